@@ -1,0 +1,101 @@
+#include "block_codec.h"
+
+#include <draco/compression/decode.h>
+#include <draco/compression/expert_encode.h>
+#include <draco/point_cloud/point_cloud_builder.h>
+
+namespace surfcast {
+
+namespace {
+// Draco speed 0..10: 5 is its default balance; the kd-tree coder's ratio barely
+// changes below it while encoding gets markedly slower.
+constexpr int kDracoSpeed = 5;
+
+template <typename T>
+bool readAttribute(const draco::PointCloud& pc, int index, draco::DataType type, int components, std::vector<T>* out) {
+    if (index >= pc.num_attributes()) return false;
+    const draco::PointAttribute* a = pc.attribute(index);
+    if (a->data_type() != type || a->num_components() != components) return false;
+    out->resize(size_t(pc.num_points()) * components);
+    for (draco::PointIndex i(0); i < pc.num_points(); ++i) a->GetMappedValue(i, out->data() + size_t(i.value()) * components);
+    return true;
+}
+}  // namespace
+
+Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCodecOptions& options) {
+    const size_t n = block.size();
+    assert(n > 0 && block.positions.size() == 3 * n);
+    draco::PointCloudBuilder builder;
+    builder.Start(uint32_t(n));
+    struct Quantized { int id; int bits; };
+    std::vector<Quantized> quantized;
+    int pos = builder.AddAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_UINT32);
+    builder.SetAttributeValuesForAllPoints(pos, block.positions.data(), 3 * sizeof(uint32_t));
+    if (!block.normals.empty()) {
+        assert(block.normals.size() == 3 * n);
+        int id = builder.AddAttribute(draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32);
+        builder.SetAttributeValuesForAllPoints(id, block.normals.data(), 3 * sizeof(float));
+        quantized.push_back({id, options.normalBits});
+    }
+    std::vector<uint8_t> colors8;
+    if (!block.colors.empty()) {
+        assert(block.colors.size() == 3 * n);
+        if (options.colorBits == 8) {
+            colors8.assign(block.colors.begin(), block.colors.end());
+            int id = builder.AddAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8);
+            builder.SetAttributeValuesForAllPoints(id, colors8.data(), 3);
+        } else {
+            int id = builder.AddAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT16);
+            builder.SetAttributeValuesForAllPoints(id, block.colors.data(), 3 * sizeof(uint16_t));
+        }
+    }
+    for (auto [values, bits] : {std::pair{&block.weights, options.weightBits}, std::pair{&block.radii, options.radiusBits}}) {
+        if (values->empty()) continue;
+        assert(values->size() == n);
+        int id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 1, draco::DT_FLOAT32);
+        builder.SetAttributeValuesForAllPoints(id, values->data(), sizeof(float));
+        quantized.push_back({id, bits});
+    }
+    std::unique_ptr<draco::PointCloud> pc = builder.Finalize(false);
+    if (!pc) return Status::error("Draco rejected the block's attributes");
+
+    draco::ExpertEncoder encoder(*pc);
+    encoder.SetEncodingMethod(draco::POINT_CLOUD_KD_TREE_ENCODING);
+    encoder.SetSpeedOptions(kDracoSpeed, kDracoSpeed);
+    for (const Quantized& q : quantized) encoder.SetAttributeQuantization(q.id, q.bits);
+    draco::EncoderBuffer buffer;
+    draco::Status st = encoder.EncodeToBuffer(&buffer);
+    if (!st.ok()) return Status::error(std::string("Draco encoding failed: ") + st.error_msg());
+    return std::vector<uint8_t>(buffer.data(), buffer.data() + buffer.size());
+}
+
+Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect) {
+    draco::DecoderBuffer buffer;
+    buffer.Init(reinterpret_cast<const char*>(data), size);
+    draco::Decoder decoder;
+    auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
+    if (!decoded.ok()) return Status::error(std::string("Draco decoding failed: ") + decoded.status().error_msg());
+    const draco::PointCloud& pc = *decoded.value();
+    int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii;
+    if (pc.num_attributes() != expected || pc.num_points() == 0)
+        return Status::error("block has " + std::to_string(pc.num_attributes()) + " attributes and " +
+                             std::to_string(pc.num_points()) + " points; the tile set declares " +
+                             std::to_string(expected) + " attributes");
+    BlockData block;
+    int index = 0;
+    bool ok = readAttribute(pc, index++, draco::DT_UINT32, 3, &block.positions);
+    if (ok && expect.normals) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 3, &block.normals);
+    if (ok && expect.colorBits == 8) {
+        std::vector<uint8_t> c8;
+        ok = readAttribute(pc, index++, draco::DT_UINT8, 3, &c8);
+        block.colors.assign(c8.begin(), c8.end());
+    } else if (ok && expect.colorBits == 16) {
+        ok = readAttribute(pc, index++, draco::DT_UINT16, 3, &block.colors);
+    }
+    if (ok && expect.weights) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 1, &block.weights);
+    if (ok && expect.radii) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 1, &block.radii);
+    if (!ok) return Status::error("block attribute " + std::to_string(index - 1) + " has an unexpected type or size");
+    return block;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,43 @@
+// Node blocks: one Draco point cloud per node (kd-tree encoding). The only file
+// that includes Draco. The kd-tree encoder reorders points, so every per-surfel
+// value travels as a Draco attribute, never as a side array.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "status.h"
+
+namespace surfcast {
+
+// What a block carries. Attributes with empty vectors are absent.
+struct BlockData {
+    std::vector<uint32_t> positions;  // 3 per surfel: quantized in the node box, [0, 2^bits-1]
+    std::vector<float> normals;       // 3 per surfel, unit length (world space)
+    std::vector<uint16_t> colors;     // 3 per surfel, in [0, 2^colorBits-1]
+    std::vector<float> weights;       // 1 per surfel: normalization weight s_k
+    std::vector<float> radii;         // 1 per surfel: own h, world units (irregular nodes only)
+
+    size_t size() const { return positions.size() / 3; }
+};
+
+struct BlockCodecOptions {
+    int positionBits = 16;  // bits the positions occupy (for Draco's integer coder)
+    int colorBits = 8;      // 8 or 16: stored as uint8 or uint16
+    int normalBits = 10;    // Draco quantization bits per normal component
+    int weightBits = 12;    // per weight
+    int radiusBits = 8;     // per radius
+};
+
+Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCodecOptions& options);
+// Decodes untrusted bytes; checks the attribute set against what the tile set
+// declares (expectColorBits 0 = no colour, expect* = attribute present).
+struct BlockExpectation {
+    int colorBits = 0;
+    bool normals = true;
+    bool weights = true;
+    bool radii = false;
+};
+Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect);
+
+}  // namespace surfcast

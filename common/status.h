@@ -1,0 +1,63 @@
+// Status and Result<T>: the error channel for anything that comes from disk,
+// network or a user (DESIGN.md, Style). Programmer mistakes are asserts instead.
+#pragma once
+
+#include <cassert>
+#include <optional>
+#include <string>
+#include <utility>
+
+namespace surfcast {
+
+class [[nodiscard]] Status {
+public:
+    Status() = default;  // success
+    static Status error(std::string message) { return Status(std::move(message)); }
+
+    bool ok() const { return !message_.has_value(); }
+    explicit operator bool() const { return ok(); }
+    // Human-readable reason; names the file and place where one is known.
+    const std::string& message() const {
+        assert(!ok());
+        return *message_;
+    }
+
+private:
+    explicit Status(std::string message) : message_(std::move(message)) {}
+    std::optional<std::string> message_;
+};
+
+template <typename T>
+class [[nodiscard]] Result {
+public:
+    Result(T value) : value_(std::move(value)) {}
+    Result(Status status) : status_(std::move(status)) { assert(!status_.ok()); }
+
+    bool ok() const { return value_.has_value(); }
+    explicit operator bool() const { return ok(); }
+    const Status& status() const { return status_; }
+    T& value() {
+        assert(ok());
+        return *value_;
+    }
+    const T& value() const {
+        assert(ok());
+        return *value_;
+    }
+    T* operator->() { return &value(); }
+    const T* operator->() const { return &value(); }
+    T& operator*() { return value(); }
+
+private:
+    std::optional<T> value_;
+    Status status_;
+};
+
+}  // namespace surfcast
+
+// Propagate a failed Status from an expression returning Status.
+#define SC_TRY(expr)                      \
+    do {                                  \
+        ::surfcast::Status sc_st_ = (expr); \
+        if (!sc_st_.ok()) return sc_st_;  \
+    } while (0)

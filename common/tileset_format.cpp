@@ -1,0 +1,246 @@
+#include "tileset_format.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <deque>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "byte_io.h"
+#include "crc32.h"
+
+namespace surfcast {
+
+void encodeRecord(const NodeRecord& r, uint8_t out[kRecordSize]) {
+    std::memset(out, 0, kRecordSize);
+    out[0] = r.key.level;
+    out[1] = r.childMask;
+    le::put<uint16_t>(out + 2, r.flags);
+    le::put<uint32_t>(out + 4, r.key.x);
+    le::put<uint32_t>(out + 8, r.key.y);
+    le::put<uint32_t>(out + 12, r.key.z);
+    le::put<uint64_t>(out + 16, r.blockOffset);
+    le::put<uint32_t>(out + 24, r.blockSize);
+    le::put<uint32_t>(out + 28, r.blockCrc);
+    le::put<uint32_t>(out + 32, r.surfelCount);
+    le::put<float>(out + 36, r.spacing);
+    le::put<float>(out + 40, r.coneAxis.x);
+    le::put<float>(out + 44, r.coneAxis.y);
+    le::put<float>(out + 48, r.coneAxis.z);
+    le::put<float>(out + 52, r.coneCosHalfAngle);
+    out[56] = r.positionBits;  // 57..59 reserved, zero
+    le::put<uint32_t>(out + 60, r.childPage);
+}
+
+NodeRecord decodeRecord(const uint8_t in[kRecordSize]) {
+    NodeRecord r;
+    r.key.level = in[0];
+    r.childMask = in[1];
+    r.flags = le::get<uint16_t>(in + 2);
+    r.key.x = le::get<uint32_t>(in + 4);
+    r.key.y = le::get<uint32_t>(in + 8);
+    r.key.z = le::get<uint32_t>(in + 12);
+    r.blockOffset = le::get<uint64_t>(in + 16);
+    r.blockSize = le::get<uint32_t>(in + 24);
+    r.blockCrc = le::get<uint32_t>(in + 28);
+    r.surfelCount = le::get<uint32_t>(in + 32);
+    r.spacing = le::get<float>(in + 36);
+    r.coneAxis = {le::get<float>(in + 40), le::get<float>(in + 44), le::get<float>(in + 48)};
+    r.coneCosHalfAngle = le::get<float>(in + 52);
+    r.positionBits = in[56];
+    r.childPage = le::get<uint32_t>(in + 60);
+    return r;
+}
+
+std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t pageDepth) {
+    assert(pageDepth >= 2);
+    std::map<NodeKey, NodeRecord> byKey;
+    for (const NodeRecord& n : nodes) byKey[n.key] = n;
+
+    std::vector<std::vector<NodeRecord>> pages;
+    std::deque<NodeKey> pageRoots;
+    if (!byKey.empty()) pageRoots.push_back(NodeKey{});
+    while (!pageRoots.empty()) {
+        NodeKey pageRoot = pageRoots.front();
+        pageRoots.pop_front();
+        std::vector<NodeRecord> page;
+        std::deque<NodeKey> queue{pageRoot};
+        while (!queue.empty()) {
+            NodeRecord rec = byKey.at(queue.front());
+            queue.pop_front();
+            rec.flags &= uint16_t(~kFlagChildrenInPage);
+            rec.childPage = kNoPage;
+            bool atPageBottom = uint32_t(rec.key.level - pageRoot.level) == pageDepth - 1;
+            if (atPageBottom && rec.childMask) {
+                rec.flags |= kFlagChildrenInPage;
+                rec.childPage = uint32_t(pages.size() + 1 + pageRoots.size());
+                pageRoots.push_back(rec.key);
+            } else {
+                for (int i = 0; i < 8; ++i)
+                    if (rec.childMask & (1u << i)) queue.push_back(rec.key.child(i));
+            }
+            page.push_back(rec);
+        }
+        pages.push_back(std::move(page));
+    }
+
+    size_t tableEnd = kHierarchyHeaderSize + pages.size() * kPageEntrySize;
+    size_t total = tableEnd;
+    for (const auto& p : pages) total += p.size() * kRecordSize;
+    std::vector<uint8_t> out(total, 0);
+    uint64_t offset = tableEnd;
+    for (size_t i = 0; i < pages.size(); ++i) {
+        uint8_t* pageStart = out.data() + offset;
+        for (size_t j = 0; j < pages[i].size(); ++j) encodeRecord(pages[i][j], pageStart + j * kRecordSize);
+        size_t bytes = pages[i].size() * kRecordSize;
+        uint8_t* entry = out.data() + kHierarchyHeaderSize + i * kPageEntrySize;
+        le::put<uint64_t>(entry, offset);
+        le::put<uint32_t>(entry + 8, uint32_t(pages[i].size()));
+        le::put<uint32_t>(entry + 12, crc32(pageStart, bytes));
+        offset += bytes;
+    }
+    std::memcpy(out.data(), kHierarchyMagic, 4);
+    le::put<uint32_t>(out.data() + 4, kFormatVersion);
+    le::put<uint32_t>(out.data() + 8, kRecordSize);
+    le::put<uint32_t>(out.data() + 12, uint32_t(pages.size()));
+    le::put<uint32_t>(out.data() + 16, pageDepth);
+    le::put<uint32_t>(out.data() + 20, uint32_t(byKey.size()));
+    le::put<uint32_t>(out.data() + 24, crc32(out.data() + kHierarchyHeaderSize, tableEnd - kHierarchyHeaderSize));
+    return out;
+}
+
+Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what) {
+    auto fail = [&](const std::string& why) { return Status::error(what + ": " + why); };
+    if (bytes.size() < kHierarchyHeaderSize) return fail("shorter than the 32-byte header");
+    const uint8_t* b = bytes.data();
+    if (std::memcmp(b, kHierarchyMagic, 4) != 0) return fail("bad magic at byte 0 (expected SCHY)");
+    if (le::get<uint32_t>(b + 4) != uint32_t(kFormatVersion))
+        return fail("unsupported version " + std::to_string(le::get<uint32_t>(b + 4)) + " at byte 4");
+    if (le::get<uint32_t>(b + 8) != kRecordSize) return fail("record size at byte 8 is not 64");
+    uint64_t pageCount = le::get<uint32_t>(b + 12);
+    uint32_t nodeCount = le::get<uint32_t>(b + 20);
+    uint64_t tableEnd = kHierarchyHeaderSize + pageCount * kPageEntrySize;
+    if (tableEnd > bytes.size()) return fail("page table runs past the end of the file");
+    if (crc32(b + kHierarchyHeaderSize, tableEnd - kHierarchyHeaderSize) != le::get<uint32_t>(b + 24))
+        return fail("page table CRC mismatch");
+
+    std::vector<NodeRecord> nodes;
+    std::vector<int> pageReferenced(pageCount, 0);
+    std::vector<NodeKey> pageRootFromProxy(pageCount);
+    for (uint64_t p = 0; p < pageCount; ++p) {
+        const uint8_t* entry = b + kHierarchyHeaderSize + p * kPageEntrySize;
+        uint64_t offset = le::get<uint64_t>(entry);
+        uint64_t count = le::get<uint32_t>(entry + 8);
+        std::string where = "page " + std::to_string(p) + " at byte " + std::to_string(offset);
+        if (count == 0 || offset < tableEnd || offset > bytes.size() || count * kRecordSize > bytes.size() - offset)
+            return fail(where + ": out of the file's bounds");
+        if (crc32(b + offset, count * kRecordSize) != le::get<uint32_t>(entry + 12)) return fail(where + ": CRC mismatch");
+        std::vector<NodeRecord> recs(count);
+        for (uint64_t i = 0; i < count; ++i) recs[i] = decodeRecord(b + offset + i * kRecordSize);
+        if (p == 0 ? recs[0].key != NodeKey{} : (pageReferenced[p] != 1 || recs[0].key != pageRootFromProxy[p]))
+            return fail(where + ": page root does not match the record that points to it");
+        size_t next = 1;
+        for (size_t i = 0; i < recs.size(); ++i) {
+            const NodeRecord& r = recs[i];
+            if (r.key.level > kMaxLevel) return fail(where + ": level beyond " + std::to_string(kMaxLevel));
+            if (r.flags & kFlagChildrenInPage) {
+                if (r.childPage <= p || r.childPage >= pageCount || r.childMask == 0)
+                    return fail(where + ": bad child page of node " + r.key.name());
+                pageReferenced[r.childPage]++;
+                pageRootFromProxy[r.childPage] = r.key;
+                continue;
+            }
+            for (int c = 0; c < 8; ++c) {
+                if (!(r.childMask & (1u << c))) continue;
+                if (next >= recs.size() || recs[next].key != r.key.child(c))
+                    return fail(where + ": children of node " + r.key.name() + " out of order");
+                ++next;
+            }
+        }
+        if (next != recs.size()) return fail(where + ": records not reachable from the page root");
+        nodes.insert(nodes.end(), recs.begin() + (p == 0 ? 0 : 1), recs.end());
+    }
+    if (nodes.size() != nodeCount) return fail("node count in header does not match the pages");
+    return nodes;
+}
+
+namespace {
+using ordered_json = nlohmann::ordered_json;
+ordered_json vec(const Vec3d& v) { return ordered_json::array({v.x, v.y, v.z}); }
+}  // namespace
+
+std::string writeTilesetJson(const TilesetInfo& info) {
+    ordered_json j;
+    j["format"] = "surfcast-tileset";
+    j["version"] = kFormatVersion;
+    j["generator"] = info.generator;
+    j["input_points"] = info.inputPoints;
+    j["surfels"] = info.surfels;
+    j["nodes"] = info.nodes;
+    j["levels"] = info.levels;
+    j["grid"] = info.grid;
+    j["root"] = {{"min", vec(info.rootMin)}, {"edge", info.rootEdge}};
+    j["bounds"] = {{"min", vec(info.bounds.min)}, {"max", vec(info.bounds.max)}};
+    j["color_bits"] = info.colorBits;
+    ordered_json attrs = ordered_json::array();
+    for (const AttributeInfo& a : info.attributes)
+        attrs.push_back({{"name", a.name}, {"type", a.type}, {"components", a.components},
+                         {"quantization_bits", a.quantizationBits}});
+    j["attributes"] = attrs;
+    j["normal_source"] = info.normalSource;
+    j["weights"] = info.weights;
+    j["hierarchy"] = {{"file", "hierarchy.bin"}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
+                      {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
+    j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
+    return j.dump(2) + "\n";
+}
+
+Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what) {
+    nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+    if (j.is_discarded()) return Status::error(what + ": not valid JSON");
+    try {
+        if (j.at("format").get<std::string>() != "surfcast-tileset") return Status::error(what + ": not a surfcast tile set");
+        if (j.at("version").get<int>() != kFormatVersion)
+            return Status::error(what + ": unsupported version " + j.at("version").dump());
+        auto readVec = [](const nlohmann::json& a) { return Vec3d{a.at(0).get<double>(), a.at(1).get<double>(), a.at(2).get<double>()}; };
+        TilesetInfo info;
+        info.generator = j.at("generator").get<std::string>();
+        info.inputPoints = j.at("input_points").get<uint64_t>();
+        info.surfels = j.at("surfels").get<uint64_t>();
+        info.nodes = j.at("nodes").get<uint64_t>();
+        info.levels = j.at("levels").get<int>();
+        info.grid = j.at("grid").get<int>();
+        info.rootMin = readVec(j.at("root").at("min"));
+        info.rootEdge = j.at("root").at("edge").get<double>();
+        info.bounds.min = readVec(j.at("bounds").at("min"));
+        info.bounds.max = readVec(j.at("bounds").at("max"));
+        info.colorBits = j.at("color_bits").get<int>();
+        for (const auto& a : j.at("attributes"))
+            info.attributes.push_back({a.at("name").get<std::string>(), a.at("type").get<std::string>(),
+                                       a.at("components").get<int>(), a.at("quantization_bits").get<int>()});
+        info.normalSource = j.at("normal_source").get<std::string>();
+        info.weights = j.at("weights").get<std::string>();
+        const auto& h = j.at("hierarchy");
+        info.hierarchyBytes = h.at("bytes").get<uint64_t>();
+        info.hierarchyPages = h.at("pages").get<uint32_t>();
+        info.pageDepth = h.at("page_depth").get<uint32_t>();
+        info.hierarchyCrc = h.at("crc32").get<uint32_t>();
+        info.blocksBytes = j.at("blocks").at("bytes").get<uint64_t>();
+        if (!(info.rootEdge > 0) || !std::isfinite(info.rootEdge) || info.levels < 1 || info.levels > kMaxLevel + 1 ||
+            info.grid < 1)
+            return Status::error(what + ": root edge, levels or grid out of range");
+        return info;
+    } catch (const nlohmann::json::exception& e) {
+        return Status::error(what + ": missing or mistyped field (" + std::string(e.what()) + ")");
+    }
+}
+
+double nodeEdge(const TilesetInfo& info, int level) { return std::ldexp(info.rootEdge, -level); }
+
+Vec3d nodeMin(const TilesetInfo& info, const NodeKey& key) {
+    double e = nodeEdge(info, key.level);
+    return info.rootMin + Vec3d{key.x * e, key.y * e, key.z * e};
+}
+
+}  // namespace surfcast

@@ -1,0 +1,101 @@
+// The tile-set format: tileset.json, hierarchy.bin, blocks.bin. The normative
+// specification is docs/FORMAT.md; this header is its one implementation, and
+// tests/tileset_format_test.cpp pins the bytes.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "octree_key.h"
+#include "status.h"
+#include "vec3.h"
+
+namespace surfcast {
+
+inline constexpr int kFormatVersion = 1;
+inline constexpr char kHierarchyMagic[4] = {'S', 'C', 'H', 'Y'};
+inline constexpr uint32_t kHierarchyHeaderSize = 32;
+inline constexpr uint32_t kPageEntrySize = 16;
+inline constexpr uint32_t kRecordSize = 64;
+inline constexpr uint32_t kNoPage = 0xFFFFFFFFu;
+// Levels per hierarchy page: a client fetches a page (at most 1+8+..+8^4 = 4681
+// records, 300 KB) per request instead of the whole hierarchy of a huge set.
+inline constexpr uint32_t kDefaultPageDepth = 5;
+
+enum NodeFlags : uint16_t {
+    kFlagConeFull = 1u << 0,       // normals span more than a hemisphere: never backface-cull
+    kFlagHasRadius = 1u << 1,      // block carries a per-surfel radius attribute
+    kFlagChildrenInPage = 1u << 2, // children live in page `child_page`, not in this page
+    kFlagInputPoints = 1u << 3,    // leaf: the surfels are the input points themselves
+};
+
+// One node of the octree as stored in hierarchy.bin (64 bytes, little-endian).
+struct NodeRecord {
+    NodeKey key;
+    uint8_t childMask = 0;       // bit i: child i exists (see NodeKey::child)
+    uint16_t flags = 0;          // NodeFlags
+    uint64_t blockOffset = 0;    // byte offset of the node's Draco blob in blocks.bin
+    uint32_t blockSize = 0;      // bytes
+    uint32_t blockCrc = 0;       // CRC-32 of the blob
+    uint32_t surfelCount = 0;
+    float spacing = 0;           // h, world units
+    Vec3f coneAxis{0, 0, 1};     // unit vector, world space
+    float coneCosHalfAngle = -1; // cos of the cone's half-angle; -1 with kFlagConeFull
+    uint8_t positionBits = 0;    // quantization bits per axis of the block's positions
+    uint32_t childPage = kNoPage;
+
+    bool operator==(const NodeRecord&) const = default;
+};
+
+void encodeRecord(const NodeRecord& record, uint8_t out[kRecordSize]);
+NodeRecord decodeRecord(const uint8_t in[kRecordSize]);
+
+// hierarchy.bin from the set's nodes (any order; must form one tree rooted at
+// level 0). Pages are subtrees of pageDepth levels in breadth-first order.
+std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t pageDepth = kDefaultPageDepth);
+// Parse and validate hierarchy.bin (magic, sizes, CRCs, tree shape); nodes come
+// back once each, in breadth-first order from the root. `what` names the source.
+Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what);
+
+struct AttributeInfo {
+    std::string name;       // position, normal, color, weight, radius
+    std::string type;       // uint8, uint16, uint32, float32
+    int components = 0;
+    int quantizationBits = 0;  // Draco quantization of float attributes; 0 for integers
+    bool operator==(const AttributeInfo&) const = default;
+};
+
+// Everything in tileset.json.
+struct TilesetInfo {
+    std::string generator;
+    uint64_t inputPoints = 0;  // points accepted from the inputs
+    uint64_t surfels = 0;      // surfels stored over all nodes
+    uint64_t nodes = 0;
+    int levels = 0;            // deepest level + 1
+    int grid = 128;            // G: cells per axis of a node's sampling grid
+    Vec3d rootMin;             // double-precision origin of the octree (world units)
+    double rootEdge = 0;       // edge length of the cubic root box
+    Box3d bounds;              // tight bounds of the input points
+    int colorBits = 0;         // 0: no colour; 8 or 16 bits per channel
+    std::vector<AttributeInfo> attributes;  // in the order they appear in each block
+    std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
+    std::string weights;       // analytic | none
+    uint64_t hierarchyBytes = 0;
+    uint32_t hierarchyPages = 0;
+    uint32_t hierarchyCrc = 0;  // CRC-32 of the whole hierarchy.bin
+    uint64_t blocksBytes = 0;
+    uint32_t pageDepth = kDefaultPageDepth;
+
+    bool operator==(const TilesetInfo&) const = default;
+};
+
+std::string writeTilesetJson(const TilesetInfo& info);
+Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what);
+
+// Edge length of a node at `level`, and its box minimum, in world units.
+double nodeEdge(const TilesetInfo& info, int level);
+Vec3d nodeMin(const TilesetInfo& info, const NodeKey& key);
+
+}  // namespace surfcast

@@ -1,0 +1,118 @@
+#include "tileset_reader.h"
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "crc32.h"
+
+namespace surfcast {
+
+namespace {
+Result<std::vector<uint8_t>> readWholeFile(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return Status::error(path + ": cannot open");
+    std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) return Status::error(path + ": read error");
+    return bytes;
+}
+}  // namespace
+
+Result<TilesetReader> TilesetReader::open(const std::string& dir) {
+    TilesetReader r;
+    r.dir_ = dir;
+    auto json = readWholeFile(dir + "/tileset.json");
+    if (!json) return json.status();
+    auto info = readTilesetJson(std::string(json->begin(), json->end()), dir + "/tileset.json");
+    if (!info) return info.status();
+    r.info_ = *info;
+    std::string hierarchyPath = dir + "/hierarchy.bin";
+    auto hierarchy = readWholeFile(hierarchyPath);
+    if (!hierarchy) return hierarchy.status();
+    if (hierarchy->size() != r.info_.hierarchyBytes || crc32(hierarchy->data(), hierarchy->size()) != r.info_.hierarchyCrc)
+        return Status::error(hierarchyPath + ": size or CRC differs from tileset.json");
+    auto nodes = readHierarchy(*hierarchy, hierarchyPath);
+    if (!nodes) return nodes.status();
+    r.nodes_ = std::move(*nodes);
+    std::string blocksPath = dir + "/blocks.bin";
+    r.blocks_.reset(std::fopen(blocksPath.c_str(), "rb"), [](std::FILE* f) { if (f) std::fclose(f); });
+    if (!r.blocks_) return Status::error(blocksPath + ": cannot open");
+    std::fseek(r.blocks_.get(), 0, SEEK_END);
+    long size = std::ftell(r.blocks_.get());
+    if (size < 0 || uint64_t(size) != r.info_.blocksBytes)
+        return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
+                             std::to_string(r.info_.blocksBytes));
+    for (const NodeRecord& n : r.nodes_)
+        if (n.blockOffset > r.info_.blocksBytes || n.blockSize > r.info_.blocksBytes - n.blockOffset)
+            return Status::error(hierarchyPath + ": node " + n.key.name() + " points past the end of blocks.bin");
+    return r;
+}
+
+BlockExpectation TilesetReader::expectation(const NodeRecord& node) const {
+    BlockExpectation e;
+    e.colorBits = info_.colorBits;
+    e.normals = true;
+    e.weights = info_.weights != "none";
+    e.radii = (node.flags & kFlagHasRadius) != 0;
+    return e;
+}
+
+Result<std::vector<uint8_t>> TilesetReader::readBlockBytes(const NodeRecord& node) const {
+    std::vector<uint8_t> bytes(node.blockSize);
+    std::string where = dir_ + "/blocks.bin: node " + node.key.name() + " at byte " + std::to_string(node.blockOffset);
+    if (std::fseek(blocks_.get(), long(node.blockOffset), SEEK_SET) != 0 ||
+        std::fread(bytes.data(), 1, bytes.size(), blocks_.get()) != bytes.size())
+        return Status::error(where + ": short read");
+    if (crc32(bytes.data(), bytes.size()) != node.blockCrc) return Status::error(where + ": CRC mismatch");
+    return bytes;
+}
+
+Result<BlockData> TilesetReader::readBlock(const NodeRecord& node) const {
+    auto bytes = readBlockBytes(node);
+    if (!bytes) return bytes.status();
+    auto block = decodeBlock(bytes->data(), bytes->size(), expectation(node));
+    if (!block) return Status::error(dir_ + "/blocks.bin: node " + node.key.name() + ": " + block.status().message());
+    if (block->size() != node.surfelCount)
+        return Status::error(dir_ + "/blocks.bin: node " + node.key.name() + " decodes to " +
+                             std::to_string(block->size()) + " surfels, hierarchy says " + std::to_string(node.surfelCount));
+    return block;
+}
+
+Vec3d TilesetReader::position(const NodeRecord& node, const BlockData& block, size_t i) const {
+    double step = nodeEdge(info_, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
+    Vec3d q{double(block.positions[3 * i]), double(block.positions[3 * i + 1]), double(block.positions[3 * i + 2])};
+    return nodeMin(info_, node.key) + q * step;
+}
+
+Result<std::string> verifyTileset(const std::string& dir) {
+    auto reader = TilesetReader::open(dir);
+    if (!reader) return reader.status();
+    std::map<int, std::pair<uint64_t, uint64_t>> perLevel;  // level -> nodes, surfels
+    uint64_t surfels = 0;
+    for (const NodeRecord& n : reader->nodes()) {
+        auto block = reader->readBlock(n);
+        if (!block) return block.status();
+        perLevel[n.key.level].first++;
+        perLevel[n.key.level].second += n.surfelCount;
+        surfels += n.surfelCount;
+    }
+    const TilesetInfo& info = reader->info();
+    if (surfels != info.surfels || reader->nodes().size() != info.nodes)
+        return Status::error(dir + ": node or surfel totals differ from tileset.json");
+    std::ostringstream out;
+    out << dir << ": " << info.inputPoints << " input points, " << info.surfels << " surfels in " << info.nodes
+        << " nodes, " << info.levels << " levels\n";
+    out << "  root min (" << info.rootMin.x << ", " << info.rootMin.y << ", " << info.rootMin.z << "), edge "
+        << info.rootEdge << "\n  attributes:";
+    for (const auto& a : info.attributes) out << " " << a.name << "(" << a.type << "x" << a.components << ")";
+    out << "\n  normals: " << info.normalSource << ", weights: " << info.weights << "\n";
+    for (auto [level, counts] : perLevel)
+        out << "  level " << level << ": " << counts.first << " nodes, " << counts.second << " surfels\n";
+    out << "  bytes: hierarchy " << info.hierarchyBytes << ", blocks " << info.blocksBytes << " ("
+        << (info.inputPoints ? double(info.blocksBytes) / double(info.inputPoints) : 0.0) << " per input point)\n";
+    out << "  all " << info.nodes << " block checksums verified";
+    return out.str();
+}
+
+}  // namespace surfcast

@@ -1,0 +1,41 @@
+// Read a tile set from a local directory: tileset.json, hierarchy.bin, and
+// blocks on demand. Used by `surfcast-build --info`, the tests and (later) the
+// renderer's local source.
+#pragma once
+
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "block_codec.h"
+#include "tileset_format.h"
+
+namespace surfcast {
+
+class TilesetReader {
+public:
+    static Result<TilesetReader> open(const std::string& dir);
+
+    const TilesetInfo& info() const { return info_; }
+    const std::vector<NodeRecord>& nodes() const { return nodes_; }
+    BlockExpectation expectation(const NodeRecord& node) const;
+
+    // The node's raw blob, checked against its CRC.
+    Result<std::vector<uint8_t>> readBlockBytes(const NodeRecord& node) const;
+    Result<BlockData> readBlock(const NodeRecord& node) const;
+    // World-space position of quantized surfel i of a decoded block.
+    Vec3d position(const NodeRecord& node, const BlockData& block, size_t i) const;
+
+private:
+    std::string dir_;
+    TilesetInfo info_;
+    std::vector<NodeRecord> nodes_;
+    std::shared_ptr<std::FILE> blocks_;
+};
+
+// Verify a tile set: every CRC, every block decodes with the declared attributes
+// and count. Returns a summary text on success.
+Result<std::string> verifyTileset(const std::string& dir);
+
+}  // namespace surfcast

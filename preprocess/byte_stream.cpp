@@ -1,0 +1,118 @@
+#include "byte_stream.h"
+
+#include <cstring>
+#include <utility>
+
+namespace surfcast {
+
+namespace {
+constexpr size_t kBufferSize = 1 << 20;  // 1 MiB: large sequential reads, bounded memory
+}
+
+Result<ByteStream> ByteStream::open(const std::string& path) {
+    ByteStream s;
+    s.path_ = path;
+    s.file_ = std::fopen(path.c_str(), "rb");
+    if (!s.file_) return Status::error(path + ": cannot open (" + std::strerror(errno) + ")");
+    if (std::fseek(s.file_, 0, SEEK_END) == 0) {
+        long size = std::ftell(s.file_);
+        s.fileSize_ = size > 0 ? uint64_t(size) : 0;
+        std::fseek(s.file_, 0, SEEK_SET);
+    }
+    s.buffer_.resize(kBufferSize);
+    return s;
+}
+
+ByteStream::ByteStream(ByteStream&& o) noexcept { *this = std::move(o); }
+
+ByteStream& ByteStream::operator=(ByteStream&& o) noexcept {
+    std::swap(path_, o.path_);
+    std::swap(file_, o.file_);
+    std::swap(buffer_, o.buffer_);
+    std::swap(begin_, o.begin_);
+    std::swap(end_, o.end_);
+    std::swap(offset_, o.offset_);
+    std::swap(line_, o.line_);
+    std::swap(fileSize_, o.fileSize_);
+    return *this;
+}
+
+ByteStream::~ByteStream() {
+    if (file_) std::fclose(file_);
+}
+
+bool ByteStream::fill() {
+    if (begin_ < end_) return true;
+    begin_ = 0;
+    end_ = std::fread(buffer_.data(), 1, buffer_.size(), file_);
+    return end_ > 0;
+}
+
+bool ByteStream::readBytes(void* dst, size_t n) {
+    auto* out = static_cast<char*>(dst);
+    while (n > 0) {
+        if (!fill()) return false;
+        size_t take = std::min(n, end_ - begin_);
+        std::memcpy(out, buffer_.data() + begin_, take);
+        begin_ += take;
+        offset_ += take;
+        out += take;
+        n -= take;
+    }
+    return true;
+}
+
+bool ByteStream::seek(uint64_t absolute) {
+    if (absolute > fileSize_ || std::fseek(file_, long(absolute), SEEK_SET) != 0) return false;
+    begin_ = end_ = 0;
+    offset_ = absolute;
+    return true;
+}
+
+bool ByteStream::skip(uint64_t n) {
+    if (n <= end_ - begin_) {
+        begin_ += n;
+        offset_ += n;
+        return true;
+    }
+    return seek(offset_ + n);
+}
+
+bool ByteStream::readLine(std::string* line) {
+    line->clear();
+    bool any = false;
+    while (fill()) {
+        any = true;
+        const char* start = buffer_.data() + begin_;
+        const void* nl = std::memchr(start, '\n', end_ - begin_);
+        size_t take = nl ? size_t(static_cast<const char*>(nl) - start) : end_ - begin_;
+        line->append(start, take);
+        begin_ += take;
+        offset_ += take;
+        if (nl) {
+            ++begin_;
+            ++offset_;
+            ++line_;
+            break;
+        }
+    }
+    if (!line->empty() && line->back() == '\r') line->pop_back();
+    return any;
+}
+
+bool ByteStream::readToken(std::string_view* token) {
+    token_.clear();
+    while (fill()) {
+        char c = buffer_[begin_];
+        bool space = c == ' ' || c == '\t' || c == '\n' || c == '\r';
+        if (space && !token_.empty()) break;
+        if (!space) token_.push_back(c);
+        if (c == '\n') ++line_;
+        ++begin_;
+        ++offset_;
+    }
+    *token = token_;
+    return !token_.empty();
+}
+
+}  // namespace surfcast

@@ -1,0 +1,53 @@
+// Buffered sequential reading of an input file, with the byte offset and line
+// number every error message needs. Readers share it instead of each owning a FILE*.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "status.h"
+
+namespace surfcast {
+
+class ByteStream {
+public:
+    static Result<ByteStream> open(const std::string& path);
+    ByteStream(ByteStream&&) noexcept;
+    ByteStream& operator=(ByteStream&&) noexcept;
+    ~ByteStream();
+
+    const std::string& path() const { return path_; }
+    uint64_t offset() const { return offset_; }  // bytes consumed so far
+    uint64_t line() const { return line_; }      // 1-based line of the next byte (text formats)
+    uint64_t fileSize() const { return fileSize_; }
+
+    // Copies exactly n bytes; false at end of file (nothing partial is consumed... the
+    // offset then names where the data ran out).
+    bool readBytes(void* dst, size_t n);
+    bool skip(uint64_t n);
+    bool seek(uint64_t absolute);
+    // Next line without its terminator ('\n' or "\r\n"); false at end of file.
+    bool readLine(std::string* line);
+    // Next whitespace-separated token (spans lines); false at end of file.
+    bool readToken(std::string_view* token);
+
+    // "PATH: byte N" / "PATH: line N" prefix for errors.
+    std::string at() const { return path_ + ": byte " + std::to_string(offset_); }
+    std::string atLine() const { return path_ + ": line " + std::to_string(line_); }
+
+private:
+    ByteStream() = default;
+    bool fill();
+
+    std::string path_;
+    std::FILE* file_ = nullptr;
+    std::vector<char> buffer_;
+    size_t begin_ = 0, end_ = 0;
+    uint64_t offset_ = 0, line_ = 1, fileSize_ = 0;
+    std::string token_;
+};
+
+}  // namespace surfcast

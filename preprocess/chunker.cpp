@@ -1,0 +1,174 @@
+#include "chunker.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <functional>
+
+namespace surfcast {
+
+namespace {
+constexpr uint32_t kCountCells = 1u << kCountLevel;
+constexpr size_t kBufferedPoints = 2048;  // per chunk file: 96 KiB
+
+uint32_t cellCoord(double v, double cellEdge) {
+    return uint32_t(std::clamp(std::floor(v / cellEdge), 0.0, double(kCountCells - 1)));
+}
+}  // namespace
+
+ChunkLayout ChunkLayout::single(double rootEdge, int grid) {
+    ChunkLayout l;
+    l.rootEdge_ = rootEdge;
+    l.grid_ = grid;
+    l.chunks_.push_back(Chunk{NodeKey{}});
+    return l;
+}
+
+size_t ChunkLayout::cellIndex(const Vec3d& p, double rootEdge) {
+    double e = rootEdge / kCountCells;
+    return (size_t(cellCoord(p.x, e)) * kCountCells + cellCoord(p.y, e)) * kCountCells + cellCoord(p.z, e);
+}
+
+ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_t maxChunkPoints, double rootEdge, int grid) {
+    ChunkLayout l;
+    l.rootEdge_ = rootEdge;
+    l.grid_ = grid;
+    l.cellChunk_.assign(counts.size(), -1);
+    // Sum of counts in a node's cells, by recursion over the pyramid (computed
+    // top-down on demand: the node count stays small, the grid is 2M cells).
+    std::function<uint64_t(const NodeKey&)> countOf = [&](const NodeKey& k) -> uint64_t {
+        if (k.level == kCountLevel) return counts[(size_t(k.x) * kCountCells + k.y) * kCountCells + k.z];
+        uint64_t sum = 0;
+        for (int c = 0; c < 8; ++c) sum += countOf(k.child(c));
+        return sum;
+    };
+    std::function<void(const NodeKey&, uint64_t)> place = [&](const NodeKey& k, uint64_t count) {
+        if (count == 0) return;
+        if (count <= maxChunkPoints || k.level == kCountLevel) {
+            int id = int(l.chunks_.size());
+            l.chunks_.push_back(Chunk{k, 0});
+            uint32_t span = 1u << (kCountLevel - k.level);
+            for (uint32_t x = 0; x < span; ++x)
+                for (uint32_t y = 0; y < span; ++y)
+                    for (uint32_t z = 0; z < span; ++z)
+                        l.cellChunk_[((size_t(k.x) * span + x) * kCountCells + (k.y * span + y)) * kCountCells + k.z * span + z] = id;
+            return;
+        }
+        for (int c = 0; c < 8; ++c) {
+            NodeKey child = k.child(c);
+            place(child, countOf(child));
+        }
+    };
+    place(NodeKey{}, countOf(NodeKey{}));
+    return l;
+}
+
+int ChunkLayout::chunkOf(const Vec3d& p) const {
+    return cellChunk_.empty() ? 0 : cellChunk_[cellIndex(p, rootEdge_)];
+}
+
+double ChunkLayout::margin(int chunk) const {
+    double edge = std::ldexp(rootEdge_, -chunks_[chunk].key.level);
+    // Capped at one counting cell, so only the 26 neighbouring cells can hold
+    // a chunk whose margin reaches p.
+    return std::min(kHaloCells * edge / grid_, rootEdge_ / kCountCells);
+}
+
+void ChunkLayout::haloChunksOf(const Vec3d& p, std::vector<int>* out) const {
+    out->clear();
+    if (cellChunk_.empty()) return;
+    const double cell = rootEdge_ / kCountCells;
+    int own = chunkOf(p);
+    int32_t c[3];
+    for (int a = 0; a < 3; ++a) c[a] = int32_t(cellCoord(p[a], cell));
+    for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dz = -1; dz <= 1; ++dz) {
+                int32_t n[3] = {c[0] + dx, c[1] + dy, c[2] + dz};
+                if (std::any_of(n, n + 3, [](int32_t v) { return v < 0 || v >= int32_t(kCountCells); })) continue;
+                int id = cellChunk_[(size_t(n[0]) * kCountCells + size_t(n[1])) * kCountCells + size_t(n[2])];
+                if (id < 0 || id == own || std::find(out->begin(), out->end(), id) != out->end()) continue;
+                // Distance from p to the chunk's box.
+                const NodeKey& k = chunks_[id].key;
+                double e = std::ldexp(rootEdge_, -k.level), d2 = 0;
+                uint32_t kc[3] = {k.x, k.y, k.z};
+                for (int a = 0; a < 3; ++a) {
+                    double lo = kc[a] * e, hi = lo + e;
+                    double d = p[a] < lo ? lo - p[a] : (p[a] > hi ? p[a] - hi : 0);
+                    d2 += d * d;
+                }
+                double m = margin(id);
+                if (d2 < m * m) out->push_back(id);
+            }
+}
+
+ChunkWriter::ChunkWriter(ChunkLayout& layout, std::string dir) : layout_(layout), dir_(std::move(dir)) {
+    size_t n = layout_.chunks().size();
+    buffers_.resize(2 * n);
+    files_.assign(2 * n, nullptr);
+    for (size_t i = 0; i < n; ++i) {
+        layout_.chunks()[i].file = dir_ + "/chunk-" + std::to_string(i) + ".bin";
+        layout_.chunks()[i].haloFile = dir_ + "/chunk-" + std::to_string(i) + ".halo";
+    }
+}
+
+ChunkWriter::~ChunkWriter() {
+    for (std::FILE* f : files_)
+        if (f) std::fclose(f);
+}
+
+Status ChunkWriter::flush(size_t slot) {
+    auto& buf = buffers_[slot];
+    if (buf.empty()) return {};
+    if (!files_[slot]) {
+        const Chunk& c = layout_.chunks()[slot / 2];
+        const std::string& path = slot % 2 ? c.haloFile : c.file;
+        files_[slot] = std::fopen(path.c_str(), "wb");
+        if (!files_[slot]) return Status::error(path + ": cannot create (" + std::strerror(errno) + ")");
+    }
+    if (std::fwrite(buf.data(), sizeof(Surfel), buf.size(), files_[slot]) != buf.size())
+        return Status::error(dir_ + ": writing chunk files failed (disk full?)");
+    buf.clear();
+    return {};
+}
+
+Status ChunkWriter::append(int chunk, bool halo, const Surfel& s) {
+    size_t slot = size_t(chunk) * 2 + (halo ? 1 : 0);
+    buffers_[slot].push_back(s);
+    Chunk& c = layout_.chunks()[chunk];
+    (halo ? c.haloPoints : c.points)++;
+    if (buffers_[slot].size() >= kBufferedPoints) return flush(slot);
+    return {};
+}
+
+Status ChunkWriter::add(std::span<const Surfel> points) {
+    for (const Surfel& s : points) {
+        SC_TRY(append(layout_.chunkOf(s.position), false, s));
+        layout_.haloChunksOf(s.position, &halo_);
+        for (int h : halo_) SC_TRY(append(h, true, s));
+    }
+    return {};
+}
+
+Status ChunkWriter::finish() {
+    for (size_t slot = 0; slot < buffers_.size(); ++slot) {
+        SC_TRY(flush(slot));
+        if (files_[slot] && std::fclose(files_[slot]) != 0) return Status::error(dir_ + ": closing a chunk file failed");
+        files_[slot] = nullptr;
+    }
+    return {};
+}
+
+Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected) {
+    std::vector<Surfel> points(expected);
+    if (expected == 0) return points;
+    std::FILE* f = std::fopen(path.c_str(), "rb");
+    if (!f) return Status::error(path + ": cannot open chunk file");
+    size_t got = std::fread(points.data(), sizeof(Surfel), points.size(), f);
+    std::fclose(f);
+    if (got != expected) return Status::error(path + ": chunk file holds " + std::to_string(got) + " of " + std::to_string(expected) + " points");
+    return points;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,80 @@
+// Out-of-core distribution (the scheme of PotreeConverter 2, Schütz et al. 2020):
+// a counting pass fills a 2^kCountLevel-per-axis grid, cells merge bottom-up
+// into chunks (octree nodes) of at most maxChunkPoints, and a distribution pass
+// writes every point to its chunk's file. Each chunk also receives a halo: the
+// points of neighbouring chunks within a margin of its box, so neighbour
+// searches see across chunk borders.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "octree_key.h"
+#include "status.h"
+#include "surfel.h"
+
+namespace surfcast {
+
+// Counting grid: 128³ cells (8 MiB of counters) resolves chunks down to 1/128
+// of the root edge.
+inline constexpr int kCountLevel = 7;
+// Halo width in units of the chunk root's sampling cell (edge / G): the spacing
+// and weight neighbourhoods reach about 3 cells at the chunk's coarsest level.
+inline constexpr double kHaloCells = 4.0;
+
+struct Chunk {
+    NodeKey key;
+    uint64_t points = 0;
+    uint64_t haloPoints = 0;
+    std::string file, haloFile;
+};
+
+class ChunkLayout {
+public:
+    // One chunk holding everything (inputs that fit the memory budget).
+    static ChunkLayout single(double rootEdge, int grid);
+    // From counts per cell of the counting grid (index x·128² + y·128 + z).
+    static ChunkLayout fromCounts(const std::vector<uint32_t>& counts, uint64_t maxChunkPoints, double rootEdge, int grid);
+
+    static size_t cellIndex(const Vec3d& p, double rootEdge);  // p relative to the root minimum
+
+    std::vector<Chunk>& chunks() { return chunks_; }
+    const std::vector<Chunk>& chunks() const { return chunks_; }
+    int chunkOf(const Vec3d& p) const;
+    // Chunks (other than p's own) whose halo margin contains p.
+    void haloChunksOf(const Vec3d& p, std::vector<int>* out) const;
+    double margin(int chunk) const;  // halo width of a chunk
+
+private:
+    double rootEdge_ = 1;
+    int grid_ = 128;
+    std::vector<Chunk> chunks_;
+    std::vector<int32_t> cellChunk_;  // empty for a single chunk
+};
+
+// Writes points (and halos) to per-chunk files under `dir`.
+class ChunkWriter {
+public:
+    ChunkWriter(ChunkLayout& layout, std::string dir);
+    ~ChunkWriter();
+    Status add(std::span<const Surfel> points);
+    Status finish();
+
+private:
+    Status append(int chunk, bool halo, const Surfel& s);
+    Status flush(size_t slot);
+
+    ChunkLayout& layout_;
+    std::string dir_;
+    std::vector<std::vector<Surfel>> buffers_;  // 2 per chunk: own, halo
+    std::vector<std::FILE*> files_;
+    std::vector<int> halo_;
+};
+
+// Reads a chunk file written by ChunkWriter.
+Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected);
+
+}  // namespace surfcast

@@ -1,0 +1,51 @@
+// The point record every reader produces, and what a reader knows about its file.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "status.h"
+#include "vec3.h"
+
+namespace surfcast {
+
+struct InputPoint {
+    Vec3d position;          // world coordinates of the input, double precision
+    Vec3f normal;            // unit; the zero vector where the input has none
+    uint16_t color[3] = {};  // raw channel values as the file stores them (see colorMax)
+    uint16_t intensity = 0;
+};
+
+struct InputDescription {
+    std::string path;
+    std::string format;              // "ply", "las", "text", "mesh", "scene"
+    uint64_t declaredPoints = 0;     // from the header; 0 when the format has no count
+    bool hasNormals = false;
+    bool hasColors = false;
+    bool hasIntensity = false;
+    int colorBits = 8;               // bits of the file's colour channels (8 or 16)
+    double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
+    bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude
+    std::optional<Vec3d> scanOrigin; // where the scanner stood, when the format says
+    bool airborne = false;           // aerial LiDAR: normals point up
+};
+
+// A streaming reader: never holds the whole file. Points with NaN or infinite
+// coordinates are skipped and counted, never returned.
+class PointReader {
+public:
+    virtual ~PointReader() = default;
+    virtual const InputDescription& description() const = 0;
+    // Fills up to `max` points; 0 means the end. Errors name the file and place.
+    virtual Result<size_t> read(InputPoint* out, size_t max) = 0;
+    uint64_t skipped() const { return skipped_; }
+
+protected:
+    uint64_t skipped_ = 0;
+};
+
+inline bool finite(const Vec3d& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+
+}  // namespace surfcast

@@ -1,0 +1,56 @@
+// Opening inputs by format, and the first pass over them: counts, bounds and
+// what each input's colours really hold.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "default_scene.h"
+#include "input_point.h"
+#include "mesh_reader.h"
+#include "surfel.h"
+
+namespace surfcast {
+
+struct InputOptions {
+    std::vector<std::string> paths;
+    bool defaultScene = false;   // add the built-in scene
+    SceneOptions scene;
+    std::string columns;         // text layout; empty: detect
+    MeshSampling mesh;
+    bool verticesOnly = false;   // treat a mesh file as its vertices
+};
+
+// Fresh readers for every input, in order (a pass over the data opens them anew).
+Result<std::vector<std::unique_ptr<PointReader>>> openInputs(const InputOptions& options);
+
+// What the first pass learns of each input (one entry per reader).
+struct SourceStats {
+    InputDescription description;
+    uint64_t points = 0, skipped = 0;
+    Box3d bounds;
+    uint16_t colorMax = 0;      // largest raw colour channel value
+    bool colors8Bit = true;     // every channel value is exactly representable in 8 bits
+    double colorScale = 1;      // multiplier to the 16-bit range (LAS files storing 0..255 get 257)
+};
+
+struct InputStats {
+    std::vector<SourceStats> sources;
+    uint64_t points = 0, skipped = 0;
+    Box3d bounds;
+    bool anyColors = false;
+    int colorBits = 0;          // 0 (no colour), 8 or 16: what the tile set stores
+};
+
+// Pass 1. `progress` receives point counts as they are read.
+Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
+
+// Every accepted point as a Surfel (position minus `origin`, colour scaled to
+// 16 bits, source index set), in batches.
+Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
+                    const std::function<Status(std::span<Surfel>)>& consume);
+
+}  // namespace surfcast

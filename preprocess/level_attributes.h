@@ -1,0 +1,62 @@
+// Per-level attributes that need neighbours: the node spacing h, the optional
+// per-surfel radius, and the analytic normalization weights. One FLANN query
+// per surfel serves all three. Neighbours come from every node of the level
+// plus a halo of surfels from beyond the chunk, so nothing is inflated at
+// node borders.
+//
+// Spacing rule (docs/ARCHITECTURE.md, "Spacing"): d_k(i) is the distance from
+// surfel i to its k-th nearest neighbour (k = 8). A node's h is the 95th
+// percentile of d_k over its surfels: up to 5% isolated outliers cannot blow
+// it up. A node whose sampling is too irregular for one h (95th / 5th
+// percentile > kIrregularRatio) also stores a per-surfel radius
+// r_i = clamp(d_k(i), P5, h), so r_i <= h always and h stays the bound the
+// client's level choice relies on.
+//
+// Weights (Ren et al. 2002, §7.1, analytic form): s_k = 1 / Σ_j g_k(u_j - u_k),
+// summed over surfel k and its neighbours j, with u_j - u_k projected into the
+// tangent plane of k, g_k(u) = exp(-|u|²/(2 r²)), r = r_k (or h), truncated at
+// the renderer's cutoff |u| <= sqrt(2c)·r, and only over neighbours whose
+// normals face the same side (a close opposite surface is hidden by the
+// visibility pass and must not darken this one).
+#pragma once
+
+#include <span>
+#include <vector>
+
+#include "surfel.h"
+
+namespace surfcast {
+
+inline constexpr double kSpacingPercentile = 0.95;
+inline constexpr double kIrregularPercentile = 0.05;
+inline constexpr double kIrregularRatio = 4.0;
+
+struct LevelNode {
+    std::span<const Surfel> surfels;  // input
+    float h = 0;                      // outputs
+    std::vector<float> weights;       // empty when weights are off
+    std::vector<float> radii;         // empty for regular nodes
+};
+
+struct LevelParams {
+    int spacingK = 8;
+    int weightK = 24;          // neighbours fetched for the weight sum
+    double cutoff = 1.0;       // c of the renderer's kernel cutoff y'y <= 2c
+    double fallbackSpacing = 0;  // h of a node with no neighbours at all: the level's cell size
+    bool weights = true;
+    int threads = 1;
+};
+
+// The spacing rule above, for one node's d_k values (reordered in place).
+struct SpacingResult {
+    float h = 0;
+    bool irregular = false;
+    float minRadius = 0;  // P5, the clamp floor of per-surfel radii
+};
+SpacingResult spacingRule(std::vector<float>& dk, double fallback);
+
+// Fills h, weights and radii of `nodes`; `extra` are neighbour-only surfels
+// (the halo, or the level's nodes computed elsewhere).
+void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const Surfel> extra, const LevelParams& params);
+
+}  // namespace surfcast

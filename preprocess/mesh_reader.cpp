@@ -1,0 +1,177 @@
+#include "mesh_reader.h"
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "ply_reader.h"
+#include "random.h"
+
+namespace surfcast {
+
+namespace {
+
+struct MeshTraits : public OpenMesh::DefaultTraits {
+    using Point = OpenMesh::Vec3d;
+    using Normal = OpenMesh::Vec3d;
+    using Color = OpenMesh::Vec3uc;
+};
+using TriMesh = OpenMesh::TriMesh_ArrayKernelT<MeshTraits>;
+
+struct LoadedMesh {
+    TriMesh mesh;
+    bool hasColors = false;
+    uint64_t rejectedFaces = 0;  // faces OpenMesh refused (non-manifold)
+};
+
+std::string lowerExtension(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+
+Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
+    auto loaded = std::make_unique<LoadedMesh>();
+    TriMesh& mesh = loaded->mesh;
+    mesh.request_vertex_colors();
+    if (lowerExtension(path) == ".ply") {
+        // Our PLY parser handles triangle strips and big-endian files, which
+        // OpenMesh's PLY reader does not; OpenMesh then owns the topology.
+        auto ply = readPlyMesh(path);
+        if (!ply) return ply.status();
+        std::vector<TriMesh::VertexHandle> handles;
+        handles.reserve(ply->vertices.size());
+        for (size_t i = 0; i < ply->vertices.size(); ++i) {
+            const Vec3d& v = ply->vertices[i];
+            handles.push_back(mesh.add_vertex({v.x, v.y, v.z}));
+            if (!ply->colors.empty())
+                mesh.set_color(handles.back(), {uint8_t(ply->colors[i][0] >> 8), uint8_t(ply->colors[i][1] >> 8),
+                                                uint8_t(ply->colors[i][2] >> 8)});
+        }
+        loaded->hasColors = !ply->colors.empty();
+        for (const auto& t : ply->triangles)
+            if (!mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) ++loaded->rejectedFaces;
+    } else {
+        OpenMesh::IO::Options options = OpenMesh::IO::Options::VertexColor;
+        if (!OpenMesh::IO::read_mesh(mesh, path, options)) return Status::error(path + ": OpenMesh could not read the mesh");
+        loaded->hasColors = options.check(OpenMesh::IO::Options::VertexColor) && mesh.has_vertex_colors();
+    }
+    if (mesh.n_vertices() == 0) return Status::error(path + ": mesh has no vertices");
+    for (auto v : mesh.vertices()) {
+        auto p = mesh.point(v);
+        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+            return Status::error(path + ": vertex " + std::to_string(v.idx()) + " has a NaN or infinite coordinate");
+    }
+    mesh.request_face_normals();
+    mesh.request_vertex_normals();
+    mesh.update_normals();
+    return loaded;
+}
+
+class MeshReader final : public PointReader {
+public:
+    MeshReader(std::unique_ptr<LoadedMesh> mesh, const std::string& path, const MeshSampling& sampling)
+        : mesh_(std::move(mesh)), rng_(sampling.seed), spacing_(sampling.spacing) {
+        const TriMesh& m = mesh_->mesh;
+        if (!(spacing_ > 0)) {
+            std::vector<double> lengths;
+            for (auto e : m.edges()) lengths.push_back(m.calc_edge_length(e));
+            if (!lengths.empty()) {
+                std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
+                spacing_ = 0.5 * lengths[lengths.size() / 2];
+            }
+        }
+        desc_.path = path;
+        desc_.format = "mesh";
+        desc_.hasNormals = true;
+        desc_.hasColors = mesh_->hasColors;
+        desc_.colorBits = 8;
+    }
+
+    const InputDescription& description() const override { return desc_; }
+
+    Result<size_t> read(InputPoint* out, size_t max) override {
+        const TriMesh& m = mesh_->mesh;
+        size_t n = 0;
+        // Meshes without faces (or with faces too small to sample) still give their vertices.
+        if (m.n_faces() == 0 || !(spacing_ > 0)) {
+            for (; n < max && vertex_ < m.n_vertices(); ++vertex_, ++n) {
+                TriMesh::VertexHandle v{int(vertex_)};
+                out[n] = makePoint(m.point(v), m.normal(v), v, v, v, 1, 0, 0);
+            }
+            return n;
+        }
+        while (n < max) {
+            if (pending_ == 0) {
+                if (face_ >= m.n_faces()) break;
+                TriMesh::FaceHandle f{int(face_++)};
+                auto fv = m.cfv_iter(f);
+                v_[0] = *fv; ++fv; v_[1] = *fv; ++fv; v_[2] = *fv;
+                double area = 0.5 * ((m.point(v_[1]) - m.point(v_[0])) % (m.point(v_[2]) - m.point(v_[0]))).norm();
+                double expected = area / (spacing_ * spacing_);
+                pending_ = uint64_t(std::floor(expected + rng_.uniform()));  // unbiased count
+                continue;
+            }
+            --pending_;
+            // Uniform point in the triangle (Osada et al. 2002).
+            double r1 = std::sqrt(rng_.uniform()), r2 = rng_.uniform();
+            double a = 1 - r1, b = r1 * (1 - r2), c = r1 * r2;
+            auto p = m.point(v_[0]) * a + m.point(v_[1]) * b + m.point(v_[2]) * c;
+            auto normal = m.normal(v_[0]) * a + m.normal(v_[1]) * b + m.normal(v_[2]) * c;
+            out[n++] = makePoint(p, normal, v_[0], v_[1], v_[2], a, b, c);
+        }
+        return n;
+    }
+
+private:
+    InputPoint makePoint(const OpenMesh::Vec3d& p, const OpenMesh::Vec3d& normal, TriMesh::VertexHandle v0,
+                         TriMesh::VertexHandle v1, TriMesh::VertexHandle v2, double a, double b, double c) const {
+        const TriMesh& m = mesh_->mesh;
+        InputPoint q;
+        q.position = {p[0], p[1], p[2]};
+        q.normal = normalizeOrZero(Vec3f{float(normal[0]), float(normal[1]), float(normal[2])});
+        if (mesh_->hasColors)
+            for (int k = 0; k < 3; ++k)
+                q.color[k] = uint16_t(std::lround((m.color(v0)[k] * a + m.color(v1)[k] * b + m.color(v2)[k] * c) * 257.0));
+        return q;
+    }
+
+    std::unique_ptr<LoadedMesh> mesh_;
+    SplitMix64 rng_;
+    double spacing_;
+    InputDescription desc_;
+    size_t face_ = 0, vertex_ = 0;
+    uint64_t pending_ = 0;
+    TriMesh::VertexHandle v_[3];
+};
+
+}  // namespace
+
+bool isMeshExtension(const std::string& path) {
+    std::string ext = lowerExtension(path);
+    return ext == ".obj" || ext == ".off" || ext == ".stl";
+}
+
+Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling) {
+    auto mesh = loadMesh(path);
+    if (!mesh) return mesh.status();
+    return std::unique_ptr<PointReader>(new MeshReader(std::move(*mesh), path, sampling));
+}
+
+Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
+    auto mesh = loadMesh(path);
+    if (!mesh) return mesh.status();
+    const TriMesh& m = (*mesh)->mesh;
+    MeshVertexNormals out;
+    for (auto v : m.vertices()) {
+        auto p = m.point(v);
+        auto n = m.normal(v);
+        out.positions.push_back({p[0], p[1], p[2]});
+        out.normals.push_back(Vec3f{float(n[0]), float(n[1]), float(n[2])});
+    }
+    return out;
+}
+
+}  // namespace surfcast

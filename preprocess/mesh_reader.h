@@ -1,0 +1,33 @@
+// Meshes (PLY with faces or triangle strips, OBJ, OFF, STL) through OpenMesh,
+// sampled into surfels: uniform random samples on every triangle at a target
+// spacing, normals interpolated from OpenMesh's vertex normals, colours from
+// vertex colours. The mesh itself is held in memory; the samples are streamed.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "input_point.h"
+
+namespace surfcast {
+
+struct MeshSampling {
+    double spacing = 0;  // world units; 0: half the median edge length
+    uint64_t seed = 1;
+};
+
+Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling);
+
+// The mesh's vertices with OpenMesh's area-weighted vertex normals, to measure
+// estimated normals against.
+struct MeshVertexNormals {
+    std::vector<Vec3d> positions;
+    std::vector<Vec3f> normals;
+};
+Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path);
+
+// True for file names the mesh path reads (.obj .off .stl; PLY decides by content).
+bool isMeshExtension(const std::string& path);
+
+}  // namespace surfcast

@@ -1,0 +1,508 @@
+#include "octree_builder.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#include <unistd.h>
+
+#include "block_codec.h"
+#include "chunker.h"
+#include "cones.h"
+#include "level_attributes.h"
+#include "normals.h"
+#include "progress.h"
+#include "sampler.h"
+#include "tileset_writer.h"
+
+namespace fs = std::filesystem;
+
+namespace surfcast {
+
+namespace {
+
+// Leaves of inputs whose precision is unknown (doubles, text) are quantized to
+// this fraction of the leaf's cell size.
+constexpr double kUnknownPrecisionFraction = 256;
+// Float32 coordinates: 24 significant bits.
+constexpr double kFloat32Epsilon = 0x1.0p-24;
+constexpr int kMaxPositionBits = 30;
+
+struct BuiltNode {
+    NodeKey key;
+    std::vector<Surfel> surfels;
+    uint8_t childMask = 0;
+    bool inputPoints = false;
+    LevelNode level;
+};
+
+class Builder {
+public:
+    explicit Builder(const BuildOptions& o) : opt_(o), progress_(o.progress) {
+        threads_ = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    }
+
+    Result<BuildSummary> run();
+
+private:
+    Status scan();
+    Status planAndDistribute();
+    Status buildChunks();
+    Status buildChunk(const Chunk& chunk, int innerThreads);
+    BuiltNode* buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
+                            std::vector<std::unique_ptr<BuiltNode>>& nodes);
+    Status buildUpperLevels();
+    Status emit(BuiltNode& node);
+    int positionBits(const BuiltNode& node) const;
+    double edge(int level) const { return std::ldexp(rootEdge_, -level); }
+    Vec3d nodeMinRel(const NodeKey& k) const {
+        double e = edge(k.level);
+        return {k.x * e, k.y * e, k.z * e};
+    }
+    SampleGrid nodeGrid(const NodeKey& k) const { return {nodeMinRel(k), edge(k.level) / opt_.grid, uint32_t(opt_.grid)}; }
+    LevelParams levelParams(int level, int threads) const {
+        LevelParams p;
+        p.spacingK = opt_.spacingK;
+        p.weightK = opt_.weightK;
+        p.cutoff = opt_.cutoff;
+        p.fallbackSpacing = edge(level) / opt_.grid;
+        p.weights = opt_.weights;
+        p.threads = threads;
+        return p;
+    }
+    void phaseDone(const std::string& name) { summary_.phaseSeconds.push_back({name, progress_.end()}); }
+
+    BuildOptions opt_;
+    int threads_ = 1;
+    Progress progress_;
+    InputStats stats_;
+    Vec3d rootMin_;
+    double rootEdge_ = 1;
+    double leafStep_ = 0;  // quantization step at the leaves; 0: unknown precision
+    NormalContext normals_;
+    std::string chunkDir_;
+    ChunkLayout layout_;
+    std::unique_ptr<TilesetWriter> writer_;
+    std::mutex mutex_;  // guards retained_ and summary_ counters
+    std::map<NodeKey, std::unique_ptr<BuiltNode>> retained_;  // chunk roots, for the levels above
+    BuildSummary summary_;
+};
+
+Status Builder::scan() {
+    progress_.begin("scan", 0);
+    auto stats = scanInputs(opt_.inputs, [&](uint64_t n) { progress_.advance(n); });
+    if (!stats) return stats.status();
+    phaseDone("scan");
+    stats_ = std::move(*stats);
+    if (stats_.points == 0)
+        return Status::error("the inputs hold no valid points (" + std::to_string(stats_.skipped) + " skipped as NaN/Inf)");
+
+    // Cubic root box around the bounds, a hair larger so the maximum lies inside.
+    const Box3d& b = stats_.bounds;
+    double extent = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
+    double magnitude = std::max({std::fabs(b.min.x), std::fabs(b.min.y), std::fabs(b.min.z), std::fabs(b.max.x),
+                                 std::fabs(b.max.y), std::fabs(b.max.z), 1.0});
+    // Identical points have no extent: give them a box a million times their
+    // coordinates' resolution.
+    rootEdge_ = std::max(extent * (1 + 1e-6), magnitude * 1e-9);
+    Vec3d centre = (b.min + b.max) * 0.5;
+    rootMin_ = centre - Vec3d{rootEdge_, rootEdge_, rootEdge_} * 0.5;
+
+    bool unknown = false;
+    double step = HUGE_VAL;
+    for (const SourceStats& s : stats_.sources) {
+        const InputDescription& d = s.description;
+        double mag = std::max({std::fabs(s.bounds.min.x), std::fabs(s.bounds.min.y), std::fabs(s.bounds.min.z),
+                               std::fabs(s.bounds.max.x), std::fabs(s.bounds.max.y), std::fabs(s.bounds.max.z)});
+        if (d.precision > 0) step = std::min(step, d.precision);
+        else if (d.float32Coordinates) step = std::min(step, mag * kFloat32Epsilon);
+        else unknown = true;
+        OrientationRule rule;
+        if (d.scanOrigin) rule.scanOrigin = *d.scanOrigin - rootMin_;
+        rule.up = d.airborne;
+        normals_.rules.push_back(rule);
+    }
+    leafStep_ = unknown || !(step > 0) || !std::isfinite(step) ? 0 : step;
+    normals_.centre = centre - rootMin_;
+    normals_.k = opt_.normalK;
+
+    std::vector<std::string> sources;
+    for (size_t i = 0; i < stats_.sources.size(); ++i) {
+        std::string name = stats_.sources[i].description.hasNormals ? "input" : orientationName(normals_.rules[i]);
+        if (std::find(sources.begin(), sources.end(), name) == sources.end()) sources.push_back(name);
+    }
+    for (size_t i = 0; i < sources.size(); ++i) summary_.normalSource += (i ? "+" : "") + sources[i];
+    summary_.colorBits = stats_.colorBits;
+    return {};
+}
+
+Status Builder::planAndDistribute() {
+    uint64_t workers = uint64_t(threads_);
+    if (opt_.memoryBytes < kBaselineBytes + workers * kBytesPerChunkPoint * opt_.capacity * 4)
+        return Status::error("--memory " + std::to_string(opt_.memoryBytes >> 20) + " MiB is too small: at least " +
+                             std::to_string((kBaselineBytes + workers * kBytesPerChunkPoint * opt_.capacity * 4) >> 20) +
+                             " MiB are needed with " + std::to_string(workers) + " threads and capacity " +
+                             std::to_string(opt_.capacity));
+    uint64_t maxChunkPoints = (opt_.memoryBytes - kBaselineBytes) / (workers * kBytesPerChunkPoint);
+
+    if (stats_.points <= maxChunkPoints) {
+        layout_ = ChunkLayout::single(rootEdge_, opt_.grid);
+    } else {
+        progress_.begin("count", stats_.points);
+        std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
+        SC_TRY(forEachBatch(opt_.inputs, stats_, rootMin_, [&](std::span<Surfel> batch) {
+            for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, rootEdge_)]++;
+            progress_.advance(batch.size());
+            return Status{};
+        }));
+        phaseDone("count");
+        layout_ = ChunkLayout::fromCounts(counts, maxChunkPoints, rootEdge_, opt_.grid);
+    }
+
+    progress_.begin("distribute", stats_.points);
+    ChunkWriter chunkWriter(layout_, chunkDir_);
+    uint64_t seen = 0;
+    SC_TRY(forEachBatch(opt_.inputs, stats_, rootMin_, [&](std::span<Surfel> batch) {
+        seen += batch.size();
+        progress_.advance(batch.size());
+        return chunkWriter.add(batch);
+    }));
+    SC_TRY(chunkWriter.finish());
+    phaseDone("distribute");
+    if (seen != stats_.points)
+        return Status::error("the inputs changed while being read: " + std::to_string(stats_.points) + " points, then " +
+                             std::to_string(seen));
+    summary_.chunks = layout_.chunks().size();
+    return {};
+}
+
+BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
+                                 std::vector<std::unique_ptr<BuiltNode>>& nodes) {
+    auto node = std::make_unique<BuiltNode>();
+    node->key = key;
+    auto first = pts.begin() + long(b), last = pts.begin() + long(e);
+    bool identical = std::all_of(first, last, [&](const Surfel& s) { return s.position == first->position; });
+    if (e - b <= opt_.capacity || key.level >= kMaxLevel || identical) {
+        // Leaf: the input points themselves, exact duplicates merged.
+        node->inputPoints = true;
+        node->surfels.assign(first, last);
+        auto& v = node->surfels;
+        std::sort(v.begin(), v.end(), [](const Surfel& a, const Surfel& c) {
+            return std::tie(a.position.x, a.position.y, a.position.z) < std::tie(c.position.x, c.position.y, c.position.z);
+        });
+        size_t out = 0;
+        for (size_t i = 0; i < v.size(); ++i) {
+            if (out > 0 && v[out - 1].position == v[i].position) v[out - 1].count += v[i].count;
+            else v[out++] = v[i];
+        }
+        v.resize(out);
+    } else {
+        // Partition the range into the 8 children (child index bits: x, y, z).
+        Vec3d mid = nodeMinRel(key) + Vec3d{1, 1, 1} * (edge(key.level) * 0.5);
+        size_t bounds[9];
+        bounds[0] = b;
+        bounds[8] = e;
+        auto split = [&](size_t lo, size_t hi, int axis) {
+            return size_t(std::partition(pts.begin() + long(lo), pts.begin() + long(hi),
+                                         [&](const Surfel& s) { return s.position[axis] < mid[axis]; }) -
+                          pts.begin());
+        };
+        bounds[4] = split(b, e, 0);
+        bounds[2] = split(bounds[0], bounds[4], 1);
+        bounds[6] = split(bounds[4], bounds[8], 1);
+        for (int i = 0; i < 8; i += 2) bounds[i + 1] = split(bounds[i], bounds[i + 2], 2);
+        std::vector<Surfel> gathered;
+        for (int c = 0; c < 8; ++c) {
+            if (bounds[c] == bounds[c + 1]) continue;
+            BuiltNode* child = buildSubtree(pts, bounds[c], bounds[c + 1], key.child(c), nodes);
+            node->childMask |= uint8_t(1u << c);
+            gathered.insert(gathered.end(), child->surfels.begin(), child->surfels.end());
+        }
+        node->surfels = resample(gathered, nodeGrid(key));
+    }
+    nodes.push_back(std::move(node));
+    return nodes.back().get();
+}
+
+Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
+    auto pts = readChunkFile(chunk.file, chunk.points);
+    if (!pts) return pts.status();
+    auto halo = readChunkFile(chunk.haloFile, chunk.haloPoints);
+    if (!halo) return halo.status();
+    std::error_code ec;
+    fs::remove(chunk.file, ec);
+    fs::remove(chunk.haloFile, ec);
+    if (pts->empty()) return {};
+
+    NormalContext ctx = normals_;
+    ctx.threads = innerThreads;
+    estimateNormals(*pts, *halo, ctx);
+
+    std::vector<std::unique_ptr<BuiltNode>> nodes;
+    BuiltNode* root = buildSubtree(*pts, 0, pts->size(), chunk.key, nodes);
+    std::vector<Surfel>().swap(*pts);
+
+    // Per level: h, radii and weights, with the halo resampled on the level's grid.
+    std::map<int, std::vector<LevelNode*>> levels;
+    for (auto& n : nodes) {
+        n->level.surfels = n->surfels;
+        levels[n->key.level].push_back(&n->level);
+    }
+    const double margin = layout_.margin(int(&chunk - layout_.chunks().data()));
+    for (auto& [level, members] : levels) {
+        std::vector<Surfel> haloLevel;
+        double cell = edge(level) / opt_.grid;
+        Vec3d lo = nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
+        SampleGrid g;
+        for (int a = 0; a < 3; ++a) g.origin[a] = std::floor(lo[a] / cell) * cell;  // aligned with the level's cells
+        g.cellSize = cell;
+        double cells = std::ceil((edge(chunk.key.level) + 2 * margin) / cell) + 2;
+        if (cells < kMaxGridCells) {
+            g.cells = uint32_t(cells);
+            haloLevel = resample(*halo, g, false);
+        } else {
+            haloLevel = *halo;  // finer than any resampling grid can address: the points themselves
+        }
+        computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
+    }
+    for (auto& n : nodes)
+        if (n.get() != root) SC_TRY(emit(*n));
+    bool isRoot = chunk.key == NodeKey{};
+    if (isRoot) return emit(*root);
+    // The chunk root is emitted now and kept for the levels above.
+    SC_TRY(emit(*root));
+    std::lock_guard lock(mutex_);
+    for (auto& n : nodes)
+        if (n.get() == root) retained_[root->key] = std::move(n);
+    return {};
+}
+
+Status Builder::buildChunks() {
+    std::vector<size_t> order(layout_.chunks().size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    // Largest first: the long poles start early.
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return layout_.chunks()[a].points > layout_.chunks()[b].points; });
+    int workers = int(std::min<size_t>(size_t(threads_), order.size()));
+    int inner = std::max(1, threads_ / workers);
+    progress_.begin("build", stats_.points);
+    std::atomic<size_t> next{0};
+    std::mutex errorMutex;
+    Status firstError;
+    auto work = [&] {
+        while (true) {
+            size_t i = next++;
+            if (i >= order.size()) return;
+            {
+                std::lock_guard lock(errorMutex);
+                if (!firstError.ok()) return;
+            }
+            const Chunk& c = layout_.chunks()[order[i]];
+            Status st = buildChunk(c, inner);
+            progress_.advance(c.points);
+            if (!st.ok()) {
+                std::lock_guard lock(errorMutex);
+                if (firstError.ok()) firstError = st;
+            }
+        }
+    };
+    std::vector<std::thread> pool;
+    for (int w = 1; w < workers; ++w) pool.emplace_back(work);
+    work();
+    for (auto& t : pool) t.join();
+    phaseDone("build");
+    return firstError;
+}
+
+Status Builder::buildUpperLevels() {
+    if (retained_.empty()) return {};
+    int deepest = 0;
+    for (auto& [key, node] : retained_) deepest = std::max(deepest, int(key.level));
+    progress_.begin("upper", uint64_t(deepest), "levels");
+    std::map<NodeKey, std::unique_ptr<BuiltNode>> below;  // nodes of level L+1 still needed
+    for (int level = deepest - 1; level >= 0; --level) {
+        // Children: chunk roots and upper nodes of level+1.
+        for (auto it = retained_.begin(); it != retained_.end();) {
+            if (it->first.level == level + 1) {
+                below[it->first] = std::move(it->second);
+                it = retained_.erase(it);
+            } else {
+                ++it;
+            }
+        }
+        std::map<NodeKey, std::unique_ptr<BuiltNode>> current;
+        std::map<NodeKey, std::vector<Surfel>> gathered;
+        for (auto& [key, child] : below) {
+            NodeKey parent = key.parent();
+            auto& p = current[parent];
+            if (!p) {
+                p = std::make_unique<BuiltNode>();
+                p->key = parent;
+            }
+            p->childMask |= uint8_t(1u << key.childIndex());
+            auto& g = gathered[parent];
+            g.insert(g.end(), child->surfels.begin(), child->surfels.end());
+        }
+        below.clear();
+        std::vector<LevelNode*> members;
+        for (auto& [key, node] : current) {
+            node->surfels = resample(gathered[key], nodeGrid(key));
+            node->level.surfels = node->surfels;
+            members.push_back(&node->level);
+        }
+        gathered.clear();
+        std::vector<Surfel> neighbours;  // chunk roots on this level
+        for (auto& [key, node] : retained_)
+            if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
+        computeLevelAttributes(members, neighbours, levelParams(level, threads_));
+        for (auto& [key, node] : current) SC_TRY(emit(*node));
+        below = std::move(current);
+        progress_.advance(1);
+    }
+    phaseDone("upper");
+    return {};
+}
+
+int Builder::positionBits(const BuiltNode& node) const {
+    double e = edge(node.key.level), cell = e / opt_.grid;
+    double step = !node.inputPoints ? cell / opt_.positionFraction
+                  : leafStep_ > 0   ? leafStep_
+                                    : cell / kUnknownPrecisionFraction;
+    int bits = int(std::ceil(std::log2(e / step) - 1e-9));
+    return std::clamp(bits, 1, kMaxPositionBits);
+}
+
+Status Builder::emit(BuiltNode& node) {
+    const size_t n = node.surfels.size();
+    const int bits = positionBits(node);
+    const double maxQ = double((uint64_t(1) << bits) - 1);
+    const double step = edge(node.key.level) / maxQ;
+    const Vec3d lo = nodeMinRel(node.key);
+    BlockData block;
+    block.positions.resize(3 * n);
+    block.normals.resize(3 * n);
+    if (stats_.colorBits) block.colors.resize(3 * n);
+    for (size_t i = 0; i < n; ++i) {
+        const Surfel& s = node.surfels[i];
+        for (int a = 0; a < 3; ++a) {
+            block.positions[3 * i + a] = uint32_t(std::clamp(std::round((s.position[a] - lo[a]) / step), 0.0, maxQ));
+            block.normals[3 * i + a] = s.normal[a];
+        }
+        if (stats_.colorBits)
+            for (int c = 0; c < 3; ++c) block.colors[3 * i + c] = stats_.colorBits == 8 ? uint16_t(s.color[c] >> 8) : s.color[c];
+    }
+    block.weights = node.level.weights;
+    block.radii = node.level.radii;
+    BlockCodecOptions codec;
+    codec.positionBits = bits;
+    codec.colorBits = stats_.colorBits ? stats_.colorBits : 8;
+    auto blob = encodeBlock(block, codec);
+    if (!blob) return Status::error("node " + node.key.name() + ": " + blob.status().message());
+
+    NormalCone cone = computeCone(node.surfels);
+    NodeRecord r;
+    r.key = node.key;
+    r.childMask = node.childMask;
+    r.flags = uint16_t((cone.full ? kFlagConeFull : 0) | (block.radii.empty() ? 0 : kFlagHasRadius) |
+                       (node.inputPoints ? kFlagInputPoints : 0));
+    r.surfelCount = uint32_t(n);
+    r.spacing = node.level.h;
+    r.coneAxis = cone.axis;
+    r.coneCosHalfAngle = cone.cosHalfAngle;
+    r.positionBits = uint8_t(bits);
+    SC_TRY(writer_->addNode(r, *blob));
+
+    std::lock_guard lock(mutex_);
+    size_t L = node.key.level;
+    if (summary_.nodesPerLevel.size() <= L) {
+        summary_.nodesPerLevel.resize(L + 1);
+        summary_.surfelsPerLevel.resize(L + 1);
+    }
+    summary_.nodesPerLevel[L]++;
+    summary_.surfelsPerLevel[L] += n;
+    summary_.surfels += n;
+    return {};
+}
+
+Result<BuildSummary> Builder::run() {
+    auto start = std::chrono::steady_clock::now();
+    SC_TRY(scan());
+    auto writer = TilesetWriter::create(opt_.output);
+    if (!writer) return writer.status();
+    writer_ = std::move(*writer);
+    fs::path partial(writer_->partialDir());
+    chunkDir_ = (partial.parent_path() / (partial.filename().string() + "-chunks")).string();
+    std::error_code ec;
+    fs::create_directories(chunkDir_, ec);
+    if (ec) return Status::error(chunkDir_ + ": cannot create the temporary chunk folder (" + ec.message() + ")");
+    struct RemoveDir {
+        std::string path;
+        ~RemoveDir() { std::error_code e; fs::remove_all(path, e); }
+    } chunkDirGuard{chunkDir_};
+
+    SC_TRY(planAndDistribute());
+    SC_TRY(buildChunks());
+    SC_TRY(buildUpperLevels());
+
+    progress_.begin("write", 0);
+    TilesetInfo info;
+    info.generator = "surfcast-build 0.1.0";
+    info.inputPoints = stats_.points;
+    info.surfels = summary_.surfels;
+    info.levels = int(summary_.nodesPerLevel.size());
+    info.grid = opt_.grid;
+    info.rootMin = rootMin_;
+    info.rootEdge = rootEdge_;
+    info.bounds = stats_.bounds;
+    info.colorBits = stats_.colorBits;
+    info.attributes.push_back({"position", "uint32", 3, 0});
+    info.attributes.push_back({"normal", "float32", 3, BlockCodecOptions{}.normalBits});
+    if (stats_.colorBits) info.attributes.push_back({"color", stats_.colorBits == 8 ? "uint8" : "uint16", 3, 0});
+    if (opt_.weights) info.attributes.push_back({"weight", "float32", 1, BlockCodecOptions{}.weightBits});
+    info.attributes.push_back({"radius", "float32", 1, BlockCodecOptions{}.radiusBits});  // only in nodes flagged kFlagHasRadius
+    info.normalSource = summary_.normalSource;
+    info.weights = opt_.weights ? "analytic" : "none";
+    SC_TRY(writer_->finish(info));
+    phaseDone("write");
+
+    summary_.inputPoints = stats_.points;
+    summary_.skippedPoints = stats_.skipped;
+    summary_.nodes = info.nodes;
+    summary_.levels = info.levels;
+    summary_.hierarchyBytes = info.hierarchyBytes;
+    summary_.blocksBytes = info.blocksBytes;
+    summary_.totalSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary_.peakRss = peakRssBytes();
+    return summary_;
+}
+
+}  // namespace
+
+std::string BuildSummary::text() const {
+    std::ostringstream out;
+    out.setf(std::ios::fixed);
+    out.precision(2);
+    out << "points in: " << inputPoints << " (" << skippedPoints << " skipped as NaN/Inf)\n";
+    out << "surfels: " << surfels << " in " << nodes << " nodes, " << levels << " levels, " << chunks << " chunks\n";
+    for (size_t l = 0; l < surfelsPerLevel.size(); ++l)
+        out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";
+    out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none") << "\n";
+    out << "bytes: hierarchy " << hierarchyBytes << ", blocks " << blocksBytes << " ("
+        << (inputPoints ? double(blocksBytes + hierarchyBytes) / double(inputPoints) : 0) << " per input point)\n";
+    out << "time:";
+    for (auto& [phase, s] : phaseSeconds) out << " " << phase << " " << s << " s,";
+    out << " total " << totalSeconds << " s (" << (totalSeconds > 0 ? double(inputPoints) / totalSeconds / 1e6 : 0)
+        << " M points/s)\n";
+    out << "peak RSS: " << double(peakRss) / double(1 << 20) << " MiB\n";
+    return out.str();
+}
+
+Result<BuildSummary> buildTileset(const BuildOptions& options) {
+    Builder builder(options);
+    return builder.run();
+}
+
+}  // namespace surfcast

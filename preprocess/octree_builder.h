@@ -1,0 +1,58 @@
+// The tile-set build: inputs → chunks on disk → a subtree per chunk → the
+// levels above the chunks → tile set. Follows DESIGN.md decisions 2-4: every
+// level is a complete resampling on its node's G³ grid (sampler.h), leaves hold
+// the input points, a node splits above `capacity` surfels, and each node gets
+// h, a visibility cone and analytic normalization weights.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "inputs.h"
+#include "status.h"
+
+namespace surfcast {
+
+struct BuildOptions {
+    InputOptions inputs;
+    std::string output;
+    int grid = 128;                     // G: cells per axis of a node's grid
+    uint32_t capacity = 20000;          // surfels above which a node splits
+    uint64_t memoryBytes = 2ull << 30;  // peak RSS budget
+    int threads = 0;                    // 0: all cores
+    int normalK = 16;                   // neighbours for PCA normals
+    int spacingK = 8;                   // k of the k-th-neighbour spacing h
+    int weightK = 24;                   // neighbours fetched for the weight sums
+    double cutoff = 1.0;                // kernel cutoff c the weights assume
+    double positionFraction = 8;        // resampled levels: quantization step = cell size / this
+    bool weights = true;                // store analytic per-surfel normalization weights
+    bool progress = true;
+};
+
+struct BuildSummary {
+    uint64_t inputPoints = 0, skippedPoints = 0, surfels = 0, nodes = 0;
+    int levels = 0;
+    size_t chunks = 0;
+    std::vector<uint64_t> nodesPerLevel, surfelsPerLevel;
+    uint64_t hierarchyBytes = 0, blocksBytes = 0;
+    std::vector<std::pair<std::string, double>> phaseSeconds;
+    double totalSeconds = 0;
+    uint64_t peakRss = 0;
+    std::string normalSource;
+    int colorBits = 0;
+
+    std::string text() const;
+};
+
+Result<BuildSummary> buildTileset(const BuildOptions& options);
+
+// Bytes of working memory per point while a chunk is built (points, halo,
+// kd-trees, sort keys, resampled levels), measured on the default scene; the
+// chunk size follows from the budget with it.
+inline constexpr uint64_t kBytesPerChunkPoint = 320;
+// Memory the build needs whatever the chunk size: code, libraries, counting
+// grid (16 MiB), file buffers, upper levels.
+inline constexpr uint64_t kBaselineBytes = 48ull << 20;
+
+}  // namespace surfcast

@@ -1,0 +1,53 @@
+// PLY (Turk 1994): ascii, binary_little_endian, binary_big_endian. Streams the
+// vertex element as points; files with faces or triangle strips are meshes and
+// go through mesh_reader instead (plyHasFaces tells which).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "byte_stream.h"
+#include "input_point.h"
+
+namespace surfcast {
+
+enum class PlyType { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+
+struct PlyProperty {
+    std::string name;
+    PlyType type = PlyType::Float32;
+    bool isList = false;
+    PlyType countType = PlyType::UInt8;
+};
+
+struct PlyElement {
+    std::string name;
+    uint64_t count = 0;
+    std::vector<PlyProperty> properties;
+};
+
+struct PlyHeader {
+    enum class Format { Ascii, BinaryLittle, BinaryBig } format = Format::Ascii;
+    std::vector<PlyElement> elements;
+};
+
+Result<PlyHeader> parsePlyHeader(ByteStream& in);
+// True when the file holds a non-empty face or tristrips element.
+bool plyHasFaces(const PlyHeader& header);
+
+Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path);
+
+// Whole-file read of a PLY mesh: vertex positions and colours (16-bit scale,
+// empty when absent) and triangles from faces (fans of polygons) or strips.
+struct PlyMesh {
+    std::vector<Vec3d> vertices;
+    std::vector<std::array<uint16_t, 3>> colors;
+    std::vector<std::array<uint32_t, 3>> triangles;
+    int colorBits = 8;
+};
+Result<PlyMesh> readPlyMesh(const std::string& path);
+
+}  // namespace surfcast

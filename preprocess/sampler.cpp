@@ -1,0 +1,104 @@
+#include "sampler.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <numeric>
+
+namespace surfcast {
+
+namespace {
+
+constexpr int kAxisBits = 21;
+constexpr uint64_t kAxisMask = (uint64_t(1) << kAxisBits) - 1;
+
+uint64_t packCell(uint64_t x, uint64_t y, uint64_t z) { return x << (2 * kAxisBits) | y << kAxisBits | z; }
+
+uint32_t cellCoord(double v, const SampleGrid& g, int axis) {
+    double c = std::floor((v - g.origin[axis]) / g.cellSize);
+    return uint32_t(std::clamp(c, 0.0, double(g.cells - 1)));
+}
+
+struct Cell {
+    uint64_t key;
+    uint32_t begin, end;  // range in the sorted order
+};
+
+}  // namespace
+
+std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& grid, bool withAttributes) {
+    assert(grid.cells >= 1 && grid.cells <= kMaxGridCells);
+    const size_t n = points.size();
+    std::vector<std::pair<uint64_t, uint32_t>> order(n);
+    for (size_t i = 0; i < n; ++i) {
+        const Vec3d& p = points[i].position;
+        order[i] = {packCell(cellCoord(p.x, grid, 0), cellCoord(p.y, grid, 1), cellCoord(p.z, grid, 2)), uint32_t(i)};
+    }
+    std::sort(order.begin(), order.end());
+
+    std::vector<Cell> cells;
+    for (uint32_t i = 0; i < n;) {
+        uint32_t j = i;
+        while (j < n && order[j].first == order[i].first) ++j;
+        cells.push_back({order[i].first, i, j});
+        i = j;
+    }
+
+    std::vector<Surfel> out(cells.size());
+    for (size_t c = 0; c < cells.size(); ++c) {
+        const Cell& cell = cells[c];
+        Vec3d centroid;
+        Vec3f normal;
+        double weight = 0;
+        for (uint32_t k = cell.begin; k < cell.end; ++k) {
+            const Surfel& s = points[order[k].second];
+            centroid += s.position * double(s.count);
+            normal += s.normal * s.count;
+            weight += s.count;
+        }
+        centroid = centroid * (1.0 / weight);
+        uint32_t nearest = order[cell.begin].second;
+        double best = HUGE_VAL;
+        for (uint32_t k = cell.begin; k < cell.end; ++k) {
+            Vec3d d = points[order[k].second].position - centroid;
+            if (dot(d, d) < best) { best = dot(d, d); nearest = order[k].second; }
+        }
+        Surfel& s = out[c];
+        s = points[nearest];
+        s.normal = normalizeOrZero(normal);
+        s.count = float(weight);
+    }
+    if (!withAttributes) return out;
+
+    // Colours: Gaussian-weighted over the 3x3x3 block of cells around each cell.
+    const double inv2Sigma2 = 1.0 / (2.0 * std::pow(kPrefilterSigma * grid.cellSize, 2));
+    auto findCell = [&](uint64_t key) {
+        auto it = std::lower_bound(cells.begin(), cells.end(), key, [](const Cell& a, uint64_t k) { return a.key < k; });
+        return it != cells.end() && it->key == key ? &*it : nullptr;
+    };
+    for (size_t c = 0; c < cells.size(); ++c) {
+        int64_t x = int64_t(cells[c].key >> (2 * kAxisBits)), y = int64_t((cells[c].key >> kAxisBits) & kAxisMask),
+                z = int64_t(cells[c].key & kAxisMask);
+        double sum[3] = {0, 0, 0}, wsum = 0;
+        for (int dx = -1; dx <= 1; ++dx)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dz = -1; dz <= 1; ++dz) {
+                    int64_t nx = x + dx, ny = y + dy, nz = z + dz;
+                    if (nx < 0 || ny < 0 || nz < 0 || nx >= grid.cells || ny >= grid.cells || nz >= grid.cells) continue;
+                    const Cell* nb = findCell(packCell(uint64_t(nx), uint64_t(ny), uint64_t(nz)));
+                    if (!nb) continue;
+                    for (uint32_t k = nb->begin; k < nb->end; ++k) {
+                        const Surfel& p = points[order[k].second];
+                        Vec3d d = p.position - out[c].position;
+                        double w = p.count * std::exp(-dot(d, d) * inv2Sigma2);
+                        for (int ch = 0; ch < 3; ++ch) sum[ch] += w * p.color[ch];
+                        wsum += w;
+                    }
+                }
+        if (wsum > 0)
+            for (int ch = 0; ch < 3; ++ch) out[c].color[ch] = uint16_t(std::lround(sum[ch] / wsum));
+    }
+    return out;
+}
+
+}  // namespace surfcast

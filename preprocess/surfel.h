@@ -1,0 +1,21 @@
+// The in-memory (and chunk-file) record of the builder: an input point or a
+// resampled surfel. Positions are relative to the root box minimum, in double
+// precision, so huge georeferenced coordinates lose nothing before quantization.
+#pragma once
+
+#include <cstdint>
+
+#include "vec3.h"
+
+namespace surfcast {
+
+struct Surfel {
+    Vec3d position;          // world position minus the root minimum
+    Vec3f normal;            // unit; zero until estimated
+    uint16_t color[3] = {};  // 16-bit channels (8-bit inputs scaled by 257)
+    uint16_t source = 0;     // index of the input it came from (scan origin, orientation rule)
+    float count = 1;         // input points it stands for: weights centroids when resampling
+};
+static_assert(sizeof(Surfel) == 48, "chunk files store Surfel records raw; keep them compact");
+
+}  // namespace surfcast

@@ -1,0 +1,115 @@
+#include "tileset_writer.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "byte_io.h"
+#include "crc32.h"
+
+namespace fs = std::filesystem;
+
+namespace surfcast {
+
+namespace {
+
+Status writeFileSynced(const fs::path& path, const void* data, size_t size) {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd < 0) return Status::error(path.string() + ": cannot create (" + std::strerror(errno) + ")");
+    const char* p = static_cast<const char*>(data);
+    while (size > 0) {
+        ssize_t w = ::write(fd, p, size);
+        if (w < 0) {
+            if (errno == EINTR) continue;
+            ::close(fd);
+            return Status::error(path.string() + ": write failed (" + std::strerror(errno) + ")");
+        }
+        p += w;
+        size -= size_t(w);
+    }
+    bool ok = ::fsync(fd) == 0;
+    ok = ::close(fd) == 0 && ok;
+    if (!ok) return Status::error(path.string() + ": could not be flushed to disk");
+    return {};
+}
+
+}  // namespace
+
+Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& output) {
+    fs::path out = fs::absolute(output).lexically_normal();
+    if (out.filename().empty()) out = out.parent_path();
+    std::error_code ec;
+    if (fs::exists(out, ec) && !(fs::is_directory(out) && (fs::is_empty(out) || fs::exists(out / "tileset.json"))))
+        return Status::error(out.string() + ": exists and is not a tile set; refusing to replace it");
+    fs::create_directories(out.parent_path(), ec);
+    std::unique_ptr<TilesetWriter> w(new TilesetWriter);
+    w->output_ = out.string();
+    w->partial_ = (out.parent_path() / ("." + out.filename().string() + ".partial-" + std::to_string(::getpid()))).string();
+    fs::remove_all(w->partial_, ec);
+    if (!fs::create_directory(w->partial_, ec))
+        return Status::error(w->partial_ + ": cannot create (" + ec.message() + ")");
+    w->blocks_ = std::fopen((w->partial_ + "/blocks.bin").c_str(), "wb");
+    if (!w->blocks_) return Status::error(w->partial_ + "/blocks.bin: cannot create");
+    return w;
+}
+
+TilesetWriter::~TilesetWriter() {
+    if (blocks_) std::fclose(blocks_);
+    if (!finished_) {
+        std::error_code ec;
+        fs::remove_all(partial_, ec);
+    }
+}
+
+Status TilesetWriter::addNode(NodeRecord record, const std::vector<uint8_t>& blob) {
+    uint32_t crc = crc32(blob.data(), blob.size());
+    std::lock_guard lock(mutex_);
+    if (std::fwrite(blob.data(), 1, blob.size(), blocks_) != blob.size())
+        return Status::error(partial_ + "/blocks.bin: write failed (disk full?)");
+    record.blockOffset = blocksBytes_;
+    record.blockSize = uint32_t(blob.size());
+    record.blockCrc = crc;
+    blocksBytes_ += blob.size();
+    records_.push_back(record);
+    return {};
+}
+
+Status TilesetWriter::finish(TilesetInfo& info) {
+    bool ok = std::fflush(blocks_) == 0 && ::fsync(::fileno(blocks_)) == 0;
+    ok = std::fclose(blocks_) == 0 && ok;
+    blocks_ = nullptr;
+    if (!ok) return Status::error(partial_ + "/blocks.bin: could not be flushed to disk");
+
+    std::vector<uint8_t> hierarchy = writeHierarchy(records_, info.pageDepth);
+    info.nodes = records_.size();
+    info.hierarchyBytes = hierarchy.size();
+    info.hierarchyCrc = crc32(hierarchy.data(), hierarchy.size());
+    info.hierarchyPages = le::get<uint32_t>(hierarchy.data() + 12);  // page count, header byte 12
+    info.blocksBytes = blocksBytes_;
+    SC_TRY(writeFileSynced(fs::path(partial_) / "hierarchy.bin", hierarchy.data(), hierarchy.size()));
+    std::string json = writeTilesetJson(info);
+    SC_TRY(writeFileSynced(fs::path(partial_) / "tileset.json", json.data(), json.size()));
+
+    // Swap the folders: the old set (if any) moves aside, the new one moves in.
+    std::error_code ec;
+    fs::path old = fs::path(partial_).parent_path() / ("." + fs::path(output_).filename().string() + ".old-" + std::to_string(::getpid()));
+    bool hadOld = fs::exists(output_, ec);
+    if (hadOld) {
+        fs::rename(output_, old, ec);
+        if (ec) return Status::error(output_ + ": cannot move the previous tile set aside (" + ec.message() + ")");
+    }
+    fs::rename(partial_, output_, ec);
+    if (ec) {
+        if (hadOld) fs::rename(old, output_, ec);
+        return Status::error(output_ + ": cannot move the new tile set into place");
+    }
+    finished_ = true;
+    if (hadOld) fs::remove_all(old, ec);
+    return {};
+}
+
+}  // namespace surfcast
