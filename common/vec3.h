@@ -44,6 +44,7 @@ struct Box3d {
     Vec3d max{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
 
     bool empty() const { return min.x > max.x; }
+    bool operator==(const Box3d&) const = default;
     void extend(const Vec3d& p) {
         for (int i = 0; i < 3; ++i) {
             min[i] = std::fmin(min[i], p[i]);

@@ -63,10 +63,22 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
             body(start, count, nbr.size() / count);
         }
     };
+    // Neighbours facing away (the other side of a thin sheet, a close parallel
+    // surface) do not sample this surface: they count for neither d_k nor weights.
+    auto sameSide = [&](size_t self, int other) {
+        return normals[size_t(other)] == Vec3f{} || normals[self] == Vec3f{} || dot(normals[size_t(other)], normals[self]) >= 0;
+    };
     forBatches([&](size_t start, size_t count, size_t kk) {
         for (size_t q = 0; q < count; ++q) {
-            size_t j = std::min<size_t>(size_t(params.spacingK), kk - 1);
-            dk[start + q] = kk > 1 ? std::sqrt(d2[q * kk + j]) : 0.f;
+            int seen = 0;
+            float d = 0;
+            for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {
+                int id = nbr[q * kk + j];
+                if (id < 0 || !sameSide(start + q, id)) continue;
+                d = std::sqrt(d2[q * kk + j]);
+                ++seen;
+            }
+            dk[start + q] = d;  // fewer than k neighbours: the farthest one found
         }
     });
     std::vector<SpacingResult> spacing(nodes.size());
@@ -105,8 +117,7 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
             double sum = 0;
             for (size_t j = 0; j < kk; ++j) {
                 int id = nbr[q * kk + j];
-                if (id < 0) continue;
-                if (normals[id] != Vec3f{} && dot(normals[id], normals[self]) < 0) continue;
+                if (id < 0 || !sameSide(self, id)) continue;
                 Vec3d d = cast<double>(points[id] - points[self]);
                 Vec3d t = d - n * dot(d, n);  // tangent-plane component
                 double y2 = dot(t, t) / (r * r);

@@ -5,7 +5,8 @@
 // node borders.
 //
 // Spacing rule (docs/ARCHITECTURE.md, "Spacing"): d_k(i) is the distance from
-// surfel i to its k-th nearest neighbour (k = 8). A node's h is the 95th
+// surfel i to its k-th nearest neighbour (k = 8) among those whose normals face
+// the same side (a close surface behind does not sample this one). A node's h is the 95th
 // percentile of d_k over its surfels: up to 5% isolated outliers cannot blow
 // it up. A node whose sampling is too irregular for one h (95th / 5th
 // percentile > kIrregularRatio) also stores a per-surfel radius

@@ -24,6 +24,9 @@ struct LoadedMesh {
     TriMesh mesh;
     bool hasColors = false;
     uint64_t rejectedFaces = 0;  // faces OpenMesh refused (non-manifold)
+    // Faces wound clockwise (negative signed volume): OpenMesh's normals point
+    // inward and are flipped, so surfels face out of the object.
+    double normalSign = 1;
 };
 
 std::string lowerExtension(const std::string& path) {
@@ -67,6 +70,22 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
     mesh.request_face_normals();
     mesh.request_vertex_normals();
     mesh.update_normals();
+    // Signed volume by the divergence theorem, about the centroid so that
+    // large coordinates do not cancel.
+    OpenMesh::Vec3d centroid(0, 0, 0);
+    for (auto v : mesh.vertices()) centroid += mesh.point(v);
+    centroid /= double(mesh.n_vertices());
+    double volume = 0;
+    for (auto f : mesh.faces()) {
+        auto fv = mesh.cfv_iter(f);
+        auto a = mesh.point(*fv) - centroid;
+        ++fv;
+        auto b = mesh.point(*fv) - centroid;
+        ++fv;
+        auto c = mesh.point(*fv) - centroid;
+        volume += (a | (b % c)) / 6.0;
+    }
+    loaded->normalSign = volume < 0 ? -1 : 1;
     return loaded;
 }
 
@@ -99,7 +118,7 @@ public:
         if (m.n_faces() == 0 || !(spacing_ > 0)) {
             for (; n < max && vertex_ < m.n_vertices(); ++vertex_, ++n) {
                 TriMesh::VertexHandle v{int(vertex_)};
-                out[n] = makePoint(m.point(v), m.normal(v), v, v, v, 1, 0, 0);
+                out[n] = makePoint(m.point(v), m.normal(v) * mesh_->normalSign, v, v, v, 1, 0, 0);
             }
             return n;
         }
@@ -119,7 +138,7 @@ public:
             double r1 = std::sqrt(rng_.uniform()), r2 = rng_.uniform();
             double a = 1 - r1, b = r1 * (1 - r2), c = r1 * r2;
             auto p = m.point(v_[0]) * a + m.point(v_[1]) * b + m.point(v_[2]) * c;
-            auto normal = m.normal(v_[0]) * a + m.normal(v_[1]) * b + m.normal(v_[2]) * c;
+            auto normal = (m.normal(v_[0]) * a + m.normal(v_[1]) * b + m.normal(v_[2]) * c) * mesh_->normalSign;
             out[n++] = makePoint(p, normal, v_[0], v_[1], v_[2], a, b, c);
         }
         return n;
@@ -167,7 +186,7 @@ Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
     MeshVertexNormals out;
     for (auto v : m.vertices()) {
         auto p = m.point(v);
-        auto n = m.normal(v);
+        auto n = m.normal(v) * (*mesh)->normalSign;
         out.positions.push_back({p[0], p[1], p[2]});
         out.normals.push_back(Vec3f{float(n[0]), float(n[1]), float(n[2])});
     }

@@ -1,6 +1,7 @@
 // Meshes (PLY with faces or triangle strips, OBJ, OFF, STL) through OpenMesh,
 // sampled into surfels: uniform random samples on every triangle at a target
-// spacing, normals interpolated from OpenMesh's vertex normals, colours from
+// spacing, normals interpolated from OpenMesh's vertex normals (flipped when
+// the faces wind inward, i.e. the signed volume is negative), colours from
 // vertex colours. The mesh itself is held in memory; the samples are streamed.
 #pragma once
 
@@ -19,8 +20,8 @@ struct MeshSampling {
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling);
 
-// The mesh's vertices with OpenMesh's area-weighted vertex normals, to measure
-// estimated normals against.
+// The mesh's vertices with OpenMesh's vertex normals (oriented out of the
+// object by the sign of the mesh's volume), to measure estimated normals against.
 struct MeshVertexNormals {
     std::vector<Vec3d> positions;
     std::vector<Vec3f> normals;

@@ -32,6 +32,23 @@ constexpr double kUnknownPrecisionFraction = 256;
 constexpr double kFloat32Epsilon = 0x1.0p-24;
 constexpr int kMaxPositionBits = 30;
 
+// Adds the wall time of a scope to a counter: where the build's time goes,
+// summed over worker threads.
+class ScopedTimer {
+public:
+    explicit ScopedTimer(std::atomic<uint64_t>& ns) : ns_(ns), start_(std::chrono::steady_clock::now()) {}
+    ~ScopedTimer() {
+        ns_ += uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start_).count());
+    }
+
+private:
+    std::atomic<uint64_t>& ns_;
+    std::chrono::steady_clock::time_point start_;
+};
+
+enum Step { kStepNormals, kStepOctree, kStepAttributes, kStepEncode, kStepCount };
+const char* const kStepNames[kStepCount] = {"normals", "octree", "neighbours+h+weights", "encode"};
+
 struct BuiltNode {
     NodeKey key;
     std::vector<Surfel> surfels;
@@ -90,6 +107,7 @@ private:
     std::mutex mutex_;  // guards retained_ and summary_ counters
     std::map<NodeKey, std::unique_ptr<BuiltNode>> retained_;  // chunk roots, for the levels above
     BuildSummary summary_;
+    std::atomic<uint64_t> stepNs_[kStepCount] = {};
 };
 
 Status Builder::scan() {
@@ -240,11 +258,17 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
 
     NormalContext ctx = normals_;
     ctx.threads = innerThreads;
-    estimateNormals(*pts, *halo, ctx);
-
+    {
+        ScopedTimer t(stepNs_[kStepNormals]);
+        estimateNormals(*pts, *halo, ctx);
+    }
     std::vector<std::unique_ptr<BuiltNode>> nodes;
-    BuiltNode* root = buildSubtree(*pts, 0, pts->size(), chunk.key, nodes);
-    std::vector<Surfel>().swap(*pts);
+    BuiltNode* root = nullptr;
+    {
+        ScopedTimer t(stepNs_[kStepOctree]);
+        root = buildSubtree(*pts, 0, pts->size(), chunk.key, nodes);
+        std::vector<Surfel>().swap(*pts);
+    }
 
     // Per level: h, radii and weights, with the halo resampled on the level's grid.
     std::map<int, std::vector<LevelNode*>> levels;
@@ -254,6 +278,7 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
     }
     const double margin = layout_.margin(int(&chunk - layout_.chunks().data()));
     for (auto& [level, members] : levels) {
+        ScopedTimer t(stepNs_[kStepAttributes]);
         std::vector<Surfel> haloLevel;
         double cell = edge(level) / opt_.grid;
         Vec3d lo = nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
@@ -399,7 +424,10 @@ Status Builder::emit(BuiltNode& node) {
     BlockCodecOptions codec;
     codec.positionBits = bits;
     codec.colorBits = stats_.colorBits ? stats_.colorBits : 8;
-    auto blob = encodeBlock(block, codec);
+    auto blob = [&] {
+        ScopedTimer t(stepNs_[kStepEncode]);
+        return encodeBlock(block, codec);
+    }();
     if (!blob) return Status::error("node " + node.key.name() + ": " + blob.status().message());
 
     NormalCone cone = computeCone(node.surfels);
@@ -476,6 +504,7 @@ Result<BuildSummary> Builder::run() {
     summary_.blocksBytes = info.blocksBytes;
     summary_.totalSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     summary_.peakRss = peakRssBytes();
+    for (int i = 0; i < kStepCount; ++i) summary_.stepSeconds.push_back({kStepNames[i], double(stepNs_[i]) * 1e-9});
     return summary_;
 }
 
@@ -496,6 +525,9 @@ std::string BuildSummary::text() const {
     for (auto& [phase, s] : phaseSeconds) out << " " << phase << " " << s << " s,";
     out << " total " << totalSeconds << " s (" << (totalSeconds > 0 ? double(inputPoints) / totalSeconds / 1e6 : 0)
         << " M points/s)\n";
+    out << "build steps (thread-seconds):";
+    for (auto& [step, s] : stepSeconds) out << " " << step << " " << s << ",";
+    out << "\n";
     out << "peak RSS: " << double(peakRss) / double(1 << 20) << " MiB\n";
     return out.str();
 }

@@ -37,6 +37,7 @@ struct BuildSummary {
     std::vector<uint64_t> nodesPerLevel, surfelsPerLevel;
     uint64_t hierarchyBytes = 0, blocksBytes = 0;
     std::vector<std::pair<std::string, double>> phaseSeconds;
+    std::vector<std::pair<std::string, double>> stepSeconds;  // inside build/upper, summed over threads
     double totalSeconds = 0;
     uint64_t peakRss = 0;
     std::string normalSource;

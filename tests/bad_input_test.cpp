@@ -1,0 +1,187 @@
+// Bad input through the real program: each case ends in a valid tile set or in
+// a clear error naming the file and place, a non-zero exit and no output.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <fcntl.h>
+
+#include <chrono>
+#include <cstring>
+#include <cmath>
+#include <filesystem>
+#include <thread>
+
+#include "test_support.h"
+#include "tileset_reader.h"
+
+namespace fs = std::filesystem;
+using namespace surfcast;
+using test::TempDir;
+
+namespace {
+
+test::RunResult build(const TempDir& dir, const std::string& input, const std::vector<std::string>& extra = {}) {
+    std::vector<std::string> args = {test::binary("surfcast-build"), "-q", input, "-o", dir.file("out")};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return test::run(args);
+}
+
+// Nothing in the folder but the input files: no output, no leftovers.
+void expectNoOutput(const TempDir& dir) {
+    EXPECT_FALSE(fs::exists(dir.file("out")));
+    for (const auto& e : fs::directory_iterator(dir.path()))
+        EXPECT_EQ(e.path().filename().string().find(".out"), std::string::npos) << "leftover " << e.path();
+}
+
+void expectError(const TempDir& dir, const test::RunResult& r, const std::string& file, const std::string& place) {
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find(file), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(place), std::string::npos) << r.output;
+    expectNoOutput(dir);
+}
+
+std::string asciiPly(const std::vector<std::string>& rows) {
+    std::string s = "ply\nformat ascii 1.0\nelement vertex " + std::to_string(rows.size()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    for (const auto& r : rows) s += r + "\n";
+    return s;
+}
+
+uint64_t surfelsOf(const std::string& set) {
+    auto r = TilesetReader::open(set);
+    EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.status().message());
+    return r.ok() ? r->info().surfels : 0;
+}
+
+}  // namespace
+
+TEST(BadInput, TruncatedBinaryPly) {
+    TempDir dir;
+    std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nproperty float y\n"
+                    "property float z\nend_header\n";
+    s += std::string(12 * 500, '\0');
+    test::writeFile(dir.file("t.ply"), s);
+    expectError(dir, build(dir, dir.file("t.ply")), "t.ply", "1000 vertices");
+}
+
+TEST(BadInput, TruncatedAsciiPly) {
+    TempDir dir;
+    std::string s = asciiPly({"0 0 0", "1 1 1", "2 2 2"});
+    s.resize(s.size() - 6);  // the last row is cut
+    test::writeFile(dir.file("t.ply"), s);
+    expectError(dir, build(dir, dir.file("t.ply")), "t.ply", "line");
+}
+
+TEST(BadInput, UnknownPropertyType) {
+    TempDir dir;
+    test::writeFile(dir.file("u.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n1\n");
+    expectError(dir, build(dir, dir.file("u.ply")), "u.ply", "unknown property type 'float128'");
+}
+
+TEST(BadInput, MalformedHeaders) {
+    TempDir dir;
+    test::writeFile(dir.file("h.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n");
+    expectError(dir, build(dir, dir.file("h.ply")), "h.ply", "end_header");
+    test::writeFile(dir.file("n.ply"), "plx\n");
+    expectError(dir, build(dir, dir.file("n.ply")), "n.ply", "byte 0");
+    test::writeFile(dir.file("l.las"), "LASF" + std::string(100, '\0'));
+    expectError(dir, build(dir, dir.file("l.las")), "l.las", "227 bytes");
+}
+
+TEST(BadInput, EmptyFile) {
+    TempDir dir;
+    test::writeFile(dir.file("e.xyz"), "");
+    expectError(dir, build(dir, dir.file("e.xyz")), "e.xyz", "empty");
+}
+
+TEST(BadInput, OnlyNaNPoints) {
+    TempDir dir;
+    test::writeFile(dir.file("nan.ply"), asciiPly({"nan 0 0", "0 inf 0"}));
+    auto r = build(dir, dir.file("nan.ply"));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.output.find("2 skipped"), std::string::npos) << r.output;
+    expectNoOutput(dir);
+}
+
+TEST(BadInput, NaNPointsAreSkippedAndCounted) {
+    TempDir dir;
+    test::writeFile(dir.file("p.ply"), asciiPly({"0 0 0", "nan 1 1", "1 0 0", "0 1 0", "0 0 -inf", "1 1 0"}));
+    auto r = build(dir, dir.file("p.ply"));
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("points in: 4 (2 skipped"), std::string::npos) << r.output;
+    EXPECT_EQ(surfelsOf(dir.file("out")), 4u);
+}
+
+TEST(BadInput, DegenerateGeometriesBuild) {
+    struct Case { const char* name; std::vector<std::string> rows; uint64_t surfels; };
+    std::vector<Case> cases = {
+        {"single", {"5 6 7"}, 1},
+        {"identical", std::vector<std::string>(50000, "1.5 -2 3"), 1},
+    };
+    std::vector<std::string> line, plane;
+    for (int i = 0; i < 30000; ++i) line.push_back(std::to_string(i * 0.001) + " 0 0");
+    for (int i = 0; i < 200; ++i)
+        for (int j = 0; j < 150; ++j) plane.push_back(std::to_string(i * 0.01) + " " + std::to_string(j * 0.01) + " 2");
+    cases.push_back({"collinear", line, 0});
+    cases.push_back({"coplanar", plane, 0});
+    for (const auto& c : cases) {
+        TempDir dir;
+        test::writeFile(dir.file("in.ply"), asciiPly(c.rows));
+        auto r = build(dir, dir.file("in.ply"), {"--capacity", "5000"});
+        ASSERT_EQ(r.exitCode, 0) << c.name << ": " << r.output;
+        auto v = test::run({test::binary("surfcast-build"), "--info", dir.file("out")});
+        EXPECT_EQ(v.exitCode, 0) << c.name << ": " << v.output;
+        if (c.surfels) EXPECT_EQ(surfelsOf(dir.file("out")), c.surfels) << c.name;
+        else EXPECT_GT(surfelsOf(dir.file("out")), c.rows.size()) << c.name;  // several levels
+    }
+}
+
+TEST(BadInput, LasCountMismatch) {
+    TempDir dir;
+    std::string h(227, '\0');
+    std::memcpy(h.data(), "LASF", 4);
+    h[24] = 1;
+    h[25] = 2;
+    uint16_t hs = 227;
+    uint32_t off = 227, count = 10;
+    std::memcpy(h.data() + 94, &hs, 2);
+    std::memcpy(h.data() + 96, &off, 4);
+    uint16_t len = 20;
+    std::memcpy(h.data() + 105, &len, 2);
+    std::memcpy(h.data() + 107, &count, 4);
+    double scale = 0.01;
+    for (int a = 0; a < 3; ++a) std::memcpy(h.data() + 131 + 8 * a, &scale, 8);
+    test::writeFile(dir.file("c.las"), h + std::string(20 * 7, '\0'));
+    expectError(dir, build(dir, dir.file("c.las")), "c.las", "declares 10 points, the file holds 7");
+}
+
+TEST(BadInput, UnknownFormatAndMissingFile) {
+    TempDir dir;
+    test::writeFile(dir.file("x.foo"), "hello");
+    expectError(dir, build(dir, dir.file("x.foo")), "x.foo", "unknown input format");
+    expectError(dir, build(dir, dir.file("missing.ply")), "missing.ply", "no such file");
+}
+
+TEST(BadInput, KilledBuildLeavesNoTileset) {
+    TempDir dir;
+    pid_t pid = fork();
+    if (pid == 0) {
+        int devnull = open("/dev/null", O_WRONLY);
+        dup2(devnull, 2);
+        dup2(devnull, 1);
+        std::string bin = test::binary("surfcast-build"), out = dir.file("out");
+        execl(bin.c_str(), bin.c_str(), "--default-scene", "-o", out.c_str(), nullptr);
+        _exit(127);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(WIFSIGNALED(status)) << "the build finished before it could be killed";
+    EXPECT_FALSE(fs::exists(dir.file("out")));
+    for (const auto& e : fs::recursive_directory_iterator(dir.path()))
+        EXPECT_NE(e.path().filename(), "tileset.json") << e.path();
+}

@@ -1,0 +1,61 @@
+#include <gtest/gtest.h>
+
+#include <map>
+#include <tuple>
+
+#include "block_codec.h"
+
+using namespace surfcast;
+
+namespace {
+BlockData sampleBlock(size_t n) {
+    BlockData b;
+    for (size_t i = 0; i < n; ++i) {
+        b.positions.insert(b.positions.end(), {uint32_t(i * 7 % 1024), uint32_t(i * 13 % 1024), uint32_t(i % 1024)});
+        b.normals.insert(b.normals.end(), {0.f, 0.6f, 0.8f});
+        b.colors.insert(b.colors.end(), {uint16_t(i % 256), uint16_t(255 - i % 256), 7});
+        b.weights.push_back(0.1f + 0.001f * float(i % 100));
+    }
+    return b;
+}
+}  // namespace
+
+// The kd-tree coder reorders points: check the per-point tuples survive as sets.
+TEST(BlockCodec, RoundTripKeepsEveryPointsAttributesTogether) {
+    BlockData in = sampleBlock(500);
+    BlockCodecOptions opt;
+    opt.positionBits = 10;
+    auto bytes = encodeBlock(in, opt);
+    ASSERT_TRUE(bytes.ok()) << bytes.status().message();
+    BlockExpectation e;
+    e.colorBits = 8;
+    auto out = decodeBlock(bytes->data(), bytes->size(), e);
+    ASSERT_TRUE(out.ok()) << out.status().message();
+    ASSERT_EQ(out->size(), in.size());
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, std::pair<uint16_t, float>> expected;
+    for (size_t i = 0; i < in.size(); ++i)
+        expected[{in.positions[3 * i], in.positions[3 * i + 1], in.positions[3 * i + 2]}] = {in.colors[3 * i], in.weights[i]};
+    for (size_t i = 0; i < out->size(); ++i) {
+        auto it = expected.find({out->positions[3 * i], out->positions[3 * i + 1], out->positions[3 * i + 2]});
+        ASSERT_NE(it, expected.end());
+        EXPECT_EQ(out->colors[3 * i], it->second.first);
+        // 12-bit quantization over the block's weight range [0.1, 0.199].
+        EXPECT_NEAR(out->weights[i], it->second.second, 0.1 / 4095 + 1e-6);
+        EXPECT_NEAR(out->normals[3 * i + 1], 0.6f, 2.0 / 1023);
+    }
+}
+
+TEST(BlockCodec, RejectsTruncatedAndMismatchedBlocks) {
+    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{});
+    ASSERT_TRUE(bytes.ok());
+    BlockExpectation e;
+    e.colorBits = 8;
+    for (size_t cut : {size_t(0), size_t(5), bytes->size() / 2, bytes->size() - 1})
+        EXPECT_FALSE(decodeBlock(bytes->data(), cut, e).ok()) << "cut at " << cut;
+    BlockExpectation wrong = e;
+    wrong.radii = true;
+    EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), wrong).ok());
+    wrong = e;
+    wrong.colorBits = 16;
+    EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), wrong).ok());
+}

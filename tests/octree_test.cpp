@@ -1,0 +1,200 @@
+// Round trip through a built tile set: leaves keep every input point within
+// the quantization step, levels shrink about 4x, cones bound normals, and h
+// bounds the true nearest-neighbour distance.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+
+#include "inputs.h"
+#include "neighbours.h"
+#include "octree_builder.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+
+using namespace surfcast;
+
+namespace {
+
+struct Decoded {
+    NodeRecord node;
+    std::vector<Vec3d> positions;
+    std::vector<Vec3f> normals;
+};
+
+std::vector<Decoded> decodeAll(const TilesetReader& set) {
+    std::vector<Decoded> out;
+    for (const NodeRecord& n : set.nodes()) {
+        auto block = set.readBlock(n);
+        EXPECT_TRUE(block.ok()) << block.status().message();
+        if (!block.ok()) continue;
+        Decoded d{n, {}, {}};
+        for (size_t i = 0; i < block->size(); ++i) {
+            d.positions.push_back(set.position(n, *block, i));
+            d.normals.push_back({block->normals[3 * i], block->normals[3 * i + 1], block->normals[3 * i + 2]});
+        }
+        out.push_back(std::move(d));
+    }
+    return out;
+}
+
+double stepOf(const TilesetReader& set, const NodeRecord& n) {
+    return nodeEdge(set.info(), n.key.level) / double((uint64_t(1) << n.positionBits) - 1);
+}
+
+BuildOptions quietOptions(const std::string& out) {
+    BuildOptions o;
+    o.output = out;
+    o.progress = false;
+    return o;
+}
+
+// Every input point has a leaf surfel within half a quantization step per axis.
+void expectInputsInLeaves(const TilesetReader& set, const std::vector<Decoded>& nodes, const InputOptions& inputs) {
+    std::vector<Vec3f> leafPoints;
+    double maxStep = 0;
+    const Vec3d origin = set.info().rootMin;
+    for (const auto& d : nodes) {
+        if (d.node.childMask) continue;
+        maxStep = std::max(maxStep, stepOf(set, d.node));
+        for (const auto& p : d.positions) leafPoints.push_back(cast<float>(p - origin));
+    }
+    NeighbourIndex index(leafPoints, 2);
+    auto stats = scanInputs(inputs, [](uint64_t) {});
+    ASSERT_TRUE(stats.ok());
+    EXPECT_EQ(leafPoints.size() <= stats->points, true);
+    double worst = 0;
+    uint64_t checked = 0;
+    ASSERT_TRUE(forEachBatch(inputs, *stats, origin, [&](std::span<Surfel> batch) {
+        std::vector<Vec3f> q;
+        for (const Surfel& s : batch) q.push_back(cast<float>(s.position));
+        std::vector<int> idx;
+        std::vector<float> d2;
+        index.knn(q.data(), q.size(), 1, &idx, &d2);
+        for (float d : d2) worst = std::max(worst, double(std::sqrt(d)));
+        checked += q.size();
+        return Status{};
+    }).ok());
+    EXPECT_EQ(checked, stats->points);
+    // Half a step per axis, plus float rounding of the test's own coordinates.
+    double floatSlack = set.info().rootEdge * 2e-7;
+    EXPECT_LE(worst, 0.5 * maxStep * std::sqrt(3.0) + floatSlack) << "max leaf step " << maxStep;
+}
+
+void expectConesAndSpacing(const TilesetReader& set, const std::vector<Decoded>& nodes) {
+    // Cones: every normal inside (10-bit normals: allow their quantization error).
+    for (const auto& d : nodes) {
+        if (d.node.flags & kFlagConeFull) continue;
+        for (const auto& n : d.normals)
+            ASSERT_GE(dot(n, d.node.coneAxis), d.node.coneCosHalfAngle - 4e-3) << d.node.key.name();
+    }
+    // h >= the nearest-neighbour distance, over all surfels of each level.
+    std::map<int, std::vector<const Decoded*>> levels;
+    for (const auto& d : nodes) levels[d.node.key.level].push_back(&d);
+    uint64_t total = 0, within = 0;
+    for (auto& [level, members] : levels) {
+        std::vector<Vec3f> pts;
+        for (const Decoded* d : members)
+            for (const auto& p : d->positions) pts.push_back(cast<float>(p - set.info().rootMin));
+        NeighbourIndex index(pts, 2);
+        std::vector<int> idx;
+        std::vector<float> d2;
+        index.knn(pts.data(), pts.size(), 2, &idx, &d2);
+        size_t at = 0;
+        for (const Decoded* d : members)
+            for (size_t i = 0; i < d->positions.size(); ++i, ++at) {
+                if (pts.size() < 2) continue;
+                ++total;
+                if (std::sqrt(d2[2 * at + 1]) <= d->node.spacing * (1 + 1e-5)) ++within;
+            }
+    }
+    ASSERT_GT(total, 0u);
+    EXPECT_GE(double(within) / double(total), 0.99) << within << " of " << total;
+}
+
+}  // namespace
+
+TEST(Octree, IgeaScanRoundTrip) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    BuildOptions o = quietOptions(dir.file("igea"));
+    o.inputs.paths = {test::dataFile("igea.ply")};
+    o.inputs.verticesOnly = true;
+    o.capacity = 500;
+    o.grid = 16;  // coarse cells, so several levels stay coarser than the scan
+    auto summary = buildTileset(o);
+    ASSERT_TRUE(summary.ok()) << summary.status().message();
+    EXPECT_EQ(summary->inputPoints, 134345u);
+    auto set = TilesetReader::open(dir.file("igea"));
+    ASSERT_TRUE(set.ok()) << set.status().message();
+    auto nodes = decodeAll(*set);
+    expectInputsInLeaves(*set, nodes, o.inputs);
+    expectConesAndSpacing(*set, nodes);
+
+    // Levels as complete resamplings: level L is drawn by its nodes plus the
+    // leaves above it. On a surface each level holds about 4x the one above,
+    // as long as its cells are coarser than the scan's own sampling.
+    int levels = set->info().levels;
+    std::vector<uint64_t> complete(levels, 0);
+    std::vector<uint64_t> fromLeaves(levels, 0);  // leaves hold the scan's own points, not a resampling
+    for (const auto& d : nodes) {
+        int l = d.node.key.level;
+        complete[l] += d.node.surfelCount;
+        if (!d.node.childMask)
+            for (int below = l; below < levels; ++below) {
+                fromLeaves[below] += d.node.surfelCount;
+                if (below > l) complete[below] += d.node.surfelCount;
+            }
+    }
+    const double inputSpacing = 0.0005;  // igea: 134k vertices on about 0.03 m², measured median
+    int checked = 0;
+    for (int l = 0; l + 1 < levels; ++l) {
+        double cell = nodeEdge(set->info(), l + 1) / set->info().grid;
+        if (cell < 2 * inputSpacing || fromLeaves[l + 1] * 10 > complete[l + 1]) break;
+        double ratio = double(complete[l + 1]) / double(complete[l]);
+        EXPECT_GT(ratio, 3.0) << "level " << l;
+        EXPECT_LT(ratio, 5.0) << "level " << l;
+        ++checked;
+    }
+    EXPECT_GE(checked, 2);
+}
+
+TEST(Octree, GeoreferencedLasKeepsCentimetres) {
+    REQUIRE_DATA();
+    // Autzen: coordinates near 10^6 with a 0.01 scale; leaves must keep them.
+    test::TempDir dir;
+    BuildOptions o = quietOptions(dir.file("autzen"));
+    o.inputs.paths = {test::dataFile("autzen_trim.las")};
+    o.capacity = 20000;
+    auto summary = buildTileset(o);
+    ASSERT_TRUE(summary.ok()) << summary.status().message();
+    auto set = TilesetReader::open(dir.file("autzen"));
+    ASSERT_TRUE(set.ok());
+    EXPECT_EQ(set->info().normalSource, "estimated-up");
+    auto nodes = decodeAll(*set);
+    for (const auto& d : nodes)
+        if (!d.node.childMask) EXPECT_LE(stepOf(*set, d.node), 0.01) << d.node.key.name();
+    expectInputsInLeaves(*set, nodes, o.inputs);
+    expectConesAndSpacing(*set, nodes);
+}
+
+TEST(Octree, DefaultSceneAcrossChunks) {
+    // A budget that forces several chunks: halos, chunk roots and upper levels.
+    test::TempDir dir;
+    BuildOptions o = quietOptions(dir.file("scene"));
+    o.inputs.defaultScene = true;
+    o.inputs.scene.targetPoints = 300000;
+    o.capacity = 5000;
+    o.memoryBytes = kBaselineBytes + 2 * kBytesPerChunkPoint * 60000;
+    o.threads = 2;
+    auto summary = buildTileset(o);
+    ASSERT_TRUE(summary.ok()) << summary.status().message();
+    EXPECT_GT(summary->chunks, 2u);
+    auto set = TilesetReader::open(dir.file("scene"));
+    ASSERT_TRUE(set.ok());
+    EXPECT_EQ(set->info().normalSource, "estimated-scan-origin");
+    EXPECT_EQ(set->info().colorBits, 8);
+    auto nodes = decodeAll(*set);
+    expectInputsInLeaves(*set, nodes, o.inputs);
+    expectConesAndSpacing(*set, nodes);
+}

@@ -1,0 +1,75 @@
+#include "test_support.h"
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace surfcast::test {
+
+bool haveData() { return fs::exists(std::string(SURFCAST_DATA_DIR) + "/PROVENANCE.md"); }
+
+std::string dataFile(const std::string& name) { return std::string(SURFCAST_DATA_DIR) + "/" + name; }
+
+std::string binary(const std::string& name) { return std::string(SURFCAST_BIN_DIR) + "/" + name; }
+
+TempDir::TempDir() {
+    std::string tmpl = (fs::temp_directory_path() / "surfcast-test-XXXXXX").string();
+    char* p = ::mkdtemp(tmpl.data());
+    if (!p) std::abort();
+    path_ = p;
+}
+
+TempDir::~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+}
+
+RunResult run(const std::vector<std::string>& args) {
+    RunResult r;
+    int pipefd[2];
+    if (::pipe(pipefd) != 0) return r;
+    pid_t pid = ::fork();
+    if (pid == 0) {
+        ::dup2(pipefd[1], 1);
+        ::dup2(pipefd[1], 2);
+        ::close(pipefd[0]);
+        ::close(pipefd[1]);
+        std::vector<char*> argv;
+        for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+        argv.push_back(nullptr);
+        ::execv(argv[0], argv.data());
+        ::_exit(127);
+    }
+    ::close(pipefd[1]);
+    char buf[4096];
+    ssize_t n;
+    while ((n = ::read(pipefd[0], buf, sizeof buf)) > 0) r.output.append(buf, size_t(n));
+    ::close(pipefd[0]);
+    int status = 0;
+    rusage usage{};
+    ::wait4(pid, &status, 0, &usage);
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    r.peakRss = uint64_t(usage.ru_maxrss) * 1024;
+    return r;
+}
+
+void writeFile(const std::string& path, const std::string& bytes) {
+    std::ofstream out(path, std::ios::binary);
+    out << bytes;
+}
+
+std::string readFile(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+}  // namespace surfcast::test

@@ -1,0 +1,51 @@
+// Shared helpers for the tests: where the shared scans and the programs are,
+// scratch folders, and running a program as a child process.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace surfcast::test {
+
+// Path of a file in ../shared/data. When the data folder is missing the test
+// is skipped, except under CI (the CI variable set), where it fails.
+std::string dataFile(const std::string& name);
+bool haveData();
+
+std::string binary(const std::string& name);  // build/bin/NAME
+
+// A fresh folder under the system temp dir, removed when the object dies.
+class TempDir {
+public:
+    TempDir();
+    ~TempDir();
+    const std::string& path() const { return path_; }
+    std::string file(const std::string& name) const { return path_ + "/" + name; }
+
+private:
+    std::string path_;
+};
+
+struct RunResult {
+    int exitCode = -1;
+    std::string output;     // stdout and stderr together
+    uint64_t peakRss = 0;   // bytes, of the child
+};
+RunResult run(const std::vector<std::string>& args);
+
+void writeFile(const std::string& path, const std::string& bytes);
+std::string readFile(const std::string& path);
+
+}  // namespace surfcast::test
+
+// Skips (locally) or fails (under CI) when the shared data is missing.
+#define REQUIRE_DATA()                                                              \
+    do {                                                                            \
+        if (!::surfcast::test::haveData()) {                                        \
+            if (std::getenv("CI")) FAIL() << "shared data missing: " SURFCAST_DATA_DIR; \
+            GTEST_SKIP() << "shared data missing: " SURFCAST_DATA_DIR;              \
+        }                                                                           \
+    } while (0)

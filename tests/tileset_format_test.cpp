@@ -1,0 +1,227 @@
+// Pins docs/FORMAT.md: record bytes, hierarchy header and paging, tileset.json text.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <map>
+
+#include "crc32.h"
+#include "tileset_format.h"
+
+using namespace surfcast;
+
+namespace {
+NodeRecord sampleRecord() {
+    NodeRecord r;
+    r.key = {3, 1, 2, 5};
+    r.childMask = 0x81;
+    r.flags = kFlagConeFull | kFlagChildrenInPage;
+    r.blockOffset = 0x0102030405060708ull;
+    r.blockSize = 1000;
+    r.blockCrc = 0xDEADBEEF;
+    r.surfelCount = 20000;
+    r.spacing = 0.5f;
+    r.coneAxis = {0, 0, 1};
+    r.coneCosHalfAngle = 0.5f;
+    r.positionBits = 12;
+    r.childPage = kNoPage;
+    return r;
+}
+}  // namespace
+
+TEST(TilesetFormat, RecordGoldenBytes) {
+    // Hand-assembled from the field table in docs/FORMAT.md (little-endian).
+    const uint8_t expected[kRecordSize] = {
+        0x03, 0x81, 0x05, 0x00,                          // level, child mask, flags
+        0x01, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00,  // x, y
+        0x05, 0x00, 0x00, 0x00,                          // z
+        0x08, 0x07, 0x06, 0x05, 0x04, 0x03, 0x02, 0x01,  // block offset
+        0xE8, 0x03, 0x00, 0x00, 0xEF, 0xBE, 0xAD, 0xDE,  // block size, CRC
+        0x20, 0x4E, 0x00, 0x00, 0x00, 0x00, 0x00, 0x3F,  // surfels, spacing 0.5f
+        0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,  // cone axis x, y
+        0x00, 0x00, 0x80, 0x3F, 0x00, 0x00, 0x00, 0x3F,  // cone axis z, cos 0.5f
+        0x0C, 0x00, 0x00, 0x00, 0xFF, 0xFF, 0xFF, 0xFF,  // position bits, reserved, child page
+    };
+    uint8_t bytes[kRecordSize];
+    encodeRecord(sampleRecord(), bytes);
+    EXPECT_EQ(0, std::memcmp(bytes, expected, kRecordSize));
+    EXPECT_EQ(decodeRecord(expected), sampleRecord());
+}
+
+TEST(TilesetFormat, HierarchyHeaderAndSinglePage) {
+    NodeRecord root;
+    root.surfelCount = 7;
+    std::vector<uint8_t> bytes = writeHierarchy({root});
+    ASSERT_EQ(bytes.size(), 32u + 16u + 64u);
+    EXPECT_EQ(0, std::memcmp(bytes.data(), "SCHY", 4));
+    auto u32 = [&](size_t at) { return uint32_t(bytes[at] | bytes[at + 1] << 8 | bytes[at + 2] << 16 | uint32_t(bytes[at + 3]) << 24); };
+    EXPECT_EQ(u32(4), 1u);    // version
+    EXPECT_EQ(u32(8), 64u);   // record size
+    EXPECT_EQ(u32(12), 1u);   // pages
+    EXPECT_EQ(u32(16), kDefaultPageDepth);
+    EXPECT_EQ(u32(20), 1u);   // nodes
+    EXPECT_EQ(u32(24), crc32(bytes.data() + 32, 16));
+    EXPECT_EQ(u32(32), 48u);  // page 0 offset (low word)
+    EXPECT_EQ(u32(40), 1u);   // page 0 records
+    EXPECT_EQ(u32(44), crc32(bytes.data() + 48, 64));
+}
+
+TEST(TilesetFormat, HierarchyPagesRoundTrip) {
+    // A chain 9 levels deep with a sibling at every level: with 3 levels per
+    // page it needs 4 pages, whose roots repeat the proxy records.
+    std::vector<NodeRecord> nodes;
+    NodeKey key;
+    for (int level = 0; level <= 8; ++level) {
+        NodeRecord r;
+        r.key = key;
+        r.surfelCount = uint32_t(100 + level);
+        r.childMask = level < 8 ? 0x03 : 0;
+        nodes.push_back(r);
+        if (level < 8) {
+            NodeRecord sibling;
+            sibling.key = key.child(1);
+            sibling.surfelCount = 1;
+            nodes.push_back(sibling);
+        }
+        key = key.child(0);
+    }
+    std::reverse(nodes.begin(), nodes.end());  // any input order
+    std::vector<uint8_t> bytes = writeHierarchy(nodes, 3);
+    auto read = readHierarchy(bytes, "test");
+    ASSERT_TRUE(read.ok()) << read.status().message();
+    ASSERT_EQ(read->size(), nodes.size());
+    std::map<NodeKey, NodeRecord> byKey;
+    for (const auto& r : *read) byKey[r.key] = r;
+    for (const auto& n : nodes) {
+        ASSERT_TRUE(byKey.count(n.key)) << n.key.name();
+        EXPECT_EQ(byKey[n.key].surfelCount, n.surfelCount);
+        EXPECT_EQ(byKey[n.key].childMask, n.childMask);
+    }
+    EXPECT_EQ(bytes[12], 4);  // pages
+    // Proxies sit at the bottom of each page and point at a later page.
+    int proxies = 0;
+    for (const auto& r : *read)
+        if (r.flags & kFlagChildrenInPage) {
+            ++proxies;
+            // Page roots at levels 0, 2, 4, 6 reach 3 levels: proxies at 2, 4, 6.
+            EXPECT_EQ(r.key.level % 2, 0);
+            EXPECT_GT(r.key.level, 0);
+        }
+    EXPECT_EQ(proxies, 3);
+}
+
+TEST(TilesetFormat, HierarchyRejectsCorruption) {
+    NodeRecord root;
+    root.childMask = 1;
+    NodeRecord child;
+    child.key = NodeKey{}.child(0);
+    std::vector<uint8_t> bytes = writeHierarchy({root, child});
+    auto flipped = bytes;
+    flipped.back() ^= 0x40;
+    auto r1 = readHierarchy(flipped, "h.bin");
+    ASSERT_FALSE(r1.ok());
+    EXPECT_NE(r1.status().message().find("page 0"), std::string::npos) << r1.status().message();
+    EXPECT_NE(r1.status().message().find("CRC"), std::string::npos);
+    auto truncated = bytes;
+    truncated.resize(bytes.size() - 10);
+    EXPECT_FALSE(readHierarchy(truncated, "h.bin").ok());
+    std::vector<uint8_t> garbage(100, 0x5A);
+    auto r3 = readHierarchy(garbage, "h.bin");
+    ASSERT_FALSE(r3.ok());
+    EXPECT_NE(r3.status().message().find("magic"), std::string::npos);
+}
+
+TEST(TilesetFormat, TilesetJsonGoldenText) {
+    TilesetInfo info;
+    info.generator = "surfcast-build 0.1.0";
+    info.inputPoints = 1000;
+    info.surfels = 1300;
+    info.nodes = 9;
+    info.levels = 2;
+    info.grid = 128;
+    info.rootMin = {-1.5, 2.25, 1000000.5};
+    info.rootEdge = 4;
+    info.bounds.min = {-1.5, 2.25, 1000000.5};
+    info.bounds.max = {2, 3, 1000001};
+    info.colorBits = 8;
+    info.attributes = {{"position", "uint32", 3, 0}, {"color", "uint8", 3, 0}};
+    info.normalSource = "input";
+    info.weights = "analytic";
+    info.hierarchyBytes = 624;
+    info.hierarchyPages = 1;
+    info.hierarchyCrc = 305419896;
+    info.blocksBytes = 4096;
+    const char* expected = R"({
+  "format": "surfcast-tileset",
+  "version": 1,
+  "generator": "surfcast-build 0.1.0",
+  "input_points": 1000,
+  "surfels": 1300,
+  "nodes": 9,
+  "levels": 2,
+  "grid": 128,
+  "root": {
+    "min": [
+      -1.5,
+      2.25,
+      1000000.5
+    ],
+    "edge": 4.0
+  },
+  "bounds": {
+    "min": [
+      -1.5,
+      2.25,
+      1000000.5
+    ],
+    "max": [
+      2.0,
+      3.0,
+      1000001.0
+    ]
+  },
+  "color_bits": 8,
+  "attributes": [
+    {
+      "name": "position",
+      "type": "uint32",
+      "components": 3,
+      "quantization_bits": 0
+    },
+    {
+      "name": "color",
+      "type": "uint8",
+      "components": 3,
+      "quantization_bits": 0
+    }
+  ],
+  "normal_source": "input",
+  "weights": "analytic",
+  "hierarchy": {
+    "file": "hierarchy.bin",
+    "bytes": 624,
+    "pages": 1,
+    "page_depth": 5,
+    "crc32": 305419896
+  },
+  "blocks": {
+    "file": "blocks.bin",
+    "bytes": 4096,
+    "codec": "draco"
+  }
+}
+)";
+    std::string text = writeTilesetJson(info);
+    EXPECT_EQ(text, expected);
+    auto back = readTilesetJson(text, "tileset.json");
+    ASSERT_TRUE(back.ok()) << back.status().message();
+    EXPECT_EQ(*back, info);
+}
+
+TEST(TilesetFormat, TilesetJsonRejectsBadInput) {
+    EXPECT_FALSE(readTilesetJson("{", "t.json").ok());
+    EXPECT_FALSE(readTilesetJson("{\"format\": \"surfcast-tileset\", \"version\": 1}", "t.json").ok());
+    auto r = readTilesetJson("{\"format\": \"other\"}", "t.json");
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.status().message().find("t.json"), std::string::npos);
+}
