@@ -52,35 +52,39 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
     NeighbourIndex index(points, params.threads);
     const int k = std::max(params.spacingK, params.weights ? params.weightK : 0) + 1;  // +1: the query itself
 
-    // Pass 1: d_k per surfel, then h per node.
+    // One kNN query per surfel; the neighbour lists (not the distances, which
+    // are cheap to recompute) are kept for the weights, which need every node's h.
+    std::vector<uint32_t> neighbours;  // kk per own surfel; UINT32_MAX: none
+    size_t kk = 0;
     std::vector<float> dk(own);
     std::vector<int> nbr;
     std::vector<float> d2;
-    auto forBatches = [&](auto&& body) {
-        for (size_t start = 0; start < own; start += kQueryBatch) {
-            size_t count = std::min(kQueryBatch, own - start);
-            index.knn(points.data() + start, count, k, &nbr, &d2);
-            body(start, count, nbr.size() / count);
-        }
-    };
     // Neighbours facing away (the other side of a thin sheet, a close parallel
     // surface) do not sample this surface: they count for neither d_k nor weights.
-    auto sameSide = [&](size_t self, int other) {
-        return normals[size_t(other)] == Vec3f{} || normals[self] == Vec3f{} || dot(normals[size_t(other)], normals[self]) >= 0;
+    auto sameSide = [&](size_t self, uint32_t other) {
+        return normals[other] == Vec3f{} || normals[self] == Vec3f{} || dot(normals[other], normals[self]) >= 0;
     };
-    forBatches([&](size_t start, size_t count, size_t kk) {
+    for (size_t start = 0; start < own; start += kQueryBatch) {
+        size_t count = std::min(kQueryBatch, own - start);
+        index.knn(points.data() + start, count, k, &nbr, &d2);
+        kk = nbr.size() / count;
+        neighbours.resize(own * kk);
         for (size_t q = 0; q < count; ++q) {
             int seen = 0;
             float d = 0;
-            for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {
+            for (size_t j = 0; j < kk; ++j) {
                 int id = nbr[q * kk + j];
-                if (id < 0 || !sameSide(start + q, id)) continue;
+                uint32_t other = id < 0 ? UINT32_MAX : uint32_t(id);
+                neighbours[(start + q) * kk + j] = other;
+                if (j == 0 || other == UINT32_MAX || seen >= params.spacingK || !sameSide(start + q, other)) continue;
                 d = std::sqrt(d2[q * kk + j]);
                 ++seen;
             }
             dk[start + q] = d;  // fewer than k neighbours: the farthest one found
         }
-    });
+    }
+    std::vector<int>().swap(nbr);
+    std::vector<float>().swap(d2);
     std::vector<SpacingResult> spacing(nodes.size());
     size_t offset = 0;
     for (size_t i = 0; i < nodes.size(); ++i) {
@@ -105,27 +109,24 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         nodes[i]->weights.assign(nodes[i]->surfels.size(), 1.f);
     }
     const double cutoff2 = 2.0 * params.cutoff;
-    forBatches([&](size_t start, size_t count, size_t kk) {
 #pragma omp parallel for num_threads(params.threads) schedule(static)
-        for (size_t q = 0; q < count; ++q) {
-            size_t self = start + q;
-            LevelNode* node = nodes[owner[self]];
-            size_t local = self - firstOf[owner[self]];
-            double r = node->radii.empty() ? node->h : node->radii[local];
-            if (!(r > 0)) continue;
-            Vec3d n = cast<double>(normals[self]);
-            double sum = 0;
-            for (size_t j = 0; j < kk; ++j) {
-                int id = nbr[q * kk + j];
-                if (id < 0 || !sameSide(self, id)) continue;
-                Vec3d d = cast<double>(points[id] - points[self]);
-                Vec3d t = d - n * dot(d, n);  // tangent-plane component
-                double y2 = dot(t, t) / (r * r);
-                if (y2 <= cutoff2) sum += std::exp(-0.5 * y2);
-            }
-            node->weights[local] = float(1.0 / std::max(sum, 1.0));
+    for (size_t self = 0; self < own; ++self) {
+        LevelNode* node = nodes[owner[self]];
+        size_t local = self - firstOf[owner[self]];
+        double r = node->radii.empty() ? node->h : node->radii[local];
+        if (!(r > 0)) continue;
+        Vec3d n = cast<double>(normals[self]);
+        double sum = 0;
+        for (size_t j = 0; j < kk; ++j) {
+            uint32_t other = neighbours[self * kk + j];
+            if (other == UINT32_MAX || !sameSide(self, other)) continue;
+            Vec3d d = cast<double>(points[other] - points[self]);
+            Vec3d t = d - n * dot(d, n);  // tangent-plane component
+            double y2 = dot(t, t) / (r * r);
+            if (y2 <= cutoff2) sum += std::exp(-0.5 * y2);
         }
-    });
+        node->weights[local] = float(1.0 / std::max(sum, 1.0));
+    }
 }
 
 }  // namespace surfcast
