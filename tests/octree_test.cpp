@@ -198,3 +198,23 @@ TEST(Octree, DefaultSceneAcrossChunks) {
     expectInputsInLeaves(*set, nodes, o.inputs);
     expectConesAndSpacing(*set, nodes);
 }
+
+TEST(Octree, SeveralInputsMergeIntoOneSet) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    BuildOptions o = quietOptions(dir.file("merged"));
+    o.inputs.paths = {test::dataFile("bunny.ply"), test::dataFile("horse.ply")};
+    o.inputs.verticesOnly = true;
+    auto summary = buildTileset(o);
+    ASSERT_TRUE(summary.ok()) << summary.status().message();
+    EXPECT_EQ(summary->inputPoints, 35947u + 48485u);
+    auto set = TilesetReader::open(dir.file("merged"));
+    ASSERT_TRUE(set.ok());
+    // The horse has (white) colour, the bunny none: colour is stored, the bunny's white.
+    EXPECT_EQ(set->info().colorBits, 8);
+    Box3d b = set->info().bounds;
+    EXPECT_NEAR(b.min.x, -0.094690, 1e-6);  // bunny
+    EXPECT_NEAR(b.min.y, -0.091670, 1e-6);  // horse
+    auto nodes = decodeAll(*set);
+    expectInputsInLeaves(*set, nodes, o.inputs);
+}

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "default_scene.h"
 #include "inputs.h"
 #include "las_reader.h"
 #include "mesh_reader.h"
@@ -297,4 +298,39 @@ TEST(Inputs, ScanMergesFilesAndScalesLasColours) {
     EXPECT_EQ(stats->points, 110000u + 134345u);
     EXPECT_EQ(stats->sources[0].colorScale, 257);  // 8-bit values in LAS's 16-bit fields
     EXPECT_EQ(stats->colorBits, 8);
+}
+
+TEST(DefaultScene, DeterministicIrregularAndColoured) {
+    auto read = [](uint64_t seed) {
+        SceneOptions o;
+        o.seed = seed;
+        o.targetPoints = 60000;
+        std::vector<InputPoint> all;
+        for (auto& r : openDefaultScene(o)) {
+            EXPECT_TRUE(r->description().hasColors);
+            EXPECT_FALSE(r->description().hasNormals);
+            EXPECT_TRUE(r->description().scanOrigin.has_value());
+            auto part = readAll(*r, true);
+            all.insert(all.end(), part.all.begin(), part.all.end());
+        }
+        return all;
+    };
+    auto a = read(7), b = read(7), c = read(8);
+    ASSERT_EQ(a.size(), b.size());
+    for (size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a[i].position, b[i].position) << i;
+    EXPECT_NE(a[100].position, c[100].position);
+    // About the requested size.
+    EXPECT_GT(a.size(), 45000u);
+    EXPECT_LT(a.size(), 75000u);
+    // Density falls with distance from the scanners: points per m² of ground
+    // within 3 m of scanner 1's foot far exceed those 9-12 m away.
+    size_t nearCount = 0, farCount = 0;
+    for (const auto& p : a) {
+        if (std::fabs(p.position.z) > 0.02) continue;
+        double r = std::hypot(p.position.x - 7.0, p.position.y + 6.0);
+        if (r < 3) ++nearCount;
+        else if (r > 9 && r < 12) ++farCount;
+    }
+    double nearDensity = nearCount / (M_PI * 9), farDensity = farCount / (M_PI * (144 - 81));
+    EXPECT_GT(nearDensity, 5 * farDensity);
 }
