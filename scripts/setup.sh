@@ -9,8 +9,8 @@ packages=(
   build-essential cmake ninja-build pkg-config git
   libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
-  libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
-  python3 python3-venv xvfb
+  libmicrohttpd-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
+  python3 python3-venv xvfb curl
 )
 missing=()
 for p in "${packages[@]}"; do

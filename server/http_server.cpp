@@ -1,0 +1,467 @@
+// HTTP front on GNU libmicrohttpd: an epoll event loop per core, like nginx,
+// instead of a thread per connection. cpp-httplib (thread per keep-alive
+// connection) reached 0.62x nginx's requests/s here, below the 0.8x target;
+// see bench/BENCHMARKS.md. This is the only file that includes microhttpd.h.
+#include "http_server.h"
+
+#include <arpa/inet.h>
+#include <microhttpd.h>
+#include <netinet/in.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <cstring>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "byte_io.h"
+#include "byte_ranges.h"
+
+namespace surfcast {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kImmutable = "public, max-age=31536000, immutable";
+constexpr const char* kRevalidate = "no-cache";
+constexpr size_t kMaxBatchBody = 64 * 1024;
+// Per-connection buffer for the request line and headers: bounds header size.
+constexpr size_t kConnectionMemory = 32 * 1024;
+// Connections one client address may hold: one client cannot take them all.
+constexpr unsigned kPerAddressConnections = 256;
+constexpr unsigned kMaxConnections = 4096;
+// How long stop() waits for requests in flight before closing connections.
+constexpr auto kDrainTime = std::chrono::seconds(5);
+
+std::string hex8(uint32_t v) {
+    char b[16];
+    std::snprintf(b, sizeof b, "%08x", v);
+    return b;
+}
+
+// State of one request, from its first byte to the completion callback.
+struct RequestState {
+    Clock::time_point start = Clock::now();
+    std::string method, path, route = "other", body;
+    int status = 0;
+    uint64_t bytes = 0;
+    bool bodyTooLarge = false;
+};
+
+// What a response body points into, released with the response.
+struct BodyOwner {
+    std::shared_ptr<const TilesetSnapshot> snapshot;
+    std::vector<std::string> texts;  // multipart framing, batch length prefixes
+    std::string owned;               // a body built in memory (JSON, metrics)
+};
+
+void releaseBody(void* cls) { delete static_cast<BodyOwner*>(cls); }
+
+struct Reply {
+    int status = 200;
+    std::vector<std::pair<std::string, std::string>> headers;
+    // Body: owned text, or iovecs into the owner's snapshot and texts.
+    std::unique_ptr<BodyOwner> owner = std::make_unique<BodyOwner>();
+    std::vector<MHD_IoVec> iov;
+    bool useIov = false;
+
+    void header(const std::string& k, const std::string& v) { headers.emplace_back(k, v); }
+    void text(std::string s, const std::string& type) {
+        owner->owned = std::move(s);
+        header("Content-Type", type);
+        useIov = false;
+    }
+    void piece(const void* p, size_t n) {
+        iov.push_back({p, n});
+        useIov = true;
+    }
+};
+
+std::string header(MHD_Connection* c, const char* name) {
+    const char* v = MHD_lookup_connection_value(c, MHD_HEADER_KIND, name);
+    return v ? v : "";
+}
+
+bool etagMatches(const std::string& inm, const std::string& etag) {
+    std::stringstream ss(inm);
+    std::string tag;
+    while (std::getline(ss, tag, ',')) {
+        size_t b = tag.find_first_not_of(" \t"), e = tag.find_last_not_of(" \t");
+        if (b == std::string::npos) continue;
+        tag = tag.substr(b, e - b + 1);
+        if (tag.rfind("W/", 0) == 0) tag = tag.substr(2);
+        if (tag == "*" || tag == etag) return true;
+    }
+    return false;
+}
+
+// "/sets/NAME/REST" -> NAME, REST; false for other paths.
+bool splitSetPath(const std::string& path, std::string* name, std::string* rest) {
+    const std::string prefix = "/sets/";
+    if (path.rfind(prefix, 0) != 0) return false;
+    size_t slash = path.find('/', prefix.size());
+    if (slash == std::string::npos) return false;
+    *name = path.substr(prefix.size(), slash - prefix.size());
+    *rest = path.substr(slash + 1);
+    return true;
+}
+
+}  // namespace
+
+struct HttpServer::Impl {
+    TilesetStore& store;
+    ServerConfig config;
+    Metrics metrics;
+    MHD_Daemon* daemon = nullptr;
+    int boundPort = -1;
+    std::mutex mutex;
+    std::condition_variable stopped;
+    bool stopRequested = false;
+
+    Impl(TilesetStore& s, ServerConfig c) : store(s), config(std::move(c)) {}
+
+    void fail(Reply& r, int status, const std::string& kind, const std::string& message) {
+        r.status = status;
+        r.iov.clear();
+        r.text(nlohmann::json{{"error", message}}.dump() + "\n", "application/json");
+        metrics.error(kind);
+    }
+
+    std::shared_ptr<const TilesetSnapshot> snapshot(const std::string& name, Reply& r) {
+        std::string error;
+        auto snap = store.get(name, &error);
+        if (!snap) fail(r, TilesetStore::validName(name) ? 404 : 400, "not_found", error);
+        return snap;
+    }
+
+    // Clients that pin a version (?v=, tileset.json's hierarchy.crc32) get
+    // immutable caching; a stale pin is refused so they reload tileset.json.
+    bool checkVersion(MHD_Connection* c, Reply& r, const TilesetSnapshot& s, bool* pinned) {
+        const char* v = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "v");
+        *pinned = v != nullptr;
+        if (v && std::string(v) != std::to_string(s.info.hierarchyCrc)) {
+            fail(r, 409, "stale", std::string("version ") + v + " is not the current one (" +
+                                      std::to_string(s.info.hierarchyCrc) + "); reload tileset.json");
+            return false;
+        }
+        return true;
+    }
+
+    // Bytes of a mapped file with ETag, conditional requests and Range.
+    void serveBytes(MHD_Connection* c, Reply& r, std::shared_ptr<const TilesetSnapshot> snap, const uint8_t* data,
+                    uint64_t size, const std::string& type, const std::string& etag, const char* cacheControl) {
+        r.header("ETag", etag);
+        r.header("Cache-Control", cacheControl);
+        r.header("Accept-Ranges", "bytes");
+        if (etagMatches(header(c, "If-None-Match"), etag)) {
+            r.status = 304;
+            return;
+        }
+        RangeRequest rr = parseRange(header(c, "Range"), size, config.maxRanges);
+        switch (rr.kind) {
+            case RangeRequest::Kind::Whole:
+                r.header("Content-Type", type);
+                r.piece(data, size_t(size));
+                break;
+            case RangeRequest::Kind::Unsatisfiable:
+                r.header("Content-Range", "bytes */" + std::to_string(size));
+                return fail(r, 416, "range", "no requested range overlaps the " + std::to_string(size) + " bytes");
+            case RangeRequest::Kind::TooMany:
+                return fail(r, 400, "range", "more than " + std::to_string(config.maxRanges) + " ranges");
+            case RangeRequest::Kind::Partial:
+                r.status = 206;
+                if (rr.ranges.size() == 1) {
+                    const ByteRange& b = rr.ranges[0];
+                    r.header("Content-Type", type);
+                    r.header("Content-Range", "bytes " + std::to_string(b.first) + "-" + std::to_string(b.last) + "/" +
+                                                  std::to_string(size));
+                    r.piece(data + b.first, size_t(b.length()));
+                } else {
+                    const std::string boundary = "surfcast-" + etag.substr(1, etag.size() - 2);
+                    auto& texts = r.owner->texts;
+                    texts.reserve(rr.ranges.size() + 1);  // pointers into it must stay put
+                    for (const ByteRange& b : rr.ranges) {
+                        texts.push_back("\r\n--" + boundary + "\r\nContent-Type: " + type + "\r\nContent-Range: bytes " +
+                                        std::to_string(b.first) + "-" + std::to_string(b.last) + "/" + std::to_string(size) +
+                                        "\r\n\r\n");
+                        r.piece(texts.back().data(), texts.back().size());
+                        r.piece(data + b.first, size_t(b.length()));
+                    }
+                    texts.push_back("\r\n--" + boundary + "--\r\n");
+                    r.piece(texts.back().data(), texts.back().size());
+                    r.header("Content-Type", "multipart/byteranges; boundary=" + boundary);
+                }
+                break;
+        }
+        r.owner->snapshot = std::move(snap);  // keeps the mapping alive until sent
+    }
+
+    void route(MHD_Connection* c, RequestState& st, Reply& r) {
+        const std::string& path = st.path;
+        const bool post = st.method == "POST";
+        if (st.method == "OPTIONS") {
+            st.route = "options";
+            r.status = 204;
+            return;
+        }
+        if (path == "/healthz" && !post) {
+            st.route = "healthz";
+            return r.text("ok\n", "text/plain");
+        }
+        if (path == "/metrics" && !post) {
+            st.route = "metrics";
+            return r.text(metrics.text(), "text/plain; version=0.0.4");
+        }
+        if (path == "/sets" && !post) {
+            st.route = "sets";
+            nlohmann::ordered_json list = nlohmann::ordered_json::array();
+            for (const auto& s : store.list()) {
+                const TilesetInfo& i = s->info;
+                list.push_back({{"name", s->name},
+                                {"points", i.inputPoints},
+                                {"surfels", i.surfels},
+                                {"nodes", i.nodes},
+                                {"bounds", {{"min", {i.bounds.min.x, i.bounds.min.y, i.bounds.min.z}},
+                                            {"max", {i.bounds.max.x, i.bounds.max.y, i.bounds.max.z}}}},
+                                {"version", i.hierarchyCrc}});
+            }
+            r.header("Cache-Control", kRevalidate);
+            return r.text(list.dump(2) + "\n", "application/json");
+        }
+        std::string name, rest;
+        if (!splitSetPath(path, &name, &rest)) return fail(r, 404, "not_found", "no such resource");
+        if (!post && (rest == "tileset.json" || rest == "hierarchy.bin" || rest == "blocks.bin")) {
+            st.route = rest;
+            auto snap = snapshot(name, r);
+            if (!snap) return;
+            const MappedFile& m = rest == "tileset.json" ? *snap->json : rest == "hierarchy.bin" ? *snap->hierarchy : *snap->blocks;
+            // The JSON's CRC changes whenever any byte of the set does.
+            std::string etag = "\"" + std::string(1, rest[0] == 't' ? 'j' : rest[0]) + "-" + hex8(snap->version) + "\"";
+            return serveBytes(c, r, snap, m.data(), m.size(), rest == "tileset.json" ? "application/json" : "application/octet-stream",
+                              etag, kRevalidate);
+        }
+        if (!post && rest.rfind("nodes/", 0) == 0) {
+            st.route = "nodes";
+            auto snap = snapshot(name, r);
+            if (!snap) return;
+            NodeKey key;
+            if (!NodeKey::parse(rest.substr(6), &key)) return fail(r, 400, "bad_request", "node keys look like L-X-Y-Z");
+            auto it = snap->nodes.find(key);
+            if (it == snap->nodes.end()) return fail(r, 404, "not_found", "no node " + key.name());
+            bool pinned = false;
+            if (!checkVersion(c, r, *snap, &pinned)) return;
+            const NodeRecord& n = it->second;
+            std::string etag = "\"n-" + hex8(n.blockCrc) + "-" + std::to_string(n.blockSize) + "\"";
+            return serveBytes(c, r, snap, snap->blocks->data() + n.blockOffset, n.blockSize, "application/octet-stream", etag,
+                              pinned ? kImmutable : kRevalidate);
+        }
+        if (post && rest == "batch") {
+            st.route = "batch";
+            return batch(c, st, r, name);
+        }
+        fail(r, 404, "not_found", "no such resource");
+    }
+
+    void batch(MHD_Connection* c, RequestState& st, Reply& r, const std::string& name) {
+        if (st.bodyTooLarge) return fail(r, 413, "bad_request", "batch body over " + std::to_string(kMaxBatchBody) + " bytes");
+        auto snap = snapshot(name, r);
+        if (!snap) return;
+        bool pinned = false;
+        if (!checkVersion(c, r, *snap, &pinned)) return;
+        std::vector<const NodeRecord*> nodes;
+        std::string body = st.body;
+        for (char& ch : body)
+            if (ch == ',') ch = ' ';
+        std::stringstream words(body);
+        std::string word;
+        while (words >> word) {
+            NodeKey key;
+            if (!NodeKey::parse(word, &key)) return fail(r, 400, "bad_request", "'" + word + "' is not a node key");
+            auto it = snap->nodes.find(key);
+            if (it == snap->nodes.end()) return fail(r, 404, "not_found", "no node " + word);
+            if (nodes.size() == config.maxBatch)
+                return fail(r, 400, "bad_request", "more than " + std::to_string(config.maxBatch) + " nodes");
+            nodes.push_back(&it->second);
+        }
+        if (nodes.empty()) return fail(r, 400, "bad_request", "no node keys in the body");
+        // Length-prefixed blobs in request order: u32 LE size, then the bytes.
+        auto& texts = r.owner->texts;
+        texts.reserve(nodes.size());
+        for (const NodeRecord* n : nodes) {
+            std::string len(4, '\0');
+            le::put<uint32_t>(reinterpret_cast<uint8_t*>(len.data()), n->blockSize);
+            texts.push_back(len);
+            r.piece(texts.back().data(), 4);
+            r.piece(snap->blocks->data() + n->blockOffset, n->blockSize);
+        }
+        r.header("Content-Type", "application/x-surfcast-batch");
+        r.header("Cache-Control", "no-store");
+        r.owner->snapshot = std::move(snap);
+    }
+
+    bool authorized(MHD_Connection* c, const RequestState& st) const {
+        if (config.token.empty() || st.path == "/healthz" || st.method == "OPTIONS") return true;
+        std::string auth = header(c, "Authorization");
+        std::string expected = "Bearer " + config.token;
+        // Constant time in the token's length: no timing oracle.
+        unsigned diff = auth.size() == expected.size() ? 0u : 1u;
+        for (size_t i = 0; i < expected.size(); ++i)
+            diff |= unsigned(uint8_t(expected[i]) ^ uint8_t(i < auth.size() ? auth[i] : 0));
+        return diff == 0;
+    }
+
+    MHD_Result respond(MHD_Connection* c, RequestState& st) {
+        Reply r;
+        if (st.method != "GET" && st.method != "HEAD" && st.method != "POST" && st.method != "OPTIONS") {
+            fail(r, 405, "bad_request", "read-only server: " + st.method + " is not allowed");
+            r.header("Allow", "GET, HEAD, POST, OPTIONS");
+        } else if (!authorized(c, st)) {
+            fail(r, 401, "unauthorized", "missing or wrong bearer token");
+            r.header("WWW-Authenticate", "Bearer realm=\"surfcast\"");
+        } else {
+            route(c, st, r);
+        }
+        if (!config.corsOrigin.empty()) {
+            r.header("Access-Control-Allow-Origin", config.corsOrigin);
+            r.header("Access-Control-Allow-Methods", "GET, HEAD, POST, OPTIONS");
+            r.header("Access-Control-Allow-Headers", "Authorization, Range, If-None-Match, Content-Type");
+            r.header("Access-Control-Expose-Headers", "Content-Range, Content-Length, ETag, Accept-Ranges");
+            r.header("Vary", "Origin");
+        }
+        MHD_Response* res = nullptr;
+        BodyOwner* owner = r.owner.release();
+        if (r.useIov) {
+            res = MHD_create_response_from_iovec(r.iov.data(), unsigned(r.iov.size()), releaseBody, owner);
+            for (const auto& v : r.iov) st.bytes += v.iov_len;
+        } else {
+            res = MHD_create_response_from_buffer_with_free_callback_cls(owner->owned.size(), owner->owned.data(),
+                                                                         releaseBody, owner);
+            st.bytes = owner->owned.size();
+        }
+        if (!res) {
+            delete owner;
+            return MHD_NO;
+        }
+        for (const auto& [k, v] : r.headers) MHD_add_response_header(res, k.c_str(), v.c_str());
+        st.status = r.status;
+        if (st.method == "HEAD" || r.status == 304 || r.status == 204) st.bytes = 0;
+        MHD_Result ok = MHD_queue_response(c, unsigned(r.status), res);
+        MHD_destroy_response(res);
+        return ok;
+    }
+
+    // MHD callbacks.
+    static void* onUri(void* cls, const char*, MHD_Connection*) {
+        (void)cls;
+        return new RequestState;
+    }
+
+    static MHD_Result onRequest(void* cls, MHD_Connection* c, const char* url, const char* method, const char*,
+                                const char* upload, size_t* uploadSize, void** reqCls) {
+        auto* self = static_cast<Impl*>(cls);
+        auto* st = static_cast<RequestState*>(*reqCls);
+        if (st->method.empty()) {
+            // Answer only from the second call on: MHD then knows the request
+            // (and any body) was read whole and keeps the connection alive.
+            st->method = method;
+            st->path = url;
+            return MHD_YES;
+        }
+        if (*uploadSize > 0) {
+            if (st->body.size() + *uploadSize > kMaxBatchBody) st->bodyTooLarge = true;
+            else st->body.append(upload, *uploadSize);
+            *uploadSize = 0;
+            return MHD_YES;
+        }
+        return self->respond(c, *st);
+    }
+
+    static void onCompleted(void* cls, MHD_Connection*, void** reqCls, MHD_RequestTerminationCode) {
+        auto* self = static_cast<Impl*>(cls);
+        std::unique_ptr<RequestState> st(static_cast<RequestState*>(*reqCls));
+        *reqCls = nullptr;
+        if (!st || st->method.empty()) return;
+        double seconds = std::chrono::duration<double>(Clock::now() - st->start).count();
+        int status = st->status ? st->status : 500;
+        self->metrics.record(st->route, status, st->bytes, seconds);
+        const LogLevel level = self->config.log;
+        if (level == LogLevel::Requests || (level == LogLevel::Errors && status >= 400))
+            std::fprintf(stderr, "%s %s %d %llu %.2fms\n", st->method.c_str(), st->path.c_str(), status,
+                         static_cast<unsigned long long>(st->bytes), seconds * 1e3);
+    }
+
+    static void onLog(void* cls, const char* fmt, va_list ap) {
+        auto* self = static_cast<Impl*>(cls);
+        if (self->config.log == LogLevel::Quiet) return;
+        std::fprintf(stderr, "surfcast-serve: ");
+        std::vfprintf(stderr, fmt, ap);
+    }
+};
+
+HttpServer::HttpServer(TilesetStore& store, ServerConfig config) : impl_(new Impl(store, std::move(config))) {}
+
+HttpServer::~HttpServer() {
+    if (impl_->daemon) MHD_stop_daemon(impl_->daemon);
+}
+
+Status HttpServer::bind() {
+    const ServerConfig& c = impl_->config;
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(uint16_t(c.port));
+    if (::inet_pton(AF_INET, c.host.c_str(), &addr.sin_addr) != 1)
+        return Status::error("cannot listen on " + c.host + ": not an IPv4 address");
+    unsigned threads = c.threads > 0 ? unsigned(c.threads) : std::max(1u, std::thread::hardware_concurrency());
+    unsigned flags = MHD_USE_EPOLL_INTERNAL_THREAD | MHD_USE_ERROR_LOG | MHD_USE_TURBO | MHD_USE_ITC;
+    impl_->daemon = MHD_start_daemon(
+        flags, 0, nullptr, nullptr, &Impl::onRequest, impl_.get(),                                   //
+        MHD_OPTION_SOCK_ADDR, reinterpret_cast<sockaddr*>(&addr),                                      //
+        MHD_OPTION_THREAD_POOL_SIZE, threads,                                                          //
+        MHD_OPTION_CONNECTION_TIMEOUT, unsigned(std::max(c.timeoutSeconds, 1)),                       //
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, kConnectionMemory,                                         //
+        MHD_OPTION_CONNECTION_LIMIT, kMaxConnections,                                                  //
+        MHD_OPTION_PER_IP_CONNECTION_LIMIT, kPerAddressConnections,                                    //
+        MHD_OPTION_URI_LOG_CALLBACK, &Impl::onUri, impl_.get(),                                        //
+        MHD_OPTION_NOTIFY_COMPLETED, &Impl::onCompleted, impl_.get(),                                  //
+        MHD_OPTION_EXTERNAL_LOGGER, &Impl::onLog, impl_.get(),                                         //
+        MHD_OPTION_END);
+    if (!impl_->daemon) return Status::error("cannot listen on " + c.host + ":" + std::to_string(c.port));
+    const MHD_DaemonInfo* info = MHD_get_daemon_info(impl_->daemon, MHD_DAEMON_INFO_BIND_PORT);
+    impl_->boundPort = info ? int(info->port) : c.port;
+    return {};
+}
+
+int HttpServer::port() const { return impl_->boundPort; }
+
+void HttpServer::run() {
+    std::unique_lock lock(impl_->mutex);
+    impl_->stopped.wait(lock, [&] { return impl_->stopRequested; });
+    if (!impl_->daemon) return;
+    // Stop accepting, let requests in flight finish, then close.
+    MHD_socket listener = MHD_quiesce_daemon(impl_->daemon);
+    if (listener != MHD_INVALID_SOCKET) ::close(listener);
+    auto deadline = Clock::now() + kDrainTime;
+    while (Clock::now() < deadline) {
+        const MHD_DaemonInfo* info = MHD_get_daemon_info(impl_->daemon, MHD_DAEMON_INFO_CURRENT_CONNECTIONS);
+        if (!info || info->num_connections == 0) break;
+        lock.unlock();
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        lock.lock();
+    }
+    MHD_stop_daemon(impl_->daemon);
+    impl_->daemon = nullptr;
+}
+
+void HttpServer::stop() {
+    std::lock_guard lock(impl_->mutex);
+    impl_->stopRequested = true;
+    impl_->stopped.notify_all();
+}
+
+const Metrics& HttpServer::metrics() const { return impl_->metrics; }
+
+}  // namespace surfcast

@@ -1,0 +1,44 @@
+// The HTTP front of the server (docs/PROTOCOL.md). cpp-httplib stays inside
+// http_server.cpp; this header is free of it.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "metrics.h"
+#include "status.h"
+#include "tileset_store.h"
+
+namespace surfcast {
+
+enum class LogLevel { Quiet, Errors, Requests };
+
+struct ServerConfig {
+    std::string host = "127.0.0.1";  // loopback unless asked otherwise
+    int port = 8080;                 // 0: any free port
+    int threads = 0;                 // event-loop threads; 0: one per core
+    std::string token;               // bearer token; empty: no authentication
+    std::string corsOrigin;          // Access-Control-Allow-Origin; empty: no CORS headers
+    LogLevel log = LogLevel::Requests;
+    size_t maxBatch = 256;           // nodes per batch request
+    size_t maxRanges = 16;           // ranges per Range header
+    int timeoutSeconds = 10;         // read/write timeout: stalled clients are dropped
+    int keepAliveSeconds = 10;       // idle keep-alive connections close after this
+};
+
+class HttpServer {
+public:
+    HttpServer(TilesetStore& store, ServerConfig config);
+    ~HttpServer();
+    Status bind();       // listens; with port 0, port() tells the one chosen
+    int port() const;
+    void run();          // serves until stop(); call after bind()
+    void stop();         // thread-safe; run() returns after in-flight requests finish
+    const Metrics& metrics() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace surfcast

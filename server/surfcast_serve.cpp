@@ -1,0 +1,127 @@
+// surfcast-serve: serves every tile set under a folder over HTTP
+// (docs/PROTOCOL.md). main() parses arguments, wires the store and the HTTP
+// server, and turns SIGINT/SIGTERM into a graceful stop.
+#include <signal.h>
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "http_server.h"
+#include "tileset_store.h"
+
+namespace {
+
+const char* kUsage = R"(usage: surfcast-serve DIR [options]
+
+Serves every tile set under DIR (its sub-folders holding tileset.json) over
+HTTP: the three files with Range support, single node blocks, batches of nodes,
+/sets, /healthz and /metrics. Read-only; a set rebuilt in place is picked up.
+
+  --bind HOST:PORT     address to listen on (default 127.0.0.1:8080; port 0 picks one)
+  --threads N          event-loop threads, each serving many connections (default: one per core)
+  --token-file F       require "Authorization: Bearer <token>" with the token in F
+  --cors ORIGIN        send Access-Control-Allow-Origin: ORIGIN (e.g. *)
+  --log LEVEL          requests (default), errors or quiet; one line per request on stderr
+  --timeout S          read/write timeout for stalled clients, seconds (default 10)
+  -h, --help           this text
+)";
+
+int usageError(const std::string& m) {
+    std::fprintf(stderr, "surfcast-serve: %s\n(see surfcast-serve --help)\n", m.c_str());
+    return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    surfcast::ServerConfig config;
+    std::string dir;
+    for (int i = 1; i < argc; ++i) {
+        std::string a = argv[i];
+        auto value = [&](std::string* out) {
+            if (i + 1 >= argc) return false;
+            *out = argv[++i];
+            return true;
+        };
+        std::string v;
+        if (a == "-h" || a == "--help") {
+            std::fputs(kUsage, stdout);
+            return 0;
+        } else if (a == "--bind") {
+            size_t colon;
+            if (!value(&v) || (colon = v.rfind(':')) == std::string::npos) return usageError("--bind needs HOST:PORT");
+            config.host = v.substr(0, colon);
+            char* end = nullptr;
+            long port = std::strtol(v.c_str() + colon + 1, &end, 10);
+            if (*end || port < 0 || port > 65535 || config.host.empty()) return usageError("--bind needs HOST:PORT");
+            config.port = int(port);
+        } else if (a == "--threads") {
+            if (!value(&v) || (config.threads = std::atoi(v.c_str())) < 1 || config.threads > 4096)
+                return usageError("--threads needs a value in [1, 4096]");
+        } else if (a == "--token-file") {
+            if (!value(&v)) return usageError("--token-file needs a file");
+            std::ifstream f(v);
+            if (!f) return usageError("cannot read token file " + v);
+            std::getline(f, config.token);
+            while (!config.token.empty() && std::isspace(static_cast<unsigned char>(config.token.back()))) config.token.pop_back();
+            if (config.token.empty()) return usageError("token file " + v + " is empty");
+        } else if (a == "--cors") {
+            if (!value(&config.corsOrigin)) return usageError("--cors needs an origin");
+        } else if (a == "--log") {
+            if (!value(&v) || (v != "requests" && v != "errors" && v != "quiet"))
+                return usageError("--log is requests, errors or quiet");
+            config.log = v == "requests" ? surfcast::LogLevel::Requests
+                         : v == "errors" ? surfcast::LogLevel::Errors
+                                         : surfcast::LogLevel::Quiet;
+        } else if (a == "--timeout") {
+            if (!value(&v) || (config.timeoutSeconds = std::atoi(v.c_str())) < 1) return usageError("--timeout needs seconds >= 1");
+        } else if (!a.empty() && a[0] == '-') {
+            return usageError("unknown option " + a);
+        } else if (dir.empty()) {
+            dir = a;
+        } else {
+            return usageError("one folder only");
+        }
+    }
+    if (dir.empty()) return usageError("no folder given");
+
+    auto store = surfcast::TilesetStore::open(dir);
+    if (!store) {
+        std::fprintf(stderr, "surfcast-serve: %s\n", store.status().message().c_str());
+        return 1;
+    }
+    // Block the stop signals in every thread; one thread waits for them.
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGINT);
+    sigaddset(&signals, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+    signal(SIGPIPE, SIG_IGN);
+
+    surfcast::HttpServer server(**store, config);
+    surfcast::Status st = server.bind();
+    if (!st.ok()) {
+        std::fprintf(stderr, "surfcast-serve: %s\n", st.message().c_str());
+        return 1;
+    }
+    std::fprintf(stderr, "surfcast-serve: serving %s on http://%s:%d (%zu tile sets)\n", dir.c_str(), config.host.c_str(),
+                 server.port(), (*store)->list().size());
+    std::thread waiter([&] {
+        int sig = 0;
+        sigwait(&signals, &sig);
+        std::fprintf(stderr, "surfcast-serve: %s, finishing requests in flight\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
+        server.stop();
+    });
+    server.run();
+    // run() also returns when listening fails; wake the waiter either way.
+    pthread_kill(waiter.native_handle(), SIGTERM);
+    waiter.join();
+    std::fprintf(stderr, "surfcast-serve: stopped\n");
+    return 0;
+}

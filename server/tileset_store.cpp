@@ -1,0 +1,156 @@
+#include "tileset_store.h"
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <vector>
+
+#include "crc32.h"
+
+namespace surfcast {
+
+namespace {
+constexpr size_t kMaxNameLength = 128;
+
+bool sameFile(const struct stat& st, const TilesetSnapshot& s) {
+    return st.st_dev == s.device && st.st_ino == s.inode && st.st_mtim.tv_sec == s.modified.tv_sec &&
+           st.st_mtim.tv_nsec == s.modified.tv_nsec;
+}
+
+struct Fd {
+    int fd = -1;
+    ~Fd() { if (fd >= 0) ::close(fd); }
+};
+}  // namespace
+
+Result<std::shared_ptr<MappedFile>> MappedFile::openAt(int dirFd, const std::string& name, const std::string& what) {
+    // O_NOFOLLOW: a symlink inside a set cannot point the server outside it.
+    Fd f{::openat(dirFd, name.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC)};
+    if (f.fd < 0) return Status::error(what + ": cannot open (" + std::strerror(errno) + ")");
+    struct stat st{};
+    if (::fstat(f.fd, &st) != 0 || !S_ISREG(st.st_mode)) return Status::error(what + ": not a regular file");
+    std::shared_ptr<MappedFile> m(new MappedFile);
+    m->size_ = uint64_t(st.st_size);
+    if (m->size_ > 0) {
+        void* p = ::mmap(nullptr, m->size_, PROT_READ, MAP_SHARED, f.fd, 0);
+        if (p == MAP_FAILED) return Status::error(what + ": mmap failed (" + std::strerror(errno) + ")");
+        m->data_ = static_cast<const uint8_t*>(p);
+    }
+    return m;
+}
+
+MappedFile::~MappedFile() {
+    if (data_) ::munmap(const_cast<uint8_t*>(data_), size_);
+}
+
+Result<std::unique_ptr<TilesetStore>> TilesetStore::open(const std::string& root) {
+    std::unique_ptr<TilesetStore> s(new TilesetStore);
+    s->root_ = root;
+    s->rootFd_ = ::open(root.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (s->rootFd_ < 0) return Status::error(root + ": cannot open folder (" + std::strerror(errno) + ")");
+    return s;
+}
+
+bool TilesetStore::validName(const std::string& name) {
+    if (name.empty() || name.size() > kMaxNameLength || name[0] == '.') return false;
+    return std::all_of(name.begin(), name.end(), [](unsigned char c) {
+        return std::isalnum(c) || c == '.' || c == '_' || c == '-';
+    });
+}
+
+Result<std::shared_ptr<TilesetSnapshot>> TilesetStore::load(const std::string& name) {
+    // The folder is opened once and its three files relative to it, so all
+    // three come from the same folder even if another is renamed in meanwhile.
+    Fd dir{::openat(rootFd_, name.c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC)};
+    if (dir.fd < 0) return Status::error("no tile set named '" + name + "'");
+    std::string where = root_ + "/" + name + "/";
+    auto json = MappedFile::openAt(dir.fd, "tileset.json", where + "tileset.json");
+    if (!json) return json.status();
+    auto hierarchy = MappedFile::openAt(dir.fd, "hierarchy.bin", where + "hierarchy.bin");
+    if (!hierarchy) return hierarchy.status();
+    auto blocks = MappedFile::openAt(dir.fd, "blocks.bin", where + "blocks.bin");
+    if (!blocks) return blocks.status();
+
+    auto snap = std::make_shared<TilesetSnapshot>();
+    snap->name = name;
+    const auto& j = **json;
+    auto info = readTilesetJson(std::string(reinterpret_cast<const char*>(j.data()), j.size()), where + "tileset.json");
+    if (!info) return info.status();
+    snap->info = *info;
+    const auto& h = **hierarchy;
+    if (h.size() != info->hierarchyBytes || crc32(h.data(), h.size()) != info->hierarchyCrc ||
+        (*blocks)->size() != info->blocksBytes)
+        return Status::error(where + ": files do not match tileset.json (a build in progress?)");
+    auto nodes = readHierarchy(std::vector<uint8_t>(h.data(), h.data() + h.size()), where + "hierarchy.bin");
+    if (!nodes) return nodes.status();
+    for (const NodeRecord& n : *nodes) {
+        if (n.blockOffset > info->blocksBytes || n.blockSize > info->blocksBytes - n.blockOffset)
+            return Status::error(where + "hierarchy.bin: node " + n.key.name() + " points past blocks.bin");
+        snap->nodes[n.key] = n;
+    }
+    snap->version = crc32(j.data(), j.size());
+    snap->json = std::move(*json);
+    snap->hierarchy = std::move(*hierarchy);
+    snap->blocks = std::move(*blocks);
+    struct stat st{};
+    if (::fstatat(dir.fd, "tileset.json", &st, AT_SYMLINK_NOFOLLOW) == 0) {
+        snap->device = st.st_dev;
+        snap->inode = st.st_ino;
+        snap->modified = st.st_mtim;
+    }
+    return snap;
+}
+
+std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name, std::string* error) {
+    if (!validName(name)) {
+        *error = "invalid tile set name";
+        return nullptr;
+    }
+    struct stat st{};
+    std::string path = name + "/tileset.json";
+    bool exists = ::fstatat(rootFd_, path.c_str(), &st, 0) == 0;
+    {
+        std::lock_guard lock(mutex_);
+        auto it = sets_.find(name);
+        if (it != sets_.end() && exists && sameFile(st, *it->second)) return it->second;
+    }
+    // New, replaced or gone: load (outside the lock; concurrent loads of one set are harmless).
+    auto loaded = load(name);
+    std::lock_guard lock(mutex_);
+    if (!loaded) {
+        // A set that fails to load mid-replacement keeps serving its last snapshot.
+        auto it = sets_.find(name);
+        if (it != sets_.end() && exists) return it->second;
+        sets_.erase(name);
+        *error = loaded.status().message();
+        return nullptr;
+    }
+    std::shared_ptr<const TilesetSnapshot> snap = std::move(*loaded);
+    sets_[name] = snap;
+    return snap;
+}
+
+std::vector<std::shared_ptr<const TilesetSnapshot>> TilesetStore::list() {
+    std::vector<std::string> names;
+    int fd = ::dup(rootFd_);
+    if (DIR* d = fd >= 0 ? ::fdopendir(fd) : nullptr) {
+        ::rewinddir(d);
+        while (dirent* e = ::readdir(d))
+            if (validName(e->d_name)) names.push_back(e->d_name);
+        ::closedir(d);
+    }
+    std::sort(names.begin(), names.end());
+    std::vector<std::shared_ptr<const TilesetSnapshot>> out;
+    std::string error;
+    for (const auto& n : names)
+        if (auto s = get(n, &error)) out.push_back(s);
+    return out;
+}
+
+}  // namespace surfcast

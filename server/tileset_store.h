@@ -1,0 +1,78 @@
+// The tile sets under one folder, memory-mapped, as immutable snapshots. A
+// request takes the current snapshot of its set and serves every byte of its
+// response from it; a set rebuilt and renamed over the old one is noticed on
+// the next request (the inode of its tileset.json changes) and loaded as a new
+// snapshot, while responses in flight keep the old mappings alive. No response
+// ever mixes old and new bytes.
+#pragma once
+
+#include <sys/types.h>
+
+#include <cstdint>
+#include <ctime>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "octree_key.h"
+#include "status.h"
+#include "tileset_format.h"
+
+namespace surfcast {
+
+// A read-only mapping of a whole file; empty files map to nothing.
+class MappedFile {
+public:
+    static Result<std::shared_ptr<MappedFile>> openAt(int dirFd, const std::string& name, const std::string& what);
+    ~MappedFile();
+    const uint8_t* data() const { return data_; }
+    uint64_t size() const { return size_; }
+
+private:
+    MappedFile() = default;
+    const uint8_t* data_ = nullptr;
+    uint64_t size_ = 0;
+};
+
+struct TilesetSnapshot {
+    std::string name;
+    TilesetInfo info;
+    std::shared_ptr<MappedFile> json, hierarchy, blocks;
+    std::unordered_map<NodeKey, NodeRecord, NodeKeyHash> nodes;
+    uint32_t version = 0;  // CRC-32 of tileset.json: it covers every block through the hierarchy CRC
+    // Identity of the tileset.json it was loaded from.
+    dev_t device = 0;
+    ino_t inode = 0;
+    timespec modified{};
+};
+
+class TilesetStore {
+public:
+    // `root` must exist; sets are its direct sub-folders holding tileset.json.
+    static Result<std::unique_ptr<TilesetStore>> open(const std::string& root);
+
+    // Set names: 1-128 of [A-Za-z0-9._-], not starting with '.'. Anything else
+    // (traversal, encoded or not, hidden folders) is refused before any disk access.
+    static bool validName(const std::string& name);
+
+    // The current snapshot of a set, reloaded if its files were replaced; null
+    // with `error` set when there is no such set or it does not load.
+    std::shared_ptr<const TilesetSnapshot> get(const std::string& name, std::string* error);
+    // Every loadable set, sorted by name.
+    std::vector<std::shared_ptr<const TilesetSnapshot>> list();
+
+    const std::string& root() const { return root_; }
+
+private:
+    TilesetStore() = default;
+    Result<std::shared_ptr<TilesetSnapshot>> load(const std::string& name);
+
+    std::string root_;
+    int rootFd_ = -1;
+    std::mutex mutex_;
+    std::unordered_map<std::string, std::shared_ptr<const TilesetSnapshot>> sets_;
+};
+
+}  // namespace surfcast

@@ -1,0 +1,362 @@
+// The server over real HTTP on loopback: every endpoint, ranges, caching,
+// traversal attempts, malformed and oversized requests, authentication,
+// concurrency, stalled clients and a set replaced during a download.
+#include <gtest/gtest.h>
+#include <httplib.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <thread>
+
+#include "byte_io.h"
+#include "crc32.h"
+#include "http_server.h"
+#include "octree_builder.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+
+namespace fs = std::filesystem;
+using namespace surfcast;
+
+namespace {
+
+void buildScene(const std::string& out, uint64_t points, uint64_t seed) {
+    BuildOptions o;
+    o.output = out;
+    o.progress = false;
+    o.inputs.defaultScene = true;
+    o.inputs.scene.targetPoints = points;
+    o.inputs.scene.seed = seed;
+    auto s = buildTileset(o);
+    ASSERT_TRUE(s.ok()) << s.status().message();
+}
+
+// One small set shared by the tests (built once).
+class ServerTest : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() {
+        dir_ = new test::TempDir;
+        fs::create_directories(dir_->file("sets"));
+        buildScene(dir_->file("sets/scene"), 40000, 1);
+    }
+    static void TearDownTestSuite() { delete dir_; }
+
+    void start(ServerConfig config = {}) {
+        auto store = TilesetStore::open(dir_->file("sets"));
+        ASSERT_TRUE(store.ok());
+        store_ = std::move(*store);
+        config.port = 0;
+        config.log = LogLevel::Quiet;
+        server_ = std::make_unique<HttpServer>(*store_, config);
+        ASSERT_TRUE(server_->bind().ok());
+        thread_ = std::thread([this] { server_->run(); });
+    }
+    void TearDown() override {
+        if (server_) server_->stop();
+        if (thread_.joinable()) thread_.join();
+    }
+    httplib::Client client() {
+        httplib::Client c("127.0.0.1", server_->port());
+        c.set_read_timeout(10, 0);
+        return c;
+    }
+    std::string file(const std::string& name) { return test::readFile(dir_->file("sets/scene/" + name)); }
+
+    // Sends raw bytes on a fresh connection; returns what comes back until close or timeout.
+    std::string raw(const std::string& bytes, int timeoutMs = 3000, bool firstDataOnly = false) {
+        int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+        sockaddr_in addr{};
+        addr.sin_family = AF_INET;
+        addr.sin_port = htons(uint16_t(server_->port()));
+        addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+        timeval tv{timeoutMs / 1000, (timeoutMs % 1000) * 1000};
+        ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+        ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
+        std::string out;
+        char buf[4096];
+        ssize_t n;
+        while ((n = ::recv(fd, buf, sizeof buf, 0)) > 0) {
+            out.append(buf, size_t(n));
+            if (firstDataOnly) break;
+        }
+        ::close(fd);
+        return out;
+    }
+
+    static test::TempDir* dir_;
+    std::unique_ptr<TilesetStore> store_;
+    std::unique_ptr<HttpServer> server_;
+    std::thread thread_;
+};
+test::TempDir* ServerTest::dir_ = nullptr;
+
+}  // namespace
+
+TEST_F(ServerTest, HealthSetsAndFiles) {
+    start();
+    auto c = client();
+    auto h = c.Get("/healthz");
+    ASSERT_TRUE(h);
+    EXPECT_EQ(h->status, 200);
+    auto sets = c.Get("/sets");
+    ASSERT_TRUE(sets);
+    auto j = nlohmann::json::parse(sets->body);
+    ASSERT_EQ(j.size(), 1u);
+    EXPECT_EQ(j[0]["name"], "scene");
+    auto info = TilesetReader::open(dir_->file("sets/scene"));
+    ASSERT_TRUE(info.ok());
+    EXPECT_EQ(j[0]["points"], info->info().inputPoints);
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"}) {
+        auto r = c.Get(std::string("/sets/scene/") + f);
+        ASSERT_TRUE(r) << f;
+        EXPECT_EQ(r->status, 200);
+        EXPECT_EQ(r->body, file(f)) << f;
+        EXPECT_EQ(r->get_header_value("Content-Type"), std::string(f) == "tileset.json" ? "application/json" : "application/octet-stream");
+        EXPECT_EQ(r->get_header_value("Accept-Ranges"), "bytes");
+        auto head = c.Head(std::string("/sets/scene/") + f);
+        ASSERT_TRUE(head);
+        EXPECT_EQ(head->status, 200);
+        EXPECT_TRUE(head->body.empty());
+        EXPECT_EQ(head->get_header_value("Content-Length"), std::to_string(r->body.size()));
+    }
+}
+
+TEST_F(ServerTest, NodesAndBatches) {
+    start();
+    auto c = client();
+    auto set = TilesetReader::open(dir_->file("sets/scene"));
+    ASSERT_TRUE(set.ok());
+    std::string batchBody;
+    std::vector<std::string> expected;
+    for (const NodeRecord& n : set->nodes()) {
+        auto r = c.Get("/sets/scene/nodes/" + n.key.name());
+        ASSERT_TRUE(r);
+        ASSERT_EQ(r->status, 200) << n.key.name();
+        EXPECT_EQ(crc32(r->body.data(), r->body.size()), n.blockCrc);
+        EXPECT_EQ(r->get_header_value("Cache-Control"), "no-cache");
+        if (expected.size() < 5) {
+            batchBody += n.key.name() + (expected.size() % 2 ? "\n" : ",");
+            expected.push_back(r->body);
+        }
+    }
+    auto b = c.Post("/sets/scene/batch", batchBody, "text/plain");
+    ASSERT_TRUE(b);
+    ASSERT_EQ(b->status, 200) << b->body;
+    size_t at = 0;
+    for (const auto& e : expected) {
+        ASSERT_LE(at + 4, b->body.size());
+        uint32_t len = le::get<uint32_t>(reinterpret_cast<const uint8_t*>(b->body.data() + at));
+        ASSERT_EQ(len, e.size());
+        EXPECT_EQ(b->body.substr(at + 4, len), e);
+        at += 4 + len;
+    }
+    EXPECT_EQ(at, b->body.size());
+    EXPECT_EQ(c.Post("/sets/scene/batch", "0-0-0-0,9-9-9-9", "text/plain")->status, 404);
+    EXPECT_EQ(c.Post("/sets/scene/batch", "nonsense", "text/plain")->status, 400);
+    std::string tooMany;
+    for (int i = 0; i < 300; ++i) tooMany += "0-0-0-0,";
+    EXPECT_EQ(c.Post("/sets/scene/batch", tooMany, "text/plain")->status, 400);
+    EXPECT_EQ(c.Get("/sets/scene/nodes/1-5-0-0")->status, 400);  // out of range for level 1
+    EXPECT_EQ(c.Get("/sets/scene/nodes/7-0-0-0")->status, 404);
+}
+
+TEST_F(ServerTest, RangesSingleMultipleAndUnsatisfiable) {
+    start();
+    auto c = client();
+    std::string blocks = file("blocks.bin");
+    auto r = c.Get("/sets/scene/blocks.bin", {{"Range", "bytes=100-199"}});
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 206);
+    EXPECT_EQ(r->body, blocks.substr(100, 100));
+    EXPECT_EQ(r->get_header_value("Content-Range"), "bytes 100-199/" + std::to_string(blocks.size()));
+    auto suffix = c.Get("/sets/scene/blocks.bin", {{"Range", "bytes=-10"}});
+    EXPECT_EQ(suffix->body, blocks.substr(blocks.size() - 10));
+    auto multi = c.Get("/sets/scene/blocks.bin", {{"Range", "bytes=0-3,50-59"}});
+    ASSERT_TRUE(multi);
+    EXPECT_EQ(multi->status, 206);
+    std::string type = multi->get_header_value("Content-Type");
+    ASSERT_EQ(type.rfind("multipart/byteranges; boundary=", 0), 0u) << type;
+    std::string boundary = type.substr(type.find('=') + 1);
+    std::string expected = "\r\n--" + boundary + "\r\nContent-Type: application/octet-stream\r\nContent-Range: bytes 0-3/" +
+                           std::to_string(blocks.size()) + "\r\n\r\n" + blocks.substr(0, 4) + "\r\n--" + boundary +
+                           "\r\nContent-Type: application/octet-stream\r\nContent-Range: bytes 50-59/" +
+                           std::to_string(blocks.size()) + "\r\n\r\n" + blocks.substr(50, 10) + "\r\n--" + boundary + "--\r\n";
+    EXPECT_EQ(multi->body, expected);
+    auto bad = c.Get("/sets/scene/blocks.bin", {{"Range", "bytes=" + std::to_string(blocks.size()) + "-"}});
+    EXPECT_EQ(bad->status, 416);
+    EXPECT_EQ(bad->get_header_value("Content-Range"), "bytes */" + std::to_string(blocks.size()));
+    std::string many = "bytes=";
+    for (int i = 0; i < 40; ++i) many += (i ? "," : "") + std::to_string(i) + "-" + std::to_string(i);
+    EXPECT_EQ(c.Get("/sets/scene/blocks.bin", {{"Range", many}})->status, 400);
+}
+
+TEST_F(ServerTest, EtagsAndVersionPins) {
+    start();
+    auto c = client();
+    auto r = c.Get("/sets/scene/tileset.json");
+    std::string etag = r->get_header_value("ETag");
+    ASSERT_FALSE(etag.empty());
+    auto again = c.Get("/sets/scene/tileset.json", {{"If-None-Match", etag}});
+    EXPECT_EQ(again->status, 304);
+    EXPECT_TRUE(again->body.empty());
+    EXPECT_EQ(c.Get("/sets/scene/tileset.json", {{"If-None-Match", "\"other\""}})->status, 200);
+    auto set = TilesetReader::open(dir_->file("sets/scene"));
+    std::string v = std::to_string(set->info().hierarchyCrc);
+    auto pinned = c.Get("/sets/scene/nodes/0-0-0-0?v=" + v);
+    EXPECT_EQ(pinned->status, 200);
+    EXPECT_EQ(pinned->get_header_value("Cache-Control"), "public, max-age=31536000, immutable");
+    auto node = c.Get("/sets/scene/nodes/0-0-0-0", {{"If-None-Match", pinned->get_header_value("ETag")}});
+    EXPECT_EQ(node->status, 304);
+    EXPECT_EQ(c.Get("/sets/scene/nodes/0-0-0-0?v=123")->status, 409);
+}
+
+TEST_F(ServerTest, TraversalAndSymlinksStayInside) {
+    // A tile set outside DIR, reachable only through symlinks placed inside.
+    test::TempDir outside;
+    buildScene(outside.file("secret"), 2000, 3);
+    fs::create_directory_symlink(outside.file("secret"), dir_->file("sets/linked"));
+    fs::create_directories(dir_->file("sets/filelink"));
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        fs::create_symlink(outside.file(std::string("secret/") + f), dir_->file(std::string("sets/filelink/") + f));
+    start();
+    auto c = client();
+    for (const char* path : {"/sets/linked/tileset.json", "/sets/filelink/tileset.json", "/sets/../sets/scene/tileset.json",
+                             "/sets/%2e%2e/tileset.json", "/sets/..%2fsets%2fscene/tileset.json", "/sets//etc/passwd",
+                             "/sets/%2Fetc%2Fpasswd/tileset.json", "/sets/.hidden/tileset.json", "/sets/", "/sets/scene/",
+                             "/sets/scene/../../x", "/etc/passwd"}) {
+        auto r = c.Get(path);
+        ASSERT_TRUE(r) << path;
+        EXPECT_TRUE(r->status == 400 || r->status == 404) << path << " gave " << r->status;
+        EXPECT_EQ(r->body.find("surfcast-tileset"), std::string::npos) << path;
+    }
+    auto sets = nlohmann::json::parse(c.Get("/sets")->body);
+    EXPECT_EQ(sets.size(), 1u) << sets.dump();  // the symlinked sets are not listed
+    fs::remove(dir_->file("sets/linked"));
+    fs::remove_all(dir_->file("sets/filelink"));
+}
+
+TEST_F(ServerTest, MalformedOversizedAndWrongMethods) {
+    start();
+    std::string garbage = raw("GARBAGE\r\n\r\n", 3000, true);
+    EXPECT_TRUE(garbage.empty() || garbage.find(" 400 ") != std::string::npos) << garbage;
+    std::string big = raw("GET /healthz HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(64 * 1024, 'a') + "\r\n\r\n", 3000, true);
+    EXPECT_EQ(big.find(" 200 "), std::string::npos) << big.substr(0, 200);
+    std::string bin = raw(std::string("\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03", 11), 3000, true);
+    EXPECT_EQ(bin.find(" 200 "), std::string::npos);
+    auto c = client();
+    EXPECT_EQ(c.Delete("/sets/scene/blocks.bin")->status, 405);
+    EXPECT_EQ(c.Put("/sets/scene/blocks.bin", "x", "text/plain")->status, 405);
+    EXPECT_EQ(c.Get("/nope")->status, 404);
+    EXPECT_EQ(c.Get("/healthz")->status, 200);  // still serving
+}
+
+TEST_F(ServerTest, TokenRequired) {
+    ServerConfig config;
+    config.token = "s3cret";
+    config.corsOrigin = "*";
+    start(config);
+    auto c = client();
+    auto none = c.Get("/sets/scene/tileset.json");
+    EXPECT_EQ(none->status, 401);
+    EXPECT_EQ(none->get_header_value("WWW-Authenticate"), "Bearer realm=\"surfcast\"");
+    EXPECT_EQ(c.Get("/sets/scene/tileset.json", {{"Authorization", "Bearer wrong!"}})->status, 401);
+    EXPECT_EQ(c.Get("/sets/scene/tileset.json", {{"Authorization", "Bearer s3cre"}})->status, 401);
+    auto ok = c.Get("/sets/scene/tileset.json", {{"Authorization", "Bearer s3cret"}});
+    EXPECT_EQ(ok->status, 200);
+    EXPECT_EQ(ok->get_header_value("Access-Control-Allow-Origin"), "*");
+    EXPECT_EQ(c.Get("/healthz")->status, 200);
+    auto pre = c.Options("/sets/scene/blocks.bin");
+    EXPECT_EQ(pre->status, 204);
+    EXPECT_NE(pre->get_header_value("Access-Control-Allow-Headers").find("Range"), std::string::npos);
+}
+
+TEST_F(ServerTest, ConcurrentClientsAndMetrics) {
+    start();
+    auto set = TilesetReader::open(dir_->file("sets/scene"));
+    ASSERT_TRUE(set.ok());
+    const auto& nodes = set->nodes();
+    std::atomic<int> good{0}, bad{0};
+    std::vector<std::thread> clients;
+    for (int t = 0; t < 16; ++t)
+        clients.emplace_back([&, t] {
+            auto c = client();
+            std::mt19937 rng(t);
+            for (int i = 0; i < 40; ++i) {
+                const NodeRecord& n = nodes[rng() % nodes.size()];
+                auto r = c.Get("/sets/scene/nodes/" + n.key.name());
+                (r && r->status == 200 && crc32(r->body.data(), r->body.size()) == n.blockCrc ? good : bad)++;
+            }
+        });
+    for (auto& t : clients) t.join();
+    EXPECT_EQ(good, 640);
+    EXPECT_EQ(bad, 0);
+    auto m = client().Get("/metrics");
+    ASSERT_TRUE(m);
+    EXPECT_NE(m->body.find("surfcast_requests_total{route=\"nodes\",status=\"200\"} 640"), std::string::npos) << m->body;
+    EXPECT_NE(m->body.find("surfcast_request_duration_seconds_count"), std::string::npos);
+}
+
+TEST_F(ServerTest, StalledClientDoesNotBlockOthers) {
+    ServerConfig config;
+    config.timeoutSeconds = 1;
+    start(config);
+    std::thread stalled([&] {
+        // Half a request, then silence: the server drops the connection after
+        // the timeout instead of holding it forever.
+        auto t0 = std::chrono::steady_clock::now();
+        std::string got = raw("GET /healthz HTTP/1.1\r\nHost: x\r\n", 5000);
+        double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        EXPECT_EQ(got.find(" 200 "), std::string::npos) << got;
+        EXPECT_LT(s, 4.0) << "stalled request was not dropped";
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    auto t0 = std::chrono::steady_clock::now();
+    auto r = client().Get("/healthz");
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 200);
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 0.5);
+    stalled.join();
+}
+
+TEST_F(ServerTest, ReplacedDuringDownloadNeverMixes) {
+    test::TempDir tmp;
+    fs::create_directories(tmp.file("sets"));
+    buildScene(tmp.file("sets/live"), 300000, 11);
+    std::string oldBlocks = test::readFile(tmp.file("sets/live/blocks.bin"));
+    auto store = TilesetStore::open(tmp.file("sets"));
+    ASSERT_TRUE(store.ok());
+    ServerConfig config;
+    config.port = 0;
+    config.log = LogLevel::Quiet;
+    HttpServer server(**store, config);
+    ASSERT_TRUE(server.bind().ok());
+    std::thread run([&] { server.run(); });
+    httplib::Client c("127.0.0.1", server.port());
+    std::string got;
+    bool replaced = false;
+    auto r = c.Get("/sets/live/blocks.bin", [&](const char* data, size_t n) {
+        got.append(data, n);
+        if (!replaced) {
+            // Mid-download: rebuild the set with another seed and rename it over.
+            replaced = true;
+            buildScene(tmp.file("sets/live"), 300000, 12);
+        }
+        return true;
+    });
+    ASSERT_TRUE(r);
+    EXPECT_TRUE(replaced);
+    EXPECT_EQ(got.size(), oldBlocks.size());
+    EXPECT_TRUE(got == oldBlocks) << "the response mixed old and new bytes";
+    std::string newBlocks = test::readFile(tmp.file("sets/live/blocks.bin"));
+    ASSERT_NE(newBlocks, oldBlocks);
+    auto after = c.Get("/sets/live/blocks.bin");
+    EXPECT_TRUE(after->body == newBlocks);
+    server.stop();
+    run.join();
+}
