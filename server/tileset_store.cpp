@@ -138,9 +138,10 @@ std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name
 
 std::vector<std::shared_ptr<const TilesetSnapshot>> TilesetStore::list() {
     std::vector<std::string> names;
-    int fd = ::dup(rootFd_);
+    // A fresh open file description: concurrent listings must not share a
+    // directory offset (dup() would).
+    int fd = ::openat(rootFd_, ".", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (DIR* d = fd >= 0 ? ::fdopendir(fd) : nullptr) {
-        ::rewinddir(d);
         while (dirent* e = ::readdir(d))
             if (validName(e->d_name)) names.push_back(e->d_name);
         ::closedir(d);
