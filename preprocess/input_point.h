@@ -29,6 +29,7 @@ struct InputDescription {
     double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
     bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude
     std::optional<Vec3d> scanOrigin; // where the scanner stood, when the format says
+    bool scanOriginIsDefault = false; // the format's default (0,0,0), possibly meaningless
     bool airborne = false;           // aerial LiDAR: normals point up
 };
 

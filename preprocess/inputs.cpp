@@ -5,6 +5,7 @@
 
 #include "byte_stream.h"
 #include "las_reader.h"
+#include "pcd_reader.h"
 #include "ply_reader.h"
 #include "text_reader.h"
 
@@ -41,12 +42,12 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
         }
         return openPlyReader(path);
     }
-    if (ext == ".las" || std::string(magic, 4) == "LASF") return openLasReader(path);
-    if (ext == ".laz") return Status::error(path + ": LAZ input is not supported yet (convert to LAS)");
+    if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS") return openPcdReader(path);
+    if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF") return openLasReader(path, options.threads);
     if (isMeshExtension(path)) return openMeshReader(path, options.mesh);
     if (ext == ".xyz" || ext == ".txt" || ext == ".pts" || ext == ".csv" || ext == ".asc")
         return openTextReader(path, options.columns);
-    return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
+    return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
 }
 
 uint16_t scaled(uint16_t raw, double scale) { return uint16_t(std::min(65535.0, raw * scale)); }

@@ -22,6 +22,7 @@ struct InputOptions {
     std::string columns;         // text layout; empty: detect
     MeshSampling mesh;
     bool verticesOnly = false;   // treat a mesh file as its vertices
+    int threads = 1;             // decoder threads (LAZ chunks)
 };
 
 // Fresh readers for every input, in order (a pass over the data opens them anew).

@@ -31,6 +31,16 @@ constexpr double kUnknownPrecisionFraction = 256;
 // Float32 coordinates: 24 significant bits.
 constexpr double kFloat32Epsilon = 0x1.0p-24;
 constexpr int kMaxPositionBits = 30;
+// A default scan origin farther from the data than this many data extents is ignored.
+constexpr double kFarOrigin = 10;
+// Data whose height is under this fraction of its width is terrain: normals up.
+constexpr double kFlatRatio = 0.25;
+
+double distanceToBox(const Vec3d& p, const Box3d& b) {
+    Vec3d d;
+    for (int a = 0; a < 3; ++a) d[a] = std::max({b.min[a] - p[a], 0.0, p[a] - b.max[a]});
+    return length(d);
+}
 
 // Adds the wall time of a scope to a counter: where the build's time goes,
 // summed over worker threads.
@@ -61,6 +71,7 @@ class Builder {
 public:
     explicit Builder(const BuildOptions& o) : opt_(o), progress_(o.progress) {
         threads_ = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+        opt_.inputs.threads = threads_;
     }
 
     Result<BuildSummary> run();
@@ -140,8 +151,14 @@ Status Builder::scan() {
         else if (d.float32Coordinates) step = std::min(step, mag * kFloat32Epsilon);
         else unknown = true;
         OrientationRule rule;
-        if (d.scanOrigin) rule.scanOrigin = *d.scanOrigin - rootMin_;
-        rule.up = d.airborne;
+        const Box3d& sb = s.bounds;
+        double sourceExtent = std::max({sb.max.x - sb.min.x, sb.max.y - sb.min.y, sb.max.z - sb.min.z});
+        // A default scan origin (PCD's 0,0,0) far from the data is no origin.
+        bool originUsable = d.scanOrigin && !(d.scanOriginIsDefault && distanceToBox(*d.scanOrigin, sb) > kFarOrigin * sourceExtent);
+        if (originUsable) rule.scanOrigin = *d.scanOrigin - rootMin_;
+        // Airborne LiDAR, and any data much flatter than wide (terrain), face up.
+        bool flat = sb.max.z - sb.min.z < kFlatRatio * std::max(sb.max.x - sb.min.x, sb.max.y - sb.min.y);
+        rule.up = d.airborne || (!originUsable && flat);
         normals_.rules.push_back(rule);
     }
     leafStep_ = unknown || !(step > 0) || !std::isfinite(step) ? 0 : step;

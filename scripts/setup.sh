@@ -12,6 +12,9 @@ packages=(
   libmicrohttpd-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
   python3 python3-venv xvfb curl
 )
+# A Rust toolchain for the LAZ decoder (preprocess/laz_ffi): any cargo on PATH,
+# else Debian's.
+command -v cargo >/dev/null 2>&1 || packages+=(cargo)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

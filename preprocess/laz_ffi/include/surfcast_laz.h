@@ -1,0 +1,38 @@
+/* C ABI of the surfcast_laz Rust static library (preprocess/laz_ffi).
+ * Decompresses the point records of a LAZ file; the LAS header and VLRs are
+ * parsed by the caller (las_reader.cpp). Errors come back as text in `err`. */
+#ifndef SURFCAST_LAZ_H
+#define SURFCAST_LAZ_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct ScLazReader ScLazReader;
+
+/* Opens `path` for decompression. `data_offset`: byte offset of the point data
+ * (header field "offset to point data"); `vlr`: the payload of the LASzip VLR
+ * (user "laszip encoded", record 22204); `point_count`: points the header
+ * declares, checked against the chunk table; `threads` > 1 decompresses chunks
+ * in parallel (rayon). Returns NULL on error. */
+ScLazReader* sc_laz_open(const char* path, uint64_t data_offset, const uint8_t* vlr, size_t vlr_len, uint64_t point_count,
+                         int threads, char* err, size_t err_len);
+
+/* Bytes per decompressed point record, and points per chunk (0: variable). */
+uint64_t sc_laz_point_size(const ScLazReader* reader);
+uint64_t sc_laz_chunk_size(const ScLazReader* reader);
+
+/* Decompresses the next `points` records into `out` (points * point_size
+ * bytes). Returns 0, or -1 with a message in `err`. */
+int sc_laz_read(ScLazReader* reader, uint8_t* out, uint64_t points, char* err, size_t err_len);
+
+void sc_laz_close(ScLazReader* reader);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,171 @@
+//! LAZ decompression through the `laz` crate, exposed to C++ (see
+//! include/surfcast_laz.h). Panics never cross the boundary: every entry
+//! point catches them and reports an error instead.
+
+use std::ffi::CStr;
+use std::fs::File;
+use std::io::{BufReader, Seek, SeekFrom};
+use std::os::raw::{c_char, c_int};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use laz::laszip::ChunkTable;
+use laz::{LasZipDecompressor, LazVlr, ParLasZipDecompressor};
+
+enum Decompressor {
+    Sequential(LasZipDecompressor<'static, BufReader<File>>),
+    Parallel(ParLasZipDecompressor<BufReader<File>>, rayon::ThreadPool),
+}
+
+pub struct ScLazReader {
+    decompressor: Decompressor,
+    point_size: u64,
+    chunk_size: u64,
+}
+
+fn write_err(err: *mut c_char, err_len: usize, message: &str) {
+    if err.is_null() || err_len == 0 {
+        return;
+    }
+    let bytes = message.as_bytes();
+    let n = bytes.len().min(err_len - 1);
+    // SAFETY: the caller provides err_len writable bytes at err.
+    unsafe {
+        std::ptr::copy_nonoverlapping(bytes.as_ptr(), err as *mut u8, n);
+        *err.add(n) = 0;
+    }
+}
+
+fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
+    if let Some(s) = p.downcast_ref::<&str>() {
+        s.to_string()
+    } else if let Some(s) = p.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic".to_string()
+    }
+}
+
+fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usize) -> Result<ScLazReader, String> {
+    let vlr = LazVlr::from_buffer(vlr).map_err(|e| format!("LASzip VLR: {}", e))?;
+    let point_size = vlr.items_size();
+    let chunk_size = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
+    let open_at_data = || -> Result<BufReader<File>, String> {
+        let mut f = BufReader::new(File::open(path).map_err(|e| format!("cannot open: {}", e))?);
+        f.seek(SeekFrom::Start(data_offset)).map_err(|e| format!("cannot seek to the point data: {}", e))?;
+        Ok(f)
+    };
+
+    // The chunk table (at the end of the file) says how many points there are:
+    // a truncated file or a wrong header count fails here, before any work.
+    match ChunkTable::read_from(open_at_data()?, &vlr) {
+        Ok(table) => {
+            let chunks = table.len() as u64;
+            if chunk_size == 0 {
+                let total: u64 = table.as_ref().iter().map(|e| e.point_count).sum();
+                if total != point_count {
+                    return Err(format!("header declares {} points, the chunk table holds {}", point_count, total));
+                }
+            } else if point_count > chunks * chunk_size || (chunks > 0 && point_count <= (chunks - 1) * chunk_size) {
+                return Err(format!(
+                    "header declares {} points, the chunk table has {} chunks of {} points",
+                    point_count, chunks, chunk_size
+                ));
+            }
+        }
+        Err(e) => return Err(format!("cannot read the chunk table (truncated file?): {}", e)),
+    }
+
+    let decompressor = if threads > 1 {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| format!("thread pool: {}", e))?;
+        let d = ParLasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
+        Decompressor::Parallel(d, pool)
+    } else {
+        let d = LasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
+        Decompressor::Sequential(d)
+    };
+    Ok(ScLazReader { decompressor, point_size, chunk_size })
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_open(
+    path: *const c_char,
+    data_offset: u64,
+    vlr: *const u8,
+    vlr_len: usize,
+    point_count: u64,
+    threads: c_int,
+    err: *mut c_char,
+    err_len: usize,
+) -> *mut ScLazReader {
+    if path.is_null() || vlr.is_null() {
+        write_err(err, err_len, "null argument");
+        return std::ptr::null_mut();
+    }
+    // SAFETY: the caller passes a NUL-terminated path and vlr_len readable bytes.
+    let path = unsafe { CStr::from_ptr(path) }.to_string_lossy().into_owned();
+    let vlr = unsafe { std::slice::from_raw_parts(vlr, vlr_len) };
+    let threads = threads.max(1) as usize;
+    match catch_unwind(|| open(&path, data_offset, vlr, point_count, threads)) {
+        Ok(Ok(reader)) => Box::into_raw(Box::new(reader)),
+        Ok(Err(message)) => {
+            write_err(err, err_len, &message);
+            std::ptr::null_mut()
+        }
+        Err(p) => {
+            write_err(err, err_len, &format!("LAZ decoder panicked: {}", panic_message(p)));
+            std::ptr::null_mut()
+        }
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_point_size(reader: *const ScLazReader) -> u64 {
+    // SAFETY: reader comes from sc_laz_open.
+    unsafe { reader.as_ref() }.map_or(0, |r| r.point_size)
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_chunk_size(reader: *const ScLazReader) -> u64 {
+    // SAFETY: reader comes from sc_laz_open.
+    unsafe { reader.as_ref() }.map_or(0, |r| r.chunk_size)
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_read(reader: *mut ScLazReader, out: *mut u8, points: u64, err: *mut c_char, err_len: usize) -> c_int {
+    // SAFETY: reader comes from sc_laz_open; out has points * point_size bytes.
+    let reader = match unsafe { reader.as_mut() } {
+        Some(r) => r,
+        None => {
+            write_err(err, err_len, "null reader");
+            return -1;
+        }
+    };
+    let len = (points * reader.point_size) as usize;
+    let out = unsafe { std::slice::from_raw_parts_mut(out, len) };
+    let result = catch_unwind(AssertUnwindSafe(|| match &mut reader.decompressor {
+        Decompressor::Sequential(d) => d.decompress_many(out).map_err(|e| format!("{}", e)),
+        Decompressor::Parallel(d, pool) => pool.install(|| d.decompress_many(out)).map_err(|e| format!("{}", e)),
+    }));
+    match result {
+        Ok(Ok(())) => 0,
+        Ok(Err(message)) => {
+            write_err(err, err_len, &message);
+            -1
+        }
+        Err(p) => {
+            write_err(err, err_len, &format!("LAZ decoder panicked: {}", panic_message(p)));
+            -1
+        }
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_close(reader: *mut ScLazReader) {
+    if !reader.is_null() {
+        // SAFETY: reader comes from sc_laz_open and is closed once.
+        drop(unsafe { Box::from_raw(reader) });
+    }
+}

@@ -1,0 +1,18 @@
+// PCD (the Point Cloud Library's format, v0.5-0.7): DATA ascii, binary and
+// binary_compressed (LZF, decompressed as a stream: lzf_stream.h). Fields x y z,
+// packed rgb (float bits) or rgba (uint), normal_x/y/z, intensity; other fields
+// are skipped. VIEWPOINT is the scan origin that orients estimated normals.
+// Organized clouds mark invalid pixels with NaN; those points are skipped and
+// counted.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "input_point.h"
+
+namespace surfcast {
+
+Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path);
+
+}  // namespace surfcast

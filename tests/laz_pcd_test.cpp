@@ -1,0 +1,210 @@
+// LAZ (through the laz crate), COPC and PCD on every shared file of those
+// formats: counts, bounds and colours against PROVENANCE.md, a tile set built
+// from each, truncated and corrupted copies, and the streaming LZF decoder.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+
+#include "las_reader.h"
+#include "lzf_stream.h"
+#include "pcd_reader.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+
+namespace fs = std::filesystem;
+using namespace surfcast;
+
+namespace {
+
+struct Expected {
+    const char* file;
+    uint64_t points;     // finite points
+    uint64_t skipped;    // NaN entries of organized clouds
+    bool colors;
+    Vec3d min, max;
+};
+
+// PROVENANCE.md (coordinates given to 6 decimals).
+const Expected kFiles[] = {
+    {"lone-star.laz", 518862, 0, false, {515368.602250, 4918340.364000, 2322.896250}, {515401.043000, 4918381.123750, 2338.575500}},
+    {"lion_takanawa.copc.laz", 341989, 0, true, {-4.99, 1.04, -3.45}, {-0.79, 6.72, 1.12}},
+    {"Megaplot.laz", 81590, 0, false, {684766.39, 5017773.08, 0.0}, {684993.29, 5018007.25, 29.97}},
+    {"fragment.pcd", 113662, 0, true, {1.151989, 0.815273, 0.726409}, {3.519531, 2.761719, 1.530428}},
+    {"milk_cartoon_all_small_clorox.pcd", 241407, 307200 - 241407, true, {-1.060800, -0.869233, 0.501000}, {1.152494, 0.219669, 2.063000}},
+    {"table_scene_mug_stereo_textured.pcd", 209280, 307200 - 209280, true, {-0.456430, -0.510740, 0.690010}, {0.715180, 0.179230, 2.592700}},
+    {"CSite1_red1-utm.pcd", 522674, 0, false, {512049.5, 5403059.5, 247.190002}, {513150.1875, 5404100.0, 426.820007}},
+};
+
+Result<std::unique_ptr<PointReader>> openAny(const std::string& path, int threads) {
+    return path.ends_with(".pcd") ? openPcdReader(path) : openLasReader(path, threads);
+}
+
+struct Scan {
+    uint64_t points = 0, skipped = 0;
+    Box3d bounds;
+    bool anyColor = false;
+    std::vector<Vec3d> sample;  // every 1000th point
+};
+
+Scan scan(PointReader& r) {
+    Scan s;
+    std::vector<InputPoint> batch(7777);  // odd size: batches straddle chunks
+    while (true) {
+        auto n = r.read(batch.data(), batch.size());
+        EXPECT_TRUE(n.ok()) << n.status().message();
+        if (!n.ok() || *n == 0) break;
+        for (size_t i = 0; i < *n; ++i) {
+            s.bounds.extend(batch[i].position);
+            if (batch[i].color[0] || batch[i].color[1] || batch[i].color[2]) s.anyColor = true;
+            if ((s.points + i) % 1000 == 0) s.sample.push_back(batch[i].position);
+        }
+        s.points += *n;
+    }
+    s.skipped = r.skipped();
+    return s;
+}
+
+}  // namespace
+
+TEST(LazPcd, SharedFilesMatchProvenance) {
+    REQUIRE_DATA();
+    for (const Expected& e : kFiles) {
+        SCOPED_TRACE(e.file);
+        auto r = openAny(test::dataFile(e.file), 2);
+        ASSERT_TRUE(r.ok()) << r.status().message();
+        EXPECT_EQ((*r)->description().hasColors, e.colors);
+        Scan s = scan(**r);
+        EXPECT_EQ(s.points, e.points);
+        EXPECT_EQ(s.skipped, e.skipped);
+        EXPECT_EQ(s.anyColor, e.colors);
+        for (int a = 0; a < 3; ++a) {
+            EXPECT_NEAR(s.bounds.min[a], e.min[a], 1e-6) << "axis " << a;
+            EXPECT_NEAR(s.bounds.max[a], e.max[a], 1e-6) << "axis " << a;
+        }
+    }
+}
+
+TEST(LazPcd, ParallelDecodeEqualsSequential) {
+    REQUIRE_DATA();
+    for (const char* f : {"lone-star.laz", "lion_takanawa.copc.laz"}) {
+        auto one = openLasReader(test::dataFile(f), 1), two = openLasReader(test::dataFile(f), 2);
+        ASSERT_TRUE(one.ok() && two.ok());
+        Scan a = scan(**one), b = scan(**two);
+        ASSERT_EQ(a.sample.size(), b.sample.size()) << f;
+        for (size_t i = 0; i < a.sample.size(); ++i) ASSERT_EQ(a.sample[i], b.sample[i]) << f << " point " << i * 1000;
+    }
+}
+
+TEST(LazPcd, TileSetsBuildAndReadBack) {
+    REQUIRE_DATA();
+    for (const Expected& e : kFiles) {
+        SCOPED_TRACE(e.file);
+        test::TempDir dir;
+        auto r = test::run({test::binary("surfcast-build"), "-q", test::dataFile(e.file), "-o", dir.file("set")});
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        auto set = TilesetReader::open(dir.file("set"));
+        ASSERT_TRUE(set.ok()) << set.status().message();
+        EXPECT_EQ(set->info().inputPoints, e.points);
+        EXPECT_EQ(set->info().colorBits != 0, e.colors);
+        auto verified = verifyTileset(dir.file("set"));
+        EXPECT_TRUE(verified.ok()) << verified.status().message();
+    }
+}
+
+TEST(LazPcd, TruncatedCopiesGiveClearErrors) {
+    REQUIRE_DATA();
+    for (const Expected& e : kFiles) {
+        SCOPED_TRACE(e.file);
+        test::TempDir dir;
+        std::string bytes = test::readFile(test::dataFile(e.file));
+        std::string cut = dir.file(std::string("cut-") + e.file);
+        test::writeFile(cut, bytes.substr(0, bytes.size() * 6 / 10));
+        auto r = test::run({test::binary("surfcast-build"), "-q", cut, "-o", dir.file("out")});
+        EXPECT_EQ(r.exitCode, 1) << r.output;
+        EXPECT_NE(r.output.find(cut), std::string::npos) << r.output;
+        EXPECT_FALSE(fs::exists(dir.file("out")));
+    }
+}
+
+TEST(LazPcd, WrongCountsAndFieldsGiveClearErrors) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    // LAZ with fixed-size chunks: the legacy count at byte 107 raised.
+    std::string laz = test::readFile(test::dataFile("lone-star.laz"));
+    uint32_t more = 600000;
+    std::memcpy(laz.data() + 107, &more, 4);
+    test::writeFile(dir.file("count.laz"), laz);
+    auto a = openLasReader(dir.file("count.laz"), 1);
+    ASSERT_FALSE(a.ok());
+    EXPECT_NE(a.status().message().find("declares 600000 points"), std::string::npos) << a.status().message();
+    // COPC (variable chunks): the 64-bit count at byte 247 lowered.
+    std::string copc = test::readFile(test::dataFile("lion_takanawa.copc.laz"));
+    uint64_t fewer = 1000;
+    std::memcpy(copc.data() + 247, &fewer, 8);
+    test::writeFile(dir.file("count.copc.laz"), copc);
+    auto b = openLasReader(dir.file("count.copc.laz"), 2);
+    ASSERT_FALSE(b.ok());
+    EXPECT_NE(b.status().message().find("chunk table holds 341989"), std::string::npos) << b.status().message();
+    // PCD: POINTS that is not WIDTH x HEIGHT, a short binary DATA, an unknown type.
+    std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 10\nHEIGHT 1\nPOINTS ";
+    test::writeFile(dir.file("p.pcd"), head + "11\nDATA ascii\n");
+    auto c = openPcdReader(dir.file("p.pcd"));
+    ASSERT_FALSE(c.ok());
+    EXPECT_NE(c.status().message().find("WIDTH x HEIGHT"), std::string::npos);
+    test::writeFile(dir.file("short.pcd"), head + "10\nDATA binary\n" + std::string(12 * 7, '\0'));
+    auto d = openPcdReader(dir.file("short.pcd"));
+    ASSERT_FALSE(d.ok());
+    EXPECT_NE(d.status().message().find("DATA section is short"), std::string::npos) << d.status().message();
+    test::writeFile(dir.file("type.pcd"), "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F Q\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n");
+    auto t = openPcdReader(dir.file("type.pcd"));
+    ASSERT_FALSE(t.ok());
+    EXPECT_NE(t.status().message().find("unknown type Q"), std::string::npos) << t.status().message();
+    // ASCII with a packed float rgb and a NaN row.
+    float packed;
+    uint32_t rgb = 0x00FF8001;
+    std::memcpy(&packed, &rgb, 4);
+    char row[64];
+    std::snprintf(row, sizeof row, "%.9g", double(packed));
+    test::writeFile(dir.file("rgb.pcd"), "FIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F F\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3 " +
+                                             std::string(row) + "\nnan nan nan 0\n");
+    auto g = openPcdReader(dir.file("rgb.pcd"));
+    ASSERT_TRUE(g.ok()) << g.status().message();
+    std::vector<InputPoint> pts(4);
+    auto n = (*g)->read(pts.data(), pts.size());
+    ASSERT_TRUE(n.ok()) << n.status().message();
+    ASSERT_EQ(*n, 1u);
+    EXPECT_EQ((*g)->skipped(), 1u);
+    EXPECT_EQ(pts[0].color[0], 255 * 257);
+    EXPECT_EQ(pts[0].color[1], 128 * 257);
+    EXPECT_EQ(pts[0].color[2], 1 * 257);
+}
+
+TEST(Lzf, HandAssembledStreams) {
+    test::TempDir dir;
+    // "abcabcabcX": literal run "abc" (ctrl 2), back-reference of 6 bytes at
+    // distance 3 (ctrl (6-2)<<5 | 0, offset byte 2), literal "X" (ctrl 0).
+    const std::string stream = std::string("\x02" "abc", 4) + std::string("\x80\x02", 2) + std::string("\x00" "X", 2);
+    test::writeFile(dir.file("ok.lzf"), stream);
+    auto in = ByteStream::open(dir.file("ok.lzf"));
+    ASSERT_TRUE(in.ok());
+    LzfStream lzf(std::move(*in), stream.size(), 10);
+    uint8_t out[10];
+    ASSERT_TRUE(lzf.read(out, 2).ok());
+    ASSERT_TRUE(lzf.skip(3).ok());
+    ASSERT_TRUE(lzf.read(out + 2, 5).ok());
+    EXPECT_EQ(std::string(reinterpret_cast<char*>(out), 7), "abcabcX");  // "ab" + skip "cab" + "cabcX"
+    // A back-reference before the start of the output is refused.
+    const std::string bad = std::string("\x00" "a", 2) + std::string("\x20\x05", 2);
+    test::writeFile(dir.file("bad.lzf"), bad);
+    auto in2 = ByteStream::open(dir.file("bad.lzf"));
+    LzfStream lzf2(std::move(*in2), bad.size(), 4);
+    auto st = lzf2.read(out, 4);
+    ASSERT_FALSE(st.ok());
+    EXPECT_NE(st.message().find("before the start"), std::string::npos) << st.message();
+    // Truncated: the declared output is longer than the stream gives.
+    auto in3 = ByteStream::open(dir.file("ok.lzf"));
+    LzfStream lzf3(std::move(*in3), stream.size(), 20);
+    EXPECT_FALSE(lzf3.read(out, 10).ok() && lzf3.skip(10).ok());
+}
