@@ -1,9 +1,19 @@
 #include "byte_stream.h"
 
+#include "input_point.h"
+
+#include <algorithm>
 #include <cstring>
+#include <filesystem>
 #include <utility>
 
 namespace surfcast {
+
+std::string lowerExtension(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
 
 namespace {
 constexpr size_t kBufferSize = 1 << 20;  // 1 MiB: large sequential reads, bounded memory

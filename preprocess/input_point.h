@@ -47,6 +47,9 @@ protected:
     uint64_t skipped_ = 0;
 };
 
+// A file name's extension in lower case, with its dot ("" when none).
+std::string lowerExtension(const std::string& path);
+
 inline bool finite(const Vec3d& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
 
 }  // namespace surfcast

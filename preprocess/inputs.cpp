@@ -15,11 +15,6 @@ namespace {
 
 constexpr size_t kBatchPoints = 1 << 16;
 
-std::string lowerExtension(const std::string& path) {
-    std::string ext = std::filesystem::path(path).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    return ext;
-}
 
 Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const InputOptions& options) {
     std::error_code ec;

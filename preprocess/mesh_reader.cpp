@@ -29,11 +29,6 @@ struct LoadedMesh {
     double normalSign = 1;
 };
 
-std::string lowerExtension(const std::string& path) {
-    std::string ext = std::filesystem::path(path).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    return ext;
-}
 
 Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
     auto loaded = std::make_unique<LoadedMesh>();
