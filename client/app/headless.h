@@ -1,0 +1,11 @@
+// surfcast-view --headless: render frames to PNG, one JSON line per frame.
+#pragma once
+
+#include "view_options.h"
+
+namespace surfcast {
+
+// Returns the process exit status.
+int runHeadless(const ViewOptions& options, const SurfelSet& set);
+
+}  // namespace surfcast

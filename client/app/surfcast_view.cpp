@@ -1,0 +1,21 @@
+// surfcast-view: renders a tile set in a window or headless. main() only
+// parses arguments, loads the surfels and hands over to one of the two.
+#include <cstdio>
+
+#include "headless.h"
+#include "view_options.h"
+#include "window.h"
+
+int main(int argc, char** argv) {
+    surfcast::ViewOptions options;
+    int exitCode = 0;
+    if (!surfcast::parseViewOptions(argc, argv, &options, &exitCode)) return exitCode;
+    auto set = surfcast::loadSurfelSet(options.set, options.level);
+    if (!set) {
+        std::fprintf(stderr, "surfcast-view: %s\n", set.status().message().c_str());
+        return 1;
+    }
+    if (!options.shadingGiven)
+        options.settings.shading = set->hasColor ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
+    return options.headless ? surfcast::runHeadless(options, *set) : surfcast::runWindow(options, *set);
+}

@@ -1,0 +1,225 @@
+#include "view_options.h"
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <optional>
+#include <sstream>
+
+#include "context.h"
+
+namespace surfcast {
+
+namespace {
+
+const char* kUsage = R"(usage: surfcast-view SET [options]                 (a window)
+       surfcast-view --headless SET [options]      (PNG files, one JSON line per frame)
+
+Renders a tile set (a folder with tileset.json) with object-space EWA surface
+splatting on Vulkan, or with the CPU screen-space EWA reference.
+
+  --camera ex,ey,ez,tx,ty,tz,ux,uy,uz,fov
+                        eye, target, up (world coordinates of the input) and
+                        vertical field of view in degrees (default: frame the set)
+  --camera-path FILE    JSON {"frames": [{"eye": [..], "target": [..], "up": [..], "fov": 45}, ...]}
+  --size WxH            image size (default 1280x720)
+  --mode MODE           points, circles, ewa-noprefilter, ewa-surfel, ewa-pixel
+                        (default), cpu-reference
+  --out PATH            PNG to write (default frame.png; several frames: PATH_0000.png ...)
+  --level N|leaves      draw level N (with the leaves above it) or every leaf (default)
+  --kernel-scale K      reconstruction kernel V^r = (K h)^2 I (default 1)
+  --cutoff C            splats end at y'y = 2C (default 1)
+  --zt Z                visibility depth offset z_t as a multiple of h (default 0.5)
+  --lowpass V           low-pass filter variance in pixels^2 (default 1)
+  --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
+  --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)
+  --background R,G,B    background colour in [0,1] (default 1,1,1)
+  --expansion E         quad (instanced quads, default) or geometry (geometry shader)
+  --accumulation F      rgba32f (default) or rgba16f accumulation targets
+  --device D            Vulkan device index or name substring (default: discrete GPU first)
+  --list-devices        print the Vulkan devices and exit
+  --validation          enable the Khronos validation layer (also SURFCAST_VALIDATION=1);
+                        any validation error makes the exit status 1
+  --repeat N            headless: render each frame N times, report the median GPU times
+  --frames N            window: close after N frames
+  --screenshot PATH     window: write the last frame to PATH on exit
+  -h, --help            this text
+
+Window keys: drag left = orbit, drag right = pan, wheel = zoom, W/A/S/D/Q/E = fly,
+1..5 = mode (points, circles, ewa-noprefilter, ewa-surfel, ewa-pixel),
+L = shading, P = screenshot (surfcast-NNNN.png), Esc = quit.
+)";
+
+int usageError(const std::string& message) {
+    std::fprintf(stderr, "surfcast-view: %s\n(see surfcast-view --help)\n", message.c_str());
+    return 2;
+}
+
+bool parseFloat(const std::string& s, float* out) {
+    char* end = nullptr;
+    double v = std::strtod(s.c_str(), &end);
+    if (end == s.c_str() || *end != '\0' || !std::isfinite(v)) return false;
+    *out = float(v);
+    return true;
+}
+
+}  // namespace
+
+std::string framePath(const std::string& out, size_t frame, size_t frames) {
+    if (frames <= 1) return out;
+    char suffix[32];
+    std::snprintf(suffix, sizeof(suffix), "_%04zu", frame);
+    size_t dot = out.rfind('.');
+    size_t slash = out.rfind('/');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return out + suffix;
+    return out.substr(0, dot) + suffix + out.substr(dot);
+}
+
+bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
+    const char* env = std::getenv("SURFCAST_VALIDATION");
+    o->validation = env && std::string(env) == "1";
+#ifndef NDEBUG
+    o->validation = true;  // debug builds always validate
+#endif
+    std::vector<std::string> positional;
+    for (int i = 1; i < argc; ++i) {
+        std::string a = argv[i];
+        std::string v;
+        // --name=value as well as --name value (values may start with '-').
+        std::optional<std::string> inlineValue;
+        if (size_t eq = a.find('='); a.rfind("--", 0) == 0 && eq != std::string::npos) {
+            inlineValue = a.substr(eq + 1);
+            a.resize(eq);
+        }
+        auto value = [&]() {
+            if (inlineValue) {
+                v = *inlineValue;
+                return true;
+            }
+            if (i + 1 >= argc) return false;
+            v = argv[++i];
+            return true;
+        };
+        auto positive = [&](float* out, const char* what) {
+            if (!value() || !parseFloat(v, out) || !(*out > 0)) {
+                *exitCode = usageError(std::string(what) + " wants a positive number");
+                return false;
+            }
+            return true;
+        };
+        auto count = [&](int* out, const char* what) {
+            char* end = nullptr;
+            long n = value() ? std::strtol(v.c_str(), &end, 10) : -1;
+            if (!end || *end != '\0' || n < 1 || n > 1000000) {
+                *exitCode = usageError(std::string(what) + " wants a whole number >= 1");
+                return false;
+            }
+            *out = int(n);
+            return true;
+        };
+        if (a == "-h" || a == "--help") {
+            std::fputs(kUsage, stdout);
+            *exitCode = 0;
+            return false;
+        } else if (a == "--list-devices") {
+            std::fputs(gpu::listDevices().c_str(), stdout);
+            *exitCode = 0;
+            return false;
+        } else if (a == "--headless") {
+            o->headless = true;
+        } else if (a == "--camera") {
+            if (!value()) return (*exitCode = usageError("--camera wants ex,ey,ez,tx,ty,tz,ux,uy,uz,fov")), false;
+            auto c = parseCamera(v);
+            if (!c) return (*exitCode = usageError(c.status().message())), false;
+            o->cameras = {*c};
+        } else if (a == "--camera-path") {
+            if (!value()) return (*exitCode = usageError("--camera-path wants a JSON file")), false;
+            std::ifstream in(v);
+            if (!in) return (*exitCode = usageError("--camera-path: cannot read " + v)), false;
+            std::stringstream text;
+            text << in.rdbuf();
+            auto path = parseCameraPath(text.str(), v);
+            if (!path) return (*exitCode = usageError(path.status().message())), false;
+            o->cameras = *path;
+        } else if (a == "--size") {
+            int w = 0, h = 0;
+            char tail = 0;
+            if (!value() || std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > 16384 ||
+                h > 16384)
+                return (*exitCode = usageError("--size wants WxH, each 1..16384")), false;
+            o->width = w;
+            o->height = h;
+        } else if (a == "--mode") {
+            auto m = value() ? parseRenderMode(v) : std::nullopt;
+            if (!m)
+                return (*exitCode = usageError("--mode wants points, circles, ewa-noprefilter, ewa-surfel, ewa-pixel or cpu-reference")),
+                       false;
+            o->settings.mode = *m;
+        } else if (a == "--out") {
+            if (!value()) return (*exitCode = usageError("--out wants a path")), false;
+            o->out = v;
+        } else if (a == "--level") {
+            if (!value()) return (*exitCode = usageError("--level wants a level number or 'leaves'")), false;
+            char* end = nullptr;
+            long n = std::strtol(v.c_str(), &end, 10);
+            if (v == "leaves") o->level.level = -1;
+            else if (*end == '\0' && end != v.c_str() && n >= 0 && n <= 30) o->level.level = int(n);
+            else return (*exitCode = usageError("--level wants a level number or 'leaves'")), false;
+        } else if (a == "--kernel-scale") {
+            if (!positive(&o->settings.kernelScale, "--kernel-scale")) return false;
+        } else if (a == "--cutoff") {
+            if (!positive(&o->settings.cutoff, "--cutoff")) return false;
+        } else if (a == "--zt") {
+            if (!value() || !parseFloat(v, &o->settings.zt) || o->settings.zt < 0)
+                return (*exitCode = usageError("--zt wants a number >= 0")), false;
+        } else if (a == "--lowpass") {
+            if (!value() || !parseFloat(v, &o->settings.lowpassVariance) || o->settings.lowpassVariance < 0)
+                return (*exitCode = usageError("--lowpass wants a number >= 0")), false;
+        } else if (a == "--coverage") {
+            if (!value() || !parseFloat(v, &o->settings.coverage) || o->settings.coverage < 0)
+                return (*exitCode = usageError("--coverage wants a number >= 0")), false;
+        } else if (a == "--shading") {
+            auto s = value() ? parseShading(v) : std::nullopt;
+            if (!s) return (*exitCode = usageError("--shading wants unlit, lambert or phong")), false;
+            o->settings.shading = *s;
+            o->shadingGiven = true;
+        } else if (a == "--background") {
+            Vec3f c;
+            char tail = 0;
+            if (!value() || std::sscanf(v.c_str(), "%f,%f,%f%c", &c.x, &c.y, &c.z, &tail) != 3 ||
+                !(c.x >= 0 && c.x <= 1 && c.y >= 0 && c.y <= 1 && c.z >= 0 && c.z <= 1))
+                return (*exitCode = usageError("--background wants R,G,B in [0,1]")), false;
+            o->settings.background = c;
+        } else if (a == "--expansion") {
+            if (!value() || (v != "quad" && v != "geometry"))
+                return (*exitCode = usageError("--expansion wants quad or geometry")), false;
+            o->renderer.expansion = v == "quad" ? Expansion::Quad : Expansion::Geometry;
+        } else if (a == "--accumulation") {
+            if (!value() || (v != "rgba32f" && v != "rgba16f"))
+                return (*exitCode = usageError("--accumulation wants rgba32f or rgba16f")), false;
+            o->renderer.halfFloatAccumulation = v == "rgba16f";
+        } else if (a == "--device") {
+            if (!value()) return (*exitCode = usageError("--device wants an index or a name")), false;
+            o->device = v;
+        } else if (a == "--validation") {
+            o->validation = true;
+        } else if (a == "--repeat") {
+            if (!count(&o->repeat, "--repeat")) return false;
+        } else if (a == "--frames") {
+            if (!count(&o->frames, "--frames")) return false;
+        } else if (a == "--screenshot") {
+            if (!value()) return (*exitCode = usageError("--screenshot wants a path")), false;
+            o->screenshot = v;
+        } else if (!a.empty() && a[0] == '-') {
+            return (*exitCode = usageError("unknown option " + a)), false;
+        } else {
+            positional.push_back(a);
+        }
+    }
+    if (positional.size() != 1)
+        return (*exitCode = usageError(positional.empty() ? "no tile set given" : "more than one tile set given")), false;
+    o->set = positional[0];
+    return true;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,38 @@
+// surfcast-view's command line.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "camera.h"
+#include "render_settings.h"
+#include "splat_renderer.h"
+#include "surfel_set.h"
+
+namespace surfcast {
+
+struct ViewOptions {
+    std::string set;                  // tile set folder
+    bool headless = false;
+    std::vector<Camera> cameras;      // empty: frame the whole set
+    int width = 1280, height = 720;
+    std::string out = "frame.png";
+    LevelChoice level;
+    RenderSettings settings;
+    bool shadingGiven = false;        // else unlit with colour, lambert without
+    RendererOptions renderer;
+    std::string device;
+    bool validation = false;
+    int repeat = 1;                   // headless: renders per frame (median times reported)
+    int frames = 0;                   // window: quit after this many frames (0: run until closed)
+    std::string screenshot;           // window: save the last frame here on exit
+};
+
+// Parses argv; on --help/--list-devices prints and sets *exitCode = 0; on a
+// usage error prints it and sets *exitCode = 2. Returns false in both cases.
+bool parseViewOptions(int argc, char** argv, ViewOptions* options, int* exitCode);
+
+// "name_0003.png" for frame 3 of several; the path itself for a single frame.
+std::string framePath(const std::string& out, size_t frame, size_t frames);
+
+}  // namespace surfcast

@@ -1,0 +1,12 @@
+// surfcast-view's window (GLFW): orbit and fly camera, mode keys, screenshots,
+// the frame time in the title. Never used by the headless path (GLFW needs a
+// display; DESIGN.md, Platform facts).
+#pragma once
+
+#include "view_options.h"
+
+namespace surfcast {
+
+int runWindow(const ViewOptions& options, const SurfelSet& set);
+
+}  // namespace surfcast

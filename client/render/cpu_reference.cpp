@@ -1,0 +1,190 @@
+// Screen-space EWA splatting, Zwicker et al. 2001 (§3 the resampling kernel,
+// §4 the rendering algorithm, eq. 9 per-pixel normalization).
+//
+// For a surfel with centre o (camera space), tangent basis s, t and
+// reconstruction kernel V^r = r^2 I, the projective map of its tangent plane is
+// approximated at o by the Jacobian J (DESIGN.md, "Object-space EWA in one
+// screen", y row negated for the y-down screen). The screen-space resampling
+// kernel is
+//     rho(x) = |J| r^2 / |V|^(1/2) * exp(-1/2 d' V^-1 d),  V = J V^r J' + V^h,
+// d = x - m, m the projected centre: the Gaussian G_V scaled by 2 pi |V^r|^(1/2)
+// so that it peaks at 1 under magnification. That scale is the same for every
+// surfel of equal r and cancels in the normalization; it makes rho the very
+// function the GPU path evaluates in object space (|J M J'|^(1/2) = |J| r0 r1).
+#include "cpu_reference.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace surfcast {
+
+namespace {
+
+struct ScreenSplat {
+    float mx, my;         // projected centre, pixels
+    float qa, qb, qc;     // conic V^-1 = [qa qb; qb qc]
+    float amplitude;
+    int x0, x1, y0, y1;   // pixel bounding box, inclusive
+    Vec3f o, n;           // camera-space centre and unit normal
+    float zt;             // depth offset, world units
+    float depthExtent;    // the disc's half-extent in depth, world units
+    Vec3f color;
+};
+
+// Any unit vector orthogonal to n, continuous enough for a basis.
+Vec3f tangentOf(const Vec3f& n) {
+    Vec3f a = std::fabs(n.x) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
+    return normalizeOrZero(cross(n, a));
+}
+
+bool finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// Distance along the pixel's ray to the splat's tangent plane. Near grazing
+// the low-pass filter widens the footprint past the splat's own disc and the
+// plane is hit far from it: the depth is clamped to the disc's depth range.
+float rayDistance(const ScreenSplat& s, const Vec3f& ray, float rayLength) {
+    float denom = dot(ray, s.n);
+    float t = std::fabs(denom) > 1e-6f ? dot(s.o, s.n) / denom : s.o.z;
+    if (!std::isfinite(t)) t = s.o.z;
+    return std::clamp(t, s.o.z - s.depthExtent, s.o.z + s.depthExtent) * rayLength;
+}
+
+}  // namespace
+
+float nearPlaneFor(const SurfelSet& set) {
+    double diagonal = set.bounds.empty() ? 1.0 : length(set.bounds.max - set.bounds.min);
+    return float(std::max(diagonal, 1e-6) * kNearFraction);
+}
+
+Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const RenderSettings& settings,
+                         CpuFrameStats* stats) {
+    auto start = std::chrono::steady_clock::now();
+    const int W = view.width, H = view.height;
+    const float eta = view.eta, near = nearPlaneFor(set);
+    const float cutoff2 = 2.f * settings.cutoff, lowpass = settings.lowpassVariance;
+
+    // Setup: one screen-space kernel per surfel.
+    std::vector<ScreenSplat> splats;
+    splats.reserve(set.surfels.size());
+    for (const auto& g : set.surfels) {
+        Vec3f o = view.apply({g.px, g.py, g.pz});
+        if (!finite(o) || !(o.z >= near)) continue;  // behind the near plane (or NaN)
+        Vec3f n = normalizeOrZero(view.rotate(unpackNormalOct(g.normal)));
+        if (!(length(n) > 0)) continue;
+        Vec3f s = tangentOf(n), t = cross(n, s);
+        float r = g.radius * settings.kernelScale;
+        if (!(r > 0) || !std::isfinite(r)) r = o.z / eta;  // h = 0: one pixel's worth
+        float k = eta / (o.z * o.z);
+        float j00 = k * (s.x * o.z - s.z * o.x), j01 = k * (t.x * o.z - t.z * o.x);
+        float j10 = -k * (s.y * o.z - s.z * o.y), j11 = -k * (t.y * o.z - t.z * o.y);
+        float r2 = r * r;
+        float va = r2 * (j00 * j00 + j01 * j01) + lowpass;
+        float vb = r2 * (j00 * j10 + j01 * j11);
+        float vc = r2 * (j10 * j10 + j11 * j11) + lowpass;
+        float det = va * vc - vb * vb;
+        float detJ = std::fabs(j00 * j11 - j01 * j10);
+        if (!(det > 0) || !std::isfinite(det)) continue;  // no low-pass and J singular
+        ScreenSplat sp;
+        sp.mx = 0.5f * W + eta * o.x / o.z;
+        sp.my = 0.5f * H - eta * o.y / o.z;
+        sp.qa = vc / det;
+        sp.qb = -vb / det;
+        sp.qc = va / det;
+        sp.amplitude = detJ * r2 / std::sqrt(det);
+        float ex = std::sqrt(cutoff2 * va), ey = std::sqrt(cutoff2 * vc);
+        // Pixel centres at i + 0.5 inside [m - e, m + e].
+        auto lo = [](float v) { return int(std::ceil(std::clamp(v - 0.5f, -1e9f, 1e9f))); };
+        auto hi = [](float v) { return int(std::floor(std::clamp(v - 0.5f, -1e9f, 1e9f))); };
+        sp.x0 = std::max(lo(sp.mx - ex), 0);
+        sp.x1 = std::min(hi(sp.mx + ex), W - 1);
+        sp.y0 = std::max(lo(sp.my - ey), 0);
+        sp.y1 = std::min(hi(sp.my + ey), H - 1);
+        if (sp.x0 > sp.x1 || sp.y0 > sp.y1 || !std::isfinite(sp.amplitude)) continue;
+        sp.o = o;
+        sp.n = n;
+        sp.zt = settings.zt * r;
+        sp.depthExtent = std::sqrt(cutoff2) * r * std::sqrt(std::max(0.f, 1.f - n.z * n.z));
+        sp.color = unpackColor(g.color);
+        splats.push_back(sp);
+    }
+
+    // Rasterization in row bands, one per thread: every band visits the splats
+    // in the same order, so the sums do not depend on the thread count.
+    std::vector<float> front(size_t(W) * H, INFINITY);
+    struct Accum { float r, g, b, w, nx, ny, nz; };
+    std::vector<Accum> acc(size_t(W) * H, Accum{0, 0, 0, 0, 0, 0, 0});
+    auto ray = [&](int x, int y) { return Vec3f{(x + 0.5f - 0.5f * W) / eta, -(y + 0.5f - 0.5f * H) / eta, 1.f}; };
+    auto forEachFragment = [&](int y0, int y1, auto&& fragment) {
+        for (const ScreenSplat& sp : splats) {
+            int ya = std::max(sp.y0, y0), yb = std::min(sp.y1, y1 - 1);
+            for (int y = ya; y <= yb; ++y) {
+                float dy = y + 0.5f - sp.my;
+                for (int x = sp.x0; x <= sp.x1; ++x) {
+                    float dx = x + 0.5f - sp.mx;
+                    float q = sp.qa * dx * dx + 2 * sp.qb * dx * dy + sp.qc * dy * dy;
+                    if (q > cutoff2) continue;
+                    fragment(sp, x, y, q);
+                }
+            }
+        }
+    };
+    const int threads = std::max(1, omp_get_max_threads());
+    const int band = (H + threads - 1) / threads;
+#pragma omp parallel for num_threads(threads) schedule(static, 1)
+    for (int b = 0; b < threads; ++b) {
+        int y0 = b * band, y1 = std::min(H, y0 + band);
+        // Pass 1, visibility: the nearest surface, pushed back by z_t.
+        forEachFragment(y0, y1, [&](const ScreenSplat& sp, int x, int y, float) {
+            Vec3f d = ray(x, y);
+            float z = rayDistance(sp, d, length(d)) + sp.zt;
+            float& f = front[size_t(y) * W + x];
+            f = std::min(f, z);
+        });
+        // Pass 2, accumulation of the fragments in front of it.
+        forEachFragment(y0, y1, [&](const ScreenSplat& sp, int x, int y, float q) {
+            Vec3f d = ray(x, y);
+            size_t i = size_t(y) * W + x;
+            if (rayDistance(sp, d, length(d)) > front[i]) return;
+            float w = sp.amplitude * std::exp(-0.5f * q);
+            Accum& a = acc[i];
+            a.r += sp.color.x * w;
+            a.g += sp.color.y * w;
+            a.b += sp.color.z * w;
+            a.w += w;
+            a.nx += sp.n.x * w;
+            a.ny += sp.n.y * w;
+            a.nz += sp.n.z * w;
+        });
+    }
+
+    // Resolve: per-pixel normalization and deferred shading.
+    Image image{W, H, std::vector<uint8_t>(size_t(W) * H * 4)};
+    size_t covered = 0;
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            size_t i = size_t(y) * W + x;
+            const Accum& a = acc[i];
+            Vec3f c = settings.background;
+            bool hit = a.w > settings.coverage;
+            if (hit) {
+                c = shadePixel(settings.shading, Vec3f{a.r, a.g, a.b} * (1.f / a.w), {a.nx, a.ny, a.nz}, ray(x, y));
+                ++covered;
+            }
+            uint8_t* px = &image.rgba[4 * i];
+            px[0] = uint8_t(std::lround(std::clamp(c.x, 0.f, 1.f) * 255.f));
+            px[1] = uint8_t(std::lround(std::clamp(c.y, 0.f, 1.f) * 255.f));
+            px[2] = uint8_t(std::lround(std::clamp(c.z, 0.f, 1.f) * 255.f));
+            px[3] = hit ? 255 : 0;
+        }
+    if (stats) {
+        stats->splats = splats.size();
+        stats->pixelsCovered = covered;
+        stats->milliseconds = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    }
+    return image;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,78 @@
+#include "render_settings.h"
+
+#include <cmath>
+
+namespace surfcast {
+
+namespace {
+struct ModeName {
+    RenderMode mode;
+    const char* name;
+};
+constexpr ModeName kModes[] = {
+    {RenderMode::Points, "points"},          {RenderMode::Circles, "circles"},
+    {RenderMode::EwaNoPrefilter, "ewa-noprefilter"}, {RenderMode::EwaSurfel, "ewa-surfel"},
+    {RenderMode::EwaPixel, "ewa-pixel"},     {RenderMode::CpuReference, "cpu-reference"},
+};
+// Headlight shading: ambient + diffuse (+ a Blinn-Phong highlight).
+constexpr float kAmbient = 0.25f, kDiffuse = 0.75f, kSpecular = 0.3f, kShininess = 32.f;
+}  // namespace
+
+std::optional<RenderMode> parseRenderMode(const std::string& name) {
+    for (const auto& m : kModes)
+        if (name == m.name) return m.mode;
+    return std::nullopt;
+}
+
+const char* renderModeName(RenderMode mode) {
+    for (const auto& m : kModes)
+        if (m.mode == mode) return m.name;
+    return "?";
+}
+
+std::optional<Shading> parseShading(const std::string& name) {
+    if (name == "unlit") return Shading::Unlit;
+    if (name == "lambert") return Shading::Lambert;
+    if (name == "phong") return Shading::Phong;
+    return std::nullopt;
+}
+
+gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& s, float nearPlane) {
+    gpu_types::FrameParams p{};
+    p.view0 = {view.rows[0][0], view.rows[0][1], view.rows[0][2], view.rows[0][3]};
+    p.view1 = {view.rows[1][0], view.rows[1][1], view.rows[1][2], view.rows[1][3]};
+    p.view2 = {view.rows[2][0], view.rows[2][1], view.rows[2][2], view.rows[2][3]};
+    p.viewport = {view.eta, float(view.width), float(view.height), nearPlane};
+    float lowpass = s.mode == RenderMode::EwaNoPrefilter ? 0.f : s.lowpassVariance;
+    p.kernel = {s.kernelScale, s.cutoff, s.zt, lowpass};
+    p.resolve = {s.background.x, s.background.y, s.background.z, s.coverage};
+    switch (s.mode) {
+    case RenderMode::Points: p.mode = SC_MODE_POINTS; break;
+    case RenderMode::Circles: p.mode = SC_MODE_CIRCLES; break;
+    case RenderMode::EwaNoPrefilter: p.mode = SC_MODE_EWA_NOPREFILTER; break;
+    case RenderMode::EwaSurfel: p.mode = SC_MODE_EWA_SURFEL; break;
+    case RenderMode::EwaPixel:
+    case RenderMode::CpuReference: p.mode = SC_MODE_EWA_PIXEL; break;
+    }
+    p.shading = s.shading == Shading::Unlit ? SC_SHADING_UNLIT
+                : s.shading == Shading::Lambert ? SC_SHADING_LAMBERT : SC_SHADING_PHONG;
+    p.maxFilterPixels = kMaxFilterPixels;
+    p.circleScale = s.kernelScale;
+    return p;
+}
+
+Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const Vec3f& ray) {
+    if (shading == Shading::Unlit) return color;
+    Vec3f n = normalizeOrZero(normal);
+    Vec3f v = normalizeOrZero(ray) * -1.f;  // toward the eye; the light sits at the eye
+    float ndotv = std::fabs(dot(n, v));     // splats are two-sided
+    float light = kAmbient + kDiffuse * ndotv;
+    Vec3f out = color * light;
+    if (shading == Shading::Phong) {
+        float spec = kSpecular * std::pow(ndotv, kShininess);  // half vector = v for a headlight
+        out = out + Vec3f{spec, spec, spec};
+    }
+    return {std::fmin(out.x, 1.f), std::fmin(out.y, 1.f), std::fmin(out.z, 1.f)};
+}
+
+}  // namespace surfcast

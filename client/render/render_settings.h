@@ -1,0 +1,54 @@
+// What a frame is drawn with: the renderer mode (each a point on the
+// speed-accuracy chart), the EWA parameters and the resolve's shading. Shared
+// by the GPU renderer and the CPU reference.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "camera.h"
+#include "gpu_types.h"
+#include "vec3.h"
+
+namespace surfcast {
+
+enum class RenderMode {
+    Points,          // 1-px points, nearest wins
+    Circles,         // opaque screen-facing discs of radius r (as Potree draws)
+    EwaNoPrefilter,  // object-space EWA, reconstruction kernel only, per-pixel normalization
+    EwaSurfel,       // object-space EWA, per-surfel weights s_k, no division
+    EwaPixel,        // object-space EWA, per-pixel normalization (the default)
+    CpuReference,    // screen-space EWA on the CPU (Zwicker 2001)
+};
+enum class Shading { Unlit, Lambert, Phong };
+
+std::optional<RenderMode> parseRenderMode(const std::string& name);
+const char* renderModeName(RenderMode mode);
+std::optional<Shading> parseShading(const std::string& name);
+
+// Clamp of the low-pass filter's object-space extent where J is near singular
+// (grazing angles): at most this many pixels' worth at the surfel's depth.
+inline constexpr float kMaxFilterPixels = 64.f;
+// Near plane, as a fraction of the set's bounding-box diagonal (reversed-Z
+// depth keeps float precision at every distance, so it can be small).
+inline constexpr double kNearFraction = 1e-4;
+
+struct RenderSettings {
+    RenderMode mode = RenderMode::EwaPixel;
+    Shading shading = Shading::Unlit;
+    float kernelScale = 1.f;      // V^r = (kernelScale * r)^2 I; the stored weights assume 1
+    float cutoff = 1.f;           // c: splats end at y'y = 2c
+    float zt = 0.5f;              // visibility depth offset z_t, a multiple of r
+    float lowpassVariance = 1.f;  // V^h = variance * I, in pixels^2 (Zwicker's V^h = I)
+    float coverage = 0.05f;       // a pixel shows the surface where sum(w) exceeds this
+    Vec3f background{1.f, 1.f, 1.f};
+};
+
+// Push constants for one frame; `nearPlane` in world units.
+gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& settings, float nearPlane);
+
+// The resolve's shading of one pixel (the GLSL resolve shader is its twin):
+// colour, filtered camera-space normal (any length), pixel ray direction.
+Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const Vec3f& ray);
+
+}  // namespace surfcast

@@ -1,0 +1,83 @@
+// The GPU renderer: object-space EWA surface splatting after Ren et al. 2002
+// (§5: visibility pass, EWA accumulation pass, normalization) plus the 1-px
+// point and fixed-circle modes, all on Vulkan (client/gpu/). One frame:
+//
+//   points/circles: opaque draw (depth write) ──────────────┐
+//   ewa-*: visibility (depth only, pushed back by z_t)      ├─► resolve ─► RGBA8 output
+//          accumulation (additive, depth test, no write) ───┘   (normalize, shade)
+//
+// Accumulation targets: RGBA32F (colour*w, w) and (normal*w); RGBA16F on request.
+#pragma once
+
+#include <memory>
+
+#include "../gpu/resources.h"
+#include "camera.h"
+#include "image.h"
+#include "render_settings.h"
+#include "surfel_set.h"
+
+namespace surfcast {
+
+// How a splat becomes a quad: an instanced 4-vertex strip (setup per corner),
+// or a geometry shader on points (setup once per surfel).
+enum class Expansion { Quad, Geometry };
+
+struct RendererOptions {
+    Expansion expansion = Expansion::Quad;
+    bool halfFloatAccumulation = false;  // RGBA16F instead of RGBA32F
+};
+
+struct GpuFrameStats {
+    double visibilityMs = 0, accumulateMs = 0, resolveMs = 0, totalMs = 0;  // GPU timestamps
+    size_t splats = 0;
+    size_t pixelsCovered = 0;
+};
+
+class SplatRenderer {
+public:
+    static Result<std::unique_ptr<SplatRenderer>> create(gpu::Context& ctx, const RendererOptions& options);
+    ~SplatRenderer();
+    SplatRenderer(const SplatRenderer&) = delete;
+    SplatRenderer& operator=(const SplatRenderer&) = delete;
+
+    // Replaces the surfels drawn (device-local copy through a staging buffer).
+    Status upload(const SurfelSet& set);
+    Status resize(uint32_t width, uint32_t height);
+    float nearPlane() const { return near_; }
+    size_t splatCount() const { return splatCount_; }
+
+    // Records one frame; output() ends in TRANSFER_SRC_OPTIMAL, ready to copy
+    // or blit. The mode comes from params.mode.
+    void record(VkCommandBuffer cmd, const gpu_types::FrameParams& params);
+    // Per-pass GPU times of the last recorded frame, once it has completed.
+    GpuFrameStats timings() const;
+    const gpu::Image& output() const { return output_; }
+
+    // Headless: record, submit, wait and read the output back.
+    Result<Image> render(const ViewTransform& view, const RenderSettings& settings, GpuFrameStats* stats = nullptr);
+
+private:
+    explicit SplatRenderer(gpu::Context& ctx) : ctx_(ctx) {}
+    Status createPipelines();
+    void destroyTargets();
+
+    gpu::Context& ctx_;
+    RendererOptions options_;
+    VkFormat accumFormat_ = VK_FORMAT_R32G32B32A32_SFLOAT;
+    VkDescriptorSetLayout resolveSetLayout_ = VK_NULL_HANDLE;
+    VkDescriptorPool descriptorPool_ = VK_NULL_HANDLE;
+    VkDescriptorSet resolveSet_ = VK_NULL_HANDLE;
+    VkSampler sampler_ = VK_NULL_HANDLE;
+    VkPipelineLayout splatLayout_ = VK_NULL_HANDLE, resolveLayout_ = VK_NULL_HANDLE;
+    VkPipeline points_ = VK_NULL_HANDLE, circles_ = VK_NULL_HANDLE, visibility_ = VK_NULL_HANDLE,
+               accumulate_ = VK_NULL_HANDLE, resolve_ = VK_NULL_HANDLE;
+    VkQueryPool queries_ = VK_NULL_HANDLE;
+    gpu::Buffer surfels_, readback_;
+    gpu::Image depth_, colorWeight_, normalWeight_, output_;
+    size_t splatCount_ = 0;
+    float near_ = 1e-4f;
+    bool ewaFrame_ = false;
+};
+
+}  // namespace surfcast

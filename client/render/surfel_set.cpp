@@ -1,0 +1,130 @@
+#include "surfel_set.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "tileset_reader.h"
+
+namespace surfcast {
+
+using gpu_types::GpuSurfel;
+
+namespace {
+
+uint16_t snorm16(float v) {
+    v = std::clamp(std::isfinite(v) ? v : 0.f, -1.f, 1.f);
+    return uint16_t(int16_t(std::lround(v * 32767.f)));
+}
+float fromSnorm16(uint16_t v) { return std::max(float(int16_t(v)) / 32767.f, -1.f); }
+float signNotZero(float v) { return v < 0 ? -1.f : 1.f; }
+
+// 21 bits per axis interleaved.
+uint64_t spread21(uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffull;
+    v = (v | v << 16) & 0x1f0000ff0000ffull;
+    v = (v | v << 8) & 0x100f00f00f00f00full;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+    v = (v | v << 2) & 0x1249249249249249ull;
+    return v;
+}
+
+}  // namespace
+
+uint32_t packNormalOct(const Vec3f& n) {
+    // Octahedral encoding (Cigolle et al. 2014): project onto the octahedron,
+    // fold the lower half over the diagonals.
+    float l1 = std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z);
+    if (!(l1 > 0) || !std::isfinite(l1)) return 0;
+    float x = n.x / l1, y = n.y / l1;
+    if (n.z < 0) {
+        float fx = (1 - std::fabs(y)) * signNotZero(x);
+        float fy = (1 - std::fabs(x)) * signNotZero(y);
+        x = fx;
+        y = fy;
+    }
+    return uint32_t(snorm16(x)) | uint32_t(snorm16(y)) << 16;
+}
+
+Vec3f unpackNormalOct(uint32_t packed) {
+    float x = fromSnorm16(uint16_t(packed & 0xffff)), y = fromSnorm16(uint16_t(packed >> 16));
+    Vec3f n{x, y, 1 - std::fabs(x) - std::fabs(y)};
+    float t = std::max(-n.z, 0.f);
+    n.x += n.x >= 0 ? -t : t;
+    n.y += n.y >= 0 ? -t : t;
+    return normalizeOrZero(n);
+}
+
+uint32_t packColor(const Vec3f& rgb, float a) {
+    auto u8 = [](float v) { return uint32_t(std::lround(std::clamp(std::isfinite(v) ? v : 0.f, 0.f, 1.f) * 255.f)); };
+    return u8(rgb.x) | u8(rgb.y) << 8 | u8(rgb.z) << 16 | u8(a) << 24;
+}
+
+Vec3f unpackColor(uint32_t c) {
+    return {float(c & 0xff) / 255.f, float(c >> 8 & 0xff) / 255.f, float(c >> 16 & 0xff) / 255.f};
+}
+
+void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float radius,
+               const Vec3f& color, float weight) {
+    Vec3d local = position - set.origin;
+    set.surfels.push_back({float(local.x), float(local.y), float(local.z), radius, packNormalOct(normal),
+                           packColor(color), weight, 0.f});
+    if (std::isfinite(position.x) && std::isfinite(position.y) && std::isfinite(position.z)) set.bounds.extend(position);
+}
+
+void sortMorton(SurfelSet& set) {
+    if (set.bounds.empty() || set.surfels.size() < 2) return;
+    Vec3d lo = set.bounds.min - set.origin;
+    Vec3d extent = set.bounds.max - set.bounds.min;
+    double scale = double((1u << 21) - 1) / std::max({extent.x, extent.y, extent.z, 1e-30});
+    std::vector<std::pair<uint64_t, uint32_t>> keys(set.surfels.size());
+    for (size_t i = 0; i < keys.size(); ++i) {
+        const GpuSurfel& s = set.surfels[i];
+        auto cell = [&](float v, double l) {
+            double c = (double(v) - l) * scale;
+            return uint64_t(std::isfinite(c) ? std::clamp(c, 0.0, double((1u << 21) - 1)) : 0.0);
+        };
+        keys[i] = {spread21(cell(s.px, lo.x)) | spread21(cell(s.py, lo.y)) << 1 | spread21(cell(s.pz, lo.z)) << 2,
+                   uint32_t(i)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<GpuSurfel> sorted(keys.size());
+    for (size_t i = 0; i < keys.size(); ++i) sorted[i] = set.surfels[keys[i].second];
+    set.surfels.swap(sorted);
+}
+
+Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice) {
+    auto reader = TilesetReader::open(dir);
+    if (!reader) return reader.status();
+    const TilesetInfo& info = reader->info();
+    if (choice.level >= info.levels)
+        return Status::error(dir + ": level " + std::to_string(choice.level) + " does not exist (the set has levels 0.." +
+                             std::to_string(info.levels - 1) + ")");
+    SurfelSet set;
+    set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
+    set.hasWeights = info.weights != "none";
+    set.hasColor = info.colorBits > 0;
+    const float colorScale = info.colorBits > 0 ? 1.f / float((1u << info.colorBits) - 1) : 0.f;
+    for (const NodeRecord& node : reader->nodes()) {
+        bool leaf = node.childMask == 0;
+        bool wanted = choice.level < 0 ? leaf : (node.key.level == choice.level || (leaf && node.key.level < choice.level));
+        if (!wanted || node.surfelCount == 0) continue;
+        auto block = reader->readBlock(node);
+        if (!block) return block.status();
+        const BlockData& b = *block;
+        for (size_t i = 0; i < b.size(); ++i) {
+            Vec3f n = b.normals.empty() ? Vec3f{0, 0, 1} : Vec3f{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]};
+            Vec3f c = b.colors.empty() ? Vec3f{0.8f, 0.8f, 0.8f}
+                                       : Vec3f{b.colors[3 * i] * colorScale, b.colors[3 * i + 1] * colorScale,
+                                               b.colors[3 * i + 2] * colorScale};
+            float r = b.radii.empty() ? node.spacing : b.radii[i];
+            float w = b.weights.empty() ? 1.f : b.weights[i];
+            addSurfel(set, reader->position(node, b, i), n, r, c, w);
+        }
+    }
+    sortMorton(set);
+    return set;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,46 @@
+// The surfels one frame draws, in the layout the GPU reads (GpuSurfel), with a
+// double-precision render origin. Both renderers (GPU and CPU reference) take
+// the same SurfelSet, so they see identical inputs.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "gpu_types.h"
+#include "status.h"
+#include "vec3.h"
+
+namespace surfcast {
+
+struct SurfelSet {
+    Vec3d origin;                           // world position of local (0,0,0)
+    std::vector<gpu_types::GpuSurfel> surfels;
+    Box3d bounds;                           // world bounds of the surfel centres
+    bool hasWeights = false;                // s_k came from the tile set
+    bool hasColor = false;                  // colours came from the data (else grey)
+};
+
+// Which nodes of a tile set to draw: a level (its nodes plus the leaves above
+// it, which together cover the surface), or every leaf (level < 0).
+struct LevelChoice {
+    int level = -1;
+};
+
+Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice);
+
+// Append one surfel given in world coordinates (origin must be set first).
+// Colour components in [0, 1]. Non-finite input is kept: the renderers guard it.
+void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float radius,
+               const Vec3f& color, float weight = 1.f);
+
+// Reorder along a Morton (Z-order) curve over the bounds: rasterizers with tiled
+// caches (lavapipe measured 1.3-3.9x) run faster on spatially coherent input.
+void sortMorton(SurfelSet& set);
+
+// Packing shared with GLSL's unpack functions.
+uint32_t packNormalOct(const Vec3f& n);
+Vec3f unpackNormalOct(uint32_t packed);
+uint32_t packColor(const Vec3f& rgb, float a = 1.f);
+Vec3f unpackColor(uint32_t packed);
+
+}  // namespace surfcast

@@ -1,0 +1,42 @@
+#version 450
+// Pass 3: normalization and deferred shading (twin of shadePixel in
+// client/render/render_settings.cpp). Alpha is coverage: 1 where sum(w) shows
+// the surface.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(set = 0, binding = 0) uniform sampler2D colorWeight;
+layout(set = 0, binding = 1) uniform sampler2D normalWeight;
+
+layout(location = 0) out vec4 outColor;
+
+const float kAmbient = 0.25, kDiffuse = 0.75, kSpecular = 0.3, kShininess = 32.0;
+
+void main() {
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    vec4 cw = texelFetch(colorWeight, pixel, 0);
+    vec3 nw = texelFetch(normalWeight, pixel, 0).xyz;
+    vec3 background = frame.resolve.rgb;
+    if (!(cw.a > frame.resolve.a)) {
+        outColor = vec4(background, 0.0);
+        return;
+    }
+    vec3 color;
+    if (frame.mode == SC_MODE_EWA_SURFEL) {
+        // Per-surfel weights: no division; where the weights fall short of 1
+        // (the surface's edge) the background shows through.
+        color = cw.rgb + max(1.0 - cw.a, 0.0) * background;
+    } else {
+        color = cw.rgb / cw.a;
+    }
+    if (frame.shading != SC_SHADING_UNLIT) {
+        float eta = frame.viewport.x;
+        vec3 ray = vec3((gl_FragCoord.x - 0.5 * frame.viewport.y) / eta, -(gl_FragCoord.y - 0.5 * frame.viewport.z) / eta, 1.0);
+        vec3 n = dot(nw, nw) > 0.0 ? normalize(nw) : vec3(0);
+        float ndotv = abs(dot(n, -normalize(ray)));
+        vec3 lit = color * (kAmbient + kDiffuse * ndotv);
+        if (frame.shading == SC_SHADING_PHONG) lit += vec3(kSpecular * pow(ndotv, kShininess));
+        color = min(lit, vec3(1.0));
+    }
+    outColor = vec4(color, 1.0);
+}

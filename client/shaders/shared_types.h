@@ -1,0 +1,50 @@
+// Structs the GPU reads, defined once for C++ and GLSL (DESIGN.md, Style).
+// C++ side: static_asserts in client/render/gpu_types.h pin sizes and offsets.
+#ifndef SURFCAST_SHARED_TYPES_H
+#define SURFCAST_SHARED_TYPES_H
+
+#ifdef __cplusplus
+#include <cstdint>
+namespace surfcast::gpu_types {
+using uint = uint32_t;
+struct alignas(16) vec4 { float x, y, z, w; };
+#endif
+
+// One surfel as uploaded (32 bytes, a per-instance vertex binding). Positions are
+// relative to the render origin (float), the normal is octahedral-encoded as two
+// snorm16 (x in the low half), the colour RGBA8 unorm.
+struct GpuSurfel {
+    float px, py, pz;
+    float radius;    // r = h (or the surfel's own radius), world units
+    uint normal;     // packSnorm2x16(octahedral(n))
+    uint color;      // packUnorm4x8(rgba)
+    float weight;    // per-surfel normalization weight s_k (1 when absent)
+    float pad;
+};
+
+// Per-frame parameters (push constants, 112 bytes <= the guaranteed 128).
+struct FrameParams {
+    vec4 view0, view1, view2;  // rows of the world->camera transform (camera: x right, y up, z forward)
+    vec4 viewport;   // eta, width, height, near
+    vec4 kernel;     // kernel scale (multiple of r), cutoff c, z_t (multiple of r), low-pass variance (px^2)
+    vec4 resolve;    // background r, g, b; coverage threshold on sum(w)
+    uint mode;       // kMode* below
+    uint shading;    // kShading* below
+    float maxFilterPixels;  // clamp of the low-pass extent at grazing angles (pixels)
+    float circleScale;      // circles: screen radius = circleScale * r projected
+};
+
+#define SC_MODE_POINTS 0u
+#define SC_MODE_CIRCLES 1u
+#define SC_MODE_EWA_NOPREFILTER 2u
+#define SC_MODE_EWA_SURFEL 3u
+#define SC_MODE_EWA_PIXEL 4u
+
+#define SC_SHADING_UNLIT 0u
+#define SC_SHADING_LAMBERT 1u
+#define SC_SHADING_PHONG 2u
+
+#ifdef __cplusplus
+}  // namespace surfcast::gpu_types
+#endif
+#endif

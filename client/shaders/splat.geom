@@ -1,0 +1,37 @@
+#version 450
+// Geometry-shader expansion: the EWA setup runs once per surfel (the instanced
+// quad runs it per corner) and emits the 4-vertex parallelogram.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(constant_id = 0) const int kPass = 1;
+
+layout(points) in;
+layout(triangle_strip, max_vertices = 4) out;
+
+layout(location = 1) flat in vec3 inColor[];
+layout(location = 4) flat in vec4 inPositionRadius[];
+layout(location = 5) flat in uint inPackedNormal[];
+layout(location = 6) flat in float inWeight[];
+
+layout(location = 0) out vec2 outY;
+layout(location = 1) flat out vec3 outColor;
+layout(location = 2) flat out vec3 outNormal;
+layout(location = 3) flat out float outAmplitude;
+
+void main() {
+    Splat sp;
+    if (!setupSplat(inPositionRadius[0].xyz, inPositionRadius[0].w, inPackedNormal[0], inWeight[0], sp)) return;
+    for (int corner = 0; corner < 4; ++corner) {
+        vec2 y;
+        vec3 p = splatCorner(sp, corner, y);
+        if (kPass == 0) p = pushBack(sp, p);
+        gl_Position = project(p);
+        outY = y;
+        outColor = inColor[0];
+        outNormal = sp.n;
+        outAmplitude = sp.amplitude;
+        EmitVertex();
+    }
+    EndPrimitive();
+}

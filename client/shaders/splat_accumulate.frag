@@ -1,0 +1,20 @@
+#version 450
+// Pass 2: additive EWA accumulation of colour*w, w and normal*w (Ren 2002 §5.2).
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(location = 0) in vec2 inY;
+layout(location = 1) flat in vec3 inColor;
+layout(location = 2) flat in vec3 inNormal;
+layout(location = 3) flat in float inAmplitude;
+
+layout(location = 0) out vec4 outColorWeight;
+layout(location = 1) out vec4 outNormalWeight;
+
+void main() {
+    float q = dot(inY, inY);
+    if (q > 2.0 * frame.kernel.y) discard;
+    float w = inAmplitude * exp(-0.5 * q);
+    outColorWeight = vec4(inColor * w, w);
+    outNormalWeight = vec4(inNormal * w, 0.0);
+}

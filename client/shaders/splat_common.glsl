@@ -1,0 +1,116 @@
+// Shared by the splat shaders: frame parameters, transforms, unpacking, and the
+// object-space EWA setup of Ren et al. 2002, §5.2 and appendix A (DESIGN.md,
+// "Object-space EWA in one screen"). The CPU reference
+// (client/render/cpu_reference.cpp) evaluates the same kernel in screen space.
+#include "shared_types.h"
+
+layout(push_constant) uniform Push { FrameParams frame; };
+
+vec3 toCamera(vec3 p) {
+    vec4 q = vec4(p, 1.0);
+    return vec3(dot(frame.view0, q), dot(frame.view1, q), dot(frame.view2, q));
+}
+vec3 rotateToCamera(vec3 v) {
+    return vec3(dot(frame.view0.xyz, v), dot(frame.view1.xyz, v), dot(frame.view2.xyz, v));
+}
+
+// Reversed-Z perspective with an infinite far plane: depth = near / z, so
+// float depth keeps its relative precision at every distance (the visibility
+// offset z_t must survive the depth test far away too).
+vec4 project(vec3 c) {
+    float eta = frame.viewport.x;
+    return vec4(2.0 * eta / frame.viewport.y * c.x, -2.0 * eta / frame.viewport.z * c.y, frame.viewport.w, c.z);
+}
+// A clip position outside the view volume: the primitive is dropped.
+const vec4 kCulled = vec4(2.0, 2.0, 2.0, 1.0);
+
+vec3 decodeNormal(uint packed) {
+    vec2 e = unpackSnorm2x16(packed);
+    vec3 n = vec3(e, 1.0 - abs(e.x) - abs(e.y));
+    float t = max(-n.z, 0.0);
+    n.x += n.x >= 0.0 ? -t : t;
+    n.y += n.y >= 0.0 ? -t : t;
+    return normalize(n);
+}
+
+bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
+
+vec3 tangentOf(vec3 n) {
+    vec3 a = abs(n.x) < 0.9 ? vec3(1, 0, 0) : vec3(0, 1, 0);
+    return normalize(cross(n, a));
+}
+
+// The splat's tangent-plane parallelogram in camera space: corner y in
+// [-sqrt(2c), sqrt(2c)]^2 sits at o + y.x * axisU + y.y * axisV.
+struct Splat {
+    vec3 o;          // centre
+    vec3 axisU, axisV;
+    vec3 n;          // unit normal, facing the eye (splats are two-sided)
+    float amplitude; // weight at the centre
+    float r;         // reconstruction radius after the kernel scale
+};
+
+bool setupSplat(vec3 position, float radius, uint normal, float weight, out Splat sp) {
+    float eta = frame.viewport.x;
+    vec3 o = toCamera(position);
+    // Surfels behind the near plane (or NaN) are dropped; those straddling it
+    // are clipped by the rasterizer, which is safe because o.z >= near > 0.
+    if (!finite3(o) || !(o.z >= frame.viewport.w)) return false;
+    vec3 n = rotateToCamera(decodeNormal(normal));
+    if (!finite3(n)) return false;
+    n = dot(n, o) > 0.0 ? -n : n;
+    vec3 s = tangentOf(n), t = cross(n, s);
+    float r = radius * frame.kernel.x;
+    if (!(r > 0.0) || isinf(r)) r = o.z / eta;  // h = 0: one pixel's worth
+
+    // J: columns d(screen)/du_s and d(screen)/du_t at the centre.
+    float k = eta / (o.z * o.z);
+    vec2 js = k * vec2(s.x * o.z - s.z * o.x, s.y * o.z - s.z * o.y);
+    vec2 jt = k * vec2(t.x * o.z - t.z * o.x, t.y * o.z - t.z * o.y);
+    // M = V^r + V^h J^-1 J^-T shares its eigenvectors with J'J (V^r = r^2 I
+    // is isotropic), so Rot(theta) and Lambda come from J'J's eigensystem.
+    float a = dot(js, js), b = dot(js, jt), c = dot(jt, jt);
+    float mean = 0.5 * (a + c), dev = sqrt(max(0.25 * (a - c) * (a - c) + b * b, 0.0));
+    float l0 = mean + dev, l1 = max(mean - dev, 0.0);
+    vec2 e0 = a >= c ? vec2(l0 - c, b) : vec2(b, l0 - a);
+    e0 = dot(e0, e0) > 0.0 ? normalize(e0) : vec2(1, 0);
+    vec2 e1 = vec2(-e0.y, e0.x);
+    // Grazing angles: J'J is near singular and the low-pass filter's object
+    // extent explodes; clamp it to maxFilterPixels pixels at this depth.
+    float lmin = eta / (frame.maxFilterPixels * o.z);
+    lmin *= lmin;
+    float lowpass = frame.kernel.w;
+    float m0 = r * r + lowpass / max(l0, lmin), m1 = r * r + lowpass / max(l1, lmin);
+    float L0 = sqrt(m0), L1 = sqrt(m1);
+    sp.o = o;
+    sp.n = n;
+    sp.r = r;
+    sp.axisU = L0 * (e0.x * s + e0.y * t);
+    sp.axisV = L1 * (e1.x * s + e1.y * t);
+    // G_M scaled by 2 pi r^2: peak 1 under magnification, a constant integral
+    // under minification (where M grows with the low-pass filter).
+    sp.amplitude = r * r / (L0 * L1) * (frame.mode == SC_MODE_EWA_SURFEL ? weight : 1.0);
+    return finite3(sp.axisU) && finite3(sp.axisV) && !isnan(sp.amplitude) && !isinf(sp.amplitude);
+}
+
+// Corner `corner` (0..3, a triangle strip) of the splat: y and camera position.
+vec3 splatCorner(Splat sp, int corner, out vec2 y) {
+    vec2 v = vec2(corner & 1, corner >> 1);
+    y = 2.0 * sqrt(2.0 * frame.kernel.y) * (v - 0.5);
+    return sp.o + y.x * sp.axisU + y.y * sp.axisV;
+}
+
+// Visibility pass (Ren 2002 §5.1): the splat pushed back by z_t along the ray
+// through its centre.
+vec3 pushBack(Splat sp, vec3 p) { return p + frame.kernel.z * sp.r * normalize(sp.o); }
+
+// Circles: a screen-aligned square of half-size r projected (at least half a
+// pixel) at the centre's depth; y in [-1, 1]^2.
+vec4 circleCorner(vec3 o, float radius, int corner, out vec2 y) {
+    float eta = frame.viewport.x;
+    float rpx = max(eta * radius * frame.circleScale / o.z, 0.5);
+    y = 2.0 * vec2(corner & 1, corner >> 1) - 1.0;
+    vec4 clip = project(o);
+    clip.xy += vec2(y.x * 2.0 * rpx / frame.viewport.y, -y.y * 2.0 * rpx / frame.viewport.z) * o.z;
+    return clip;
+}

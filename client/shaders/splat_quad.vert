@@ -1,0 +1,44 @@
+#version 450
+// Instanced-quad expansion: one instance per surfel, 4 strip vertices each.
+// kPass 0: visibility (pushed back), 1: accumulation, 2: circles.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(constant_id = 0) const int kPass = 1;
+
+layout(location = 0) in vec4 inPositionRadius;
+layout(location = 1) in uint inNormal;
+layout(location = 2) in vec4 inColor;
+layout(location = 3) in float inWeight;
+
+layout(location = 0) out vec2 outY;
+layout(location = 1) flat out vec3 outColor;
+layout(location = 2) flat out vec3 outNormal;
+layout(location = 3) flat out float outAmplitude;
+
+void main() {
+    outColor = inColor.rgb;
+    if (kPass == 2) {
+        vec3 o = toCamera(inPositionRadius.xyz);
+        vec3 n = rotateToCamera(decodeNormal(inNormal));
+        bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n);
+        float r = inPositionRadius.w > 0.0 ? inPositionRadius.w : 0.0;
+        gl_Position = ok ? circleCorner(o, r, gl_VertexIndex, outY) : kCulled;
+        outNormal = dot(n, o) > 0.0 ? -n : n;
+        outAmplitude = 1.0;
+        return;
+    }
+    Splat sp;
+    if (!setupSplat(inPositionRadius.xyz, inPositionRadius.w, inNormal, inWeight, sp)) {
+        gl_Position = kCulled;
+        outY = vec2(0);
+        outNormal = vec3(0);
+        outAmplitude = 0.0;
+        return;
+    }
+    vec3 p = splatCorner(sp, gl_VertexIndex, outY);
+    if (kPass == 0) p = pushBack(sp, p);
+    gl_Position = project(p);
+    outNormal = sp.n;
+    outAmplitude = sp.amplitude;
+}

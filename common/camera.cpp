@@ -1,0 +1,122 @@
+#include "camera.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <nlohmann/json.hpp>
+
+namespace surfcast {
+
+namespace {
+
+bool finite(const Vec3d& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+Status checkCamera(const Camera& c) {
+    if (!finite(c.eye) || !finite(c.target) || !finite(c.up) || !std::isfinite(c.fovYDegrees))
+        return Status::error("camera has a non-finite value");
+    if (!(c.fovYDegrees > 0 && c.fovYDegrees < 180))
+        return Status::error("camera field of view " + std::to_string(c.fovYDegrees) + " is outside (0, 180) degrees");
+    Vec3d forward = c.target - c.eye;
+    if (!(length(forward) > 0)) return Status::error("camera eye and target coincide");
+    Vec3d side = cross(normalizeOrZero(forward), normalizeOrZero(c.up));
+    if (!(length(side) > 1e-9)) return Status::error("camera up vector is parallel to the view direction (or zero)");
+    return Status{};
+}
+
+}  // namespace
+
+Result<Camera> parseCamera(const std::string& text) {
+    double v[10];
+    const char* p = text.c_str();
+    for (int i = 0; i < 10; ++i) {
+        char* end = nullptr;
+        v[i] = std::strtod(p, &end);
+        if (end == p) return Status::error("--camera '" + text + "': value " + std::to_string(i + 1) + " of 10 is not a number (want ex,ey,ez,tx,ty,tz,ux,uy,uz,fov)");
+        p = end;
+        if (i < 9) {
+            if (*p != ',') return Status::error("--camera '" + text + "': want 10 comma-separated numbers ex,ey,ez,tx,ty,tz,ux,uy,uz,fov");
+            ++p;
+        }
+    }
+    if (*p != '\0') return Status::error("--camera '" + text + "': trailing text after 10 numbers");
+    Camera c{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}, {v[6], v[7], v[8]}, v[9]};
+    SC_TRY(checkCamera(c));
+    return c;
+}
+
+Result<std::vector<Camera>> parseCameraPath(const std::string& text, const std::string& what) {
+    nlohmann::json doc = nlohmann::json::parse(text, nullptr, false);
+    if (doc.is_discarded()) return Status::error(what + ": not valid JSON");
+    if (!doc.is_object() || !doc.contains("frames") || !doc["frames"].is_array())
+        return Status::error(what + ": want an object with a \"frames\" array");
+    auto vec = [&](const nlohmann::json& f, const char* key, size_t i, Vec3d fallback, bool required) -> Result<Vec3d> {
+        if (!f.contains(key)) {
+            if (required) return Status::error(what + ": frame " + std::to_string(i) + " lacks \"" + key + "\"");
+            return fallback;
+        }
+        const auto& a = f[key];
+        if (!a.is_array() || a.size() != 3 || !a[0].is_number() || !a[1].is_number() || !a[2].is_number())
+            return Status::error(what + ": frame " + std::to_string(i) + " \"" + key + "\" is not an array of 3 numbers");
+        return Vec3d{a[0].get<double>(), a[1].get<double>(), a[2].get<double>()};
+    };
+    std::vector<Camera> cameras;
+    const auto& frames = doc["frames"];
+    for (size_t i = 0; i < frames.size(); ++i) {
+        const auto& f = frames[i];
+        if (!f.is_object()) return Status::error(what + ": frame " + std::to_string(i) + " is not an object");
+        Camera c;
+        { auto r = vec(f, "eye", i, {}, true); if (!r) return r.status(); c.eye = *r; }
+        { auto r = vec(f, "target", i, {}, true); if (!r) return r.status(); c.target = *r; }
+        { auto r = vec(f, "up", i, {0, 0, 1}, false); if (!r) return r.status(); c.up = *r; }
+        if (f.contains("fov")) {
+            if (!f["fov"].is_number()) return Status::error(what + ": frame " + std::to_string(i) + " \"fov\" is not a number");
+            c.fovYDegrees = f["fov"].get<double>();
+        }
+        Status s = checkCamera(c);
+        if (!s) return Status::error(what + ": frame " + std::to_string(i) + ": " + s.message());
+        cameras.push_back(c);
+    }
+    if (cameras.empty()) return Status::error(what + ": \"frames\" is empty");
+    return cameras;
+}
+
+Camera frameBox(const Box3d& box, double aspect, double fovYDegrees) {
+    Camera c;
+    c.fovYDegrees = fovYDegrees;
+    if (box.empty()) {
+        c.eye = {0, -1, 0};
+        c.target = {0, 0, 0};
+        return c;
+    }
+    Vec3d centre = (box.min + box.max) * 0.5;
+    double radius = std::max(0.5 * length(box.max - box.min), 1e-9);
+    // The bounding sphere fits the narrower of the two fields of view.
+    double halfFov = 0.5 * fovYDegrees * M_PI / 180.0;
+    double halfFovX = std::atan(std::tan(halfFov) * aspect);
+    double distance = radius / std::sin(std::min(halfFov, halfFovX));
+    Vec3d direction = normalizeOrZero(Vec3d{0.35, -1.0, 0.55});
+    c.eye = centre - direction * distance;
+    c.target = centre;
+    c.up = {0, 0, 1};
+    return c;
+}
+
+Result<ViewTransform> makeViewTransform(const Camera& camera, const Vec3d& origin, int width, int height) {
+    SC_TRY(checkCamera(camera));
+    if (width <= 0 || height <= 0) return Status::error("image size must be positive");
+    Vec3d forward = normalizeOrZero(camera.target - camera.eye);
+    Vec3d right = normalizeOrZero(cross(forward, camera.up));
+    Vec3d up = cross(right, forward);
+    Vec3d eye = camera.eye - origin;
+    ViewTransform v{};
+    const Vec3d axes[3] = {right, up, forward};
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) v.rows[r][c] = float(axes[r][c]);
+        v.rows[r][3] = float(-dot(axes[r], eye));
+    }
+    v.eta = float(height / (2.0 * std::tan(0.5 * camera.fovYDegrees * M_PI / 180.0)));
+    v.width = width;
+    v.height = height;
+    return v;
+}
+
+}  // namespace surfcast
