@@ -13,29 +13,34 @@ namespace surfcast {
 
 namespace {
 
-// Orbit camera around a target, in double (world coordinates can be 10^6).
-struct Orbit {
-    Vec3d target;
-    double distance = 1, yaw = 0, pitch = 0.3;  // radians
-    double fov = 45;
-
-    Camera camera() const {
-        Vec3d dir{std::cos(pitch) * std::sin(yaw), -std::cos(pitch) * std::cos(yaw), std::sin(pitch)};
-        return {target + dir * distance, target, {0, 0, 1}, fov};
-    }
-    Vec3d forward() const { return normalizeOrZero(target - camera().eye); }
-};
-
-Orbit orbitFrom(const Camera& c) {
-    Orbit o;
-    Vec3d d = c.eye - c.target;
-    o.target = c.target;
-    o.distance = std::max(length(d), 1e-9);
-    o.pitch = std::asin(std::clamp(d.z / o.distance, -1.0, 1.0));
-    o.yaw = std::atan2(d.x, -d.y);
-    o.fov = c.fovYDegrees;
-    return o;
+// Rotate v about the unit axis k by angle a (Rodrigues).
+Vec3d rotate(const Vec3d& v, const Vec3d& k, double a) {
+    return v * std::cos(a) + cross(k, v) * std::sin(a) + k * (dot(k, v) * (1 - std::cos(a)));
 }
+
+// The interactive camera: orbit about the target around the camera's own up
+// axis, pan, zoom and fly; in double (world coordinates can be 10^6). Until
+// the user moves it, it is exactly the camera it started from.
+struct Orbit {
+    Camera cam;
+
+    Vec3d forward() const { return normalizeOrZero(cam.target - cam.eye); }
+    Vec3d right() const { return normalizeOrZero(cross(forward(), cam.up)); }
+    void orbit(double yaw, double pitch) {
+        Vec3d up = normalizeOrZero(cam.up);
+        Vec3d offset = rotate(cam.eye - cam.target, up, -yaw);
+        Vec3d axis = normalizeOrZero(cross(offset, up));
+        Vec3d pitched = rotate(offset, axis, pitch);
+        // Stop short of the poles, where the view direction meets the up axis.
+        if (std::fabs(dot(normalizeOrZero(pitched), up)) < 0.995) offset = pitched;
+        cam.eye = cam.target + offset;
+    }
+    void move(const Vec3d& delta) {
+        cam.eye += delta;
+        cam.target += delta;
+    }
+    void zoom(double factor) { cam.eye = cam.target + (cam.eye - cam.target) * factor; }
+};
 
 struct WindowState {
     Orbit orbit;
@@ -74,34 +79,32 @@ void onCursor(GLFWwindow* w, double x, double y) {
     int width = 1, height = 1;
     glfwGetWindowSize(w, &width, &height);
     if (s->orbiting) {
-        s->orbit.yaw += dx * 0.01;
-        s->orbit.pitch = std::clamp(s->orbit.pitch + dy * 0.01, -1.55, 1.55);
+        s->orbit.orbit(dx * 0.01, dy * 0.01);
     } else if (s->panning) {
-        Camera c = s->orbit.camera();
-        Vec3d f = s->orbit.forward();
-        Vec3d right = normalizeOrZero(cross(f, c.up)), up = cross(right, f);
-        double perPixel = 2 * s->orbit.distance * std::tan(0.5 * s->orbit.fov * M_PI / 180) / std::max(height, 1);
-        s->orbit.target = s->orbit.target - right * (dx * perPixel) + up * (dy * perPixel);
+        const Camera& c = s->orbit.cam;
+        Vec3d right = s->orbit.right(), up = cross(right, s->orbit.forward());
+        double perPixel = 2 * length(c.eye - c.target) * std::tan(0.5 * c.fovYDegrees * M_PI / 180) / std::max(height, 1);
+        s->orbit.move(right * (-dx * perPixel) + up * (dy * perPixel));
     }
 }
 
 void onScroll(GLFWwindow* w, double, double dy) {
     auto* s = static_cast<WindowState*>(glfwGetWindowUserPointer(w));
-    s->orbit.distance *= std::pow(0.9, dy);
+    s->orbit.zoom(std::pow(0.9, dy));
 }
 
 // Fly: move eye and target together along the view axes.
 void fly(GLFWwindow* w, WindowState& s, double seconds) {
-    Vec3d f = s.orbit.forward();
-    Vec3d right = normalizeOrZero(cross(f, Vec3d{0, 0, 1}));
+    Vec3d f = s.orbit.forward(), right = s.orbit.right(), up = normalizeOrZero(s.orbit.cam.up);
     Vec3d move;
     if (glfwGetKey(w, GLFW_KEY_W) == GLFW_PRESS) move += f;
     if (glfwGetKey(w, GLFW_KEY_S) == GLFW_PRESS) move = move - f;
     if (glfwGetKey(w, GLFW_KEY_D) == GLFW_PRESS) move += right;
     if (glfwGetKey(w, GLFW_KEY_A) == GLFW_PRESS) move = move - right;
-    if (glfwGetKey(w, GLFW_KEY_E) == GLFW_PRESS) move += Vec3d{0, 0, 1};
-    if (glfwGetKey(w, GLFW_KEY_Q) == GLFW_PRESS) move = move - Vec3d{0, 0, 1};
-    s.orbit.target += move * (0.5 * s.orbit.distance * seconds);
+    if (glfwGetKey(w, GLFW_KEY_E) == GLFW_PRESS) move += up;
+    if (glfwGetKey(w, GLFW_KEY_Q) == GLFW_PRESS) move = move - up;
+    // Half the distance to the target per second.
+    s.orbit.move(move * (0.5 * length(s.orbit.cam.eye - s.orbit.cam.target) * seconds));
 }
 
 int fail(const std::string& message) {
@@ -122,7 +125,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
         return fail("cannot create a window");
     }
     WindowState state;
-    state.orbit = orbitFrom(o.cameras.empty() ? frameBox(set.bounds, double(o.width) / o.height) : o.cameras[0]);
+    state.orbit.cam = o.cameras.empty() ? frameBox(set.bounds, double(o.width) / o.height) : o.cameras[0];
     state.mode = o.settings.mode;
     state.shading = o.settings.shading;
     glfwSetWindowUserPointer(window, &state);
@@ -161,7 +164,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             RenderSettings settings = o.settings;
             settings.mode = state.mode;
             settings.shading = state.shading;
-            auto view = makeViewTransform(state.orbit.camera(), set.origin, int(extent.width), int(extent.height));
+            auto view = makeViewTransform(state.orbit.cam, set.origin, int(extent.width), int(extent.height));
             if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
             auto params = makeFrameParams(*view, settings, r.nearPlane());
             auto presented = gpu::presentFrame(**ctx, *swapchain, window, r.output().image,

@@ -42,9 +42,9 @@ Vec3f tangentOf(const Vec3f& n) {
 
 bool finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
-// Distance along the pixel's ray to the splat's tangent plane. Near grazing
-// the low-pass filter widens the footprint past the splat's own disc and the
-// plane is hit far from it: the depth is clamped to the disc's depth range.
+// Distance along the pixel's ray to the splat's tangent plane, clamped to the
+// depth range of the splat's object-space footprint: near grazing angles the
+// ray meets the plane far outside the splat.
 float rayDistance(const ScreenSplat& s, const Vec3f& ray, float rayLength) {
     float denom = dot(ray, s.n);
     float t = std::fabs(denom) > 1e-6f ? dot(s.o, s.n) / denom : s.o.z;
@@ -74,6 +74,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         if (!finite(o) || !(o.z >= near)) continue;  // behind the near plane (or NaN)
         Vec3f n = normalizeOrZero(view.rotate(unpackNormalOct(g.normal)));
         if (!(length(n) > 0)) continue;
+        if (dot(n, o) > 0) n = n * -1.f;  // two-sided: the normal faces the eye
         Vec3f s = tangentOf(n), t = cross(n, s);
         float r = g.radius * settings.kernelScale;
         if (!(r > 0) || !std::isfinite(r)) r = o.z / eta;  // h = 0: one pixel's worth
@@ -106,7 +107,14 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         sp.o = o;
         sp.n = n;
         sp.zt = settings.zt * r;
-        sp.depthExtent = std::sqrt(cutoff2) * r * std::sqrt(std::max(0.f, 1.f - n.z * n.z));
+        // The footprint's object-space extent is that of the GPU's
+        // parallelogram: the largest axis of M = r^2 I + V^h (J'J)^-1, with
+        // the same clamp at grazing angles (client/shaders/splat_common.glsl).
+        float ta = j00 * j00 + j10 * j10, tb = j00 * j01 + j10 * j11, tc = j01 * j01 + j11 * j11;
+        float lambdaMin = 0.5f * (ta + tc) - std::sqrt(0.25f * (ta - tc) * (ta - tc) + tb * tb);
+        float lambdaFloor = eta / (kMaxFilterPixels * o.z);
+        float extent = std::sqrt(r2 + lowpass / std::max(lambdaMin, lambdaFloor * lambdaFloor));
+        sp.depthExtent = std::sqrt(cutoff2) * extent * std::sqrt(std::max(0.f, 1.f - n.z * n.z));
         sp.color = unpackColor(g.color);
         splats.push_back(sp);
     }
@@ -114,8 +122,8 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
     // Rasterization in row bands, one per thread: every band visits the splats
     // in the same order, so the sums do not depend on the thread count.
     std::vector<float> front(size_t(W) * H, INFINITY);
-    struct Accum { float r, g, b, w, nx, ny, nz; };
-    std::vector<Accum> acc(size_t(W) * H, Accum{0, 0, 0, 0, 0, 0, 0});
+    struct Accum { float r, g, b, w, nx, ny, nz, coverage; };
+    std::vector<Accum> acc(size_t(W) * H, Accum{0, 0, 0, 0, 0, 0, 0, 0});
     auto ray = [&](int x, int y) { return Vec3f{(x + 0.5f - 0.5f * W) / eta, -(y + 0.5f - 0.5f * H) / eta, 1.f}; };
     auto forEachFragment = [&](int y0, int y1, auto&& fragment) {
         for (const ScreenSplat& sp : splats) {
@@ -148,7 +156,8 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
             Vec3f d = ray(x, y);
             size_t i = size_t(y) * W + x;
             if (rayDistance(sp, d, length(d)) > front[i]) return;
-            float w = sp.amplitude * std::exp(-0.5f * q);
+            float g = std::exp(-0.5f * q);
+            float w = sp.amplitude * g;
             Accum& a = acc[i];
             a.r += sp.color.x * w;
             a.g += sp.color.y * w;
@@ -157,6 +166,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
             a.nx += sp.n.x * w;
             a.ny += sp.n.y * w;
             a.nz += sp.n.z * w;
+            a.coverage += g;
         });
     }
 
@@ -168,7 +178,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
             size_t i = size_t(y) * W + x;
             const Accum& a = acc[i];
             Vec3f c = settings.background;
-            bool hit = a.w > settings.coverage;
+            bool hit = a.coverage > settings.coverage && a.w > 0;
             if (hit) {
                 c = shadePixel(settings.shading, Vec3f{a.r, a.g, a.b} * (1.f / a.w), {a.nx, a.ny, a.nz}, ray(x, y));
                 ++covered;

@@ -40,7 +40,8 @@ struct RenderSettings {
     float cutoff = 1.f;           // c: splats end at y'y = 2c
     float zt = 0.5f;              // visibility depth offset z_t, a multiple of r
     float lowpassVariance = 1.f;  // V^h = variance * I, in pixels^2 (Zwicker's V^h = I)
-    float coverage = 0.05f;       // a pixel shows the surface where sum(w) exceeds this
+    float coverage = 0.05f;       // a pixel shows the surface where the sum of the unscaled
+                                  // kernels exp(-y'y/2) exceeds this
     Vec3f background{1.f, 1.f, 1.f};
 };
 

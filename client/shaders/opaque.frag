@@ -15,5 +15,5 @@ layout(location = 1) out vec4 outNormalWeight;
 void main() {
     if (kCircle && dot(inY, inY) > 1.0) discard;
     outColorWeight = vec4(inColor, 1.0);
-    outNormalWeight = vec4(inNormal, 0.0);
+    outNormalWeight = vec4(inNormal, 1.0);
 }

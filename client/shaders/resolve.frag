@@ -1,7 +1,7 @@
 #version 450
 // Pass 3: normalization and deferred shading (twin of shadePixel in
-// client/render/render_settings.cpp). Alpha is coverage: 1 where sum(w) shows
-// the surface.
+// client/render/render_settings.cpp and of the CPU reference's resolve).
+// Output alpha is coverage: 1 where the summed kernels show the surface.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
@@ -15,9 +15,9 @@ const float kAmbient = 0.25, kDiffuse = 0.75, kSpecular = 0.3, kShininess = 32.0
 void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
     vec4 cw = texelFetch(colorWeight, pixel, 0);
-    vec3 nw = texelFetch(normalWeight, pixel, 0).xyz;
+    vec4 nw = texelFetch(normalWeight, pixel, 0);
     vec3 background = frame.resolve.rgb;
-    if (!(cw.a > frame.resolve.a)) {
+    if (!(nw.a > frame.resolve.a) || !(cw.a > 0.0)) {
         outColor = vec4(background, 0.0);
         return;
     }
@@ -32,7 +32,7 @@ void main() {
     if (frame.shading != SC_SHADING_UNLIT) {
         float eta = frame.viewport.x;
         vec3 ray = vec3((gl_FragCoord.x - 0.5 * frame.viewport.y) / eta, -(gl_FragCoord.y - 0.5 * frame.viewport.z) / eta, 1.0);
-        vec3 n = dot(nw, nw) > 0.0 ? normalize(nw) : vec3(0);
+        vec3 n = dot(nw.xyz, nw.xyz) > 0.0 ? normalize(nw.xyz) : vec3(0);
         float ndotv = abs(dot(n, -normalize(ray)));
         vec3 lit = color * (kAmbient + kDiffuse * ndotv);
         if (frame.shading == SC_SHADING_PHONG) lit += vec3(kSpecular * pow(ndotv, kShininess));

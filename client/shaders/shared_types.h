@@ -27,7 +27,7 @@ struct FrameParams {
     vec4 view0, view1, view2;  // rows of the world->camera transform (camera: x right, y up, z forward)
     vec4 viewport;   // eta, width, height, near
     vec4 kernel;     // kernel scale (multiple of r), cutoff c, z_t (multiple of r), low-pass variance (px^2)
-    vec4 resolve;    // background r, g, b; coverage threshold on sum(w)
+    vec4 resolve;    // background r, g, b; coverage threshold on sum(exp(-q/2))
     uint mode;       // kMode* below
     uint shading;    // kShading* below
     float maxFilterPixels;  // clamp of the low-pass extent at grazing angles (pixels)

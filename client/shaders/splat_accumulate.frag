@@ -1,5 +1,7 @@
 #version 450
-// Pass 2: additive EWA accumulation of colour*w, w and normal*w (Ren 2002 §5.2).
+// Pass 2: additive EWA accumulation of colour*w, w and normal*w (Ren 2002 §5.2),
+// and of the unscaled kernel exp(-q/2), which measures coverage: the weights'
+// scale shrinks with minification, so sum(w) cannot tell surface from fringe.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
@@ -14,7 +16,8 @@ layout(location = 1) out vec4 outNormalWeight;
 void main() {
     float q = dot(inY, inY);
     if (q > 2.0 * frame.kernel.y) discard;
-    float w = inAmplitude * exp(-0.5 * q);
+    float g = exp(-0.5 * q);
+    float w = inAmplitude * g;
     outColorWeight = vec4(inColor * w, w);
-    outNormalWeight = vec4(inNormal * w, 0.0);
+    outNormalWeight = vec4(inNormal * w, g);
 }

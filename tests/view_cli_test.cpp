@@ -1,0 +1,177 @@
+// surfcast-view end to end: the real programs on a real scan (the bunny), the
+// GPU path against the CPU reference, camera paths, bad arguments, and the
+// window under Xvfb. SURFCAST_VALIDATION=1 is set for this test (CMake), so
+// every GPU run also checks for zero validation errors.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "image.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+
+namespace surfcast {
+namespace {
+
+using test::binary;
+using test::run;
+using test::TempDir;
+
+const char* kBunnyCamera = "--camera=-0.017,0.13,0.2,-0.017,0.11,-0.002,0,1,0,40";
+
+std::vector<nlohmann::json> jsonLines(const std::string& output) {
+    std::vector<nlohmann::json> lines;
+    std::istringstream in(output);
+    for (std::string line; std::getline(in, line);)
+        if (!line.empty() && line[0] == '{') lines.push_back(nlohmann::json::parse(line));
+    return lines;
+}
+
+double meanAbsDiff(const Image& a, const Image& b, size_t* coverDiff) {
+    double sum = 0;
+    size_t n = 0;
+    *coverDiff = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4) {
+        bool ca = a.rgba[i] != 255 || a.rgba[i + 1] != 255 || a.rgba[i + 2] != 255;  // white background
+        bool cb = b.rgba[i] != 255 || b.rgba[i + 1] != 255 || b.rgba[i + 2] != 255;
+        *coverDiff += ca != cb;
+        if (!ca && !cb) continue;
+        for (int c = 0; c < 3; ++c) sum += std::abs(int(a.rgba[i + c]) - int(b.rgba[i + c])) / 255.0;
+        n += 3;
+    }
+    return sum / std::max<size_t>(n, 1);
+}
+
+class ViewCli : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() {
+        if (!test::haveData()) return;
+        dir_ = new TempDir;
+        auto r = run({binary("surfcast-build"), "-q", test::dataFile("bunny.ply"), "-o", dir_->file("bunny")});
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+    }
+    static void TearDownTestSuite() {
+        delete dir_;
+        dir_ = nullptr;
+    }
+    void SetUp() override { REQUIRE_DATA(); }
+    static std::string set() { return dir_->file("bunny"); }
+    static TempDir* dir_;
+};
+TempDir* ViewCli::dir_ = nullptr;
+
+TEST_F(ViewCli, BunnyGpuPerPixelEwaMatchesCpuReference) {
+    TempDir out;
+    auto gpu = run({binary("surfcast-view"), "--headless", set(), kBunnyCamera, "--size", "400x300", "--mode",
+                    "ewa-pixel", "--out", out.file("gpu.png")});
+    ASSERT_EQ(gpu.exitCode, 0) << gpu.output;
+    auto cpu = run({binary("surfcast-view"), "--headless", set(), kBunnyCamera, "--size", "400x300", "--mode",
+                    "cpu-reference", "--out", out.file("cpu.png")});
+    ASSERT_EQ(cpu.exitCode, 0) << cpu.output;
+
+    // The frame's JSON line: splats = every leaf's surfels, counted here from
+    // the hierarchy independently of the renderer.
+    auto reader = TilesetReader::open(set());
+    ASSERT_TRUE(reader);
+    size_t leafSurfels = 0;
+    for (const auto& n : reader->nodes()) leafSurfels += n.childMask == 0 ? n.surfelCount : 0;
+    auto lines = jsonLines(gpu.output);
+    ASSERT_EQ(lines.size(), 1u) << gpu.output;
+    EXPECT_EQ(lines[0]["splats"].get<size_t>(), leafSurfels);
+    EXPECT_EQ(lines[0]["validation_errors"].get<int>(), 0);
+    EXPECT_GT(lines[0]["gpu_ms"]["total"].get<double>(), 0);
+    EXPECT_EQ(lines[0]["mode"], "ewa-pixel");
+
+    auto a = readPng(out.file("gpu.png")), b = readPng(out.file("cpu.png"));
+    ASSERT_TRUE(a && b);
+    ASSERT_EQ(a->width, 400);
+    ASSERT_EQ(a->height, 300);
+    size_t coverDiff = 0;
+    double mean = meanAbsDiff(*a, *b, &coverDiff);
+    // The threshold of render_test's checkerboard (docs/RENDERER.md): shading
+    // (Lambert) varies slowly, so the same bound holds; the outline differs by
+    // the silhouette fringe, a one-pixel band.
+    EXPECT_LT(mean, 0.01);
+    size_t covered = lines[0]["pixels_covered"].get<size_t>();
+    EXPECT_GT(covered, 400u * 300 / 2);
+    EXPECT_LT(coverDiff, covered / 20);
+}
+
+TEST_F(ViewCli, CameraPathWritesOnePngAndOneJsonLinePerFrame) {
+    TempDir out;
+    test::writeFile(out.file("path.json"), R"({"frames": [
+        {"eye": [-0.017, 0.13, 0.25], "target": [-0.017, 0.11, 0], "up": [0, 1, 0], "fov": 40},
+        {"eye": [0.2, 0.13, 0.1], "target": [-0.017, 0.11, 0], "up": [0, 1, 0]},
+        {"eye": [-0.2, 0.3, 0.1], "target": [-0.017, 0.11, 0], "up": [0, 1, 0], "fov": 60}]})");
+    for (const char* mode : {"points", "circles", "ewa-surfel"}) {
+        auto r = run({binary("surfcast-view"), "--headless", set(), "--camera-path", out.file("path.json"), "--size",
+                      "160x120", "--mode", mode, "--out", out.file(std::string(mode) + ".png")});
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        auto lines = jsonLines(r.output);
+        ASSERT_EQ(lines.size(), 3u) << r.output;
+        for (size_t f = 0; f < 3; ++f) {
+            std::string path = out.file(std::string(mode) + "_000" + std::to_string(f) + ".png");
+            EXPECT_EQ(lines[f]["out"], path);
+            EXPECT_EQ(lines[f]["frame"].get<size_t>(), f);
+            auto img = readPng(path);
+            ASSERT_TRUE(img) << img.status().message();
+            EXPECT_GT(lines[f]["pixels_covered"].get<size_t>(), 500u) << mode;
+        }
+    }
+    // Without --camera the view frames the whole set: something is drawn.
+    auto r = run({binary("surfcast-view"), "--headless", set(), "--size", "160x120", "--out", out.file("auto.png")});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_GT(jsonLines(r.output).at(0)["pixels_covered"].get<size_t>(), 200u);
+}
+
+TEST_F(ViewCli, BadArgumentsAndInputsGiveClearErrors) {
+    TempDir out;
+    struct Case {
+        std::vector<std::string> args;
+        int exit;
+        std::string message;
+    };
+    std::vector<Case> cases = {
+        {{"--headless", out.file("nope")}, 1, "nope"},
+        {{"--headless", set(), "--camera", "1,2,3"}, 2, "--camera"},
+        {{"--headless", set(), "--camera", "0,0,0,0,0,0,0,0,1,45"}, 2, "coincide"},
+        {{"--headless", set(), "--mode", "splat"}, 2, "--mode"},
+        {{"--headless", set(), "--size", "0x10"}, 2, "--size"},
+        {{"--headless", set(), "--level", "9"}, 1, "level 9"},
+        {{"--headless", set(), "--camera-path", out.file("missing.json")}, 2, "missing.json"},
+        {{"--headless"}, 2, "no tile set"},
+        {{"--headless", set(), "--frobnicate"}, 2, "--frobnicate"},
+        {{"--headless", set(), "--out", out.file("no/such/dir/x.png")}, 1, "x.png"},
+    };
+    for (const auto& c : cases) {
+        std::vector<std::string> args = {binary("surfcast-view")};
+        args.insert(args.end(), c.args.begin(), c.args.end());
+        auto r = run(args);
+        EXPECT_EQ(r.exitCode, c.exit) << c.args.back() << ": " << r.output;
+        EXPECT_NE(r.output.find(c.message), std::string::npos) << r.output;
+    }
+    auto help = run({binary("surfcast-view"), "--help"});
+    EXPECT_EQ(help.exitCode, 0);
+    EXPECT_NE(help.output.find("--mode"), std::string::npos);
+}
+
+TEST_F(ViewCli, WindowRendersUnderXvfbLikeHeadless) {
+    TempDir out;
+    auto window = run({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", binary("surfcast-view"), set(), kBunnyCamera,
+                       "--size", "320x240", "--frames", "3", "--screenshot", out.file("window.png")});
+    ASSERT_EQ(window.exitCode, 0) << window.output;
+    auto headless = run({binary("surfcast-view"), "--headless", set(), kBunnyCamera, "--size", "320x240", "--out",
+                         out.file("headless.png")});
+    ASSERT_EQ(headless.exitCode, 0) << headless.output;
+    auto a = readPng(out.file("window.png")), b = readPng(out.file("headless.png"));
+    ASSERT_TRUE(a) << a.status().message();
+    ASSERT_TRUE(b);
+    ASSERT_EQ(a->width, 320);
+    EXPECT_EQ(a->rgba, b->rgba) << "the window's frame is the headless frame of the same camera";
+}
+
+}  // namespace
+}  // namespace surfcast
