@@ -94,7 +94,7 @@ Camera frameBox(const Box3d& box, double aspect, double fovYDegrees) {
     double halfFovX = std::atan(std::tan(halfFov) * aspect);
     double distance = radius / std::sin(std::min(halfFov, halfFovX));
     Vec3d direction = normalizeOrZero(Vec3d{0.35, -1.0, 0.55});
-    c.eye = centre - direction * distance;
+    c.eye = centre + direction * distance;
     c.target = centre;
     c.up = {0, 0, 1};
     return c;

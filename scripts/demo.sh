@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # The main job on the built-in default scene: build its tile set, verify it,
-# serve it over HTTP on loopback and fetch tileset.json and a block through the
-# server as a check. (Rendering through HTTP comes with the streaming client.)
+# render it with object-space EWA splatting (Vulkan; lavapipe without a GPU) to
+# out/scene.png, and serve it over HTTP on loopback, fetching tileset.json and a
+# block through the server as a check. With a display (and SURFCAST_DEMO_WINDOW=1)
+# it also opens the viewer window. (Rendering over HTTP comes with the
+# streaming client.)
 # Usage: scripts/demo.sh [OUT_DIR]   (default: out/)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,6 +16,13 @@ build/bin/surfcast-build --default-scene -o "$out/sets/scene"
 echo
 echo "== verifying it"
 build/bin/surfcast-build --info "$out/sets/scene"
+echo
+echo "== rendering it (ewa-pixel, 1280x720) to $out/scene.png"
+build/bin/surfcast-view --headless "$out/sets/scene" --out "$out/scene.png"
+if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ] && [ "${SURFCAST_DEMO_WINDOW:-0}" = 1 ]; then
+  echo "== opening the viewer (Esc closes it)"
+  build/bin/surfcast-view "$out/sets/scene"
+fi
 echo
 echo "== serving $out/sets on loopback"
 log="$out/serve.log"

@@ -87,6 +87,7 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
             line["gpu_ms"] = {{"visibility", median(vis)}, {"accumulate", median(acc)},
                               {"resolve", median(res)}, {"total", median(total)}};
             line["device"] = ctx->properties.deviceName;
+            line["expansion"] = renderer->expansion() == Expansion::Geometry ? "geometry" : "quad";
         }
         std::string path = framePath(o.out, f, cameras.size());
         if (Status s = writePng(image, path); !s) {

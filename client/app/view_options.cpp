@@ -34,7 +34,8 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
   --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)
   --background R,G,B    background colour in [0,1] (default 1,1,1)
-  --expansion E         quad (instanced quads, default) or geometry (geometry shader)
+  --expansion E         quad (instanced quads) or geometry (geometry shader); default:
+                        geometry where the device has it (faster on lavapipe)
   --accumulation F      rgba32f (default) or rgba16f accumulation targets
   --device D            Vulkan device index or name substring (default: discrete GPU first)
   --list-devices        print the Vulkan devices and exit

@@ -50,6 +50,8 @@ VkRenderingAttachmentInfo attachment(VkImageView view, VkImageLayout layout, VkA
 Result<std::unique_ptr<SplatRenderer>> SplatRenderer::create(gpu::Context& ctx, const RendererOptions& options) {
     std::unique_ptr<SplatRenderer> r(new SplatRenderer(ctx));
     r->options_ = options;
+    if (options.expansion == Expansion::Auto)
+        r->options_.expansion = ctx.geometryShader ? Expansion::Geometry : Expansion::Quad;
     if (options.expansion == Expansion::Geometry && !ctx.geometryShader)
         return Status::error("the Vulkan device has no geometry shaders; use the quad expansion");
     r->accumFormat_ = options.halfFloatAccumulation ? VK_FORMAT_R16G16B16A16_SFLOAT : VK_FORMAT_R32G32B32A32_SFLOAT;

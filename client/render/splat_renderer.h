@@ -20,11 +20,13 @@
 namespace surfcast {
 
 // How a splat becomes a quad: an instanced 4-vertex strip (setup per corner),
-// or a geometry shader on points (setup once per surfel).
-enum class Expansion { Quad, Geometry };
+// or a geometry shader on points (setup once per surfel). Auto: the geometry
+// shader where the device has one; it won on lavapipe by 15-40% (see
+// bench/BENCHMARKS.md, "Renderer").
+enum class Expansion { Auto, Quad, Geometry };
 
 struct RendererOptions {
-    Expansion expansion = Expansion::Quad;
+    Expansion expansion = Expansion::Auto;
     bool halfFloatAccumulation = false;  // RGBA16F instead of RGBA32F
 };
 
@@ -46,6 +48,7 @@ public:
     Status resize(uint32_t width, uint32_t height);
     float nearPlane() const { return near_; }
     size_t splatCount() const { return splatCount_; }
+    Expansion expansion() const { return options_.expansion; }
 
     // Records one frame; output() ends in TRANSFER_SRC_OPTIMAL, ready to copy
     // or blit. The mode comes from params.mode.
