@@ -17,7 +17,9 @@ uint64_t spreadBits(uint64_t v) {
 }
 }  // namespace
 
-uint64_t NodeKey::morton() const { return spreadBits(x) << 2 | spreadBits(y) << 1 | spreadBits(z); }
+uint64_t mortonCode(uint32_t x, uint32_t y, uint32_t z) { return spreadBits(x) << 2 | spreadBits(y) << 1 | spreadBits(z); }
+
+uint64_t NodeKey::morton() const { return mortonCode(x, y, z); }
 
 std::string NodeKey::name() const {
     return std::to_string(level) + "-" + std::to_string(x) + "-" + std::to_string(y) + "-" + std::to_string(z);

@@ -9,6 +9,10 @@
 
 namespace surfcast {
 
+// Morton (Z-order) code of a cell: the low 21 bits of x, y, z interleaved,
+// x highest (bit 3i+2), z lowest.
+uint64_t mortonCode(uint32_t x, uint32_t y, uint32_t z);
+
 // Deepest level a key can name: 3·kMaxLevel bits of Morton code fit in 64 bits
 // with room for the level.
 inline constexpr int kMaxLevel = 20;

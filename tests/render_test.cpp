@@ -334,14 +334,14 @@ TEST(SurfelSet, OctahedralNormalsAndMortonOrder) {
         EXPECT_GT(dot(n, back), 0.99999f);
     }
     EXPECT_GT(dot(unpackNormalOct(packNormalOct({0, 0, -1})), Vec3f{0, 0, -1}), 0.99999f);
-    // The 8 corners of a cube come out in Z order: x fastest, then y, then z.
+    // The 8 corners of a cube come out in Z order: z fastest, then y, then x.
     SurfelSet set;
-    for (int i = 7; i >= 0; --i) addSurfel(set, {double(i & 1), double(i >> 1 & 1), double(i >> 2)}, {0, 0, 1}, 1, {});
+    for (int i = 7; i >= 0; --i) addSurfel(set, {double(i >> 2), double(i >> 1 & 1), double(i & 1)}, {0, 0, 1}, 1, {});
     sortMorton(set);
     for (int i = 0; i < 8; ++i) {
-        EXPECT_EQ(set.surfels[i].px, float(i & 1));
+        EXPECT_EQ(set.surfels[i].px, float(i >> 2));
         EXPECT_EQ(set.surfels[i].py, float(i >> 1 & 1));
-        EXPECT_EQ(set.surfels[i].pz, float(i >> 2));
+        EXPECT_EQ(set.surfels[i].pz, float(i & 1));
     }
 }
 

@@ -36,12 +36,12 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
         ctx = std::move(*c);
         auto r = SplatRenderer::create(*ctx, o.renderer);
         Status s = r ? r.value()->upload(set) : r.status();
+        if (r) renderer = std::move(*r);
         if (!s) {
-            renderer.reset();
+            renderer.reset();  // before the device it lives on
             gpu::destroyContext(ctx);
             return fail(s.message());
         }
-        renderer = std::move(*r);
     }
     int status = 0;
     for (size_t f = 0; f < cameras.size() && status == 0; ++f) {

@@ -2,6 +2,7 @@
 
 #include <GLFW/glfw3.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -181,18 +182,18 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                           renderModeName(state.mode), seconds * 1e3, t.totalMs, t.splats);
             glfwSetWindowTitle(window, title);
             ++frame;
-            bool last = o.frames > 0 && frame >= o.frames;
-            if (state.screenshot || (last && !o.screenshot.empty())) {
+            bool lastFrame = o.frames > 0 && frame >= o.frames;
+            if (state.screenshot || (lastFrame && !o.screenshot.empty())) {
                 auto image = r.render(*view, settings);
                 char name[64];
                 std::snprintf(name, sizeof(name), "surfcast-%04d.png", screenshots++);
-                std::string path = last && !o.screenshot.empty() ? o.screenshot : name;
+                std::string path = lastFrame && !o.screenshot.empty() ? o.screenshot : name;
                 Status ws = image ? writePng(*image, path) : image.status();
                 if (!ws) status = fail(ws.message());
                 else std::fprintf(stderr, "surfcast-view: wrote %s\n", path.c_str());
                 state.screenshot = false;
             }
-            if (last) glfwSetWindowShouldClose(window, GLFW_TRUE);
+            if (lastFrame) glfwSetWindowShouldClose(window, GLFW_TRUE);
         }
         if (renderer) renderer->reset();
         if (swapchain) gpu::destroySwapchain(**ctx, *swapchain);

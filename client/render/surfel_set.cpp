@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numeric>
 
+#include "octree_key.h"
 #include "tileset_reader.h"
 
 namespace surfcast {
@@ -18,17 +19,6 @@ uint16_t snorm16(float v) {
 }
 float fromSnorm16(uint16_t v) { return std::max(float(int16_t(v)) / 32767.f, -1.f); }
 float signNotZero(float v) { return v < 0 ? -1.f : 1.f; }
-
-// 21 bits per axis interleaved.
-uint64_t spread21(uint64_t v) {
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffull;
-    v = (v | v << 16) & 0x1f0000ff0000ffull;
-    v = (v | v << 8) & 0x100f00f00f00f00full;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
-    v = (v | v << 2) & 0x1249249249249249ull;
-    return v;
-}
 
 }  // namespace
 
@@ -83,10 +73,9 @@ void sortMorton(SurfelSet& set) {
         const GpuSurfel& s = set.surfels[i];
         auto cell = [&](float v, double l) {
             double c = (double(v) - l) * scale;
-            return uint64_t(std::isfinite(c) ? std::clamp(c, 0.0, double((1u << 21) - 1)) : 0.0);
+            return uint32_t(std::isfinite(c) ? std::clamp(c, 0.0, double((1u << 21) - 1)) : 0.0);
         };
-        keys[i] = {spread21(cell(s.px, lo.x)) | spread21(cell(s.py, lo.y)) << 1 | spread21(cell(s.pz, lo.z)) << 2,
-                   uint32_t(i)};
+        keys[i] = {mortonCode(cell(s.px, lo.x), cell(s.py, lo.y), cell(s.pz, lo.z)), uint32_t(i)};
     }
     std::sort(keys.begin(), keys.end());
     std::vector<GpuSurfel> sorted(keys.size());
