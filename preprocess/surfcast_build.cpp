@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "octree_builder.h"
+#include "reweight.h"
 #include "tileset_reader.h"
 
 namespace {
@@ -31,7 +32,8 @@ in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set.
   --normal-k K            neighbours for normal estimation (default 16)
   --spacing-k K           k of the k-th-neighbour spacing h (default 8)
   --position-fraction F   resampled levels: quantization step = cell / F (default 8)
-  --weights MODE          analytic (default) or none
+  --weights MODE          analytic (default), capture (rendered on Vulkan, Ren 2002
+                          §7.2; see surfcast-weights) or none
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
   --mesh-spacing S        mesh sampling spacing (default: half the median edge)
   --vertices-only         read a mesh file's vertices as points, no sampling
@@ -69,6 +71,7 @@ int usageError(const std::string& message) {
 
 int main(int argc, char** argv) {
     surfcast::BuildOptions opt;
+    bool captureWeights = false;
     std::string info;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
@@ -119,8 +122,11 @@ int main(int argc, char** argv) {
             if (!number(&d, 1, 1 << 16)) return usageError("--position-fraction needs a value in [1, 65536]");
             opt.positionFraction = d;
         } else if (a == "--weights") {
-            if (!value(&v) || (v != "analytic" && v != "none")) return usageError("--weights is analytic or none");
-            opt.weights = v == "analytic";
+            if (!value(&v) || (v != "analytic" && v != "none" && v != "capture"))
+                return usageError("--weights is capture, analytic or none");
+            // Capture starts from analytic weights: they stay for surfels no view sees.
+            opt.weights = v != "none";
+            captureWeights = v == "capture";
         } else if (a == "--columns") {
             if (!value(&opt.inputs.columns)) return usageError("--columns needs a layout");
         } else if (a == "--mesh-spacing") {
@@ -155,5 +161,18 @@ int main(int argc, char** argv) {
         return 1;
     }
     std::printf("wrote %s\n%s", opt.output.c_str(), summary->text().c_str());
+    if (captureWeights) {
+        surfcast::ReweightOptions reweight;
+        reweight.capture.progress = opt.progress;
+        const char* env = std::getenv("SURFCAST_VALIDATION");
+        reweight.validation = env && std::string(env) == "1";
+        auto captured = surfcast::reweightTileset(opt.output, reweight);
+        if (!captured) {
+            std::fprintf(stderr, "surfcast-build: weight capture: %s (the set keeps its analytic weights)\n",
+                         captured.status().message().c_str());
+            return 1;
+        }
+        std::printf("weights captured: %s", captured->text().c_str());
+    }
     return 0;
 }

@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "surfcast-view: %s\n", set.status().message().c_str());
         return 1;
     }
+    if (options.color)
+        for (auto& s : set->surfels) s.color = surfcast::packColor(*options.color);
     if (!options.shadingGiven)
         options.settings.shading = set->hasColor ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
     return options.headless ? surfcast::runHeadless(options, *set) : surfcast::runWindow(options, *set);

@@ -34,6 +34,7 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
   --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)
   --background R,G,B    background colour in [0,1] (default 1,1,1)
+  --color R,G,B         draw every surfel in this colour (for brightness measurements)
   --expansion E         quad (instanced quads) or geometry (geometry shader); default:
                         geometry where the device has it (faster on lavapipe)
   --accumulation F      rgba32f (default) or rgba16f accumulation targets
@@ -184,13 +185,14 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             if (!s) return (*exitCode = usageError("--shading wants unlit, lambert or phong")), false;
             o->settings.shading = *s;
             o->shadingGiven = true;
-        } else if (a == "--background") {
+        } else if (a == "--background" || a == "--color") {
             Vec3f c;
             char tail = 0;
             if (!value() || std::sscanf(v.c_str(), "%f,%f,%f%c", &c.x, &c.y, &c.z, &tail) != 3 ||
                 !(c.x >= 0 && c.x <= 1 && c.y >= 0 && c.y <= 1 && c.z >= 0 && c.z <= 1))
-                return (*exitCode = usageError("--background wants R,G,B in [0,1]")), false;
-            o->settings.background = c;
+                return (*exitCode = usageError(a + " wants R,G,B in [0,1]")), false;
+            if (a == "--color") o->color = c;
+            else o->settings.background = c;
         } else if (a == "--expansion") {
             if (!value() || (v != "quad" && v != "geometry"))
                 return (*exitCode = usageError("--expansion wants quad or geometry")), false;

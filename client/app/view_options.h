@@ -1,6 +1,7 @@
 // surfcast-view's command line.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,7 @@ struct ViewOptions {
     LevelChoice level;
     RenderSettings settings;
     bool shadingGiven = false;        // else unlit with colour, lambert without
+    std::optional<Vec3f> color;       // draw every surfel in this colour (measurements)
     RendererOptions renderer;
     std::string device;
     bool validation = false;

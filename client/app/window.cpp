@@ -167,7 +167,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             settings.shading = state.shading;
             auto view = makeViewTransform(state.orbit.cam, set.origin, int(extent.width), int(extent.height));
             if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
-            auto params = makeFrameParams(*view, settings, r.nearPlane());
+            auto params = makeFrameParams(*view, settings, r.nearPlane(*view));
             auto presented = gpu::presentFrame(**ctx, *swapchain, window, r.output().image,
                                                [&](VkCommandBuffer cmd) { r.record(cmd, params); });
             if (!presented) {

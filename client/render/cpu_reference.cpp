@@ -54,16 +54,21 @@ float rayDistance(const ScreenSplat& s, const Vec3f& ray, float rayLength) {
 
 }  // namespace
 
-float nearPlaneFor(const SurfelSet& set) {
-    double diagonal = set.bounds.empty() ? 1.0 : length(set.bounds.max - set.bounds.min);
-    return float(std::max(diagonal, 1e-6) * kNearFraction);
+double diagonalOf(const SurfelSet& set) { return set.bounds.empty() ? 0.0 : length(set.bounds.max - set.bounds.min); }
+
+float nearPlaneFor(double diagonal, const ViewTransform& view) {
+    // The eye's distance to the origin (the set's centre): |translation|.
+    double eye = std::sqrt(double(view.rows[0][3]) * view.rows[0][3] + double(view.rows[1][3]) * view.rows[1][3] +
+                           double(view.rows[2][3]) * view.rows[2][3]);
+    double scale = std::max(diagonal, eye);
+    return float((scale > 0 ? scale : 1.0) * kNearFraction);
 }
 
 Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const RenderSettings& settings,
                          CpuFrameStats* stats) {
     auto start = std::chrono::steady_clock::now();
     const int W = view.width, H = view.height;
-    const float eta = view.eta, near = nearPlaneFor(set);
+    const float eta = view.eta, near = nearPlaneFor(diagonalOf(set), view);
     const float cutoff2 = 2.f * settings.cutoff, lowpass = settings.lowpassVariance;
 
     // Setup: one screen-space kernel per surfel.

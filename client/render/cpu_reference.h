@@ -23,7 +23,10 @@ struct CpuFrameStats {
 Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const RenderSettings& settings,
                          CpuFrameStats* stats = nullptr);
 
-// The near plane both renderers use for a set (kNearFraction of its diagonal).
-float nearPlaneFor(const SurfelSet& set);
+// The near plane both renderers use: kNearFraction of the larger of the set's
+// diagonal and the eye's distance to the set's centre (a set of one point has
+// no diagonal; depth = near / z must stay well above zero where drawn).
+float nearPlaneFor(double diagonal, const ViewTransform& view);
+double diagonalOf(const SurfelSet& set);
 
 }  // namespace surfcast

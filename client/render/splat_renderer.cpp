@@ -1,5 +1,6 @@
 #include "splat_renderer.h"
 
+#include <cmath>
 #include <cstring>
 
 #include "../gpu/vk_check.h"
@@ -200,7 +201,7 @@ Status SplatRenderer::upload(const SurfelSet& set) {
     vkDeviceWaitIdle(ctx_.device);
     gpu::destroyBuffer(ctx_, surfels_);
     splatCount_ = 0;
-    near_ = nearPlaneFor(set);
+    diagonal_ = diagonalOf(set);
     if (set.surfels.empty()) return {};
     auto buffer = gpu::createBufferWithData(ctx_, set.surfels.data(), set.surfels.size() * sizeof(GpuSurfel),
                                             VK_BUFFER_USAGE_VERTEX_BUFFER_BIT);
@@ -220,8 +221,11 @@ Status SplatRenderer::resize(uint32_t width, uint32_t height) {
         img = *i;
         return {};
     };
-    SC_TRY(make(depth_, kDepthFormat, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT, VK_IMAGE_ASPECT_DEPTH_BIT));
-    const VkImageUsageFlags accum = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT;
+    // TRANSFER_SRC on depth and colour*w: capture() reads them back.
+    SC_TRY(make(depth_, kDepthFormat, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                VK_IMAGE_ASPECT_DEPTH_BIT));
+    const VkImageUsageFlags accum = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT |
+                                    VK_IMAGE_USAGE_TRANSFER_SRC_BIT;
     SC_TRY(make(colorWeight_, accumFormat_, accum, VK_IMAGE_ASPECT_COLOR_BIT));
     SC_TRY(make(normalWeight_, accumFormat_, accum, VK_IMAGE_ASPECT_COLOR_BIT));
     SC_TRY(make(output_, kOutputFormat, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
@@ -354,7 +358,7 @@ GpuFrameStats SplatRenderer::timings() const {
 
 Result<Image> SplatRenderer::render(const ViewTransform& view, const RenderSettings& settings, GpuFrameStats* stats) {
     SC_TRY(resize(uint32_t(view.width), uint32_t(view.height)));
-    FrameParams params = makeFrameParams(view, settings, near_);
+    FrameParams params = makeFrameParams(view, settings, nearPlane(view));
     SC_TRY(gpu::submitAndWait(ctx_, [&](VkCommandBuffer cmd) {
         record(cmd, params);
         VkBufferImageCopy copy{};
@@ -378,6 +382,71 @@ Result<Image> SplatRenderer::render(const ViewTransform& view, const RenderSetti
         for (size_t i = 3; i < image.rgba.size(); i += 4) stats->pixelsCovered += image.rgba[i] == 255;
     }
     return image;
+}
+
+Status SplatRenderer::capture(const ViewTransform& view, const RenderSettings& settings, std::vector<float>* weightSums,
+                              std::vector<float>* depth) {
+    SC_TRY(resize(uint32_t(view.width), uint32_t(view.height)));
+    RenderSettings s = settings;
+    s.mode = RenderMode::EwaNoPrefilter;
+    FrameParams params = makeFrameParams(view, s, nearPlane(view));
+    const VkDeviceSize pixels = VkDeviceSize(view.width) * view.height;
+    const VkDeviceSize colorBytes = pixels * (options_.halfFloatAccumulation ? 8 : 16);
+    auto colorBuffer = gpu::createBuffer(ctx_, colorBytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
+    if (!colorBuffer) return colorBuffer.status();
+    auto depthBuffer = gpu::createBuffer(ctx_, pixels * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
+    if (!depthBuffer) {
+        gpu::destroyBuffer(ctx_, *colorBuffer);
+        return depthBuffer.status();
+    }
+    Status status = gpu::submitAndWait(ctx_, [&](VkCommandBuffer cmd) {
+        record(cmd, params);
+        gpu::imageBarrier(cmd, colorWeight_.image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
+                          VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_PIPELINE_STAGE_2_FRAGMENT_SHADER_BIT,
+                          VK_ACCESS_2_SHADER_SAMPLED_READ_BIT, VK_PIPELINE_STAGE_2_TRANSFER_BIT, VK_ACCESS_2_TRANSFER_READ_BIT);
+        const VkPipelineStageFlags2 depthStages =
+            VK_PIPELINE_STAGE_2_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_2_LATE_FRAGMENT_TESTS_BIT;
+        gpu::imageBarrier(cmd, depth_.image, VK_IMAGE_ASPECT_DEPTH_BIT, VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL,
+                          VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, depthStages,
+                          VK_ACCESS_2_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_2_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT,
+                          VK_PIPELINE_STAGE_2_TRANSFER_BIT, VK_ACCESS_2_TRANSFER_READ_BIT);
+        VkBufferImageCopy copy{};
+        copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+        copy.imageExtent = {uint32_t(view.width), uint32_t(view.height), 1};
+        vkCmdCopyImageToBuffer(cmd, colorWeight_.image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, colorBuffer->buffer, 1, &copy);
+        copy.imageSubresource.aspectMask = VK_IMAGE_ASPECT_DEPTH_BIT;
+        vkCmdCopyImageToBuffer(cmd, depth_.image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, depthBuffer->buffer, 1, &copy);
+        VkMemoryBarrier2 toHost{VK_STRUCTURE_TYPE_MEMORY_BARRIER_2};
+        toHost.srcStageMask = VK_PIPELINE_STAGE_2_TRANSFER_BIT;
+        toHost.srcAccessMask = VK_ACCESS_2_TRANSFER_WRITE_BIT;
+        toHost.dstStageMask = VK_PIPELINE_STAGE_2_HOST_BIT;
+        toHost.dstAccessMask = VK_ACCESS_2_HOST_READ_BIT;
+        VkDependencyInfo dep{VK_STRUCTURE_TYPE_DEPENDENCY_INFO};
+        dep.memoryBarrierCount = 1;
+        dep.pMemoryBarriers = &toHost;
+        vkCmdPipelineBarrier2(cmd, &dep);
+    });
+    if (status) {
+        weightSums->resize(pixels);
+        depth->resize(pixels);
+        std::memcpy(depth->data(), depthBuffer->mapped, pixels * 4);
+        if (options_.halfFloatAccumulation) {
+            // The RGBA16F alpha, widened (IEEE half: 1 sign, 5 exponent, 10 mantissa bits).
+            const auto* h = static_cast<const uint16_t*>(colorBuffer->mapped);
+            for (VkDeviceSize i = 0; i < pixels; ++i) {
+                uint16_t v = h[4 * i + 3];
+                int e = (v >> 10) & 31, m = v & 1023;
+                float f = e == 0 ? std::ldexp(float(m), -24) : e == 31 ? INFINITY : std::ldexp(float(m | 1024), e - 25);
+                (*weightSums)[i] = v & 0x8000 ? -f : f;
+            }
+        } else {
+            const auto* f = static_cast<const float*>(colorBuffer->mapped);
+            for (VkDeviceSize i = 0; i < pixels; ++i) (*weightSums)[i] = f[4 * i + 3];
+        }
+    }
+    gpu::destroyBuffer(ctx_, *colorBuffer);
+    gpu::destroyBuffer(ctx_, *depthBuffer);
+    return status;
 }
 
 }  // namespace surfcast

@@ -13,6 +13,7 @@
 
 #include "../gpu/resources.h"
 #include "camera.h"
+#include "cpu_reference.h"
 #include "image.h"
 #include "render_settings.h"
 #include "surfel_set.h"
@@ -46,7 +47,7 @@ public:
     // Replaces the surfels drawn (device-local copy through a staging buffer).
     Status upload(const SurfelSet& set);
     Status resize(uint32_t width, uint32_t height);
-    float nearPlane() const { return near_; }
+    float nearPlane(const ViewTransform& view) const { return nearPlaneFor(diagonal_, view); }
     size_t splatCount() const { return splatCount_; }
     Expansion expansion() const { return options_.expansion; }
 
@@ -59,6 +60,13 @@ public:
 
     // Headless: record, submit, wait and read the output back.
     Result<Image> render(const ViewTransform& view, const RenderSettings& settings, GpuFrameStats* stats = nullptr);
+
+    // Normalization-weight capture (Ren 2002 §7.2): renders ewa-noprefilter
+    // (amplitude 1, no s_k) and reads back, per pixel, row-major from the top
+    // left, the accumulated sum of weights and the visibility pass's depth
+    // (reversed Z: near / z_pushed_back; 0 where nothing was drawn).
+    Status capture(const ViewTransform& view, const RenderSettings& settings, std::vector<float>* weightSums,
+                   std::vector<float>* depth);
 
 private:
     explicit SplatRenderer(gpu::Context& ctx) : ctx_(ctx) {}
@@ -79,7 +87,7 @@ private:
     gpu::Buffer surfels_, readback_;
     gpu::Image depth_, colorWeight_, normalWeight_, output_;
     size_t splatCount_ = 0;
-    float near_ = 1e-4f;
+    double diagonal_ = 0;  // of the uploaded set, for the near plane
     bool ewaFrame_ = false;
 };
 

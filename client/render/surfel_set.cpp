@@ -63,8 +63,10 @@ void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float
     if (std::isfinite(position.x) && std::isfinite(position.y) && std::isfinite(position.z)) set.bounds.extend(position);
 }
 
-void sortMorton(SurfelSet& set) {
-    if (set.bounds.empty() || set.surfels.size() < 2) return;
+std::vector<uint32_t> sortMorton(SurfelSet& set) {
+    std::vector<uint32_t> order(set.surfels.size());
+    std::iota(order.begin(), order.end(), 0u);
+    if (set.bounds.empty() || set.surfels.size() < 2) return order;
     Vec3d lo = set.bounds.min - set.origin;
     Vec3d extent = set.bounds.max - set.bounds.min;
     double scale = double((1u << 21) - 1) / std::max({extent.x, extent.y, extent.z, 1e-30});
@@ -79,8 +81,12 @@ void sortMorton(SurfelSet& set) {
     }
     std::sort(keys.begin(), keys.end());
     std::vector<GpuSurfel> sorted(keys.size());
-    for (size_t i = 0; i < keys.size(); ++i) sorted[i] = set.surfels[keys[i].second];
+    for (size_t i = 0; i < keys.size(); ++i) {
+        sorted[i] = set.surfels[keys[i].second];
+        order[i] = keys[i].second;
+    }
     set.surfels.swap(sorted);
+    return order;
 }
 
 Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice) {
