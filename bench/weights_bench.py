@@ -105,7 +105,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--views", type=int, default=32)
     ap.add_argument("--models", default="plane,bunny,horse,igea")
+    ap.add_argument("--chart-only", action="store_true", help="redraw weights.png from weights.csv")
     args = ap.parse_args()
+    if args.chart_only:
+        with open(os.path.join(REPORT, "weights.csv")) as f:
+            rows = [(r[0], r[1], r[2], r[3], float(r[4]), float(r[5]), int(r[6])) for r in list(csv.reader(f))[1:]]
+        chart(rows)
+        return
     os.makedirs(REPORT, exist_ok=True)
     rows, times = [], []
     with tempfile.TemporaryDirectory() as tmp:
@@ -158,19 +164,19 @@ def chart(rows):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=True)
     for ax, region in zip(axes, ["interior", "edge"]):
         sel = [r for r in rows if r[3] == region]
-        labels = sorted({f"{r[0]}\n{r[1]}" for r in sel})
+        labels = sorted({f"{r[0]} {r[1]}" for r in sel})
         x = np.arange(len(labels))
         for k, method in enumerate(["analytic", "captured"]):
-            vals = {f"{r[0]}\n{r[1]}": r for r in sel if r[2] == method}
+            vals = {f"{r[0]} {r[1]}": r for r in sel if r[2] == method}
             means = [vals[label][4] for label in labels]
             p99 = [vals[label][5] for label in labels]
             ax.bar(x + (k - 0.5) * 0.38, means, 0.38, label=f"{method} mean")
             ax.scatter(x + (k - 0.5) * 0.38, p99, marker="_", s=200, color="k" if k else "r",
                        label=f"{method} P99")
-        ax.set_xticks(x, labels, fontsize=8)
+        ax.set_xticks(x, labels, fontsize=8, rotation=40, ha="right")
         ax.set_title(f"per-surfel vs per-pixel brightness error, {region}")
         ax.set_yscale("log")
     axes[0].set_ylabel("|I_surfel / I_pixel - 1|")

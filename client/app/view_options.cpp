@@ -29,7 +29,8 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --level N|leaves      draw level N (with the leaves above it) or every leaf (default)
   --kernel-scale K      reconstruction kernel V^r = (K h)^2 I (default 1)
   --cutoff C            splats end at y'y = 2C (default 1)
-  --zt Z                visibility depth offset z_t as a multiple of h (default 0.5)
+  --zt Z                visibility depth offset z_t, a multiple of the splat's footprint
+                        (h when magnified; default 0.5)
   --lowpass V           low-pass filter variance in pixels^2 (default 1)
   --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
   --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)

@@ -18,7 +18,7 @@ drops the weights. Analytic weights come from surfcast-build (--weights analytic
   --method M        capture (default) or none
   --views N         capture viewpoints (default 32)
   --size N          capture image edge in pixels (default 1024)
-  --zt Z            visibility offset z_t, multiple of h (default 0.5)
+  --zt Z            visibility offset z_t, as surfcast-view --zt (default 0.5)
   --device D        Vulkan device index or name substring
   --validation      enable the Khronos validation layer (errors fail the run)
   -q, --quiet       no progress output

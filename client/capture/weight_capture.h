@@ -15,7 +15,7 @@ namespace surfcast {
 struct CaptureOptions {
     int views = 32;        // viewpoints on the bounding sphere (Fibonacci lattice)
     int size = 1024;       // capture image edge, pixels
-    float zt = 0.5f;       // visibility offset, multiple of r (as when rendering)
+    float zt = 0.5f;       // visibility offset, as RenderSettings::zt
     float cutoff = 1.f;    // kernel cutoff c (as when rendering)
     bool progress = true;  // a line per level on stderr
 };

@@ -111,7 +111,6 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         if (sp.x0 > sp.x1 || sp.y0 > sp.y1 || !std::isfinite(sp.amplitude)) continue;
         sp.o = o;
         sp.n = n;
-        sp.zt = settings.zt * r;
         // The footprint's object-space extent is that of the GPU's
         // parallelogram: the largest axis of M = r^2 I + V^h (J'J)^-1, with
         // the same clamp at grazing angles (client/shaders/splat_common.glsl).
@@ -119,6 +118,9 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         float lambdaMin = 0.5f * (ta + tc) - std::sqrt(0.25f * (ta - tc) * (ta - tc) + tb * tb);
         float lambdaFloor = eta / (kMaxFilterPixels * o.z);
         float extent = std::sqrt(r2 + lowpass / std::max(lambdaMin, lambdaFloor * lambdaFloor));
+        // z_t scales with the footprint's longer axis, as on the GPU
+        // (splat_common.glsl, pushBack).
+        sp.zt = settings.zt * extent;
         sp.depthExtent = std::sqrt(cutoff2) * extent * std::sqrt(std::max(0.f, 1.f - n.z * n.z));
         sp.color = unpackColor(g.color);
         splats.push_back(sp);

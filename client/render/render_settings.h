@@ -38,7 +38,7 @@ struct RenderSettings {
     Shading shading = Shading::Unlit;
     float kernelScale = 1.f;      // V^r = (kernelScale * r)^2 I; the stored weights assume 1
     float cutoff = 1.f;           // c: splats end at y'y = 2c
-    float zt = 0.5f;              // visibility depth offset z_t, a multiple of r
+    float zt = 0.5f;              // visibility depth offset z_t, a multiple of the footprint (r magnified)
     float lowpassVariance = 1.f;  // V^h = variance * I, in pixels^2 (Zwicker's V^h = I)
     float coverage = 0.05f;       // a pixel shows the surface where the sum of the unscaled
                                   // kernels exp(-y'y/2) exceeds this

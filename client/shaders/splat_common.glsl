@@ -48,6 +48,7 @@ struct Splat {
     vec3 n;          // unit normal, facing the eye (splats are two-sided)
     float amplitude; // weight at the centre
     float r;         // reconstruction radius after the kernel scale
+    float footprint; // max(Lambda0, Lambda1): r magnified, the low-pass filter's object extent minified
 };
 
 bool setupSplat(vec3 position, float radius, uint normal, float weight, out Splat sp) {
@@ -85,6 +86,7 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, out Spla
     sp.o = o;
     sp.n = n;
     sp.r = r;
+    sp.footprint = max(L0, L1);
     sp.axisU = L0 * (e0.x * s + e0.y * t);
     sp.axisV = L1 * (e1.x * s + e1.y * t);
     // G_M scaled by 2 pi r^2: peak 1 under magnification, a constant integral
@@ -101,8 +103,12 @@ vec3 splatCorner(Splat sp, int corner, out vec2 y) {
 }
 
 // Visibility pass (Ren 2002 §5.1): the splat pushed back by z_t along the ray
-// through its centre.
-vec3 pushBack(Splat sp, vec3 p) { return p + frame.kernel.z * sp.r * normalize(sp.o); }
+// through its centre. z_t scales with the splat's footprint (its longer axis),
+// not r alone: under minification a pixel gathers splats from a patch whose
+// depth spans about its footprint, and an offset of r keeps only the nearest
+// slab (measured on the bunny, minified, per-surfel brightness error: mean
+// 0.77 with r, 0.46 with sqrt(L0 L1), 0.38 with max(L0, L1)).
+vec3 pushBack(Splat sp, vec3 p) { return p + frame.kernel.z * sp.footprint * normalize(sp.o); }
 
 // Circles: a screen-aligned square of half-size r projected (at least half a
 // pixel) at the centre's depth; y in [-1, 1]^2.
