@@ -131,7 +131,9 @@ def main():
             shutil.copytree(analytic, captured)
             t_capture, _ = run([os.path.join(BIN, "surfcast-weights"), "-q", captured, "--views", str(args.views)])
             surfels = json.load(open(os.path.join(analytic, "tileset.json")))["surfels"]
-            times.append((model, surfels, max(t_analytic - t_none, 0.0), t_capture))
+            size = lambda d: os.path.getsize(os.path.join(d, "blocks.bin"))
+            times.append((model, surfels, max(t_analytic - t_none, 0.0), t_capture, size(os.path.join(tmp, model + "_none")),
+                          size(analytic), size(captured)))
             for view, camera in cameras(analytic).items():
                 pixel = render(analytic, "ewa-pixel", camera, os.path.join(tmp, "p.png"))
                 for method, tileset in [("analytic", analytic), ("captured", captured)]:
@@ -154,10 +156,10 @@ def main():
             continue
         c = keyed[(m, v, "captured", r)]
         print(f"| {m} | {v} | {r} | {mean:.3f} | {p99:.3f} | {c[0]:.3f} | {c[1]:.3f} | {n} |")
-    print("\n| model | surfels | analytic weights s | capture s |")
-    print("|---|---:|---:|---:|")
-    for m, n, ta, tc in times:
-        print(f"| {m} | {n} | {ta:.2f} | {tc:.2f} |")
+    print("\n| model | surfels | analytic weights s | capture s | blocks, no weights | analytic | captured (+ edge weights) |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for m, n, ta, tc, bn, ba, bc in times:
+        print(f"| {m} | {n} | {ta:.2f} | {tc:.2f} | {bn / 1e6:.2f} MB | {ba / 1e6:.2f} MB | {bc / 1e6:.2f} MB |")
 
 
 def chart(rows):

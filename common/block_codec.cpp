@@ -56,6 +56,12 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
         builder.SetAttributeValuesForAllPoints(id, values->data(), sizeof(float));
         quantized.push_back({id, bits});
     }
+    if (!block.edgeWeights.empty()) {
+        assert(block.edgeWeights.size() == 4 * n);
+        int id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 4, draco::DT_FLOAT32);
+        builder.SetAttributeValuesForAllPoints(id, block.edgeWeights.data(), 4 * sizeof(float));
+        quantized.push_back({id, options.edgeWeightBits});
+    }
     std::unique_ptr<draco::PointCloud> pc = builder.Finalize(false);
     if (!pc) return Status::error("Draco rejected the block's attributes");
 
@@ -76,7 +82,7 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
     if (!decoded.ok()) return Status::error(std::string("Draco decoding failed: ") + decoded.status().error_msg());
     const draco::PointCloud& pc = *decoded.value();
-    int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii;
+    int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii + expect.edgeWeights;
     if (pc.num_attributes() != expected || pc.num_points() == 0)
         return Status::error("block has " + std::to_string(pc.num_attributes()) + " attributes and " +
                              std::to_string(pc.num_points()) + " points; the tile set declares " +
@@ -94,6 +100,7 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     }
     if (ok && expect.weights) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 1, &block.weights);
     if (ok && expect.radii) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 1, &block.radii);
+    if (ok && expect.edgeWeights) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 4, &block.edgeWeights);
     if (!ok) return Status::error("block attribute " + std::to_string(index - 1) + " has an unexpected type or size");
     return block;
 }

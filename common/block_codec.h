@@ -17,6 +17,8 @@ struct BlockData {
     std::vector<uint16_t> colors;     // 3 per surfel, in [0, 2^colorBits-1]
     std::vector<float> weights;       // 1 per surfel: normalization weight s_k
     std::vector<float> radii;         // 1 per surfel: own h, world units (irregular nodes only)
+    std::vector<float> edgeWeights;   // 4 per surfel: weight / s_k at the tangent points
+                                      // +r s, -r s, +r t, -r t (nodes at the model's edges only)
 
     size_t size() const { return positions.size() / 3; }
 };
@@ -27,6 +29,7 @@ struct BlockCodecOptions {
     int normalBits = 10;    // Draco quantization bits per normal component
     int weightBits = 12;    // per weight
     int radiusBits = 8;     // per radius
+    int edgeWeightBits = 8; // per edge-weight ratio
 };
 
 Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCodecOptions& options);
@@ -37,6 +40,7 @@ struct BlockExpectation {
     bool normals = true;
     bool weights = true;
     bool radii = false;
+    bool edgeWeights = false;
 };
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect);
 

@@ -29,6 +29,7 @@ enum NodeFlags : uint16_t {
     kFlagHasRadius = 1u << 1,      // block carries a per-surfel radius attribute
     kFlagChildrenInPage = 1u << 2, // children live in page `child_page`, not in this page
     kFlagInputPoints = 1u << 3,    // leaf: the surfels are the input points themselves
+    kFlagEdgeWeights = 1u << 4,    // block carries per-surfel edge-weight ratios (captured weights)
 };
 
 // One node of the octree as stored in hierarchy.bin (64 bytes, little-endian).

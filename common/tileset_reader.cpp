@@ -55,6 +55,7 @@ BlockExpectation TilesetReader::expectation(const NodeRecord& node) const {
     e.normals = true;
     e.weights = info_.weights != "none";
     e.radii = (node.flags & kFlagHasRadius) != 0;
+    e.edgeWeights = (node.flags & kFlagEdgeWeights) != 0;
     return e;
 }
 

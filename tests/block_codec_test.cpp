@@ -59,3 +59,27 @@ TEST(BlockCodec, RejectsTruncatedAndMismatchedBlocks) {
     wrong.colorBits = 16;
     EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), wrong).ok());
 }
+
+// Edge weights (4 ratios per surfel, 8-bit) travel with their point.
+TEST(BlockCodec, EdgeWeightsRoundTripWithTheirPoint) {
+    BlockData in = sampleBlock(400);
+    for (size_t i = 0; i < in.size(); ++i)
+        in.edgeWeights.insert(in.edgeWeights.end(), {1.f, 1.f + float(i % 5) * 0.5f, 0.5f, float(i % 3)});
+    BlockCodecOptions opt;
+    opt.positionBits = 10;
+    auto bytes = encodeBlock(in, opt);
+    ASSERT_TRUE(bytes.ok()) << bytes.status().message();
+    BlockExpectation e;
+    e.colorBits = 8;
+    EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), e).ok()) << "an undeclared attribute must be rejected";
+    e.edgeWeights = true;
+    auto out = decodeBlock(bytes->data(), bytes->size(), e);
+    ASSERT_TRUE(out.ok()) << out.status().message();
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, size_t> index;
+    for (size_t i = 0; i < in.size(); ++i) index[{in.positions[3 * i], in.positions[3 * i + 1], in.positions[3 * i + 2]}] = i;
+    for (size_t i = 0; i < out->size(); ++i) {
+        size_t j = index.at({out->positions[3 * i], out->positions[3 * i + 1], out->positions[3 * i + 2]});
+        // 8 bits over the range [0, 3]: steps of 3/255.
+        for (int k = 0; k < 4; ++k) EXPECT_NEAR(out->edgeWeights[4 * i + k], in.edgeWeights[4 * j + k], 3.0 / 255 + 1e-6);
+    }
+}

@@ -108,34 +108,50 @@ TEST_F(Weights, PerSurfelRenderStaysWithinToleranceOfPerPixel) {
         return img ? *img : Image{};
     };
     Image pixel = render(dir_->file("captured"), "ewa-pixel", out.file("p.png"));
+    // Interior: covered pixels at least kBand pixels from the outline (one
+    // splat radius here: r = 1.5 units of about 3 px, times sqrt(2c)); edge:
+    // the covered rest, the band where the plane's boundary fades.
+    constexpr int kBand = 8;
+    const int W = 320, H = 240;
+    auto covered = [&](int x, int y) {
+        return x >= 0 && y >= 0 && x < W && y < H && pixel.rgba[4 * size_t(y * W + x) + 1] > 0;
+    };
+    struct Stats { double mean, p99; size_t n; };
+    auto stats = [](std::vector<double> e) {
+        std::sort(e.begin(), e.end());
+        double mean = 0;
+        for (double v : e) mean += v / std::max<size_t>(e.size(), 1);
+        return Stats{mean, e.empty() ? 0 : e[e.size() * 99 / 100], e.size()};
+    };
+    std::map<std::string, std::pair<Stats, Stats>> results;  // interior, edge
     for (const char* set : {"captured", "analytic"}) {
         Image surfel = render(dir_->file(set), "ewa-surfel", out.file("s.png"));
         ASSERT_EQ(surfel.rgba.size(), pixel.rgba.size());
-        // Interior: covered pixels at least kBand pixels from the outline (one
-        // splat radius here: r = 1.5 units of about 3 px, times sqrt(2c)).
-        constexpr int kBand = 8;
-        std::vector<double> err;
-        const int W = 320, H = 240;
-        for (int y = kBand; y < H - kBand; ++y)
-            for (int x = kBand; x < W - kBand; ++x) {
+        std::vector<double> interior, edge;
+        for (int y = 0; y < H; ++y)
+            for (int x = 0; x < W; ++x) {
+                if (!covered(x, y)) continue;
                 bool inside = true;
                 for (int dy = -kBand; dy <= kBand && inside; ++dy)
-                    for (int dx = -kBand; dx <= kBand && inside; ++dx)
-                        inside = pixel.rgba[4 * ((y + dy) * W + x + dx) + 1] > 0;
-                if (!inside) continue;
+                    for (int dx = -kBand; dx <= kBand && inside; ++dx) inside = covered(x + dx, y + dy);
                 size_t i = 4 * size_t(y * W + x);
-                err.push_back(std::fabs(double(surfel.rgba[i + 1]) / pixel.rgba[i + 1] - 1));
+                (inside ? interior : edge).push_back(std::fabs(double(surfel.rgba[i + 1]) / pixel.rgba[i + 1] - 1));
             }
-        ASSERT_GT(err.size(), size_t(W * H / 4));
-        std::sort(err.begin(), err.end());
-        double mean = 0;
-        for (double e : err) mean += e / err.size();
+        results[set] = {stats(interior), stats(edge)};
+        const auto& [in, ed] = results[set];
+        std::printf("%s: interior mean %.4f P99 %.4f (%zu px); edge mean %.4f P99 %.4f (%zu px)\n", set, in.mean, in.p99,
+                    in.n, ed.mean, ed.p99, ed.n);
+        ASSERT_GT(in.n, size_t(W * H / 4));
+        ASSERT_GT(ed.n, size_t(500));
         // bench/BENCHMARKS.md ("Normalization weights"), the jittered plane
-        // magnified, interior: mean 0.03, P99 0.11, for both methods.
-        EXPECT_LT(mean, 0.05) << set;
-        EXPECT_LT(err[err.size() * 99 / 100], 0.15) << set;
-        std::printf("%s: interior mean %.4f, P99 %.4f over %zu pixels\n", set, mean, err[err.size() * 99 / 100], err.size());
+        // magnified, interior: mean 0.032, P99 0.108, for both methods.
+        EXPECT_LT(in.mean, 0.05) << set;
+        EXPECT_LT(in.p99, 0.15) << set;
     }
+    // Edge weights (captured only) bring the boundary band closer to per-pixel
+    // normalization: measured P99 0.27 -> 0.13 on the bench's plane.
+    EXPECT_LT(results["captured"].second.p99, 0.8 * results["analytic"].second.p99);
+    EXPECT_LE(results["captured"].second.mean, results["analytic"].second.mean);
 }
 
 TEST_F(Weights, DegenerateSetsAndBadArguments) {

@@ -9,9 +9,11 @@ namespace surfcast {
 
 std::string ReweightSummary::text() const {
     char buf[256];
-    std::snprintf(buf, sizeof(buf), "nodes: %zu, blocks %llu bytes; capture: %zu of %zu surfels seen in %zu renders, %.2f s; total %.2f s\n",
-                  nodes, (unsigned long long)blocksBytes, capture.seen, capture.surfels, capture.renders, capture.seconds,
-                  seconds);
+    std::snprintf(buf, sizeof(buf),
+                  "nodes: %zu, blocks %llu bytes; capture: %zu of %zu surfels seen (%zu with edge weights) in %zu "
+                  "renders, %.2f s; total %.2f s\n",
+                  nodes, (unsigned long long)blocksBytes, capture.seen, capture.surfels, capture.edges, capture.renders,
+                  capture.seconds, seconds);
     return buf;
 }
 
@@ -29,7 +31,7 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
         blocks.push_back(std::move(*b));
     }
 
-    std::vector<std::vector<float>> weights(nodes.size());
+    std::vector<std::vector<float>> weights(nodes.size()), edgeWeights(nodes.size());
     if (options.method == WeightMethod::Capture && !nodes.empty()) {
         auto ctx = gpu::createContext({options.device, options.validation, {}, false});
         if (!ctx) return ctx.status();
@@ -38,7 +40,8 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
         gpu::destroyContext(*ctx);
         if (!captured) return captured.status();
         if (errors > 0) return Status::error(std::to_string(errors) + " Vulkan validation error(s) during capture");
-        weights = std::move(*captured);
+        weights = std::move(captured->weights);
+        edgeWeights = std::move(captured->edgeWeights);
     }
 
     auto writer = TilesetWriter::create(dir);
@@ -47,21 +50,27 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
     for (size_t n = 0; n < nodes.size(); ++n) {
         BlockData& b = blocks[n];
         b.weights = std::move(weights[n]);
+        b.edgeWeights = std::move(edgeWeights[n]);
+        NodeRecord record = nodes[n];
+        record.flags = uint16_t((record.flags & ~kFlagEdgeWeights) | (b.edgeWeights.empty() ? 0 : kFlagEdgeWeights));
         BlockCodecOptions codec;
         codec.positionBits = nodes[n].positionBits;
         codec.colorBits = info.colorBits ? info.colorBits : 8;
         auto blob = encodeBlock(b, codec);
         if (!blob) return Status::error("node " + nodes[n].key.name() + ": " + blob.status().message());
-        SC_TRY(writer.value()->addNode(nodes[n], *blob));
+        SC_TRY(writer.value()->addNode(record, *blob));
     }
     // The attribute list: weight sits after colour, before radius (FORMAT.md).
     std::vector<AttributeInfo> attributes;
     for (const auto& a : info.attributes) {
-        if (a.name == "weight") continue;
+        if (a.name == "weight" || a.name == "edge_weight") continue;
         if (a.name == "radius" && options.method == WeightMethod::Capture)
             attributes.push_back({"weight", "float32", 1, BlockCodecOptions{}.weightBits});
         attributes.push_back(a);
     }
+    // Only in nodes flagged EDGE_WEIGHTS, like radius.
+    if (options.method == WeightMethod::Capture)
+        attributes.push_back({"edge_weight", "float32", 4, BlockCodecOptions{}.edgeWeightBits});
     info.attributes = attributes;
     info.weights = options.method == WeightMethod::Capture ? "captured" : "none";
     SC_TRY(writer.value()->finish(info));

@@ -19,6 +19,8 @@ drops the weights. Analytic weights come from surfcast-build (--weights analytic
   --views N         capture viewpoints (default 32)
   --size N          capture image edge in pixels (default 1024)
   --zt Z            visibility offset z_t, as surfcast-view --zt (default 0.5)
+  --no-edge-weights capture no per-vertex weights at the model's edges (smaller blocks;
+                    per-surfel renders fade at boundaries)
   --device D        Vulkan device index or name substring
   --validation      enable the Khronos validation layer (errors fail the run)
   -q, --quiet       no progress output
@@ -68,6 +70,8 @@ int main(int argc, char** argv) {
             double z = value(&v) ? std::strtod(v.c_str(), &end) : -1;
             if (!end || *end != '\0' || !(z >= 0)) return usageError("--zt wants a number >= 0");
             opt.capture.zt = float(z);
+        } else if (a == "--no-edge-weights") {
+            opt.capture.edgeWeights = false;
         } else if (a == "--device") {
             if (!value(&opt.device)) return usageError("--device wants an index or a name");
         } else if (a == "--validation") {

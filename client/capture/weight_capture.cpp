@@ -28,16 +28,23 @@ constexpr double kCaptureFovDegrees = 40;
 // through its centre pixel meets its neighbours' splats far from where they
 // overlap it on the surface, and S is off (measured: bright blotches).
 constexpr float kMinFacing = 0.3f;
+// The tangent points (edge weights) are sampled only from frontal views: from
+// an oblique one a point r from the centre can land past a silhouette, where S
+// is only the surfel's own fringe (measured: 12% of the bunny's surfels taken
+// for edges at kMinFacing).
+constexpr float kMinEdgeFacing = 0.7f;
 
 }  // namespace
 
-Result<std::vector<std::vector<float>>> captureWeights(gpu::Context& ctx, const TilesetReader& reader,
-                                                       const std::vector<BlockData>& blocks, const CaptureOptions& options,
-                                                       CaptureStats* stats) {
+Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& reader, const std::vector<BlockData>& blocks,
+                                       const CaptureOptions& options, CaptureStats* stats) {
     auto start = std::chrono::steady_clock::now();
     const TilesetInfo& info = reader.info();
     const auto& nodes = reader.nodes();
-    std::vector<std::vector<float>> weights(nodes.size());
+    CapturedWeights result;
+    std::vector<std::vector<float>>& weights = result.weights;
+    result.edgeWeights.resize(nodes.size());
+    weights.resize(nodes.size());
     CaptureStats local;
     CaptureStats& st = stats ? *stats : local;
     st = {};
@@ -75,10 +82,24 @@ Result<std::vector<std::vector<float>>> captureWeights(gpu::Context& ctx, const 
         std::vector<uint32_t> order = sortMorton(set);
         if (Status s = renderer.value()->upload(set); !s) return s;
 
-        // Samples 1/S per own surfel, NaN where a view did not see it.
+        // Samples 1/S per own surfel, NaN where a view did not see it; and the
+        // sums of 1/S at its four tangent points (Ren's per-vertex weights;
+        // averaged, not medians, to keep memory at 32 bytes per surfel).
         const size_t count = set.surfels.size();
         std::vector<float> samples(count * directions.size(), NAN);
+        std::vector<float> edgeSum(4 * count, 0.f);
+        std::vector<uint16_t> edgeCount(4 * count, 0);
         std::vector<float> sums, depth;
+        // The pixel of camera-space point o when it is visible there, else -1.
+        auto visiblePixel = [&](const ViewTransform& view, const Vec3f& o, float near) -> long {
+            if (!(o.z >= near)) return -1;
+            float x = 0.5f * options.size + view.eta * o.x / o.z, y = 0.5f * options.size - view.eta * o.y / o.z;
+            if (!(x >= 0 && y >= 0 && x < options.size && y < options.size)) return -1;
+            size_t p = size_t(y) * options.size + size_t(x);
+            // In front of the pushed-back nearest surface (reversed Z: larger is nearer).
+            if (!(near / o.z >= depth[p]) || !(sums[p] > 0)) return -1;
+            return long(p);
+        };
         for (size_t v = 0; v < directions.size(); ++v) {
             Camera cam{centre + directions[v] * distance, centre,
                        std::fabs(directions[v].z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, 1, 0}, kCaptureFovDegrees};
@@ -90,17 +111,25 @@ Result<std::vector<std::vector<float>>> captureWeights(gpu::Context& ctx, const 
             for (size_t i = 0; i < count; ++i) {
                 if (owner[order[i]].first == UINT32_MAX) continue;
                 const auto& g = set.surfels[i];
-                Vec3f o = view->apply({g.px, g.py, g.pz});
-                if (!(o.z >= near)) continue;
-                Vec3f n = view->rotate(unpackNormalOct(g.normal));
-                if (std::fabs(dot(n, o)) < kMinFacing * length(o)) continue;
-                float x = 0.5f * options.size + view->eta * o.x / o.z, y = 0.5f * options.size - view->eta * o.y / o.z;
-                if (!(x >= 0 && y >= 0 && x < options.size && y < options.size)) continue;
-                size_t p = size_t(y) * options.size + size_t(x);
-                // Visible at its centre: in front of the pushed-back nearest
-                // surface (reversed Z: larger is nearer).
-                if (!(near / o.z >= depth[p]) || !(sums[p] > 0)) continue;
-                samples[i * directions.size() + v] = 1.f / sums[p];
+                Vec3f local{g.px, g.py, g.pz};
+                Vec3f o = view->apply(local);
+                Vec3f nw = unpackNormalOct(g.normal);
+                float facing = std::fabs(dot(view->rotate(nw), o)) / length(o);
+                if (!(facing >= kMinFacing)) continue;
+                long p = visiblePixel(*view, o, near);
+                if (p < 0) continue;
+                samples[i * directions.size() + v] = 1.f / sums[size_t(p)];
+                if (facing < kMinEdgeFacing) continue;
+                // The tangent points +r s, -r s, +r t, -r t (the basis the
+                // renderer's edgeFactor uses).
+                Vec3f sw = tangentOf(nw), tw = cross(nw, sw);
+                const Vec3f offsets[4] = {sw * g.radius, sw * -g.radius, tw * g.radius, tw * -g.radius};
+                for (int k = 0; k < 4; ++k) {
+                    long q = visiblePixel(*view, view->apply(local + offsets[k]), near);
+                    if (q < 0) continue;
+                    edgeSum[4 * i + k] += 1.f / sums[size_t(q)];
+                    ++edgeCount[4 * i + k];
+                }
             }
         }
 
@@ -119,7 +148,20 @@ Result<std::vector<std::vector<float>>> captureWeights(gpu::Context& ctx, const 
             ++st.surfels;
             if (values.empty()) continue;
             std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-            weights[n][local] = values[values.size() / 2];
+            float w = values[values.size() / 2];
+            weights[n][local] = w;
+            float ratios[4];
+            bool edge = false;
+            for (int k = 0; k < 4; ++k) {
+                ratios[k] = edgeCount[4 * i + k] ? std::min(edgeSum[4 * i + k] / edgeCount[4 * i + k] / w, float(SC_EDGE_RATIO_MAX)) : 1.f;
+                edge = edge || ratios[k] > kEdgeRatioThreshold;
+            }
+            if (edge && options.edgeWeights) {
+                auto& e = result.edgeWeights[n];
+                if (e.empty()) e.assign(4 * blocks[n].size(), 1.f);
+                std::copy(ratios, ratios + 4, e.begin() + 4 * local);
+                ++st.edges;
+            }
             nodeSum[n] += weights[n][local];
             ++nodeSeen[n];
             ++st.seen;
@@ -134,7 +176,7 @@ Result<std::vector<std::vector<float>>> captureWeights(gpu::Context& ctx, const 
             std::fprintf(stderr, "capture: level %d, %zu surfels, %zu views\n", level, count, directions.size());
     }
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return weights;
+    return result;
 }
 
 }  // namespace surfcast

@@ -34,12 +34,6 @@ struct ScreenSplat {
     Vec3f color;
 };
 
-// Any unit vector orthogonal to n, continuous enough for a basis.
-Vec3f tangentOf(const Vec3f& n) {
-    Vec3f a = std::fabs(n.x) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
-    return normalizeOrZero(cross(n, a));
-}
-
 bool finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 // Distance along the pixel's ray to the splat's tangent plane, clamped to the

@@ -27,7 +27,8 @@ void surfelInput(gpu::PipelineDesc& d, VkVertexInputRate rate) {
     d.attributes = {{0, 0, VK_FORMAT_R32G32B32A32_SFLOAT, offsetof(GpuSurfel, px)},
                     {1, 0, VK_FORMAT_R32_UINT, offsetof(GpuSurfel, normal)},
                     {2, 0, VK_FORMAT_R8G8B8A8_UNORM, offsetof(GpuSurfel, color)},
-                    {3, 0, VK_FORMAT_R32_SFLOAT, offsetof(GpuSurfel, weight)}};
+                    {3, 0, VK_FORMAT_R32_SFLOAT, offsetof(GpuSurfel, weight)},
+                    {4, 0, VK_FORMAT_R32_UINT, offsetof(GpuSurfel, edge)}};
 }
 
 void specialize(gpu::PipelineDesc& d, int32_t pass, int32_t expand, int32_t circle) {

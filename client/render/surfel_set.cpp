@@ -55,11 +55,25 @@ Vec3f unpackColor(uint32_t c) {
     return {float(c & 0xff) / 255.f, float(c >> 8 & 0xff) / 255.f, float(c >> 16 & 0xff) / 255.f};
 }
 
+uint32_t packEdgeWeights(const float ratios[4]) {
+    uint32_t packed = 0;
+    for (int i = 0; i < 4; ++i) {
+        float v = std::isfinite(ratios[i]) ? ratios[i] / float(SC_EDGE_RATIO_MAX) : 1.f / float(SC_EDGE_RATIO_MAX);
+        packed |= uint32_t(std::lround(std::clamp(v, 1.f / 255, 1.f) * 255.f)) << (8 * i);
+    }
+    return packed;
+}
+
+Vec3f tangentOf(const Vec3f& n) {
+    Vec3f a = std::fabs(n.x) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
+    return normalizeOrZero(cross(n, a));
+}
+
 void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float radius,
-               const Vec3f& color, float weight) {
+               const Vec3f& color, float weight, uint32_t edge) {
     Vec3d local = position - set.origin;
     set.surfels.push_back({float(local.x), float(local.y), float(local.z), radius, packNormalOct(normal),
-                           packColor(color), weight, 0.f});
+                           packColor(color), weight, edge});
     if (std::isfinite(position.x) && std::isfinite(position.y) && std::isfinite(position.z)) set.bounds.extend(position);
 }
 
@@ -115,7 +129,8 @@ Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choic
                                                b.colors[3 * i + 2] * colorScale};
             float r = b.radii.empty() ? node.spacing : b.radii[i];
             float w = b.weights.empty() ? 1.f : b.weights[i];
-            addSurfel(set, reader->position(node, b, i), n, r, c, w);
+            uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
+            addSurfel(set, reader->position(node, b, i), n, r, c, w, edge);
         }
     }
     sortMorton(set);

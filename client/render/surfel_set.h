@@ -31,7 +31,7 @@ Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice
 // Append one surfel given in world coordinates (origin must be set first).
 // Colour components in [0, 1]. Non-finite input is kept: the renderers guard it.
 void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float radius,
-               const Vec3f& color, float weight = 1.f);
+               const Vec3f& color, float weight = 1.f, uint32_t edge = 0);
 
 // Reorder along a Morton (Z-order) curve over the bounds: rasterizers with tiled
 // caches (lavapipe measured 1.3-3.9x) run faster on spatially coherent input.
@@ -43,5 +43,12 @@ uint32_t packNormalOct(const Vec3f& n);
 Vec3f unpackNormalOct(uint32_t packed);
 uint32_t packColor(const Vec3f& rgb, float a = 1.f);
 Vec3f unpackColor(uint32_t packed);
+// Edge-weight ratios (+s, -s, +t, -t) as GpuSurfel::edge; clamped to
+// [1/255, 1] * SC_EDGE_RATIO_MAX so that a packed value is never 0 ("none").
+uint32_t packEdgeWeights(const float ratios[4]);
+
+// A unit tangent of n, the twin of GLSL tangentOf (splat_common.glsl): the
+// edge weights' directions are defined in this basis of the world normal.
+Vec3f tangentOf(const Vec3f& n);
 
 }  // namespace surfcast

@@ -19,7 +19,9 @@ struct GpuSurfel {
     uint normal;     // packSnorm2x16(octahedral(n))
     uint color;      // packUnorm4x8(rgba)
     float weight;    // per-surfel normalization weight s_k (1 when absent)
-    float pad;
+    uint edge;       // edge weights (Ren 2002 §7.2) at the tangent points +r s, -r s, +r t, -r t
+                     // (s, t: tangentBasis of the world normal) as packUnorm4x8(ratio to s_k /
+                     // SC_EDGE_RATIO_MAX); 0: none
 };
 
 // Per-frame parameters (push constants, 112 bytes <= the guaranteed 128).
@@ -39,6 +41,9 @@ struct FrameParams {
 #define SC_MODE_EWA_NOPREFILTER 2u
 #define SC_MODE_EWA_SURFEL 3u
 #define SC_MODE_EWA_PIXEL 4u
+
+// Largest edge-weight ratio a GpuSurfel can carry.
+#define SC_EDGE_RATIO_MAX 4.0
 
 #define SC_SHADING_UNLIT 0u
 #define SC_SHADING_LAMBERT 1u

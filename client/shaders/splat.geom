@@ -13,24 +13,30 @@ layout(location = 1) flat in vec3 inColor[];
 layout(location = 4) flat in vec4 inPositionRadius[];
 layout(location = 5) flat in uint inPackedNormal[];
 layout(location = 6) flat in float inWeight[];
+layout(location = 7) flat in uint inPackedEdge[];
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
 layout(location = 2) flat out vec3 outNormal;
 layout(location = 3) flat out float outAmplitude;
+layout(location = 4) out vec2 outEdgeUV;
+layout(location = 5) flat out uint outEdge;
 
 void main() {
     Splat sp;
-    if (!setupSplat(inPositionRadius[0].xyz, inPositionRadius[0].w, inPackedNormal[0], inWeight[0], sp)) return;
+    if (!setupSplat(inPositionRadius[0].xyz, inPositionRadius[0].w, inPackedNormal[0], inWeight[0], inPackedEdge[0], sp))
+        return;
     for (int corner = 0; corner < 4; ++corner) {
-        vec2 y;
-        vec3 p = splatCorner(sp, corner, y);
+        vec2 y, edgeUV;
+        vec3 p = splatCorner(sp, corner, y, edgeUV);
         if (kPass == 0) p = pushBack(sp, p);
         gl_Position = project(p);
         outY = y;
         outColor = inColor[0];
         outNormal = sp.n;
         outAmplitude = sp.amplitude;
+        outEdgeUV = edgeUV;
+        outEdge = sp.edge;
         EmitVertex();
     }
     EndPrimitive();

@@ -9,6 +9,8 @@ layout(location = 0) in vec2 inY;
 layout(location = 1) flat in vec3 inColor;
 layout(location = 2) flat in vec3 inNormal;
 layout(location = 3) flat in float inAmplitude;
+layout(location = 4) in vec2 inEdgeUV;
+layout(location = 5) flat in uint inEdge;
 
 layout(location = 0) out vec4 outColorWeight;
 layout(location = 1) out vec4 outNormalWeight;
@@ -17,7 +19,7 @@ void main() {
     float q = dot(inY, inY);
     if (q > 2.0 * frame.kernel.y) discard;
     float g = exp(-0.5 * q);
-    float w = inAmplitude * g;
+    float w = inAmplitude * g * edgeFactor(inEdge, inEdgeUV);
     outColorWeight = vec4(inColor * w, w);
     outNormalWeight = vec4(inNormal * w, g);
 }

@@ -47,11 +47,13 @@ struct Splat {
     vec3 axisU, axisV;
     vec3 n;          // unit normal, facing the eye (splats are two-sided)
     float amplitude; // weight at the centre
+    vec3 edgeS, edgeT; // camera-space tangentOf basis of the world normal, scaled by 1/r (edge weights)
+    uint edge;       // GpuSurfel::edge
     float r;         // reconstruction radius after the kernel scale
     float footprint; // max(Lambda0, Lambda1): r magnified, the low-pass filter's object extent minified
 };
 
-bool setupSplat(vec3 position, float radius, uint normal, float weight, out Splat sp) {
+bool setupSplat(vec3 position, float radius, uint normal, float weight, uint edge, out Splat sp) {
     float eta = frame.viewport.x;
     vec3 o = toCamera(position);
     // Surfels behind the near plane (or NaN) are dropped; those straddling it
@@ -85,6 +87,15 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, out Spla
     float L0 = sqrt(m0), L1 = sqrt(m1);
     sp.o = o;
     sp.n = n;
+    // Edge weights live in the world normal's tangentOf basis (as captured by
+    // client/capture/weight_capture.cpp), at distance r from the centre.
+    sp.edge = frame.mode == SC_MODE_EWA_SURFEL ? edge : 0u;
+    sp.edgeS = sp.edgeT = vec3(0);
+    if (sp.edge != 0u) {
+        vec3 nw = decodeNormal(normal), sw = tangentOf(nw);
+        sp.edgeS = rotateToCamera(sw) / r;
+        sp.edgeT = rotateToCamera(cross(nw, sw)) / r;
+    }
     sp.r = r;
     sp.footprint = max(L0, L1);
     sp.axisU = L0 * (e0.x * s + e0.y * t);
@@ -95,11 +106,23 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, out Spla
     return finite3(sp.axisU) && finite3(sp.axisV) && !isnan(sp.amplitude) && !isinf(sp.amplitude);
 }
 
-// Corner `corner` (0..3, a triangle strip) of the splat: y and camera position.
-vec3 splatCorner(Splat sp, int corner, out vec2 y) {
+// Corner `corner` (0..3, a triangle strip) of the splat: y, the edge-weight
+// coordinates (tangent offset / r in the edge basis) and the camera position.
+vec3 splatCorner(Splat sp, int corner, out vec2 y, out vec2 edgeUV) {
     vec2 v = vec2(corner & 1, corner >> 1);
     y = 2.0 * sqrt(2.0 * frame.kernel.y) * (v - 0.5);
-    return sp.o + y.x * sp.axisU + y.y * sp.axisV;
+    vec3 offset = y.x * sp.axisU + y.y * sp.axisV;
+    edgeUV = vec2(dot(offset, sp.edgeS), dot(offset, sp.edgeT));
+    return sp.o + offset;
+}
+
+// The edge-weight factor at edge coordinates uv: piecewise linear through the
+// ratios at (+-1, 0) and (0, +-1), 1 at the centre.
+float edgeFactor(uint edge, vec2 uv) {
+    if (edge == 0u) return 1.0;
+    vec4 e = unpackUnorm4x8(edge) * SC_EDGE_RATIO_MAX;
+    float fs = uv.x > 0.0 ? e.x : e.y, ft = uv.y > 0.0 ? e.z : e.w;
+    return clamp(1.0 + (fs - 1.0) * abs(uv.x) + (ft - 1.0) * abs(uv.y), 0.0, SC_EDGE_RATIO_MAX);
 }
 
 // Visibility pass (Ren 2002 §5.1): the splat pushed back by z_t along the ray

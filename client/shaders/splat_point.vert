@@ -10,6 +10,7 @@ layout(location = 0) in vec4 inPositionRadius;
 layout(location = 1) in uint inNormal;
 layout(location = 2) in vec4 inColor;
 layout(location = 3) in float inWeight;
+layout(location = 4) in uint inEdge;
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
@@ -18,6 +19,7 @@ layout(location = 3) flat out float outAmplitude;
 layout(location = 4) flat out vec4 outPositionRadius;
 layout(location = 5) flat out uint outPackedNormal;
 layout(location = 6) flat out float outWeight;
+layout(location = 7) flat out uint outPackedEdge;
 
 void main() {
     outY = vec2(0);
@@ -26,6 +28,7 @@ void main() {
     outPositionRadius = inPositionRadius;
     outPackedNormal = inNormal;
     outWeight = inWeight;
+    outPackedEdge = inEdge;
     vec3 o = toCamera(inPositionRadius.xyz);
     vec3 n = rotateToCamera(decodeNormal(inNormal));
     outNormal = dot(n, o) > 0.0 ? -n : n;

@@ -10,14 +10,19 @@ layout(location = 0) in vec4 inPositionRadius;
 layout(location = 1) in uint inNormal;
 layout(location = 2) in vec4 inColor;
 layout(location = 3) in float inWeight;
+layout(location = 4) in uint inEdge;
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
 layout(location = 2) flat out vec3 outNormal;
 layout(location = 3) flat out float outAmplitude;
+layout(location = 4) out vec2 outEdgeUV;
+layout(location = 5) flat out uint outEdge;
 
 void main() {
     outColor = inColor.rgb;
+    outEdgeUV = vec2(0);
+    outEdge = 0u;
     if (kPass == 2) {
         vec3 o = toCamera(inPositionRadius.xyz);
         vec3 n = rotateToCamera(decodeNormal(inNormal));
@@ -29,14 +34,15 @@ void main() {
         return;
     }
     Splat sp;
-    if (!setupSplat(inPositionRadius.xyz, inPositionRadius.w, inNormal, inWeight, sp)) {
+    if (!setupSplat(inPositionRadius.xyz, inPositionRadius.w, inNormal, inWeight, inEdge, sp)) {
         gl_Position = kCulled;
         outY = vec2(0);
         outNormal = vec3(0);
         outAmplitude = 0.0;
         return;
     }
-    vec3 p = splatCorner(sp, gl_VertexIndex, outY);
+    vec3 p = splatCorner(sp, gl_VertexIndex, outY, outEdgeUV);
+    outEdge = sp.edge;
     if (kPass == 0) p = pushBack(sp, p);
     gl_Position = project(p);
     outNormal = sp.n;
