@@ -190,6 +190,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["attributes"] = attrs;
     j["normal_source"] = info.normalSource;
     j["weights"] = info.weights;
+    j["kernel_scale"] = info.kernelScale;
     j["hierarchy"] = {{"file", "hierarchy.bin"}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
     j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
@@ -221,6 +222,10 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
                                        a.at("components").get<int>(), a.at("quantization_bits").get<int>()});
         info.normalSource = j.at("normal_source").get<std::string>();
         info.weights = j.at("weights").get<std::string>();
+        // Absent in sets written before it existed, whose weights assumed k = 1.
+        info.kernelScale = j.value("kernel_scale", 1.0);
+        if (!(info.kernelScale > 0) || !std::isfinite(info.kernelScale))
+            return Status::error(what + ": kernel_scale must be positive");
         const auto& h = j.at("hierarchy");
         info.hierarchyBytes = h.at("bytes").get<uint64_t>();
         info.hierarchyPages = h.at("pages").get<uint32_t>();

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "neighbours.h"
+#include "tileset_format.h"
 
 namespace surfcast {
 
@@ -113,16 +114,30 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
     for (size_t self = 0; self < own; ++self) {
         LevelNode* node = nodes[owner[self]];
         size_t local = self - firstOf[owner[self]];
-        double r = node->radii.empty() ? node->h : node->radii[local];
+        double r = params.kernelScale * (node->radii.empty() ? node->h : node->radii[local]);
         if (!(r > 0)) continue;
+        // Each neighbour's kernel has its own width, as the renderer draws it;
+        // halo surfels (other chunks) are taken at this surfel's width.
+        auto radiusOf = [&](uint32_t other) {
+            if (other >= own) return r;
+            const LevelNode* o = nodes[owner[other]];
+            size_t l = other - firstOf[owner[other]];
+            double ro = params.kernelScale * (o->radii.empty() ? o->h : o->radii[l]);
+            return ro > 0 ? ro : r;
+        };
         Vec3d n = cast<double>(normals[self]);
         double sum = 0;
         for (size_t j = 0; j < kk; ++j) {
             uint32_t other = neighbours[self * kk + j];
             if (other == UINT32_MAX || !sameSide(self, other)) continue;
             Vec3d d = cast<double>(points[other] - points[self]);
+            // A neighbour off the tangent plane by more than z_t (a close
+            // parallel surface, the other sheet of a crossing) is hidden or
+            // hides this one when rendered: it does not blend, so it does not count.
+            if (std::fabs(dot(d, n)) > kDefaultZt * r) continue;
             Vec3d t = d - n * dot(d, n);  // tangent-plane component
-            double y2 = dot(t, t) / (r * r);
+            double rj = radiusOf(other);
+            double y2 = dot(t, t) / (rj * rj);
             if (y2 <= cutoff2) sum += std::exp(-0.5 * y2);
         }
         node->weights[local] = float(1.0 / std::max(sum, 1.0));

@@ -97,6 +97,7 @@ private:
         p.spacingK = opt_.spacingK;
         p.weightK = opt_.weightK;
         p.cutoff = opt_.cutoff;
+        p.kernelScale = opt_.kernelScale;
         p.fallbackSpacing = edge(level) / opt_.grid;
         p.weights = opt_.weights;
         p.threads = threads;
@@ -510,6 +511,7 @@ Result<BuildSummary> Builder::run() {
     info.attributes.push_back({"radius", "float32", 1, BlockCodecOptions{}.radiusBits});  // only in nodes flagged kFlagHasRadius
     info.normalSource = summary_.normalSource;
     info.weights = opt_.weights ? "analytic" : "none";
+    info.kernelScale = opt_.kernelScale;
     SC_TRY(writer_->finish(info));
     phaseDone("write");
 

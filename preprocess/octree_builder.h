@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "inputs.h"
+#include "tileset_format.h"
 #include "status.h"
 
 namespace surfcast {
@@ -25,6 +26,7 @@ struct BuildOptions {
     int spacingK = 8;                   // k of the k-th-neighbour spacing h
     int weightK = 24;                   // neighbours fetched for the weight sums
     double cutoff = 1.0;                // kernel cutoff c the weights assume
+    double kernelScale = kDefaultKernelScale;  // k of V^r = (k h)^2 I the weights assume
     double positionFraction = 8;        // resampled levels: quantization step = cell size / this
     bool weights = true;                // store analytic per-surfel normalization weights
     bool progress = true;

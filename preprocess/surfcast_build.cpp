@@ -32,6 +32,8 @@ in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set.
   --normal-k K            neighbours for normal estimation (default 16)
   --spacing-k K           k of the k-th-neighbour spacing h (default 8)
   --position-fraction F   resampled levels: quantization step = cell / F (default 8)
+  --kernel-scale K        reconstruction kernel V^r = (K h)^2 I the weights assume
+                          (default 0.5, measured: see bench/BENCHMARKS.md)
   --weights MODE          analytic (default), capture (rendered on Vulkan, Ren 2002
                           §7.2; see surfcast-weights) or none
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
@@ -115,6 +117,9 @@ int main(int argc, char** argv) {
         } else if (a == "--normal-k") {
             if (!number(&d, 3, 256)) return usageError("--normal-k needs a value in [3, 256]");
             opt.normalK = int(d);
+        } else if (a == "--kernel-scale") {
+            if (!number(&d, 0.05, 10)) return usageError("--kernel-scale needs a value in [0.05, 10]");
+            opt.kernelScale = d;
         } else if (a == "--spacing-k") {
             if (!number(&d, 1, 64)) return usageError("--spacing-k needs a value in [1, 64]");
             opt.spacingK = int(d);

@@ -125,17 +125,19 @@ TEST_F(Stability, CrossingSurfacesShowTheNearerOneAwayFromTheirIntersection) {
 }
 
 TEST_F(Stability, CloseParallelSurfacesAgainstZt) {
-    // z_t = 0.5 r = 0.75 units here. Farther than z_t: only the front colour;
-    // nearer than z_t: the two blend (the method's known limit: a thin sheet
-    // shows both sides).
+    // Magnified, z_t = zt * k * r (0.5 * 0.5 * 1.5 = 0.375 units with the
+    // defaults). Farther than z_t: only the front colour; nearer than z_t:
+    // the two blend (the method's known limit: a thin sheet shows both sides).
+    const RenderSettings defaults;
+    const double zt = defaults.zt * defaults.kernelScale * 1.5;
     const Vec3f red{0.9f, 0.1f, 0.1f}, blue{0.1f, 0.1f, 0.9f};
-    for (double gap : {0.5 * 0.75, 2 * 0.75}) {
+    for (double gap : {0.5 * zt, 2 * zt}) {
         SurfelSet set;
         addPatch(set, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, -60, 60, -60, 60, 1.0, red, 1);
         addPatch(set, {0, 0, -gap}, {1, 0, 0}, {0, 1, 0}, -60, 60, -60, 60, 1.0, blue, 2);
         Image img = render(set, topDown(70));
         size_t front = countColour(img, red, 0.02);
-        if (gap > 0.75) {
+        if (gap > zt) {
             EXPECT_EQ(front, size_t(kW * kH)) << "gap " << gap;
         } else {
             EXPECT_LT(front, size_t(kW * kH / 10)) << "gap " << gap << ": expected the two to blend";
@@ -193,10 +195,13 @@ TEST_F(Stability, OnePointSetDrawsADot) {
     SurfelSet set;
     addSurfel(set, {5, 5, 5}, {0, 0, 1}, 0.1f, {0, 0, 0});
     Image img = render(set, {{5, 5, 10}, {5, 5, 5}, {0, 1, 0}, 40});
-    // r = 0.1 at distance 5 is 5.3 px (eta = 264): a disc of radius
-    // sqrt(2c) r = 7.5 px, about 176 px, widened a little by the low-pass.
-    double expected = M_PI * std::pow(std::sqrt(2.0) * 0.1 * 264 / 5, 2);
-    EXPECT_GT(double(covered(img)), 0.8 * expected);
+    // k r = 0.05 at distance 5 is 2.6 px (eta = 264): a disc of radius
+    // sqrt(2c) k r = 3.7 px, about 44 px, widened by the low-pass filter
+    // (M = (k r)^2 + 1 px^2 per axis: 2.8 px, a disc of 4 px, 50 px).
+    const double k = RenderSettings{}.kernelScale;
+    double rpx = std::sqrt(std::pow(k * 0.1 * 264 / 5, 2) + 1.0);
+    double expected = M_PI * 2 * rpx * rpx;
+    EXPECT_GT(double(covered(img)), 0.7 * expected);
     EXPECT_LT(double(covered(img)), 1.3 * expected);
 }
 

@@ -197,6 +197,7 @@ TEST(TilesetFormat, TilesetJsonGoldenText) {
   ],
   "normal_source": "input",
   "weights": "analytic",
+  "kernel_scale": 1.0,
   "hierarchy": {
     "file": "hierarchy.bin",
     "bytes": 624,

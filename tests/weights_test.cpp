@@ -88,11 +88,15 @@ TEST_F(Weights, CapturedAgreesWithAnalyticOnInteriorSurfels) {
     }
     ASSERT_GT(rel.size(), size_t(kN * kN / 2));
     std::sort(rel.begin(), rel.end());
-    // Both evaluate sum_j exp(-|t_j|^2 / 2r^2) at the surfel; capture samples
-    // it at the centre pixel of 32 views (12-bit weights: steps of ~0.1%).
-    // Measured on this plane: median 0.0%, 95th percentile under 1%.
-    EXPECT_LT(rel[rel.size() / 2], 0.01);
-    EXPECT_LT(rel[rel.size() * 95 / 100], 0.05);
+    // Both evaluate sum_j exp(-|t_j|^2 / 2 r_j^2) at the surfel, but capture
+    // samples the rendered sum near its centre (capture pixels are 0.18 units
+    // here) and the kernels end abruptly at the cutoff, where a neighbour
+    // still weighs exp(-c) = 0.37: a neighbour within half a pixel of its
+    // cutoff radius (1.2 units at k = 0.5) flips in or out, moving S (about 4)
+    // by up to 9%. Measured: median 2.5%, 95th percentile 9.7% (at k = 1,
+    // where the cutoff lies farther out: 0% and 2.6%).
+    EXPECT_LT(rel[rel.size() / 2], 0.04);
+    EXPECT_LT(rel[rel.size() * 95 / 100], 0.12);
 }
 
 TEST_F(Weights, PerSurfelRenderStaysWithinToleranceOfPerPixel) {
@@ -144,9 +148,11 @@ TEST_F(Weights, PerSurfelRenderStaysWithinToleranceOfPerPixel) {
         ASSERT_GT(in.n, size_t(W * H / 4));
         ASSERT_GT(ed.n, size_t(500));
         // bench/BENCHMARKS.md ("Normalization weights"), the jittered plane
-        // magnified, interior: mean 0.032, P99 0.108, for both methods.
-        EXPECT_LT(in.mean, 0.05) << set;
-        EXPECT_LT(in.p99, 0.15) << set;
+        // magnified, interior, at the default k = 0.5: mean 0.08, P99 0.26
+        // for both methods (at k = 1: 0.03 and 0.10; narrow kernels make the
+        // sum of neighbours vary more between samples).
+        EXPECT_LT(in.mean, 0.12) << set;
+        EXPECT_LT(in.p99, 0.35) << set;
     }
     // Edge weights (captured only) bring the boundary band closer to per-pixel
     // normalization: measured P99 0.27 -> 0.13 on the bench's plane.

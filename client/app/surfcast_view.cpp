@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
     }
     if (options.color)
         for (auto& s : set->surfels) s.color = surfcast::packColor(*options.color);
+    if (!options.kernelScaleGiven) options.settings.kernelScale = float(set->kernelScale);
     if (!options.shadingGiven)
         options.settings.shading = set->hasColor ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
     return options.headless ? surfcast::runHeadless(options, *set) : surfcast::runWindow(options, *set);

@@ -27,7 +27,8 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
                         (default), cpu-reference
   --out PATH            PNG to write (default frame.png; several frames: PATH_0000.png ...)
   --level N|leaves      draw level N (with the leaves above it) or every leaf (default)
-  --kernel-scale K      reconstruction kernel V^r = (K h)^2 I (default 1)
+  --kernel-scale K      reconstruction kernel V^r = (K h)^2 I (default: the set's
+                        kernel_scale, which its weights assume; 0.5 unless built otherwise)
   --cutoff C            splats end at y'y = 2C (default 1)
   --zt Z                visibility depth offset z_t, a multiple of the splat's footprint
                         (h when magnified; default 0.5)
@@ -170,6 +171,7 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             else return (*exitCode = usageError("--level wants a level number or 'leaves'")), false;
         } else if (a == "--kernel-scale") {
             if (!positive(&o->settings.kernelScale, "--kernel-scale")) return false;
+            o->kernelScaleGiven = true;
         } else if (a == "--cutoff") {
             if (!positive(&o->settings.cutoff, "--cutoff")) return false;
         } else if (a == "--zt") {

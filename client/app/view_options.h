@@ -21,6 +21,7 @@ struct ViewOptions {
     LevelChoice level;
     RenderSettings settings;
     bool shadingGiven = false;        // else unlit with colour, lambert without
+    bool kernelScaleGiven = false;    // else the set's kernel_scale
     std::optional<Vec3f> color;       // draw every surfel in this colour (measurements)
     RendererOptions renderer;
     std::string device;

@@ -52,6 +52,7 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
     auto renderer = SplatRenderer::create(ctx, {});
     if (!renderer) return renderer.status();
     RenderSettings settings;
+    settings.kernelScale = float(info.kernelScale);  // the kernel the weights are for
     settings.zt = options.zt;
     settings.cutoff = options.cutoff;
     const Vec3d centre = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
@@ -100,6 +101,27 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
             if (!(near / o.z >= depth[p]) || !(sums[p] > 0)) return -1;
             return long(p);
         };
+        // S at the exact projection of o (bilinear between pixel centres, over
+        // the neighbours that show the same surface as pixel p): with narrow
+        // kernels S changes within a pixel, and the nearest pixel centre can be
+        // half a pixel off the surfel.
+        auto sumAt = [&](const ViewTransform& view, const Vec3f& o, size_t p) {
+            const int n = options.size;
+            float x = 0.5f * n + view.eta * o.x / o.z - 0.5f, y = 0.5f * n - view.eta * o.y / o.z - 0.5f;
+            int x0 = std::clamp(int(std::floor(x)), 0, n - 2), y0 = std::clamp(int(std::floor(y)), 0, n - 2);
+            float fx = std::clamp(x - x0, 0.f, 1.f), fy = std::clamp(y - y0, 0.f, 1.f);
+            float total = 0, weight = 0;
+            for (int dy = 0; dy < 2; ++dy)
+                for (int dx = 0; dx < 2; ++dx) {
+                    size_t q = size_t(y0 + dy) * n + size_t(x0 + dx);
+                    // Same surface: depth within 1% of the centre pixel's.
+                    if (!(sums[q] > 0) || std::fabs(depth[q] - depth[p]) > 0.01f * depth[p]) continue;
+                    float w = (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy);
+                    total += w * sums[q];
+                    weight += w;
+                }
+            return weight > 0 ? total / weight : sums[p];
+        };
         for (size_t v = 0; v < directions.size(); ++v) {
             Camera cam{centre + directions[v] * distance, centre,
                        std::fabs(directions[v].z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, 1, 0}, kCaptureFovDegrees};
@@ -118,12 +140,13 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
                 if (!(facing >= kMinFacing)) continue;
                 long p = visiblePixel(*view, o, near);
                 if (p < 0) continue;
-                samples[i * directions.size() + v] = 1.f / sums[size_t(p)];
+                samples[i * directions.size() + v] = 1.f / sumAt(*view, o, size_t(p));
                 if (facing < kMinEdgeFacing) continue;
                 // The tangent points +r s, -r s, +r t, -r t (the basis the
                 // renderer's edgeFactor uses).
                 Vec3f sw = tangentOf(nw), tw = cross(nw, sw);
-                const Vec3f offsets[4] = {sw * g.radius, sw * -g.radius, tw * g.radius, tw * -g.radius};
+                const float r = g.radius * settings.kernelScale;  // as the renderer's edge basis
+                const Vec3f offsets[4] = {sw * r, sw * -r, tw * r, tw * -r};
                 for (int k = 0; k < 4; ++k) {
                     long q = visiblePixel(*view, view->apply(local + offsets[k]), near);
                     if (q < 0) continue;

@@ -8,6 +8,7 @@
 
 #include "camera.h"
 #include "gpu_types.h"
+#include "tileset_format.h"
 #include "vec3.h"
 
 namespace surfcast {
@@ -36,9 +37,10 @@ inline constexpr double kNearFraction = 1e-4;
 struct RenderSettings {
     RenderMode mode = RenderMode::EwaPixel;
     Shading shading = Shading::Unlit;
-    float kernelScale = 1.f;      // V^r = (kernelScale * r)^2 I; the stored weights assume 1
+    float kernelScale = float(kDefaultKernelScale);  // V^r = (kernelScale * r)^2 I; a set's weights
+                                                    // assume its tileset.json kernel_scale
     float cutoff = 1.f;           // c: splats end at y'y = 2c
-    float zt = 0.5f;              // visibility depth offset z_t, a multiple of the footprint (r magnified)
+    float zt = float(kDefaultZt);  // visibility depth offset z_t, a multiple of the footprint (k r magnified)
     float lowpassVariance = 1.f;  // V^h = variance * I, in pixels^2 (Zwicker's V^h = I)
     float coverage = 0.05f;       // a pixel shows the surface where the sum of the unscaled
                                   // kernels exp(-y'y/2) exceeds this

@@ -114,6 +114,7 @@ Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choic
     set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
     set.hasWeights = info.weights != "none";
     set.hasColor = info.colorBits > 0;
+    set.kernelScale = info.kernelScale;
     const float colorScale = info.colorBits > 0 ? 1.f / float((1u << info.colorBits) - 1) : 0.f;
     for (const NodeRecord& node : reader->nodes()) {
         bool leaf = node.childMask == 0;

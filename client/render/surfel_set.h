@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "gpu_types.h"
+#include "tileset_format.h"
 #include "status.h"
 #include "vec3.h"
 
@@ -18,6 +19,7 @@ struct SurfelSet {
     Box3d bounds;                           // world bounds of the surfel centres
     bool hasWeights = false;                // s_k came from the tile set
     bool hasColor = false;                  // colours came from the data (else grey)
+    double kernelScale = kDefaultKernelScale;  // the k its weights assume (tileset.json kernel_scale)
 };
 
 // Which nodes of a tile set to draw: a level (its nodes plus the leaves above

@@ -1,0 +1,360 @@
+#!/usr/bin/env python3
+"""Speed against accuracy: every renderer mode against exact references.
+
+Synthetic scenes with exact ground truth: a CPU ray caster (numpy) renders
+each scene's analytic surfaces with 16 x 16 stratified samples per pixel and
+band-limited textures (square waves cut after the 7th harmonic), so the
+reference is the true pixel-area average. The same surfaces are sampled into
+surfels (a jittered grid at 0.5 units, colour = the texture at the sample,
+exact normals), written as PLY, built with surfcast-build and rendered by
+surfcast-view --headless in every mode (1-px points, circles, EWA without
+prefilter, EWA per-surfel, EWA per-pixel, the CPU reference), unlit on white.
+
+Metrics against the reference: PSNR and SSIM (scikit-image) and mean FLIP
+(NVIDIA's flip-evaluator, LDR). Time: the median GPU ms of --repeat N (CPU ms
+for cpu-reference). Writes bench/report/accuracy.csv, accuracy_speed.png
+(FLIP against frame time, one point per scene and mode), a montage per scene
+(reference and every mode) and accuracy.md; prints the Markdown.
+
+Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/accuracy_bench.py [--size 320x240] [--repeat 3]
+"""
+import argparse
+import csv
+import json
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+
+import flip_evaluator as flip
+import numpy as np
+from PIL import Image
+from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.join(ROOT, "build", "bin")
+REPORT = os.path.join(ROOT, "bench", "report")
+MODES = ["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel", "cpu-reference"]
+# The reconstruction kernel sweep (ewa-pixel): V^r = (k h)^2 I.
+KERNEL_SCALES = [0.4, 0.5, 0.6, 0.7, 0.85, 1.0]
+SPACING = 0.5      # surfel sampling step (world units)
+SUPERSAMPLE = 16   # per axis: 256 rays per pixel
+BACKGROUND = np.array([1.0, 1.0, 1.0])
+
+
+# --- band-limited textures -------------------------------------------------
+
+def square_wave(t, harmonics=7):
+    """(4/pi) sum_{odd k <= harmonics} sin(k t)/k: a square wave without its
+    frequencies above the 7th harmonic."""
+    s = np.zeros_like(t)
+    for k in range(1, harmonics + 1, 2):
+        s += np.sin(k * t) / k
+    return np.clip(4 / np.pi * s, -1, 1)
+
+
+def checker(a, b, period, dark, light):
+    v = 0.5 + 0.5 * square_wave(np.pi * a / (period / 2)) * square_wave(np.pi * b / (period / 2))
+    return dark[None, :] * (1 - v[:, None]) + light[None, :] * v[:, None]
+
+
+# --- surfaces: intersection, texture, sampling -------------------------------
+
+class Patch:
+    """A planar patch: centre c, unit axes u, v; (a, b) in [a0, a1] x [b0, b1],
+    or a disc of the given radius."""
+
+    def __init__(self, c, u, v, extent=None, radius=None, texture=None, normal_sign=1):
+        self.c, self.u, self.v = np.array(c, float), np.array(u, float), np.array(v, float)
+        self.u /= np.linalg.norm(self.u)
+        self.v /= np.linalg.norm(self.v)
+        self.n = normal_sign * np.cross(self.u, self.v)
+        self.extent, self.radius, self.texture = extent, radius, texture
+
+    def inside(self, a, b):
+        if self.radius is not None:
+            return a * a + b * b <= self.radius ** 2
+        a0, a1, b0, b1 = self.extent
+        return (a >= a0) & (a <= a1) & (b >= b0) & (b <= b1)
+
+    def intersect(self, o, d):
+        denom = d @ self.n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((self.c - o) @ self.n) / denom
+        p = o + t[:, None] * d
+        a, b = (p - self.c) @ self.u, (p - self.c) @ self.v
+        ok = (t > 0) & np.isfinite(t) & self.inside(a, b)
+        return np.where(ok, t, np.inf), (a, b)
+
+    def colour(self, ab):
+        return self.texture(*ab)
+
+    def samples(self, rng):
+        if self.radius is not None:
+            a0 = b0 = -self.radius
+            a1 = b1 = self.radius
+        else:
+            a0, a1, b0, b1 = self.extent
+        a, b = np.meshgrid(np.arange(a0 + SPACING / 2, a1, SPACING), np.arange(b0 + SPACING / 2, b1, SPACING))
+        a = a.ravel() + rng.uniform(-0.3, 0.3, a.size) * SPACING
+        b = b.ravel() + rng.uniform(-0.3, 0.3, b.size) * SPACING
+        keep = self.inside(a, b)
+        a, b = a[keep], b[keep]
+        p = self.c + a[:, None] * self.u + b[:, None] * self.v
+        return p, np.repeat(self.n[None, :], len(a), axis=0), self.colour((a, b))
+
+
+class Sphere:
+    def __init__(self, c, r, texture):
+        self.c, self.r, self.texture = np.array(c, float), r, texture
+
+    def angles(self, p):
+        q = (p - self.c) / self.r
+        return np.arctan2(q[:, 1], q[:, 0]), np.arccos(np.clip(q[:, 2], -1, 1))
+
+    def intersect(self, o, d):
+        oc = o - self.c
+        b = np.einsum("ij,ij->i", d, oc)
+        disc = b * b - (np.einsum("ij,ij->i", oc, oc) - self.r ** 2)
+        t = -b - np.sqrt(np.maximum(disc, 0))
+        t = np.where((disc >= 0) & (t > 0), t, np.inf)
+        p = o + np.where(np.isfinite(t), t, 0)[:, None] * d
+        return t, self.angles(p)
+
+    def colour(self, angles):
+        return self.texture(*angles)
+
+    def samples(self, rng):
+        n = int(4 * np.pi * self.r ** 2 / SPACING ** 2)
+        i = np.arange(n) + 0.5
+        z = 1 - 2 * i / n
+        phi = np.pi * (3 - np.sqrt(5)) * i
+        q = np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
+        p = self.c + self.r * q
+        return p, q, self.colour(self.angles(p))
+
+
+def scenes():
+    dark, light = np.array([0.1, 0.1, 0.12]), np.array([0.92, 0.9, 0.85])
+    red, blue, orange = np.array([0.85, 0.2, 0.15]), np.array([0.15, 0.3, 0.85]), np.array([0.95, 0.6, 0.1])
+    solid = lambda c: (lambda a, b: np.repeat(c[None, :], len(a), axis=0))
+    tex_checker = lambda a, b: checker(a, b, 4.0, dark, light)
+    zone = lambda a, b: (0.5 + 0.5 * np.cos(0.052 * (a * a + b * b)))[:, None] * (light - dark) + dark
+    sphere_checker = lambda phi, theta: checker(phi * 12 / np.pi, theta * 6 / np.pi, 2.0, dark, light)
+    z_t = 0.5 * 1.5 * SPACING  # 0.5 h, with h about 1.5 x the sampling step
+    s = 0.5  # sin(30 deg)
+    c30 = np.sqrt(3) / 2
+    return {
+        "checker-horizon": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-60, 60, -5, 300), texture=tex_checker)],
+                            "0,-12,8,0,40,0,0,0,1,50"),
+        "zone-plate": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-30, 30, -30, 30), texture=zone)],
+                       "0,-30,55,0,0,0,0,0,1,50"),
+        "textured-sphere": ([Sphere([0, 0, 0], 10, sphere_checker)], "0,-35,12,0,0,0,0,0,1,40"),
+        "crossing-30deg": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-20, 20, -20, 20), texture=solid(red)),
+                            Patch([0, 0, 0], [1, 0, 0], [0, c30, s], extent=(-20, 20, -20, 20), texture=solid(blue))],
+                           "8,-45,30,0,0,0,0,0,1,45"),
+        "parallel-0.5zt": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-20, 20, -20, 20), texture=solid(orange)),
+                            Patch([0, 0, -0.5 * z_t], [1, 0, 0], [0, 1, 0], extent=(-25, 25, -25, 25), texture=solid(blue))],
+                           "0,-35,30,0,0,0,0,0,1,45"),
+        "parallel-2zt": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-20, 20, -20, 20), texture=solid(orange)),
+                          Patch([0, 0, -2 * z_t], [1, 0, 0], [0, 1, 0], extent=(-25, 25, -25, 25), texture=solid(blue))],
+                         "0,-35,30,0,0,0,0,0,1,45"),
+        "thin-sheet": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-20, 20, -20, 20), texture=solid(orange)),
+                        Patch([0, 0, -0.05], [1, 0, 0], [0, 1, 0], extent=(-20, 20, -20, 20), texture=solid(blue),
+                              normal_sign=-1)],
+                       "0,-35,30,0,0,0,0,0,1,45"),
+        "open-boundary": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], radius=15, texture=tex_checker)],
+                          "0,-30,22,0,0,0,0,0,1,45"),
+    }
+
+
+# --- the reference ray caster -------------------------------------------------
+
+def camera_rays(camera, width, height):
+    v = [float(x) for x in camera.split(",")]
+    eye, target, up, fov = np.array(v[0:3]), np.array(v[3:6]), np.array(v[6:9]), v[9]
+    f = target - eye
+    f /= np.linalg.norm(f)
+    r = np.cross(f, up)
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    eta = height / (2 * np.tan(np.radians(fov) / 2))
+    return eye, f, r, u, eta
+
+
+def reference(surfaces, camera, width, height):
+    eye, f, r, u, eta = camera_rays(camera, width, height)
+    image = np.zeros((height, width, 3))
+    offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE
+    ox, oy = np.meshgrid(offsets, offsets)
+    ox, oy = ox.ravel(), oy.ravel()
+    for y in range(height):
+        px = np.repeat(np.arange(width), len(ox)) + np.tile(ox, width)
+        py = y + np.tile(oy, width)
+        d = f[None, :] + ((px - width / 2) / eta)[:, None] * r[None, :] - ((py - height / 2) / eta)[:, None] * u[None, :]
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        o = np.repeat(eye[None, :], len(d), axis=0)
+        best = np.full(len(d), np.inf)
+        colour = np.repeat(BACKGROUND[None, :], len(d), axis=0)
+        for s in surfaces:
+            t, param = s.intersect(o, d)
+            hit = t < best
+            if hit.any():
+                colour[hit] = s.colour(tuple(p[hit] for p in param))
+                best[hit] = t[hit]
+        image[y] = colour.reshape(width, len(ox), 3).mean(axis=1)
+    return image
+
+
+# --- surfels, programs, metrics ----------------------------------------------
+
+def write_ply(path, points, normals, colours):
+    n = len(points)
+    header = ("ply\nformat binary_little_endian 1.0\nelement vertex %d\n"
+              "property double x\nproperty double y\nproperty double z\n"
+              "property float nx\nproperty float ny\nproperty float nz\n"
+              "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n" % n)
+    rec = np.zeros(n, dtype=[("p", "<f8", 3), ("n", "<f4", 3), ("c", "u1", 3)])
+    rec["p"], rec["n"] = points, normals
+    rec["c"] = np.clip(np.round(colours * 255), 0, 255)
+    with open(path, "wb") as fh:
+        fh.write(header.encode())
+        fh.write(rec.tobytes())
+
+
+def run(args):
+    return subprocess.run(args, check=True, capture_output=True, text=True).stdout
+
+
+def render(tileset, mode, camera, size, repeat, png, kernel=None):
+    extra = ["--kernel-scale", str(kernel)] if kernel else []
+    out = run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, f"--camera={camera}", "--size", size, "--mode",
+               mode, "--shading", "unlit", "--background", "1,1,1", "--repeat", str(repeat), "--out", png, *extra])
+    line = json.loads(out.strip().splitlines()[-1])
+    ms = line["cpu_ms"] if mode == "cpu-reference" else line["gpu_ms"]["total"]
+    img = np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
+    return img, ms, line["splats"]
+
+
+def metrics(ref, img):
+    psnr = peak_signal_noise_ratio(ref, img, data_range=1.0)
+    ssim = structural_similarity(ref, img, channel_axis=2, data_range=1.0)
+    _, mean_flip, _ = flip.evaluate(ref.astype(np.float32), img.astype(np.float32), "LDR")
+    return psnr, ssim, float(mean_flip)
+
+
+def montage(name, ref, images):
+    tiles = [("reference", ref)] + images
+    h, w = ref.shape[:2]
+    sheet = Image.new("RGB", (w * 4, h * 2), "white")
+    from PIL import ImageDraw
+    draw = ImageDraw.Draw(sheet)
+    for k, (label, img) in enumerate(tiles[:8]):
+        x, y = (k % 4) * w, (k // 4) * h
+        sheet.paste(Image.fromarray((np.clip(img, 0, 1) * 255).astype(np.uint8)), (x, y))
+        draw.rectangle([x, y, x + 7 * len(label) + 6, y + 14], fill="white")
+        draw.text((x + 3, y + 2), label, fill="black")
+    sheet.save(os.path.join(REPORT, f"montage-{name}.png"))
+
+
+def chart(rows):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    for k, mode in enumerate(MODES):
+        sel = [r for r in rows if r["mode"] == mode]
+        ax.scatter([r["ms"] for r in sel], [r["flip"] for r in sel], s=18, alpha=0.5, color=f"C{k}")
+        ax.scatter([np.median([r["ms"] for r in sel])], [np.mean([r["flip"] for r in sel])], s=120, marker="*",
+                   color=f"C{k}", edgecolor="k", label=f"{mode} (median ms, mean FLIP)")
+    ax.set_xscale("log")
+    ax.set_xlabel("frame time, ms (GPU timestamps on lavapipe; CPU for cpu-reference)")
+    ax.set_ylabel("mean FLIP against the 16x16 ray-cast reference (lower is better)")
+    ax.set_title("Speed against accuracy, per scene (dots) and per mode (stars)")
+    ax.legend(fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(os.path.join(REPORT, "accuracy_speed.png"), dpi=110)
+
+
+def kernel_chart(sweep):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for name in sorted({r["scene"] for r in sweep}):
+        sel = sorted((r for r in sweep if r["scene"] == name), key=lambda r: r["kernel"])
+        ax.plot([r["kernel"] for r in sel], [r["flip"] for r in sel], marker="o", label=name)
+    ax.set_xlabel("kernel scale k (V^r = (k h)^2 I)")
+    ax.set_ylabel("mean FLIP (ewa-pixel)")
+    ax.set_title("Reconstruction kernel width against accuracy")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(REPORT, "kernel_scale.png"), dpi=110)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", default="320x240")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--scenes", default="", help="comma-separated subset")
+    args = ap.parse_args()
+    width, height = (int(v) for v in args.size.split("x"))
+    os.makedirs(REPORT, exist_ok=True)
+    rng = np.random.default_rng(1)
+    rows, sweep = [], []
+    wanted = set(args.scenes.split(",")) if args.scenes else None
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, (surfaces, camera) in scenes().items():
+            if wanted and name not in wanted:
+                continue
+            ref = reference(surfaces, camera, width, height)
+            pts, nrm, col = (np.concatenate(x) for x in zip(*(s.samples(rng) for s in surfaces)))
+            ply = os.path.join(tmp, name + ".ply")
+            write_ply(ply, pts, nrm, col)
+            tileset = os.path.join(tmp, name)
+            run([os.path.join(BIN, "surfcast-build"), "-q", ply, "-o", tileset])
+            images = []
+            for mode in MODES:
+                img, ms, splats = render(tileset, mode, camera, args.size, 1 if mode == "cpu-reference" else args.repeat,
+                                         os.path.join(tmp, "frame.png"))
+                psnr, ssim, fl = metrics(ref, img)
+                rows.append({"scene": name, "mode": mode, "kernel": "", "splats": splats, "ms": ms, "psnr": psnr,
+                             "ssim": ssim, "flip": fl})
+                images.append((mode, img))
+                print(f"{name} {mode}: {ms:.1f} ms, PSNR {psnr:.2f}, SSIM {ssim:.3f}, FLIP {fl:.4f}", file=sys.stderr)
+            montage(name, ref, images)
+            for k in KERNEL_SCALES:
+                img, ms, splats = render(tileset, "ewa-pixel", camera, args.size, 1, os.path.join(tmp, "frame.png"), k)
+                psnr, ssim, fl = metrics(ref, img)
+                sweep.append({"scene": name, "mode": "ewa-pixel", "kernel": k, "splats": splats, "ms": ms, "psnr": psnr,
+                              "ssim": ssim, "flip": fl})
+    with open(os.path.join(REPORT, "accuracy.csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows + sweep)
+    chart(rows)
+    kernel_chart(sweep)
+    lines = [f"Scenes at {args.size}, reference 16x16 ray-cast; time = median of {args.repeat} (GPU), one run (CPU).", "",
+             "| scene | mode | splats | ms | PSNR dB | SSIM | FLIP |", "|---|---|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['scene']} | {r['mode']} | {r['splats']} | {r['ms']:.1f} | {r['psnr']:.2f} | {r['ssim']:.3f} | {r['flip']:.4f} |")
+    lines += ["", "| mode | median ms | mean PSNR dB | mean SSIM | mean FLIP |", "|---|---:|---:|---:|---:|"]
+    for mode in MODES:
+        sel = [r for r in rows if r["mode"] == mode]
+        lines.append(f"| {mode} | {np.median([r['ms'] for r in sel]):.1f} | {np.mean([r['psnr'] for r in sel]):.2f} | "
+                     f"{np.mean([r['ssim'] for r in sel]):.3f} | {np.mean([r['flip'] for r in sel]):.4f} |")
+    lines += ["", "Kernel scale sweep (ewa-pixel, V^r = (k h)^2 I), mean over scenes:", "",
+              "| k | mean PSNR dB | mean SSIM | mean FLIP | worst scene FLIP |", "|---:|---:|---:|---:|---:|"]
+    for k in KERNEL_SCALES:
+        sel = [r for r in sweep if r["kernel"] == k]
+        lines.append(f"| {k} | {np.mean([r['psnr'] for r in sel]):.2f} | {np.mean([r['ssim'] for r in sel]):.3f} | "
+                     f"{np.mean([r['flip'] for r in sel]):.4f} | {max(r['flip'] for r in sel):.4f} |")
+    text = "\n".join(lines) + "\n"
+    with open(os.path.join(REPORT, "accuracy.md"), "w") as fh:
+        fh.write(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
