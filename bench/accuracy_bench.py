@@ -22,6 +22,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -38,6 +39,12 @@ REPORT = os.path.join(ROOT, "bench", "report")
 MODES = ["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel", "cpu-reference"]
 # The reconstruction kernel sweep (ewa-pixel): V^r = (k h)^2 I.
 KERNEL_SCALES = [0.4, 0.5, 0.6, 0.7, 0.85, 1.0]
+# The model sweep: surfcast-build options against bytes and error, one at a
+# time from the defaults (--position-fraction 8, --normal-bits 10, radii on).
+QUANTIZATION = ([("position-fraction", f) for f in (1, 2, 4, 8, 16)] + [("normal-bits", n) for n in (6, 8, 10, 12)] +
+                [("no-radius", None)])
+# Scenes with analytic geometry for the geometric error (surfcast-geom-error).
+GEOMETRY = {"textured-sphere": ["sphere", "0", "0", "0", "10"]}
 SPACING = 0.5      # surfel sampling step (world units)
 SUPERSAMPLE = 16   # per axis: 256 rays per pixel
 BACKGROUND = np.array([1.0, 1.0, 1.0])
@@ -106,8 +113,8 @@ class Patch:
 
 
 class Sphere:
-    def __init__(self, c, r, texture):
-        self.c, self.r, self.texture = np.array(c, float), r, texture
+    def __init__(self, c, r, texture, spacing=SPACING):
+        self.c, self.r, self.texture, self.spacing = np.array(c, float), r, texture, spacing
 
     def angles(self, p):
         q = (p - self.c) / self.r
@@ -126,7 +133,7 @@ class Sphere:
         return self.texture(*angles)
 
     def samples(self, rng):
-        n = int(4 * np.pi * self.r ** 2 / SPACING ** 2)
+        n = int(4 * np.pi * self.r ** 2 / self.spacing ** 2)
         i = np.arange(n) + 0.5
         z = 1 - 2 * i / n
         phi = np.pi * (3 - np.sqrt(5)) * i
@@ -150,7 +157,8 @@ def scenes():
                             "0,-12,8,0,40,0,0,0,1,50"),
         "zone-plate": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-30, 30, -30, 30), texture=zone)],
                        "0,-30,55,0,0,0,0,0,1,50"),
-        "textured-sphere": ([Sphere([0, 0, 0], 10, sphere_checker)], "0,-35,12,0,0,0,0,0,1,40"),
+        # Denser than the rest (0.15): several levels, for the model sweep.
+        "textured-sphere": ([Sphere([0, 0, 0], 10, sphere_checker, spacing=0.15)], "0,-35,12,0,0,0,0,0,1,40"),
         "crossing-30deg": ([Patch([0, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-20, 20, -20, 20), texture=solid(red)),
                             Patch([0, 0, 0], [1, 0, 0], [0, c30, s], extent=(-20, 20, -20, 20), texture=solid(blue))],
                            "8,-45,30,0,0,0,0,0,1,45"),
@@ -277,6 +285,53 @@ def chart(rows):
     fig.savefig(os.path.join(REPORT, "accuracy_speed.png"), dpi=110)
 
 
+def quantization_sweep(name, ply, camera, ref, size, tmp):
+    out = []
+    for option, value in QUANTIZATION:
+        label = f"--{option}" + ("" if value is None else f" {value}")
+        tileset = os.path.join(tmp, f"{name}-q")
+        shutil.rmtree(tileset, ignore_errors=True)
+        run([os.path.join(BIN, "surfcast-build"), "-q", ply, "-o", tileset, f"--{option}"] +
+            ([] if value is None else [str(value)]))
+        info = json.load(open(os.path.join(tileset, "tileset.json")))
+        level = max(info["levels"] - 2, 0)  # the finest resampled level
+        geo = json.loads(run([os.path.join(BIN, "surfcast-geom-error"), tileset, str(level), *GEOMETRY[name]]))
+        img, ms, splats = render_level(tileset, camera, size, level, os.path.join(tmp, "q.png"))
+        _, _, fl = metrics(ref, img)
+        out.append({"scene": name, "option": label, "level": level, "surfels": info["surfels"],
+                    "bytes": os.path.getsize(os.path.join(tileset, "blocks.bin")), "rms": geo["rms"],
+                    "normal_deg": geo["normal_rms_degrees"], "flip": fl})
+        print(f"{name} {label}: {out[-1]['bytes']} bytes, RMS {geo['rms']:.2e}, FLIP {fl:.4f}", file=sys.stderr)
+    return out
+
+
+def render_level(tileset, camera, size, level, png):
+    run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, f"--camera={camera}", "--size", size, "--level",
+         str(level), "--shading", "unlit", "--background", "1,1,1", "--out", png])
+    return np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255, 0, 0
+
+
+def model_chart(model):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    for ax, metric, label in [(axes[0], "flip", "mean FLIP (ewa-pixel, resampled level)"),
+                              (axes[1], "rms", "RMS distance to the true surface")]:
+        for k, scene in enumerate(sorted({r["scene"] for r in model})):
+            for r in (r for r in model if r["scene"] == scene):
+                ax.scatter(r["bytes"] / r["surfels"], r[metric], color=f"C{k}", s=20)
+                ax.annotate(r["option"].replace("--", ""), (r["bytes"] / r["surfels"], r[metric]), fontsize=6)
+        ax.set_xlabel("block bytes per surfel")
+        ax.set_ylabel(label)
+        if metric == "rms":
+            ax.set_yscale("log")
+    axes[0].set_title("Model size against image error")
+    axes[1].set_title("Model size against geometric error")
+    fig.tight_layout()
+    fig.savefig(os.path.join(REPORT, "model_size.png"), dpi=110)
+
+
 def kernel_chart(sweep):
     import matplotlib
     matplotlib.use("Agg")
@@ -302,7 +357,7 @@ def main():
     width, height = (int(v) for v in args.size.split("x"))
     os.makedirs(REPORT, exist_ok=True)
     rng = np.random.default_rng(1)
-    rows, sweep = [], []
+    rows, sweep, model = [], [], []
     wanted = set(args.scenes.split(",")) if args.scenes else None
     with tempfile.TemporaryDirectory() as tmp:
         for name, (surfaces, camera) in scenes().items():
@@ -324,6 +379,8 @@ def main():
                 images.append((mode, img))
                 print(f"{name} {mode}: {ms:.1f} ms, PSNR {psnr:.2f}, SSIM {ssim:.3f}, FLIP {fl:.4f}", file=sys.stderr)
             montage(name, ref, images)
+            if name in GEOMETRY:
+                model.extend(quantization_sweep(name, ply, camera, ref, args.size, tmp))
             for k in KERNEL_SCALES:
                 img, ms, splats = render(tileset, "ewa-pixel", camera, args.size, 1, os.path.join(tmp, "frame.png"), k)
                 psnr, ssim, fl = metrics(ref, img)
@@ -335,6 +392,12 @@ def main():
         w.writerows(rows + sweep)
     chart(rows)
     kernel_chart(sweep)
+    if model:
+        model_chart(model)
+        with open(os.path.join(REPORT, "model.csv"), "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(model[0].keys()))
+            w.writeheader()
+            w.writerows(model)
     lines = [f"Scenes at {args.size}, reference 16x16 ray-cast; time = median of {args.repeat} (GPU), one run (CPU).", "",
              "| scene | mode | splats | ms | PSNR dB | SSIM | FLIP |", "|---|---|---:|---:|---:|---:|---:|"]
     for r in rows:
@@ -350,6 +413,13 @@ def main():
         sel = [r for r in sweep if r["kernel"] == k]
         lines.append(f"| {k} | {np.mean([r['psnr'] for r in sel]):.2f} | {np.mean([r['ssim'] for r in sel]):.3f} | "
                      f"{np.mean([r['flip'] for r in sel]):.4f} | {max(r['flip'] for r in sel):.4f} |")
+    if model:
+        lines += ["", "Model sweep (one option changed from the defaults; a resampled level rendered with ewa-pixel):", "",
+                  "| scene | option | level | blocks bytes (all levels) | bytes/surfel | RMS distance (level) | normal RMS deg | FLIP (level) |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|"]
+        for r in model:
+            lines.append(f"| {r['scene']} | {r['option']} | {r['level']} | {r['bytes']} | {r['bytes'] / r['surfels']:.2f} | "
+                         f"{r['rms']:.2e} | {r['normal_deg']:.2f} | {r['flip']:.4f} |")
     text = "\n".join(lines) + "\n"
     with open(os.path.join(REPORT, "accuracy.md"), "w") as fh:
         fh.write(text)

@@ -94,7 +94,7 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         spacing[i] = spacingRule(mine, params.fallbackSpacing);
         nodes[i]->h = spacing[i].h;
         nodes[i]->radii.clear();
-        if (spacing[i].irregular) {
+        if (spacing[i].irregular && params.radii) {
             nodes[i]->radii.resize(n);
             for (size_t s = 0; s < n; ++s)
                 nodes[i]->radii[s] = std::clamp(dk[offset + s], spacing[i].minRadius, spacing[i].h);

@@ -44,6 +44,7 @@ struct LevelParams {
     int weightK = 24;          // neighbours fetched for the weight sum
     double cutoff = 1.0;       // c of the renderer's kernel cutoff y'y <= 2c
     double kernelScale = 1.0;  // k of the renderer's kernel V^r = (k r)^2 I
+    bool radii = true;         // per-surfel radii where a node's sampling is irregular
     double fallbackSpacing = 0;  // h of a node with no neighbours at all: the level's cell size
     bool weights = true;
     int threads = 1;

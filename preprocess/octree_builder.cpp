@@ -98,6 +98,7 @@ private:
         p.weightK = opt_.weightK;
         p.cutoff = opt_.cutoff;
         p.kernelScale = opt_.kernelScale;
+        p.radii = opt_.radii;
         p.fallbackSpacing = edge(level) / opt_.grid;
         p.weights = opt_.weights;
         p.threads = threads;
@@ -441,6 +442,7 @@ Status Builder::emit(BuiltNode& node) {
     block.radii = node.level.radii;
     BlockCodecOptions codec;
     codec.positionBits = bits;
+    codec.normalBits = opt_.normalBits;
     codec.colorBits = stats_.colorBits ? stats_.colorBits : 8;
     auto blob = [&] {
         ScopedTimer t(stepNs_[kStepEncode]);
@@ -505,7 +507,7 @@ Result<BuildSummary> Builder::run() {
     info.bounds = stats_.bounds;
     info.colorBits = stats_.colorBits;
     info.attributes.push_back({"position", "uint32", 3, 0});
-    info.attributes.push_back({"normal", "float32", 3, BlockCodecOptions{}.normalBits});
+    info.attributes.push_back({"normal", "float32", 3, opt_.normalBits});
     if (stats_.colorBits) info.attributes.push_back({"color", stats_.colorBits == 8 ? "uint8" : "uint16", 3, 0});
     if (opt_.weights) info.attributes.push_back({"weight", "float32", 1, BlockCodecOptions{}.weightBits});
     info.attributes.push_back({"radius", "float32", 1, BlockCodecOptions{}.radiusBits});  // only in nodes flagged kFlagHasRadius

@@ -29,6 +29,8 @@ struct BuildOptions {
     double kernelScale = kDefaultKernelScale;  // k of V^r = (k h)^2 I the weights assume
     double positionFraction = 8;        // resampled levels: quantization step = cell size / this
     bool weights = true;                // store analytic per-surfel normalization weights
+    bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
+    int normalBits = 10;                // Draco quantization bits per normal component
     bool progress = true;
 };
 

@@ -32,6 +32,8 @@ in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set.
   --normal-k K            neighbours for normal estimation (default 16)
   --spacing-k K           k of the k-th-neighbour spacing h (default 8)
   --position-fraction F   resampled levels: quantization step = cell / F (default 8)
+  --normal-bits N         Draco quantization bits per normal component (default 10)
+  --no-radius             no per-surfel radius, even where a node's sampling is irregular
   --kernel-scale K        reconstruction kernel V^r = (K h)^2 I the weights assume
                           (default 0.5, measured: see bench/BENCHMARKS.md)
   --weights MODE          analytic (default), capture (rendered on Vulkan, Ren 2002
@@ -120,6 +122,11 @@ int main(int argc, char** argv) {
         } else if (a == "--kernel-scale") {
             if (!number(&d, 0.05, 10)) return usageError("--kernel-scale needs a value in [0.05, 10]");
             opt.kernelScale = d;
+        } else if (a == "--normal-bits") {
+            if (!number(&d, 4, 16)) return usageError("--normal-bits needs a value in [4, 16]");
+            opt.normalBits = int(d);
+        } else if (a == "--no-radius") {
+            opt.radii = false;
         } else if (a == "--spacing-k") {
             if (!number(&d, 1, 64)) return usageError("--spacing-k needs a value in [1, 64]");
             opt.spacingK = int(d);
