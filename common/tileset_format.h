@@ -26,7 +26,7 @@ inline constexpr uint32_t kDefaultPageDepth = 5;
 // Default k of the reconstruction kernel V^r = (k h)^2 I, h the node spacing
 // (P95 of the 8th-neighbour distance, about 1.5-2 sampling steps). Measured
 // by bench/accuracy_bench.py: mean FLIP against exact references falls from
-// 0.36 at k = 1 to 0.22 at k = 0.5; at 0.4 the first holes open in the
+// 0.34 at k = 1 to 0.21 at k = 0.5; at 0.4 the first holes open in the
 // scanned default scene.
 inline constexpr double kDefaultKernelScale = 0.5;
 // Default visibility offset z_t as a multiple of a splat's footprint (k h when
