@@ -1,6 +1,11 @@
 #!/usr/bin/env python3
 """Speed against accuracy: every renderer mode against exact references.
 
+Meshes: the shared bunny, horse and igea, their vertices built as surfels
+(--vertices-only), drawn grey (--color 0.8) with Lambert shading, against the
+triangle mesh rasterized with 4 x 4 samples per pixel and the renderer's own
+Lambert headlight on the same grey (surfcast-mesh-reference).
+
 Synthetic scenes with exact ground truth: a CPU ray caster (numpy) renders
 each scene's analytic surfaces with 16 x 16 stratified samples per pixel and
 band-limited textures (square waves cut after the 7th harmonic), so the
@@ -34,11 +39,18 @@ from PIL import Image
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DATA = os.environ.get("SURFCAST_DATA_DIR", os.path.join(ROOT, "..", "shared", "data"))
+# The shared scanned meshes: their vertices as surfels against the mesh itself
+# (surfcast-mesh-reference: 4 x 4 samples per pixel, the renderer's Lambert).
+MESHES = ["bunny", "horse", "igea"]
 BIN = os.path.join(ROOT, "build", "bin")
 REPORT = os.path.join(ROOT, "bench", "report")
 MODES = ["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel", "cpu-reference"]
 # The reconstruction kernel sweep (ewa-pixel): V^r = (k h)^2 I.
 KERNEL_SCALES = [0.4, 0.5, 0.6, 0.7, 0.85, 1.0]
+# The low-pass filter sweep (ewa-pixel): V^h = v I, pixels^2. A box-filtered
+# (supersampled) reference pixel corresponds to a variance of about 1/12.
+LOWPASS = [0.0, 0.1, 0.25, 0.5, 1.0]
 # The model sweep: surfcast-build options against bytes and error, one at a
 # time from the defaults (--position-fraction 8, --normal-bits 10, radii on).
 QUANTIZATION = ([("position-fraction", f) for f in (1, 2, 4, 8, 16)] + [("normal-bits", n) for n in (6, 8, 10, 12)] +
@@ -235,10 +247,12 @@ def run(args):
     return subprocess.run(args, check=True, capture_output=True, text=True).stdout
 
 
-def render(tileset, mode, camera, size, repeat, png, kernel=None):
+def render(tileset, mode, camera, size, repeat, png, kernel=None, shading="unlit", colour=None, lowpass=None):
     extra = ["--kernel-scale", str(kernel)] if kernel else []
+    extra += ["--lowpass", str(lowpass)] if lowpass is not None else []
+    extra += ["--color", colour] if colour else []
     out = run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, f"--camera={camera}", "--size", size, "--mode",
-               mode, "--shading", "unlit", "--background", "1,1,1", "--repeat", str(repeat), "--out", png, *extra])
+               mode, "--shading", shading, "--background", "1,1,1", "--repeat", str(repeat), "--out", png, *extra])
     line = json.loads(out.strip().splitlines()[-1])
     ms = line["cpu_ms"] if mode == "cpu-reference" else line["gpu_ms"]["total"]
     img = np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
@@ -305,6 +319,43 @@ def quantization_sweep(name, ply, camera, ref, size, tmp):
     return out
 
 
+def mesh_scene(mesh, size, repeat, tmp):
+    src = os.path.join(DATA, mesh + ".ply")
+    tileset = os.path.join(tmp, "mesh-" + mesh)
+    run([os.path.join(BIN, "surfcast-build"), "-q", "--vertices-only", src, "-o", tileset])
+    info = json.load(open(os.path.join(tileset, "tileset.json")))
+    lo, hi = np.array(info["bounds"]["min"]), np.array(info["bounds"]["max"])
+    centre, diag = (lo + hi) / 2, np.linalg.norm(hi - lo)
+    d = np.array([0.3, 0.35, 1.0])
+    d /= np.linalg.norm(d)
+    eye = centre + d * 1.4 * diag
+    camera = ",".join(f"{v:.9g}" for v in [*eye, *centre]) + ",0,1,0,40"
+    ref_png = os.path.join(tmp, "mesh-ref.png")
+    run([os.path.join(BIN, "surfcast-mesh-reference"), src, f"--camera={camera}", "--size", size, "--out", ref_png])
+    ref = np.asarray(Image.open(ref_png).convert("RGB")).astype(np.float64) / 255
+    out, images = [], []
+    for mode in MODES:
+        img, ms, splats = render(tileset, mode, camera, size, 1 if mode == "cpu-reference" else repeat,
+                                 os.path.join(tmp, "frame.png"), shading="lambert", colour="0.8,0.8,0.8")
+        psnr, ssim, fl = metrics(ref, img)
+        out.append({"scene": "mesh-" + mesh, "mode": mode, "kernel": "", "splats": splats, "ms": ms, "psnr": psnr,
+                    "ssim": ssim, "flip": fl})
+        images.append((mode, img))
+        print(f"mesh-{mesh} {mode}: {ms:.1f} ms, PSNR {psnr:.2f}, FLIP {fl:.4f}", file=sys.stderr)
+    montage("mesh-" + mesh, ref, images)
+    return out, lowpass_sweep("mesh-" + mesh, tileset, camera, ref, size, tmp, shading="lambert", colour="0.8,0.8,0.8")
+
+
+def lowpass_sweep(name, tileset, camera, ref, size, tmp, shading="unlit", colour=None):
+    out = []
+    for v in LOWPASS:
+        img, ms, splats = render(tileset, "ewa-pixel", camera, size, 1, os.path.join(tmp, "lp.png"), shading=shading,
+                                 colour=colour, lowpass=v)
+        psnr, ssim, fl = metrics(ref, img)
+        out.append({"scene": name, "lowpass": v, "psnr": psnr, "ssim": ssim, "flip": fl})
+    return out
+
+
 def render_level(tileset, camera, size, level, png):
     run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, f"--camera={camera}", "--size", size, "--level",
          str(level), "--shading", "unlit", "--background", "1,1,1", "--out", png])
@@ -357,7 +408,7 @@ def main():
     width, height = (int(v) for v in args.size.split("x"))
     os.makedirs(REPORT, exist_ok=True)
     rng = np.random.default_rng(1)
-    rows, sweep, model = [], [], []
+    rows, sweep, model, lowpass = [], [], [], []
     wanted = set(args.scenes.split(",")) if args.scenes else None
     with tempfile.TemporaryDirectory() as tmp:
         for name, (surfaces, camera) in scenes().items():
@@ -386,12 +437,18 @@ def main():
                 psnr, ssim, fl = metrics(ref, img)
                 sweep.append({"scene": name, "mode": "ewa-pixel", "kernel": k, "splats": splats, "ms": ms, "psnr": psnr,
                               "ssim": ssim, "flip": fl})
+            lowpass.extend(lowpass_sweep(name, tileset, camera, ref, args.size, tmp))
+        for mesh in MESHES if not wanted else [m for m in MESHES if "mesh-" + m in wanted]:
+            mesh_rows, mesh_lowpass = mesh_scene(mesh, args.size, args.repeat, tmp)
+            rows.extend(mesh_rows)
+            lowpass.extend(mesh_lowpass)
     with open(os.path.join(REPORT, "accuracy.csv"), "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         w.writeheader()
         w.writerows(rows + sweep)
     chart(rows)
-    kernel_chart(sweep)
+    if sweep:
+        kernel_chart(sweep)
     if model:
         model_chart(model)
         with open(os.path.join(REPORT, "model.csv"), "w", newline="") as fh:
@@ -407,12 +464,22 @@ def main():
         sel = [r for r in rows if r["mode"] == mode]
         lines.append(f"| {mode} | {np.median([r['ms'] for r in sel]):.1f} | {np.mean([r['psnr'] for r in sel]):.2f} | "
                      f"{np.mean([r['ssim'] for r in sel]):.3f} | {np.mean([r['flip'] for r in sel]):.4f} |")
-    lines += ["", "Kernel scale sweep (ewa-pixel, V^r = (k h)^2 I), mean over scenes:", "",
-              "| k | mean PSNR dB | mean SSIM | mean FLIP | worst scene FLIP |", "|---:|---:|---:|---:|---:|"]
-    for k in KERNEL_SCALES:
+    if sweep:
+        lines += ["", "Kernel scale sweep (ewa-pixel, V^r = (k h)^2 I), mean over the synthetic scenes:", "",
+                  "| k | mean PSNR dB | mean SSIM | mean FLIP | worst scene FLIP |", "|---:|---:|---:|---:|---:|"]
+    for k in KERNEL_SCALES if sweep else []:
         sel = [r for r in sweep if r["kernel"] == k]
         lines.append(f"| {k} | {np.mean([r['psnr'] for r in sel]):.2f} | {np.mean([r['ssim'] for r in sel]):.3f} | "
                      f"{np.mean([r['flip'] for r in sel]):.4f} | {max(r['flip'] for r in sel):.4f} |")
+    if lowpass:
+        scenes_lp = sorted({r["scene"] for r in lowpass})
+        lines += ["", "Low-pass filter sweep (ewa-pixel, V^h = v I px^2), FLIP per scene:", "",
+                  "| scene | " + " | ".join(f"v = {v}" for v in LOWPASS) + " |", "|---|" + "---:|" * len(LOWPASS)]
+        for sc in scenes_lp:
+            vals = {r["lowpass"]: r["flip"] for r in lowpass if r["scene"] == sc}
+            lines.append(f"| {sc} | " + " | ".join(f"{vals[v]:.4f}" for v in LOWPASS) + " |")
+        lines.append("| mean | " + " | ".join(f"{np.mean([r['flip'] for r in lowpass if r['lowpass'] == v]):.4f}"
+                                                for v in LOWPASS) + " |")
     if model:
         lines += ["", "Model sweep (one option changed from the defaults; a resampled level rendered with ewa-pixel):", "",
                   "| scene | option | level | blocks bytes (all levels) | bytes/surfel | RMS distance (level) | normal RMS deg | FLIP (level) |",

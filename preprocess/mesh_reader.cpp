@@ -174,17 +174,33 @@ Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, con
     return std::unique_ptr<PointReader>(new MeshReader(std::move(*mesh), path, sampling));
 }
 
-Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
-    auto mesh = loadMesh(path);
-    if (!mesh) return mesh.status();
-    const TriMesh& m = (*mesh)->mesh;
+namespace {
+MeshVertexNormals vertexNormals(const LoadedMesh& loaded) {
+    const TriMesh& m = loaded.mesh;
     MeshVertexNormals out;
     for (auto v : m.vertices()) {
         auto p = m.point(v);
-        auto n = m.normal(v) * (*mesh)->normalSign;
+        auto n = m.normal(v) * loaded.normalSign;
         out.positions.push_back({p[0], p[1], p[2]});
         out.normals.push_back(Vec3f{float(n[0]), float(n[1]), float(n[2])});
     }
+    return out;
+}
+}  // namespace
+
+Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
+    auto mesh = loadMesh(path);
+    if (!mesh) return mesh.status();
+    return vertexNormals(**mesh);
+}
+
+Result<MeshTriangles> readMeshTriangles(const std::string& path) {
+    auto mesh = loadMesh(path);
+    if (!mesh) return mesh.status();
+    const TriMesh& m = (*mesh)->mesh;
+    MeshTriangles out{vertexNormals(**mesh), {}};
+    for (auto f : m.faces())
+        for (auto v : m.fv_range(f)) out.triangles.push_back(uint32_t(v.idx()));
     return out;
 }
 

@@ -28,6 +28,14 @@ struct MeshVertexNormals {
 };
 Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path);
 
+// The whole triangle mesh (vertices with outward normals as above, and
+// triangles as vertex index triples), for reference renders of the mesh.
+struct MeshTriangles {
+    MeshVertexNormals vertices;
+    std::vector<uint32_t> triangles;  // 3 per triangle
+};
+Result<MeshTriangles> readMeshTriangles(const std::string& path);
+
 // True for file names the mesh path reads (.obj .off .stl; PLY decides by content).
 bool isMeshExtension(const std::string& path);
 

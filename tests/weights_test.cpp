@@ -148,11 +148,12 @@ TEST_F(Weights, PerSurfelRenderStaysWithinToleranceOfPerPixel) {
         ASSERT_GT(in.n, size_t(W * H / 4));
         ASSERT_GT(ed.n, size_t(500));
         // bench/BENCHMARKS.md ("Normalization weights"), the jittered plane
-        // magnified, interior, at the default k = 0.5: mean 0.08, P99 0.26
-        // for both methods (at k = 1: 0.03 and 0.10; narrow kernels make the
-        // sum of neighbours vary more between samples).
-        EXPECT_LT(in.mean, 0.12) << set;
-        EXPECT_LT(in.p99, 0.35) << set;
+        // magnified, interior, at the defaults (k = 0.5, low-pass 0.1 px^2):
+        // measured here mean 0.095-0.100, P99 0.30-0.32 (at k = 1 and 1 px^2:
+        // 0.03 and 0.10; narrow kernels make the sum of neighbours vary more
+        // between samples). Bounds: 1.4x the measured.
+        EXPECT_LT(in.mean, 0.14) << set;
+        EXPECT_LT(in.p99, 0.45) << set;
     }
     // Edge weights (captured only) bring the boundary band closer to per-pixel
     // normalization: measured P99 0.27 -> 0.13 on the bench's plane.

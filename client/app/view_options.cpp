@@ -32,7 +32,8 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --cutoff C            splats end at y'y = 2C (default 1)
   --zt Z                visibility depth offset z_t, a multiple of the splat's footprint
                         (h when magnified; default 0.5)
-  --lowpass V           low-pass filter variance in pixels^2 (default 1)
+  --lowpass V           low-pass filter variance in pixels^2 (default 0.1, measured;
+                        Zwicker's V^h = I is 1)
   --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
   --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)
   --background R,G,B    background colour in [0,1] (default 1,1,1)

@@ -1,0 +1,123 @@
+// surfcast-mesh-reference: the reference image of a triangle mesh for
+// bench/accuracy_bench.py. A z-buffer rasterizer with 4 x 4 samples per pixel
+// (16x supersampling), perspective-correct vertex normals, and the renderer's
+// own shading (shadePixel: headlight Lambert on grey 0.8, white background),
+// with the camera model of surfcast-view (common/camera.h).
+// Usage: surfcast-mesh-reference MESH --camera ex,..,fov --size WxH --out PNG
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "camera.h"
+#include "image.h"
+#include "mesh_reader.h"
+#include "render_settings.h"
+
+using namespace surfcast;
+
+namespace {
+constexpr int kSamples = 4;  // per axis
+}
+
+int main(int argc, char** argv) {
+    std::string mesh, cameraText, out;
+    int W = 320, H = 240;
+    for (int i = 1; i < argc; ++i) {
+        std::string a = argv[i];
+        if (a.rfind("--camera=", 0) == 0) cameraText = a.substr(9);
+        else if (a == "--camera" && i + 1 < argc) cameraText = argv[++i];
+        else if (a == "--size" && i + 1 < argc) std::sscanf(argv[++i], "%dx%d", &W, &H);
+        else if (a == "--out" && i + 1 < argc) out = argv[++i];
+        else mesh = a;
+    }
+    auto camera = parseCamera(cameraText);
+    if (mesh.empty() || out.empty() || !camera || W < 1 || H < 1) {
+        std::fprintf(stderr, "usage: surfcast-mesh-reference MESH --camera ex,ey,ez,tx,ty,tz,ux,uy,uz,fov --size WxH --out PNG\n");
+        return 2;
+    }
+    auto m = readMeshTriangles(mesh);
+    if (!m) {
+        std::fprintf(stderr, "surfcast-mesh-reference: %s\n", m.status().message().c_str());
+        return 1;
+    }
+    Box3d bounds;
+    for (const Vec3d& p : m->vertices.positions) bounds.extend(p);
+    const Vec3d origin = (bounds.min + bounds.max) * 0.5;
+    const int SW = W * kSamples, SH = H * kSamples;
+    auto view = makeViewTransform(*camera, origin, SW, SH);
+    if (!view) return 1;
+    std::vector<Vec3f> cam(m->vertices.positions.size()), nrm(cam.size());
+    for (size_t i = 0; i < cam.size(); ++i) {
+        cam[i] = view->apply(cast<float>(m->vertices.positions[i] - origin));
+        nrm[i] = view->rotate(m->vertices.normals[i]);
+    }
+    std::vector<float> depth(size_t(SW) * SH, INFINITY);
+    std::vector<Vec3f> normal(size_t(SW) * SH);
+    const float near = 1e-6f;
+    for (size_t t = 0; t + 2 < m->triangles.size(); t += 3) {
+        const uint32_t idx[3] = {m->triangles[t], m->triangles[t + 1], m->triangles[t + 2]};
+        float sx[3], sy[3], iz[3];
+        bool ok = true;
+        for (int k = 0; k < 3; ++k) {
+            const Vec3f& o = cam[idx[k]];
+            ok = ok && o.z > near;
+            sx[k] = 0.5f * SW + view->eta * o.x / o.z;
+            sy[k] = 0.5f * SH - view->eta * o.y / o.z;
+            iz[k] = 1.f / o.z;
+        }
+        if (!ok) continue;  // the reference views keep meshes in front of the camera
+        float area = (sx[1] - sx[0]) * (sy[2] - sy[0]) - (sx[2] - sx[0]) * (sy[1] - sy[0]);
+        if (!(std::fabs(area) > 0)) continue;
+        int x0 = std::max(0, int(std::floor(std::min({sx[0], sx[1], sx[2]}))));
+        int x1 = std::min(SW - 1, int(std::ceil(std::max({sx[0], sx[1], sx[2]}))));
+        int y0 = std::max(0, int(std::floor(std::min({sy[0], sy[1], sy[2]}))));
+        int y1 = std::min(SH - 1, int(std::ceil(std::max({sy[0], sy[1], sy[2]}))));
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+                float px = x + 0.5f, py = y + 0.5f;
+                float w0 = ((sx[1] - px) * (sy[2] - py) - (sx[2] - px) * (sy[1] - py)) / area;
+                float w1 = ((sx[2] - px) * (sy[0] - py) - (sx[0] - px) * (sy[2] - py)) / area;
+                float w2 = 1 - w0 - w1;
+                if (w0 < 0 || w1 < 0 || w2 < 0) continue;
+                float invz = w0 * iz[0] + w1 * iz[1] + w2 * iz[2];
+                float z = 1 / invz;
+                size_t i = size_t(y) * SW + x;
+                if (!(z < depth[i])) continue;
+                depth[i] = z;
+                // Perspective-correct: interpolate n/z, then multiply by z.
+                Vec3f n = (nrm[idx[0]] * (w0 * iz[0]) + nrm[idx[1]] * (w1 * iz[1]) + nrm[idx[2]] * (w2 * iz[2])) * z;
+                normal[i] = n;
+            }
+    }
+    const Vec3f grey{0.8f, 0.8f, 0.8f}, background{1, 1, 1};
+    Image image{W, H, std::vector<uint8_t>(size_t(W) * H * 4)};
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            Vec3f sum{};
+            int hits = 0;
+            for (int sy = 0; sy < kSamples; ++sy)
+                for (int sx = 0; sx < kSamples; ++sx) {
+                    int X = x * kSamples + sx, Y = y * kSamples + sy;
+                    size_t i = size_t(Y) * SW + X;
+                    if (std::isfinite(depth[i])) {
+                        Vec3f ray{(X + 0.5f - 0.5f * SW) / view->eta, -(Y + 0.5f - 0.5f * SH) / view->eta, 1.f};
+                        sum += shadePixel(Shading::Lambert, grey, normal[i], ray);
+                        ++hits;
+                    } else {
+                        sum += background;
+                    }
+                }
+            sum = sum * (1.f / (kSamples * kSamples));
+            uint8_t* p = &image.rgba[4 * (size_t(y) * W + x)];
+            for (int c = 0; c < 3; ++c) p[c] = uint8_t(std::lround(std::clamp(sum[c], 0.f, 1.f) * 255));
+            p[3] = hits ? 255 : 0;
+        }
+    if (Status s = writePng(image, out); !s) {
+        std::fprintf(stderr, "surfcast-mesh-reference: %s\n", s.message().c_str());
+        return 1;
+    }
+    return 0;
+}
