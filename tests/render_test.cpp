@@ -6,8 +6,8 @@
 #include <cmath>
 #include <random>
 
-#include "context.h"
 #include "cpu_reference.h"
+#include "gpu_fixture.h"
 #include "splat_renderer.h"
 #include "surfel_set.h"
 
@@ -73,43 +73,18 @@ void dump(const Image& img, const std::string& name) {
     if (const char* dir = std::getenv("SURFCAST_TEST_OUT")) (void)writePng(img, std::string(dir) + "/" + name + ".png");
 }
 
-class RenderTest : public ::testing::Test {
+class RenderTest : public test::GpuTest {
 protected:
-    static void SetUpTestSuite() {
-        auto ctx = gpu::createContext({"", true, {}, false});
-        ASSERT_TRUE(ctx) << ctx.status().message();
-        context_ = std::move(*ctx);
-    }
-    static void TearDownTestSuite() { gpu::destroyContext(context_); }
-    void SetUp() override { ASSERT_TRUE(context_); }
-    void TearDown() override {
-        if (context_) {
-            EXPECT_EQ(context_->validationErrors.load(), 0) << "Vulkan validation errors (see stderr)";
-        }
-    }
-
     Image gpuRender(const SurfelSet& set, const Camera& camera, RenderSettings settings,
                     RendererOptions options = {}, GpuFrameStats* stats = nullptr) {
-        auto renderer = SplatRenderer::create(*context_, options);
-        EXPECT_TRUE(renderer) << renderer.status().message();
-        if (!renderer) return {};
-        Status s = renderer.value()->upload(set);
-        EXPECT_TRUE(s) << s.message();
-        auto view = makeViewTransform(camera, set.origin, kW, kH);
-        EXPECT_TRUE(view);
-        auto img = renderer.value()->render(*view, settings, stats);
-        EXPECT_TRUE(img) << img.status().message();
-        return img ? *img : Image{};
+        return GpuTest::gpuRender(set, camera, kW, kH, settings, options, stats);
     }
     Image cpuRender(const SurfelSet& set, const Camera& camera, const RenderSettings& settings) {
         auto view = makeViewTransform(camera, set.origin, kW, kH);
         EXPECT_TRUE(view);
         return renderCpuReference(set, *view, settings);
     }
-
-    static std::unique_ptr<gpu::Context> context_;
 };
-std::unique_ptr<gpu::Context> RenderTest::context_;
 
 // A checkerboard of 8x8-sample squares on a 160 x 160 plane.
 SurfelSet checkerboard(Vec3d origin) {

@@ -8,44 +8,19 @@
 #include <cmath>
 #include <random>
 
-#include "context.h"
-#include "cpu_reference.h"
-#include "splat_renderer.h"
-#include "surfel_set.h"
+#include "gpu_fixture.h"
 
 namespace surfcast {
 namespace {
 
 constexpr int kW = 256, kH = 192;
 
-class Stability : public ::testing::Test {
+class Stability : public test::GpuTest {
 protected:
-    static void SetUpTestSuite() {
-        auto ctx = gpu::createContext({"", true, {}, false});
-        ASSERT_TRUE(ctx) << ctx.status().message();
-        context_ = std::move(*ctx);
-    }
-    static void TearDownTestSuite() { gpu::destroyContext(context_); }
-    void SetUp() override { ASSERT_TRUE(context_); }
-    void TearDown() override {
-        if (context_) {
-            EXPECT_EQ(context_->validationErrors.load(), 0) << "Vulkan validation errors (see stderr)";
-        }
-    }
     Image render(const SurfelSet& set, const Camera& camera, RenderSettings settings = {}, RendererOptions options = {}) {
-        auto renderer = SplatRenderer::create(*context_, options);
-        EXPECT_TRUE(renderer) << renderer.status().message();
-        if (!renderer) return {};
-        EXPECT_TRUE(renderer.value()->upload(set));
-        auto view = makeViewTransform(camera, set.origin, kW, kH);
-        EXPECT_TRUE(view);
-        auto img = renderer.value()->render(*view, settings);
-        EXPECT_TRUE(img) << img.status().message();
-        return img ? *img : Image{};
+        return gpuRender(set, camera, kW, kH, settings, options);
     }
-    static std::unique_ptr<gpu::Context> context_;
 };
-std::unique_ptr<gpu::Context> Stability::context_;
 
 // Surfels on a jittered grid over [x0, x1] x [y0, y1] of the plane through
 // `centre` spanned by u, v; r = 1.5 spacing (as the preprocessor's h).
