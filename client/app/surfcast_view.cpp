@@ -10,6 +10,21 @@ int main(int argc, char** argv) {
     surfcast::ViewOptions options;
     int exitCode = 0;
     if (!surfcast::parseViewOptions(argc, argv, &options, &exitCode)) return exitCode;
+    if (options.lod) {
+        if (!options.headless || options.settings.mode == surfcast::RenderMode::CpuReference) {
+            std::fprintf(stderr, "surfcast-view: --lod renders with --headless and a GPU mode\n");
+            return 2;
+        }
+        auto reader = surfcast::TilesetReader::open(options.set);
+        if (!reader) {
+            std::fprintf(stderr, "surfcast-view: %s\n", reader.status().message().c_str());
+            return 1;
+        }
+        if (!options.kernelScaleGiven) options.settings.kernelScale = float(reader->info().kernelScale);
+        if (!options.shadingGiven)
+            options.settings.shading = reader->info().colorBits ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
+        return surfcast::runHeadlessLod(options);
+    }
     auto set = surfcast::loadSurfelSet(options.set, options.level);
     if (!set) {
         std::fprintf(stderr, "surfcast-view: %s\n", set.status().message().c_str());

@@ -46,6 +46,9 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --validation          enable the Khronos validation layer (also SURFCAST_VALIDATION=1);
                         any validation error makes the exit status 1
   --repeat N            headless: render each frame N times, report the median GPU times
+  --lod PX              headless: level of detail per frame, refining nodes while their
+                        projected spacing exceeds PX pixels (frustum and cone culling)
+  --no-culling          with --lod: draw what culling would skip (for comparisons)
   --frames N            window: close after N frames
   --screenshot PATH     window: write the last frame to PATH on exit
   -h, --help            this text
@@ -210,6 +213,12 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             o->device = v;
         } else if (a == "--validation") {
             o->validation = true;
+        } else if (a == "--lod") {
+            float px = 0;
+            if (!positive(&px, "--lod")) return false;
+            o->lod = px;
+        } else if (a == "--no-culling") {
+            o->culling = false;
         } else if (a == "--repeat") {
             if (!count(&o->repeat, "--repeat")) return false;
         } else if (a == "--frames") {

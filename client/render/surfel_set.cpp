@@ -103,6 +103,31 @@ std::vector<uint32_t> sortMorton(SurfelSet& set) {
     return order;
 }
 
+SurfelSet emptySurfelSet(const TilesetReader& reader) {
+    const TilesetInfo& info = reader.info();
+    SurfelSet set;
+    set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
+    set.hasWeights = info.weights != "none";
+    set.hasColor = info.colorBits > 0;
+    set.kernelScale = info.kernelScale;
+    return set;
+}
+
+void appendNode(SurfelSet& set, const TilesetReader& reader, const NodeRecord& node, const BlockData& b) {
+    const int colorBits = reader.info().colorBits;
+    const float colorScale = colorBits > 0 ? 1.f / float((1u << colorBits) - 1) : 0.f;
+    for (size_t i = 0; i < b.size(); ++i) {
+        Vec3f n = b.normals.empty() ? Vec3f{0, 0, 1} : Vec3f{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]};
+        Vec3f c = b.colors.empty() ? Vec3f{0.8f, 0.8f, 0.8f}
+                                   : Vec3f{b.colors[3 * i] * colorScale, b.colors[3 * i + 1] * colorScale,
+                                           b.colors[3 * i + 2] * colorScale};
+        float r = b.radii.empty() ? node.spacing : b.radii[i];
+        float w = b.weights.empty() ? 1.f : b.weights[i];
+        uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
+        addSurfel(set, reader.position(node, b, i), n, r, c, w, edge);
+    }
+}
+
 Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice) {
     auto reader = TilesetReader::open(dir);
     if (!reader) return reader.status();
@@ -110,29 +135,14 @@ Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choic
     if (choice.level >= info.levels)
         return Status::error(dir + ": level " + std::to_string(choice.level) + " does not exist (the set has levels 0.." +
                              std::to_string(info.levels - 1) + ")");
-    SurfelSet set;
-    set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
-    set.hasWeights = info.weights != "none";
-    set.hasColor = info.colorBits > 0;
-    set.kernelScale = info.kernelScale;
-    const float colorScale = info.colorBits > 0 ? 1.f / float((1u << info.colorBits) - 1) : 0.f;
+    SurfelSet set = emptySurfelSet(*reader);
     for (const NodeRecord& node : reader->nodes()) {
         bool leaf = node.childMask == 0;
         bool wanted = choice.level < 0 ? leaf : (node.key.level == choice.level || (leaf && node.key.level < choice.level));
         if (!wanted || node.surfelCount == 0) continue;
         auto block = reader->readBlock(node);
         if (!block) return block.status();
-        const BlockData& b = *block;
-        for (size_t i = 0; i < b.size(); ++i) {
-            Vec3f n = b.normals.empty() ? Vec3f{0, 0, 1} : Vec3f{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]};
-            Vec3f c = b.colors.empty() ? Vec3f{0.8f, 0.8f, 0.8f}
-                                       : Vec3f{b.colors[3 * i] * colorScale, b.colors[3 * i + 1] * colorScale,
-                                               b.colors[3 * i + 2] * colorScale};
-            float r = b.radii.empty() ? node.spacing : b.radii[i];
-            float w = b.weights.empty() ? 1.f : b.weights[i];
-            uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
-            addSurfel(set, reader->position(node, b, i), n, r, c, w, edge);
-        }
+        appendNode(set, *reader, node, *block);
     }
     sortMorton(set);
     return set;

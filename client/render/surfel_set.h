@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "gpu_types.h"
+#include "tileset_reader.h"
 #include "tileset_format.h"
 #include "status.h"
 #include "vec3.h"
@@ -29,6 +30,11 @@ struct LevelChoice {
 };
 
 Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice);
+
+// An empty set for a tile set (origin, flags and kernel scale from its
+// tileset.json), and one decoded node's surfels appended to it.
+SurfelSet emptySurfelSet(const TilesetReader& reader);
+void appendNode(SurfelSet& set, const TilesetReader& reader, const NodeRecord& node, const BlockData& block);
 
 // Append one surfel given in world coordinates (origin must be set first).
 // Colour components in [0, 1]. Non-finite input is kept: the renderers guard it.

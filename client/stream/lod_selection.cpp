@@ -1,0 +1,162 @@
+#include "lod_selection.h"
+
+#include <cmath>
+#include <unordered_map>
+
+namespace surfcast {
+
+namespace {
+
+// Splat extent beyond the surfel centres that a node box must grow by before
+// culling: sqrt(2c) k h with c = 1 and k <= 1, plus the low-pass filter's
+// pixel, covered generously by 2 h.
+constexpr double kExtentFactor = 2.0;
+
+struct Frame {
+    Vec3d eye, right, up, forward;
+    double eta, halfW, halfH, near;
+};
+
+Frame frameOf(const Camera& c, int width, int height) {
+    Frame f;
+    f.forward = normalizeOrZero(c.target - c.eye);
+    f.right = normalizeOrZero(cross(f.forward, c.up));
+    f.up = cross(f.right, f.forward);
+    f.eye = c.eye;
+    f.eta = height / (2.0 * std::tan(0.5 * c.fovYDegrees * M_PI / 180.0));
+    f.halfW = 0.5 * width;
+    f.halfH = 0.5 * height;
+    return f;
+}
+
+Vec3d toCamera(const Frame& f, const Vec3d& p) {
+    Vec3d d = p - f.eye;
+    return {dot(d, f.right), dot(d, f.up), dot(d, f.forward)};
+}
+
+// All 8 corners of the box on the outside of one frustum plane.
+bool outsideFrustum(const Frame& f, const Box3d& b) {
+    Vec3d c[8];
+    for (int i = 0; i < 8; ++i)
+        c[i] = toCamera(f, {i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z});
+    auto allOutside = [&](auto&& outside) {
+        for (const Vec3d& p : c)
+            if (!outside(p)) return false;
+        return true;
+    };
+    return allOutside([&](const Vec3d& p) { return p.z <= 0; }) ||
+           allOutside([&](const Vec3d& p) { return f.eta * p.x > f.halfW * p.z; }) ||
+           allOutside([&](const Vec3d& p) { return -f.eta * p.x > f.halfW * p.z; }) ||
+           allOutside([&](const Vec3d& p) { return f.eta * p.y > f.halfH * p.z; }) ||
+           allOutside([&](const Vec3d& p) { return -f.eta * p.y > f.halfH * p.z; });
+}
+
+// Every normal of the cone faces away from the eye seen from every point of
+// the box: the angle between the cone axis and the directions to the eye
+// exceeds 90 degrees plus both half-angles (the box as its bounding sphere).
+bool backfacing(const NodeRecord& n, const Box3d& b, const Vec3d& eye) {
+    if (n.flags & kFlagConeFull || !(n.coneCosHalfAngle > -1)) return false;
+    Vec3d centre = (b.min + b.max) * 0.5;
+    double radius = 0.5 * length(b.max - b.min);
+    Vec3d toEye = eye - centre;
+    double distance = length(toEye);
+    if (distance <= radius) return false;  // the eye is inside the box's sphere
+    double beta = std::asin(radius / distance);
+    double alpha = std::acos(std::fmax(-1.0, std::fmin(1.0, double(n.coneCosHalfAngle))));
+    Vec3d axis = cast<double>(n.coneAxis);
+    double gamma = std::acos(std::fmax(-1.0, std::fmin(1.0, dot(normalizeOrZero(axis), toEye * (1 / distance)))));
+    return gamma > 0.5 * M_PI + alpha + beta;
+}
+
+}  // namespace
+
+LodSelector::LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes) : info_(info), nodes_(std::move(nodes)) {
+    std::unordered_map<NodeKey, int32_t, NodeKeyHash> index;
+    for (size_t i = 0; i < nodes_.size(); ++i) {
+        index[nodes_[i].key] = int32_t(i);
+        if (nodes_[i].key.level == 0) root_ = int32_t(i);
+    }
+    children_.assign(nodes_.size(), {-1, -1, -1, -1, -1, -1, -1, -1});
+    for (size_t i = 0; i < nodes_.size(); ++i)
+        for (int c = 0; c < 8; ++c)
+            if (nodes_[i].childMask & (1u << c)) {
+                auto it = index.find(nodes_[i].key.child(c));
+                if (it != index.end()) children_[i][size_t(c)] = it->second;
+            }
+}
+
+Box3d LodSelector::box(uint32_t i) const {
+    Vec3d lo = nodeMin(info_, nodes_[i].key);
+    double e = nodeEdge(info_, nodes_[i].key.level);
+    return {lo, lo + Vec3d{e, e, e}};
+}
+
+std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, int height, const LodParams& params,
+                                              const std::function<bool(uint32_t)>& resident, LodStats* stats) const {
+    std::vector<SelectedNode> out;
+    LodStats local;
+    LodStats& st = stats ? *stats : local;
+    st = {};
+    if (root_ < 0 || width <= 0 || height <= 0) return out;
+    const Frame f = frameOf(camera, width, height);
+    // Boxes closer than this count as touching the eye: refine them.
+    const double nearDistance = 1e-9 * std::fmax(1.0, info_.rootEdge);
+
+    // Whether node i is drawn (or reached by refinement) at all.
+    auto culled = [&](uint32_t i, Box3d* grown) {
+        Box3d b = box(i);
+        double extent = kExtentFactor * nodes_[i].spacing;
+        *grown = {b.min - Vec3d{extent, extent, extent}, b.max + Vec3d{extent, extent, extent}};
+        if (params.frustumCulling && outsideFrustum(f, *grown)) {
+            ++st.frustumCulled;
+            return true;
+        }
+        if (params.backfaceCulling && backfacing(nodes_[i], *grown, f.eye)) {
+            ++st.backfaceCulled;
+            return true;
+        }
+        return false;
+    };
+    // h times the largest pixels-per-unit over the box's corners.
+    auto projectedSpacing = [&](uint32_t i, const Box3d& b) {
+        double nearest = HUGE_VAL;
+        for (int c = 0; c < 8; ++c)
+            nearest = std::fmin(nearest, toCamera(f, {c & 1 ? b.max.x : b.min.x, c & 2 ? b.max.y : b.min.y,
+                                                      c & 4 ? b.max.z : b.min.z}).z);
+        if (!(nearest > nearDistance)) return HUGE_VAL;  // the box reaches the eye's plane: refine
+        return nodes_[i].spacing * f.eta / nearest;
+    };
+
+    std::vector<uint32_t> stack{uint32_t(root_)};
+    while (!stack.empty()) {
+        uint32_t i = stack.back();
+        stack.pop_back();
+        ++st.visited;
+        Box3d grown;
+        if (culled(i, &grown)) continue;
+        double spacing = projectedSpacing(i, grown);
+        bool wantChildren = spacing > params.targetPixels && nodes_[i].childMask != 0;
+        if (wantChildren) {
+            // Replacement: refine only when every child that will be drawn or
+            // refined (not culled) is resident; else draw this node meanwhile.
+            std::vector<uint32_t> needed;
+            bool ready = true;
+            for (int32_t c : children_[i]) {
+                if (c < 0) continue;
+                Box3d childGrown;
+                if (culled(uint32_t(c), &childGrown)) continue;  // counted here, once
+                needed.push_back(uint32_t(c));
+                ready = ready && resident(uint32_t(c));
+            }
+            if (ready) {
+                for (uint32_t c : needed) stack.push_back(c);
+                continue;
+            }
+            ++st.waiting;
+        }
+        if (resident(i)) out.push_back({i, spacing});
+    }
+    return out;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,59 @@
+// Which nodes of a tile set to draw for a view (Ren et al. 2002, §6.2): a
+// traversal from the root every frame with frustum culling of node boxes
+// (expanded by the splat extent), backface culling by the nodes' visibility
+// cones, and level choice by warping the node's box to the screen: a node is
+// refined while its surfels' projected spacing, h times the largest
+// pixels-per-unit over the box's corners, exceeds the target. Replacement
+// refinement: children are drawn only when every child that is needed is
+// resident, otherwise the node itself, so nothing holes while data streams.
+// Pure CPU, no Vulkan, no I/O: the streaming client and surfcast-view use it.
+#pragma once
+
+#include <array>
+#include <functional>
+#include <vector>
+
+#include "camera.h"
+#include "tileset_format.h"
+
+namespace surfcast {
+
+struct LodParams {
+    double targetPixels = 1.0;  // refine while the projected spacing exceeds this
+    bool frustumCulling = true;
+    bool backfaceCulling = true;
+};
+
+struct LodStats {
+    size_t visited = 0, frustumCulled = 0, backfaceCulled = 0;
+    size_t waiting = 0;  // nodes drawn in place of children that are not resident yet
+};
+
+struct SelectedNode {
+    uint32_t index;            // into the node list
+    double projectedSpacing;   // pixels
+};
+
+class LodSelector {
+public:
+    // `nodes` in any order, one tree rooted at level 0 (readHierarchy's output).
+    LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes);
+
+    const std::vector<NodeRecord>& nodes() const { return nodes_; }
+
+    // Nodes to draw for the camera at width x height pixels. `resident(i)`
+    // says whether node i's surfels can be drawn now (all true for a local set).
+    std::vector<SelectedNode> select(const Camera& camera, int width, int height, const LodParams& params,
+                                     const std::function<bool(uint32_t)>& resident, LodStats* stats = nullptr) const;
+
+    // World box of node i, and its projected spacing for a camera (pixels).
+    Box3d box(uint32_t i) const;
+
+private:
+    TilesetInfo info_;
+    std::vector<NodeRecord> nodes_;
+    std::vector<std::array<int32_t, 8>> children_;  // node index per child slot, -1 if none
+    int32_t root_ = -1;
+};
+
+}  // namespace surfcast
