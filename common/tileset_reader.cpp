@@ -49,15 +49,17 @@ Result<TilesetReader> TilesetReader::open(const std::string& dir) {
     return r;
 }
 
-BlockExpectation TilesetReader::expectation(const NodeRecord& node) const {
+BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& node) {
     BlockExpectation e;
-    e.colorBits = info_.colorBits;
+    e.colorBits = info.colorBits;
     e.normals = true;
-    e.weights = info_.weights != "none";
+    e.weights = info.weights != "none";
     e.radii = (node.flags & kFlagHasRadius) != 0;
     e.edgeWeights = (node.flags & kFlagEdgeWeights) != 0;
     return e;
 }
+
+BlockExpectation TilesetReader::expectation(const NodeRecord& node) const { return blockExpectation(info_, node); }
 
 Result<std::vector<uint8_t>> TilesetReader::readBlockBytes(const NodeRecord& node) const {
     std::vector<uint8_t> bytes(node.blockSize);
@@ -80,10 +82,14 @@ Result<BlockData> TilesetReader::readBlock(const NodeRecord& node) const {
     return block;
 }
 
-Vec3d TilesetReader::position(const NodeRecord& node, const BlockData& block, size_t i) const {
-    double step = nodeEdge(info_, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
+Vec3d surfelPosition(const TilesetInfo& info, const NodeRecord& node, const BlockData& block, size_t i) {
+    double step = nodeEdge(info, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
     Vec3d q{double(block.positions[3 * i]), double(block.positions[3 * i + 1]), double(block.positions[3 * i + 2])};
-    return nodeMin(info_, node.key) + q * step;
+    return nodeMin(info, node.key) + q * step;
+}
+
+Vec3d TilesetReader::position(const NodeRecord& node, const BlockData& block, size_t i) const {
+    return surfelPosition(info_, node, block, i);
 }
 
 Result<std::string> verifyTileset(const std::string& dir) {

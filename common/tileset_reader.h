@@ -34,6 +34,11 @@ private:
     std::shared_ptr<std::FILE> blocks_;
 };
 
+// What a node's block carries, and surfel i's world position, from the set's
+// metadata alone (for readers of blocks fetched elsewhere, e.g. over HTTP).
+BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& node);
+Vec3d surfelPosition(const TilesetInfo& info, const NodeRecord& node, const BlockData& block, size_t i);
+
 // Verify a tile set: every CRC, every block decodes with the declared attributes
 // and count. Returns a summary text on success.
 Result<std::string> verifyTileset(const std::string& dir);

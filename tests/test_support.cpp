@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -70,6 +71,42 @@ std::string readFile(const std::string& path) {
     std::stringstream ss;
     ss << in.rdbuf();
     return ss.str();
+}
+
+bool Child::waitFor(const std::string& needle) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    char buf[1024];
+    while (log.find(needle) == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+        ssize_t n = ::read(err, buf, sizeof buf);
+        if (n <= 0) break;
+        log.append(buf, size_t(n));
+    }
+    return log.find(needle) != std::string::npos;
+}
+
+Child spawn(const std::vector<std::string>& args) {
+    int p[2];
+    EXPECT_EQ(::pipe(p), 0);
+    Child c;
+    c.pid = ::fork();
+    if (c.pid == 0) {
+        ::dup2(p[1], 2);
+        ::close(p[0]);
+        std::vector<char*> argv;
+        for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+        argv.push_back(nullptr);
+        ::execv(argv[0], argv.data());
+        ::_exit(127);
+    }
+    ::close(p[1]);
+    c.err = p[0];
+    return c;
+}
+
+int exitCode(int pid) {
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
 }  // namespace surfcast::test

@@ -36,6 +36,17 @@ struct RunResult {
 };
 RunResult run(const std::vector<std::string>& args);
 
+// A program running beside the test (a server): its stderr is read by waitFor.
+struct Child {
+    int pid = -1;
+    int err = -1;  // read end of its stderr
+    std::string log;
+    // Reads stderr until `needle` shows up (or 10 s pass).
+    bool waitFor(const std::string& needle);
+};
+Child spawn(const std::vector<std::string>& args);
+int exitCode(int pid);  // waits for it
+
 void writeFile(const std::string& path, const std::string& bytes);
 std::string readFile(const std::string& path);
 

@@ -2,13 +2,13 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <unordered_map>
+#include <chrono>
+#include <thread>
 #include <nlohmann/json.hpp>
 
 #include "context.h"
 #include "cpu_reference.h"
-#include "lod_selection.h"
-#include "tileset_reader.h"
+#include "streamer.h"
 
 namespace surfcast {
 
@@ -18,6 +18,9 @@ double median(std::vector<double> v) {
     std::sort(v.begin(), v.end());
     return v.empty() ? 0 : v[v.size() / 2];
 }
+
+// While streaming, frames are redrawn at most this often.
+constexpr int kStreamPollMs = 30;
 
 int fail(const std::string& message) {
     std::fprintf(stderr, "surfcast-view: %s\n", message.c_str());
@@ -112,71 +115,86 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
 }
 
 int runHeadlessLod(const ViewOptions& o) {
-    auto reader = TilesetReader::open(o.set);
-    if (!reader) return fail(reader.status().message());
-    LodSelector selector(reader->info(), reader->nodes());
-    const auto& nodes = selector.nodes();
+    auto streamed = StreamingSet::open(o.set);
+    if (!streamed) return fail(streamed.status().message());
+    StreamingSet& stream = **streamed;
+    const auto& nodes = stream.nodes();
+    RenderSettings settings = o.settings;
+    if (!o.kernelScaleGiven) settings.kernelScale = float(stream.info().kernelScale);
+    if (!o.shadingGiven) settings.shading = stream.info().colorBits ? Shading::Unlit : Shading::Lambert;
     std::vector<Camera> cameras = o.cameras;
-    if (cameras.empty()) cameras = {frameBox(reader->info().bounds, double(o.width) / o.height)};
+    if (cameras.empty()) cameras = {frameBox(stream.info().bounds, double(o.width) / o.height)};
     auto c = gpu::createContext({o.device, o.validation, {}, false});
     if (!c) return fail(c.status().message());
     std::unique_ptr<gpu::Context> ctx = std::move(*c);
     int status = 0;
+    const auto start = std::chrono::steady_clock::now();
+    auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
     {
         auto renderer = SplatRenderer::create(*ctx, o.renderer);
         if (!renderer) status = fail(renderer.status().message());
-        std::unordered_map<uint32_t, BlockData> blocks;  // decoded once per run
         LodParams params;
         params.targetPixels = *o.lod;
         params.frustumCulling = params.backfaceCulling = o.culling;
         for (size_t f = 0; f < cameras.size() && status == 0; ++f) {
-            LodStats stats;
-            auto selected = selector.select(cameras[f], o.width, o.height, params, [](uint32_t) { return true; }, &stats);
-            SurfelSet set = emptySurfelSet(*reader);
-            for (const SelectedNode& s : selected) {
-                auto it = blocks.find(s.index);
-                if (it == blocks.end()) {
-                    auto block = reader->readBlock(nodes[s.index]);
-                    if (!block) {
-                        status = fail(block.status().message());
-                        break;
-                    }
-                    it = blocks.emplace(s.index, std::move(*block)).first;
+            // Progressive: draw what is resident, until nothing more is wanted
+            // for this view (converged) or --max-wait runs out.
+            const double frameStart = seconds();
+            Image image;
+            for (int iteration = 0; status == 0; ++iteration) {
+                LodStats lod;
+                bool converged = false;
+                auto selected = stream.update(cameras[f], o.width, o.height, params, &lod, &converged);
+                SurfelSet set = emptySurfelSet(stream.info());
+                for (const SelectedNode& s : selected)
+                    if (auto block = stream.block(s.index)) appendNode(set, stream.info(), nodes[s.index], *block);
+                sortMorton(set);
+                auto view = makeViewTransform(cameras[f], set.origin, o.width, o.height);
+                Status up = view ? renderer.value()->upload(set) : view.status();
+                if (!up) {
+                    status = fail("frame " + std::to_string(f) + ": " + up.message());
+                    break;
                 }
-                appendNode(set, *reader, nodes[s.index], it->second);
+                GpuFrameStats gpuStats;
+                auto rendered = renderer.value()->render(*view, settings, &gpuStats);
+                if (!rendered) {
+                    status = fail(rendered.status().message());
+                    break;
+                }
+                image = std::move(*rendered);
+                StreamStats ss = stream.stats();
+                bool timedOut = seconds() - frameStart > o.maxWait;
+                nlohmann::ordered_json line;
+                line["frame"] = f;
+                line["iteration"] = iteration;
+                line["time_s"] = seconds();
+                line["lod_target_px"] = *o.lod;
+                line["nodes"] = selected.size();
+                line["splats"] = gpuStats.splats;
+                line["pixels_covered"] = gpuStats.pixelsCovered;
+                line["nodes_visited"] = lod.visited;
+                line["frustum_culled"] = lod.frustumCulled;
+                line["backface_culled"] = lod.backfaceCulled;
+                line["wanted"] = lod.missing.size();
+                line["bytes_downloaded"] = ss.bytesDownloaded;
+                line["requests_in_flight"] = ss.inFlight;
+                line["fetch_ms"] = ss.fetchMs;
+                line["decode_ms"] = ss.decodeMs;
+                line["failures"] = ss.failures;
+                if (!ss.lastError.empty()) line["last_error"] = ss.lastError;
+                line["gpu_ms"] = gpuStats.totalMs;
+                line["converged"] = converged;
+                std::printf("%s\n", line.dump().c_str());
+                std::fflush(stdout);
+                if (converged) break;
+                if (timedOut) {
+                    std::fprintf(stderr, "surfcast-view: frame %zu not converged after --max-wait %.0f s\n", f, o.maxWait);
+                    break;
+                }
+                std::this_thread::sleep_for(std::chrono::milliseconds(kStreamPollMs));
             }
             if (status) break;
-            sortMorton(set);
-            RenderSettings settings = o.settings;
-            auto view = makeViewTransform(cameras[f], set.origin, o.width, o.height);
-            Status up = view ? renderer.value()->upload(set) : view.status();
-            if (!up) {
-                status = fail("frame " + std::to_string(f) + ": " + up.message());
-                break;
-            }
-            GpuFrameStats gpuStats;
-            auto image = renderer.value()->render(*view, settings, &gpuStats);
-            Status written = image ? writePng(*image, framePath(o.out, f, cameras.size())) : image.status();
-            if (!written) {
-                status = fail(written.message());
-                break;
-            }
-            nlohmann::ordered_json line;
-            line["frame"] = f;
-            line["mode"] = renderModeName(o.settings.mode);
-            line["lod_target_px"] = *o.lod;
-            line["nodes"] = selected.size();
-            line["nodes_visited"] = stats.visited;
-            line["frustum_culled"] = stats.frustumCulled;
-            line["backface_culled"] = stats.backfaceCulled;
-            line["splats"] = gpuStats.splats;
-            line["pixels_covered"] = gpuStats.pixelsCovered;
-            line["gpu_ms"] = {{"visibility", gpuStats.visibilityMs}, {"accumulate", gpuStats.accumulateMs},
-                              {"resolve", gpuStats.resolveMs}, {"total", gpuStats.totalMs}};
-            line["out"] = framePath(o.out, f, cameras.size());
-            line["validation_errors"] = ctx->validationErrors.load();
-            std::printf("%s\n", line.dump().c_str());
-            std::fflush(stdout);
+            if (Status w = writePng(image, framePath(o.out, f, cameras.size())); !w) status = fail(w.message());
         }
     }
     int errors = ctx->validationErrors.load();

@@ -15,14 +15,6 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "surfcast-view: --lod renders with --headless and a GPU mode\n");
             return 2;
         }
-        auto reader = surfcast::TilesetReader::open(options.set);
-        if (!reader) {
-            std::fprintf(stderr, "surfcast-view: %s\n", reader.status().message().c_str());
-            return 1;
-        }
-        if (!options.kernelScaleGiven) options.settings.kernelScale = float(reader->info().kernelScale);
-        if (!options.shadingGiven)
-            options.settings.shading = reader->info().colorBits ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
         return surfcast::runHeadlessLod(options);
     }
     auto set = surfcast::loadSurfelSet(options.set, options.level);

@@ -49,6 +49,10 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --lod PX              headless: level of detail per frame, refining nodes while their
                         projected spacing exceeds PX pixels (frustum and cone culling)
   --no-culling          with --lod: draw what culling would skip (for comparisons)
+  --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
+  With --lod, SET may be a URL: http://HOST:PORT/sets/NAME (surfcast-serve) or any
+  folder URL on a static host with Range; frames redraw as blocks arrive, one JSON
+  line per redraw, until converged.
   --frames N            window: close after N frames
   --screenshot PATH     window: write the last frame to PATH on exit
   -h, --help            this text
@@ -217,6 +221,10 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             float px = 0;
             if (!positive(&px, "--lod")) return false;
             o->lod = px;
+        } else if (a == "--max-wait") {
+            float s = 0;
+            if (!positive(&s, "--max-wait")) return false;
+            o->maxWait = s;
         } else if (a == "--no-culling") {
             o->culling = false;
         } else if (a == "--repeat") {

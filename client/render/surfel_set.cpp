@@ -103,8 +103,7 @@ std::vector<uint32_t> sortMorton(SurfelSet& set) {
     return order;
 }
 
-SurfelSet emptySurfelSet(const TilesetReader& reader) {
-    const TilesetInfo& info = reader.info();
+SurfelSet emptySurfelSet(const TilesetInfo& info) {
     SurfelSet set;
     set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
     set.hasWeights = info.weights != "none";
@@ -113,8 +112,8 @@ SurfelSet emptySurfelSet(const TilesetReader& reader) {
     return set;
 }
 
-void appendNode(SurfelSet& set, const TilesetReader& reader, const NodeRecord& node, const BlockData& b) {
-    const int colorBits = reader.info().colorBits;
+void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& b) {
+    const int colorBits = info.colorBits;
     const float colorScale = colorBits > 0 ? 1.f / float((1u << colorBits) - 1) : 0.f;
     for (size_t i = 0; i < b.size(); ++i) {
         Vec3f n = b.normals.empty() ? Vec3f{0, 0, 1} : Vec3f{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]};
@@ -124,7 +123,7 @@ void appendNode(SurfelSet& set, const TilesetReader& reader, const NodeRecord& n
         float r = b.radii.empty() ? node.spacing : b.radii[i];
         float w = b.weights.empty() ? 1.f : b.weights[i];
         uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
-        addSurfel(set, reader.position(node, b, i), n, r, c, w, edge);
+        addSurfel(set, surfelPosition(info, node, b, i), n, r, c, w, edge);
     }
 }
 
@@ -135,14 +134,14 @@ Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choic
     if (choice.level >= info.levels)
         return Status::error(dir + ": level " + std::to_string(choice.level) + " does not exist (the set has levels 0.." +
                              std::to_string(info.levels - 1) + ")");
-    SurfelSet set = emptySurfelSet(*reader);
+    SurfelSet set = emptySurfelSet(reader->info());
     for (const NodeRecord& node : reader->nodes()) {
         bool leaf = node.childMask == 0;
         bool wanted = choice.level < 0 ? leaf : (node.key.level == choice.level || (leaf && node.key.level < choice.level));
         if (!wanted || node.surfelCount == 0) continue;
         auto block = reader->readBlock(node);
         if (!block) return block.status();
-        appendNode(set, *reader, node, *block);
+        appendNode(set, reader->info(), node, *block);
     }
     sortMorton(set);
     return set;

@@ -33,8 +33,8 @@ Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice
 
 // An empty set for a tile set (origin, flags and kernel scale from its
 // tileset.json), and one decoded node's surfels appended to it.
-SurfelSet emptySurfelSet(const TilesetReader& reader);
-void appendNode(SurfelSet& set, const TilesetReader& reader, const NodeRecord& node, const BlockData& block);
+SurfelSet emptySurfelSet(const TilesetInfo& info);
+void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& block);
 
 // Append one surfel given in world coordinates (origin must be set first).
 // Colour components in [0, 1]. Non-finite input is kept: the renderers guard it.

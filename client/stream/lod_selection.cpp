@@ -146,7 +146,10 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
                 Box3d childGrown;
                 if (culled(uint32_t(c), &childGrown)) continue;  // counted here, once
                 needed.push_back(uint32_t(c));
-                ready = ready && resident(uint32_t(c));
+                if (!resident(uint32_t(c))) {
+                    ready = false;
+                    st.missing.push_back({uint32_t(c), spacing});
+                }
             }
             if (ready) {
                 for (uint32_t c : needed) stack.push_back(c);
@@ -155,6 +158,7 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
             ++st.waiting;
         }
         if (resident(i)) out.push_back({i, spacing});
+        else st.missing.push_back({i, HUGE_VAL});  // nothing to stand in for it: first
     }
     return out;
 }

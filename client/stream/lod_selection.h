@@ -27,6 +27,9 @@ struct LodParams {
 struct LodStats {
     size_t visited = 0, frustumCulled = 0, backfaceCulled = 0;
     size_t waiting = 0;  // nodes drawn in place of children that are not resident yet
+    // Nodes the view needs that are not resident, with a priority (the
+    // projected spacing of the node waiting for them: coarsest gaps first).
+    std::vector<std::pair<uint32_t, double>> missing;
 };
 
 struct SelectedNode {

@@ -1,0 +1,106 @@
+#include "tile_source.h"
+
+#include <httplib.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+
+namespace surfcast {
+
+namespace {
+
+// Per-request limits: a stalled server must not hang the client.
+constexpr int kConnectTimeoutSeconds = 5;
+constexpr int kReadTimeoutSeconds = 20;
+
+class LocalSource : public TileSource {
+public:
+    explicit LocalSource(std::string dir) : dir_(std::move(dir)) {}
+    Result<std::vector<uint8_t>> file(const std::string& name) override {
+        std::string path = dir_ + "/" + name;
+        std::FILE* f = std::fopen(path.c_str(), "rb");
+        if (!f) return Status::error(path + ": " + std::strerror(errno));
+        std::vector<uint8_t> out;
+        uint8_t buf[1 << 16];
+        for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) out.insert(out.end(), buf, buf + n);
+        std::fclose(f);
+        return out;
+    }
+    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
+        std::string path = dir_ + "/blocks.bin";
+        std::FILE* f = std::fopen(path.c_str(), "rb");
+        if (!f) return Status::error(path + ": " + std::strerror(errno));
+        std::vector<uint8_t> out(size);
+        bool ok = std::fseek(f, long(offset), SEEK_SET) == 0 && std::fread(out.data(), 1, size, f) == size;
+        std::fclose(f);
+        if (!ok) return Status::error(path + ": cannot read " + std::to_string(size) + " bytes at " + std::to_string(offset));
+        return out;
+    }
+    std::string describe() const override { return dir_; }
+
+private:
+    std::string dir_;
+};
+
+class HttpSource : public TileSource {
+public:
+    HttpSource(std::string origin, std::string path) : origin_(std::move(origin)), path_(std::move(path)) {}
+    Result<std::vector<uint8_t>> file(const std::string& name) override { return get(name, nullptr); }
+    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
+        if (size == 0) return std::vector<uint8_t>{};
+        std::pair<uint64_t, uint64_t> range{offset, offset + size - 1};
+        auto bytes = get("blocks.bin", &range);
+        if (bytes && bytes->size() != size)
+            return Status::error(describe() + "/blocks.bin: asked for " + std::to_string(size) + " bytes at " +
+                                 std::to_string(offset) + ", got " + std::to_string(bytes->size()));
+        return bytes;
+    }
+    std::string describe() const override { return origin_ + path_; }
+
+private:
+    httplib::Client& client() {
+        std::lock_guard lock(mutex_);
+        auto& c = clients_[std::this_thread::get_id()];
+        if (!c) {
+            c = std::make_unique<httplib::Client>(origin_);
+            c->set_keep_alive(true);
+            c->set_connection_timeout(kConnectTimeoutSeconds, 0);
+            c->set_read_timeout(kReadTimeoutSeconds, 0);
+        }
+        return *c;
+    }
+    Result<std::vector<uint8_t>> get(const std::string& name, const std::pair<uint64_t, uint64_t>* range) {
+        std::string url = path_ + "/" + name;
+        httplib::Headers headers;
+        if (range)
+            headers.emplace("Range", "bytes=" + std::to_string(range->first) + "-" + std::to_string(range->second));
+        auto res = client().Get(url, headers);
+        if (!res) return Status::error(origin_ + url + ": " + httplib::to_string(res.error()));
+        if (range ? res->status != 206 : res->status != 200)
+            return Status::error(origin_ + url + ": HTTP " + std::to_string(res->status));
+        return std::vector<uint8_t>(res->body.begin(), res->body.end());
+    }
+
+    std::string origin_, path_;
+    std::mutex mutex_;
+    std::unordered_map<std::thread::id, std::unique_ptr<httplib::Client>> clients_;
+};
+
+}  // namespace
+
+bool isUrl(const std::string& location) { return location.rfind("http://", 0) == 0; }
+
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location) {
+    if (!isUrl(location)) return std::unique_ptr<TileSource>(new LocalSource(location));
+    size_t slash = location.find('/', 7);
+    std::string origin = location.substr(0, slash), path = slash == std::string::npos ? "" : location.substr(slash);
+    while (!path.empty() && path.back() == '/') path.pop_back();
+    if (origin.size() <= 7) return Status::error(location + ": not an http://HOST[:PORT]/PATH URL");
+    return std::unique_ptr<TileSource>(new HttpSource(origin, path));
+}
+
+}  // namespace surfcast

@@ -1,0 +1,30 @@
+// Where a tile set's bytes come from: a local folder, or an HTTP folder URL
+// (the project's server at http://HOST:PORT/sets/NAME, or any static host that
+// honours Range). The only HTTP client code of the client library.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "status.h"
+
+namespace surfcast {
+
+class TileSource {
+public:
+    virtual ~TileSource() = default;
+    // A whole file of the set: "tileset.json" or "hierarchy.bin".
+    virtual Result<std::vector<uint8_t>> file(const std::string& name) = 0;
+    // Bytes [offset, offset + size) of blocks.bin. Thread-safe.
+    virtual Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) = 0;
+    virtual std::string describe() const = 0;
+};
+
+// "http://..." opens an HTTP source (keep-alive, one connection per calling
+// thread); anything else is a local folder.
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location);
+bool isUrl(const std::string& location);
+
+}  // namespace surfcast
