@@ -70,5 +70,22 @@ TEST(Stream, UnreachableServerIsAClearError) {
     EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30));
 }
 
+TEST(Stream, WindowStreamsUnderXvfb) {
+    TempDir dir;
+    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "100000", "--capacity", "3000", "-o",
+                  dir.file("scene")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const char* camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
+    // --frames counts converged frames: the screenshot is the converged view.
+    auto window = run({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", binary("surfcast-view"), dir.file("scene"),
+                       camera, "--lod", "1", "--size", "200x150", "--frames", "2", "--screenshot", dir.file("window.png")});
+    ASSERT_EQ(window.exitCode, 0) << window.output;
+    auto headless = run({binary("surfcast-view"), "--headless", dir.file("scene"), camera, "--lod", "1", "--size", "200x150",
+                         "--out", dir.file("headless.png")});
+    ASSERT_EQ(headless.exitCode, 0) << headless.output;
+    EXPECT_TRUE(test::readFile(dir.file("window.png")) == test::readFile(dir.file("headless.png")))
+        << "the window's converged frame differs from the headless one";
+}
+
 }  // namespace
 }  // namespace surfcast

@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "headless.h"
+#include "streamer.h"
 #include "view_options.h"
 #include "window.h"
 
@@ -11,11 +12,21 @@ int main(int argc, char** argv) {
     int exitCode = 0;
     if (!surfcast::parseViewOptions(argc, argv, &options, &exitCode)) return exitCode;
     if (options.lod) {
-        if (!options.headless || options.settings.mode == surfcast::RenderMode::CpuReference) {
-            std::fprintf(stderr, "surfcast-view: --lod renders with --headless and a GPU mode\n");
+        if (options.settings.mode == surfcast::RenderMode::CpuReference) {
+            std::fprintf(stderr, "surfcast-view: --lod renders with a GPU mode\n");
             return 2;
         }
-        return surfcast::runHeadlessLod(options);
+        if (options.headless) return surfcast::runHeadlessLod(options);
+        auto stream = surfcast::StreamingSet::open(options.set);
+        if (!stream) {
+            std::fprintf(stderr, "surfcast-view: %s\n", stream.status().message().c_str());
+            return 1;
+        }
+        const surfcast::TilesetInfo& info = stream.value()->info();
+        if (!options.kernelScaleGiven) options.settings.kernelScale = float(info.kernelScale);
+        if (!options.shadingGiven)
+            options.settings.shading = info.colorBits ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
+        return surfcast::runWindow(options, surfcast::emptySurfelSet(info), stream.value().get());
     }
     auto set = surfcast::loadSurfelSet(options.set, options.level);
     if (!set) {

@@ -46,8 +46,9 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --validation          enable the Khronos validation layer (also SURFCAST_VALIDATION=1);
                         any validation error makes the exit status 1
   --repeat N            headless: render each frame N times, report the median GPU times
-  --lod PX              headless: level of detail per frame, refining nodes while their
-                        projected spacing exceeds PX pixels (frustum and cone culling)
+  --lod PX              level of detail per frame, refining nodes while their projected
+                        spacing exceeds PX pixels (frustum and cone culling); streams
+                        SET (a folder or an http:// URL) in the window or headless
   --no-culling          with --lod: draw what culling would skip (for comparisons)
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
   With --lod, SET may be a URL: http://HOST:PORT/sets/NAME (surfcast-serve) or any

@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "context.h"
+#include "streamer.h"
 #include "swapchain.h"
 
 namespace surfcast {
@@ -115,7 +116,10 @@ int fail(const std::string& message) {
 
 }  // namespace
 
-int runWindow(const ViewOptions& o, const SurfelSet& set) {
+int runWindow(const ViewOptions& o, const SurfelSet& initial, StreamingSet* stream) {
+    SurfelSet set = initial;
+    std::vector<uint32_t> drawn;  // the streamed nodes in `set`
+    bool converged = stream == nullptr;
     if (o.settings.mode == RenderMode::CpuReference)
         return fail("the window draws the GPU modes; render cpu-reference with --headless");
     if (!glfwInit()) return fail("cannot open a window (no display?); use --headless");
@@ -165,6 +169,25 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             RenderSettings settings = o.settings;
             settings.mode = state.mode;
             settings.shading = state.shading;
+            if (stream) {
+                LodParams lod;
+                lod.targetPixels = *o.lod;
+                lod.frustumCulling = lod.backfaceCulling = o.culling;
+                auto selected = stream->update(state.orbit.cam, int(extent.width), int(extent.height), lod, nullptr, &converged);
+                std::vector<uint32_t> now;
+                for (const auto& s : selected) now.push_back(s.index);
+                if (now != drawn) {  // rebuild and upload only when the drawn nodes change
+                    set = emptySurfelSet(stream->info());
+                    for (uint32_t i : now)
+                        if (auto block = stream->block(i)) appendNode(set, stream->info(), stream->nodes()[i], *block);
+                    sortMorton(set);
+                    if (Status us = r.upload(set); !us) {
+                        status = fail(us.message());
+                        break;
+                    }
+                    drawn = std::move(now);
+                }
+            }
             auto view = makeViewTransform(state.orbit.cam, set.origin, int(extent.width), int(extent.height));
             if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
             auto params = makeFrameParams(*view, settings, r.nearPlane(*view));
@@ -177,11 +200,16 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             if (!*presented) continue;
             vkWaitForFences((*ctx)->device, 1, &swapchain->inFlight, VK_TRUE, UINT64_MAX);
             GpuFrameStats t = r.timings();
-            char title[256];
-            std::snprintf(title, sizeof(title), "surfcast-view - %s - %.1f ms frame, %.1f ms GPU, %zu splats",
-                          renderModeName(state.mode), seconds * 1e3, t.totalMs, t.splats);
+            char title[320];
+            int used = std::snprintf(title, sizeof(title), "surfcast-view - %s - %.1f ms frame, %.1f ms GPU, %zu splats",
+                                     renderModeName(state.mode), seconds * 1e3, t.totalMs, t.splats);
+            if (stream) {
+                StreamStats ss = stream->stats();
+                std::snprintf(title + used, sizeof(title) - size_t(used), " - %zu nodes, %.1f MB%s", drawn.size(),
+                              double(ss.bytesDownloaded) / 1e6, converged ? "" : ", streaming");
+            }
             glfwSetWindowTitle(window, title);
-            ++frame;
+            if (converged) ++frame;  // --frames counts converged frames
             bool lastFrame = o.frames > 0 && frame >= o.frames;
             if (state.screenshot || (lastFrame && !o.screenshot.empty())) {
                 auto image = r.render(*view, settings);

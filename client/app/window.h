@@ -7,6 +7,11 @@
 
 namespace surfcast {
 
-int runWindow(const ViewOptions& options, const SurfelSet& set);
+class StreamingSet;
+
+// Draws `set`; with `stream`, draws what the stream has resident for each
+// frame's view instead (level of detail, --lod), and --frames counts only
+// once the view has converged.
+int runWindow(const ViewOptions& options, const SurfelSet& set, StreamingSet* stream = nullptr);
 
 }  // namespace surfcast
