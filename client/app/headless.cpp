@@ -8,7 +8,7 @@
 
 #include "context.h"
 #include "cpu_reference.h"
-#include "streamer.h"
+#include "surfcast_client.h"
 
 namespace surfcast {
 
@@ -115,15 +115,6 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
 }
 
 int runHeadlessLod(const ViewOptions& o) {
-    auto streamed = StreamingSet::open(o.set);
-    if (!streamed) return fail(streamed.status().message());
-    StreamingSet& stream = **streamed;
-    const auto& nodes = stream.nodes();
-    RenderSettings settings = o.settings;
-    if (!o.kernelScaleGiven) settings.kernelScale = float(stream.info().kernelScale);
-    if (!o.shadingGiven) settings.shading = stream.info().colorBits ? Shading::Unlit : Shading::Lambert;
-    std::vector<Camera> cameras = o.cameras;
-    if (cameras.empty()) cameras = {frameBox(stream.info().bounds, double(o.width) / o.height)};
     auto c = gpu::createContext({o.device, o.validation, {}, false});
     if (!c) return fail(c.status().message());
     std::unique_ptr<gpu::Context> ctx = std::move(*c);
@@ -131,62 +122,59 @@ int runHeadlessLod(const ViewOptions& o) {
     const auto start = std::chrono::steady_clock::now();
     auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
     {
-        auto renderer = SplatRenderer::create(*ctx, o.renderer);
-        if (!renderer) status = fail(renderer.status().message());
-        LodParams params;
-        params.targetPixels = *o.lod;
-        params.frustumCulling = params.backfaceCulling = o.culling;
+        ClientOptions options;
+        options.lod.targetPixels = *o.lod;
+        options.lod.frustumCulling = options.lod.backfaceCulling = o.culling;
+        options.renderer = o.renderer;
+        auto client = SurfcastClient::open(*ctx, o.set, options);
+        if (!client) status = fail(client.status().message());
+        RenderSettings settings = o.settings;
+        std::vector<Camera> cameras = o.cameras;
+        if (client) {
+            RenderSettings defaults = client.value()->defaultSettings();
+            if (!o.kernelScaleGiven) settings.kernelScale = defaults.kernelScale;
+            if (!o.shadingGiven) settings.shading = defaults.shading;
+            if (cameras.empty()) cameras = {frameBox(client.value()->info().bounds, double(o.width) / o.height)};
+        }
         for (size_t f = 0; f < cameras.size() && status == 0; ++f) {
             // Progressive: draw what is resident, until nothing more is wanted
             // for this view (converged) or --max-wait runs out.
             const double frameStart = seconds();
             Image image;
             for (int iteration = 0; status == 0; ++iteration) {
-                LodStats lod;
-                bool converged = false;
-                auto selected = stream.update(cameras[f], o.width, o.height, params, &lod, &converged);
-                SurfelSet set = emptySurfelSet(stream.info());
-                for (const SelectedNode& s : selected)
-                    if (auto block = stream.block(s.index)) appendNode(set, stream.info(), nodes[s.index], *block);
-                sortMorton(set);
-                auto view = makeViewTransform(cameras[f], set.origin, o.width, o.height);
-                Status up = view ? renderer.value()->upload(set) : view.status();
-                if (!up) {
-                    status = fail("frame " + std::to_string(f) + ": " + up.message());
-                    break;
-                }
+                auto frame = client.value()->update(cameras[f], o.width, o.height);
                 GpuFrameStats gpuStats;
-                auto rendered = renderer.value()->render(*view, settings, &gpuStats);
+                auto rendered = frame ? client.value()->renderImage(settings, &gpuStats) : Result<Image>(frame.status());
                 if (!rendered) {
-                    status = fail(rendered.status().message());
+                    status = fail("frame " + std::to_string(f) + ": " + rendered.status().message());
                     break;
                 }
                 image = std::move(*rendered);
-                StreamStats ss = stream.stats();
+                const ClientFrame& cf = *frame;
                 bool timedOut = seconds() - frameStart > o.maxWait;
                 nlohmann::ordered_json line;
                 line["frame"] = f;
                 line["iteration"] = iteration;
                 line["time_s"] = seconds();
                 line["lod_target_px"] = *o.lod;
-                line["nodes"] = selected.size();
+                line["nodes"] = cf.nodes;
                 line["splats"] = gpuStats.splats;
                 line["pixels_covered"] = gpuStats.pixelsCovered;
-                line["nodes_visited"] = lod.visited;
-                line["frustum_culled"] = lod.frustumCulled;
-                line["backface_culled"] = lod.backfaceCulled;
-                line["wanted"] = lod.missing.size();
-                line["bytes_downloaded"] = ss.bytesDownloaded;
-                line["requests_in_flight"] = ss.inFlight;
-                line["fetch_ms"] = ss.fetchMs;
-                line["decode_ms"] = ss.decodeMs;
-                line["failures"] = ss.failures;
-                if (!ss.lastError.empty()) line["last_error"] = ss.lastError;
+                line["nodes_visited"] = cf.lod.visited;
+                line["frustum_culled"] = cf.lod.frustumCulled;
+                line["backface_culled"] = cf.lod.backfaceCulled;
+                line["wanted"] = cf.lod.missing.size();
+                line["bytes_downloaded"] = cf.stream.bytesDownloaded;
+                line["requests_in_flight"] = cf.stream.inFlight;
+                line["fetch_ms"] = cf.stream.fetchMs;
+                line["decode_ms"] = cf.stream.decodeMs;
+                line["failures"] = cf.stream.failures;
+                if (!cf.stream.lastError.empty()) line["last_error"] = cf.stream.lastError;
                 line["gpu_ms"] = gpuStats.totalMs;
-                line["converged"] = converged;
+                line["converged"] = cf.converged;
                 std::printf("%s\n", line.dump().c_str());
                 std::fflush(stdout);
-                if (converged) break;
+                if (cf.converged) break;
                 if (timedOut) {
                     std::fprintf(stderr, "surfcast-view: frame %zu not converged after --max-wait %.0f s\n", f, o.maxWait);
                     break;

@@ -3,7 +3,6 @@
 #include <cstdio>
 
 #include "headless.h"
-#include "streamer.h"
 #include "view_options.h"
 #include "window.h"
 
@@ -17,16 +16,7 @@ int main(int argc, char** argv) {
             return 2;
         }
         if (options.headless) return surfcast::runHeadlessLod(options);
-        auto stream = surfcast::StreamingSet::open(options.set);
-        if (!stream) {
-            std::fprintf(stderr, "surfcast-view: %s\n", stream.status().message().c_str());
-            return 1;
-        }
-        const surfcast::TilesetInfo& info = stream.value()->info();
-        if (!options.kernelScaleGiven) options.settings.kernelScale = float(info.kernelScale);
-        if (!options.shadingGiven)
-            options.settings.shading = info.colorBits ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
-        return surfcast::runWindow(options, surfcast::emptySurfelSet(info), stream.value().get());
+        return surfcast::runWindow(options, surfcast::SurfelSet{});
     }
     auto set = surfcast::loadSurfelSet(options.set, options.level);
     if (!set) {

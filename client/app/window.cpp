@@ -4,11 +4,12 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <cmath>
 #include <cstdio>
 
 #include "context.h"
-#include "streamer.h"
+#include "surfcast_client.h"
 #include "swapchain.h"
 
 namespace surfcast {
@@ -116,10 +117,7 @@ int fail(const std::string& message) {
 
 }  // namespace
 
-int runWindow(const ViewOptions& o, const SurfelSet& initial, StreamingSet* stream) {
-    SurfelSet set = initial;
-    std::vector<uint32_t> drawn;  // the streamed nodes in `set`
-    bool converged = stream == nullptr;
+int runWindow(const ViewOptions& o, const SurfelSet& set) {
     if (o.settings.mode == RenderMode::CpuReference)
         return fail("the window draws the GPU modes; render cpu-reference with --headless");
     if (!glfwInit()) return fail("cannot open a window (no display?); use --headless");
@@ -129,16 +127,6 @@ int runWindow(const ViewOptions& o, const SurfelSet& initial, StreamingSet* stre
         glfwTerminate();
         return fail("cannot create a window");
     }
-    WindowState state;
-    state.orbit.cam = o.cameras.empty() ? frameBox(set.bounds, double(o.width) / o.height) : o.cameras[0];
-    state.mode = o.settings.mode;
-    state.shading = o.settings.shading;
-    glfwSetWindowUserPointer(window, &state);
-    glfwSetKeyCallback(window, onKey);
-    glfwSetMouseButtonCallback(window, onButton);
-    glfwSetCursorPosCallback(window, onCursor);
-    glfwSetScrollCallback(window, onScroll);
-
     int status = 0;
     auto ctx = gpu::createContext({o.device, o.validation, gpu::windowInstanceExtensions(), true});
     if (!ctx) {
@@ -146,11 +134,44 @@ int runWindow(const ViewOptions& o, const SurfelSet& initial, StreamingSet* stre
         glfwTerminate();
         return fail(ctx.status().message());
     }
+    WindowState state;
     {
         auto swapchain = gpu::createSwapchain(**ctx, window);
-        auto renderer = swapchain ? SplatRenderer::create(**ctx, o.renderer) : swapchain.status();
-        Status s = renderer ? renderer.value()->upload(set) : renderer.status();
+        // Either a whole set on one renderer, or a streamed one (--lod).
+        std::unique_ptr<SplatRenderer> renderer;
+        std::unique_ptr<SurfcastClient> client;
+        RenderSettings base = o.settings;
+        Box3d bounds = set.bounds;
+        Status s = swapchain ? Status{} : swapchain.status();
+        if (s && o.lod) {
+            ClientOptions options;
+            options.lod.targetPixels = *o.lod;
+            options.lod.frustumCulling = options.lod.backfaceCulling = o.culling;
+            options.renderer = o.renderer;
+            auto c = SurfcastClient::open(**ctx, o.set, options);
+            if (c) {
+                client = std::move(*c);
+                if (!o.kernelScaleGiven) base.kernelScale = client->defaultSettings().kernelScale;
+                if (!o.shadingGiven) base.shading = client->defaultSettings().shading;
+                bounds = client->info().bounds;
+            } else {
+                s = c.status();
+            }
+        } else if (s) {
+            auto r = SplatRenderer::create(**ctx, o.renderer);
+            s = r ? r.value()->upload(set) : r.status();
+            if (r) renderer = std::move(*r);
+        }
         if (!s) status = fail(s.message());
+        state.orbit.cam = o.cameras.empty() ? frameBox(bounds, double(o.width) / o.height) : o.cameras[0];
+        state.mode = base.mode;
+        state.shading = base.shading;
+        glfwSetWindowUserPointer(window, &state);
+        glfwSetKeyCallback(window, onKey);
+        glfwSetMouseButtonCallback(window, onButton);
+        glfwSetCursorPosCallback(window, onCursor);
+        glfwSetScrollCallback(window, onScroll);
+
         int frame = 0, screenshots = 0;
         auto last = std::chrono::steady_clock::now();
         while (status == 0 && !glfwWindowShouldClose(window)) {
@@ -159,60 +180,57 @@ int runWindow(const ViewOptions& o, const SurfelSet& initial, StreamingSet* stre
             double seconds = std::chrono::duration<double>(now - last).count();
             last = now;
             fly(window, state, seconds);
-            SplatRenderer& r = **renderer;
             VkExtent2D extent = swapchain->extent;
             if (extent.width == 0 || extent.height == 0) continue;  // minimized
-            if (Status rs = r.resize(extent.width, extent.height); !rs) {
-                status = fail(rs.message());
-                break;
-            }
-            RenderSettings settings = o.settings;
+            RenderSettings settings = base;
             settings.mode = state.mode;
             settings.shading = state.shading;
-            if (stream) {
-                LodParams lod;
-                lod.targetPixels = *o.lod;
-                lod.frustumCulling = lod.backfaceCulling = o.culling;
-                auto selected = stream->update(state.orbit.cam, int(extent.width), int(extent.height), lod, nullptr, &converged);
-                std::vector<uint32_t> now;
-                for (const auto& s : selected) now.push_back(s.index);
-                if (now != drawn) {  // rebuild and upload only when the drawn nodes change
-                    set = emptySurfelSet(stream->info());
-                    for (uint32_t i : now)
-                        if (auto block = stream->block(i)) appendNode(set, stream->info(), stream->nodes()[i], *block);
-                    sortMorton(set);
-                    if (Status us = r.upload(set); !us) {
-                        status = fail(us.message());
-                        break;
-                    }
-                    drawn = std::move(now);
+            const int W = int(extent.width), H = int(extent.height);
+            bool converged = true;
+            ClientFrame streamed;
+            std::function<void(VkCommandBuffer)> record;
+            VkImage source = VK_NULL_HANDLE;
+            Result<ViewTransform> view = makeViewTransform(state.orbit.cam, set.origin, W, H);
+            if (client) {
+                auto fr = client->update(state.orbit.cam, W, H);
+                if (!fr) {
+                    status = fail(fr.status().message());
+                    break;
                 }
+                streamed = *fr;
+                converged = streamed.converged;
+                record = [&](VkCommandBuffer cmd) { client->record(cmd, settings); };
+                source = client->output().image;
+            } else {
+                if (Status rs = renderer->resize(extent.width, extent.height); !rs) {
+                    status = fail(rs.message());
+                    break;
+                }
+                if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
+                auto params = makeFrameParams(*view, settings, renderer->nearPlane(*view));
+                record = [&, params](VkCommandBuffer cmd) { renderer->record(cmd, params); };
+                source = renderer->output().image;
             }
-            auto view = makeViewTransform(state.orbit.cam, set.origin, int(extent.width), int(extent.height));
-            if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
-            auto params = makeFrameParams(*view, settings, r.nearPlane(*view));
-            auto presented = gpu::presentFrame(**ctx, *swapchain, window, r.output().image,
-                                               [&](VkCommandBuffer cmd) { r.record(cmd, params); });
+            auto presented = gpu::presentFrame(**ctx, *swapchain, window, source, record);
             if (!presented) {
                 status = fail(presented.status().message());
                 break;
             }
             if (!*presented) continue;
             vkWaitForFences((*ctx)->device, 1, &swapchain->inFlight, VK_TRUE, UINT64_MAX);
-            GpuFrameStats t = r.timings();
+            GpuFrameStats t = client ? client->timings() : renderer->timings();
             char title[320];
             int used = std::snprintf(title, sizeof(title), "surfcast-view - %s - %.1f ms frame, %.1f ms GPU, %zu splats",
                                      renderModeName(state.mode), seconds * 1e3, t.totalMs, t.splats);
-            if (stream) {
-                StreamStats ss = stream->stats();
-                std::snprintf(title + used, sizeof(title) - size_t(used), " - %zu nodes, %.1f MB%s", drawn.size(),
-                              double(ss.bytesDownloaded) / 1e6, converged ? "" : ", streaming");
-            }
+            if (client)
+                std::snprintf(title + used, sizeof(title) - size_t(used), " - %zu nodes, %.1f MB%s", streamed.nodes,
+                              double(streamed.stream.bytesDownloaded) / 1e6, converged ? "" : ", streaming");
             glfwSetWindowTitle(window, title);
             if (converged) ++frame;  // --frames counts converged frames
             bool lastFrame = o.frames > 0 && frame >= o.frames;
             if (state.screenshot || (lastFrame && !o.screenshot.empty())) {
-                auto image = r.render(*view, settings);
+                auto image = client ? client->renderImage(settings)
+                                    : (view ? renderer->render(*view, settings) : Result<Image>(view.status()));
                 char name[64];
                 std::snprintf(name, sizeof(name), "surfcast-%04d.png", screenshots++);
                 std::string path = lastFrame && !o.screenshot.empty() ? o.screenshot : name;
@@ -223,7 +241,8 @@ int runWindow(const ViewOptions& o, const SurfelSet& initial, StreamingSet* stre
             }
             if (lastFrame) glfwSetWindowShouldClose(window, GLFW_TRUE);
         }
-        if (renderer) renderer->reset();
+        client.reset();
+        renderer.reset();
         if (swapchain) gpu::destroySwapchain(**ctx, *swapchain);
     }
     int errors = (*ctx)->validationErrors.load();

@@ -7,11 +7,9 @@
 
 namespace surfcast {
 
-class StreamingSet;
-
-// Draws `set`; with `stream`, draws what the stream has resident for each
-// frame's view instead (level of detail, --lod), and --frames counts only
-// once the view has converged.
-int runWindow(const ViewOptions& options, const SurfelSet& set, StreamingSet* stream = nullptr);
+// Draws `set`; with --lod, streams options.set through a SurfcastClient
+// instead (level of detail per frame; `set` is unused) and --frames counts
+// only frames whose view has converged.
+int runWindow(const ViewOptions& options, const SurfelSet& set);
 
 }  // namespace surfcast
