@@ -64,8 +64,9 @@ int main(int argc, char** argv) {
         for (int k = 0; k < 3; ++k) {
             const Vec3f& o = cam[idx[k]];
             ok = ok && o.z > near;
-            sx[k] = 0.5f * SW + view->eta * o.x / o.z;
-            sy[k] = 0.5f * SH - view->eta * o.y / o.z;
+            const PixelPoint s = view->project(o);
+            sx[k] = s.x;
+            sy[k] = s.y;
             iz[k] = 1.f / o.z;
         }
         if (!ok) continue;  // the reference views keep meshes in front of the camera
@@ -103,7 +104,7 @@ int main(int argc, char** argv) {
                     int X = x * kSamples + sx, Y = y * kSamples + sy;
                     size_t i = size_t(Y) * SW + X;
                     if (std::isfinite(depth[i])) {
-                        Vec3f ray{(X + 0.5f - 0.5f * SW) / view->eta, -(Y + 0.5f - 0.5f * SH) / view->eta, 1.f};
+                        Vec3f ray = view->pixelRay(X + 0.5f, Y + 0.5f);
                         sum += shadePixel(Shading::Lambert, grey, normal[i], ray);
                         ++hits;
                     } else {

@@ -100,20 +100,28 @@ Camera frameBox(const Box3d& box, double aspect, double fovYDegrees) {
     return c;
 }
 
+CameraAxes cameraAxes(const Camera& camera) {
+    Vec3d forward = normalizeOrZero(camera.target - camera.eye);
+    Vec3d right = normalizeOrZero(cross(forward, camera.up));
+    return {right, cross(right, forward), forward};
+}
+
+double viewportScale(const Camera& camera, int height) {
+    return height / (2.0 * std::tan(0.5 * camera.fovYDegrees * M_PI / 180.0));
+}
+
 Result<ViewTransform> makeViewTransform(const Camera& camera, const Vec3d& origin, int width, int height) {
     SC_TRY(checkCamera(camera));
     if (width <= 0 || height <= 0) return Status::error("image size must be positive");
-    Vec3d forward = normalizeOrZero(camera.target - camera.eye);
-    Vec3d right = normalizeOrZero(cross(forward, camera.up));
-    Vec3d up = cross(right, forward);
+    const CameraAxes a = cameraAxes(camera);
     Vec3d eye = camera.eye - origin;
     ViewTransform v{};
-    const Vec3d axes[3] = {right, up, forward};
+    const Vec3d axes[3] = {a.right, a.up, a.forward};
     for (int r = 0; r < 3; ++r) {
         for (int c = 0; c < 3; ++c) v.rows[r][c] = float(axes[r][c]);
         v.rows[r][3] = float(-dot(axes[r], eye));
     }
-    v.eta = float(height / (2.0 * std::tan(0.5 * camera.fovYDegrees * M_PI / 180.0)));
+    v.eta = float(viewportScale(camera, height));
     v.width = width;
     v.height = height;
     return v;

@@ -33,6 +33,19 @@ Result<std::vector<Camera>> parseCameraPath(const std::string& json, const std::
 // looking at its centre from the -y side and above, up +z.
 Camera frameBox(const Box3d& box, double aspect, double fovYDegrees = 45);
 
+// The camera's orthonormal axes in world space (double): x right, y up, z
+// forward, as camera space defines them above.
+struct CameraAxes {
+    Vec3d right, up, forward;
+};
+CameraAxes cameraAxes(const Camera& camera);
+// eta: pixels per unit at camera depth 1 for an image `height` pixels tall.
+double viewportScale(const Camera& camera, int height);
+
+struct PixelPoint {
+    float x, y;
+};
+
 // World -> camera rigid transform, as three rows (r, -r.(eye - origin)) in
 // float, computed in double relative to `origin`.
 struct ViewTransform {
@@ -45,6 +58,12 @@ struct ViewTransform {
                 rows[1][0] * p.x + rows[1][1] * p.y + rows[1][2] * p.z + rows[1][3],
                 rows[2][0] * p.x + rows[2][1] * p.y + rows[2][2] * p.z + rows[2][3]};
     }
+    // The screen position (pixels, continuous) of camera-space point o, o.z > 0.
+    PixelPoint project(const Vec3f& o) const {
+        return {0.5f * width + eta * o.x / o.z, 0.5f * height - eta * o.y / o.z};
+    }
+    // The camera-space ray (z = 1) through screen position (x, y).
+    Vec3f pixelRay(float x, float y) const { return {(x - 0.5f * width) / eta, -(y - 0.5f * height) / eta, 1.f}; }
     Vec3f rotate(const Vec3f& v) const {
         return {rows[0][0] * v.x + rows[0][1] * v.y + rows[0][2] * v.z,
                 rows[1][0] * v.x + rows[1][1] * v.y + rows[1][2] * v.z,

@@ -7,7 +7,6 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <set>
-#include <sstream>
 
 #include "image.h"
 #include "lod_selection.h"
@@ -36,6 +35,17 @@ protected:
     static TempDir* dir_;
 };
 TempDir* Lod::dir_ = nullptr;
+
+// Pixels whose colour differs between two PNGs of the same size.
+size_t differingPixels(const std::string& pathA, const std::string& pathB) {
+    auto a = readPng(pathA), b = readPng(pathB);
+    EXPECT_TRUE(a && b);
+    if (!a || !b || a->rgba.size() != b->rgba.size()) return SIZE_MAX;
+    size_t n = 0;
+    for (size_t i = 0; i < a->rgba.size(); i += 4)
+        n += a->rgba[i] != b->rgba[i] || a->rgba[i + 1] != b->rgba[i + 1] || a->rgba[i + 2] != b->rgba[i + 2];
+    return n;
+}
 
 const char* kCameras[] = {"3,-6,2,0,0,0.5,0,0,1,50", "0,0,1,5,5,0.5,0,0,1,70", "-8,-8,6,0,0,0,0,0,1,30",
                           "0,-2,0.4,0,5,0.2,0,0,1,60"};
@@ -115,18 +125,12 @@ TEST_F(Lod, CullingNeverChangesTheImage) {
         // the additive sums run over a different (Morton-sorted) set in a
         // different order: float rounding can tip a pixel at the coverage
         // threshold. Measured: 1 pixel of 30000 in one of these views.
-        auto a = readPng(out.file("on.png")), b = readPng(out.file("off.png"));
-        ASSERT_TRUE(a && b);
-        ASSERT_EQ(a->rgba.size(), b->rgba.size());
-        size_t differing = 0;
-        for (size_t i = 0; i < a->rgba.size(); i += 4)
-            differing += a->rgba[i] != b->rgba[i] || a->rgba[i + 1] != b->rgba[i + 1] || a->rgba[i + 2] != b->rgba[i + 2];
+        size_t differing = differingPixels(out.file("on.png"), out.file("off.png"));
         EXPECT_LE(differing, 200u * 150 / 2000) << kCameras[c] << ": culling changed " << differing << " pixels";
         // The converged (last) redraw's counts.
-        nlohmann::json last;
-        std::istringstream lines(on.output);
-        for (std::string line; std::getline(lines, line);)
-            if (!line.empty() && line[0] == '{') last = nlohmann::json::parse(line);
+        auto lines = test::jsonLines(on.output);
+        ASSERT_FALSE(lines.empty()) << on.output;
+        const nlohmann::json& last = lines.back();
         culledSomewhere += last["frustum_culled"].get<size_t>() + last["backface_culled"].get<size_t>() > 0;
     }
     EXPECT_GT(culledSomewhere, 0u) << "no view culled anything: the test proves nothing";
@@ -167,11 +171,7 @@ TEST_F(Lod, ConesCullTheFarSideOfASphere) {
                     "200x150", "--out", out.file("off.png")});
     ASSERT_EQ(on.exitCode, 0) << on.output;
     ASSERT_EQ(off.exitCode, 0) << off.output;
-    auto a = readPng(out.file("on.png")), c = readPng(out.file("off.png"));
-    ASSERT_TRUE(a && c);
-    size_t differing = 0;
-    for (size_t i = 0; i < a->rgba.size(); i += 4)
-        differing += a->rgba[i] != c->rgba[i] || a->rgba[i + 1] != c->rgba[i + 1] || a->rgba[i + 2] != c->rgba[i + 2];
+    size_t differing = differingPixels(out.file("on.png"), out.file("off.png"));
     EXPECT_LE(differing, 200u * 150 / 2000) << "backface culling changed " << differing << " pixels";
 }
 

@@ -26,11 +26,8 @@ using test::run;
 using test::TempDir;
 
 nlohmann::json lastLine(const std::string& output) {
-    nlohmann::json last;
-    std::istringstream in(output);
-    for (std::string line; std::getline(in, line);)
-        if (!line.empty() && line[0] == '{') last = nlohmann::json::parse(line);
-    return last;
+    auto lines = test::jsonLines(output);
+    return lines.empty() ? nlohmann::json() : lines.back();
 }
 
 TEST(Stream, OverHttpConvergesToTheLocalImage) {

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 namespace surfcast::test {
 
 // Path of a file in ../shared/data. When the data folder is missing the test
@@ -48,6 +50,9 @@ Child spawn(const std::vector<std::string>& args);
 int exitCode(int pid);  // waits for it
 
 void writeFile(const std::string& path, const std::string& bytes);
+
+// The JSON lines (those starting with '{') of a program's output, in order.
+std::vector<nlohmann::json> jsonLines(const std::string& output);
 std::string readFile(const std::string& path);
 
 }  // namespace surfcast::test

@@ -17,18 +17,11 @@ namespace surfcast {
 namespace {
 
 using test::binary;
+using test::jsonLines;
 using test::run;
 using test::TempDir;
 
 const char* kBunnyCamera = "--camera=-0.017,0.13,0.2,-0.017,0.11,-0.002,0,1,0,40";
-
-std::vector<nlohmann::json> jsonLines(const std::string& output) {
-    std::vector<nlohmann::json> lines;
-    std::istringstream in(output);
-    for (std::string line; std::getline(in, line);)
-        if (!line.empty() && line[0] == '{') lines.push_back(nlohmann::json::parse(line));
-    return lines;
-}
 
 double meanAbsDiff(const Image& a, const Image& b, size_t* coverDiff) {
     double sum = 0;

@@ -1,6 +1,7 @@
 #include "weight_capture.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -94,9 +95,9 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
         // The pixel of camera-space point o when it is visible there, else -1.
         auto visiblePixel = [&](const ViewTransform& view, const Vec3f& o, float near) -> long {
             if (!(o.z >= near)) return -1;
-            float x = 0.5f * options.size + view.eta * o.x / o.z, y = 0.5f * options.size - view.eta * o.y / o.z;
-            if (!(x >= 0 && y >= 0 && x < options.size && y < options.size)) return -1;
-            size_t p = size_t(y) * options.size + size_t(x);
+            const PixelPoint s = view.project(o);
+            if (!(s.x >= 0 && s.y >= 0 && s.x < options.size && s.y < options.size)) return -1;
+            size_t p = size_t(s.y) * options.size + size_t(s.x);
             // In front of the pushed-back nearest surface (reversed Z: larger is nearer).
             if (!(near / o.z >= depth[p]) || !(sums[p] > 0)) return -1;
             return long(p);
@@ -107,7 +108,8 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
         // half a pixel off the surfel.
         auto sumAt = [&](const ViewTransform& view, const Vec3f& o, size_t p) {
             const int n = options.size;
-            float x = 0.5f * n + view.eta * o.x / o.z - 0.5f, y = 0.5f * n - view.eta * o.y / o.z - 0.5f;
+            const PixelPoint s = view.project(o);
+            float x = s.x - 0.5f, y = s.y - 0.5f;  // relative to pixel centres
             int x0 = std::clamp(int(std::floor(x)), 0, n - 2), y0 = std::clamp(int(std::floor(y)), 0, n - 2);
             float fx = std::clamp(x - x0, 0.f, 1.f), fy = std::clamp(y - y0, 0.f, 1.f);
             float total = 0, weight = 0;
@@ -122,6 +124,19 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
                 }
             return weight > 0 ? total / weight : sums[p];
         };
+        // Per own surfel, once: the world normal and the tangent points +r s,
+        // -r s, +r t, -r t (the basis the renderer's edgeFactor uses).
+        std::vector<Vec3f> normalOf(count);
+        std::vector<std::array<Vec3f, 4>> tangentPoints(count);
+        for (size_t i = 0; i < count; ++i) {
+            if (owner[order[i]].first == UINT32_MAX) continue;
+            const auto& g = set.surfels[i];
+            const Vec3f local{g.px, g.py, g.pz}, nw = unpackNormalOct(g.normal);
+            const Vec3f sw = tangentOf(nw), tw = cross(nw, sw);
+            const float r = g.radius * settings.kernelScale;
+            normalOf[i] = nw;
+            tangentPoints[i] = {local + sw * r, local + sw * -r, local + tw * r, local + tw * -r};
+        }
         for (size_t v = 0; v < directions.size(); ++v) {
             Camera cam{centre + directions[v] * distance, centre,
                        std::fabs(directions[v].z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, 1, 0}, kCaptureFovDegrees};
@@ -133,22 +148,15 @@ Result<CapturedWeights> captureWeights(gpu::Context& ctx, const TilesetReader& r
             for (size_t i = 0; i < count; ++i) {
                 if (owner[order[i]].first == UINT32_MAX) continue;
                 const auto& g = set.surfels[i];
-                Vec3f local{g.px, g.py, g.pz};
-                Vec3f o = view->apply(local);
-                Vec3f nw = unpackNormalOct(g.normal);
-                float facing = std::fabs(dot(view->rotate(nw), o)) / length(o);
+                Vec3f o = view->apply({g.px, g.py, g.pz});
+                float facing = std::fabs(dot(view->rotate(normalOf[i]), o)) / length(o);
                 if (!(facing >= kMinFacing)) continue;
                 long p = visiblePixel(*view, o, near);
                 if (p < 0) continue;
                 samples[i * directions.size() + v] = 1.f / sumAt(*view, o, size_t(p));
                 if (facing < kMinEdgeFacing) continue;
-                // The tangent points +r s, -r s, +r t, -r t (the basis the
-                // renderer's edgeFactor uses).
-                Vec3f sw = tangentOf(nw), tw = cross(nw, sw);
-                const float r = g.radius * settings.kernelScale;  // as the renderer's edge basis
-                const Vec3f offsets[4] = {sw * r, sw * -r, tw * r, tw * -r};
                 for (int k = 0; k < 4; ++k) {
-                    long q = visiblePixel(*view, view->apply(local + offsets[k]), near);
+                    long q = visiblePixel(*view, view->apply(tangentPoints[i][size_t(k)]), near);
                     if (q < 0) continue;
                     edgeSum[4 * i + k] += 1.f / sums[size_t(q)];
                     ++edgeCount[4 * i + k];

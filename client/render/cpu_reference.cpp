@@ -88,8 +88,9 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         float detJ = std::fabs(j00 * j11 - j01 * j10);
         if (!(det > 0) || !std::isfinite(det)) continue;  // no low-pass and J singular
         ScreenSplat sp;
-        sp.mx = 0.5f * W + eta * o.x / o.z;
-        sp.my = 0.5f * H - eta * o.y / o.z;
+        const PixelPoint m = view.project(o);
+        sp.mx = m.x;
+        sp.my = m.y;
         sp.qa = vc / det;
         sp.qb = -vb / det;
         sp.qc = va / det;
@@ -125,7 +126,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
     std::vector<float> front(size_t(W) * H, INFINITY);
     struct Accum { float r, g, b, w, nx, ny, nz, coverage; };
     std::vector<Accum> acc(size_t(W) * H, Accum{0, 0, 0, 0, 0, 0, 0, 0});
-    auto ray = [&](int x, int y) { return Vec3f{(x + 0.5f - 0.5f * W) / eta, -(y + 0.5f - 0.5f * H) / eta, 1.f}; };
+    auto ray = [&](int x, int y) { return view.pixelRay(x + 0.5f, y + 0.5f); };
     auto forEachFragment = [&](int y0, int y1, auto&& fragment) {
         for (const ScreenSplat& sp : splats) {
             int ya = std::max(sp.y0, y0), yb = std::min(sp.y1, y1 - 1);

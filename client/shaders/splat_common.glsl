@@ -35,6 +35,10 @@ vec3 decodeNormal(uint packed) {
 
 bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
 
+// The splat radius at camera depth z: r, or one pixel's worth where r is 0,
+// NaN or infinite (a degenerate h draws as a dot, never as NaN).
+float splatRadius(float r, float z) { return r > 0.0 && !isinf(r) ? r : z / frame.viewport.x; }
+
 vec3 tangentOf(vec3 n) {
     vec3 a = abs(n.x) < 0.9 ? vec3(1, 0, 0) : vec3(0, 1, 0);
     return normalize(cross(n, a));
@@ -63,8 +67,7 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, uint edg
     if (!finite3(n)) return false;
     n = dot(n, o) > 0.0 ? -n : n;
     vec3 s = tangentOf(n), t = cross(n, s);
-    float r = radius * frame.kernel.x;
-    if (!(r > 0.0) || isinf(r)) r = o.z / eta;  // h = 0: one pixel's worth
+    float r = splatRadius(radius * frame.kernel.x, o.z);
 
     // J: columns d(screen)/du_s and d(screen)/du_t at the centre.
     float k = eta / (o.z * o.z);

@@ -27,8 +27,7 @@ void main() {
         vec3 o = toCamera(inPositionRadius.xyz);
         vec3 n = rotateToCamera(decodeNormal(inNormal));
         bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n);
-        float r = inPositionRadius.w > 0.0 && !isinf(inPositionRadius.w) ? inPositionRadius.w : o.z / frame.viewport.x;
-        gl_Position = ok ? circleCorner(o, r, gl_VertexIndex, outY) : kCulled;
+        gl_Position = ok ? circleCorner(o, splatRadius(inPositionRadius.w, o.z), gl_VertexIndex, outY) : kCulled;
         outNormal = dot(n, o) > 0.0 ? -n : n;
         outAmplitude = 1.0;
         return;

@@ -17,13 +17,15 @@ struct Frame {
     double eta, halfW, halfH, near;
 };
 
+// Double precision: node boxes are world coordinates (10^6 for georeferenced data).
 Frame frameOf(const Camera& c, int width, int height) {
     Frame f;
-    f.forward = normalizeOrZero(c.target - c.eye);
-    f.right = normalizeOrZero(cross(f.forward, c.up));
-    f.up = cross(f.right, f.forward);
+    const CameraAxes a = cameraAxes(c);
+    f.right = a.right;
+    f.up = a.up;
+    f.forward = a.forward;
     f.eye = c.eye;
-    f.eta = height / (2.0 * std::tan(0.5 * c.fovYDegrees * M_PI / 180.0));
+    f.eta = viewportScale(c, height);
     f.halfW = 0.5 * width;
     f.halfH = 0.5 * height;
     return f;
