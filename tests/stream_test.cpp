@@ -90,15 +90,20 @@ TEST(Stream, WindowStreamsUnderXvfb) {
         << "the window's converged frame differs from the headless one";
 }
 
+StreamOptions connections(int n) {
+    StreamOptions o;
+    o.connections = n;
+    return o;
+}
+
 // Update until converged (or the deadline); returns whether it converged.
 bool streamUntilConverged(StreamingSet& stream, const Camera& camera, std::vector<uint32_t>* drawn, double seconds) {
     auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
     while (std::chrono::steady_clock::now() < deadline) {
-        bool converged = false;
-        auto selected = stream.update(camera, 200, 150, {}, nullptr, &converged);
-        if (converged) {
+        StreamUpdate u = stream.update(camera, 200, 150, {});
+        if (u.converged) {
             drawn->clear();
-            for (const auto& s : selected) drawn->push_back(s.index);
+            for (const auto& s : u.draw) drawn->push_back(s.index);
             std::sort(drawn->begin(), drawn->end());
             return true;
         }
@@ -127,7 +132,7 @@ TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
     size_t at = server.log.find("http://127.0.0.1:");
     std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
-    auto remote = StreamingSet::open(origin + "/sets/scene", 4);
+    auto remote = StreamingSet::open(origin + "/sets/scene", connections(4));
     ASSERT_TRUE(remote) << remote.status().message();
     std::vector<uint32_t> drawn;
     ASSERT_TRUE(streamUntilConverged(**remote, *first, &drawn, 30));
@@ -177,14 +182,14 @@ TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
         }
     } stop{host, serving};
     while (!host.is_running()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    auto flaky = StreamingSet::open("http://127.0.0.1:" + std::to_string(port) + "/flaky", 2);
+    auto flaky = StreamingSet::open("http://127.0.0.1:" + std::to_string(port) + "/flaky", connections(2));
     ASSERT_TRUE(flaky) << flaky.status().message();
     ASSERT_TRUE(streamUntilConverged(**flaky, *first, &drawn, 30)) << (*flaky)->stats().lastError;
     EXPECT_EQ(drawn, expectFirst);
     EXPECT_GE((*flaky)->stats().failures, 1u);
     EXPECT_NE((*flaky)->stats().lastError.find("CRC"), std::string::npos) << (*flaky)->stats().lastError;
     // The same set from the static mount (Range by cpp-httplib itself) converges too.
-    auto mounted = StreamingSet::open("http://127.0.0.1:" + std::to_string(port) + "/static", 2);
+    auto mounted = StreamingSet::open("http://127.0.0.1:" + std::to_string(port) + "/static", connections(2));
     ASSERT_TRUE(mounted) << mounted.status().message();
     ASSERT_TRUE(streamUntilConverged(**mounted, *second, &drawn, 30)) << (*mounted)->stats().lastError;
     EXPECT_EQ(drawn, expectSecond);

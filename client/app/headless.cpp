@@ -122,9 +122,8 @@ int runHeadlessLod(const ViewOptions& o) {
     const auto start = std::chrono::steady_clock::now();
     auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
     {
-        ClientOptions options;
+        ClientOptions options = o.client;
         options.lod.targetPixels = *o.lod;
-        options.lod.frustumCulling = options.lod.backfaceCulling = o.culling;
         options.renderer = o.renderer;
         auto client = SurfcastClient::open(*ctx, o.set, options);
         if (!client) status = fail(client.status().message());
@@ -164,8 +163,14 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["frustum_culled"] = cf.lod.frustumCulled;
                 line["backface_culled"] = cf.lod.backfaceCulled;
                 line["wanted"] = cf.lod.missing.size();
+                line["budget_limited"] = cf.lod.budgetLimited;
                 line["bytes_downloaded"] = cf.stream.bytesDownloaded;
-                line["requests_in_flight"] = cf.stream.inFlight;
+                line["requests"] = cf.stream.requests;
+                line["requests_in_flight"] = cf.stream.requestsInFlight;
+                line["nodes_in_flight"] = cf.stream.inFlight;
+                line["resident_nodes"] = cf.stream.resident;
+                line["resident_bytes"] = cf.stream.residentBytes;
+                line["evictions"] = cf.stream.evictions;
                 line["fetch_ms"] = cf.stream.fetchMs;
                 line["decode_ms"] = cf.stream.decodeMs;
                 line["failures"] = cf.stream.failures;

@@ -50,6 +50,11 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
                         spacing exceeds PX pixels (frustum and cone culling); streams
                         SET (a folder or an http:// URL) in the window or headless
   --no-culling          with --lod: draw what culling would skip (for comparisons)
+  --splat-budget N      with --lod: at most N splats per frame (default 5000000); views
+                        that need more stay coarser, evenly
+  --gpu-budget MIB      with --lod: GPU memory for surfels, least recently used nodes
+                        evicted beyond it (default 1024, or a quarter of the device's)
+  --connections N       with --lod: concurrent block requests (default 6)
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
   With --lod, SET may be a URL: http://HOST:PORT/sets/NAME (surfcast-serve) or any
   folder URL on a static host with Range; frames redraw as blocks arrive, one JSON
@@ -120,10 +125,10 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             }
             return true;
         };
-        auto count = [&](int* out, const char* what) {
+        auto count = [&](int* out, const char* what, long most = 1000000) {
             char* end = nullptr;
             long n = value() ? std::strtol(v.c_str(), &end, 10) : -1;
-            if (!end || *end != '\0' || n < 1 || n > 1000000) {
+            if (!end || *end != '\0' || n < 1 || n > most) {
                 *exitCode = usageError(std::string(what) + " wants a whole number >= 1");
                 return false;
             }
@@ -227,7 +232,17 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             if (!positive(&s, "--max-wait")) return false;
             o->maxWait = s;
         } else if (a == "--no-culling") {
-            o->culling = false;
+            o->client.lod.frustumCulling = o->client.lod.backfaceCulling = false;
+        } else if (a == "--splat-budget") {
+            int n = 0;
+            if (!count(&n, "--splat-budget", 2000000000)) return false;
+            o->client.lod.splatBudget = size_t(n);
+        } else if (a == "--gpu-budget") {
+            float mib = 0;
+            if (!positive(&mib, "--gpu-budget")) return false;
+            o->client.gpuBudget = size_t(double(mib) * (1 << 20));
+        } else if (a == "--connections") {
+            if (!count(&o->client.connections, "--connections")) return false;
         } else if (a == "--repeat") {
             if (!count(&o->repeat, "--repeat")) return false;
         } else if (a == "--frames") {

@@ -7,6 +7,7 @@
 
 #include "camera.h"
 #include "render_settings.h"
+#include "surfcast_client.h"
 #include "splat_renderer.h"
 #include "surfel_set.h"
 
@@ -28,7 +29,7 @@ struct ViewOptions {
     bool validation = false;
     int repeat = 1;                   // headless: renders per frame (median times reported)
     std::optional<double> lod;        // level of detail: target projected spacing, pixels
-    bool culling = true;              // frustum and backface culling with --lod
+    ClientOptions client;             // with --lod: culling, budgets, connections
     double maxWait = 120;             // with --lod: seconds a frame may stream before it is written
     int frames = 0;                   // window: quit after this many frames (0: run until closed)
     std::string screenshot;           // window: save the last frame here on exit

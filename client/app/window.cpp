@@ -144,9 +144,8 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
         Box3d bounds = set.bounds;
         Status s = swapchain ? Status{} : swapchain.status();
         if (s && o.lod) {
-            ClientOptions options;
+            ClientOptions options = o.client;
             options.lod.targetPixels = *o.lod;
-            options.lod.frustumCulling = options.lod.backfaceCulling = o.culling;
             options.renderer = o.renderer;
             auto c = SurfcastClient::open(**ctx, o.set, options);
             if (c) {

@@ -144,6 +144,24 @@ std::string listDevices() {
     return out;
 }
 
+namespace {
+// Timestamp support and the command pool, for a device made here or by the host.
+Status finishContext(Context& ctx) {
+    uint32_t count = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(ctx.physicalDevice, &count, nullptr);
+    std::vector<VkQueueFamilyProperties> families(count);
+    vkGetPhysicalDeviceQueueFamilyProperties(ctx.physicalDevice, &count, families.data());
+    if (ctx.queueFamily >= count) return Status::error("queue family " + std::to_string(ctx.queueFamily) + " does not exist");
+    ctx.timestamps = families[ctx.queueFamily].timestampValidBits > 0 && ctx.properties.limits.timestampPeriod > 0;
+    VkCommandPoolCreateInfo pool{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+    pool.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    pool.queueFamilyIndex = ctx.queueFamily;
+    if (VkResult r = vkCreateCommandPool(ctx.device, &pool, nullptr, &ctx.commandPool); r != VK_SUCCESS)
+        return vkError("vkCreateCommandPool", r, __FILE__, __LINE__);
+    return {};
+}
+}  // namespace
+
 Result<std::unique_ptr<Context>> createContext(const ContextOptions& options) {
     auto ctx = std::make_unique<Context>();
     bool debugUtils = false;
@@ -221,17 +239,26 @@ Result<std::unique_ptr<Context>> createContext(const ContextOptions& options) {
         return fail(vkError("vkCreateDevice", r, __FILE__, __LINE__));
     vkGetDeviceQueue(ctx->device, ctx->queueFamily, 0, &ctx->queue);
 
-    uint32_t count = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(ctx->physicalDevice, &count, nullptr);
-    std::vector<VkQueueFamilyProperties> families(count);
-    vkGetPhysicalDeviceQueueFamilyProperties(ctx->physicalDevice, &count, families.data());
-    ctx->timestamps = families[ctx->queueFamily].timestampValidBits > 0 && ctx->properties.limits.timestampPeriod > 0;
+    if (Status st = finishContext(*ctx); !st) return fail(st);
+    return ctx;
+}
 
-    VkCommandPoolCreateInfo pool{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
-    pool.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-    pool.queueFamilyIndex = ctx->queueFamily;
-    if (VkResult r = vkCreateCommandPool(ctx->device, &pool, nullptr, &ctx->commandPool); r != VK_SUCCESS)
-        return fail(vkError("vkCreateCommandPool", r, __FILE__, __LINE__));
+Result<std::unique_ptr<Context>> wrapContext(const HostDevice& host) {
+    if (!host.instance || !host.physicalDevice || !host.device || !host.queue)
+        return Status::error("wrapContext: the host device needs an instance, physical device, device and queue");
+    auto ctx = std::make_unique<Context>();
+    ctx->ownsDevice = false;
+    ctx->instance = host.instance;
+    ctx->physicalDevice = host.physicalDevice;
+    ctx->device = host.device;
+    ctx->queueFamily = host.queueFamily;
+    ctx->queue = host.queue;
+    ctx->geometryShader = host.geometryShaderEnabled;
+    vkGetPhysicalDeviceProperties(ctx->physicalDevice, &ctx->properties);
+    if (Status st = finishContext(*ctx); !st) {
+        destroyContext(ctx);
+        return st;
+    }
     return ctx;
 }
 
@@ -240,7 +267,11 @@ void destroyContext(std::unique_ptr<Context>& ctx) {
     if (ctx->device) {
         vkDeviceWaitIdle(ctx->device);
         if (ctx->commandPool) vkDestroyCommandPool(ctx->device, ctx->commandPool, nullptr);
-        vkDestroyDevice(ctx->device, nullptr);
+        if (ctx->ownsDevice) vkDestroyDevice(ctx->device, nullptr);
+    }
+    if (!ctx->ownsDevice) {
+        ctx.reset();
+        return;
     }
     if (ctx->messenger) {
         auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(

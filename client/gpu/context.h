@@ -31,6 +31,7 @@ struct Context {
     VkCommandPool commandPool = VK_NULL_HANDLE;
     bool geometryShader = false;  // the device supports (and has enabled) geometry shaders
     bool timestamps = false;      // the queue writes timestamps
+    bool ownsDevice = true;       // false: the host's device (wrapContext), not destroyed here
     std::atomic<int> validationErrors{0};
     std::atomic<int> validationWarnings{0};
 };
@@ -39,6 +40,21 @@ struct Context {
 // Vulkan 1.3, dynamic rendering and synchronization2.
 Result<std::unique_ptr<Context>> createContext(const ContextOptions& options);
 void destroyContext(std::unique_ptr<Context>& context);
+
+// A device the host application made, for embedding: Vulkan 1.3 with
+// dynamicRendering and synchronization2 enabled (and geometryShader, if it
+// should be used). The context borrows it: destroyContext frees only what the
+// context created (a command pool). The library submits to `queue` (uploads,
+// offscreen renders): call it from the thread that owns the queue.
+struct HostDevice {
+    VkInstance instance = VK_NULL_HANDLE;
+    VkPhysicalDevice physicalDevice = VK_NULL_HANDLE;
+    VkDevice device = VK_NULL_HANDLE;
+    uint32_t queueFamily = 0;  // graphics
+    VkQueue queue = VK_NULL_HANDLE;
+    bool geometryShaderEnabled = false;
+};
+Result<std::unique_ptr<Context>> wrapContext(const HostDevice& host);
 
 // The available devices, one per line ("index: name (type)"), for --help/--device.
 std::string listDevices();

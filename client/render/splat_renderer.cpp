@@ -201,15 +201,22 @@ void SplatRenderer::destroyTargets() {
 Status SplatRenderer::upload(const SurfelSet& set) {
     vkDeviceWaitIdle(ctx_.device);
     gpu::destroyBuffer(ctx_, surfels_);
-    splatCount_ = 0;
-    diagonal_ = diagonalOf(set);
+    setDraws(VK_NULL_HANDLE, {}, diagonalOf(set));
     if (set.surfels.empty()) return {};
     auto buffer = gpu::createBufferWithData(ctx_, set.surfels.data(), set.surfels.size() * sizeof(GpuSurfel),
                                             VK_BUFFER_USAGE_VERTEX_BUFFER_BIT);
     if (!buffer) return buffer.status();
     surfels_ = *buffer;
-    splatCount_ = set.surfels.size();
+    setDraws(surfels_.buffer, {{0, uint32_t(set.surfels.size())}}, diagonal_);
     return {};
+}
+
+void SplatRenderer::setDraws(VkBuffer buffer, std::vector<DrawRange> ranges, double diagonal) {
+    drawBuffer_ = buffer;
+    ranges_ = std::move(ranges);
+    diagonal_ = diagonal;
+    splatCount_ = 0;
+    for (const DrawRange& r : ranges_) splatCount_ += r.count;
 }
 
 Status SplatRenderer::resize(uint32_t width, uint32_t height) {
@@ -298,9 +305,11 @@ void SplatRenderer::record(VkCommandBuffer cmd, const FrameParams& params) {
         vkCmdPushConstants(cmd, splatLayout_, pushStages, 0, sizeof(params), &params);
         if (splatCount_ == 0) return;
         VkDeviceSize offset = 0;
-        vkCmdBindVertexBuffers(cmd, 0, 1, &surfels_.buffer, &offset);
-        if (quads) vkCmdDraw(cmd, 4, uint32_t(splatCount_), 0, 0);
-        else vkCmdDraw(cmd, uint32_t(splatCount_), 1, 0, 0);
+        vkCmdBindVertexBuffers(cmd, 0, 1, &drawBuffer_, &offset);
+        for (const DrawRange& r : ranges_) {
+            if (quads) vkCmdDraw(cmd, 4, r.count, 0, r.first);  // one instance per surfel
+            else vkCmdDraw(cmd, r.count, 1, r.first, 0);
+        }
     };
     const bool quads = options_.expansion == Expansion::Quad;
     ewaFrame_ = params.mode != SC_MODE_POINTS && params.mode != SC_MODE_CIRCLES;

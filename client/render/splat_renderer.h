@@ -10,6 +10,7 @@
 #pragma once
 
 #include <memory>
+#include <vector>
 
 #include "../gpu/resources.h"
 #include "camera.h"
@@ -31,6 +32,11 @@ struct RendererOptions {
     bool halfFloatAccumulation = false;  // RGBA16F instead of RGBA32F
 };
 
+// Surfels [first, first + count) of a vertex buffer of GpuSurfels.
+struct DrawRange {
+    uint32_t first = 0, count = 0;
+};
+
 struct GpuFrameStats {
     double visibilityMs = 0, accumulateMs = 0, resolveMs = 0, totalMs = 0;  // GPU timestamps
     size_t splats = 0;
@@ -46,6 +52,9 @@ public:
 
     // Replaces the surfels drawn (device-local copy through a staging buffer).
     Status upload(const SurfelSet& set);
+    // Or draws ranges of a buffer the caller owns (a SurfelPool) and keeps
+    // alive while frames use it; `diagonal` of the scene sets the near plane.
+    void setDraws(VkBuffer buffer, std::vector<DrawRange> ranges, double diagonal);
     Status resize(uint32_t width, uint32_t height);
     float nearPlane(const ViewTransform& view) const { return nearPlaneFor(diagonal_, view); }
     size_t splatCount() const { return splatCount_; }
@@ -84,7 +93,9 @@ private:
     VkPipeline points_ = VK_NULL_HANDLE, circles_ = VK_NULL_HANDLE, visibility_ = VK_NULL_HANDLE,
                accumulate_ = VK_NULL_HANDLE, resolve_ = VK_NULL_HANDLE;
     VkQueryPool queries_ = VK_NULL_HANDLE;
-    gpu::Buffer surfels_, readback_;
+    gpu::Buffer surfels_, readback_;  // surfels_: the uploaded set's
+    VkBuffer drawBuffer_ = VK_NULL_HANDLE;  // surfels_ or the caller's
+    std::vector<DrawRange> ranges_;
     gpu::Image depth_, colorWeight_, normalWeight_, output_;
     size_t splatCount_ = 0;
     double diagonal_ = 0;  // of the uploaded set, for the near plane

@@ -1,6 +1,7 @@
 #include "lod_selection.h"
 
 #include <cmath>
+#include <queue>
 #include <unordered_map>
 
 namespace surfcast {
@@ -79,11 +80,14 @@ LodSelector::LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes)
         if (nodes_[i].key.level == 0) root_ = int32_t(i);
     }
     children_.assign(nodes_.size(), {-1, -1, -1, -1, -1, -1, -1, -1});
+    parent_.assign(nodes_.size(), -1);
     for (size_t i = 0; i < nodes_.size(); ++i)
         for (int c = 0; c < 8; ++c)
             if (nodes_[i].childMask & (1u << c)) {
                 auto it = index.find(nodes_[i].key.child(c));
-                if (it != index.end()) children_[i][size_t(c)] = it->second;
+                if (it == index.end()) continue;
+                children_[i][size_t(c)] = it->second;
+                parent_[size_t(it->second)] = int32_t(i);
             }
 }
 
@@ -129,39 +133,76 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
         return nodes_[i].spacing * f.eta / nearest;
     };
 
-    std::vector<uint32_t> stack{uint32_t(root_)};
-    while (!stack.empty()) {
-        uint32_t i = stack.back();
-        stack.pop_back();
-        ++st.visited;
-        Box3d grown;
-        if (culled(i, &grown)) continue;
+    // Weight of a node's gap by where it is on screen: up to 2x at the view
+    // centre, 1x at the corners and beyond.
+    auto centreWeight = [&](const Box3d& b) {
+        Vec3d c = toCamera(f, (b.min + b.max) * 0.5);
+        if (!(c.z > nearDistance)) return 2.0;
+        double x = f.eta * c.x / (c.z * f.halfW), y = f.eta * c.y / (c.z * f.halfH);
+        return 1.0 + std::fmax(0.0, 1.0 - std::sqrt(0.5 * (x * x + y * y)));
+    };
+
+    // Greedy replacement refinement from the root: the drawn node with the
+    // largest weighted gap is replaced by its children next. Without a budget
+    // the result is the plain recursive traversal (each node is refined or
+    // not on its own test), only the order differs.
+    struct Drawn {
+        uint32_t index;
+        double spacing, priority;
+        bool operator<(const Drawn& o) const { return priority < o.priority; }
+    };
+    std::vector<Drawn> final;
+    std::priority_queue<Drawn> open;  // drawn nodes that want refining
+    auto place = [&](uint32_t i, const Box3d& grown) {
         double spacing = projectedSpacing(i, grown);
-        bool wantChildren = spacing > params.targetPixels && nodes_[i].childMask != 0;
-        if (wantChildren) {
-            // Replacement: refine only when every child that will be drawn or
-            // refined (not culled) is resident; else draw this node meanwhile.
-            std::vector<uint32_t> needed;
-            bool ready = true;
-            for (int32_t c : children_[i]) {
-                if (c < 0) continue;
-                Box3d childGrown;
-                if (culled(uint32_t(c), &childGrown)) continue;  // counted here, once
-                needed.push_back(uint32_t(c));
-                if (!resident(uint32_t(c))) {
-                    ready = false;
-                    st.missing.push_back({uint32_t(c), spacing});
-                }
-            }
-            if (ready) {
-                for (uint32_t c : needed) stack.push_back(c);
-                continue;
-            }
-            ++st.waiting;
-        }
-        if (resident(i)) out.push_back({i, spacing});
-        else st.missing.push_back({i, HUGE_VAL});  // nothing to stand in for it: first
+        Drawn d{i, spacing, spacing * centreWeight(grown)};
+        if (spacing > params.targetPixels && nodes_[i].childMask != 0) open.push(d);
+        else final.push_back(d);
+        st.splats += nodes_[i].surfelCount;
+    };
+    ++st.visited;
+    Box3d rootGrown;
+    if (culled(uint32_t(root_), &rootGrown)) return out;
+    if (!resident(uint32_t(root_))) {
+        st.missing.push_back({uint32_t(root_), HUGE_VAL});  // nothing to stand in for it: first
+        return out;
     }
+    place(uint32_t(root_), rootGrown);
+    while (!open.empty()) {
+        Drawn d = open.top();
+        open.pop();
+        // Replacement: refine only when every child that will be drawn or
+        // refined (not culled) is resident; else draw this node meanwhile.
+        std::vector<std::pair<uint32_t, Box3d>> needed;
+        size_t childSplats = 0;
+        bool ready = true;
+        for (int32_t c : children_[d.index]) {
+            if (c < 0) continue;
+            ++st.visited;
+            Box3d grown;
+            if (culled(uint32_t(c), &grown)) continue;  // counted here, once
+            needed.push_back({uint32_t(c), grown});
+            childSplats += nodes_[size_t(c)].surfelCount;
+        }
+        if (st.splats - nodes_[d.index].surfelCount + childSplats > params.splatBudget) {
+            ++st.budgetLimited;
+            final.push_back(d);
+            continue;
+        }
+        for (const auto& [c, grown] : needed)
+            if (!resident(c)) {
+                ready = false;
+                st.missing.push_back({c, d.priority});
+            }
+        if (!ready) {
+            ++st.waiting;
+            final.push_back(d);
+            continue;
+        }
+        st.splats -= nodes_[d.index].surfelCount;
+        for (const auto& [c, grown] : needed) place(c, grown);
+    }
+    for (const Drawn& d : final) out.push_back({d.index, d.spacing});
     return out;
 }
 

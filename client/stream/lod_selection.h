@@ -6,10 +6,15 @@
 // pixels-per-unit over the box's corners, exceeds the target. Replacement
 // refinement: children are drawn only when every child that is needed is
 // resident, otherwise the node itself, so nothing holes while data streams.
+// Refinement goes coarsest gap first (largest projected spacing, weighted
+// towards the view centre) and stops at a splat budget, so a view that would
+// need more surfels than a frame can draw degrades evenly instead of
+// refining one corner.
 // Pure CPU, no Vulkan, no I/O: the streaming client and surfcast-view use it.
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <functional>
 #include <vector>
 
@@ -22,13 +27,17 @@ struct LodParams {
     double targetPixels = 1.0;  // refine while the projected spacing exceeds this
     bool frustumCulling = true;
     bool backfaceCulling = true;
+    size_t splatBudget = SIZE_MAX;  // most surfels drawn per frame
 };
 
 struct LodStats {
     size_t visited = 0, frustumCulled = 0, backfaceCulled = 0;
     size_t waiting = 0;  // nodes drawn in place of children that are not resident yet
+    size_t budgetLimited = 0;  // nodes left coarser than the target by the splat budget
+    size_t splats = 0;         // surfels of the selected nodes
     // Nodes the view needs that are not resident, with a priority (the
-    // projected spacing of the node waiting for them: coarsest gaps first).
+    // projected spacing of the node waiting for them, weighted towards the
+    // view centre: coarsest gaps first).
     std::vector<std::pair<uint32_t, double>> missing;
 };
 
@@ -51,11 +60,14 @@ public:
 
     // World box of node i, and its projected spacing for a camera (pixels).
     Box3d box(uint32_t i) const;
+    // The parent's index, -1 for the root.
+    int32_t parent(uint32_t i) const { return parent_[i]; }
 
 private:
     TilesetInfo info_;
     std::vector<NodeRecord> nodes_;
     std::vector<std::array<int32_t, 8>> children_;  // node index per child slot, -1 if none
+    std::vector<int32_t> parent_;
     int32_t root_ = -1;
 };
 

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <unordered_set>
 
+#include "block_codec.h"
 #include "crc32.h"
 #include "tileset_reader.h"
 
@@ -14,10 +16,13 @@ double now() { return std::chrono::duration<double>(std::chrono::steady_clock::n
 // Retry after 0.1 s, doubling per failure up to 5 s: a restarting server
 // comes back without the client hammering it.
 double backoffSeconds(int attempts) { return std::min(5.0, 0.1 * std::pow(2.0, attempts - 1)); }
+constexpr size_t kMaxBatchNodes = 32;
 }  // namespace
 
-Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& location, int connections) {
+Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& location, const StreamOptions& options) {
     std::unique_ptr<StreamingSet> s(new StreamingSet);
+    s->options_ = options;
+    s->options_.granule = std::max<size_t>(1, options.granule);
     auto source = openTileSource(location);
     if (!source) return source.status();
     s->source_ = std::move(*source);
@@ -33,7 +38,9 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     auto nodes = readHierarchy(*hierarchy, location + "/hierarchy.bin");
     if (!nodes) return nodes.status();
     s->selector_ = std::make_unique<LodSelector>(s->info_, std::move(*nodes));
-    for (int i = 0; i < std::max(1, connections); ++i) s->workers_.emplace_back([p = s.get()] { p->work(); });
+    int decoders = options.decoders > 0 ? options.decoders : int(std::max(1u, std::thread::hardware_concurrency()));
+    for (int i = 0; i < std::max(1, options.connections); ++i) s->fetchers_.emplace_back([p = s.get()] { p->fetchLoop(); });
+    for (int i = 0; i < decoders; ++i) s->decoders_.emplace_back([p = s.get()] { p->decodeLoop(); });
     return s;
 }
 
@@ -42,105 +49,180 @@ StreamingSet::~StreamingSet() {
         std::lock_guard lock(mutex_);
         stopping_ = true;
     }
-    wake_.notify_all();
-    for (auto& t : workers_) t.join();
+    wakeFetch_.notify_all();
+    wakeDecode_.notify_all();
+    for (auto& t : fetchers_) t.join();
+    for (auto& t : decoders_) t.join();
 }
 
-std::vector<SelectedNode> StreamingSet::update(const Camera& camera, int width, int height, const LodParams& params,
-                                               LodStats* lod, bool* converged) {
-    LodStats local;
-    LodStats& st = lod ? *lod : local;
-    std::vector<SelectedNode> selected;
+size_t StreamingSet::residentCost(uint32_t index) const {
+    size_t g = options_.granule;
+    return (nodes()[index].surfelCount + g - 1) / g * g * sizeof(gpu_types::GpuSurfel);
+}
+
+StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, const LodParams& params) {
+    StreamUpdate u;
     {
         std::lock_guard lock(mutex_);
-        selected = selector_->select(camera, width, height, params,
-                                     [&](uint32_t i) { return resident_.count(i) != 0; }, &st);
-        // Requests the view no longer needs are dropped (cancelled before they
-        // start; a fetch in flight completes and stays cached).
-        wanted_.clear();
-        for (const auto& [node, priority] : st.missing)
-            if (!inFlight_.count(node)) wanted_.push_back({node, priority});
-        std::stable_sort(wanted_.begin(), wanted_.end(), [](auto& a, auto& b) { return a.second < b.second; });
-        stats_.queued = wanted_.size();
-        *converged = st.missing.empty();
-    }
-    wake_.notify_all();
-    return selected;
-}
+        ++frame_;
+        // What decoded since the last update is resident from now on.
+        u.arrived.swap(arrived_);
+        for (const ArrivedNode& a : u.arrived) {
+            size_t bytes = residentCost(a.index);
+            resident_[a.index] = {frame_, bytes};
+            residentBytes_ += bytes;
+            pendingBytes_ -= bytes;
+        }
+        u.draw = selector_->select(camera, width, height, params,
+                                   [&](uint32_t i) { return resident_.count(i) != 0; }, &u.lod);
+        // The view uses the drawn nodes and every ancestor it refined through.
+        for (const SelectedNode& s : u.draw)
+            for (int32_t i = int32_t(s.index); i >= 0; i = selector_->parent(uint32_t(i))) {
+                auto it = resident_.find(uint32_t(i));
+                if (it == resident_.end() || it->second.lastUsed == frame_) break;
+                it->second.lastUsed = frame_;
+            }
 
-std::shared_ptr<const BlockData> StreamingSet::block(uint32_t index) const {
-    std::lock_guard lock(mutex_);
-    auto it = resident_.find(index);
-    return it == resident_.end() ? nullptr : it->second;
+        wanted_.clear();
+        size_t wantedBytes = 0;
+        for (const auto& [node, priority] : u.lod.missing)
+            if (!pending_.count(node)) {
+                wanted_.push_back({node, priority});
+                wantedBytes += residentCost(node);
+            }
+        std::stable_sort(wanted_.begin(), wanted_.end(), [](auto& a, auto& b) { return a.second < b.second; });
+        // Make room for what the view wants: least recently used first, never
+        // a node this frame uses.
+        if (residentBytes_ + pendingBytes_ + wantedBytes > options_.memoryBudget) {
+            std::vector<std::pair<uint64_t, uint32_t>> lru;
+            for (const auto& [node, r] : resident_)
+                if (r.lastUsed != frame_) lru.push_back({r.lastUsed, node});
+            std::sort(lru.begin(), lru.end());
+            for (const auto& [used, node] : lru) {
+                if (residentBytes_ + pendingBytes_ + wantedBytes <= options_.memoryBudget) break;
+                residentBytes_ -= resident_[node].bytes;
+                resident_.erase(node);
+                u.evicted.push_back(node);
+                ++stats_.evictions;
+            }
+        }
+        stats_.queued = wanted_.size();
+        u.converged = u.lod.missing.empty();
+    }
+    wakeFetch_.notify_all();
+    return u;
 }
 
 StreamStats StreamingSet::stats() const {
     std::lock_guard lock(mutex_);
     StreamStats s = stats_;
-    s.inFlight = inFlight_.size();
+    s.inFlight = pending_.size();
     s.resident = resident_.size();
+    s.residentBytes = residentBytes_;
     return s;
 }
 
-void StreamingSet::work() {
+void StreamingSet::fail(uint32_t node, const std::string& message) {
+    pending_.erase(node);
+    pendingBytes_ -= residentCost(node);
+    auto& f = failed_[node];
+    f.first += 1;
+    f.second = now() + backoffSeconds(f.first);
+    ++stats_.failures;
+    stats_.lastError = message;
+}
+
+void StreamingSet::fetchLoop() {
     std::unique_lock lock(mutex_);
     while (true) {
-        // The highest-priority wanted node that is not in flight and not backing off.
-        uint32_t node = UINT32_MAX;
-        double wait = 0.5;
-        wake_.wait_for(lock, std::chrono::duration<double>(0.05), [&] { return stopping_ || !wanted_.empty(); });
+        wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05), [&] { return stopping_ || !wanted_.empty(); });
         if (stopping_) return;
-        double t = now();
-        for (size_t k = wanted_.size(); k-- > 0;) {
+        // The highest-priority wanted nodes that are neither pending nor
+        // backing off, as many as one batch takes and the budget admits (at
+        // least one when nothing is resident or pending: a node larger than
+        // the budget still loads).
+        std::vector<NodeRecord> batch;
+        std::vector<uint32_t> indices;
+        size_t batchBytes = 0;
+        double t = now(), wait = 0.5;
+        for (size_t k = wanted_.size(); k-- > 0 && batch.size() < kMaxBatchNodes && batchBytes < options_.batchBytes;) {
             uint32_t candidate = wanted_[k].first;
-            if (inFlight_.count(candidate) || resident_.count(candidate)) continue;
+            if (pending_.count(candidate) || resident_.count(candidate)) continue;
             auto f = failed_.find(candidate);
             if (f != failed_.end() && f->second.second > t) {
                 wait = std::min(wait, f->second.second - t);
                 continue;
             }
-            node = candidate;
+            size_t cost = residentCost(candidate);
+            bool empty = residentBytes_ + pendingBytes_ == 0;
+            if (!empty && residentBytes_ + pendingBytes_ + cost > options_.memoryBudget) continue;
             wanted_.erase(wanted_.begin() + long(k));
-            break;
+            pending_[candidate] = 1;
+            pendingBytes_ += cost;
+            batch.push_back(nodes()[candidate]);
+            indices.push_back(candidate);
+            batchBytes += batch.back().blockSize;
         }
-        if (node == UINT32_MAX) {
-            wake_.wait_for(lock, std::chrono::duration<double>(std::max(wait, 0.01)));
+        if (batch.empty()) {
+            wakeFetch_.wait_for(lock, std::chrono::duration<double>(std::max(wait, 0.01)));
             continue;
         }
-        inFlight_[node] = 1;
-        const NodeRecord record = selector_->nodes()[node];
+        ++stats_.requestsInFlight;
+        lock.unlock();
+        double t0 = now();
+        auto blobs = source_->blobs(batch);
+        double t1 = now();
+        lock.lock();
+        --stats_.requestsInFlight;
+        ++stats_.requests;
+        stats_.fetchMs = (t1 - t0) * 1e3;
+        if (!blobs) {
+            for (uint32_t node : indices) fail(node, blobs.status().message());
+            continue;
+        }
+        for (size_t i = 0; i < indices.size(); ++i) {
+            stats_.bytesDownloaded += (*blobs)[i].size();
+            fetched_.push_back({indices[i], std::move((*blobs)[i])});
+        }
+        wakeDecode_.notify_all();
+    }
+}
+
+void StreamingSet::decodeLoop() {
+    std::unique_lock lock(mutex_);
+    while (true) {
+        wakeDecode_.wait(lock, [&] { return stopping_ || !fetched_.empty(); });
+        if (stopping_) return;
+        Fetched job = std::move(fetched_.front());
+        fetched_.pop_front();
+        const NodeRecord record = nodes()[job.node];
         lock.unlock();
 
         double t0 = now();
-        auto bytes = source_->blocks(record.blockOffset, record.blockSize);
-        double t1 = now();
         Result<BlockData> block = Status::error("");
-        if (bytes) {
-            if (crc32(bytes->data(), bytes->size()) != record.blockCrc)
-                block = Status::error(source_->describe() + ": node " + record.key.name() + ": CRC mismatch");
-            else
-                block = decodeBlock(bytes->data(), bytes->size(), blockExpectation(info_, record));
-        } else {
-            block = bytes.status();
+        const std::vector<uint8_t>& bytes = job.bytes;
+        if (crc32(bytes.data(), bytes.size()) != record.blockCrc)
+            block = Status::error(source_->describe() + ": node " + record.key.name() + ": CRC mismatch");
+        else
+            block = decodeBlock(bytes.data(), bytes.size(), blockExpectation(info_, record));
+        std::shared_ptr<SurfelSet> surfels;
+        if (block) {
+            surfels = std::make_shared<SurfelSet>(emptySurfelSet(info_));
+            appendNode(*surfels, info_, record, *block);
+            sortMorton(*surfels);
         }
-        double t2 = now();
+        double t1 = now();
 
         lock.lock();
-        inFlight_.erase(node);
-        ++stats_.requests;
-        if (bytes) stats_.bytesDownloaded += bytes->size();
-        if (block) {
-            resident_[node] = std::make_shared<const BlockData>(std::move(*block));
-            failed_.erase(node);
-            stats_.fetchMs = (t1 - t0) * 1e3;
-            stats_.decodeMs = (t2 - t1) * 1e3;
-        } else {
-            auto& f = failed_[node];
-            f.first += 1;
-            f.second = now() + backoffSeconds(f.first);
-            ++stats_.failures;
-            stats_.lastError = block.status().message();
+        if (!block) {
+            fail(job.node, block.status().message());
+            continue;
         }
+        pending_.erase(job.node);
+        failed_.erase(job.node);
+        ++stats_.nodesFetched;
+        stats_.decodeMs = (t1 - t0) * 1e3;
+        arrived_.push_back({job.node, std::move(surfels)});
     }
 }
 

@@ -1,12 +1,19 @@
 // A tile set streamed from a TileSource (local folder or HTTP): the hierarchy
 // up front, blocks on demand. Each update() traverses from the root
 // (LodSelector), draws what is resident, and queues what the view still needs,
-// coarsest gaps first. Worker threads fetch (bounded concurrency, keep-alive),
-// check the CRC, decode, and retry failures with exponential backoff; a fault
-// never stops drawing what is resident.
+// coarsest gaps first, replacing the previous wants (requests that left the
+// view are cancelled before they start).
+//
+//   update() ─wants─► fetch threads (bounded, keep-alive, batched) ─bytes─►
+//   decode threads (CRC, Draco, pack, Morton) ─surfels─► next update():
+//   `arrived` for the consumer to upload; `evicted` for it to free.
+//
+// Residency has a byte budget: beyond it, update() evicts the least recently
+// used nodes that the view does not use (neither drawn nor refined through).
+// Faults (server gone, HTTP errors, short or corrupt blocks) are retried with
+// exponential backoff; they never stop drawing what is resident.
 #pragma once
 
-#include <atomic>
 #include <condition_variable>
 #include <deque>
 #include <memory>
@@ -15,53 +22,93 @@
 #include <unordered_map>
 #include <vector>
 
-#include "block_codec.h"
 #include "lod_selection.h"
+#include "surfel_set.h"
 #include "tile_source.h"
 
 namespace surfcast {
 
+struct StreamOptions {
+    int connections = 6;       // concurrent requests
+    int decoders = 0;          // decode threads; 0: one per core
+    size_t memoryBudget = size_t(1) << 30;  // bytes of resident surfels (32 B each, in granules)
+    size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
+    size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
+};
+
 struct StreamStats {
     uint64_t bytesDownloaded = 0;
-    size_t requests = 0, inFlight = 0, queued = 0, resident = 0, failures = 0;
-    double fetchMs = 0, decodeMs = 0;  // of the last block
+    size_t requests = 0, requestsInFlight = 0, nodesFetched = 0, inFlight = 0, queued = 0, resident = 0, failures = 0, evictions = 0;
+    size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
+    double fetchMs = 0, decodeMs = 0;  // of the last request and the last block
     std::string lastError;
+};
+
+// One node's surfels, packed for the GPU and Morton-ordered within the node,
+// positions relative to the set's render origin (emptySurfelSet(info).origin).
+struct ArrivedNode {
+    uint32_t index;
+    std::shared_ptr<const SurfelSet> surfels;
+};
+
+struct StreamUpdate {
+    std::vector<SelectedNode> draw;      // resident nodes to draw now
+    std::vector<ArrivedNode> arrived;    // resident since the last update: upload these
+    std::vector<uint32_t> evicted;       // no longer resident: free these
+    LodStats lod;
+    bool converged = false;              // nothing the view needs is missing
 };
 
 class StreamingSet {
 public:
-    static Result<std::unique_ptr<StreamingSet>> open(const std::string& location, int connections = 6);
+    static Result<std::unique_ptr<StreamingSet>> open(const std::string& location, const StreamOptions& options = {});
     ~StreamingSet();
 
     const TilesetInfo& info() const { return info_; }
     const std::vector<NodeRecord>& nodes() const { return selector_->nodes(); }
+    const LodSelector& selector() const { return *selector_; }
+    const StreamOptions& options() const { return options_; }
 
-    // The nodes to draw now (all resident); queues the missing ones the view
-    // needs, replacing the previous wants. `converged` is set when nothing the
-    // view needs is missing.
-    std::vector<SelectedNode> update(const Camera& camera, int width, int height, const LodParams& params,
-                                     LodStats* lod, bool* converged);
-    // The decoded block of a resident node (nullptr if not resident).
-    std::shared_ptr<const BlockData> block(uint32_t index) const;
+    // The nodes to draw for this view; the consumer takes ownership of the
+    // surfels that arrived and must drop the evicted ones.
+    StreamUpdate update(const Camera& camera, int width, int height, const LodParams& params);
     StreamStats stats() const;
+    // Bytes a node occupies when resident (whole granules of 32-byte surfels).
+    size_t residentCost(uint32_t index) const;
 
 private:
     StreamingSet() = default;
-    void work();
+    void fetchLoop();
+    void decodeLoop();
+    void fail(uint32_t node, const std::string& message);  // with mutex_ held
 
     std::unique_ptr<TileSource> source_;
     TilesetInfo info_;
+    StreamOptions options_;
     std::unique_ptr<LodSelector> selector_;
 
+    struct Resident {
+        uint64_t lastUsed = 0;  // frame number
+        size_t bytes = 0;
+    };
+    struct Fetched {
+        uint32_t node;
+        std::vector<uint8_t> bytes;
+    };
+
     mutable std::mutex mutex_;
-    std::condition_variable wake_;
-    std::unordered_map<uint32_t, std::shared_ptr<const BlockData>> resident_;
+    std::condition_variable wakeFetch_, wakeDecode_;
+    uint64_t frame_ = 0;
+    std::unordered_map<uint32_t, Resident> resident_;
+    size_t residentBytes_ = 0, pendingBytes_ = 0;  // pending: in flight, decoding or arrived
     std::vector<std::pair<uint32_t, double>> wanted_;  // by priority, highest last
-    std::unordered_map<uint32_t, int> inFlight_;        // node -> 1
+    std::unordered_map<uint32_t, int> pending_;        // node -> 1 while fetched or decoded
+    std::deque<Fetched> fetched_;                       // waiting for a decoder
+    std::vector<ArrivedNode> arrived_;                  // decoded, not yet handed over
     std::unordered_map<uint32_t, std::pair<int, double>> failed_;  // node -> attempts, retry time (s)
     StreamStats stats_;
     bool stopping_ = false;
-    std::vector<std::thread> workers_;
+    std::vector<std::thread> fetchers_, decoders_;
 };
 
 }  // namespace surfcast

@@ -1,20 +1,51 @@
 #include "surfcast_client.h"
 
-#include "surfel_set.h"
+#include <algorithm>
 
 namespace surfcast {
+
+namespace {
+// 1 GiB, or a quarter of the largest device-local heap if that is smaller.
+size_t defaultGpuBudget(gpu::Context& ctx) {
+    VkPhysicalDeviceMemoryProperties memory;
+    vkGetPhysicalDeviceMemoryProperties(ctx.physicalDevice, &memory);
+    VkDeviceSize heap = 0;
+    for (uint32_t i = 0; i < memory.memoryHeapCount; ++i)
+        if (memory.memoryHeaps[i].flags & VK_MEMORY_HEAP_DEVICE_LOCAL_BIT) heap = std::max(heap, memory.memoryHeaps[i].size);
+    return std::min<size_t>(size_t(1) << 30, heap ? heap / 4 : size_t(1) << 30);
+}
+}  // namespace
 
 Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, const std::string& location,
                                                              const ClientOptions& options) {
     std::unique_ptr<SurfcastClient> c(new SurfcastClient);
     c->options_ = options;
-    auto stream = StreamingSet::open(location, options.connections);
-    if (!stream) return stream.status();
-    c->stream_ = std::move(*stream);
+    StreamOptions stream;
+    stream.connections = options.connections;
+    stream.decoders = options.decoders;
+    stream.memoryBudget = options.gpuBudget ? options.gpuBudget : defaultGpuBudget(ctx);
+    stream.granule = SurfelPool::kPageSurfels;
+    auto opened = StreamingSet::open(location, stream);
+    if (!opened) return opened.status();
+    c->stream_ = std::move(*opened);
+    // Every node must fit, and a frame's splats with room to spare for the
+    // ancestors the traversal passes through and for what streams in next.
+    size_t largest = 0;
+    for (uint32_t i = 0; i < c->stream_->nodes().size(); ++i) largest = std::max(largest, c->stream_->residentCost(i));
+    if (largest > stream.memoryBudget)
+        return Status::error(location + ": the GPU budget of " + std::to_string(stream.memoryBudget >> 10) +
+                             " KiB is smaller than the largest node (" + std::to_string(largest >> 10) + " KiB)");
+    size_t poolSplats = stream.memoryBudget / sizeof(gpu_types::GpuSurfel);
+    c->options_.lod.splatBudget = std::min(c->options_.lod.splatBudget, poolSplats / 2);
+    auto pool = SurfelPool::create(ctx, stream.memoryBudget);
+    if (!pool) return pool.status();
+    c->pool_ = std::move(*pool);
     auto renderer = SplatRenderer::create(ctx, options.renderer);
     if (!renderer) return renderer.status();
     c->renderer_ = std::move(*renderer);
     c->origin_ = emptySurfelSet(c->stream_->info()).origin;
+    const Box3d& b = c->stream_->info().bounds;
+    c->diagonal_ = b.empty() ? 0 : length(b.max - b.min);
     return c;
 }
 
@@ -27,22 +58,26 @@ RenderSettings SurfcastClient::defaultSettings() const {
 
 Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int height) {
     ClientFrame frame;
-    auto selected = stream_->update(camera, width, height, options_.lod, &frame.lod, &frame.converged);
-    std::vector<uint32_t> now;
-    for (const auto& s : selected) now.push_back(s.index);
-    if (now != drawn_) {  // rebuild and upload only when the drawn nodes change
-        SurfelSet set = emptySurfelSet(info());
-        for (uint32_t i : now)
-            if (auto block = stream_->block(i)) appendNode(set, info(), stream_->nodes()[i], *block);
-        sortMorton(set);
-        SC_TRY(renderer_->upload(set));
-        drawn_ = std::move(now);
-    }
+    StreamUpdate u = stream_->update(camera, width, height, options_.lod);
+    for (uint32_t i : u.evicted) pool_->release(i);
+    std::vector<std::pair<uint32_t, const SurfelSet*>> uploads;
+    for (const ArrivedNode& a : u.arrived) uploads.push_back({a.index, a.surfels.get()});
+    SC_TRY(pool_->upload(uploads));
+    // Drawn in node order: the image does not depend on arrival order.
+    std::vector<uint32_t> drawn;
+    for (const SelectedNode& s : u.draw) drawn.push_back(s.index);
+    std::sort(drawn.begin(), drawn.end());
+    renderer_->setDraws(pool_->buffer(), pool_->ranges(drawn), diagonal_);
     SC_TRY(renderer_->resize(uint32_t(width), uint32_t(height)));
     camera_ = camera;
     width_ = width;
     height_ = height;
-    frame.nodes = drawn_.size();
+    frame.nodes = drawn.size();
+    frame.splats = renderer_->splatCount();
+    frame.uploaded = u.arrived.size();
+    frame.evicted = u.evicted.size();
+    frame.converged = u.converged;
+    frame.lod = std::move(u.lod);
     frame.stream = stream_->stats();
     return frame;
 }

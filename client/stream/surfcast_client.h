@@ -11,17 +11,24 @@
 
 #include "splat_renderer.h"
 #include "streamer.h"
+#include "surfel_pool.h"
 
 namespace surfcast {
 
 struct ClientOptions {
-    LodParams lod;               // target projected spacing (px), culling
+    ClientOptions() { lod.splatBudget = 5'000'000; }
+    LodParams lod;               // target projected spacing (px), culling, splats per frame
     int connections = 6;         // concurrent block requests
+    int decoders = 0;            // decode threads; 0: one per core
+    size_t gpuBudget = 0;        // bytes of GPU memory for surfels; 0: 1 GiB or a quarter of the
+                                 // device-local heap, whichever is smaller
     RendererOptions renderer;
 };
 
 struct ClientFrame {
     size_t nodes = 0;            // drawn
+    size_t splats = 0;           // drawn
+    size_t uploaded = 0, evicted = 0;  // nodes, this update
     bool converged = false;      // nothing the view needs is missing
     LodStats lod;
     StreamStats stream;
@@ -29,7 +36,8 @@ struct ClientFrame {
 
 class SurfcastClient {
 public:
-    // `ctx` must outlive the client.
+    // `ctx` must outlive the client: gpu::createContext, or gpu::wrapContext
+    // around the host's own VkDevice.
     static Result<std::unique_ptr<SurfcastClient>> open(gpu::Context& ctx, const std::string& location,
                                                         const ClientOptions& options = {});
 
@@ -37,7 +45,8 @@ public:
     // Kernel scale and shading the set was built for (the renderer's defaults).
     RenderSettings defaultSettings() const;
 
-    // Chooses the nodes for this view and uploads them when they changed.
+    // Chooses the nodes for this view, uploads what arrived and frees what
+    // the stream evicted (GPU memory stays within gpuBudget).
     Result<ClientFrame> update(const Camera& camera, int width, int height);
     // Records the frame of the last update into `cmd`; output() is then in
     // TRANSFER_SRC_OPTIMAL for the host to blit or copy.
@@ -51,10 +60,11 @@ public:
 private:
     SurfcastClient() = default;
     std::unique_ptr<StreamingSet> stream_;
+    std::unique_ptr<SurfelPool> pool_;
     std::unique_ptr<SplatRenderer> renderer_;
     ClientOptions options_;
-    std::vector<uint32_t> drawn_;
     Vec3d origin_;
+    double diagonal_ = 0;
     Camera camera_;
     int width_ = 0, height_ = 0;
 };

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "status.h"
+#include "tileset_format.h"
 
 namespace surfcast {
 
@@ -19,6 +20,9 @@ public:
     virtual Result<std::vector<uint8_t>> file(const std::string& name) = 0;
     // Bytes [offset, offset + size) of blocks.bin. Thread-safe.
     virtual Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) = 0;
+    // Several nodes' blobs, in order: one request where the source batches
+    // (the project's server), else one range each. All or nothing. Thread-safe.
+    virtual Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes);
     virtual std::string describe() const = 0;
 };
 
