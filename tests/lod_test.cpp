@@ -110,6 +110,62 @@ TEST_F(Lod, ReplacementDrawsParentsUntilChildrenAreResident) {
     EXPECT_EQ(all.waiting, 0u);
 }
 
+TEST_F(Lod, BudgetsBindEvenlyAndMonotonically) {
+    auto reader = TilesetReader::open(dir_->file("scene"));
+    ASSERT_TRUE(reader);
+    LodSelector lod(reader->info(), reader->nodes());
+    const auto& nodes = lod.nodes();
+    auto camera = parseCamera(kCameras[3]);  // close to the ground: many fine nodes
+    ASSERT_TRUE(camera);
+    auto all = [](uint32_t) { return true; };
+    LodStats free;
+    LodParams params;
+    lod.select(*camera, 640, 480, params, all, &free);
+    ASSERT_EQ(free.budgetLimited, 0u);
+    size_t previousSplats = 0;
+    double previousWorst = HUGE_VAL;
+    // (A budget equal to the unlimited total may still bind: a partial cut can
+    // hold more splats than the final one where children are culled.)
+    for (double fraction : {0.3, 0.5, 0.8, 2.0}) {
+        params.splatBudget = size_t(fraction * double(free.splats));
+        LodStats st;
+        auto drawn = lod.select(*camera, 640, 480, params, all, &st);
+        size_t splats = 0;
+        double worst = 0;
+        for (const auto& s : drawn) {
+            splats += nodes[s.index].surfelCount;
+            if (nodes[s.index].childMask) worst = std::max(worst, s.projectedSpacing);
+        }
+        EXPECT_EQ(splats, st.splats);
+        EXPECT_LE(splats, params.splatBudget) << fraction;
+        if (fraction < 1) EXPECT_GT(st.budgetLimited, 0u) << fraction;
+        else EXPECT_EQ(st.budgetLimited, 0u);
+        // A larger budget draws more and leaves no node coarser.
+        EXPECT_GE(splats, previousSplats) << fraction;
+        EXPECT_LE(worst, previousWorst) << fraction;
+        previousSplats = splats;
+        previousWorst = worst;
+    }
+    EXPECT_EQ(previousSplats, free.splats);
+    // Below the root's size, the root alone (nothing is no answer).
+    params.splatBudget = 1;
+    auto rootOnly = lod.select(*camera, 640, 480, params, all);
+    ASSERT_EQ(rootOnly.size(), 1u);
+    EXPECT_EQ(nodes[rootOnly[0].index].key.level, 0);
+
+    // The memory budget bounds every node the view relies on (drawn, refined
+    // through, waited for), counted in whole granules.
+    LodParams memory;
+    memory.granule = 1024;
+    memory.memoryBudget = 4 << 20;
+    LodStats st;
+    lod.select(*camera, 640, 480, memory, all, &st);
+    size_t bytes = 0;
+    for (uint32_t i : st.used) bytes += (nodes[i].surfelCount + 1023) / 1024 * 1024 * 32;
+    EXPECT_LE(bytes, memory.memoryBudget);
+    EXPECT_GT(st.budgetLimited, 0u);
+}
+
 TEST_F(Lod, CullingNeverChangesTheImage) {
     TempDir out;
     size_t culledSomewhere = 0;

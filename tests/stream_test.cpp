@@ -4,7 +4,11 @@
 // clear error, not a hang.
 #include <gtest/gtest.h>
 #include <httplib.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -15,7 +19,9 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "context.h"
 #include "streamer.h"
+#include "surfcast_client.h"
 #include "test_support.h"
 
 namespace surfcast {
@@ -58,8 +64,230 @@ TEST(Stream, OverHttpConvergesToTheLocalImage) {
         EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
             << camera << ": the converged streamed image differs from the local one";
     }
+    // The client batched its node requests (the server's POST .../batch).
+    httplib::Client metrics(url.substr(0, url.find("/sets/")));
+    auto m = metrics.Get("/metrics");
+    ASSERT_TRUE(m && m->status == 200);
+    EXPECT_NE(m->body.find("surfcast_requests_total{route=\"batch\",status=\"200\"}"), std::string::npos) << m->body;
     ::kill(server.pid, SIGTERM);
     EXPECT_EQ(test::exitCode(server.pid), 0);
+}
+
+// A free loopback port (bound and released: a server started right after gets it).
+int freePort() {
+    int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t size = sizeof a;
+    int port = ::bind(fd, reinterpret_cast<sockaddr*>(&a), size) == 0 &&
+                       ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &size) == 0
+                   ? ntohs(a.sin_port)
+                   : -1;
+    ::close(fd);
+    return port;
+}
+
+TEST(Stream, FromNginxConvergesToTheLocalImage) {
+    // Debian's nginx (scripts/setup.sh installs nginx-light) serving the same
+    // folder as static files: Range requests, no batch endpoint (POST is
+    // refused, the client falls back to ranges).
+    ASSERT_TRUE(std::filesystem::exists("/usr/sbin/nginx")) << "nginx is missing: run scripts/setup.sh";
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("www/sets"));
+    std::filesystem::create_directories(dir.file("nginx"));
+    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "100000", "--capacity", "3000", "-o",
+                  dir.file("www/sets/scene")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const int port = freePort();
+    const std::string prefix = dir.file("nginx");
+    test::writeFile(prefix + "/nginx.conf",
+                    "daemon off; master_process off; worker_processes 1; pid " + prefix + "/nginx.pid;\n"
+                    "error_log stderr notice;\n"
+                    "events { worker_connections 64; }\n"
+                    "http {\n access_log off;\n client_body_temp_path " + prefix + "/body;\n"
+                    " proxy_temp_path " + prefix + "/proxy;\n fastcgi_temp_path " + prefix + "/fastcgi;\n"
+                    " uwsgi_temp_path " + prefix + "/uwsgi;\n scgi_temp_path " + prefix + "/scgi;\n"
+                    " server { listen 127.0.0.1:" + std::to_string(port) + "; root " + dir.file("www") + "; }\n}\n");
+    test::Child nginx = test::spawn({"/usr/sbin/nginx", "-e", "stderr", "-p", prefix, "-c", prefix + "/nginx.conf"});
+    struct Stop {
+        int pid;
+        ~Stop() {
+            ::kill(pid, SIGTERM);
+            test::exitCode(pid);
+        }
+    } stop{nginx.pid};
+    httplib::Client probe("127.0.0.1", port);
+    probe.set_connection_timeout(1, 0);
+    probe.set_read_timeout(2, 0);
+    bool up = false;
+    for (int i = 0; i < 100 && !up; ++i) {
+        auto r = probe.Get("/sets/scene/tileset.json");
+        up = r && r->status == 200;
+        if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ASSERT_TRUE(up) << "nginx did not start: " << nginx.log;
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/sets/scene";
+    const char* camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
+    auto remote = run({binary("surfcast-view"), "--headless", url, camera, "--lod", "1", "--size", "200x150",
+                       "--max-wait", "60", "--out", dir.file("remote.png")});
+    ASSERT_EQ(remote.exitCode, 0) << remote.output;
+    auto local = run({binary("surfcast-view"), "--headless", dir.file("www/sets/scene"), camera, "--lod", "1", "--size",
+                      "200x150", "--out", dir.file("local.png")});
+    ASSERT_EQ(local.exitCode, 0) << local.output;
+    auto last = lastLine(remote.output);
+    EXPECT_TRUE(last["converged"].get<bool>()) << remote.output;
+    EXPECT_EQ(last["failures"].get<int>(), 0) << remote.output;
+    EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
+        << "the image streamed from nginx differs from the local one";
+}
+
+TEST(Stream, TightGpuBudgetEvictsAndStillConverges) {
+    // Four views (the last repeats the first) that together need more than
+    // 8 MiB of surfels: the stream evicts least recently used nodes, never
+    // holds more than the budget, and every view converges. What a view
+    // converges to does not depend on what was resident before: the repeated
+    // view gives the same image, and a view the budgets do not limit gives
+    // the image of an unlimited GPU budget.
+    TempDir dir;
+    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "300000", "--capacity", "3000", "-o",
+                  dir.file("scene")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    test::writeFile(dir.file("path.json"), R"({"frames": [
+        {"eye": [3, -6, 2], "target": [0, 0, 0.5], "up": [0, 0, 1], "fov": 50},
+        {"eye": [-4, 5, 1.5], "target": [0, 0, 0.5], "up": [0, 0, 1], "fov": 50},
+        {"eye": [0, 0, 1], "target": [5, 5, 0.5], "up": [0, 0, 1], "fov": 70},
+        {"eye": [3, -6, 2], "target": [0, 0, 0.5], "up": [0, 0, 1], "fov": 50}]})");
+    const size_t budget = 8 << 20, splats = 100000;
+    auto tight = run({binary("surfcast-view"), "--headless", dir.file("scene"), "--camera-path", dir.file("path.json"),
+                      "--lod", "1", "--size", "320x180", "--gpu-budget", "8", "--splat-budget", std::to_string(splats),
+                      "--max-wait", "60", "--out", dir.file("tight.png")});
+    ASSERT_EQ(tight.exitCode, 0) << tight.output;
+    auto roomy = run({binary("surfcast-view"), "--headless", dir.file("scene"), "--camera-path", dir.file("path.json"),
+                      "--lod", "1", "--size", "320x180", "--splat-budget", std::to_string(splats), "--out",
+                      dir.file("roomy.png")});
+    ASSERT_EQ(roomy.exitCode, 0) << roomy.output;
+    auto lines = test::jsonLines(tight.output);
+    ASSERT_FALSE(lines.empty());
+    std::vector<nlohmann::json> converged;
+    bool limited = false;
+    for (const auto& l : lines) {
+        EXPECT_LE(l["resident_bytes"].get<size_t>(), budget) << l.dump();
+        EXPECT_LE(l["splats"].get<size_t>(), splats) << l.dump();
+        if (l["converged"].get<bool>()) converged.push_back(l);
+        limited |= l["budget_limited"].get<size_t>() > 0;
+    }
+    ASSERT_EQ(converged.size(), 4u) << tight.output;
+    EXPECT_TRUE(limited) << "the budgets should bind on some of these views";
+    EXPECT_GT(lines.back()["evictions"].get<size_t>(), 0u) << "8 MiB should not hold every view";
+    auto frame = [&](const std::string& run, int f) { return test::readFile(dir.file(run + "_000" + std::to_string(f) + ".png")); };
+    EXPECT_TRUE(frame("tight", 3) == frame("tight", 0)) << "the repeated view converged to another image";
+    size_t unlimited = 0;
+    for (int f = 0; f < 4; ++f) {
+        if (converged[size_t(f)]["budget_limited"].get<size_t>() > 0) continue;
+        ++unlimited;
+        EXPECT_TRUE(frame("tight", f) == frame("roomy", f)) << "frame " << f << " differs under the tight GPU budget";
+    }
+    EXPECT_GT(unlimited, 0u) << "one view should fit the budgets";
+}
+
+// Streams `location` through a client until converged; the rendered image.
+Image streamImage(gpu::Context& ctx, const std::string& location, const Camera& camera) {
+    ClientOptions options;
+    auto client = SurfcastClient::open(ctx, location, options);
+    EXPECT_TRUE(client) << client.status().message();
+    if (!client) return {};
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    bool converged = false;
+    while (!converged && std::chrono::steady_clock::now() < deadline) {
+        auto frame = (*client)->update(camera, 200, 150);
+        EXPECT_TRUE(frame) << frame.status().message();
+        if (!frame) return {};
+        converged = frame->converged;
+        if (!converged) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    EXPECT_TRUE(converged);
+    auto image = (*client)->renderImage((*client)->defaultSettings());
+    EXPECT_TRUE(image) << image.status().message();
+    return image ? *image : Image{};
+}
+
+TEST(Stream, HostOwnedDeviceDrawsTheSameImage) {
+    // A host application's own instance and device, made with plain Vulkan,
+    // handed to the client (gpu::wrapContext): the same image as the client's
+    // own context on the same device, and the host's device outlives it.
+    TempDir dir;
+    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "60000", "-o", dir.file("scene")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    ASSERT_TRUE(camera);
+
+    VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
+    app.apiVersion = VK_API_VERSION_1_3;
+    VkInstanceCreateInfo instanceInfo{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+    instanceInfo.pApplicationInfo = &app;
+    VkInstance instance = VK_NULL_HANDLE;
+    ASSERT_EQ(vkCreateInstance(&instanceInfo, nullptr, &instance), VK_SUCCESS);
+    uint32_t count = 0;
+    vkEnumeratePhysicalDevices(instance, &count, nullptr);
+    std::vector<VkPhysicalDevice> devices(count);
+    vkEnumeratePhysicalDevices(instance, &count, devices.data());
+    // The first Vulkan 1.3 device with a graphics queue.
+    int chosen = -1;
+    uint32_t family = 0;
+    for (size_t i = 0; i < devices.size() && chosen < 0; ++i) {
+        VkPhysicalDeviceProperties props;
+        vkGetPhysicalDeviceProperties(devices[i], &props);
+        if (props.apiVersion < VK_API_VERSION_1_3) continue;
+        uint32_t n = 0;
+        vkGetPhysicalDeviceQueueFamilyProperties(devices[i], &n, nullptr);
+        std::vector<VkQueueFamilyProperties> families(n);
+        vkGetPhysicalDeviceQueueFamilyProperties(devices[i], &n, families.data());
+        for (uint32_t f = 0; f < n && chosen < 0; ++f)
+            if (families[f].queueFlags & VK_QUEUE_GRAPHICS_BIT) {
+                chosen = int(i);
+                family = f;
+            }
+    }
+    ASSERT_GE(chosen, 0) << "no Vulkan 1.3 device";
+    VkPhysicalDeviceFeatures supported;
+    vkGetPhysicalDeviceFeatures(devices[size_t(chosen)], &supported);
+    VkPhysicalDeviceVulkan13Features f13{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_3_FEATURES};
+    f13.dynamicRendering = VK_TRUE;
+    f13.synchronization2 = VK_TRUE;
+    VkPhysicalDeviceFeatures2 features{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, &f13};
+    features.features.geometryShader = supported.geometryShader;
+    float priority = 1;
+    VkDeviceQueueCreateInfo queueInfo{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+    queueInfo.queueFamilyIndex = family;
+    queueInfo.queueCount = 1;
+    queueInfo.pQueuePriorities = &priority;
+    VkDeviceCreateInfo deviceInfo{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO, &features};
+    deviceInfo.queueCreateInfoCount = 1;
+    deviceInfo.pQueueCreateInfos = &queueInfo;
+    VkDevice device = VK_NULL_HANDLE;
+    ASSERT_EQ(vkCreateDevice(devices[size_t(chosen)], &deviceInfo, nullptr, &device), VK_SUCCESS);
+    VkQueue queue = VK_NULL_HANDLE;
+    vkGetDeviceQueue(device, family, 0, &queue);
+
+    Image hosted;
+    {
+        auto ctx = gpu::wrapContext({instance, devices[size_t(chosen)], device, family, queue, bool(supported.geometryShader)});
+        ASSERT_TRUE(ctx) << ctx.status().message();
+        hosted = streamImage(**ctx, dir.file("scene"), *camera);
+        gpu::destroyContext(*ctx);
+    }
+    // The host's device is still usable after the client and context are gone.
+    EXPECT_EQ(vkDeviceWaitIdle(device), VK_SUCCESS);
+    vkDestroyDevice(device, nullptr);
+    vkDestroyInstance(instance, nullptr);
+
+    auto own = gpu::createContext({std::to_string(chosen), false, {}, false});
+    ASSERT_TRUE(own) << own.status().message();
+    Image owned = streamImage(**own, dir.file("scene"), *camera);
+    gpu::destroyContext(*own);
+    ASSERT_EQ(hosted.width, 200u);
+    EXPECT_TRUE(hosted.rgba == owned.rgba) << "the host's device drew another image";
 }
 
 TEST(Stream, UnreachableServerIsAClearError) {

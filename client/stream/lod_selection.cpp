@@ -80,14 +80,11 @@ LodSelector::LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes)
         if (nodes_[i].key.level == 0) root_ = int32_t(i);
     }
     children_.assign(nodes_.size(), {-1, -1, -1, -1, -1, -1, -1, -1});
-    parent_.assign(nodes_.size(), -1);
     for (size_t i = 0; i < nodes_.size(); ++i)
         for (int c = 0; c < 8; ++c)
             if (nodes_[i].childMask & (1u << c)) {
                 auto it = index.find(nodes_[i].key.child(c));
-                if (it == index.end()) continue;
-                children_[i][size_t(c)] = it->second;
-                parent_[size_t(it->second)] = int32_t(i);
+                if (it != index.end()) children_[i][size_t(c)] = it->second;
             }
 }
 
@@ -153,12 +150,21 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
     };
     std::vector<Drawn> final;
     std::priority_queue<Drawn> open;  // drawn nodes that want refining
+    // Splats counted against the budget: drawn ones, and for a node waiting
+    // for its children, the children's. Reserving them keeps the budget's
+    // choices from depending on what has arrived: otherwise a later arrival
+    // takes budget from a refinement already drawn, whose nodes a tight
+    // memory budget then evicts and refetches, back and forth.
+    size_t reserved = 0, memory = 0;
+    auto cost = [&](uint32_t i) { return residentBytes(nodes_[i].surfelCount, params.granule); };
     auto place = [&](uint32_t i, const Box3d& grown) {
         double spacing = projectedSpacing(i, grown);
         Drawn d{i, spacing, spacing * centreWeight(grown)};
         if (spacing > params.targetPixels && nodes_[i].childMask != 0) open.push(d);
         else final.push_back(d);
-        st.splats += nodes_[i].surfelCount;
+        reserved += nodes_[i].surfelCount;
+        memory += cost(i);
+        st.used.push_back(i);
     };
     ++st.visited;
     Box3d rootGrown;
@@ -174,7 +180,7 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
         // Replacement: refine only when every child that will be drawn or
         // refined (not culled) is resident; else draw this node meanwhile.
         std::vector<std::pair<uint32_t, Box3d>> needed;
-        size_t childSplats = 0;
+        size_t childSplats = 0, childMemory = 0;
         bool ready = true;
         for (int32_t c : children_[d.index]) {
             if (c < 0) continue;
@@ -183,12 +189,17 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
             if (culled(uint32_t(c), &grown)) continue;  // counted here, once
             needed.push_back({uint32_t(c), grown});
             childSplats += nodes_[size_t(c)].surfelCount;
+            childMemory += cost(uint32_t(c));
         }
-        if (st.splats - nodes_[d.index].surfelCount + childSplats > params.splatBudget) {
+        // The parent stays in memory (refined through, or drawn meanwhile).
+        if (reserved - nodes_[d.index].surfelCount + childSplats > params.splatBudget ||
+            memory + childMemory > params.memoryBudget) {
             ++st.budgetLimited;
             final.push_back(d);
             continue;
         }
+        reserved += childSplats - nodes_[d.index].surfelCount;
+        memory += childMemory;
         for (const auto& [c, grown] : needed)
             if (!resident(c)) {
                 ready = false;
@@ -196,13 +207,19 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
             }
         if (!ready) {
             ++st.waiting;
+            for (const auto& [c, grown] : needed)
+                if (resident(c)) st.used.push_back(c);
             final.push_back(d);
             continue;
         }
-        st.splats -= nodes_[d.index].surfelCount;
+        reserved -= childSplats;  // place() counts them again
+        memory -= childMemory;
         for (const auto& [c, grown] : needed) place(c, grown);
     }
-    for (const Drawn& d : final) out.push_back({d.index, d.spacing});
+    for (const Drawn& d : final) {
+        out.push_back({d.index, d.spacing});
+        st.splats += nodes_[d.index].surfelCount;
+    }
     return out;
 }
 

@@ -7,9 +7,9 @@
 // refinement: children are drawn only when every child that is needed is
 // resident, otherwise the node itself, so nothing holes while data streams.
 // Refinement goes coarsest gap first (largest projected spacing, weighted
-// towards the view centre) and stops at a splat budget, so a view that would
-// need more surfels than a frame can draw degrades evenly instead of
-// refining one corner.
+// towards the view centre) and stops at a splat budget and a memory budget,
+// so a view that would need more than a frame can draw or the GPU can hold
+// degrades evenly instead of refining one corner.
 // Pure CPU, no Vulkan, no I/O: the streaming client and surfcast-view use it.
 #pragma once
 
@@ -27,18 +27,34 @@ struct LodParams {
     double targetPixels = 1.0;  // refine while the projected spacing exceeds this
     bool frustumCulling = true;
     bool backfaceCulling = true;
-    size_t splatBudget = SIZE_MAX;  // most surfels drawn per frame
+    size_t splatBudget = SIZE_MAX;  // most surfels drawn per frame (the root is drawn regardless)
+    // Most bytes the nodes a view uses may occupy: those drawn, the ancestors
+    // refined through and the children waited for, each at its surfel count
+    // rounded up to `granule` times 32 bytes. A cache of this size can then
+    // always hold what the view needs (the streamer sets these).
+    size_t memoryBudget = SIZE_MAX;
+    size_t granule = 1;
 };
+
+// Bytes a node occupies when resident: its surfels, 32 bytes each (GpuSurfel),
+// in whole granules.
+inline size_t residentBytes(uint32_t surfels, size_t granule) {
+    granule = granule ? granule : 1;
+    return (surfels + granule - 1) / granule * granule * 32;
+}
 
 struct LodStats {
     size_t visited = 0, frustumCulled = 0, backfaceCulled = 0;
     size_t waiting = 0;  // nodes drawn in place of children that are not resident yet
-    size_t budgetLimited = 0;  // nodes left coarser than the target by the splat budget
+    size_t budgetLimited = 0;  // nodes left coarser than the target by the splat or memory budget
     size_t splats = 0;         // surfels of the selected nodes
     // Nodes the view needs that are not resident, with a priority (the
     // projected spacing of the node waiting for them, weighted towards the
     // view centre: coarsest gaps first).
     std::vector<std::pair<uint32_t, double>> missing;
+    // Every resident node the view relies on: drawn, refined through, or a
+    // child waiting for its siblings. A cache must not evict these.
+    std::vector<uint32_t> used;
 };
 
 struct SelectedNode {
@@ -60,14 +76,11 @@ public:
 
     // World box of node i, and its projected spacing for a camera (pixels).
     Box3d box(uint32_t i) const;
-    // The parent's index, -1 for the root.
-    int32_t parent(uint32_t i) const { return parent_[i]; }
 
 private:
     TilesetInfo info_;
     std::vector<NodeRecord> nodes_;
     std::vector<std::array<int32_t, 8>> children_;  // node index per child slot, -1 if none
-    std::vector<int32_t> parent_;
     int32_t root_ = -1;
 };
 

@@ -55,9 +55,9 @@ StreamingSet::~StreamingSet() {
     for (auto& t : decoders_) t.join();
 }
 
+static_assert(sizeof(gpu_types::GpuSurfel) == 32, "residentBytes() counts 32 bytes per surfel");
 size_t StreamingSet::residentCost(uint32_t index) const {
-    size_t g = options_.granule;
-    return (nodes()[index].surfelCount + g - 1) / g * g * sizeof(gpu_types::GpuSurfel);
+    return residentBytes(nodes()[index].surfelCount, options_.granule);
 }
 
 StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, const LodParams& params) {
@@ -69,19 +69,16 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
         u.arrived.swap(arrived_);
         for (const ArrivedNode& a : u.arrived) {
             size_t bytes = residentCost(a.index);
-            resident_[a.index] = {frame_, bytes};
+            resident_[a.index] = {0, bytes};  // used from the selection on
             residentBytes_ += bytes;
             pendingBytes_ -= bytes;
         }
-        u.draw = selector_->select(camera, width, height, params,
+        LodParams bounded = params;  // what the view uses must fit the cache
+        bounded.memoryBudget = std::min(params.memoryBudget, options_.memoryBudget);
+        bounded.granule = options_.granule;
+        u.draw = selector_->select(camera, width, height, bounded,
                                    [&](uint32_t i) { return resident_.count(i) != 0; }, &u.lod);
-        // The view uses the drawn nodes and every ancestor it refined through.
-        for (const SelectedNode& s : u.draw)
-            for (int32_t i = int32_t(s.index); i >= 0; i = selector_->parent(uint32_t(i))) {
-                auto it = resident_.find(uint32_t(i));
-                if (it == resident_.end() || it->second.lastUsed == frame_) break;
-                it->second.lastUsed = frame_;
-            }
+        for (uint32_t i : u.lod.used) resident_[i].lastUsed = frame_;
 
         wanted_.clear();
         size_t wantedBytes = 0;
@@ -105,6 +102,10 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
                 u.evicted.push_back(node);
                 ++stats_.evictions;
             }
+            // A node that arrived for an earlier view and is evicted at once
+            // never reaches the consumer.
+            std::unordered_set<uint32_t> gone(u.evicted.begin(), u.evicted.end());
+            std::erase_if(u.arrived, [&](const ArrivedNode& a) { return gone.count(a.index) != 0; });
         }
         stats_.queued = wanted_.size();
         u.converged = u.lod.missing.empty();

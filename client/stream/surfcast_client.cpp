@@ -28,15 +28,12 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     auto opened = StreamingSet::open(location, stream);
     if (!opened) return opened.status();
     c->stream_ = std::move(*opened);
-    // Every node must fit, and a frame's splats with room to spare for the
-    // ancestors the traversal passes through and for what streams in next.
+    // Every node must fit (the root at least is always needed).
     size_t largest = 0;
     for (uint32_t i = 0; i < c->stream_->nodes().size(); ++i) largest = std::max(largest, c->stream_->residentCost(i));
     if (largest > stream.memoryBudget)
         return Status::error(location + ": the GPU budget of " + std::to_string(stream.memoryBudget >> 10) +
                              " KiB is smaller than the largest node (" + std::to_string(largest >> 10) + " KiB)");
-    size_t poolSplats = stream.memoryBudget / sizeof(gpu_types::GpuSurfel);
-    c->options_.lod.splatBudget = std::min(c->options_.lod.splatBudget, poolSplats / 2);
     auto pool = SurfelPool::create(ctx, stream.memoryBudget);
     if (!pool) return pool.status();
     c->pool_ = std::move(*pool);
