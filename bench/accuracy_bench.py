@@ -21,6 +21,10 @@ for cpu-reference). Writes bench/report/accuracy.csv, accuracy_speed.png
 (FLIP against frame time, one point per scene and mode), a montage per scene
 (reference and every mode) and accuracy.md; prints the Markdown.
 
+Model sweep on the meshes: --no-radius (irregular vertex sampling) and the
+normal bits under Lambert and Phong shading, bytes against PSNR and FLIP
+(mesh_model.csv, mesh_model.md; alone with --mesh-model-only).
+
 Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/accuracy_bench.py [--size 320x240] [--repeat 3]
 """
 import argparse
@@ -319,10 +323,12 @@ def quantization_sweep(name, ply, camera, ref, size, tmp):
     return out
 
 
-def mesh_scene(mesh, size, repeat, tmp):
+def mesh_view(mesh, size, tmp, shading="lambert"):
+    """The mesh's vertices built as surfels, a camera on it, and the mesh's own reference image."""
     src = os.path.join(DATA, mesh + ".ply")
     tileset = os.path.join(tmp, "mesh-" + mesh)
-    run([os.path.join(BIN, "surfcast-build"), "-q", "--vertices-only", src, "-o", tileset])
+    if not os.path.exists(tileset):
+        run([os.path.join(BIN, "surfcast-build"), "-q", "--vertices-only", src, "-o", tileset])
     info = json.load(open(os.path.join(tileset, "tileset.json")))
     lo, hi = np.array(info["bounds"]["min"]), np.array(info["bounds"]["max"])
     centre, diag = (lo + hi) / 2, np.linalg.norm(hi - lo)
@@ -330,9 +336,55 @@ def mesh_scene(mesh, size, repeat, tmp):
     d /= np.linalg.norm(d)
     eye = centre + d * 1.4 * diag
     camera = ",".join(f"{v:.9g}" for v in [*eye, *centre]) + ",0,1,0,40"
-    ref_png = os.path.join(tmp, "mesh-ref.png")
-    run([os.path.join(BIN, "surfcast-mesh-reference"), src, f"--camera={camera}", "--size", size, "--out", ref_png])
+    ref_png = os.path.join(tmp, f"mesh-ref-{shading}.png")
+    run([os.path.join(BIN, "surfcast-mesh-reference"), src, f"--camera={camera}", "--size", size, "--shading", shading,
+         "--out", ref_png])
     ref = np.asarray(Image.open(ref_png).convert("RGB")).astype(np.float64) / 255
+    return src, tileset, camera, ref
+
+
+# The model sweep on the scanned meshes: irregular vertex sampling (where a
+# per-surfel radius can matter) and shaded normals (where normal bits show).
+MESH_MODEL = [("defaults", []), ("no-radius", ["--no-radius"]), ("normal-bits 6", ["--normal-bits", "6"]),
+              ("normal-bits 8", ["--normal-bits", "8"]), ("normal-bits 12", ["--normal-bits", "12"])]
+
+
+def mesh_model_sweep(mesh, size, tmp):
+    out = []
+    for shading in ("lambert", "phong"):
+        src, _, camera, ref = mesh_view(mesh, size, tmp, shading)
+        for label, options in MESH_MODEL:
+            tileset = os.path.join(tmp, f"mesh-{mesh}-model")
+            shutil.rmtree(tileset, ignore_errors=True)
+            run([os.path.join(BIN, "surfcast-build"), "-q", "--vertices-only", src, "-o", tileset, *options])
+            img, ms, splats = render(tileset, "ewa-pixel", camera, size, 1, os.path.join(tmp, "m.png"), shading=shading,
+                                     colour="0.8,0.8,0.8")
+            psnr, ssim, fl = metrics(ref, img)
+            out.append({"scene": "mesh-" + mesh, "option": label, "shading": shading,
+                        "bytes": os.path.getsize(os.path.join(tileset, "blocks.bin")), "psnr": psnr, "flip": fl})
+            print(f"mesh-{mesh} {label} {shading}: {out[-1]['bytes']} bytes, PSNR {psnr:.2f}, FLIP {fl:.4f}",
+                  file=sys.stderr)
+    return out
+
+
+def write_mesh_model(rows):
+    with open(os.path.join(REPORT, "mesh_model.csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows)
+    lines = ["Model sweep on the scanned meshes (vertices as surfels, every leaf, ewa-pixel, grey, against the mesh "
+             "rasterized 4x4 with the same shading):", "",
+             "| mesh | option | shading | blocks bytes | PSNR dB | FLIP |", "|---|---|---|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['scene']} | {r['option']} | {r['shading']} | {r['bytes']} | {r['psnr']:.2f} | {r['flip']:.4f} |")
+    text = "\n".join(lines) + "\n"
+    with open(os.path.join(REPORT, "mesh_model.md"), "w") as fh:
+        fh.write(text)
+    print(text)
+
+
+def mesh_scene(mesh, size, repeat, tmp):
+    _, tileset, camera, ref = mesh_view(mesh, size, tmp)
     out, images = [], []
     for mode in MODES:
         img, ms, splats = render(tileset, mode, camera, size, 1 if mode == "cpu-reference" else repeat,
@@ -404,11 +456,18 @@ def main():
     ap.add_argument("--size", default="320x240")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--scenes", default="", help="comma-separated subset")
+    ap.add_argument("--mesh-model-only", action="store_true",
+                    help="only the model sweep on the scanned meshes (mesh_model.csv, mesh_model.md)")
     args = ap.parse_args()
+    if args.mesh_model_only:
+        os.makedirs(REPORT, exist_ok=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            write_mesh_model([r for mesh in MESHES for r in mesh_model_sweep(mesh, args.size, tmp)])
+        return
     width, height = (int(v) for v in args.size.split("x"))
     os.makedirs(REPORT, exist_ok=True)
     rng = np.random.default_rng(1)
-    rows, sweep, model, lowpass = [], [], [], []
+    rows, sweep, model, lowpass, mesh_model = [], [], [], [], []
     wanted = set(args.scenes.split(",")) if args.scenes else None
     with tempfile.TemporaryDirectory() as tmp:
         for name, (surfaces, camera) in scenes().items():
@@ -442,6 +501,7 @@ def main():
             mesh_rows, mesh_lowpass = mesh_scene(mesh, args.size, args.repeat, tmp)
             rows.extend(mesh_rows)
             lowpass.extend(mesh_lowpass)
+            mesh_model.extend(mesh_model_sweep(mesh, args.size, tmp))
     with open(os.path.join(REPORT, "accuracy.csv"), "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         w.writeheader()
@@ -449,6 +509,8 @@ def main():
     chart(rows)
     if sweep:
         kernel_chart(sweep)
+    if mesh_model:
+        write_mesh_model(mesh_model)
     if model:
         model_chart(model)
         with open(os.path.join(REPORT, "model.csv"), "w", newline="") as fh:

@@ -1,13 +1,14 @@
 // surfcast-mesh-reference: the reference image of a triangle mesh for
 // bench/accuracy_bench.py. A z-buffer rasterizer with 4 x 4 samples per pixel
 // (16x supersampling), perspective-correct vertex normals, and the renderer's
-// own shading (shadePixel: headlight Lambert on grey 0.8, white background),
-// with the camera model of surfcast-view (common/camera.h).
-// Usage: surfcast-mesh-reference MESH --camera ex,..,fov --size WxH --out PNG
+// own shading (shadePixel: headlight Lambert, or Phong, on grey 0.8, white
+// background), with the camera model of surfcast-view (common/camera.h).
+// Usage: surfcast-mesh-reference MESH --camera ex,..,fov --size WxH [--shading lambert|phong] --out PNG
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -25,17 +26,20 @@ constexpr int kSamples = 4;  // per axis
 int main(int argc, char** argv) {
     std::string mesh, cameraText, out;
     int W = 320, H = 240;
+    std::optional<Shading> shading = Shading::Lambert;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         if (a.rfind("--camera=", 0) == 0) cameraText = a.substr(9);
         else if (a == "--camera" && i + 1 < argc) cameraText = argv[++i];
         else if (a == "--size" && i + 1 < argc) std::sscanf(argv[++i], "%dx%d", &W, &H);
         else if (a == "--out" && i + 1 < argc) out = argv[++i];
+        else if (a == "--shading" && i + 1 < argc) shading = parseShading(argv[++i]);
         else mesh = a;
     }
     auto camera = parseCamera(cameraText);
-    if (mesh.empty() || out.empty() || !camera || W < 1 || H < 1) {
-        std::fprintf(stderr, "usage: surfcast-mesh-reference MESH --camera ex,ey,ez,tx,ty,tz,ux,uy,uz,fov --size WxH --out PNG\n");
+    if (mesh.empty() || out.empty() || !camera || W < 1 || H < 1 || !shading) {
+        std::fprintf(stderr, "usage: surfcast-mesh-reference MESH --camera ex,ey,ez,tx,ty,tz,ux,uy,uz,fov --size WxH "
+                             "[--shading lambert|phong] --out PNG\n");
         return 2;
     }
     auto m = readMeshTriangles(mesh);
@@ -105,7 +109,7 @@ int main(int argc, char** argv) {
                     size_t i = size_t(Y) * SW + X;
                     if (std::isfinite(depth[i])) {
                         Vec3f ray = view->pixelRay(X + 0.5f, Y + 0.5f);
-                        sum += shadePixel(Shading::Lambert, grey, normal[i], ray);
+                        sum += shadePixel(*shading, grey, normal[i], ray);
                         ++hits;
                     } else {
                         sum += background;

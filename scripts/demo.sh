@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # The main job on the built-in default scene: build its tile set, verify it,
 # render it with object-space EWA splatting (Vulkan; lavapipe without a GPU) to
-# out/scene.png, and serve it over HTTP on loopback, fetching tileset.json and a
-# block through the server as a check. With a display (and SURFCAST_DEMO_WINDOW=1)
-# it also opens the viewer window. (Rendering over HTTP comes with the
-# streaming client.)
+# out/scene.png, serve it over HTTP on loopback, fetch tileset.json and a block
+# through the server as a check, and stream it from the server with level of
+# detail to out/streamed.png. With a display (and SURFCAST_DEMO_WINDOW=1) it
+# also opens the viewer window.
 # Usage: scripts/demo.sh [OUT_DIR]   (default: out/)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -39,6 +39,18 @@ curl -fsS -o "$out/tileset.json" "$url/sets/scene/tileset.json"
 echo "fetched tileset.json: $(wc -c < "$out/tileset.json") bytes"
 curl -fsS -o "$out/root.drc" "$url/sets/scene/nodes/0-0-0-0"
 echo "fetched the root block (node 0-0-0-0): $(wc -c < "$out/root.drc") bytes, starts with $(head -c 5 "$out/root.drc")"
+echo
+echo "== streaming it from the server (level of detail 1 px) to $out/streamed.png"
+build/bin/surfcast-view --headless "$url/sets/scene" --lod 1 --out "$out/streamed.png" > "$out/streamed.jsonl"
+python3 - "$out/streamed.jsonl" <<'PY'
+import json, sys
+lines = [json.loads(l) for l in open(sys.argv[1]) if l.startswith("{")]
+first = next((l for l in lines if l["splats"] > 0), lines[-1])
+last = lines[-1]
+print(f"first image after {first['time_s']:.2f} s ({first['splats']} splats); converged={last['converged']} after "
+      f"{last['time_s']:.2f} s: {last['nodes']} nodes, {last['splats']} splats, "
+      f"{last['bytes_downloaded'] / 1e6:.1f} MB in {last['requests']} requests, {last['failures']} failures")
+PY
 kill -TERM $server
 wait $server
 trap - EXIT

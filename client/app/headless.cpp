@@ -141,7 +141,9 @@ int runHeadlessLod(const ViewOptions& o) {
             const double frameStart = seconds();
             Image image;
             for (int iteration = 0; status == 0; ++iteration) {
+                const double updateStart = seconds();
                 auto frame = client.value()->update(cameras[f], o.width, o.height);
+                const double updateMs = (seconds() - updateStart) * 1e3;
                 GpuFrameStats gpuStats;
                 auto rendered = frame ? client.value()->renderImage(settings, &gpuStats) : Result<Image>(frame.status());
                 if (!rendered) {
@@ -175,8 +177,20 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["decode_ms"] = cf.stream.decodeMs;
                 line["failures"] = cf.stream.failures;
                 if (!cf.stream.lastError.empty()) line["last_error"] = cf.stream.lastError;
+                line["update_ms"] = updateMs;
                 line["gpu_ms"] = gpuStats.totalMs;
                 line["converged"] = cf.converged;
+                if (o.saveRedraws) {
+                    std::string path = framePath(o.out, f, cameras.size());
+                    char suffix[16];
+                    std::snprintf(suffix, sizeof suffix, "_r%03d.png", iteration);
+                    path = path.substr(0, path.size() - (path.size() >= 4 && path.ends_with(".png") ? 4 : 0)) + suffix;
+                    if (Status w = writePng(image, path); !w) {
+                        status = fail(w.message());
+                        break;
+                    }
+                    line["redraw"] = path;
+                }
                 std::printf("%s\n", line.dump().c_str());
                 std::fflush(stdout);
                 if (cf.converged) break;

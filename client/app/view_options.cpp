@@ -55,6 +55,8 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --gpu-budget MIB      with --lod: GPU memory for surfels, least recently used nodes
                         evicted beyond it (default 1024, or a quarter of the device's)
   --connections N       with --lod: concurrent block requests (default 6)
+  --save-redraws        with --lod, headless: also write every redraw before
+                        convergence, as OUT_rNNN.png (progressive streaming studies)
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
   With --lod, SET may be a URL: http://HOST:PORT/sets/NAME (surfcast-serve) or any
   folder URL on a static host with Range; frames redraw as blocks arrive, one JSON
@@ -241,6 +243,8 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             float mib = 0;
             if (!positive(&mib, "--gpu-budget")) return false;
             o->client.gpuBudget = size_t(double(mib) * (1 << 20));
+        } else if (a == "--save-redraws") {
+            o->saveRedraws = true;
         } else if (a == "--connections") {
             if (!count(&o->client.connections, "--connections")) return false;
         } else if (a == "--repeat") {

@@ -31,6 +31,7 @@ struct ViewOptions {
     std::optional<double> lod;        // level of detail: target projected spacing, pixels
     ClientOptions client;             // with --lod: culling, budgets, connections
     double maxWait = 120;             // with --lod: seconds a frame may stream before it is written
+    bool saveRedraws = false;         // with --lod: also write every redraw (PATH_rNNN.png)
     int frames = 0;                   // window: quit after this many frames (0: run until closed)
     std::string screenshot;           // window: save the last frame here on exit
 };
