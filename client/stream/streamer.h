@@ -34,6 +34,7 @@ struct StreamOptions {
     size_t memoryBudget = size_t(1) << 30;  // bytes of resident surfels (32 B each, in granules)
     size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
     size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
+    int timeoutSeconds = 20;   // an HTTP response stalled this long fails (and is retried)
 };
 
 struct StreamStats {

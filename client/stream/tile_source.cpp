@@ -2,6 +2,7 @@
 
 #include <httplib.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
@@ -24,9 +25,8 @@ Result<std::vector<std::vector<uint8_t>>> TileSource::blobs(const std::vector<No
 
 namespace {
 
-// Per-request limits: a stalled server must not hang the client.
+// A server that does not accept within this fails the request.
 constexpr int kConnectTimeoutSeconds = 5;
-constexpr int kReadTimeoutSeconds = 20;
 
 class LocalSource : public TileSource {
 public:
@@ -59,7 +59,8 @@ private:
 
 class HttpSource : public TileSource {
 public:
-    HttpSource(std::string origin, std::string path) : origin_(std::move(origin)), path_(std::move(path)) {}
+    HttpSource(std::string origin, std::string path, int timeoutSeconds)
+        : origin_(std::move(origin)), path_(std::move(path)), timeoutSeconds_(timeoutSeconds) {}
     Result<std::vector<uint8_t>> file(const std::string& name) override { return get(name, nullptr); }
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
         if (size == 0) return std::vector<uint8_t>{};
@@ -114,7 +115,7 @@ private:
             c = std::make_unique<httplib::Client>(origin_);
             c->set_keep_alive(true);
             c->set_connection_timeout(kConnectTimeoutSeconds, 0);
-            c->set_read_timeout(kReadTimeoutSeconds, 0);
+            c->set_read_timeout(timeoutSeconds_, 0);
         }
         return *c;
     }
@@ -131,6 +132,7 @@ private:
     }
 
     std::string origin_, path_;
+    int timeoutSeconds_;
     std::atomic<Batch> batch_{Batch::Unknown};
     std::mutex mutex_;
     std::unordered_map<std::thread::id, std::unique_ptr<httplib::Client>> clients_;
@@ -140,13 +142,13 @@ private:
 
 bool isUrl(const std::string& location) { return location.rfind("http://", 0) == 0; }
 
-Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location) {
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, int timeoutSeconds) {
     if (!isUrl(location)) return std::unique_ptr<TileSource>(new LocalSource(location));
     size_t slash = location.find('/', 7);
     std::string origin = location.substr(0, slash), path = slash == std::string::npos ? "" : location.substr(slash);
     while (!path.empty() && path.back() == '/') path.pop_back();
     if (origin.size() <= 7) return Status::error(location + ": not an http://HOST[:PORT]/PATH URL");
-    return std::unique_ptr<TileSource>(new HttpSource(origin, path));
+    return std::unique_ptr<TileSource>(new HttpSource(origin, path, std::max(1, timeoutSeconds)));
 }
 
 }  // namespace surfcast

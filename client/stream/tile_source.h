@@ -27,8 +27,9 @@ public:
 };
 
 // "http://..." opens an HTTP source (keep-alive, one connection per calling
-// thread); anything else is a local folder.
-Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location);
+// thread; a response that stalls for `timeoutSeconds` fails); anything else
+// is a local folder.
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, int timeoutSeconds = 20);
 bool isUrl(const std::string& location);
 
 }  // namespace surfcast
