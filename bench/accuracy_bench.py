@@ -270,6 +270,22 @@ def metrics(ref, img):
     return psnr, ssim, float(mean_flip)
 
 
+def write_csv(name, rows):
+    """bench/report/NAME from a list of dicts with the same keys."""
+    with open(os.path.join(REPORT, name), "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def write_markdown(name, lines):
+    """bench/report/NAME from Markdown lines, and the same on stdout."""
+    text = "\n".join(lines) + "\n"
+    with open(os.path.join(REPORT, name), "w") as fh:
+        fh.write(text)
+    print(text)
+
+
 def montage(name, ref, images):
     tiles = [("reference", ref)] + images
     h, w = ref.shape[:2]
@@ -400,10 +416,7 @@ def scan_radius_study(tmp, size="640x480"):
 
 
 def write_mesh_model(rows, scan=()):
-    with open(os.path.join(REPORT, "mesh_model.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv("mesh_model.csv", rows)
     lines = ["Model sweep on the scanned meshes (vertices as surfels, every leaf, ewa-pixel, grey, against the mesh "
              "rasterized 4x4 with the same shading):", "",
              "| mesh | option | shading | blocks bytes | PSNR dB | FLIP |", "|---|---|---|---:|---:|---:|"]
@@ -415,10 +428,7 @@ def write_mesh_model(rows, scan=()):
         for r in scan:
             lines.append(f"| {r['scene']} | {r['option']} | {r['bytes']} | {r['covered']} | {r['pinholes']} | "
                          f"{r['flip_vs_default']:.4f} |")
-    text = "\n".join(lines) + "\n"
-    with open(os.path.join(REPORT, "mesh_model.md"), "w") as fh:
-        fh.write(text)
-    print(text)
+    write_markdown("mesh_model.md", lines)
 
 
 def mesh_scene(mesh, size, repeat, tmp):
@@ -542,10 +552,7 @@ def main():
             mesh_model.extend(mesh_model_sweep(mesh, args.size, tmp))
         if mesh_model:
             scan = scan_radius_study(tmp)
-    with open(os.path.join(REPORT, "accuracy.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
-        w.writeheader()
-        w.writerows(rows + sweep)
+    write_csv("accuracy.csv", rows + sweep)
     chart(rows)
     if sweep:
         kernel_chart(sweep)
@@ -553,10 +560,7 @@ def main():
         write_mesh_model(mesh_model, scan)
     if model:
         model_chart(model)
-        with open(os.path.join(REPORT, "model.csv"), "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(model[0].keys()))
-            w.writeheader()
-            w.writerows(model)
+        write_csv("model.csv", model)
     lines = [f"Scenes at {args.size}, reference 16x16 ray-cast; time = median of {args.repeat} (GPU), one run (CPU).", "",
              "| scene | mode | splats | ms | PSNR dB | SSIM | FLIP |", "|---|---|---:|---:|---:|---:|---:|"]
     for r in rows:
@@ -589,10 +593,7 @@ def main():
         for r in model:
             lines.append(f"| {r['scene']} | {r['option']} | {r['level']} | {r['bytes']} | {r['bytes'] / r['surfels']:.2f} | "
                          f"{r['rms']:.2e} | {r['normal_deg']:.2f} | {r['flip']:.4f} |")
-    text = "\n".join(lines) + "\n"
-    with open(os.path.join(REPORT, "accuracy.md"), "w") as fh:
-        fh.write(text)
-    print(text)
+    write_markdown("accuracy.md", lines)
 
 
 if __name__ == "__main__":

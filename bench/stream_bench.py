@@ -27,7 +27,6 @@ the Markdown.
 Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/stream_bench.py [--points 12000000] [--set DIR]
 """
 import argparse
-import csv
 import json
 import math
 import os
@@ -41,7 +40,7 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from accuracy_bench import metrics  # noqa: E402  (PSNR, SSIM, FLIP)
+from accuracy_bench import metrics, write_csv, write_markdown  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.join(ROOT, "build", "bin")
@@ -244,14 +243,8 @@ def main():
         rate = fps(tileset, tmp)
         print("level-of-detail study ...", file=sys.stderr)
         lod = lod_study(tileset, tmp, args.size, args.frames)
-    with open(os.path.join(REPORT, "stream.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(curve[0].keys()))
-        w.writeheader()
-        w.writerows(curve)
-    with open(os.path.join(REPORT, "lod.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(lod[0].keys()))
-        w.writeheader()
-        w.writerows(lod)
+    write_csv("stream.csv", curve)
+    write_csv("lod.csv", lod)
     charts(curve, lod)
 
     lines = [f"Set: {name}, {info['input_points']} points, {info['surfels']} surfels in {info['nodes']} nodes, "
@@ -274,10 +267,7 @@ def main():
         t = r["target"] if r["target"] == "full" else f"{r['target']:g}"
         lines.append(f"| {t} | {r['gpu_ms']:.1f} | {r['splats']:.0f} | {r['psnr']:.1f} | {r['flip']:.4f} | "
                      f"{r['consecutive_flip']:.4f} | {100 * r['popping']:.3f}% |")
-    text = "\n".join(lines) + "\n"
-    with open(os.path.join(REPORT, "stream.md"), "w") as fh:
-        fh.write(text)
-    print(text)
+    write_markdown("stream.md", lines)
 
 
 if __name__ == "__main__":

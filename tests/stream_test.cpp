@@ -39,6 +39,25 @@ nlohmann::json lastLine(const std::string& output) {
     return lines.empty() ? nlohmann::json() : lines.back();
 }
 
+// Streams `url` headless until converged and checks the image against the
+// same view streamed from the local folder `local`, byte for byte; the last
+// JSON line of the remote run.
+nlohmann::json expectStreamsLikeLocal(const std::string& url, const std::string& local, const char* camera,
+                                      const TempDir& dir) {
+    auto remote = run({binary("surfcast-view"), "--headless", url, camera, "--lod", "1", "--size", "200x150",
+                       "--max-wait", "60", "--out", dir.file("remote.png")});
+    EXPECT_EQ(remote.exitCode, 0) << remote.output;
+    auto folder = run({binary("surfcast-view"), "--headless", local, camera, "--lod", "1", "--size", "200x150", "--out",
+                       dir.file("local.png")});
+    EXPECT_EQ(folder.exitCode, 0) << folder.output;
+    auto last = lastLine(remote.output);
+    EXPECT_TRUE(last.is_object() && last["converged"].get<bool>()) << remote.output;
+    EXPECT_TRUE(last.is_object() && last["failures"].get<int>() == 0) << remote.output;
+    EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
+        << url << " " << camera << ": the converged streamed image differs from the local one";
+    return last;
+}
+
 TEST(Stream, OverHttpConvergesToTheLocalImage) {
     TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
@@ -52,20 +71,11 @@ TEST(Stream, OverHttpConvergesToTheLocalImage) {
     std::string url = server.log.substr(at, server.log.find_first_of(" \n", at) - at) + "/sets/scene";
 
     for (const char* camera : {"--camera=3,-6,2,0,0,0.5,0,0,1,50", "--camera=0,0,1,5,5,0.5,0,0,1,70"}) {
-        auto remote = run({binary("surfcast-view"), "--headless", url, camera, "--lod", "1", "--size", "200x150",
-                           "--max-wait", "60", "--out", dir.file("remote.png")});
-        ASSERT_EQ(remote.exitCode, 0) << remote.output;
-        auto local = run({binary("surfcast-view"), "--headless", dir.file("sets/scene"), camera, "--lod", "1", "--size",
-                          "200x150", "--out", dir.file("local.png")});
-        ASSERT_EQ(local.exitCode, 0) << local.output;
-        auto last = lastLine(remote.output);
-        EXPECT_TRUE(last["converged"].get<bool>()) << remote.output;
-        EXPECT_EQ(last["failures"].get<int>(), 0);
+        auto last = expectStreamsLikeLocal(url, dir.file("sets/scene"), camera, dir);
+        ASSERT_TRUE(last.is_object());
         uint64_t blocks = std::filesystem::file_size(dir.file("sets/scene/blocks.bin"));
         EXPECT_GT(last["bytes_downloaded"].get<uint64_t>(), 0u);
         EXPECT_LE(last["bytes_downloaded"].get<uint64_t>(), blocks);
-        EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
-            << camera << ": the converged streamed image differs from the local one";
     }
     // The client batched its node requests (the server's POST .../batch).
     httplib::Client metrics(url.substr(0, url.find("/sets/")));
@@ -130,19 +140,8 @@ TEST(Stream, FromNginxConvergesToTheLocalImage) {
         if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     ASSERT_TRUE(up) << "nginx did not start: " << nginx.log;
-    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/sets/scene";
-    const char* camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
-    auto remote = run({binary("surfcast-view"), "--headless", url, camera, "--lod", "1", "--size", "200x150",
-                       "--max-wait", "60", "--out", dir.file("remote.png")});
-    ASSERT_EQ(remote.exitCode, 0) << remote.output;
-    auto local = run({binary("surfcast-view"), "--headless", dir.file("www/sets/scene"), camera, "--lod", "1", "--size",
-                      "200x150", "--out", dir.file("local.png")});
-    ASSERT_EQ(local.exitCode, 0) << local.output;
-    auto last = lastLine(remote.output);
-    EXPECT_TRUE(last["converged"].get<bool>()) << remote.output;
-    EXPECT_EQ(last["failures"].get<int>(), 0) << remote.output;
-    EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
-        << "the image streamed from nginx differs from the local one";
+    expectStreamsLikeLocal("http://127.0.0.1:" + std::to_string(port) + "/sets/scene", dir.file("www/sets/scene"),
+                           "--camera=3,-6,2,0,0,0.5,0,0,1,50", dir);
 }
 
 TEST(Stream, TightGpuBudgetEvictsAndStillConverges) {
