@@ -439,5 +439,41 @@ TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     EXPECT_EQ(drawn, expectSecond);
 }
 
+TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
+    // The set is rebuilt on the server (renamed over the old folder) while a
+    // client streams it: its hierarchy no longer matches blocks.bin. The
+    // client notices from tileset.json after the first fault, stops fetching
+    // and says so, instead of retrying blocks that can never match.
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("sets"));
+    auto build = [&](const char* points) {
+        auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", points, "--capacity", "2000",
+                      "-o", dir.file("sets/scene")});
+        ASSERT_EQ(b.exitCode, 0) << b.output;
+    };
+    build("60000");
+    test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0"});
+    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
+    size_t at = server.log.find("http://127.0.0.1:");
+    std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
+    auto remote = StreamingSet::open(origin + "/sets/scene", connections(2));
+    ASSERT_TRUE(remote) << remote.status().message();
+    auto first = parseCamera("3,-6,2,0,0,0.5,0,0,1,50"), second = parseCamera("0,0,1,5,5,0.5,0,0,1,70");
+    std::vector<uint32_t> drawn;
+    ASSERT_TRUE(streamUntilConverged(**remote, *first, &drawn, 30));
+    EXPECT_FALSE((*remote)->stats().setChanged);
+    build("90000");
+    EXPECT_FALSE(streamUntilConverged(**remote, *second, &drawn, 6));
+    StreamStats st = (*remote)->stats();
+    EXPECT_TRUE(st.setChanged) << st.lastError;
+    EXPECT_NE(st.lastError.find("changed since it was opened"), std::string::npos) << st.lastError;
+    // Fetching stopped: no more requests go out.
+    size_t requests = st.requests;
+    EXPECT_FALSE(streamUntilConverged(**remote, *second, &drawn, 1));
+    EXPECT_EQ((*remote)->stats().requests, requests);
+    ::kill(server.pid, SIGTERM);
+    EXPECT_EQ(test::exitCode(server.pid), 0);
+}
+
 }  // namespace
 }  // namespace surfcast

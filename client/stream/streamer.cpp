@@ -30,6 +30,7 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     if (!json) return json.status();
     auto info = readTilesetJson(std::string(json->begin(), json->end()), location + "/tileset.json");
     if (!info) return info.status();
+    s->tilesetJson_ = std::move(*json);
     s->info_ = *info;
     auto hierarchy = s->source_->file("hierarchy.bin");
     if (!hierarchy) return hierarchy.status();
@@ -83,7 +84,7 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
         wanted_.clear();
         size_t wantedBytes = 0;
         for (const auto& [node, priority] : u.lod.missing)
-            if (!pending_.count(node)) {
+            if (!pending_.count(node) && !stats_.setChanged) {
                 wanted_.push_back({node, priority});
                 wantedBytes += residentCost(node);
             }
@@ -131,6 +132,20 @@ void StreamingSet::fail(uint32_t node, const std::string& message) {
     f.second = now() + backoffSeconds(f.first);
     ++stats_.failures;
     stats_.lastError = message;
+    checkDue_ = true;
+}
+
+void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
+    checkDue_ = false;
+    lastCheck_ = now();
+    lock.unlock();
+    auto json = source_->file("tileset.json");
+    lock.lock();
+    if (json && *json != tilesetJson_ && !stats_.setChanged) {
+        stats_.setChanged = true;
+        stats_.lastError = source_->describe() + ": the tile set changed since it was opened (rebuilt); open it again";
+        wanted_.clear();
+    }
 }
 
 void StreamingSet::fetchLoop() {
@@ -138,6 +153,8 @@ void StreamingSet::fetchLoop() {
     while (true) {
         wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05), [&] { return stopping_ || !wanted_.empty(); });
         if (stopping_) return;
+        if (checkDue_ && !stats_.setChanged && now() - lastCheck_ > 2.0) checkForRebuild(lock);
+        if (stats_.setChanged) continue;
         // The highest-priority wanted nodes that are neither pending nor
         // backing off, as many as one batch takes and the budget admits (at
         // least one when nothing is resident or pending: a node larger than

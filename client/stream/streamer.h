@@ -11,7 +11,10 @@
 // Residency has a byte budget: beyond it, update() evicts the least recently
 // used nodes that the view does not use (neither drawn nor refined through).
 // Faults (server gone, HTTP errors, short or corrupt blocks) are retried with
-// exponential backoff; they never stop drawing what is resident.
+// exponential backoff; they never stop drawing what is resident. After a
+// fault, tileset.json is fetched again (at most every 2 s): if the set was
+// rebuilt since it was opened, fetching stops and stats() says so, rather
+// than retrying blocks that can never match the hierarchy.
 #pragma once
 
 #include <condition_variable>
@@ -43,6 +46,9 @@ struct StreamStats {
     size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
     double fetchMs = 0, decodeMs = 0;  // of the last request and the last block
     std::string lastError;
+    // The set's tileset.json differs from the one opened (rebuilt on the
+    // server): nothing more is fetched; open it again.
+    bool setChanged = false;
 };
 
 // One node's surfels, packed for the GPU and Morton-ordered within the node,
@@ -82,8 +88,10 @@ private:
     void fetchLoop();
     void decodeLoop();
     void fail(uint32_t node, const std::string& message);  // with mutex_ held
+    void checkForRebuild(std::unique_lock<std::mutex>& lock);
 
     std::unique_ptr<TileSource> source_;
+    std::vector<uint8_t> tilesetJson_;  // as opened
     TilesetInfo info_;
     StreamOptions options_;
     std::unique_ptr<LodSelector> selector_;
@@ -108,6 +116,8 @@ private:
     std::vector<ArrivedNode> arrived_;                  // decoded, not yet handed over
     std::unordered_map<uint32_t, std::pair<int, double>> failed_;  // node -> attempts, retry time (s)
     StreamStats stats_;
+    bool checkDue_ = false;  // a fault happened: has the set changed?
+    double lastCheck_ = 0;
     bool stopping_ = false;
     std::vector<std::thread> fetchers_, decoders_;
 };

@@ -46,7 +46,8 @@ public:
     RenderSettings defaultSettings() const;
 
     // Chooses the nodes for this view, uploads what arrived and frees what
-    // the stream evicted (GPU memory stays within gpuBudget).
+    // the stream evicted (GPU memory stays within gpuBudget). An error when
+    // the set was rebuilt on the server since open(): open it again.
     Result<ClientFrame> update(const Camera& camera, int width, int height);
     // Records the frame of the last update into `cmd`; output() is then in
     // TRANSFER_SRC_OPTIMAL for the host to blit or copy.
