@@ -88,7 +88,8 @@ class Patch:
     """A planar patch: centre c, unit axes u, v; (a, b) in [a0, a1] x [b0, b1],
     or a disc of the given radius."""
 
-    def __init__(self, c, u, v, extent=None, radius=None, texture=None, normal_sign=1):
+    def __init__(self, c, u, v, extent=None, radius=None, texture=None, normal_sign=1, spacing=SPACING):
+        self.spacing = spacing
         self.c, self.u, self.v = np.array(c, float), np.array(u, float), np.array(v, float)
         self.u /= np.linalg.norm(self.u)
         self.v /= np.linalg.norm(self.v)
@@ -119,9 +120,10 @@ class Patch:
             a1 = b1 = self.radius
         else:
             a0, a1, b0, b1 = self.extent
-        a, b = np.meshgrid(np.arange(a0 + SPACING / 2, a1, SPACING), np.arange(b0 + SPACING / 2, b1, SPACING))
-        a = a.ravel() + rng.uniform(-0.3, 0.3, a.size) * SPACING
-        b = b.ravel() + rng.uniform(-0.3, 0.3, b.size) * SPACING
+        h = self.spacing
+        a, b = np.meshgrid(np.arange(a0 + h / 2, a1, h), np.arange(b0 + h / 2, b1, h))
+        a = a.ravel() + rng.uniform(-0.3, 0.3, a.size) * h
+        b = b.ravel() + rng.uniform(-0.3, 0.3, b.size) * h
         keep = self.inside(a, b)
         a, b = a[keep], b[keep]
         p = self.c + a[:, None] * self.u + b[:, None] * self.v
@@ -415,13 +417,54 @@ def scan_radius_study(tmp, size="640x480"):
     return out
 
 
-def write_mesh_model(rows, scan=()):
+def radius_synthetic_study(size, tmp):
+    """--no-radius where it matters and the truth is known: a checkerboard
+    plane sampled 10x more densely on one half (0.05 against 0.5 units), so
+    the nodes across the jump are irregular and store radii. Both builds
+    rendered with ewa-pixel against the 16x16 ray-cast reference."""
+    dark, light = np.array([0.1, 0.1, 0.12]), np.array([0.92, 0.9, 0.85])
+    # Patch-local (a, b) shifted by the centre's x: one continuous checker.
+    left = Patch([-8, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-8, 8, -20, 20), spacing=0.5,
+                 texture=lambda a, b: checker(a - 8, b, 4.0, dark, light))
+    right = Patch([8, 0, 0], [1, 0, 0], [0, 1, 0], extent=(-8, 8, -20, 20), spacing=0.05,
+                  texture=lambda a, b: checker(a + 8, b, 4.0, dark, light))
+    camera = "0,-22,14,0,2,0,0,0,1,50"
+    width, height = (int(v) for v in size.split("x"))
+    ref = reference([left, right], camera, width, height)
+    rng = np.random.default_rng(2)
+    pts, nrm, col = (np.concatenate(x) for x in zip(*(p.samples(rng) for p in (left, right))))
+    ply = os.path.join(tmp, "density-jump.ply")
+    write_ply(ply, pts, nrm, col)
+    out = []
+    for label, options in (("radii (default)", []), ("no-radius", ["--no-radius"])):
+        tileset = os.path.join(tmp, "density-jump")
+        shutil.rmtree(tileset, ignore_errors=True)
+        run([os.path.join(BIN, "surfcast-build"), "-q", ply, "-o", tileset, *options])
+        img, ms, splats = render(tileset, "ewa-pixel", camera, size, 1, os.path.join(tmp, "dj.png"))
+        psnr, ssim, fl = metrics(ref, img)
+        holes, covered = pinholes(img)
+        out.append({"scene": "density-jump 10x", "option": label,
+                    "bytes": os.path.getsize(os.path.join(tileset, "blocks.bin")), "psnr": psnr, "flip": fl,
+                    "pinholes": holes, "covered": covered})
+        print(f"density-jump {label}: {out[-1]['bytes']} bytes, PSNR {psnr:.2f}, FLIP {fl:.4f}, {holes} pinholes",
+              file=sys.stderr)
+    return out
+
+
+def write_mesh_model(rows, scan=(), synthetic=()):
     write_csv("mesh_model.csv", rows)
     lines = ["Model sweep on the scanned meshes (vertices as surfels, every leaf, ewa-pixel, grey, against the mesh "
              "rasterized 4x4 with the same shading):", "",
              "| mesh | option | shading | blocks bytes | PSNR dB | FLIP |", "|---|---|---|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['scene']} | {r['option']} | {r['shading']} | {r['bytes']} | {r['psnr']:.2f} | {r['flip']:.4f} |")
+    if synthetic:
+        lines += ["", "Per-surfel radii on a synthetic density jump (ray-cast reference, ewa-pixel):", "",
+                  "| scene | option | blocks bytes | PSNR dB | FLIP | covered pixels | pinholes |",
+                  "|---|---|---:|---:|---:|---:|---:|"]
+        for r in synthetic:
+            lines.append(f"| {r['scene']} | {r['option']} | {r['bytes']} | {r['psnr']:.2f} | {r['flip']:.4f} | "
+                         f"{r['covered']} | {r['pinholes']} |")
     if scan:
         lines += ["", "Per-surfel radii on an irregular scan (no reference surface; every leaf, default camera, 640x480):", "",
                   "| scan | option | blocks bytes | covered pixels | pinholes | FLIP against radii |", "|---|---|---:|---:|---:|---:|"]
@@ -510,12 +553,13 @@ def main():
     if args.mesh_model_only:
         os.makedirs(REPORT, exist_ok=True)
         with tempfile.TemporaryDirectory() as tmp:
-            write_mesh_model([r for mesh in MESHES for r in mesh_model_sweep(mesh, args.size, tmp)], scan_radius_study(tmp))
+            write_mesh_model([r for mesh in MESHES for r in mesh_model_sweep(mesh, args.size, tmp)], scan_radius_study(tmp),
+                             radius_synthetic_study(args.size, tmp))
         return
     width, height = (int(v) for v in args.size.split("x"))
     os.makedirs(REPORT, exist_ok=True)
     rng = np.random.default_rng(1)
-    rows, sweep, model, lowpass, mesh_model, scan = [], [], [], [], [], []
+    rows, sweep, model, lowpass, mesh_model, scan, synthetic = [], [], [], [], [], [], []
     wanted = set(args.scenes.split(",")) if args.scenes else None
     with tempfile.TemporaryDirectory() as tmp:
         for name, (surfaces, camera) in scenes().items():
@@ -551,13 +595,13 @@ def main():
             lowpass.extend(mesh_lowpass)
             mesh_model.extend(mesh_model_sweep(mesh, args.size, tmp))
         if mesh_model:
-            scan = scan_radius_study(tmp)
+            scan, synthetic = scan_radius_study(tmp), radius_synthetic_study(args.size, tmp)
     write_csv("accuracy.csv", rows + sweep)
     chart(rows)
     if sweep:
         kernel_chart(sweep)
     if mesh_model:
-        write_mesh_model(mesh_model, scan)
+        write_mesh_model(mesh_model, scan, synthetic)
     if model:
         model_chart(model)
         write_csv("model.csv", model)
