@@ -130,9 +130,7 @@ int runHeadlessLod(const ViewOptions& o) {
         RenderSettings settings = o.settings;
         std::vector<Camera> cameras = o.cameras;
         if (client) {
-            RenderSettings defaults = client.value()->defaultSettings();
-            if (!o.kernelScaleGiven) settings.kernelScale = defaults.kernelScale;
-            if (!o.shadingGiven) settings.shading = defaults.shading;
+            settings = effectiveSettings(o, client.value()->defaultSettings());
             if (cameras.empty()) cameras = {frameBox(client.value()->info().bounds, double(o.width) / o.height)};
         }
         for (size_t f = 0; f < cameras.size() && status == 0; ++f) {

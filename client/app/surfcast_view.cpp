@@ -25,8 +25,6 @@ int main(int argc, char** argv) {
     }
     if (options.color)
         for (auto& s : set->surfels) s.color = surfcast::packColor(*options.color);
-    if (!options.kernelScaleGiven) options.settings.kernelScale = float(set->kernelScale);
-    if (!options.shadingGiven)
-        options.settings.shading = set->hasColor ? surfcast::Shading::Unlit : surfcast::Shading::Lambert;
+    options.settings = surfcast::effectiveSettings(options, surfcast::settingsForSet(set->kernelScale, set->hasColor));
     return options.headless ? surfcast::runHeadless(options, *set) : surfcast::runWindow(options, *set);
 }

@@ -266,4 +266,11 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
     return true;
 }
 
+RenderSettings effectiveSettings(const ViewOptions& o, const RenderSettings& setDefaults) {
+    RenderSettings s = o.settings;
+    if (!o.kernelScaleGiven) s.kernelScale = setDefaults.kernelScale;
+    if (!o.shadingGiven) s.shading = setDefaults.shading;
+    return s;
+}
+
 }  // namespace surfcast

@@ -40,6 +40,10 @@ struct ViewOptions {
 // usage error prints it and sets *exitCode = 2. Returns false in both cases.
 bool parseViewOptions(int argc, char** argv, ViewOptions* options, int* exitCode);
 
+// The command line's settings, with the set's defaults (settingsForSet) for
+// the kernel scale and shading where they were not given.
+RenderSettings effectiveSettings(const ViewOptions& options, const RenderSettings& setDefaults);
+
 // "name_0003.png" for frame 3 of several; the path itself for a single frame.
 std::string framePath(const std::string& out, size_t frame, size_t frames);
 

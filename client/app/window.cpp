@@ -150,8 +150,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             auto c = SurfcastClient::open(**ctx, o.set, options);
             if (c) {
                 client = std::move(*c);
-                if (!o.kernelScaleGiven) base.kernelScale = client->defaultSettings().kernelScale;
-                if (!o.shadingGiven) base.shading = client->defaultSettings().shading;
+                base = effectiveSettings(o, client->defaultSettings());
                 bounds = client->info().bounds;
             } else {
                 s = c.status();

@@ -75,4 +75,11 @@ Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const
     return {std::fmin(out.x, 1.f), std::fmin(out.y, 1.f), std::fmin(out.z, 1.f)};
 }
 
+RenderSettings settingsForSet(double kernelScale, bool hasColor) {
+    RenderSettings s;
+    s.kernelScale = float(kernelScale);
+    s.shading = hasColor ? Shading::Unlit : Shading::Lambert;
+    return s;
+}
+
 }  // namespace surfcast

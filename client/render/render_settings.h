@@ -58,6 +58,11 @@ struct RenderSettings {
 // Push constants for one frame; `nearPlane` in world units.
 gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& settings, float nearPlane);
 
+// The settings a tile set is drawn with unless told otherwise: the kernel
+// scale its weights assume (tileset.json kernel_scale), unlit when it has
+// colours, else Lambert.
+RenderSettings settingsForSet(double kernelScale, bool hasColor);
+
 // The resolve's shading of one pixel (the GLSL resolve shader is its twin):
 // colour, filtered camera-space normal (any length), pixel ray direction.
 Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const Vec3f& ray);

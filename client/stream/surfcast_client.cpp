@@ -47,10 +47,7 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
 }
 
 RenderSettings SurfcastClient::defaultSettings() const {
-    RenderSettings s;
-    s.kernelScale = float(info().kernelScale);
-    s.shading = info().colorBits ? Shading::Unlit : Shading::Lambert;
-    return s;
+    return settingsForSet(info().kernelScale, info().colorBits > 0);
 }
 
 Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int height) {
