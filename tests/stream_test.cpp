@@ -39,6 +39,15 @@ nlohmann::json lastLine(const std::string& output) {
     return lines.empty() ? nlohmann::json() : lines.back();
 }
 
+// surfcast-serve on an ephemeral loopback port (or `bind`); its origin
+// (http://127.0.0.1:PORT) once it listens, "" if it did not start.
+std::string startServer(test::Child* server, const std::string& sets, const std::string& bind = "127.0.0.1:0") {
+    *server = test::spawn({binary("surfcast-serve"), sets, "--bind", bind});
+    if (!server->waitFor("(1 tile sets)\n")) return "";
+    size_t at = server->log.find("http://127.0.0.1:");
+    return at == std::string::npos ? "" : server->log.substr(at, server->log.find_first_of(" \n", at) - at);
+}
+
 // Streams `url` headless until converged and checks the image against the
 // same view streamed from the local folder `local`, byte for byte; the last
 // JSON line of the remote run.
@@ -64,11 +73,10 @@ TEST(Stream, OverHttpConvergesToTheLocalImage) {
     auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "150000", "--capacity", "3000", "-o",
                   dir.file("sets/scene")});
     ASSERT_EQ(b.exitCode, 0) << b.output;
-    test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0"});
-    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
-    size_t at = server.log.find("http://127.0.0.1:");
-    ASSERT_NE(at, std::string::npos);
-    std::string url = server.log.substr(at, server.log.find_first_of(" \n", at) - at) + "/sets/scene";
+    test::Child server;
+    const std::string origin = startServer(&server, dir.file("sets"));
+    ASSERT_FALSE(origin.empty()) << server.log;
+    const std::string url = origin + "/sets/scene";
 
     for (const char* camera : {"--camera=3,-6,2,0,0,0.5,0,0,1,50", "--camera=0,0,1,5,5,0.5,0,0,1,70"}) {
         auto last = expectStreamsLikeLocal(url, dir.file("sets/scene"), camera, dir);
@@ -78,7 +86,7 @@ TEST(Stream, OverHttpConvergesToTheLocalImage) {
         EXPECT_LE(last["bytes_downloaded"].get<uint64_t>(), blocks);
     }
     // The client batched its node requests (the server's POST .../batch).
-    httplib::Client metrics(url.substr(0, url.find("/sets/")));
+    httplib::Client metrics(origin);
     auto m = metrics.Get("/metrics");
     ASSERT_TRUE(m && m->status == 200);
     EXPECT_NE(m->body.find("surfcast_requests_total{route=\"batch\",status=\"200\"}"), std::string::npos) << m->body;
@@ -358,10 +366,9 @@ TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     ASSERT_TRUE(streamUntilConverged(**local, *second, &expectSecond, 30));
 
     // 1. The server stops after the first view and comes back on the same port.
-    test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0"});
-    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
-    size_t at = server.log.find("http://127.0.0.1:");
-    std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
+    test::Child server;
+    const std::string origin = startServer(&server, dir.file("sets"));
+    ASSERT_FALSE(origin.empty()) << server.log;
     auto remote = StreamingSet::open(origin + "/sets/scene", connections(4));
     ASSERT_TRUE(remote) << remote.status().message();
     std::vector<uint32_t> drawn;
@@ -373,8 +380,8 @@ TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     // what is resident, and the failures are counted.
     EXPECT_FALSE(streamUntilConverged(**remote, *second, &drawn, 1.0));
     EXPECT_GT((*remote)->stats().failures, 0u);
-    test::Child again = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", origin.substr(7)});
-    ASSERT_TRUE(again.waitFor("(1 tile sets)\n")) << again.log;
+    test::Child again;
+    ASSERT_EQ(startServer(&again, dir.file("sets"), origin.substr(7)), origin) << again.log;
     ASSERT_TRUE(streamUntilConverged(**remote, *second, &drawn, 30)) << (*remote)->stats().lastError;
     EXPECT_EQ(drawn, expectSecond);
     ::kill(again.pid, SIGTERM);
@@ -452,10 +459,9 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
         ASSERT_EQ(b.exitCode, 0) << b.output;
     };
     build("60000");
-    test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0"});
-    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
-    size_t at = server.log.find("http://127.0.0.1:");
-    std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
+    test::Child server;
+    const std::string origin = startServer(&server, dir.file("sets"));
+    ASSERT_FALSE(origin.empty()) << server.log;
     auto remote = StreamingSet::open(origin + "/sets/scene", connections(2));
     ASSERT_TRUE(remote) << remote.status().message();
     auto first = parseCamera("3,-6,2,0,0,0.5,0,0,1,50"), second = parseCamera("0,0,1,5,5,0.5,0,0,1,70");
