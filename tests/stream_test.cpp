@@ -84,6 +84,8 @@ TEST(Stream, OverHttpConvergesToTheLocalImage) {
         uint64_t blocks = std::filesystem::file_size(dir.file("sets/scene/blocks.bin"));
         EXPECT_GT(last["bytes_downloaded"].get<uint64_t>(), 0u);
         EXPECT_LE(last["bytes_downloaded"].get<uint64_t>(), blocks);
+        // With room in the GPU pool, no upload waits for rendering.
+        EXPECT_EQ(last["upload_waits"].get<size_t>(), 0u);
     }
     // The client batched its node requests (the server's POST .../batch).
     httplib::Client metrics(origin);
@@ -190,6 +192,8 @@ TEST(Stream, TightGpuBudgetEvictsAndStillConverges) {
     ASSERT_EQ(converged.size(), 4u) << tight.output;
     EXPECT_TRUE(limited) << "the budgets should bind on some of these views";
     EXPECT_GT(lines.back()["evictions"].get<size_t>(), 0u) << "8 MiB should not hold every view";
+    // Evicted pages are reused only after the GPU is done with them.
+    EXPECT_GT(lines.back()["upload_waits"].get<size_t>(), 0u);
     auto frame = [&](const std::string& run, int f) { return test::readFile(dir.file(run + "_000" + std::to_string(f) + ".png")); };
     EXPECT_TRUE(frame("tight", 3) == frame("tight", 0)) << "the repeated view converged to another image";
     size_t unlimited = 0;

@@ -35,9 +35,15 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
         pagesNeeded += (set->surfels.size() + kPageSurfels - 1) / kPageSurfels;
         bytes += set->surfels.size() * sizeof(GpuSurfel);
     }
-    if (pagesNeeded > free_.size())
+    if (pagesNeeded > free_.size() + retired_.size())
         return Status::error("the GPU surfel pool is full: " + std::to_string(pagesNeeded) + " pages needed, " +
-                             std::to_string(free_.size()) + " of " + std::to_string(pageCount_) + " free");
+                             std::to_string(freePages()) + " of " + std::to_string(pageCount_) + " free");
+    if (pagesNeeded > free_.size()) {  // reclaim: nothing in flight reads retired pages after this
+        VK_TRY(vkQueueWaitIdle(ctx_.queue));
+        free_.insert(retired_.begin(), retired_.end());
+        retired_.clear();
+        ++queueWaits_;
+    }
     if (bytes == 0) {
         for (const auto& [index, set] : nodes) nodes_[index] = {};
         return {};
@@ -48,7 +54,7 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
         if (!staging) return staging.status();
         staging_ = *staging;
     }
-    VK_TRY(vkQueueWaitIdle(ctx_.queue));  // the staging buffer and freed pages may be in use
+    // The staging buffer is free: the previous upload waited for its copy.
     std::vector<VkBufferCopy> copies;
     VkDeviceSize at = 0;
     for (const auto& [index, set] : nodes) {
@@ -75,7 +81,7 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
 void SurfelPool::release(uint32_t index) {
     auto it = nodes_.find(index);
     if (it == nodes_.end()) return;
-    for (uint32_t p : it->second.pages) free_.insert(p);
+    retired_.insert(retired_.end(), it->second.pages.begin(), it->second.pages.end());
     nodes_.erase(it);
 }
 
