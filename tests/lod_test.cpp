@@ -24,8 +24,7 @@ class Lod : public ::testing::Test {
 protected:
     static void SetUpTestSuite() {
         dir_ = new TempDir;
-        auto r = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "200000", "--capacity", "3000",
-                      "-o", dir_->file("scene")});
+        auto r = test::buildScene(dir_->file("scene"), 200000, {"--capacity", "3000"});
         ASSERT_EQ(r.exitCode, 0) << r.output;
     }
     static void TearDownTestSuite() {

@@ -13,8 +13,7 @@ TEST(OutOfCore, PeakRssStaysWithinBudget) {
     const uint64_t budget = 160ull << 20;
     // In memory the build would hold about kBytesPerChunkPoint per point: ~1 GB.
     ASSERT_GT(points * kBytesPerChunkPoint, 4 * budget);
-    auto r = test::run({test::binary("surfcast-build"), "-q", "--default-scene", "--scene-points", std::to_string(points),
-                        "--memory", "160M", "--threads", "2", "-o", dir.file("big")});
+    auto r = test::buildScene(dir.file("big"), int(points), {"--memory", "160M", "--threads", "2"});
     ASSERT_EQ(r.exitCode, 0) << r.output;
     EXPECT_NE(r.output.find(" chunks"), std::string::npos);
     EXPECT_EQ(r.output.find(" 1 chunks"), std::string::npos) << "the budget should have forced several chunks\n" << r.output;

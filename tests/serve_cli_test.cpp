@@ -30,7 +30,7 @@ TEST(ServeCli, UsageErrors) {
 TEST(ServeCli, ServesLogsAndStopsGracefully) {
     test::TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
-    auto b = test::run({test::binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "20000", "-o", dir.file("sets/s")});
+    auto b = test::buildScene(dir.file("sets/s"), 20000);
     ASSERT_EQ(b.exitCode, 0) << b.output;
     for (int sig : {SIGTERM, SIGINT}) {
         test::Child c = test::spawn({test::binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0"});

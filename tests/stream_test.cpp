@@ -70,8 +70,7 @@ nlohmann::json expectStreamsLikeLocal(const std::string& url, const std::string&
 TEST(Stream, OverHttpConvergesToTheLocalImage) {
     TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
-    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "150000", "--capacity", "3000", "-o",
-                  dir.file("sets/scene")});
+    auto b = test::buildScene(dir.file("sets/scene"), 150000, {"--capacity", "3000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
     test::Child server;
     const std::string origin = startServer(&server, dir.file("sets"));
@@ -119,8 +118,7 @@ TEST(Stream, FromNginxConvergesToTheLocalImage) {
     TempDir dir;
     std::filesystem::create_directories(dir.file("www/sets"));
     std::filesystem::create_directories(dir.file("nginx"));
-    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "100000", "--capacity", "3000", "-o",
-                  dir.file("www/sets/scene")});
+    auto b = test::buildScene(dir.file("www/sets/scene"), 100000, {"--capacity", "3000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
     const int port = freePort();
     const std::string prefix = dir.file("nginx");
@@ -162,8 +160,7 @@ TEST(Stream, TightGpuBudgetEvictsAndStillConverges) {
     // view gives the same image, and a view the budgets do not limit gives
     // the image of an unlimited GPU budget.
     TempDir dir;
-    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "300000", "--capacity", "3000", "-o",
-                  dir.file("scene")});
+    auto b = test::buildScene(dir.file("scene"), 300000, {"--capacity", "3000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
     test::writeFile(dir.file("path.json"), R"({"frames": [
         {"eye": [3, -6, 2], "target": [0, 0, 0.5], "up": [0, 0, 1], "fov": 50},
@@ -231,7 +228,7 @@ TEST(Stream, HostOwnedDeviceDrawsTheSameImage) {
     // handed to the client (gpu::wrapContext): the same image as the client's
     // own context on the same device, and the host's device outlives it.
     TempDir dir;
-    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "60000", "-o", dir.file("scene")});
+    auto b = test::buildScene(dir.file("scene"), 60000);
     ASSERT_EQ(b.exitCode, 0) << b.output;
     auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
     ASSERT_TRUE(camera);
@@ -317,8 +314,7 @@ TEST(Stream, UnreachableServerIsAClearError) {
 
 TEST(Stream, WindowStreamsUnderXvfb) {
     TempDir dir;
-    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "100000", "--capacity", "3000", "-o",
-                  dir.file("scene")});
+    auto b = test::buildScene(dir.file("scene"), 100000, {"--capacity", "3000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
     const char* camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
     // --frames counts converged frames: the screenshot is the converged view.
@@ -357,8 +353,7 @@ bool streamUntilConverged(StreamingSet& stream, const Camera& camera, std::vecto
 TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
-    auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", "100000", "--capacity", "2000", "-o",
-                  dir.file("sets/scene")});
+    auto b = test::buildScene(dir.file("sets/scene"), 100000, {"--capacity", "2000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
     auto first = parseCamera("3,-6,2,0,0,0.5,0,0,1,50"), second = parseCamera("-4,5,1.5,0,0,0.5,0,0,1,50");
     ASSERT_TRUE(first && second);
@@ -457,12 +452,11 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
     // and says so, instead of retrying blocks that can never match.
     TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
-    auto build = [&](const char* points) {
-        auto b = run({binary("surfcast-build"), "-q", "--default-scene", "--scene-points", points, "--capacity", "2000",
-                      "-o", dir.file("sets/scene")});
+    auto build = [&](int points) {
+        auto b = test::buildScene(dir.file("sets/scene"), points, {"--capacity", "2000"});
         ASSERT_EQ(b.exitCode, 0) << b.output;
     };
-    build("60000");
+    build(60000);
     test::Child server;
     const std::string origin = startServer(&server, dir.file("sets"));
     ASSERT_FALSE(origin.empty()) << server.log;
@@ -472,7 +466,7 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
     std::vector<uint32_t> drawn;
     ASSERT_TRUE(streamUntilConverged(**remote, *first, &drawn, 30));
     EXPECT_FALSE((*remote)->stats().setChanged);
-    build("90000");
+    build(90000);
     EXPECT_FALSE(streamUntilConverged(**remote, *second, &drawn, 6));
     StreamStats st = (*remote)->stats();
     EXPECT_TRUE(st.setChanged) << st.lastError;

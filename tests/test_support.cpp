@@ -61,6 +61,13 @@ RunResult run(const std::vector<std::string>& args) {
     return r;
 }
 
+RunResult buildScene(const std::string& out, int points, const std::vector<std::string>& options) {
+    std::vector<std::string> args{binary("surfcast-build"), "-q", "--default-scene", "--scene-points",
+                                  std::to_string(points), "-o", out};
+    args.insert(args.end(), options.begin(), options.end());
+    return run(args);
+}
+
 void writeFile(const std::string& path, const std::string& bytes) {
     std::ofstream out(path, std::ios::binary);
     out << bytes;

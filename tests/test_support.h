@@ -51,6 +51,10 @@ int exitCode(int pid);  // waits for it
 
 void writeFile(const std::string& path, const std::string& bytes);
 
+// surfcast-build's built-in scene at `points` points into `out`, with any
+// further options (e.g. {"--capacity", "3000"}).
+RunResult buildScene(const std::string& out, int points, const std::vector<std::string>& options = {});
+
 // The JSON lines (those starting with '{') of a program's output, in order.
 std::vector<nlohmann::json> jsonLines(const std::string& output);
 std::string readFile(const std::string& path);

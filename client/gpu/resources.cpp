@@ -27,6 +27,19 @@ Result<VkDeviceMemory> allocate(Context& ctx, const VkMemoryRequirements& req, V
     return memory;
 }
 
+// Memory for `req`, bound by `bind(memory)`; freed again if binding fails.
+template <typename Bind>
+Result<VkDeviceMemory> allocateAndBind(Context& ctx, const VkMemoryRequirements& req, VkMemoryPropertyFlags wanted,
+                                       const char* bindCall, Bind&& bind) {
+    auto memory = allocate(ctx, req, wanted);
+    if (!memory) return memory;
+    if (VkResult r = bind(*memory); r != VK_SUCCESS) {
+        vkFreeMemory(ctx.device, *memory, nullptr);
+        return vkError(bindCall, r, __FILE__, __LINE__);
+    }
+    return memory;
+}
+
 }  // namespace
 
 Result<Buffer> createBuffer(Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, bool hostVisible) {
@@ -39,18 +52,21 @@ Result<Buffer> createBuffer(Context& ctx, VkDeviceSize size, VkBufferUsageFlags 
     VK_TRY(vkCreateBuffer(ctx.device, &info, nullptr, &b.buffer));
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(ctx.device, b.buffer, &req);
-    auto memory = allocate(ctx, req, hostVisible ? VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
-                                                 : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    auto memory = allocateAndBind(
+        ctx, req,
+        hostVisible ? VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+                    : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT,
+        "vkBindBufferMemory", [&](VkDeviceMemory m) { return vkBindBufferMemory(ctx.device, b.buffer, m, 0); });
     if (!memory) {
         destroyBuffer(ctx, b);
         return memory.status();
     }
     b.memory = *memory;
-    VkResult r = vkBindBufferMemory(ctx.device, b.buffer, b.memory, 0);
-    if (r == VK_SUCCESS && hostVisible) r = vkMapMemory(ctx.device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped);
-    if (r != VK_SUCCESS) {
-        destroyBuffer(ctx, b);
-        return vkError("vkBindBufferMemory/vkMapMemory", r, __FILE__, __LINE__);
+    if (hostVisible) {
+        if (VkResult r = vkMapMemory(ctx.device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped); r != VK_SUCCESS) {
+            destroyBuffer(ctx, b);
+            return vkError("vkMapMemory", r, __FILE__, __LINE__);
+        }
     }
     return b;
 }
@@ -101,24 +117,21 @@ Result<Image> createImage(Context& ctx, uint32_t width, uint32_t height, VkForma
     VK_TRY(vkCreateImage(ctx.device, &info, nullptr, &img.image));
     VkMemoryRequirements req;
     vkGetImageMemoryRequirements(ctx.device, img.image, &req);
-    auto memory = allocate(ctx, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    auto memory = allocateAndBind(ctx, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, "vkBindImageMemory",
+                                  [&](VkDeviceMemory m) { return vkBindImageMemory(ctx.device, img.image, m, 0); });
     if (!memory) {
         destroyImage(ctx, img);
         return memory.status();
     }
     img.memory = *memory;
-    VkResult r = vkBindImageMemory(ctx.device, img.image, img.memory, 0);
-    if (r == VK_SUCCESS) {
-        VkImageViewCreateInfo view{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
-        view.image = img.image;
-        view.viewType = VK_IMAGE_VIEW_TYPE_2D;
-        view.format = format;
-        view.subresourceRange = {aspect, 0, 1, 0, 1};
-        r = vkCreateImageView(ctx.device, &view, nullptr, &img.view);
-    }
-    if (r != VK_SUCCESS) {
+    VkImageViewCreateInfo view{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
+    view.image = img.image;
+    view.viewType = VK_IMAGE_VIEW_TYPE_2D;
+    view.format = format;
+    view.subresourceRange = {aspect, 0, 1, 0, 1};
+    if (VkResult r = vkCreateImageView(ctx.device, &view, nullptr, &img.view); r != VK_SUCCESS) {
         destroyImage(ctx, img);
-        return vkError("vkBindImageMemory/vkCreateImageView", r, __FILE__, __LINE__);
+        return vkError("vkCreateImageView", r, __FILE__, __LINE__);
     }
     return img;
 }

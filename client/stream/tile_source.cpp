@@ -1,6 +1,8 @@
 #include "tile_source.h"
 
+#include <fcntl.h>
 #include <httplib.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -41,20 +43,34 @@ public:
         std::fclose(f);
         return out;
     }
+    ~LocalSource() override {
+        if (fd_ >= 0) ::close(fd_);
+    }
+    // blocks.bin is opened once and read with pread from any thread. A set
+    // rebuilt meanwhile (renamed over) is still read from the file opened.
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
         std::string path = dir_ + "/blocks.bin";
-        std::FILE* f = std::fopen(path.c_str(), "rb");
-        if (!f) return Status::error(path + ": " + std::strerror(errno));
+        {
+            std::lock_guard lock(mutex_);
+            if (fd_ < 0) fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+            if (fd_ < 0) return Status::error(path + ": " + std::strerror(errno));
+        }
         std::vector<uint8_t> out(size);
-        bool ok = std::fseek(f, long(offset), SEEK_SET) == 0 && std::fread(out.data(), 1, size, f) == size;
-        std::fclose(f);
-        if (!ok) return Status::error(path + ": cannot read " + std::to_string(size) + " bytes at " + std::to_string(offset));
+        for (uint64_t done = 0; done < size;) {
+            ssize_t n = ::pread(fd_, out.data() + done, size - done, off_t(offset + done));
+            if (n <= 0)
+                return Status::error(path + ": cannot read " + std::to_string(size) + " bytes at " + std::to_string(offset) +
+                                     (n < 0 ? std::string(": ") + std::strerror(errno) : std::string(": end of file")));
+            done += uint64_t(n);
+        }
         return out;
     }
     std::string describe() const override { return dir_; }
 
 private:
     std::string dir_;
+    std::mutex mutex_;
+    int fd_ = -1;
 };
 
 class HttpSource : public TileSource {
