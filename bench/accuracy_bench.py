@@ -327,7 +327,7 @@ def quantization_sweep(name, ply, camera, ref, size, tmp):
         label = f"--{option}" + ("" if value is None else f" {value}")
         tileset = os.path.join(tmp, f"{name}-q")
         shutil.rmtree(tileset, ignore_errors=True)
-        run([os.path.join(BIN, "surfcast-build"), "-q", ply, "-o", tileset, f"--{option}"] +
+        run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", ply, "-o", tileset, f"--{option}"] +
             ([] if value is None else [str(value)]))
         info = json.load(open(os.path.join(tileset, "tileset.json")))
         level = max(info["levels"] - 2, 0)  # the finest resampled level
@@ -346,7 +346,7 @@ def mesh_view(mesh, size, tmp, shading="lambert"):
     src = os.path.join(DATA, mesh + ".ply")
     tileset = os.path.join(tmp, "mesh-" + mesh)
     if not os.path.exists(tileset):
-        run([os.path.join(BIN, "surfcast-build"), "-q", "--vertices-only", src, "-o", tileset])
+        run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", "--vertices-only", src, "-o", tileset])
     info = json.load(open(os.path.join(tileset, "tileset.json")))
     lo, hi = np.array(info["bounds"]["min"]), np.array(info["bounds"]["max"])
     centre, diag = (lo + hi) / 2, np.linalg.norm(hi - lo)
@@ -374,7 +374,7 @@ def mesh_model_sweep(mesh, size, tmp):
         for label, options in MESH_MODEL:
             tileset = os.path.join(tmp, f"mesh-{mesh}-model")
             shutil.rmtree(tileset, ignore_errors=True)
-            run([os.path.join(BIN, "surfcast-build"), "-q", "--vertices-only", src, "-o", tileset, *options])
+            run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", "--vertices-only", src, "-o", tileset, *options])
             img, ms, splats = render(tileset, "ewa-pixel", camera, size, 1, os.path.join(tmp, "m.png"), shading=shading,
                                      colour="0.8,0.8,0.8")
             psnr, ssim, fl = metrics(ref, img)
@@ -404,7 +404,7 @@ def scan_radius_study(tmp, size="640x480"):
     for label, options in (("radii (default)", []), ("no-radius", ["--no-radius"])):
         tileset = os.path.join(tmp, "scan-radius")
         shutil.rmtree(tileset, ignore_errors=True)
-        run([os.path.join(BIN, "surfcast-build"), "-q", src, "-o", tileset, *options])
+        run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", src, "-o", tileset, *options])
         png = os.path.join(tmp, "scan.png")
         run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, "--size", size, "--out", png])
         img = np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
@@ -439,7 +439,7 @@ def radius_synthetic_study(size, tmp):
     for label, options in (("radii (default)", []), ("no-radius", ["--no-radius"])):
         tileset = os.path.join(tmp, "density-jump")
         shutil.rmtree(tileset, ignore_errors=True)
-        run([os.path.join(BIN, "surfcast-build"), "-q", ply, "-o", tileset, *options])
+        run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", ply, "-o", tileset, *options])
         img, ms, splats = render(tileset, "ewa-pixel", camera, size, 1, os.path.join(tmp, "dj.png"))
         psnr, ssim, fl = metrics(ref, img)
         holes, covered = pinholes(img)
@@ -570,7 +570,7 @@ def main():
             ply = os.path.join(tmp, name + ".ply")
             write_ply(ply, pts, nrm, col)
             tileset = os.path.join(tmp, name)
-            run([os.path.join(BIN, "surfcast-build"), "-q", ply, "-o", tileset])
+            run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", ply, "-o", tileset])
             images = []
             for mode in MODES:
                 img, ms, splats = render(tileset, mode, camera, args.size, 1 if mode == "cpu-reference" else args.repeat,

@@ -17,25 +17,21 @@ int main(int argc, char** argv) {
     options.threads = std::atoi(argv[1]);
     for (int i = 2; i < argc; ++i) options.paths.push_back(argv[i]);
     auto start = std::chrono::steady_clock::now();
-    auto readers = surfcast::openInputs(options);
-    if (!readers) {
-        std::fprintf(stderr, "%s\n", readers.status().message().c_str());
-        return 1;
-    }
     std::vector<surfcast::InputPoint> batch(1 << 16);
     uint64_t points = 0;
     double checksum = 0;
-    for (auto& r : *readers) {
+    surfcast::Status st = surfcast::forEachInput(options, [&](size_t, surfcast::PointReader& r) -> surfcast::Status {
         while (true) {
-            auto n = r->read(batch.data(), batch.size());
-            if (!n) {
-                std::fprintf(stderr, "%s\n", n.status().message().c_str());
-                return 1;
-            }
-            if (*n == 0) break;
+            auto n = r.read(batch.data(), batch.size());
+            if (!n) return n.status();
+            if (*n == 0) return {};
             points += *n;
             checksum += batch[0].position.x;  // keeps the loop honest
         }
+    });
+    if (!st.ok()) {
+        std::fprintf(stderr, "%s\n", st.message().c_str());
+        return 1;
     }
     double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::printf("{\"points\": %llu, \"seconds\": %.4f, \"points_per_second\": %.0f, \"checksum\": %.3f}\n",

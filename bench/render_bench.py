@@ -45,7 +45,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         for size in [int(s) for s in args.sizes.split(",")]:
             tileset = os.path.join(tmp, f"scene{size}")
-            subprocess.run([os.path.join(BIN, "surfcast-build"), "-q", "--default-scene", "--scene-points", str(size),
+            subprocess.run([os.path.join(BIN, "surfcast-build"), "-q", "--weights", "analytic", "--default-scene", "--scene-points", str(size),
                             "-o", tileset], check=True, capture_output=True)
             base = None
             configs = [(m, "quad") for m in MODES] + [(m, "geometry") for m in MODES if m.startswith("ewa")]

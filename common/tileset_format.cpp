@@ -53,7 +53,12 @@ NodeRecord decodeRecord(const uint8_t in[kRecordSize]) {
     return r;
 }
 
-std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t pageDepth) {
+namespace {
+
+// The records in their on-disk order: pages breadth first from the root page,
+// each page breadth first, with the page links set. Every page but the first
+// starts with its root, which its parent page holds too.
+std::vector<std::vector<NodeRecord>> paginate(const std::vector<NodeRecord>& nodes, uint32_t pageDepth) {
     assert(pageDepth >= 2);
     std::map<NodeKey, NodeRecord> byKey;
     for (const NodeRecord& n : nodes) byKey[n.key] = n;
@@ -84,7 +89,21 @@ std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t page
         }
         pages.push_back(std::move(page));
     }
+    return pages;
+}
 
+}  // namespace
+
+std::vector<NodeKey> hierarchyOrder(const std::vector<NodeRecord>& nodes, uint32_t pageDepth) {
+    std::vector<NodeKey> order;
+    const auto pages = paginate(nodes, pageDepth);
+    for (size_t p = 0; p < pages.size(); ++p)
+        for (size_t i = p == 0 ? 0 : 1; i < pages[p].size(); ++i) order.push_back(pages[p][i].key);  // a page root is its parent page's too
+    return order;
+}
+
+std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t pageDepth) {
+    const std::vector<std::vector<NodeRecord>> pages = paginate(nodes, pageDepth);
     size_t tableEnd = kHierarchyHeaderSize + pages.size() * kPageEntrySize;
     size_t total = tableEnd;
     for (const auto& p : pages) total += p.size() * kRecordSize;
@@ -105,7 +124,8 @@ std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t page
     le::put<uint32_t>(out.data() + 8, kRecordSize);
     le::put<uint32_t>(out.data() + 12, uint32_t(pages.size()));
     le::put<uint32_t>(out.data() + 16, pageDepth);
-    le::put<uint32_t>(out.data() + 20, uint32_t(byKey.size()));
+    const size_t records = (total - tableEnd) / kRecordSize;
+    le::put<uint32_t>(out.data() + 20, uint32_t(pages.empty() ? 0 : records - (pages.size() - 1)));  // page roots once
     le::put<uint32_t>(out.data() + 24, crc32(out.data() + kHierarchyHeaderSize, tableEnd - kHierarchyHeaderSize));
     return out;
 }

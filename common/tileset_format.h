@@ -67,6 +67,9 @@ NodeRecord decodeRecord(const uint8_t in[kRecordSize]);
 // hierarchy.bin from the set's nodes (any order; must form one tree rooted at
 // level 0). Pages are subtrees of pageDepth levels in breadth-first order.
 std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t pageDepth = kDefaultPageDepth);
+// The nodes' keys in the order hierarchy.bin stores their records: the order in
+// which the writer lays out blocks.bin, so siblings sit together.
+std::vector<NodeKey> hierarchyOrder(const std::vector<NodeRecord>& nodes, uint32_t pageDepth = kDefaultPageDepth);
 // Parse and validate hierarchy.bin (magic, sizes, CRCs, tree shape); nodes come
 // back once each, in breadth-first order from the root. `what` names the source.
 Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 
 #include "byte_stream.h"
 #include "las_reader.h"
@@ -47,32 +48,72 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
 
 uint16_t scaled(uint16_t raw, double scale) { return uint16_t(std::min(65535.0, raw * scale)); }
 
+bool readableExtension(const std::string& path) {
+    static const char* const kExtensions[] = {".ply", ".las", ".laz", ".pcd", ".xyz", ".txt", ".pts", ".csv", ".asc"};
+    std::string ext = lowerExtension(path);
+    return isMeshExtension(path) || std::find(std::begin(kExtensions), std::end(kExtensions), ext) != std::end(kExtensions);
+}
+
 }  // namespace
 
-Result<std::vector<std::unique_ptr<PointReader>>> openInputs(const InputOptions& options) {
-    std::vector<std::unique_ptr<PointReader>> readers;
+Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>& args) {
+    namespace fs = std::filesystem;
+    std::vector<std::string> out;
+    for (const std::string& arg : args) {
+        std::error_code ec;
+        if (arg.size() > 1 && arg[0] == '@') {
+            const std::string list = arg.substr(1);
+            std::ifstream in(list);
+            if (!in) return Status::error(list + ": cannot open the input list");
+            const fs::path base = fs::path(list).parent_path();
+            std::string line;
+            for (size_t number = 1; std::getline(in, line); ++number) {
+                while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
+                size_t start = line.find_first_not_of(" \t");
+                if (start == std::string::npos || line[start] == '#') continue;
+                fs::path p(line.substr(start));
+                out.push_back((p.is_absolute() ? p : base / p).string());
+            }
+            if (in.bad()) return Status::error(list + ": read error");
+        } else if (fs::is_directory(arg, ec)) {
+            std::vector<std::string> found;
+            fs::recursive_directory_iterator it(arg, fs::directory_options::skip_permission_denied, ec), end;
+            if (ec) return Status::error(arg + ": cannot list the folder (" + ec.message() + ")");
+            for (; it != end; it.increment(ec)) {
+                if (ec) return Status::error(arg + ": cannot list the folder (" + ec.message() + ")");
+                if (it->is_regular_file(ec) && readableExtension(it->path().string())) found.push_back(it->path().string());
+            }
+            if (found.empty()) return Status::error(arg + ": the folder holds no file of a readable format");
+            std::sort(found.begin(), found.end());
+            out.insert(out.end(), found.begin(), found.end());
+        } else {
+            out.push_back(arg);
+        }
+    }
+    return out;
+}
+
+Status forEachInput(const InputOptions& options, const std::function<Status(size_t index, PointReader& reader)>& visit) {
+    size_t index = 0;
     if (options.defaultScene)
-        for (auto& r : openDefaultScene(options.scene)) readers.push_back(std::move(r));
+        for (auto& r : openDefaultScene(options.scene)) SC_TRY(visit(index++, *r));
     for (const std::string& path : options.paths) {
         auto r = openOne(path, options);
         if (!r) return r.status();
-        readers.push_back(std::move(*r));
+        SC_TRY(visit(index++, **r));
     }
-    if (readers.empty()) return Status::error("no inputs given");
-    if (readers.size() > 65535) return Status::error("more than 65535 inputs");
-    return readers;
+    if (index == 0) return Status::error("no inputs given");
+    return {};
 }
 
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress) {
-    auto readers = openInputs(options);
-    if (!readers) return readers.status();
     InputStats stats;
     std::vector<InputPoint> batch(kBatchPoints);
-    for (auto& reader : *readers) {
+    SC_TRY(forEachInput(options, [&](size_t, PointReader& reader) -> Status {
         SourceStats s;
-        s.description = reader->description();
+        s.description = reader.description();
         while (true) {
-            auto n = reader->read(batch.data(), batch.size());
+            auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
             if (*n == 0) break;
             for (size_t i = 0; i < *n; ++i) {
@@ -88,7 +129,7 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
             s.points += *n;
             progress(*n);
         }
-        s.skipped = reader->skipped();
+        s.skipped = reader.skipped();
         // LAS stores 16-bit colour, but many writers put 8-bit values in it.
         if (s.description.colorBits == 16 && s.colorMax <= 255) {
             s.colorScale = 257;
@@ -106,20 +147,21 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
             stats.colorBits = std::max(stats.colorBits, s.colors8Bit ? 8 : 16);
         }
         stats.sources.push_back(std::move(s));
-    }
+        return {};
+    }));
     return stats;
 }
 
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
-                    const std::function<Status(std::span<Surfel>)>& consume) {
-    auto readers = openInputs(options);
-    if (!readers) return readers.status();
+                    std::span<const uint16_t> sourceIds, const std::function<Status(std::span<Surfel>)>& consume) {
     std::vector<InputPoint> batch(kBatchPoints);
     std::vector<Surfel> surfels(kBatchPoints);
-    for (size_t r = 0; r < readers->size(); ++r) {
+    return forEachInput(options, [&](size_t r, PointReader& reader) -> Status {
+        if (r >= stats.sources.size() || r >= sourceIds.size())
+            return Status::error("the inputs changed while being read: more inputs than the first pass saw");
         const SourceStats& src = stats.sources[r];
         while (true) {
-            auto n = (*readers)[r]->read(batch.data(), batch.size());
+            auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
             if (*n == 0) break;
             for (size_t i = 0; i < *n; ++i) {
@@ -127,14 +169,14 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 s = Surfel{};
                 s.position = batch[i].position - origin;
                 s.normal = batch[i].normal;
-                s.source = uint16_t(r);
+                s.source = sourceIds[r];
                 for (int c = 0; c < 3; ++c)
                     s.color[c] = src.description.hasColors ? scaled(batch[i].color[c], src.colorScale) : 65535;
             }
             SC_TRY(consume(std::span<Surfel>(surfels.data(), *n)));
         }
-    }
-    return {};
+        return {};
+    });
 }
 
 }  // namespace surfcast

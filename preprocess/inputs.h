@@ -25,8 +25,17 @@ struct InputOptions {
     int threads = 1;             // decoder threads (LAZ chunks)
 };
 
-// Fresh readers for every input, in order (a pass over the data opens them anew).
-Result<std::vector<std::unique_ptr<PointReader>>> openInputs(const InputOptions& options);
+// The input files that `args` name, in order: a file as itself, a folder as
+// every file under it with an extension some reader takes (recursively, sorted
+// by path), and "@LIST" as the paths in the text file LIST, one per line
+// (blank lines and lines starting with '#' skipped; relative paths are taken
+// relative to LIST's folder).
+Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>& args);
+
+// Visits every input in order with a fresh reader. Readers are opened one at a
+// time and closed before the next opens, so the open files, decoders and their
+// buffers stay bounded however many inputs there are.
+Status forEachInput(const InputOptions& options, const std::function<Status(size_t index, PointReader& reader)>& visit);
 
 // What the first pass learns of each input (one entry per reader).
 struct SourceStats {
@@ -50,8 +59,8 @@ struct InputStats {
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
-// 16 bits, source index set), in batches.
+// 16 bits, Surfel::source = sourceIds[input]), in batches.
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
-                    const std::function<Status(std::span<Surfel>)>& consume);
+                    std::span<const uint16_t> sourceIds, const std::function<Status(std::span<Surfel>)>& consume);
 
 }  // namespace surfcast

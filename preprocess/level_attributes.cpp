@@ -1,6 +1,8 @@
 #include "level_attributes.h"
 
 #include <algorithm>
+#include <array>
+#include <cassert>
 #include <cmath>
 
 #include "neighbours.h"
@@ -9,13 +11,82 @@
 namespace surfcast {
 
 namespace {
-constexpr size_t kQueryBatch = 1 << 16;  // bounds the k-per-query result arrays
+
+// The weight search grid's cell is the reach of the node at this percentile of
+// h: one ring of cells serves it and every denser node; the few sparser ones
+// search two rings or more.
+constexpr double kWeightCellPercentile = 0.9;
 
 float percentile(std::vector<float>& v, double p) {
     size_t i = std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5));
     std::nth_element(v.begin(), v.begin() + long(i), v.end());
     return v[i];
 }
+
+// Cells of a uniform grid over a point set, for fixed-radius searches: the
+// points sorted by cell, and the occupied cells' keys in order. Keys put z in
+// the low bits, so the cells of one (x, y) column around a cell are one range
+// of keys, found by one binary search.
+class CellGrid {
+public:
+    CellGrid(std::span<const Vec3f> points, float cell) : cell_(cell) {
+        lo_ = points.empty() ? Vec3f{} : points[0];
+        for (const Vec3f& p : points)
+            for (int a = 0; a < 3; ++a) lo_[a] = std::min(lo_[a], p[a]);
+        std::vector<std::pair<uint64_t, uint32_t>> keyed(points.size());
+        for (size_t i = 0; i < points.size(); ++i) keyed[i] = {keyOf(coords(points[i])), uint32_t(i)};
+        std::sort(keyed.begin(), keyed.end());
+        order_.resize(points.size());
+        for (size_t i = 0; i < keyed.size(); ++i) {
+            order_[i] = keyed[i].second;
+            if (i == 0 || keyed[i].first != keyed[i - 1].first) {
+                keys_.push_back(keyed[i].first);
+                begin_.push_back(uint32_t(i));
+            }
+        }
+        begin_.push_back(uint32_t(keyed.size()));
+    }
+
+    size_t cells() const { return keys_.size(); }
+    // The points in cell order: sorted position s holds point order()[s].
+    const std::vector<uint32_t>& order() const { return order_; }
+    // Sorted positions [begin, end) of a cell's points.
+    uint32_t begin(size_t cell) const { return begin_[cell]; }
+    uint32_t end(size_t cell) const { return begin_[cell + 1]; }
+    // The runs [first, last) of sorted positions of the points in the cells
+    // within `ring` cells of `cell`: every point within ring cell sizes of the
+    // cell's points, and some farther.
+    void near(size_t cell, int64_t ring, std::vector<std::pair<uint32_t, uint32_t>>* runs) const {
+        runs->clear();
+        const uint64_t key = keys_[cell];
+        const int64_t c[3] = {int64_t(key >> 42), int64_t(key >> 21 & kAxisMax), int64_t(key & kAxisMax)};
+        for (int64_t x = std::max<int64_t>(c[0] - ring, 0); x <= std::min(c[0] + ring, kAxisMax); ++x)
+            for (int64_t y = std::max<int64_t>(c[1] - ring, 0); y <= std::min(c[1] + ring, kAxisMax); ++y) {
+                uint64_t first = keyOf({x, y, std::max<int64_t>(c[2] - ring, 0)});
+                uint64_t last = keyOf({x, y, std::min(c[2] + ring, kAxisMax)});
+                size_t i = size_t(std::lower_bound(keys_.begin(), keys_.end(), first) - keys_.begin()), j = i;
+                while (j < keys_.size() && keys_[j] <= last) ++j;
+                if (j > i) runs->push_back({begin_[i], begin_[j]});  // the column's cells are adjacent in order
+            }
+    }
+
+private:
+    static constexpr int64_t kAxisMax = (int64_t(1) << 21) - 1;  // three 21-bit coordinates in a key
+    std::array<int64_t, 3> coords(const Vec3f& p) const {
+        std::array<int64_t, 3> c;
+        // Points beyond 2^21 cells share the border cell: more candidates, none missed.
+        for (int a = 0; a < 3; ++a) c[a] = std::clamp(int64_t(std::floor((p[a] - lo_[a]) / cell_)), int64_t(0), kAxisMax);
+        return c;
+    }
+    static uint64_t keyOf(const std::array<int64_t, 3>& c) { return uint64_t(c[0]) << 42 | uint64_t(c[1]) << 21 | uint64_t(c[2]); }
+
+    float cell_;
+    Vec3f lo_;
+    std::vector<uint32_t> order_;
+    std::vector<uint64_t> keys_;
+    std::vector<uint32_t> begin_;  // per cell, into order_; one more at the end
+};
+
 }  // namespace
 
 SpacingResult spacingRule(std::vector<float>& dk, double fallback) {
@@ -34,12 +105,19 @@ SpacingResult spacingRule(std::vector<float>& dk, double fallback) {
 void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const Surfel> extra, const LevelParams& params) {
     std::vector<Vec3f> points;
     std::vector<Vec3f> normals;
-    std::vector<uint32_t> owner;  // node index of each point; extra points get nodes.size()
+    std::vector<uint32_t> owner;  // node index of each own point
+    std::vector<size_t> firstOf(nodes.size());
     size_t own = 0;
-    for (LevelNode* n : nodes) own += n->surfels.size();
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        assert(!nodes[i]->surfels.empty() && "a level node holds at least one surfel");
+        firstOf[i] = own;
+        own += nodes[i]->surfels.size();
+    }
     if (own == 0) return;
     const Vec3d frame = nodes[0]->surfels[0].position;
     points.reserve(own + extra.size());
+    normals.reserve(own + extra.size());
+    owner.reserve(own);
     for (size_t i = 0; i < nodes.size(); ++i)
         for (const Surfel& s : nodes[i]->surfels) {
             points.push_back(cast<float>(s.position - frame));
@@ -50,97 +128,132 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         points.push_back(cast<float>(s.position - frame));
         normals.push_back(s.normal);
     }
-    NeighbourIndex index(points, params.threads);
-    const int k = std::max(params.spacingK, params.weights ? params.weightK : 0) + 1;  // +1: the query itself
-
-    // One kNN query per surfel; the neighbour lists (not the distances, which
-    // are cheap to recompute) are kept for the weights, which need every node's h.
-    std::vector<uint32_t> neighbours;  // kk per own surfel; UINT32_MAX: none
-    size_t kk = 0;
-    std::vector<float> dk(own);
-    std::vector<int> nbr;
-    std::vector<float> d2;
     // Neighbours facing away (the other side of a thin sheet, a close parallel
     // surface) do not sample this surface: they count for neither d_k nor weights.
-    auto sameSide = [&](size_t self, uint32_t other) {
+    auto sameSide = [&](size_t self, size_t other) {
         return normals[other] == Vec3f{} || normals[self] == Vec3f{} || dot(normals[other], normals[self]) >= 0;
     };
-    for (size_t start = 0; start < own; start += kQueryBatch) {
-        size_t count = std::min(kQueryBatch, own - start);
-        index.knn(points.data() + start, count, k, &nbr, &d2);
-        kk = nbr.size() / count;
-        neighbours.resize(own * kk);
-        for (size_t q = 0; q < count; ++q) {
+
+    // d_k of the surfels `queries` (indices into points) from one FLANN query each.
+    NeighbourIndex index(points, params.threads);
+    const int k = std::max(params.spacingK, params.fetchK) + 1;  // +1: the query itself
+    std::vector<Vec3f> queryPoints;
+    std::vector<int> nbr;
+    std::vector<float> d2;
+    auto kthDistances = [&](const std::vector<uint32_t>& queries) {
+        queryPoints.resize(queries.size());
+        for (size_t q = 0; q < queries.size(); ++q) queryPoints[q] = points[queries[q]];
+        index.knn(queryPoints.data(), queries.size(), k, &nbr, &d2);
+        const size_t kk = nbr.size() / std::max<size_t>(queries.size(), 1);
+        std::vector<float> dk(queries.size());
+        for (size_t q = 0; q < queries.size(); ++q) {
             int seen = 0;
             float d = 0;
-            for (size_t j = 0; j < kk; ++j) {
+            for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {  // j = 0: the query itself
                 int id = nbr[q * kk + j];
-                uint32_t other = id < 0 ? UINT32_MAX : uint32_t(id);
-                neighbours[(start + q) * kk + j] = other;
-                if (j == 0 || other == UINT32_MAX || seen >= params.spacingK || !sameSide(start + q, other)) continue;
+                if (id < 0 || !sameSide(queries[q], size_t(id))) continue;
                 d = std::sqrt(d2[q * kk + j]);
                 ++seen;
             }
-            dk[start + q] = d;  // fewer than k neighbours: the farthest one found
+            dk[q] = d;  // fewer than k neighbours: the farthest one found
         }
-    }
-    std::vector<int>().swap(nbr);
-    std::vector<float>().swap(d2);
-    std::vector<SpacingResult> spacing(nodes.size());
-    size_t offset = 0;
+        return dk;
+    };
+
+    // h per node from an evenly strided subsample of its surfels (see the
+    // header); nodes the sample finds irregular are queried whole, for their
+    // per-surfel radii and an exact h.
+    std::vector<uint32_t> queries;
     for (size_t i = 0; i < nodes.size(); ++i) {
-        size_t n = nodes[i]->surfels.size();
-        std::vector<float> mine(dk.begin() + long(offset), dk.begin() + long(offset + n));
-        spacing[i] = spacingRule(mine, params.fallbackSpacing);
-        nodes[i]->h = spacing[i].h;
-        nodes[i]->radii.clear();
-        if (spacing[i].irregular && params.radii) {
-            nodes[i]->radii.resize(n);
-            for (size_t s = 0; s < n; ++s)
-                nodes[i]->radii[s] = std::clamp(dk[offset + s], spacing[i].minRadius, spacing[i].h);
+        LevelNode& node = *nodes[i];
+        const size_t n = node.surfels.size();
+        const size_t stride = (n + kSpacingSamples - 1) / kSpacingSamples;
+        queries.clear();
+        for (size_t s = 0; s < n; s += stride) queries.push_back(uint32_t(firstOf[i] + s));
+        std::vector<float> dk = kthDistances(queries);
+        SpacingResult spacing = spacingRule(dk, params.fallbackSpacing);
+        node.radii.clear();
+        if (spacing.irregular && (params.radii || stride > 1)) {
+            queries.clear();
+            for (size_t s = 0; s < n; ++s) queries.push_back(uint32_t(firstOf[i] + s));
+            std::vector<float> all = kthDistances(queries);
+            std::vector<float> sorted = all;
+            spacing = spacingRule(sorted, params.fallbackSpacing);
+            if (spacing.irregular && params.radii) {
+                node.radii.resize(n);
+                for (size_t s = 0; s < n; ++s) node.radii[s] = std::clamp(all[s], spacing.minRadius, spacing.h);
+            }
         }
-        offset += n;
+        node.h = spacing.h;
     }
     if (!params.weights) return;
 
-    // Pass 2: weights, each over the tangent plane of its own surfel.
-    std::vector<size_t> firstOf(nodes.size());
-    for (size_t i = 0, o = 0; i < nodes.size(); o += nodes[i]->surfels.size(), ++i) {
-        firstOf[i] = o;
-        nodes[i]->weights.assign(nodes[i]->surfels.size(), 1.f);
-    }
-    const double cutoff2 = 2.0 * params.cutoff;
-#pragma omp parallel for num_threads(params.threads) schedule(static)
-    for (size_t self = 0; self < own; ++self) {
-        LevelNode* node = nodes[owner[self]];
-        size_t local = self - firstOf[owner[self]];
-        double r = params.kernelScale * (node->radii.empty() ? node->h : node->radii[local]);
-        if (!(r > 0)) continue;
-        // Each neighbour's kernel has its own width, as the renderer draws it;
-        // halo surfels (other chunks) are taken at this surfel's width.
-        auto radiusOf = [&](uint32_t other) {
-            if (other >= own) return r;
-            const LevelNode* o = nodes[owner[other]];
-            size_t l = other - firstOf[owner[other]];
-            double ro = params.kernelScale * (o->radii.empty() ? o->h : o->radii[l]);
-            return ro > 0 ? ro : r;
-        };
-        Vec3d n = cast<double>(normals[self]);
-        double sum = 0;
-        for (size_t j = 0; j < kk; ++j) {
-            uint32_t other = neighbours[self * kk + j];
-            if (other == UINT32_MAX || !sameSide(self, other)) continue;
-            Vec3d d = cast<double>(points[other] - points[self]);
-            // A neighbour off the tangent plane by more than z_t (a close
-            // parallel surface, the other sheet of a crossing) is hidden or
-            // hides this one when rendered: it does not blend, so it does not count.
-            if (std::fabs(dot(d, n)) > kDefaultZt * r) continue;
-            Vec3d t = d - n * dot(d, n);  // tangent-plane component
-            double rj = radiusOf(other);
-            double y2 = dot(t, t) / (rj * rj);
-            if (y2 <= cutoff2) sum += std::exp(-0.5 * y2);
+    // Weights, each over the tangent plane of its own surfel. A neighbour j
+    // counts within sqrt(2c)·r_j of the surfel in its tangent plane and within
+    // z_t·r of it along the normal (r, r_j: kernelScale times the surfel's own
+    // radius or its node's h). So every neighbour with r_j <= r lies within
+    // reach = r·sqrt(2c + z_t²) in 3D, and a fixed-radius search on a uniform
+    // grid finds them all. Neighbours from a sparser node (r_j > r) beyond that
+    // reach, at the border between the two, are left out: the k-nearest search
+    // this replaces left them out too.
+    const float cutoff2 = float(2.0 * params.cutoff);
+    const double reachPerRadius = std::sqrt(cutoff2 + kDefaultZt * kDefaultZt) * (1 + 1e-5);
+    std::vector<float> hs;
+    for (LevelNode* n : nodes) hs.push_back(n->h);
+    const double cell = params.kernelScale * percentile(hs, kWeightCellPercentile) * reachPerRadius;
+    if (!(cell > 0)) return;
+    CellGrid grid(points, float(cell));
+    // Positions, normals and kernel radii in the grid's order, so that the
+    // inner loop reads runs of memory. Halo surfels get radius 0: they are
+    // taken at the querying surfel's width.
+    const std::vector<uint32_t>& order = grid.order();
+    std::vector<Vec3f> gp(order.size()), gn(order.size());
+    std::vector<float> gr(order.size(), 0.f);
+    for (size_t s = 0; s < order.size(); ++s) {
+        uint32_t i = order[s];
+        gp[s] = points[i];
+        gn[s] = normals[i];
+        if (i < own) {
+            const LevelNode& node = *nodes[owner[i]];
+            size_t l = i - firstOf[owner[i]];
+            gr[s] = float(params.kernelScale * (node.radii.empty() ? node.h : node.radii[l]));
         }
-        node->weights[local] = float(1.0 / std::max(sum, 1.0));
+    }
+    for (LevelNode* n : nodes) n->weights.assign(n->surfels.size(), 1.f);
+    // Cell by cell: the cells around one serve all of its surfels.
+    std::vector<std::pair<uint32_t, uint32_t>> runs;
+#pragma omp parallel for num_threads(params.threads) schedule(dynamic, 256) firstprivate(runs)
+    for (size_t cellIndex = 0; cellIndex < grid.cells(); ++cellIndex) {
+        int64_t ring = 0;
+        for (uint32_t s = grid.begin(cellIndex); s < grid.end(cellIndex); ++s)
+            ring = std::max(ring, int64_t(std::ceil(gr[s] * reachPerRadius / cell)));
+        if (ring == 0) continue;  // halo surfels only, or no radius
+        grid.near(cellIndex, ring, &runs);
+        for (uint32_t self = grid.begin(cellIndex); self < grid.end(cellIndex); ++self) {
+            const float r = gr[self];
+            if (!(r > 0)) continue;
+            const Vec3f p = gp[self], n = gn[self];
+            const bool oriented = n != Vec3f{};
+            const float maxOffset = float(kDefaultZt) * r;
+            float sum = 0;
+            for (auto [first, last] : runs)
+                for (uint32_t o = first; o < last; ++o) {
+                    const Vec3f d = gp[o] - p;
+                    const float along = dot(d, n);
+                    // A neighbour off the tangent plane by more than z_t (a close
+                    // parallel surface, the other sheet of a crossing) is hidden or
+                    // hides this one when rendered: it does not blend, so it does
+                    // not count. Neither does one facing away (see above).
+                    if (std::fabs(along) > maxOffset || (oriented && dot(gn[o], n) < 0)) continue;
+                    // Each neighbour's kernel has its own width, as the renderer
+                    // draws it; halo surfels (other chunks) are taken at this one's.
+                    const float rj = gr[o] > 0 ? gr[o] : r;
+                    const float y2 = (dot(d, d) - along * along) / (rj * rj);  // tangent-plane distance²
+                    if (y2 <= cutoff2) sum += std::exp(-0.5f * y2);
+                }
+            const uint32_t i = order[self];
+            nodes[owner[i]]->weights[i - firstOf[owner[i]]] = 1.f / std::max(sum, 1.f);
+        }
     }
 }
 

@@ -1,8 +1,15 @@
 // Per-level attributes that need neighbours: the node spacing h, the optional
-// per-surfel radius, and the analytic normalization weights. One FLANN query
-// per surfel serves all three. Neighbours come from every node of the level
-// plus a halo of surfels from beyond the chunk, so nothing is inflated at
-// node borders.
+// per-surfel radius, and the analytic normalization weights. Neighbours come
+// from every node of the level plus a halo of surfels from beyond the chunk, so
+// nothing is inflated at node borders.
+//
+// h comes from FLANN k-nearest-neighbour queries (DESIGN.md decision 3) of an
+// evenly strided subsample of at most kSpacingSamples surfels per node: h is
+// one number per node, and a percentile of 2048 samples is within about 1% of
+// the whole node's (docs/ARCHITECTURE.md, "Spacing", has the measurement). A
+// node the sample finds irregular is queried whole: its radii need every d_k.
+// The weights need only the neighbours within the kernel's reach, found
+// exactly by a fixed-radius search on a uniform grid of that reach.
 //
 // Spacing rule (docs/ARCHITECTURE.md, "Spacing"): d_k(i) is the distance from
 // surfel i to its k-th nearest neighbour (k = 8) among those whose normals face
@@ -31,6 +38,7 @@ namespace surfcast {
 inline constexpr double kSpacingPercentile = 0.95;
 inline constexpr double kIrregularPercentile = 0.05;
 inline constexpr double kIrregularRatio = 4.0;
+inline constexpr size_t kSpacingSamples = 2048;
 
 struct LevelNode {
     std::span<const Surfel> surfels;  // input
@@ -41,7 +49,7 @@ struct LevelNode {
 
 struct LevelParams {
     int spacingK = 8;
-    int weightK = 24;          // neighbours fetched for the weight sum
+    int fetchK = 24;           // neighbours fetched per d_k query: room to skip those facing away
     double cutoff = 1.0;       // c of the renderer's kernel cutoff y'y <= 2c
     double kernelScale = 1.0;  // k of the renderer's kernel V^r = (k r)^2 I
     bool radii = true;         // per-surfel radii where a node's sampling is irregular

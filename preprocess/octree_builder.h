@@ -24,11 +24,11 @@ struct BuildOptions {
     int threads = 0;                    // 0: all cores
     int normalK = 16;                   // neighbours for PCA normals
     int spacingK = 8;                   // k of the k-th-neighbour spacing h
-    int weightK = 24;                   // neighbours fetched for the weight sums
+    int fetchK = 24;                    // neighbours fetched per d_k query (room to skip those facing away)
     double cutoff = 1.0;                // kernel cutoff c the weights assume
     double kernelScale = kDefaultKernelScale;  // k of V^r = (k h)^2 I the weights assume
     double positionFraction = 8;        // resampled levels: quantization step = cell size / this
-    bool weights = true;                // store analytic per-surfel normalization weights
+    bool weights = false;               // store analytic per-surfel normalization weights (ewa-surfel reads them)
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
     int normalBits = 10;                // Draco quantization bits per normal component
     bool progress = true;
@@ -59,5 +59,11 @@ inline constexpr uint64_t kBytesPerChunkPoint = 320;
 // Memory the build needs whatever the chunk size: code, libraries, counting
 // grid (16 MiB), file buffers, upper levels.
 inline constexpr uint64_t kBaselineBytes = 48ull << 20;
+// Chunks built at the same time, each with its share of the budget. Fixed, not
+// the thread count: the chunk layout, and so the output, must not depend on it.
+inline constexpr uint64_t kChunksAtOnce = 2;
+// A chunk holds at least this many full leaves (capacity points each), so
+// that its subtree has levels to resample: the smallest budget follows from it.
+inline constexpr uint64_t kMinChunkLeaves = 4;
 
 }  // namespace surfcast

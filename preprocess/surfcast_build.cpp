@@ -1,24 +1,36 @@
 // surfcast-build: scans → tile set. main() only parses arguments and wires the
 // builder (octree_builder.h) and the verifier (tileset_reader.h) together.
+// Weight capture renders, so it runs as its own program (surfcast-weights, next
+// to this one): the build itself needs no Vulkan.
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "octree_builder.h"
-#include "reweight.h"
 #include "tileset_reader.h"
+
+extern char** environ;
 
 namespace {
 
-const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT
+const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
        surfcast-build --info SET
 
 Builds a level-of-detail tile set (tileset.json, hierarchy.bin, blocks.bin)
 from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
 triangle strips), LAS 1.0-1.4, text columns (.xyz .txt .pts .csv), and meshes
-in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set.
+in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set. A
+folder stands for every readable file under it; @LIST for the paths listed in
+the text file LIST, one per line.
 
   -o, --output DIR        tile set folder to write (replaced atomically)
   --default-scene         add the built-in scanned scene (about 1.5 M points)
@@ -36,8 +48,9 @@ in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set.
   --no-radius             no per-surfel radius, even where a node's sampling is irregular
   --kernel-scale K        reconstruction kernel V^r = (K h)^2 I the weights assume
                           (default 0.5, measured: see bench/BENCHMARKS.md)
-  --weights MODE          analytic (default), capture (rendered on Vulkan, Ren 2002
-                          §7.2; see surfcast-weights) or none
+  --weights MODE          none (default: ewa-pixel, the default renderer mode, reads
+                          no weights), analytic (for ewa-surfel), or capture
+                          (rendered on Vulkan, Ren 2002 §7.2; see surfcast-weights)
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
   --mesh-spacing S        mesh sampling spacing (default: half the median edge)
   --vertices-only         read a mesh file's vertices as points, no sampling
@@ -64,6 +77,28 @@ bool parseNumber(const std::string& s, double* out) {
     char* end = nullptr;
     *out = std::strtod(s.c_str(), &end);
     return end != s.c_str() && *end == '\0';
+}
+
+// Runs surfcast-weights from this program's folder on `set`; its exit status,
+// or -1 when it cannot be started.
+int runWeightCapture(const std::string& set, bool quiet) {
+    std::error_code ec;
+    std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+    std::string program = ec ? std::string("surfcast-weights") : (self.parent_path() / "surfcast-weights").string();
+    std::vector<std::string> args = {program};
+    if (quiet) args.push_back("-q");
+    const char* env = std::getenv("SURFCAST_VALIDATION");
+    if (env && std::string(env) == "1") args.push_back("--validation");
+    args.push_back(set);
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    pid_t pid = 0;
+    if (posix_spawnp(&pid, program.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return -1;
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0)
+        if (errno != EINTR) return -1;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 int usageError(const std::string& message) {
@@ -166,6 +201,12 @@ int main(int argc, char** argv) {
     }
     if (opt.output.empty()) return usageError("no output folder (-o OUT)");
     if (opt.inputs.paths.empty() && !opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
+    auto paths = surfcast::expandInputPaths(opt.inputs.paths);
+    if (!paths) {
+        std::fprintf(stderr, "surfcast-build: %s\n", paths.status().message().c_str());
+        return 1;
+    }
+    opt.inputs.paths = std::move(*paths);
 
     auto summary = surfcast::buildTileset(opt);
     if (!summary) {
@@ -174,17 +215,13 @@ int main(int argc, char** argv) {
     }
     std::printf("wrote %s\n%s", opt.output.c_str(), summary->text().c_str());
     if (captureWeights) {
-        surfcast::ReweightOptions reweight;
-        reweight.capture.progress = opt.progress;
-        const char* env = std::getenv("SURFCAST_VALIDATION");
-        reweight.validation = env && std::string(env) == "1";
-        auto captured = surfcast::reweightTileset(opt.output, reweight);
-        if (!captured) {
-            std::fprintf(stderr, "surfcast-build: weight capture: %s (the set keeps its analytic weights)\n",
-                         captured.status().message().c_str());
+        std::fflush(stdout);
+        int status = runWeightCapture(opt.output, !opt.progress);
+        if (status != 0) {
+            std::fprintf(stderr, "surfcast-build: weight capture (surfcast-weights) %s; the set keeps its analytic weights\n",
+                         status < 0 ? "could not be started" : ("failed with status " + std::to_string(status)).c_str());
             return 1;
         }
-        std::printf("weights captured: %s", captured->text().c_str());
     }
     return 0;
 }

@@ -13,7 +13,7 @@ struct Surfel {
     Vec3d position;          // world position minus the root minimum
     Vec3f normal;            // unit; zero until estimated
     uint16_t color[3] = {};  // 16-bit channels (8-bit inputs scaled by 257)
-    uint16_t source = 0;     // index of the input it came from (scan origin, orientation rule)
+    uint16_t source = 0;     // orientation rule of the input it came from (NormalContext::rules)
     float count = 1;         // input points it stands for: weights centroids when resampling
 };
 static_assert(sizeof(Surfel) == 48, "chunk files store Surfel records raw; keep them compact");

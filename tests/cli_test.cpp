@@ -54,3 +54,32 @@ TEST(Cli, RefusesToReplaceSomethingElse) {
     EXPECT_NE(r.output.find("not a tile set"), std::string::npos) << r.output;
     EXPECT_EQ(test::readFile(dir.file("precious/data.txt")), "keep me");
 }
+
+TEST(Cli, FoldersAndListsOfInputs) {
+    test::TempDir dir;
+    // Three small text scans: two in a folder tree (with a file no reader takes),
+    // one named by a list with a relative path, a comment and a blank line.
+    std::filesystem::create_directories(dir.file("scans/deeper"));
+    auto xyz = [&](const std::string& path, int n, double z) {
+        std::string text;
+        for (int i = 0; i < n; ++i) text += std::to_string(i * 0.01) + " " + std::to_string((i % 7) * 0.01) + " " + std::to_string(z) + "\n";
+        test::writeFile(path, text);
+    };
+    xyz(dir.file("scans/a.xyz"), 100, 0);
+    xyz(dir.file("scans/deeper/b.xyz"), 200, 1);
+    test::writeFile(dir.file("scans/notes.md"), "not a scan");
+    xyz(dir.file("c.xyz"), 300, 2);
+    test::writeFile(dir.file("list.txt"), "# inputs\n\nc.xyz\n");
+    auto r = test::run({test::binary("surfcast-build"), "-q", dir.file("scans"), "@" + dir.file("list.txt"), "-o", dir.file("s")});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("points in: 600 "), std::string::npos) << r.output;
+
+    auto missing = test::run({test::binary("surfcast-build"), "@" + dir.file("nope.txt"), "-o", dir.file("t")});
+    EXPECT_EQ(missing.exitCode, 1);
+    EXPECT_NE(missing.output.find("nope.txt: cannot open the input list"), std::string::npos) << missing.output;
+    std::filesystem::create_directories(dir.file("empty"));
+    auto empty = test::run({test::binary("surfcast-build"), dir.file("empty"), "-o", dir.file("t")});
+    EXPECT_EQ(empty.exitCode, 1);
+    EXPECT_NE(empty.output.find("holds no file of a readable format"), std::string::npos) << empty.output;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("t")));
+}

@@ -3,6 +3,8 @@
 // bounds the true nearest-neighbour distance.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
 #include <cmath>
 #include <map>
 
@@ -65,7 +67,8 @@ void expectInputsInLeaves(const TilesetReader& set, const std::vector<Decoded>& 
     EXPECT_EQ(leafPoints.size() <= stats->points, true);
     double worst = 0;
     uint64_t checked = 0;
-    ASSERT_TRUE(forEachBatch(inputs, *stats, origin, [&](std::span<Surfel> batch) {
+    const std::vector<uint16_t> sourceIds(stats->sources.size(), 0);
+    ASSERT_TRUE(forEachBatch(inputs, *stats, origin, sourceIds, [&](std::span<Surfel> batch) {
         std::vector<Vec3f> q;
         for (const Surfel& s : batch) q.push_back(cast<float>(s.position));
         std::vector<int> idx;
@@ -217,4 +220,32 @@ TEST(Octree, SeveralInputsMergeIntoOneSet) {
     EXPECT_NEAR(b.min.y, -0.091670, 1e-6);  // horse
     auto nodes = decodeAll(*set);
     expectInputsInLeaves(*set, nodes, o.inputs);
+}
+
+TEST(Octree, SameBytesWhateverTheThreads) {
+    // Several chunks, built by one thread and then by two in whatever order they
+    // finish: the chunk layout and the block order do not depend on it. A second
+    // build over the first replaces it in place.
+    test::TempDir dir;
+    std::string files[3];
+    for (int threads : {1, 2, 2}) {
+        BuildOptions o = quietOptions(dir.file("t" + std::to_string(threads)));
+        o.inputs.defaultScene = true;
+        o.inputs.scene.targetPoints = 300000;
+        o.capacity = 5000;
+        o.memoryBytes = kBaselineBytes + 2 * kBytesPerChunkPoint * 60000;
+        o.threads = threads;
+        auto summary = buildTileset(o);
+        ASSERT_TRUE(summary.ok()) << summary.status().message();
+        EXPECT_GT(summary->chunks, 2u);
+    }
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"}) {
+        std::string one = test::readFile(dir.file(std::string("t1/") + f)), two = test::readFile(dir.file(std::string("t2/") + f));
+        EXPECT_FALSE(one.empty()) << f;
+        EXPECT_TRUE(one == two) << f << " differs between 1 and 2 threads";
+    }
+    // Only the set is left beside it: no partial or old folders.
+    size_t entries = 0;
+    for (auto& e : std::filesystem::directory_iterator(dir.file(""))) entries += e.path().filename().string()[0] == '.';
+    EXPECT_EQ(entries, 0u);
 }

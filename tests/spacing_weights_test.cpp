@@ -98,7 +98,6 @@ TEST(Weights, OppositeFacingNeighboursAreIgnored) {
     LevelNode* nodes[] = {&node};
     LevelParams p;
     p.cutoff = 1.2;
-    p.weightK = 48;
     computeLevelAttributes(nodes, halo, p);
     double expected = 1.0 / (1 + 4 * std::exp(-0.25) + 4 * std::exp(-0.5) + 4 * std::exp(-1.0));
     for (float w : node.weights) EXPECT_NEAR(w, expected, 1e-4);

@@ -43,7 +43,7 @@ protected:
     static void SetUpTestSuite() {
         if (!test::haveData()) return;
         dir_ = new TempDir;
-        auto r = run({binary("surfcast-build"), "-q", test::dataFile("bunny.ply"), "-o", dir_->file("bunny")});
+        auto r = run({binary("surfcast-build"), "-q", test::dataFile("bunny.ply"), "--weights", "analytic", "-o", dir_->file("bunny")});
         ASSERT_EQ(r.exitCode, 0) << r.output;
     }
     static void TearDownTestSuite() {

@@ -35,7 +35,7 @@ protected:
         for (int i = 0; i < kN; ++i)
             for (int j = 0; j < kN; ++j) xyz << i + jit(rng) << ' ' << j + jit(rng) << " 0 0 0 1\n";
         test::writeFile(dir_->file("plane.xyz"), xyz.str());
-        auto b = run({binary("surfcast-build"), "-q", dir_->file("plane.xyz"), "--columns", "x,y,z,nx,ny,nz", "-o",
+        auto b = run({binary("surfcast-build"), "-q", dir_->file("plane.xyz"), "--columns", "x,y,z,nx,ny,nz", "--weights", "analytic", "-o",
                       dir_->file("analytic")});
         ASSERT_EQ(b.exitCode, 0) << b.output;
         b = run({binary("surfcast-build"), "-q", dir_->file("plane.xyz"), "--columns", "x,y,z,nx,ny,nz", "--weights",

@@ -1,7 +1,14 @@
 // Writes a tile set atomically: everything goes into a hidden folder beside the
 // output (".NAME.partial-PID"), tileset.json last, and the folder is renamed
 // into place at the end. A killed build leaves only the hidden folder, which
-// holds no tileset.json and never reads as a tile set.
+// holds no tileset.json and never reads as a tile set. An existing set at the
+// output is exchanged with the new one in one step (renameat2 RENAME_EXCHANGE),
+// so that at no moment does no set exist there; where the file system cannot
+// exchange, the old set is moved aside and the new one moved in.
+//
+// Blocks are laid out in hierarchy order (hierarchyOrder), whatever order the
+// nodes arrive in: the same nodes give the same bytes, and siblings sit
+// together in blocks.bin.
 #pragma once
 
 #include <cstdio>
@@ -20,12 +27,13 @@ public:
     static Result<std::unique_ptr<TilesetWriter>> create(const std::string& output);
     ~TilesetWriter();  // removes the partial folder unless finish() succeeded
 
-    // Thread-safe: appends a node's blob to blocks.bin and fills the record's
-    // offset, size and CRC, then keeps the record.
+    // Thread-safe: appends a node's blob to a temporary file and keeps the
+    // record with its size and CRC.
     Status addNode(NodeRecord record, const std::vector<uint8_t>& blob);
 
-    // hierarchy.bin, then tileset.json, then the rename. `info` gets the byte
-    // counts and checksums filled in.
+    // blocks.bin in hierarchy order (the records' offsets filled in), then
+    // hierarchy.bin, then tileset.json, then the exchange. `info` gets the
+    // byte counts and checksums filled in.
     Status finish(TilesetInfo& info);
 
     uint64_t blockBytes() const { return blocksBytes_; }
@@ -34,7 +42,7 @@ public:
 private:
     TilesetWriter() = default;
     std::string output_, partial_;
-    std::FILE* blocks_ = nullptr;
+    std::FILE* blocks_ = nullptr;   // the blobs in arrival order (blocks.unordered)
     uint64_t blocksBytes_ = 0;
     std::vector<NodeRecord> records_;
     std::mutex mutex_;

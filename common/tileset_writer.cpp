@@ -1,12 +1,14 @@
 #include "tileset_writer.h"
 
 #include <fcntl.h>
+#include <stdio.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 
 #include "byte_io.h"
 #include "crc32.h"
@@ -16,6 +18,9 @@ namespace fs = std::filesystem;
 namespace surfcast {
 
 namespace {
+
+// The blobs as nodes arrive, before finish() lays them out in hierarchy order.
+constexpr char kUnorderedBlocks[] = "blocks.unordered";
 
 Status writeFileSynced(const fs::path& path, const void* data, size_t size) {
     int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -52,8 +57,8 @@ Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& 
     fs::remove_all(w->partial_, ec);
     if (!fs::create_directory(w->partial_, ec))
         return Status::error(w->partial_ + ": cannot create (" + ec.message() + ")");
-    w->blocks_ = std::fopen((w->partial_ + "/blocks.bin").c_str(), "wb");
-    if (!w->blocks_) return Status::error(w->partial_ + "/blocks.bin: cannot create");
+    w->blocks_ = std::fopen((w->partial_ + "/" + kUnorderedBlocks).c_str(), "w+b");
+    if (!w->blocks_) return Status::error(w->partial_ + "/" + kUnorderedBlocks + ": cannot create");
     return w;
 }
 
@@ -69,7 +74,7 @@ Status TilesetWriter::addNode(NodeRecord record, const std::vector<uint8_t>& blo
     uint32_t crc = crc32(blob.data(), blob.size());
     std::lock_guard lock(mutex_);
     if (std::fwrite(blob.data(), 1, blob.size(), blocks_) != blob.size())
-        return Status::error(partial_ + "/blocks.bin: write failed (disk full?)");
+        return Status::error(partial_ + "/" + kUnorderedBlocks + ": write failed (disk full?)");
     record.blockOffset = blocksBytes_;
     record.blockSize = uint32_t(blob.size());
     record.blockCrc = crc;
@@ -79,10 +84,32 @@ Status TilesetWriter::addNode(NodeRecord record, const std::vector<uint8_t>& blo
 }
 
 Status TilesetWriter::finish(TilesetInfo& info) {
-    bool ok = std::fflush(blocks_) == 0 && ::fsync(::fileno(blocks_)) == 0;
-    ok = std::fclose(blocks_) == 0 && ok;
+    // blocks.bin: the blobs copied from the arrival-ordered file in hierarchy order.
+    if (std::fflush(blocks_) != 0) return Status::error(partial_ + "/" + kUnorderedBlocks + ": write failed (disk full?)");
+    std::map<NodeKey, size_t> index;
+    for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
+    const fs::path ordered = fs::path(partial_) / "blocks.bin";
+    std::FILE* out = std::fopen(ordered.c_str(), "wb");
+    if (!out) return Status::error(ordered.string() + ": cannot create (" + std::strerror(errno) + ")");
+    std::vector<uint8_t> blob;
+    uint64_t offset = 0;
+    bool ok = true;
+    for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
+        NodeRecord& r = records_[index.at(key)];
+        blob.resize(r.blockSize);
+        ok = ::pread(::fileno(blocks_), blob.data(), blob.size(), off_t(r.blockOffset)) == ssize_t(blob.size()) &&
+             std::fwrite(blob.data(), 1, blob.size(), out) == blob.size();
+        if (!ok) break;
+        r.blockOffset = offset;
+        offset += r.blockSize;
+    }
+    ok = ok && std::fflush(out) == 0 && ::fsync(::fileno(out)) == 0;
+    ok = std::fclose(out) == 0 && ok;
+    std::fclose(blocks_);
     blocks_ = nullptr;
-    if (!ok) return Status::error(partial_ + "/blocks.bin: could not be flushed to disk");
+    if (!ok) return Status::error(ordered.string() + ": could not be written and flushed to disk (disk full?)");
+    std::error_code ec;
+    fs::remove(fs::path(partial_) / kUnorderedBlocks, ec);
 
     std::vector<uint8_t> hierarchy = writeHierarchy(records_, info.pageDepth);
     info.nodes = records_.size();
@@ -94,8 +121,13 @@ Status TilesetWriter::finish(TilesetInfo& info) {
     std::string json = writeTilesetJson(info);
     SC_TRY(writeFileSynced(fs::path(partial_) / "tileset.json", json.data(), json.size()));
 
-    // Swap the folders: the old set (if any) moves aside, the new one moves in.
-    std::error_code ec;
+    // Exchange the folders in one step where the file system can; else move
+    // the old set (if any) aside and the new one in.
+    if (::renameat2(AT_FDCWD, partial_.c_str(), AT_FDCWD, output_.c_str(), RENAME_EXCHANGE) == 0) {
+        finished_ = true;
+        fs::remove_all(partial_, ec);  // now the old set
+        return {};
+    }
     fs::path old = fs::path(partial_).parent_path() / ("." + fs::path(output_).filename().string() + ".old-" + std::to_string(::getpid()));
     bool hadOld = fs::exists(output_, ec);
     if (hadOld) {
