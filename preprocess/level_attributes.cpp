@@ -1,10 +1,10 @@
 #include "level_attributes.h"
 
 #include <algorithm>
-#include <array>
 #include <cassert>
 #include <cmath>
 
+#include "cell_grid.h"
 #include "neighbours.h"
 #include "tileset_format.h"
 
@@ -22,70 +22,6 @@ float percentile(std::vector<float>& v, double p) {
     std::nth_element(v.begin(), v.begin() + long(i), v.end());
     return v[i];
 }
-
-// Cells of a uniform grid over a point set, for fixed-radius searches: the
-// points sorted by cell, and the occupied cells' keys in order. Keys put z in
-// the low bits, so the cells of one (x, y) column around a cell are one range
-// of keys, found by one binary search.
-class CellGrid {
-public:
-    CellGrid(std::span<const Vec3f> points, float cell) : cell_(cell) {
-        lo_ = points.empty() ? Vec3f{} : points[0];
-        for (const Vec3f& p : points)
-            for (int a = 0; a < 3; ++a) lo_[a] = std::min(lo_[a], p[a]);
-        std::vector<std::pair<uint64_t, uint32_t>> keyed(points.size());
-        for (size_t i = 0; i < points.size(); ++i) keyed[i] = {keyOf(coords(points[i])), uint32_t(i)};
-        std::sort(keyed.begin(), keyed.end());
-        order_.resize(points.size());
-        for (size_t i = 0; i < keyed.size(); ++i) {
-            order_[i] = keyed[i].second;
-            if (i == 0 || keyed[i].first != keyed[i - 1].first) {
-                keys_.push_back(keyed[i].first);
-                begin_.push_back(uint32_t(i));
-            }
-        }
-        begin_.push_back(uint32_t(keyed.size()));
-    }
-
-    size_t cells() const { return keys_.size(); }
-    // The points in cell order: sorted position s holds point order()[s].
-    const std::vector<uint32_t>& order() const { return order_; }
-    // Sorted positions [begin, end) of a cell's points.
-    uint32_t begin(size_t cell) const { return begin_[cell]; }
-    uint32_t end(size_t cell) const { return begin_[cell + 1]; }
-    // The runs [first, last) of sorted positions of the points in the cells
-    // within `ring` cells of `cell`: every point within ring cell sizes of the
-    // cell's points, and some farther.
-    void near(size_t cell, int64_t ring, std::vector<std::pair<uint32_t, uint32_t>>* runs) const {
-        runs->clear();
-        const uint64_t key = keys_[cell];
-        const int64_t c[3] = {int64_t(key >> 42), int64_t(key >> 21 & kAxisMax), int64_t(key & kAxisMax)};
-        for (int64_t x = std::max<int64_t>(c[0] - ring, 0); x <= std::min(c[0] + ring, kAxisMax); ++x)
-            for (int64_t y = std::max<int64_t>(c[1] - ring, 0); y <= std::min(c[1] + ring, kAxisMax); ++y) {
-                uint64_t first = keyOf({x, y, std::max<int64_t>(c[2] - ring, 0)});
-                uint64_t last = keyOf({x, y, std::min(c[2] + ring, kAxisMax)});
-                size_t i = size_t(std::lower_bound(keys_.begin(), keys_.end(), first) - keys_.begin()), j = i;
-                while (j < keys_.size() && keys_[j] <= last) ++j;
-                if (j > i) runs->push_back({begin_[i], begin_[j]});  // the column's cells are adjacent in order
-            }
-    }
-
-private:
-    static constexpr int64_t kAxisMax = (int64_t(1) << 21) - 1;  // three 21-bit coordinates in a key
-    std::array<int64_t, 3> coords(const Vec3f& p) const {
-        std::array<int64_t, 3> c;
-        // Points beyond 2^21 cells share the border cell: more candidates, none missed.
-        for (int a = 0; a < 3; ++a) c[a] = std::clamp(int64_t(std::floor((p[a] - lo_[a]) / cell_)), int64_t(0), kAxisMax);
-        return c;
-    }
-    static uint64_t keyOf(const std::array<int64_t, 3>& c) { return uint64_t(c[0]) << 42 | uint64_t(c[1]) << 21 | uint64_t(c[2]); }
-
-    float cell_;
-    Vec3f lo_;
-    std::vector<uint32_t> order_;
-    std::vector<uint64_t> keys_;
-    std::vector<uint32_t> begin_;  // per cell, into order_; one more at the end
-};
 
 }  // namespace
 
@@ -134,28 +70,38 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         return normals[other] == Vec3f{} || normals[self] == Vec3f{} || dot(normals[other], normals[self]) >= 0;
     };
 
-    // d_k of the surfels `queries` (indices into points) from one FLANN query each.
+    // d_k of the surfels `queries` (indices into points): one FLANN query for
+    // the k nearest each, and a second, for fetchK, only where some of those
+    // face away. The result is the same as fetching fetchK at once, faster.
     NeighbourIndex index(points, params.threads);
-    const int k = std::max(params.spacingK, params.fetchK) + 1;  // +1: the query itself
     std::vector<Vec3f> queryPoints;
     std::vector<int> nbr;
     std::vector<float> d2;
     auto kthDistances = [&](const std::vector<uint32_t>& queries) {
-        queryPoints.resize(queries.size());
-        for (size_t q = 0; q < queries.size(); ++q) queryPoints[q] = points[queries[q]];
-        index.knn(queryPoints.data(), queries.size(), k, &nbr, &d2);
-        const size_t kk = nbr.size() / std::max<size_t>(queries.size(), 1);
-        std::vector<float> dk(queries.size());
-        for (size_t q = 0; q < queries.size(); ++q) {
-            int seen = 0;
-            float d = 0;
-            for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {  // j = 0: the query itself
-                int id = nbr[q * kk + j];
-                if (id < 0 || !sameSide(queries[q], size_t(id))) continue;
-                d = std::sqrt(d2[q * kk + j]);
-                ++seen;
+        std::vector<float> dk(queries.size(), 0.f);
+        std::vector<uint32_t> pending(queries.size());
+        for (size_t q = 0; q < queries.size(); ++q) pending[q] = uint32_t(q);
+        for (int k : {params.spacingK + 1, std::max(params.spacingK, params.fetchK) + 1}) {  // +1: the query itself
+            queryPoints.resize(pending.size());
+            for (size_t q = 0; q < pending.size(); ++q) queryPoints[q] = points[queries[pending[q]]];
+            index.knn(queryPoints.data(), pending.size(), k, &nbr, &d2);
+            const size_t kk = nbr.size() / std::max<size_t>(pending.size(), 1);
+            std::vector<uint32_t> again;
+            for (size_t q = 0; q < pending.size(); ++q) {
+                const uint32_t self = queries[pending[q]];
+                int seen = 0;
+                float d = 0;
+                for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {  // j = 0: the query itself
+                    int id = nbr[q * kk + j];
+                    if (id < 0 || !sameSide(self, size_t(id))) continue;
+                    d = std::sqrt(d2[q * kk + j]);
+                    ++seen;
+                }
+                dk[pending[q]] = d;  // fewer than k neighbours: the farthest one found
+                if (seen < params.spacingK && kk == size_t(k)) again.push_back(pending[q]);
             }
-            dk[q] = d;  // fewer than k neighbours: the farthest one found
+            pending.swap(again);
+            if (pending.empty()) break;
         }
         return dk;
     };

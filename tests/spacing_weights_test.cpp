@@ -5,6 +5,10 @@
 #include <cmath>
 
 #include "level_attributes.h"
+#include "mesh_reader.h"
+#include "neighbours.h"
+#include "tileset_format.h"
+#include "test_support.h"
 
 using namespace surfcast;
 
@@ -101,4 +105,49 @@ TEST(Weights, OppositeFacingNeighboursAreIgnored) {
     computeLevelAttributes(nodes, halo, p);
     double expected = 1.0 / (1 + 4 * std::exp(-0.25) + 4 * std::exp(-0.5) + 4 * std::exp(-1.0));
     for (float w : node.weights) EXPECT_NEAR(w, expected, 1e-4);
+}
+
+TEST(Weights, GridSearchFindsEveryNeighbourOnARealScan) {
+    // The weights' fixed-radius grid search against a brute-force sum over
+    // every surfel, on the bunny's vertices (irregular, real): the same rule,
+    // so the same weights up to float rounding.
+    REQUIRE_DATA();
+    auto mesh = readMeshVertexNormals(test::dataFile("bunny.ply"));
+    ASSERT_TRUE(mesh.ok()) << mesh.status().message();
+    std::vector<Surfel> own;
+    for (size_t i = 0; i < mesh->positions.size(); ++i) {
+        if (length(mesh->normals[i]) < 0.5f) continue;
+        Surfel s;
+        s.position = mesh->positions[i];
+        s.normal = mesh->normals[i];
+        own.push_back(s);
+    }
+    LevelNode node;
+    node.surfels = own;
+    LevelNode* nodes[] = {&node};
+    LevelParams p;
+    p.kernelScale = kDefaultKernelScale;
+    p.radii = false;  // one kernel width for all: the rule has no border case
+    p.threads = 2;
+    computeLevelAttributes(nodes, {}, p);
+    ASSERT_EQ(node.weights.size(), own.size());
+    const double r = p.kernelScale * node.h, cutoff2 = 2 * p.cutoff;
+    size_t checked = 0, summedMore = 0;
+    for (size_t i = 0; i < own.size(); i += 17, ++checked) {
+        const Vec3d n = cast<double>(own[i].normal);
+        double sum = 0;
+        int terms = 0;
+        for (const Surfel& o : own) {
+            if (dot(o.normal, own[i].normal) < 0) continue;
+            Vec3d d = o.position - own[i].position;
+            double along = dot(d, n);
+            if (std::fabs(along) > kDefaultZt * r) continue;
+            double y2 = (dot(d, d) - along * along) / (r * r);
+            if (y2 <= cutoff2) sum += std::exp(-0.5 * y2), ++terms;
+        }
+        summedMore += terms > 1;
+        EXPECT_NEAR(node.weights[i], 1.0 / std::max(sum, 1.0), 2e-5 / std::max(sum, 1.0)) << "surfel " << i;
+    }
+    EXPECT_GT(checked, 2000u);
+    EXPECT_GT(summedMore, checked / 2) << "most weights should sum several kernels";
 }
