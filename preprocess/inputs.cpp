@@ -1,8 +1,12 @@
 #include "inputs.h"
 
 #include <algorithm>
+#include <condition_variable>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <mutex>
+#include <thread>
 
 #include "byte_stream.h"
 #include "las_reader.h"
@@ -15,7 +19,9 @@ namespace surfcast {
 namespace {
 
 constexpr size_t kBatchPoints = 1 << 16;
-
+// Read-ahead: inputs opened and decoded ahead of the one being visited, at
+// most this many, and whole only when their points fit kPrefetchBytes.
+constexpr size_t kPrefetchFiles = 64;
 
 Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const InputOptions& options) {
     std::error_code ec;
@@ -93,14 +99,167 @@ Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>
     return out;
 }
 
+namespace {
+
+// An input read whole into memory by the read-ahead thread.
+class BufferedReader final : public PointReader {
+public:
+    BufferedReader(InputDescription d, std::vector<InputPoint> points, uint64_t skipped)
+        : desc_(std::move(d)), points_(std::move(points)) {
+        skipped_ = skipped;
+    }
+    const InputDescription& description() const override { return desc_; }
+    Result<size_t> read(InputPoint* out, size_t max) override {
+        size_t n = std::min(max, points_.size() - next_);
+        std::copy_n(points_.begin() + long(next_), n, out);
+        next_ += n;
+        return n;
+    }
+
+private:
+    InputDescription desc_;
+    std::vector<InputPoint> points_;
+    size_t next_ = 0;
+};
+
+// Opens the input files on threads of their own (one per --threads), ahead of
+// the visitor, which gets them in order: a point file whose declared points
+// fit a quarter of kPrefetchBytes is decoded whole (small files, whose decoding
+// cannot be split over threads, decode side by side and alongside the
+// visitor's work); a larger one is handed over open and unread. At most
+// kPrefetchFiles files and kPrefetchBytes of points are ahead.
+class ReadAhead {
+public:
+    explicit ReadAhead(const InputOptions& options) : options_(options) {
+        for (int t = 0; t < std::max(1, options.threads); ++t) threads_.emplace_back([this] { run(); });
+    }
+    ~ReadAhead() {
+        {
+            std::lock_guard lock(mutex_);
+            stop_ = true;
+        }
+        changed_.notify_all();
+        for (std::thread& t : threads_) t.join();
+    }
+
+    // The next input in order: its reader, or the error that opening or
+    // decoding it met.
+    Result<std::unique_ptr<PointReader>> next() {
+        std::unique_lock lock(mutex_);
+        changed_.wait(lock, [&] { return ready_.count(nextToVisit_) != 0; });
+        auto node = ready_.extract(nextToVisit_++);
+        Item& item = node.mapped();
+        bytes_ -= item.bytes;
+        --ahead_;
+        changed_.notify_all();
+        if (!item.status.ok()) return item.status;
+        return std::move(item.reader);
+    }
+
+private:
+    struct Item {
+        std::unique_ptr<PointReader> reader;
+        Status status;
+        size_t bytes = 0;
+    };
+
+    Item load(const std::string& path) {
+        Item item;
+        auto r = openOne(path, options_);
+        if (!r) {
+            item.status = r.status();
+            return item;
+        }
+        const InputDescription& d = (*r)->description();
+        const uint64_t declared = d.declaredPoints * sizeof(InputPoint);
+        if (d.declaredPoints == 0 || d.format == "mesh" || declared > kPrefetchBytes / 4) {
+            item.reader = std::move(*r);
+            item.bytes = kPrefetchBytes / 4;  // an open decoder and its buffers
+            return item;
+        }
+        std::vector<InputPoint> points(d.declaredPoints);
+        size_t n = 0;
+        while (n < points.size()) {
+            auto got = (*r)->read(points.data() + n, points.size() - n);
+            if (!got) {
+                item.status = got.status();
+                return item;
+            }
+            if (*got == 0) break;
+            n += *got;
+        }
+        // A file holding more points than it declares: the visitor's count check names it.
+        InputPoint extra;
+        auto more = (*r)->read(&extra, 1);
+        if (!more) {
+            item.status = more.status();
+            return item;
+        }
+        if (*more) {  // more points than declared: the visitor reads it again and names the mismatch
+            auto again = openOne(path, options_);
+            if (!again) item.status = again.status();
+            else item.reader = std::move(*again);
+            item.bytes = kPrefetchBytes / 4;
+            return item;
+        }
+        points.resize(n);
+        item.bytes = n * sizeof(InputPoint);
+        item.reader = std::make_unique<BufferedReader>(d, std::move(points), (*r)->skipped());
+        return item;
+    }
+
+    void run() {
+        while (true) {
+            size_t i = 0;
+            {
+                std::unique_lock lock(mutex_);
+                // Files are taken in order, so the one the visitor waits for is
+                // always loading or loaded: the bounds cannot block it.
+                changed_.wait(lock, [&] { return stop_ || (ahead_ < kPrefetchFiles && bytes_ < kPrefetchBytes); });
+                if (stop_ || nextToLoad_ == options_.paths.size()) return;
+                i = nextToLoad_++;
+                ++ahead_;
+            }
+            Item item = load(options_.paths[i]);
+            {
+                std::lock_guard lock(mutex_);
+                bytes_ += item.bytes;
+                ready_.emplace(i, std::move(item));
+            }
+            changed_.notify_all();
+        }
+    }
+
+    const InputOptions& options_;
+    std::mutex mutex_;
+    std::condition_variable changed_;
+    std::map<size_t, Item> ready_;  // by input index
+    size_t nextToLoad_ = 0, nextToVisit_ = 0;
+    size_t ahead_ = 0;  // taken by a loader and not yet visited
+    size_t bytes_ = 0;  // of the loaded ones
+    bool stop_ = false;
+    std::vector<std::thread> threads_;
+};
+
+}  // namespace
+
 Status forEachInput(const InputOptions& options, const std::function<Status(size_t index, PointReader& reader)>& visit) {
     size_t index = 0;
     if (options.defaultScene)
         for (auto& r : openDefaultScene(options.scene)) SC_TRY(visit(index++, *r));
-    for (const std::string& path : options.paths) {
-        auto r = openOne(path, options);
-        if (!r) return r.status();
-        SC_TRY(visit(index++, **r));
+    if (options.paths.size() > 1) {
+        ReadAhead ahead(options);
+        for (size_t i = 0; i < options.paths.size(); ++i) {
+            auto r = ahead.next();
+            if (!r) return r.status();
+            SC_TRY(visit(index++, **r));
+        }
+    } else {
+        for (const std::string& path : options.paths) {
+            auto r = openOne(path, options);
+            if (!r) return r.status();
+            SC_TRY(visit(index++, **r));
+        }
     }
     if (index == 0) return Status::error("no inputs given");
     return {};

@@ -15,6 +15,9 @@
 
 namespace surfcast {
 
+// Points decoded ahead of the visitor, at most (part of kBaselineBytes).
+inline constexpr size_t kPrefetchBytes = 16u << 20;
+
 struct InputOptions {
     std::vector<std::string> paths;
     bool defaultScene = false;   // add the built-in scene
@@ -32,9 +35,11 @@ struct InputOptions {
 // relative to LIST's folder).
 Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>& args);
 
-// Visits every input in order with a fresh reader. Readers are opened one at a
-// time and closed before the next opens, so the open files, decoders and their
-// buffers stay bounded however many inputs there are.
+// Visits every input in order with a fresh reader, each closed before the
+// visitor gets the next. With several input files a thread reads ahead:
+// small files are decoded whole while the visitor works on earlier ones (at
+// most kPrefetchBytes of points and 64 files wait), so the open files,
+// decoders and buffers stay bounded however many inputs there are.
 Status forEachInput(const InputOptions& options, const std::function<Status(size_t index, PointReader& reader)>& visit);
 
 // What the first pass learns of each input (one entry per reader).

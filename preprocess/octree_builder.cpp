@@ -5,10 +5,10 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
-#include <tuple>
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <tuple>
 #include <unistd.h>
 
 #include "block_codec.h"

@@ -70,33 +70,30 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
     }
     if (!withAttributes) return out;
 
-    // Colours: Gaussian-weighted over the 3x3x3 block of cells around each cell.
-    const double inv2Sigma2 = 1.0 / (2.0 * std::pow(kPrefilterSigma * grid.cellSize, 2));
-    auto findCell = [&](uint64_t key) {
-        auto it = std::lower_bound(cells.begin(), cells.end(), key, [](const Cell& a, uint64_t k) { return a.key < k; });
-        return it != cells.end() && it->key == key ? &*it : nullptr;
-    };
+    // Colours: Gaussian-weighted over the 3x3x3 block of cells around each
+    // cell. Keys put z lowest, so each (x, y) column of three cells is one
+    // range of the sorted cells, found by one binary search.
+    const float inv2Sigma2 = float(1.0 / (2.0 * std::pow(kPrefilterSigma * grid.cellSize, 2)));
     for (size_t c = 0; c < cells.size(); ++c) {
         int64_t x = int64_t(cells[c].key >> (2 * kAxisBits)), y = int64_t((cells[c].key >> kAxisBits) & kAxisMask),
                 z = int64_t(cells[c].key & kAxisMask);
-        double sum[3] = {0, 0, 0}, wsum = 0;
-        for (int dx = -1; dx <= 1; ++dx)
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dz = -1; dz <= 1; ++dz) {
-                    int64_t nx = x + dx, ny = y + dy, nz = z + dz;
-                    if (nx < 0 || ny < 0 || nz < 0 || nx >= grid.cells || ny >= grid.cells || nz >= grid.cells) continue;
-                    const Cell* nb = findCell(packCell(uint64_t(nx), uint64_t(ny), uint64_t(nz)));
-                    if (!nb) continue;
-                    for (uint32_t k = nb->begin; k < nb->end; ++k) {
+        float sum[3] = {0, 0, 0}, wsum = 0;
+        for (int64_t nx = std::max<int64_t>(x - 1, 0); nx <= std::min<int64_t>(x + 1, grid.cells - 1); ++nx)
+            for (int64_t ny = std::max<int64_t>(y - 1, 0); ny <= std::min<int64_t>(y + 1, grid.cells - 1); ++ny) {
+                uint64_t first = packCell(uint64_t(nx), uint64_t(ny), uint64_t(std::max<int64_t>(z - 1, 0)));
+                uint64_t last = packCell(uint64_t(nx), uint64_t(ny), uint64_t(std::min<int64_t>(z + 1, grid.cells - 1)));
+                auto it = std::lower_bound(cells.begin(), cells.end(), first, [](const Cell& a, uint64_t k) { return a.key < k; });
+                for (; it != cells.end() && it->key <= last; ++it)
+                    for (uint32_t k = it->begin; k < it->end; ++k) {
                         const Surfel& p = points[order[k].second];
-                        Vec3d d = p.position - out[c].position;
-                        double w = p.count * std::exp(-dot(d, d) * inv2Sigma2);
-                        for (int ch = 0; ch < 3; ++ch) sum[ch] += w * p.color[ch];
+                        Vec3f d = cast<float>(p.position - out[c].position);
+                        float w = p.count * std::exp(-dot(d, d) * inv2Sigma2);
+                        for (int ch = 0; ch < 3; ++ch) sum[ch] += w * float(p.color[ch]);
                         wsum += w;
                     }
-                }
+            }
         if (wsum > 0)
-            for (int ch = 0; ch < 3; ++ch) out[c].color[ch] = uint16_t(std::lround(sum[ch] / wsum));
+            for (int ch = 0; ch < 3; ++ch) out[c].color[ch] = uint16_t(std::clamp(std::lround(sum[ch] / wsum), 0l, 65535l));
     }
     return out;
 }

@@ -185,3 +185,25 @@ TEST(BadInput, KilledBuildLeavesNoTileset) {
     for (const auto& e : fs::recursive_directory_iterator(dir.path()))
         EXPECT_NE(e.path().filename(), "tileset.json") << e.path();
 }
+
+TEST(BadInput, BadFileAmongManyIsNamed) {
+    // Many inputs are opened and decoded ahead, on other threads: an error
+    // there still names the file and stops the build with nothing written.
+    REQUIRE_DATA();
+    TempDir dir;
+    fs::create_directories(dir.file("in"));
+    std::string laz = test::readFile(test::dataFile("Megaplot.laz"));
+    for (int i = 0; i < 6; ++i) test::writeFile(dir.file("in/m" + std::to_string(i) + ".laz"), laz);
+    test::writeFile(dir.file("in/m3.laz"), laz.substr(0, laz.size() / 2));  // truncated: no chunk table
+    auto r = build(dir, dir.file("in"));
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("m3.laz"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("chunk table"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("m4.laz"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir.file("out")));
+    // The same files without the bad one build, every point counted.
+    fs::remove(dir.file("in/m3.laz"));
+    auto ok = build(dir, dir.file("in"));
+    ASSERT_EQ(ok.exitCode, 0) << ok.output;
+    EXPECT_NE(ok.output.find("points in: " + std::to_string(5 * 81590) + " "), std::string::npos) << ok.output;
+}

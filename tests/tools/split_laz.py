@@ -57,7 +57,7 @@ def main():
         header.offsets = cmin  # per-file offsets, as an octree writer sets them
         rec = laspy.ScaleAwarePointRecord.zeros(len(sel), header=header)
         rec.x, rec.y, rec.z = x[sel], y[sel], z[sel]
-        for name in src.point_format.dimension_names:
+        for name in src.point_format.standard_dimension_names:  # extra bytes are left out
             if name not in ("X", "Y", "Z"):
                 rec[name] = src[name][idx[sel]]
         path = os.path.join(args.out_dir, f"r{int(k):06d}.laz")
