@@ -30,7 +30,7 @@ struct BuildOptions {
     double positionFraction = 8;        // resampled levels: quantization step = cell size / this
     bool weights = false;               // store analytic per-surfel normalization weights (ewa-surfel reads them)
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
-    int normalBits = 10;                // Draco quantization bits per normal component
+    int normalBits = 8;                 // Draco quantization bits per normal component (bench/BENCHMARKS.md, "Bytes")
     bool progress = true;
 };
 

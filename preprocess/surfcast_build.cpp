@@ -44,7 +44,7 @@ the text file LIST, one per line.
   --normal-k K            neighbours for normal estimation (default 16)
   --spacing-k K           k of the k-th-neighbour spacing h (default 8)
   --position-fraction F   resampled levels: quantization step = cell / F (default 8)
-  --normal-bits N         Draco quantization bits per normal component (default 10)
+  --normal-bits N         Draco quantization bits per normal component (default 8)
   --no-radius             no per-surfel radius, even where a node's sampling is irregular
   --kernel-scale K        reconstruction kernel V^r = (K h)^2 I the weights assume
                           (default 0.5, measured: see bench/BENCHMARKS.md)
