@@ -22,6 +22,12 @@ constexpr size_t kBatchPoints = 1 << 16;
 // Read-ahead: inputs opened and decoded ahead of the one being visited, at
 // most this many, and whole only when their points fit kPrefetchBytes.
 constexpr size_t kPrefetchFiles = 64;
+// Extensions of text point files (text_reader.h).
+constexpr const char* kTextExtensions[] = {".xyz", ".txt", ".pts", ".csv", ".asc"};
+
+bool isTextExtension(const std::string& ext) {
+    return std::find(std::begin(kTextExtensions), std::end(kTextExtensions), ext) != std::end(kTextExtensions);
+}
 
 Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const InputOptions& options) {
     std::error_code ec;
@@ -47,17 +53,16 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS") return openPcdReader(path);
     if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF") return openLasReader(path, options.threads);
     if (isMeshExtension(path)) return openMeshReader(path, options.mesh);
-    if (ext == ".xyz" || ext == ".txt" || ext == ".pts" || ext == ".csv" || ext == ".asc")
-        return openTextReader(path, options.columns);
+    if (isTextExtension(ext)) return openTextReader(path, options.columns);
     return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
 }
 
 uint16_t scaled(uint16_t raw, double scale) { return uint16_t(std::min(65535.0, raw * scale)); }
 
+// The extensions openOne() recognizes (it also goes by magic bytes).
 bool readableExtension(const std::string& path) {
-    static const char* const kExtensions[] = {".ply", ".las", ".laz", ".pcd", ".xyz", ".txt", ".pts", ".csv", ".asc"};
     std::string ext = lowerExtension(path);
-    return isMeshExtension(path) || std::find(std::begin(kExtensions), std::end(kExtensions), ext) != std::end(kExtensions);
+    return ext == ".ply" || ext == ".pcd" || ext == ".las" || ext == ".laz" || isMeshExtension(path) || isTextExtension(ext);
 }
 
 }  // namespace
@@ -73,7 +78,7 @@ Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>
             if (!in) return Status::error(list + ": cannot open the input list");
             const fs::path base = fs::path(list).parent_path();
             std::string line;
-            for (size_t number = 1; std::getline(in, line); ++number) {
+            while (std::getline(in, line)) {
                 while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
                 size_t start = line.find_first_not_of(" \t");
                 if (start == std::string::npos || line[start] == '#') continue;
@@ -188,7 +193,6 @@ private:
             if (*got == 0) break;
             n += *got;
         }
-        // A file holding more points than it declares: the visitor's count check names it.
         InputPoint extra;
         auto more = (*r)->read(&extra, 1);
         if (!more) {
@@ -247,16 +251,10 @@ Status forEachInput(const InputOptions& options, const std::function<Status(size
     size_t index = 0;
     if (options.defaultScene)
         for (auto& r : openDefaultScene(options.scene)) SC_TRY(visit(index++, *r));
-    if (options.paths.size() > 1) {
+    if (!options.paths.empty()) {
         ReadAhead ahead(options);
         for (size_t i = 0; i < options.paths.size(); ++i) {
             auto r = ahead.next();
-            if (!r) return r.status();
-            SC_TRY(visit(index++, **r));
-        }
-    } else {
-        for (const std::string& path : options.paths) {
-            auto r = openOne(path, options);
             if (!r) return r.status();
             SC_TRY(visit(index++, **r));
         }

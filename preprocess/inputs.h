@@ -36,7 +36,7 @@ struct InputOptions {
 Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>& args);
 
 // Visits every input in order with a fresh reader, each closed before the
-// visitor gets the next. With several input files a thread reads ahead:
+// visitor gets the next. Threads read the files ahead:
 // small files are decoded whole while the visitor works on earlier ones (at
 // most kPrefetchBytes of points and 64 files wait), so the open files,
 // decoders and buffers stay bounded however many inputs there are.

@@ -17,6 +17,11 @@ namespace {
 // search two rings or more.
 constexpr double kWeightCellPercentile = 0.9;
 
+// Neighbours facing away (the other side of a thin sheet, a close parallel
+// surface) do not sample a surface: they count for neither d_k nor weights.
+// An unoriented (zero) normal faces every side.
+bool sameSide(const Vec3f& a, const Vec3f& b) { return a == Vec3f{} || b == Vec3f{} || dot(a, b) >= 0; }
+
 float percentile(std::vector<float>& v, double p) {
     size_t i = std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5));
     std::nth_element(v.begin(), v.begin() + long(i), v.end());
@@ -64,11 +69,6 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         points.push_back(cast<float>(s.position - frame));
         normals.push_back(s.normal);
     }
-    // Neighbours facing away (the other side of a thin sheet, a close parallel
-    // surface) do not sample this surface: they count for neither d_k nor weights.
-    auto sameSide = [&](size_t self, size_t other) {
-        return normals[other] == Vec3f{} || normals[self] == Vec3f{} || dot(normals[other], normals[self]) >= 0;
-    };
 
     // d_k of the surfels `queries` (indices into points): one FLANN query for
     // the k nearest each, and a second, for fetchK, only where some of those
@@ -93,7 +93,7 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
                 float d = 0;
                 for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {  // j = 0: the query itself
                     int id = nbr[q * kk + j];
-                    if (id < 0 || !sameSide(self, size_t(id))) continue;
+                    if (id < 0 || !sameSide(normals[self], normals[size_t(id)])) continue;
                     d = std::sqrt(d2[q * kk + j]);
                     ++seen;
                 }
@@ -179,7 +179,6 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
             const float r = gr[self];
             if (!(r > 0)) continue;
             const Vec3f p = gp[self], n = gn[self];
-            const bool oriented = n != Vec3f{};
             const float maxOffset = float(kDefaultZt) * r;
             float sum = 0;
             for (auto [first, last] : runs)
@@ -189,8 +188,8 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
                     // A neighbour off the tangent plane by more than z_t (a close
                     // parallel surface, the other sheet of a crossing) is hidden or
                     // hides this one when rendered: it does not blend, so it does
-                    // not count. Neither does one facing away (see above).
-                    if (std::fabs(along) > maxOffset || (oriented && dot(gn[o], n) < 0)) continue;
+                    // not count. Neither does one facing away (sameSide).
+                    if (std::fabs(along) > maxOffset || !sameSide(n, gn[o])) continue;
                     // Each neighbour's kernel has its own width, as the renderer
                     // draws it; halo surfels (other chunks) are taken at this one's.
                     const float rj = gr[o] > 0 ? gr[o] : r;

@@ -57,17 +57,6 @@ private:
     std::chrono::steady_clock::time_point start_;
 };
 
-// Spreads the low 21 bits of v to every third bit (Morton interleaving).
-uint64_t spreadBits(uint64_t v) {
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffull;
-    v = (v | v << 16) & 0x1f0000ff0000ffull;
-    v = (v | v << 8) & 0x100f00f00f00f00full;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
-    v = (v | v << 2) & 0x1249249249249249ull;
-    return v;
-}
-
 // Sorts points along a Morton curve over the cube [lo, lo + edge)³ (points
 // outside are clamped to it). Neighbour queries in this order touch memory
 // that the previous query touched: measured 1.4x faster kNN on a real scan.
@@ -75,9 +64,9 @@ void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
     const double scale = double((1 << 21) - 1) / edge;
     std::vector<std::pair<uint64_t, uint32_t>> keys(points.size());
     for (size_t i = 0; i < points.size(); ++i) {
-        uint64_t c[3];
-        for (int a = 0; a < 3; ++a) c[a] = uint64_t(std::clamp((points[i].position[a] - lo[a]) * scale, 0.0, double((1 << 21) - 1)));
-        keys[i] = {spreadBits(c[0]) << 2 | spreadBits(c[1]) << 1 | spreadBits(c[2]), uint32_t(i)};
+        uint32_t c[3];
+        for (int a = 0; a < 3; ++a) c[a] = uint32_t(std::clamp((points[i].position[a] - lo[a]) * scale, 0.0, double((1 << 21) - 1)));
+        keys[i] = {mortonCode(c[0], c[1], c[2]), uint32_t(i)};
     }
     std::sort(keys.begin(), keys.end());
     std::vector<Surfel> sorted(points.size());
