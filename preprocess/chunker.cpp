@@ -61,6 +61,27 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
         }
     };
     place(NodeKey{}, countOf(NodeKey{}));
+
+    // Cells whose 26 neighbours all belong to their own chunk (or to none):
+    // their points are halo to no other chunk, the common case by far.
+    l.interior_.assign(counts.size(), 0);
+    for (uint32_t x = 0; x < kCountCells; ++x)
+        for (uint32_t y = 0; y < kCountCells; ++y)
+            for (uint32_t z = 0; z < kCountCells; ++z) {
+                const size_t i = (size_t(x) * kCountCells + y) * kCountCells + z;
+                const int32_t own = l.cellChunk_[i];
+                if (own < 0) continue;
+                bool interior = true;
+                for (int dx = -1; dx <= 1 && interior; ++dx)
+                    for (int dy = -1; dy <= 1 && interior; ++dy)
+                        for (int dz = -1; dz <= 1 && interior; ++dz) {
+                            const int64_t n[3] = {int64_t(x) + dx, int64_t(y) + dy, int64_t(z) + dz};
+                            if (std::any_of(n, n + 3, [](int64_t v) { return v < 0 || v >= int64_t(kCountCells); })) continue;
+                            const int32_t id = l.cellChunk_[(size_t(n[0]) * kCountCells + size_t(n[1])) * kCountCells + size_t(n[2])];
+                            interior = id < 0 || id == own;
+                        }
+                l.interior_[i] = interior;
+            }
     return l;
 }
 
@@ -79,9 +100,11 @@ void ChunkLayout::haloChunksOf(const Vec3d& p, std::vector<int>* out) const {
     out->clear();
     if (cellChunk_.empty()) return;
     const double cell = rootEdge_ / kCountCells;
-    int own = chunkOf(p);
     int32_t c[3];
     for (int a = 0; a < 3; ++a) c[a] = int32_t(cellCoord(p[a], cell));
+    const size_t index = (size_t(c[0]) * kCountCells + size_t(c[1])) * kCountCells + size_t(c[2]);
+    if (interior_[index]) return;
+    const int own = cellChunk_[index];
     for (int dx = -1; dx <= 1; ++dx)
         for (int dy = -1; dy <= 1; ++dy)
             for (int dz = -1; dz <= 1; ++dz) {

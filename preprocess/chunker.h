@@ -53,6 +53,7 @@ private:
     int grid_ = 128;
     std::vector<Chunk> chunks_;
     std::vector<int32_t> cellChunk_;  // empty for a single chunk
+    std::vector<uint8_t> interior_;   // per cell: no other chunk's margin reaches it
 };
 
 // Writes points (and halos) to per-chunk files under `dir`.

@@ -3,24 +3,19 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 
-#include "neighbours.h"
+#include "grid_knn.h"
 
 namespace surfcast {
-
-namespace {
-// Queries per FLANN call: bounds the k-per-query result arrays.
-constexpr size_t kQueryBatch = 1 << 16;
-}
 
 std::string orientationName(const OrientationRule& rule) {
     return rule.scanOrigin ? "estimated-scan-origin" : rule.up ? "estimated-up" : "estimated-outward";
 }
 
 void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, const NormalContext& ctx) {
-    std::vector<size_t> todo;
-    for (size_t i = 0; i < points.size(); ++i)
-        if (points[i].normal == Vec3f{}) todo.push_back(i);
-    if (todo.empty()) return;
+    std::vector<uint8_t> todo(points.size());
+    bool any = false;
+    for (size_t i = 0; i < points.size(); ++i) any |= (todo[i] = points[i].normal == Vec3f{});
+    if (!any) return;
 
     // Float coordinates relative to the first point keep precision local.
     const Vec3d frame = points[0].position;
@@ -28,51 +23,45 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     all.reserve(points.size() + halo.size());
     for (const Surfel& s : points) all.push_back(cast<float>(s.position - frame));
     for (const Surfel& s : halo) all.push_back(cast<float>(s.position - frame));
-    NeighbourIndex index(all, ctx.threads);
+    GridKnn index(all);
+    std::vector<Vec3f>().swap(all);
 
-    std::vector<Vec3f> queries;
-    std::vector<int> nbr;
-    std::vector<float> d2;
-    for (size_t start = 0; start < todo.size(); start += kQueryBatch) {
-        size_t count = std::min(kQueryBatch, todo.size() - start);
-        queries.resize(count);
-        for (size_t q = 0; q < count; ++q) queries[q] = all[todo[start + q]];
-        index.knn(queries.data(), count, ctx.k, &nbr, &d2);
-        const size_t k = count ? nbr.size() / count : 0;
-#pragma omp parallel for num_threads(ctx.threads) schedule(static)
-        for (size_t q = 0; q < count; ++q) {
-            Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-            int used = 0;
-            for (size_t j = 0; j < k; ++j) {
-                int id = nbr[q * k + j];
-                if (id < 0) continue;
-                mean += Eigen::Vector3d(all[id].x, all[id].y, all[id].z);
-                ++used;
+    const size_t own = points.size();
+    index.forEach(ctx.k, ctx.threads, [&](uint32_t i) { return i < own && todo[i]; },
+                  [&](uint32_t query, const GridKnn::Neighbours& nbr) {
+        Surfel& s = points[query];
+        Vec3d normal{0, 0, 1};
+        const size_t n = nbr.positions.size();
+        if (n >= 3) {
+            // Covariance about the mean, summed in double from offsets to the
+            // nearest neighbour (the query itself), which keep the sums small.
+            const Vec3f origin = nbr.positions[0];
+            double sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
+            for (const Vec3f& q : nbr.positions) {
+                const double x = double(q.x) - origin.x, y = double(q.y) - origin.y, z = double(q.z) - origin.z;
+                sx += x, sy += y, sz += z;
+                xx += x * x, xy += x * y, xz += x * z, yy += y * y, yz += y * z, zz += z * z;
             }
-            Surfel& s = points[todo[start + q]];
-            Vec3d normal{0, 0, 1};
-            if (used >= 3) {
-                mean /= used;
-                Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-                for (size_t j = 0; j < k; ++j) {
-                    int id = nbr[q * k + j];
-                    if (id < 0) continue;
-                    Eigen::Vector3d d = Eigen::Vector3d(all[id].x, all[id].y, all[id].z) - mean;
-                    cov += d * d.transpose();
-                }
-                Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-                solver.computeDirect(cov);
-                Eigen::Vector3d e = solver.eigenvectors().col(0);  // smallest eigenvalue first
-                if (e.allFinite() && e.norm() > 0) normal = normalizeOrZero(Vec3d{e.x(), e.y(), e.z()});
-            }
-            const OrientationRule& rule = ctx.rules[s.source];
-            Vec3d toward = rule.scanOrigin ? *rule.scanOrigin - s.position
-                           : rule.up       ? Vec3d{0, 0, 1}
-                                           : s.position - ctx.centre;
-            if (dot(normal, toward) < 0) normal = normal * -1.0;
-            s.normal = cast<float>(normal);
+            const double inv = 1.0 / double(n);
+            Eigen::Matrix3d cov;
+            cov(0, 0) = xx - sx * sx * inv;
+            cov(1, 1) = yy - sy * sy * inv;
+            cov(2, 2) = zz - sz * sz * inv;
+            cov(1, 0) = cov(0, 1) = xy - sx * sy * inv;
+            cov(2, 0) = cov(0, 2) = xz - sx * sz * inv;
+            cov(2, 1) = cov(1, 2) = yz - sy * sz * inv;
+            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+            solver.computeDirect(cov);
+            Eigen::Vector3d e = solver.eigenvectors().col(0);  // smallest eigenvalue first
+            if (e.allFinite() && e.norm() > 0) normal = normalizeOrZero(Vec3d{e.x(), e.y(), e.z()});
         }
-    }
+        const OrientationRule& rule = ctx.rules[s.source];
+        Vec3d toward = rule.scanOrigin ? *rule.scanOrigin - s.position
+                       : rule.up       ? Vec3d{0, 0, 1}
+                                       : s.position - ctx.centre;
+        if (dot(normal, toward) < 0) normal = normal * -1.0;
+        s.normal = cast<float>(normal);
+    }, GridKnn::Order::any);
 }
 
 }  // namespace surfcast
