@@ -1,8 +1,8 @@
 // Exact k-nearest-neighbour search over surface samples, cell by cell on a
 // uniform grid: the build's normals query every input point, and sharing one
-// gathered 3×3×3 block of cells among all the queries of a cell costs a
-// fraction of one kd-tree descent per query (bench/BENCHMARKS.md, "Build at
-// scale"). FLANN (neighbours.h) stays the engine for the spacing h.
+// gathered 3×3×3 block of cells among all the queries of a cell costs about
+// half a kd-tree descent per query (docs/ARCHITECTURE.md, "Normals"). FLANN
+// (neighbours.h) stays the engine for the spacing h.
 //
 // Points are sorted along a Morton curve of 21 bits per axis over their
 // bounding cube; the grid is the level of that curve whose occupied cells hold

@@ -58,8 +58,10 @@ private:
 };
 
 // Sorts points along a Morton curve over the cube [lo, lo + edge)³ (points
-// outside are clamped to it). Neighbour queries in this order touch memory
-// that the previous query touched: measured 1.4x faster kNN on a real scan.
+// outside are clamped to it). It made FLANN's normals queries 1.4x faster on a
+// real scan; with the grid search (which sorts its own copy) it measured
+// neither faster nor slower, and it is kept for the normals' writes and the
+// subtree partition, which then walk memory in runs.
 void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
     const double scale = double((1 << 21) - 1) / edge;
     std::vector<std::pair<uint64_t, uint32_t>> keys(points.size());
