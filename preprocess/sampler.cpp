@@ -72,19 +72,24 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
 
     // Colours: Gaussian-weighted over the 3x3x3 block of cells around each
     // cell. Keys put z lowest, so each (x, y) column of three cells is one
-    // range of the sorted cells, found by one binary search.
+    // range of the sorted cells. In cell order, where a column's range starts
+    // only moves forward (cell keys grow, and so does each neighbour column's
+    // first key), so one cursor per column offset walks the cells once.
     const float inv2Sigma2 = float(1.0 / (2.0 * std::pow(kPrefilterSigma * grid.cellSize, 2)));
+    size_t cursor[9] = {};
     for (size_t c = 0; c < cells.size(); ++c) {
         int64_t x = int64_t(cells[c].key >> (2 * kAxisBits)), y = int64_t((cells[c].key >> kAxisBits) & kAxisMask),
                 z = int64_t(cells[c].key & kAxisMask);
         float sum[3] = {0, 0, 0}, wsum = 0;
-        for (int64_t nx = std::max<int64_t>(x - 1, 0); nx <= std::min<int64_t>(x + 1, grid.cells - 1); ++nx)
-            for (int64_t ny = std::max<int64_t>(y - 1, 0); ny <= std::min<int64_t>(y + 1, grid.cells - 1); ++ny) {
+        for (int64_t nx = x - 1; nx <= x + 1; ++nx)
+            for (int64_t ny = y - 1; ny <= y + 1; ++ny) {
+                if (nx < 0 || ny < 0 || nx >= grid.cells || ny >= grid.cells) continue;
                 uint64_t first = packCell(uint64_t(nx), uint64_t(ny), uint64_t(std::max<int64_t>(z - 1, 0)));
                 uint64_t last = packCell(uint64_t(nx), uint64_t(ny), uint64_t(std::min<int64_t>(z + 1, grid.cells - 1)));
-                auto it = std::lower_bound(cells.begin(), cells.end(), first, [](const Cell& a, uint64_t k) { return a.key < k; });
-                for (; it != cells.end() && it->key <= last; ++it)
-                    for (uint32_t k = it->begin; k < it->end; ++k) {
+                size_t& at = cursor[(nx - x + 1) * 3 + (ny - y + 1)];
+                while (at < cells.size() && cells[at].key < first) ++at;
+                for (size_t it = at; it < cells.size() && cells[it].key <= last; ++it)
+                    for (uint32_t k = cells[it].begin; k < cells[it].end; ++k) {
                         const Surfel& p = points[order[k].second];
                         Vec3f d = cast<float>(p.position - out[c].position);
                         float w = p.count * std::exp(-dot(d, d) * inv2Sigma2);
