@@ -33,8 +33,8 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
         Vec3d normal{0, 0, 1};
         const size_t n = nbr.positions.size();
         if (n >= 3) {
-            // Covariance about the mean, summed in double from offsets to the
-            // nearest neighbour (the query itself), which keep the sums small.
+            // Covariance about the mean, summed in double from offsets to one
+            // of the neighbours, which keep the sums small.
             const Vec3f origin = nbr.positions[0];
             double sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
             for (const Vec3f& q : nbr.positions) {
