@@ -187,5 +187,67 @@ TEST_F(Weights, DegenerateSetsAndBadArguments) {
     EXPECT_EQ(run({binary("surfcast-weights")}).exitCode, 2);
 }
 
+// Rewriting the weights re-encodes every block: the normals keep the bits the
+// set was built with (tileset.json's "normal" attribute), not the codec's
+// default. Draco quantizes each component over the block's range (at most 2
+// wide), so re-encoding values already on a 14-bit grid over nearly the same
+// range moves each by less than one 14-bit step, 2 / (2^14 - 1) = 1.2e-4;
+// re-encoding at the default 10 bits moves them by up to half a 10-bit step,
+// 9.8e-4. On a sphere every surfel's normal differs, so both show.
+TEST(WeightsRewrite, KeepsTheSetsNormalBits) {
+    TempDir out;
+    std::ostringstream xyz;
+    const double pi = std::acos(-1.0);
+    for (int i = 1; i < 60; ++i)
+        for (int j = 0; j < 120; ++j) {
+            const double t = pi * i / 60, f = 2 * pi * j / 120;
+            const double nx = std::sin(t) * std::cos(f), ny = std::sin(t) * std::sin(f), nz = std::cos(t);
+            xyz << 50 * nx << ' ' << 50 * ny << ' ' << 50 * nz << ' ' << nx << ' ' << ny << ' ' << nz << "\n";
+        }
+    test::writeFile(out.file("sphere.xyz"), xyz.str());
+    auto b = run({binary("surfcast-build"), "-q", out.file("sphere.xyz"), "--columns", "x,y,z,nx,ny,nz", "--normal-bits", "14",
+                  "-o", out.file("set")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    // Normal by node and position: Draco's kd-tree coder reorders the points.
+    using Key = std::tuple<NodeKey, long, long, long>;
+    auto normalsOf = [](const std::string& dir, int* bits) {
+        std::map<Key, Vec3f> normals;
+        auto reader = TilesetReader::open(dir);
+        EXPECT_TRUE(reader) << reader.status().message();
+        if (!reader) return normals;
+        for (const auto& a : reader->info().attributes)
+            if (a.name == "normal") *bits = a.quantizationBits;
+        for (const auto& node : reader->nodes()) {
+            auto block = reader->readBlock(node);
+            EXPECT_TRUE(block) << block.status().message();
+            if (!block) continue;
+            for (size_t i = 0; i < block->size(); ++i) {
+                const Vec3d p = reader->position(node, *block, i);
+                const float* n = &block->normals[3 * i];
+                normals[{node.key, std::lround(p.x * 1e4), std::lround(p.y * 1e4), std::lround(p.z * 1e4)}] = {n[0], n[1], n[2]};
+            }
+        }
+        return normals;
+    };
+    int bitsBefore = 0, bitsAfter = 0;
+    const auto before = normalsOf(out.file("set"), &bitsBefore);
+    ASSERT_EQ(bitsBefore, 14);
+    auto w = run({binary("surfcast-weights"), "-q", out.file("set"), "--method", "none"});
+    ASSERT_EQ(w.exitCode, 0) << w.output;
+    const auto after = normalsOf(out.file("set"), &bitsAfter);
+    EXPECT_EQ(bitsAfter, 14);
+    ASSERT_EQ(before.size(), after.size());
+    float worst = 0;
+    size_t total = 0;
+    for (const auto& [key, n] : before) {
+        auto it = after.find(key);
+        ASSERT_NE(it, after.end()) << std::get<0>(key).name() << ": a surfel moved";
+        for (int a = 0; a < 3; ++a) worst = std::max(worst, std::fabs(n[a] - it->second[a]));
+        total += 3;
+    }
+    EXPECT_GT(total, 3u * 6000);
+    EXPECT_LT(worst, 2.0f / float((1 << 14) - 1)) << "over " << total << " normal components";
+}
+
 }  // namespace
 }  // namespace surfcast

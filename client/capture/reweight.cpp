@@ -47,6 +47,11 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
     auto writer = TilesetWriter::create(dir);
     if (!writer) return writer.status();
     TilesetInfo info = reader->info();
+    // Blocks are re-encoded with the set's own quantization, which tileset.json
+    // keeps declaring: only the weights change.
+    int normalBits = BlockCodecOptions{}.normalBits;
+    for (const auto& a : info.attributes)
+        if (a.name == "normal" && a.quantizationBits > 0) normalBits = a.quantizationBits;
     for (size_t n = 0; n < nodes.size(); ++n) {
         BlockData& b = blocks[n];
         b.weights = std::move(weights[n]);
@@ -56,6 +61,7 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
         BlockCodecOptions codec;
         codec.positionBits = nodes[n].positionBits;
         codec.colorBits = info.colorBits ? info.colorBits : 8;
+        codec.normalBits = normalBits;
         auto blob = encodeBlock(b, codec);
         if (!blob) return Status::error("node " + nodes[n].key.name() + ": " + blob.status().message());
         SC_TRY(writer.value()->addNode(record, *blob));
