@@ -237,9 +237,16 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
         info.bounds.min = readVec(j.at("bounds").at("min"));
         info.bounds.max = readVec(j.at("bounds").at("max"));
         info.colorBits = j.at("color_bits").get<int>();
-        for (const auto& a : j.at("attributes"))
+        if (info.colorBits != 0 && info.colorBits != 8 && info.colorBits != 16)
+            return Status::error(what + ": color_bits is " + std::to_string(info.colorBits) + ", not 0, 8 or 16");
+        for (const auto& a : j.at("attributes")) {
             info.attributes.push_back({a.at("name").get<std::string>(), a.at("type").get<std::string>(),
                                        a.at("components").get<int>(), a.at("quantization_bits").get<int>()});
+            const AttributeInfo& added = info.attributes.back();
+            // Draco quantizes with 1 to 30 bits; 0 means not quantized.
+            if (added.quantizationBits < 0 || added.quantizationBits > 30 || added.components < 1 || added.components > 4)
+                return Status::error(what + ": attribute " + added.name + ": components or quantization_bits out of range");
+        }
         info.normalSource = j.at("normal_source").get<std::string>();
         info.weights = j.at("weights").get<std::string>();
         // Absent in sets written before it existed, whose weights assumed k = 1.

@@ -226,3 +226,37 @@ TEST(TilesetFormat, TilesetJsonRejectsBadInput) {
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.status().message().find("t.json"), std::string::npos);
 }
+
+// Fields that size shifts and Draco options are range-checked, with the field
+// named: color_bits feeds 1 << bits in the renderer.
+TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
+    TilesetInfo info;
+    info.rootEdge = 4;
+    info.levels = 2;
+    info.bounds.min = {0, 0, 0};
+    info.bounds.max = {1, 1, 1};
+    info.colorBits = 8;
+    info.attributes = {{"position", "uint32", 3, 0}, {"normal", "float32", 3, 8}};
+    info.normalSource = "input";
+    info.weights = "none";
+    const std::string good = writeTilesetJson(info);
+    auto base = readTilesetJson(good, "t.json");
+    ASSERT_TRUE(base.ok()) << base.status().message();
+    auto with = [&](const std::string& from, const std::string& to) {
+        std::string text = good;
+        const size_t at = text.find(from);
+        EXPECT_NE(at, std::string::npos) << from;
+        return text.replace(at, from.size(), to);
+    };
+    for (const char* bits : {"40", "7", "-8", "32"}) {
+        auto r = readTilesetJson(with("\"color_bits\": 8", std::string("\"color_bits\": ") + bits), "t.json");
+        ASSERT_FALSE(r.ok()) << bits;
+        EXPECT_NE(r.status().message().find("color_bits"), std::string::npos) << r.status().message();
+        EXPECT_NE(r.status().message().find("t.json"), std::string::npos) << r.status().message();
+    }
+    EXPECT_TRUE(readTilesetJson(with("\"color_bits\": 8", "\"color_bits\": 16"), "t.json").ok());
+    EXPECT_TRUE(readTilesetJson(with("\"color_bits\": 8", "\"color_bits\": 0"), "t.json").ok());
+    auto r = readTilesetJson(with("\"quantization_bits\": 8", "\"quantization_bits\": 99"), "t.json");
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.status().message().find("normal"), std::string::npos) << r.status().message();
+}
