@@ -20,19 +20,21 @@ void Progress::begin(const std::string& phase, uint64_t total, const std::string
     unit_ = unit;
     total_ = total;
     done_ = 0;
-    start_ = lastPrint_ = std::chrono::steady_clock::now();
+    start_ = std::chrono::steady_clock::now();
+    lastPrint_ = start_.time_since_epoch().count();
 }
 
 void Progress::advance(uint64_t items) {
     done_ += items;
     if (!enabled_) return;
-    auto now = std::chrono::steady_clock::now();
-    if (now - lastPrint_ < (tty_ ? std::chrono::duration_cast<std::chrono::steady_clock::duration>(kTtyInterval)
+    const auto now = std::chrono::steady_clock::now();
+    const std::chrono::steady_clock::time_point last{std::chrono::steady_clock::duration{lastPrint_.load()}};
+    if (now - last < (tty_ ? std::chrono::duration_cast<std::chrono::steady_clock::duration>(kTtyInterval)
                                  : std::chrono::duration_cast<std::chrono::steady_clock::duration>(kLogInterval)))
         return;
     std::unique_lock lock(mutex_, std::try_to_lock);
     if (!lock.owns_lock()) return;
-    lastPrint_ = now;
+    lastPrint_ = now.time_since_epoch().count();
     print(false);
 }
 

@@ -26,7 +26,9 @@ private:
     std::string phase_, unit_;
     uint64_t total_ = 0;
     std::atomic<uint64_t> done_{0};
-    std::chrono::steady_clock::time_point start_, lastPrint_;
+    std::chrono::steady_clock::time_point start_;
+    // Ticks of the last print: advance() reads it without the lock.
+    std::atomic<std::chrono::steady_clock::rep> lastPrint_{0};
     std::mutex mutex_;
 };
 
