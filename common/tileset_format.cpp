@@ -268,6 +268,21 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
     }
 }
 
+Result<std::vector<NodeRecord>> readHierarchyOf(const TilesetInfo& info, const std::vector<uint8_t>& bytes,
+                                                const std::string& what) {
+    if (bytes.size() != info.hierarchyBytes || crc32(bytes.data(), bytes.size()) != info.hierarchyCrc)
+        return Status::error(what + ": " + std::to_string(bytes.size()) + " bytes whose size or CRC differs from tileset.json (" +
+                             std::to_string(info.hierarchyBytes) + " bytes): a set being rebuilt, or a damaged copy");
+    auto nodes = readHierarchy(bytes, what);
+    if (!nodes) return nodes.status();
+    for (const NodeRecord& n : *nodes)
+        if (n.blockOffset > info.blocksBytes || n.blockSize > info.blocksBytes - n.blockOffset)
+            return Status::error(what + ": node " + n.key.name() + " points past the end of blocks.bin (bytes " +
+                                 std::to_string(n.blockOffset) + " + " + std::to_string(n.blockSize) + " of " +
+                                 std::to_string(info.blocksBytes) + ")");
+    return nodes;
+}
+
 double nodeEdge(const TilesetInfo& info, int level) { return std::ldexp(info.rootEdge, -level); }
 
 Vec3d nodeMin(const TilesetInfo& info, const NodeKey& key) {

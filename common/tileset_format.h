@@ -109,6 +109,12 @@ struct TilesetInfo {
 
 std::string writeTilesetJson(const TilesetInfo& info);
 Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what);
+// hierarchy.bin as the set's tileset.json describes it: its size and CRC, then
+// readHierarchy, then every node's block inside blocks.bin's declared size.
+// The one check every reader of a set (local, server, streaming) runs, so
+// none trusts a block range the others would reject. `what` names the file.
+Result<std::vector<NodeRecord>> readHierarchyOf(const TilesetInfo& info, const std::vector<uint8_t>& bytes,
+                                                const std::string& what);
 
 // Edge length of a node at `level`, and its box minimum, in world units.
 double nodeEdge(const TilesetInfo& info, int level);

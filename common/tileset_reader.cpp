@@ -30,9 +30,7 @@ Result<TilesetReader> TilesetReader::open(const std::string& dir) {
     std::string hierarchyPath = dir + "/hierarchy.bin";
     auto hierarchy = readWholeFile(hierarchyPath);
     if (!hierarchy) return hierarchy.status();
-    if (hierarchy->size() != r.info_.hierarchyBytes || crc32(hierarchy->data(), hierarchy->size()) != r.info_.hierarchyCrc)
-        return Status::error(hierarchyPath + ": size or CRC differs from tileset.json");
-    auto nodes = readHierarchy(*hierarchy, hierarchyPath);
+    auto nodes = readHierarchyOf(r.info_, *hierarchy, hierarchyPath);
     if (!nodes) return nodes.status();
     r.nodes_ = std::move(*nodes);
     std::string blocksPath = dir + "/blocks.bin";
@@ -43,9 +41,6 @@ Result<TilesetReader> TilesetReader::open(const std::string& dir) {
     if (size < 0 || uint64_t(size) != r.info_.blocksBytes)
         return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
                              std::to_string(r.info_.blocksBytes));
-    for (const NodeRecord& n : r.nodes_)
-        if (n.blockOffset > r.info_.blocksBytes || n.blockSize > r.info_.blocksBytes - n.blockOffset)
-            return Status::error(hierarchyPath + ": node " + n.key.name() + " points past the end of blocks.bin");
     return r;
 }
 

@@ -23,6 +23,7 @@
 #include <sstream>
 
 #include "context.h"
+#include "crc32.h"
 #include "streamer.h"
 #include "surfcast_client.h"
 #include "test_support.h"
@@ -443,6 +444,79 @@ TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     ASSERT_TRUE(mounted) << mounted.status().message();
     ASSERT_TRUE(streamUntilConverged(**mounted, *second, &drawn, 30)) << (*mounted)->stats().lastError;
     EXPECT_EQ(drawn, expectSecond);
+}
+
+TEST(Stream, ABlockPastTheEndOfBlocksBinIsRejectedAtOpen) {
+    // A hierarchy record whose block reaches past blocks.bin, with every CRC
+    // valid: the client once asked for the range and retried forever. It is
+    // now rejected when the set opens, with the node named, the same check
+    // the local reader and the server make.
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto info = readTilesetJson(test::readFile(dir.file("scene/tileset.json")), "tileset.json");
+    ASSERT_TRUE(info) << info.status().message();
+    const std::string h = test::readFile(dir.file("scene/hierarchy.bin"));
+    auto nodes = readHierarchy(std::vector<uint8_t>(h.begin(), h.end()), "hierarchy.bin");
+    ASSERT_TRUE(nodes) << nodes.status().message();
+    for (NodeRecord& n : *nodes)
+        if (n.key == NodeKey{}) n.blockSize = uint32_t(4u << 30) - 1;  // about 4 GB
+    const std::vector<uint8_t> crafted = writeHierarchy(*nodes, info->pageDepth);
+    info->hierarchyBytes = crafted.size();
+    info->hierarchyCrc = crc32(crafted.data(), crafted.size());
+    test::writeFile(dir.file("scene/hierarchy.bin"), std::string(crafted.begin(), crafted.end()));
+    test::writeFile(dir.file("scene/tileset.json"), writeTilesetJson(*info));
+
+    auto opened = StreamingSet::open(dir.file("scene"));
+    ASSERT_FALSE(opened) << "a set with a block past the end of blocks.bin opened";
+    EXPECT_NE(opened.status().message().find("node 0-0-0-0 points past the end of blocks.bin"), std::string::npos)
+        << opened.status().message();
+    auto view = run({binary("surfcast-view"), "--headless", dir.file("scene"), "--lod", "1", "--size", "64x48", "--out",
+                     dir.file("x.png")});
+    EXPECT_EQ(view.exitCode, 1) << view.output;
+    EXPECT_NE(view.output.find("points past the end of blocks.bin"), std::string::npos) << view.output;
+}
+
+TEST(Stream, APersistentlyCorruptBlockGivesUpWithAClearError) {
+    // One block fails its CRC on every read (a damaged copy, not a transient
+    // fault): after maxTries the stream stops fetching and says which node,
+    // and surfcast-view exits non-zero instead of waiting forever.
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto info = readTilesetJson(test::readFile(dir.file("scene/tileset.json")), "tileset.json");
+    ASSERT_TRUE(info) << info.status().message();
+    const std::string h = test::readFile(dir.file("scene/hierarchy.bin"));
+    auto nodes = readHierarchy(std::vector<uint8_t>(h.begin(), h.end()), "hierarchy.bin");
+    ASSERT_TRUE(nodes) << nodes.status().message();
+    const NodeRecord root = nodes->front();  // breadth-first: the root, which every view needs
+    ASSERT_EQ(root.key, NodeKey{});
+    std::string blocks = test::readFile(dir.file("scene/blocks.bin"));
+    blocks[size_t(root.blockOffset + root.blockSize / 2)] ^= 0x5A;
+    test::writeFile(dir.file("scene/blocks.bin"), blocks);
+
+    StreamOptions options;
+    options.maxTries = 3;
+    auto set = StreamingSet::open(dir.file("scene"), options);
+    ASSERT_TRUE(set) << set.status().message();
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    ASSERT_TRUE(camera);
+    std::vector<uint32_t> drawn;
+    EXPECT_FALSE(streamUntilConverged(**set, *camera, &drawn, 5));
+    StreamStats st = (*set)->stats();
+    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    EXPECT_EQ(st.failures, 3u) << st.lastError;
+    EXPECT_NE(st.lastError.find("node 0-0-0-0: gave up after 3 tries"), std::string::npos) << st.lastError;
+    EXPECT_NE(st.lastError.find("CRC"), std::string::npos) << st.lastError;
+    // Fetching stopped.
+    EXPECT_FALSE(streamUntilConverged(**set, *camera, &drawn, 0.5));
+    EXPECT_EQ((*set)->stats().failures, 3u);
+
+    // The program, at the default 8 tries (about 11 s of backoff).
+    auto view = run({binary("surfcast-view"), "--headless", dir.file("scene"), "--camera", "3,-6,2,0,0,0.5,0,0,1,50", "--lod", "1",
+                     "--size", "64x48", "--max-wait", "120", "--out", dir.file("x.png")});
+    EXPECT_EQ(view.exitCode, 1) << view.output;
+    EXPECT_NE(view.output.find("gave up after 8 tries"), std::string::npos) << view.output;
 }
 
 TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {

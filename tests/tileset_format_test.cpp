@@ -260,3 +260,45 @@ TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.status().message().find("normal"), std::string::npos) << r.status().message();
 }
+
+// The hierarchy against tileset.json: size and CRC as declared, and every
+// block inside blocks.bin's declared size (the streaming client once asked for
+// a block 4 GB past the end and retried forever).
+TEST(TilesetFormat, HierarchyOfASetChecksSizesAndBlockRanges) {
+    NodeRecord root;
+    root.childMask = 1;
+    root.blockOffset = 0;
+    root.blockSize = 100;
+    NodeRecord child;
+    child.key = NodeKey{}.child(0);
+    child.blockOffset = 100;
+    child.blockSize = 50;
+    const std::vector<uint8_t> bytes = writeHierarchy({root, child});
+    TilesetInfo info;
+    info.hierarchyBytes = bytes.size();
+    info.hierarchyCrc = crc32(bytes.data(), bytes.size());
+    info.blocksBytes = 150;
+    auto good = readHierarchyOf(info, bytes, "h.bin");
+    ASSERT_TRUE(good.ok()) << good.status().message();
+    EXPECT_EQ(good->size(), 2u);
+
+    info.blocksBytes = 149;  // the child's last byte is missing
+    auto past = readHierarchyOf(info, bytes, "h.bin");
+    ASSERT_FALSE(past.ok());
+    EXPECT_NE(past.status().message().find("node 1-0-0-0 points past the end of blocks.bin"), std::string::npos)
+        << past.status().message();
+    EXPECT_NE(past.status().message().find("h.bin"), std::string::npos);
+
+    // An offset near 2^64 must not wrap around the bounds check.
+    child.blockOffset = ~uint64_t(0) - 10;
+    const std::vector<uint8_t> wrapped = writeHierarchy({root, child});
+    info.hierarchyBytes = wrapped.size();
+    info.hierarchyCrc = crc32(wrapped.data(), wrapped.size());
+    info.blocksBytes = 150;
+    EXPECT_FALSE(readHierarchyOf(info, wrapped, "h.bin").ok());
+
+    info.hierarchyCrc ^= 1;  // a different hierarchy than tileset.json names
+    auto crc = readHierarchyOf(info, wrapped, "h.bin");
+    ASSERT_FALSE(crc.ok());
+    EXPECT_NE(crc.status().message().find("CRC"), std::string::npos) << crc.status().message();
+}

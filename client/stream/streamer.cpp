@@ -34,9 +34,7 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     s->info_ = *info;
     auto hierarchy = s->source_->file("hierarchy.bin");
     if (!hierarchy) return hierarchy.status();
-    if (hierarchy->size() != s->info_.hierarchyBytes || crc32(hierarchy->data(), hierarchy->size()) != s->info_.hierarchyCrc)
-        return Status::error(location + "/hierarchy.bin: size or CRC differs from tileset.json");
-    auto nodes = readHierarchy(*hierarchy, location + "/hierarchy.bin");
+    auto nodes = readHierarchyOf(s->info_, *hierarchy, location + "/hierarchy.bin");
     if (!nodes) return nodes.status();
     s->selector_ = std::make_unique<LodSelector>(s->info_, std::move(*nodes));
     int decoders = options.decoders > 0 ? options.decoders : int(std::max(1u, std::thread::hardware_concurrency()));
@@ -84,7 +82,7 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
         wanted_.clear();
         size_t wantedBytes = 0;
         for (const auto& [node, priority] : u.lod.missing)
-            if (!pending_.count(node) && !stats_.setChanged) {
+            if (!pending_.count(node) && !stats_.setChanged && !stats_.gaveUp) {
                 wanted_.push_back({node, priority});
                 wantedBytes += residentCost(node);
             }
@@ -133,6 +131,12 @@ void StreamingSet::fail(uint32_t node, const std::string& message) {
     ++stats_.failures;
     stats_.lastError = message;
     checkDue_ = true;
+    if (f.first >= std::max(1, options_.maxTries) && !stats_.gaveUp && !stats_.setChanged) {
+        stats_.gaveUp = true;
+        stats_.lastError = source_->describe() + ": node " + nodes()[node].key.name() + ": gave up after " +
+                           std::to_string(f.first) + " tries; the last failed with: " + message;
+        wanted_.clear();
+    }
 }
 
 void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
@@ -154,7 +158,7 @@ void StreamingSet::fetchLoop() {
         wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05), [&] { return stopping_ || !wanted_.empty(); });
         if (stopping_) return;
         if (checkDue_ && !stats_.setChanged && now() - lastCheck_ > 2.0) checkForRebuild(lock);
-        if (stats_.setChanged) continue;
+        if (stats_.setChanged || stats_.gaveUp) continue;
         // The highest-priority wanted nodes that are neither pending nor
         // backing off, as many as one batch takes and the budget admits (at
         // least one when nothing is resident or pending: a node larger than

@@ -38,6 +38,10 @@ struct StreamOptions {
     size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
     size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
     int timeoutSeconds = 20;   // an HTTP response stalled this long fails (and is retried)
+    // Tries of one node before the stream gives up (StreamStats::gaveUp). With
+    // the backoff (0.1 s doubling to 5 s), 8 tries span about 11 s: past a
+    // server restart, short of a user's patience.
+    int maxTries = 8;
 };
 
 struct StreamStats {
@@ -49,6 +53,10 @@ struct StreamStats {
     // The set's tileset.json differs from the one opened (rebuilt on the
     // server): nothing more is fetched; open it again.
     bool setChanged = false;
+    // A node failed StreamOptions::maxTries times in a row (a server gone for good, a
+    // block that never passes its CRC or never decodes): nothing more is
+    // fetched, and lastError says which node and why.
+    bool gaveUp = false;
 };
 
 // One node's surfels, packed for the GPU and Morton-ordered within the node,

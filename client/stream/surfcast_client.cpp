@@ -74,7 +74,7 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     frame.converged = u.converged;
     frame.lod = std::move(u.lod);
     frame.stream = stream_->stats();
-    if (frame.stream.setChanged) return Status::error(frame.stream.lastError);
+    if (frame.stream.setChanged || frame.stream.gaveUp) return Status::error(frame.stream.lastError);
     return frame;
 }
 
