@@ -475,6 +475,21 @@ TEST(Stream, ABlockPastTheEndOfBlocksBinIsRejectedAtOpen) {
                      dir.file("x.png")});
     EXPECT_EQ(view.exitCode, 1) << view.output;
     EXPECT_NE(view.output.find("points past the end of blocks.bin"), std::string::npos) << view.output;
+
+    // tileset.json may lie about blocks.bin's size too; from a folder, the
+    // range is checked against the file before any buffer is sized by it.
+    info->blocksBytes = uint64_t(1) << 40;
+    test::writeFile(dir.file("scene/tileset.json"), writeTilesetJson(*info));
+    StreamOptions options;
+    options.maxTries = 2;
+    auto lying = StreamingSet::open(dir.file("scene"), options);
+    ASSERT_TRUE(lying) << lying.status().message();
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    std::vector<uint32_t> drawn;
+    EXPECT_FALSE(streamUntilConverged(**lying, *camera, &drawn, 3));
+    const StreamStats st = (*lying)->stats();
+    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    EXPECT_NE(st.lastError.find("reach past the end of the file"), std::string::npos) << st.lastError;
 }
 
 TEST(Stream, APersistentlyCorruptBlockGivesUpWithAClearError) {

@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <httplib.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -55,6 +56,14 @@ public:
             if (fd_ < 0) fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
             if (fd_ < 0) return Status::error(path + ": " + std::strerror(errno));
         }
+        // The range comes from the set's own metadata: checked against the
+        // file before anything is allocated for it.
+        struct stat st{};
+        if (::fstat(fd_, &st) != 0) return Status::error(path + ": " + std::strerror(errno));
+        const uint64_t fileSize = uint64_t(st.st_size);
+        if (offset > fileSize || size > fileSize - offset)
+            return Status::error(path + ": " + std::to_string(size) + " bytes at " + std::to_string(offset) +
+                                 " reach past the end of the file (" + std::to_string(fileSize) + " bytes)");
         std::vector<uint8_t> out(size);
         for (uint64_t done = 0; done < size;) {
             ssize_t n = ::pread(fd_, out.data() + done, size - done, off_t(offset + done));
