@@ -534,6 +534,71 @@ TEST(Stream, APersistentlyCorruptBlockGivesUpWithAClearError) {
     EXPECT_NE(view.output.find("gave up after 8 tries"), std::string::npos) << view.output;
 }
 
+TEST(Stream, ResponsesLongerThanAskedForAreCutOff) {
+    // A broken or hostile host answers with more than was asked for: a huge
+    // tileset.json, a range response longer than the range. The client keeps
+    // no more than it expects and says so, instead of holding all of it.
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const std::string huge(40u << 20, ' ');  // 40 MiB: whitespace, valid JSON padding
+    httplib::Server host;
+    host.Get(R"(/(\w+)/(tileset\.json|hierarchy\.bin|blocks\.bin))", [&](const httplib::Request& req, httplib::Response& res) {
+        const std::string name = req.matches[2], mode = req.matches[1];
+        std::string content = test::readFile(dir.file("scene/" + name));
+        if (mode == "bigjson" && name == "tileset.json") content += huge;
+        if (name == "blocks.bin") {
+            if (mode != "longrange") {
+                res.status = 404;
+                return;
+            }
+            // "Partial", but the whole file and more, chunked so that the
+            // library does not cut it to the range.
+            res.status = 206;
+            content += huge;
+            res.set_chunked_content_provider("application/octet-stream", [content](size_t offset, httplib::DataSink& sink) {
+                if (offset >= content.size()) {
+                    sink.done();
+                    return true;
+                }
+                const size_t n = std::min<size_t>(1 << 20, content.size() - offset);
+                return sink.write(content.data() + offset, n);
+            });
+            return;
+        }
+        res.set_content(content, "application/octet-stream");
+    });
+    const int port = host.bind_to_any_port("127.0.0.1");
+    std::thread serving([&] { host.listen_after_bind(); });
+    struct Stop {
+        httplib::Server& host;
+        std::thread& thread;
+        ~Stop() {
+            host.stop();
+            if (thread.joinable()) thread.join();
+        }
+    } stop{host, serving};
+    for (int i = 0; i < 500 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    ASSERT_TRUE(host.is_running());
+    const std::string origin = "http://127.0.0.1:" + std::to_string(port);
+
+    auto big = StreamingSet::open(origin + "/bigjson");
+    ASSERT_FALSE(big);
+    EXPECT_NE(big.status().message().find("tileset.json: response longer than the 16777216 bytes expected"), std::string::npos)
+        << big.status().message();
+
+    StreamOptions options = connections(1);
+    options.maxTries = 1;
+    auto longRange = StreamingSet::open(origin + "/longrange", options);
+    ASSERT_TRUE(longRange) << longRange.status().message();
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    std::vector<uint32_t> drawn;
+    EXPECT_FALSE(streamUntilConverged(**longRange, *camera, &drawn, 3));
+    const StreamStats st = (*longRange)->stats();
+    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    EXPECT_NE(st.lastError.find("blocks.bin: response longer than the"), std::string::npos) << st.lastError;
+}
+
 TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
     // The set is rebuilt on the server (renamed over the old folder) while a
     // client streams it: its hierarchy no longer matches blocks.bin. The

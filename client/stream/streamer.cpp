@@ -17,6 +17,9 @@ double now() { return std::chrono::duration<double>(std::chrono::steady_clock::n
 // comes back without the client hammering it.
 double backoffSeconds(int attempts) { return std::min(5.0, 0.1 * std::pow(2.0, attempts - 1)); }
 constexpr size_t kMaxBatchNodes = 32;
+// tileset.json is a few kilobytes; this bounds what a broken host can make
+// the client hold before the JSON parser rejects it.
+constexpr uint64_t kMaxTilesetJsonBytes = 16u << 20;
 }  // namespace
 
 Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& location, const StreamOptions& options) {
@@ -26,13 +29,13 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     auto source = openTileSource(location, options.timeoutSeconds);
     if (!source) return source.status();
     s->source_ = std::move(*source);
-    auto json = s->source_->file("tileset.json");
+    auto json = s->source_->file("tileset.json", kMaxTilesetJsonBytes);
     if (!json) return json.status();
     auto info = readTilesetJson(std::string(json->begin(), json->end()), location + "/tileset.json");
     if (!info) return info.status();
     s->tilesetJson_ = std::move(*json);
     s->info_ = *info;
-    auto hierarchy = s->source_->file("hierarchy.bin");
+    auto hierarchy = s->source_->file("hierarchy.bin", s->info_.hierarchyBytes);
     if (!hierarchy) return hierarchy.status();
     auto nodes = readHierarchyOf(s->info_, *hierarchy, location + "/hierarchy.bin");
     if (!nodes) return nodes.status();
@@ -143,7 +146,7 @@ void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
     checkDue_ = false;
     lastCheck_ = now();
     lock.unlock();
-    auto json = source_->file("tileset.json");
+    auto json = source_->file("tileset.json", kMaxTilesetJsonBytes);
     lock.lock();
     if (json && *json != tilesetJson_ && !stats_.setChanged) {
         stats_.setChanged = true;

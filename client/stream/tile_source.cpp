@@ -28,19 +28,27 @@ Result<std::vector<std::vector<uint8_t>>> TileSource::blobs(const std::vector<No
 
 namespace {
 
+// The body of an error response is read and dropped up to this much.
+constexpr uint64_t kMaxErrorPageBytes = 1 << 20;
 // A server that does not accept within this fails the request.
 constexpr int kConnectTimeoutSeconds = 5;
 
 class LocalSource : public TileSource {
 public:
     explicit LocalSource(std::string dir) : dir_(std::move(dir)) {}
-    Result<std::vector<uint8_t>> file(const std::string& name) override {
+    Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
         std::string path = dir_ + "/" + name;
         std::FILE* f = std::fopen(path.c_str(), "rb");
         if (!f) return Status::error(path + ": " + std::strerror(errno));
         std::vector<uint8_t> out;
         uint8_t buf[1 << 16];
-        for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) out.insert(out.end(), buf, buf + n);
+        for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) {
+            if (n > maxBytes - out.size()) {
+                std::fclose(f);
+                return Status::error(path + ": longer than the " + std::to_string(maxBytes) + " bytes expected");
+            }
+            out.insert(out.end(), buf, buf + n);
+        }
         std::fclose(f);
         return out;
     }
@@ -86,11 +94,13 @@ class HttpSource : public TileSource {
 public:
     HttpSource(std::string origin, std::string path, int timeoutSeconds)
         : origin_(std::move(origin)), path_(std::move(path)), timeoutSeconds_(timeoutSeconds) {}
-    Result<std::vector<uint8_t>> file(const std::string& name) override { return get(name, nullptr); }
+    Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
+        return get(name, nullptr, maxBytes);
+    }
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
         if (size == 0) return std::vector<uint8_t>{};
         std::pair<uint64_t, uint64_t> range{offset, offset + size - 1};
-        auto bytes = get("blocks.bin", &range);
+        auto bytes = get("blocks.bin", &range, size);
         if (bytes && bytes->size() != size)
             return Status::error(describe() + "/blocks.bin: asked for " + std::to_string(size) + " bytes at " +
                                  std::to_string(offset) + ", got " + std::to_string(bytes->size()));
@@ -103,9 +113,35 @@ public:
     Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes) override {
         if (nodes.size() < 2 || batch_ == Batch::No) return TileSource::blobs(nodes);
         std::string body, url = path_ + "/batch";
-        for (const NodeRecord& n : nodes) body += n.key.name() + ",";
-        auto res = client().Post(url, body, "text/plain");
+        uint64_t expected = 0;  // what the answer holds: a length and a blob per node
+        for (const NodeRecord& n : nodes) {
+            body += n.key.name() + ",";
+            expected += 4 + uint64_t(n.blockSize);
+        }
+        httplib::Request req;
+        req.method = "POST";
+        req.path = url;
+        req.body = body;
+        req.set_header("Content-Type", "text/plain");
+        // An error page is not kept (its status decides), but it is bounded too.
+        int status = 0;
+        req.response_handler = [&](const httplib::Response& r) {
+            status = r.status;
+            return true;
+        };
+        std::string received;
+        bool tooLong = false;
+        req.content_receiver = [&](const char* data, size_t length, uint64_t, uint64_t) {
+            const uint64_t limit = status == 200 ? expected : kMaxErrorPageBytes;
+            if (length > limit - received.size()) return !(tooLong = true);
+            if (status == 200) received.append(data, length);
+            else received.resize(received.size() + length);
+            return true;
+        };
+        auto res = client().send(req);
+        if (tooLong) return Status::error(origin_ + url + ": response longer than the " + std::to_string(expected) + " bytes asked for");
         if (!res) return Status::error(origin_ + url + ": " + httplib::to_string(res.error()));
+        if (res->status == 200) res->body = std::move(received);
         if (res->status != 200) {
             if (batch_ == Batch::Unknown && res->status >= 400 && res->status < 500) {
                 batch_ = Batch::No;
@@ -144,16 +180,35 @@ private:
         }
         return *c;
     }
-    Result<std::vector<uint8_t>> get(const std::string& name, const std::pair<uint64_t, uint64_t>* range) {
+    // The body is kept only up to maxBytes: a longer one (a hostile or broken
+    // host) cancels the request.
+    Result<std::vector<uint8_t>> get(const std::string& name, const std::pair<uint64_t, uint64_t>* range, uint64_t maxBytes) {
         std::string url = path_ + "/" + name;
         httplib::Headers headers;
         if (range)
             headers.emplace("Range", "bytes=" + std::to_string(range->first) + "-" + std::to_string(range->second));
-        auto res = client().Get(url, headers);
+        const int wanted = range ? 206 : 200;
+        int status = 0;
+        std::vector<uint8_t> body;
+        uint64_t dropped = 0;  // of an error page: not kept, but bounded too
+        bool tooLong = false;
+        auto res = client().Get(
+            url, headers,
+            [&](const httplib::Response& r) {
+                status = r.status;
+                return true;
+            },
+            [&](const char* data, size_t length) {
+                if (status != wanted) return (dropped += length) <= kMaxErrorPageBytes;
+                if (length > maxBytes - body.size()) return !(tooLong = true);
+                body.insert(body.end(), data, data + length);
+                return true;
+            });
+        if (tooLong)
+            return Status::error(origin_ + url + ": response longer than the " + std::to_string(maxBytes) + " bytes expected");
         if (!res) return Status::error(origin_ + url + ": " + httplib::to_string(res.error()));
-        if (range ? res->status != 206 : res->status != 200)
-            return Status::error(origin_ + url + ": HTTP " + std::to_string(res->status));
-        return std::vector<uint8_t>(res->body.begin(), res->body.end());
+        if (res->status != wanted) return Status::error(origin_ + url + ": HTTP " + std::to_string(res->status));
+        return body;
     }
 
     std::string origin_, path_;

@@ -16,9 +16,10 @@ namespace surfcast {
 class TileSource {
 public:
     virtual ~TileSource() = default;
-    // A whole file of the set: "tileset.json" or "hierarchy.bin".
-    virtual Result<std::vector<uint8_t>> file(const std::string& name) = 0;
-    // Bytes [offset, offset + size) of blocks.bin. Thread-safe.
+    // A whole file of the set: "tileset.json" or "hierarchy.bin". A file
+    // longer than maxBytes is an error, found before more is read or kept.
+    virtual Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) = 0;
+    // Bytes [offset, offset + size) of blocks.bin; never more is kept. Thread-safe.
     virtual Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) = 0;
     // Several nodes' blobs, in order: one request where the source batches
     // (the project's server), else one range each. All or nothing. Thread-safe.
