@@ -176,10 +176,18 @@ TEST(BadInput, KilledBuildLeavesNoTileset) {
         execl(bin.c_str(), bin.c_str(), "--default-scene", "-o", out.c_str(), nullptr);
         _exit(127);
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+    // Killed while it writes blocks (the first has reached the partial
+    // folder's block file), however fast or slow the machine: event-driven,
+    // with a generous bound for sanitizer builds.
+    const std::string blocks = dir.file(".out.partial-" + std::to_string(pid) + "/blocks.unordered");
+    std::error_code ec;
+    for (int i = 0; i < 12000 && !(fs::exists(blocks, ec) && fs::file_size(blocks, ec) > 0); ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const bool writing = fs::exists(blocks, ec) && fs::file_size(blocks, ec) > 0;
     kill(pid, SIGKILL);
     int status = 0;
     waitpid(pid, &status, 0);
+    ASSERT_TRUE(writing) << "no block written within 60 s";
     ASSERT_TRUE(WIFSIGNALED(status)) << "the build finished before it could be killed";
     EXPECT_FALSE(fs::exists(dir.file("out")));
     for (const auto& e : fs::recursive_directory_iterator(dir.path()))
