@@ -41,6 +41,20 @@ int keepNearest(const float* d, const uint32_t* ids, size_t n, int k, float* bes
     return count;
 }
 
+// Writes to keys, in order, (distance bits << 32 | index) of every d[i] whose
+// bits are at most limitBits; returns how many. Its own function: inlined in
+// the query loop, its pointers and bounds were spilled and reloaded on every
+// iteration.
+[[gnu::noinline]] size_t keysWithin(const float* d, size_t n, uint32_t limitBits, uint64_t* keys) {
+    size_t m = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const uint32_t bits = std::bit_cast<uint32_t>(d[i]);
+        keys[m] = uint64_t(bits) << 32 | i;
+        m += bits <= limitBits;
+    }
+    return m;
+}
+
 }  // namespace
 
 // The points of the 3×3×3 cells around one cell of a level, as runs of sorted
@@ -225,7 +239,7 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
             gather(level_, cell, c, &block);
             size_t count = 0;
             for (auto [b, e] : block.runs) count += e - b;
-            cx.resize(count), cy.resize(count), cz.resize(count), cid.resize(count), d.resize(count);
+            cx.resize(count), cy.resize(count), cz.resize(count), cid.resize(count), d.resize(count), keys.resize(count);
             size_t j = 0;
             for (auto [b, e] : block.runs)
                 for (uint32_t s = b; s < e; ++s, ++j) {
@@ -241,38 +255,40 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                     d[i] = dx * dx + dy * dy + dz * dz;
                 }
                 // Candidates inside the previous query's ball, when they are k or
-                // more, hold the k nearest; else all candidates are ranked. The
-                // ball is shrunk first by the area it should need (a surface's
-                // count grows with r²) while it still holds k. Keys put the
-                // distance's bits (ordered as the non-negative floats are) above
-                // the candidate, so selecting integers selects distances.
+                // more, hold the k nearest; else all candidates are ranked. Keys
+                // put the distance's bits (ordered as the non-negative floats
+                // are) above the candidate, so selecting integers selects
+                // distances. The ball's candidates are compacted into keys in one
+                // pass, then shrunk by the area they should need (a surface's
+                // count grows with r²) while that still holds k.
                 int found = -1;
                 if (prevKth >= 0) {
                     const float r = std::sqrt(prevKth) + length(p - prev);
-                    float limit = r * r * (1 + 1e-5f);
-                    size_t m = 0;
-                    for (size_t i = 0; i < count; ++i) m += d[i] <= limit;
-                    const float tighter = limit * float(k + k / 4 + 1) / float(std::max<size_t>(m, 1));
+                    const uint32_t limitBits = std::bit_cast<uint32_t>(r * r * (1 + 1e-5f));
+                    uint64_t* const kp = keys.data();
+                    size_t m = keysWithin(d.data(), count, limitBits, kp);
                     if (m > size_t(2 * k)) {
+                        const float tighter = std::bit_cast<float>(limitBits) * float(k + k / 4 + 1) / float(m);
+                        const uint64_t tighterKey = uint64_t(std::bit_cast<uint32_t>(tighter)) << 32 | 0xFFFFFFFFu;
                         size_t m2 = 0;
-                        for (size_t i = 0; i < count; ++i) m2 += d[i] <= tighter;
-                        if (m2 >= size_t(k)) limit = tighter, m = m2;
+                        for (size_t i = 0; i < m; ++i) m2 += kp[i] <= tighterKey;
+                        if (m2 >= size_t(k)) {
+                            size_t w = 0;
+                            for (size_t i = 0; i < m; ++i) {
+                                const uint64_t key = kp[i];
+                                kp[w] = key;
+                                w += key <= tighterKey;
+                            }
+                            m = w;
+                        }
                     }
                     if (m >= size_t(k)) {
-                        keys.resize(count);
-                        const uint32_t limitBits = std::bit_cast<uint32_t>(limit);
-                        size_t w = 0;
-                        for (size_t i = 0; i < count; ++i) {
-                            const uint32_t bits = std::bit_cast<uint32_t>(d[i]);
-                            keys[w] = uint64_t(bits) << 32 | i;
-                            w += bits <= limitBits;
-                        }
                         // The k-th lands at k - 1 either way: exact() and the next
                         // query's ball read it there.
-                        std::nth_element(keys.begin(), keys.begin() + (k - 1), keys.begin() + long(w));
-                        if (order == Order::nearestFirst) std::sort(keys.begin(), keys.begin() + (k - 1));
+                        std::nth_element(kp, kp + (k - 1), kp + m);
+                        if (order == Order::nearestFirst) std::sort(kp, kp + (k - 1));
                         for (int i = 0; i < k; ++i) {
-                            const uint64_t key = keys[size_t(i)];
+                            const uint64_t key = kp[i];
                             best[size_t(i)] = std::bit_cast<float>(uint32_t(key >> 32));
                             bestIds[size_t(i)] = cid[uint32_t(key)];
                         }
