@@ -9,7 +9,7 @@ namespace surfcast {
 namespace {
 // Draco speed 0..10: 5 is its default balance; the kd-tree coder's ratio barely
 // changes below it while encoding gets markedly slower.
-constexpr int kDracoSpeed = 5;
+constexpr int kDracoSpeed = 4;
 
 template <typename T>
 bool readAttribute(const draco::PointCloud& pc, int index, draco::DataType type, int components, std::vector<T>* out) {
@@ -62,6 +62,17 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
         builder.SetAttributeValuesForAllPoints(id, block.edgeWeights.data(), 4 * sizeof(float));
         quantized.push_back({id, options.edgeWeightBits});
     }
+    // LiDAR attributes, integers stored as they are (Draco's integer coder).
+    auto addInteger = [&](const auto& values, draco::DataType type) {
+        if (values.empty()) return;
+        assert(values.size() == n);
+        int id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 1, type);
+        builder.SetAttributeValuesForAllPoints(id, values.data(), sizeof(values[0]));
+    };
+    addInteger(block.intensity, draco::DT_UINT16);
+    addInteger(block.classification, draco::DT_UINT8);
+    addInteger(block.returnNumber, draco::DT_UINT8);
+    addInteger(block.numberOfReturns, draco::DT_UINT8);
     std::unique_ptr<draco::PointCloud> pc = builder.Finalize(false);
     if (!pc) return Status::error("Draco rejected the block's attributes");
 
@@ -82,7 +93,8 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
     if (!decoded.ok()) return Status::error(std::string("Draco decoding failed: ") + decoded.status().error_msg());
     const draco::PointCloud& pc = *decoded.value();
-    int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii + expect.edgeWeights;
+    int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii + expect.edgeWeights +
+                   int(expect.extra.size());
     if (pc.num_attributes() != expected || pc.num_points() == 0)
         return Status::error("block has " + std::to_string(pc.num_attributes()) + " attributes and " +
                              std::to_string(pc.num_points()) + " points; the tile set declares " +
@@ -101,6 +113,14 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     if (ok && expect.weights) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 1, &block.weights);
     if (ok && expect.radii) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 1, &block.radii);
     if (ok && expect.edgeWeights) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 4, &block.edgeWeights);
+    for (const std::string& name : expect.extra) {
+        if (!ok) break;
+        if (name == "intensity") ok = readAttribute(pc, index, draco::DT_UINT16, 1, &block.intensity);
+        else if (name == "classification") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.classification);
+        else if (name == "return_number") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.returnNumber);
+        else if (name == "number_of_returns") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.numberOfReturns);
+        ++index;  // any other: a newer writer's attribute, skipped
+    }
     if (!ok) return Status::error("block attribute " + std::to_string(index - 1) + " has an unexpected type or size");
     return block;
 }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "status.h"
@@ -19,6 +20,11 @@ struct BlockData {
     std::vector<float> radii;         // 1 per surfel: own h, world units (irregular nodes only)
     std::vector<float> edgeWeights;   // 4 per surfel: weight / s_k at the tangent points
                                       // +r s, -r s, +r t, -r t (nodes at the model's edges only)
+    // LiDAR attributes (docs/FORMAT.md, "LiDAR attributes"), 1 per surfel each.
+    std::vector<uint16_t> intensity;
+    std::vector<uint8_t> classification;
+    std::vector<uint8_t> returnNumber;
+    std::vector<uint8_t> numberOfReturns;
 
     size_t size() const { return positions.size() / 3; }
 };
@@ -33,14 +39,28 @@ struct BlockCodecOptions {
 };
 
 Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCodecOptions& options);
+// The LiDAR attributes a block can carry: tileset.json names, in block order
+// after the fixed attributes (each block stores those its set lists).
+inline constexpr const char* kLidarAttributes[] = {"intensity", "classification", "return_number", "number_of_returns"};
+enum LidarAttribute { kLidarIntensity, kLidarClassification, kLidarReturnNumber, kLidarNumberOfReturns, kLidarCount };
+// Index in kLidarAttributes, or -1.
+inline int lidarIndex(const std::string& name) {
+    for (int i = 0; i < kLidarCount; ++i)
+        if (name == kLidarAttributes[i]) return i;
+    return -1;
+}
+
 // Decodes untrusted bytes; checks the attribute set against what the tile set
 // declares (expectColorBits 0 = no colour, expect* = attribute present).
+// `extra` names the attributes after the fixed ones, in block order: those of
+// kLidarAttributes are decoded, any other is skipped (a newer writer's).
 struct BlockExpectation {
     int colorBits = 0;
     bool normals = true;
     bool weights = true;
     bool radii = false;
     bool edgeWeights = false;
+    std::vector<std::string> extra;
 };
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect);
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <map>
@@ -135,7 +136,7 @@ Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes,
     if (bytes.size() < kHierarchyHeaderSize) return fail("shorter than the 32-byte header");
     const uint8_t* b = bytes.data();
     if (std::memcmp(b, kHierarchyMagic, 4) != 0) return fail("bad magic at byte 0 (expected SCHY)");
-    if (le::get<uint32_t>(b + 4) != uint32_t(kFormatVersion))
+    if (le::get<uint32_t>(b + 4) < uint32_t(kOldestFormatVersion) || le::get<uint32_t>(b + 4) > uint32_t(kFormatVersion))
         return fail("unsupported version " + std::to_string(le::get<uint32_t>(b + 4)) + " at byte 4");
     if (le::get<uint32_t>(b + 8) != kRecordSize) return fail("record size at byte 8 is not 64");
     uint64_t pageCount = le::get<uint32_t>(b + 12);
@@ -204,10 +205,27 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["bounds"] = {{"min", vec(info.bounds.min)}, {"max", vec(info.bounds.max)}};
     j["color_bits"] = info.colorBits;
     ordered_json attrs = ordered_json::array();
-    for (const AttributeInfo& a : info.attributes)
-        attrs.push_back({{"name", a.name}, {"type", a.type}, {"components", a.components},
-                         {"quantization_bits", a.quantizationBits}});
+    for (const AttributeInfo& a : info.attributes) {
+        ordered_json e = {{"name", a.name}, {"type", a.type}, {"components", a.components},
+                          {"quantization_bits", a.quantizationBits}};
+        if (!a.kind.empty()) {
+            e["kind"] = a.kind;
+            e["scale"] = a.scale;
+            e["offset"] = a.offset;
+        }
+        attrs.push_back(e);
+    }
     j["attributes"] = attrs;
+    const TilesetStatistics& st = info.statistics;
+    ordered_json stats = {{"elevation", {{"min", st.elevationMin}, {"max", st.elevationMax}}}};
+    if (st.intensity)
+        stats["intensity"] = {{"min", st.intensityMin}, {"max", st.intensityMax}, {"p2", st.intensityP2}, {"p98", st.intensityP98}};
+    if (!st.classCounts.empty()) {
+        ordered_json counts = ordered_json::object();
+        for (auto [c, n] : st.classCounts) counts[std::to_string(c)] = n;
+        stats["classification"] = {{"counts", counts}};
+    }
+    j["statistics"] = stats;
     j["normal_source"] = info.normalSource;
     j["weights"] = info.weights;
     j["kernel_scale"] = info.kernelScale;
@@ -222,10 +240,13 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
     if (j.is_discarded()) return Status::error(what + ": not valid JSON");
     try {
         if (j.at("format").get<std::string>() != "surfcast-tileset") return Status::error(what + ": not a surfcast tile set");
-        if (j.at("version").get<int>() != kFormatVersion)
-            return Status::error(what + ": unsupported version " + j.at("version").dump());
+        const int version = j.at("version").get<int>();
+        if (version < kOldestFormatVersion || version > kFormatVersion)
+            return Status::error(what + ": unsupported version " + j.at("version").dump() + " (this reader takes " +
+                                 std::to_string(kOldestFormatVersion) + " to " + std::to_string(kFormatVersion) + ")");
         auto readVec = [](const nlohmann::json& a) { return Vec3d{a.at(0).get<double>(), a.at(1).get<double>(), a.at(2).get<double>()}; };
         TilesetInfo info;
+        info.version = version;
         info.generator = j.at("generator").get<std::string>();
         info.inputPoints = j.at("input_points").get<uint64_t>();
         info.surfels = j.at("surfels").get<uint64_t>();
@@ -241,11 +262,40 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
             return Status::error(what + ": color_bits is " + std::to_string(info.colorBits) + ", not 0, 8 or 16");
         for (const auto& a : j.at("attributes")) {
             info.attributes.push_back({a.at("name").get<std::string>(), a.at("type").get<std::string>(),
-                                       a.at("components").get<int>(), a.at("quantization_bits").get<int>()});
+                                       a.at("components").get<int>(), a.at("quantization_bits").get<int>(),
+                                       a.value("kind", std::string()), a.value("scale", 1.0), a.value("offset", 0.0)});
             const AttributeInfo& added = info.attributes.back();
+            if (!std::isfinite(added.scale) || !std::isfinite(added.offset) || added.scale == 0)
+                return Status::error(what + ": attribute " + added.name + ": scale or offset is not a finite number");
             // Draco quantizes with 1 to 30 bits; 0 means not quantized.
             if (added.quantizationBits < 0 || added.quantizationBits > 30 || added.components < 1 || added.components > 4)
                 return Status::error(what + ": attribute " + added.name + ": components or quantization_bits out of range");
+        }
+        // Absent in version 1: the elevation range is the bounds'.
+        TilesetStatistics& st = info.statistics;
+        st.elevationMin = info.bounds.min.z;
+        st.elevationMax = info.bounds.max.z;
+        if (j.contains("statistics")) {
+            const auto& js = j.at("statistics");
+            st.elevationMin = js.at("elevation").at("min").get<double>();
+            st.elevationMax = js.at("elevation").at("max").get<double>();
+            if (js.contains("intensity")) {
+                const auto& ji = js.at("intensity");
+                st.intensity = true;
+                st.intensityMin = ji.at("min").get<double>();
+                st.intensityMax = ji.at("max").get<double>();
+                st.intensityP2 = ji.at("p2").get<double>();
+                st.intensityP98 = ji.at("p98").get<double>();
+            }
+            if (js.contains("classification"))
+                for (const auto& [key, count] : js.at("classification").at("counts").items()) {
+                    char* end = nullptr;
+                    long c = std::strtol(key.c_str(), &end, 10);
+                    if (key.empty() || *end != 0 || c < 0 || c > 255)
+                        return Status::error(what + ": statistics.classification: '" + key + "' is not a class (0-255)");
+                    st.classCounts.push_back({int(c), count.get<uint64_t>()});
+                }
+            std::sort(st.classCounts.begin(), st.classCounts.end());
         }
         info.normalSource = j.at("normal_source").get<std::string>();
         info.weights = j.at("weights").get<std::string>();

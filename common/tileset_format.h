@@ -14,7 +14,11 @@
 
 namespace surfcast {
 
-inline constexpr int kFormatVersion = 1;
+// Version 2 adds the LiDAR attributes (intensity, classification, returns) and
+// `statistics`; a version-1 reader would reject their blocks' extra attributes.
+// Readers take versions 1 and 2.
+inline constexpr int kFormatVersion = 2;
+inline constexpr int kOldestFormatVersion = 1;
 inline constexpr char kHierarchyMagic[4] = {'S', 'C', 'H', 'Y'};
 inline constexpr uint32_t kHierarchyHeaderSize = 32;
 inline constexpr uint32_t kPageEntrySize = 16;
@@ -75,11 +79,25 @@ std::vector<NodeKey> hierarchyOrder(const std::vector<NodeRecord>& nodes, uint32
 Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what);
 
 struct AttributeInfo {
-    std::string name;       // position, normal, color, weight, radius
+    std::string name;       // position, normal, color, weight, radius, edge_weight, or a LiDAR attribute
     std::string type;       // uint8, uint16, uint32, float32
     int components = 0;
     int quantizationBits = 0;  // Draco quantization of float attributes; 0 for integers
+    // LiDAR attributes only (empty kind elsewhere): categorical or continuous,
+    // and the value = stored · scale + offset.
+    std::string kind;
+    double scale = 1, offset = 0;
     bool operator==(const AttributeInfo&) const = default;
+};
+
+// Per-set statistics of the input points, for a viewer to choose colour ranges
+// and list classes without reading blocks (docs/FORMAT.md).
+struct TilesetStatistics {
+    double elevationMin = 0, elevationMax = 0;      // z of the input points
+    bool intensity = false;                          // the set stores intensity
+    double intensityMin = 0, intensityMax = 0, intensityP2 = 0, intensityP98 = 0;
+    std::vector<std::pair<int, uint64_t>> classCounts;  // (class, input points), classes with points, ascending
+    bool operator==(const TilesetStatistics&) const = default;
 };
 
 // Everything in tileset.json.
@@ -95,6 +113,7 @@ struct TilesetInfo {
     Box3d bounds;              // tight bounds of the input points
     int colorBits = 0;         // 0: no colour; 8 or 16 bits per channel
     std::vector<AttributeInfo> attributes;  // in the order they appear in each block
+    TilesetStatistics statistics;
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none
     double kernelScale = 1.0;  // k of the reconstruction kernel V^r = (k h)^2 I the weights assume
@@ -103,8 +122,14 @@ struct TilesetInfo {
     uint32_t hierarchyCrc = 0;  // CRC-32 of the whole hierarchy.bin
     uint64_t blocksBytes = 0;
     uint32_t pageDepth = kDefaultPageDepth;
+    int version = kFormatVersion;  // as read; writers write kFormatVersion
 
     bool operator==(const TilesetInfo&) const = default;
+    const AttributeInfo* attribute(const std::string& name) const {
+        for (const AttributeInfo& a : attributes)
+            if (a.name == name) return &a;
+        return nullptr;
+    }
 };
 
 std::string writeTilesetJson(const TilesetInfo& info);

@@ -51,6 +51,12 @@ BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& nod
     e.weights = info.weights != "none";
     e.radii = (node.flags & kFlagHasRadius) != 0;
     e.edgeWeights = (node.flags & kFlagEdgeWeights) != 0;
+    // Every attribute past the fixed ones sits in every block, in the order
+    // tileset.json lists them.
+    for (const AttributeInfo& a : info.attributes)
+        if (a.name != "position" && a.name != "normal" && a.name != "color" && a.name != "weight" && a.name != "radius" &&
+            a.name != "edge_weight")
+            e.extra.push_back(a.name);
     return e;
 }
 

@@ -1,6 +1,7 @@
 // The point record every reader produces, and what a reader knows about its file.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -16,6 +17,8 @@ struct InputPoint {
     Vec3f normal;            // unit; the zero vector where the input has none
     uint16_t color[3] = {};  // raw channel values as the file stores them (see colorMax)
     uint16_t intensity = 0;
+    uint8_t classification = 0;  // ASPRS class (LAS 1.4: 0-255)
+    uint8_t returns = 0;         // return number in bits 0-3, number of returns in bits 4-7
 };
 
 struct InputDescription {
@@ -25,6 +28,8 @@ struct InputDescription {
     bool hasNormals = false;
     bool hasColors = false;
     bool hasIntensity = false;
+    bool hasClassification = false;
+    bool hasReturns = false;         // return number and number of returns
     int colorBits = 8;               // bits of the file's colour channels (8 or 16)
     double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
     bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude
@@ -49,6 +54,10 @@ protected:
 
 // A file name's extension in lower case, with its dot ("" when none).
 std::string lowerExtension(const std::string& path);
+
+// A scalar class label (PLY, PCD) as a class: 0 where it is not an integer in
+// 0..255 (ASPRS class 0, "never classified").
+inline uint8_t classOf(double v) { return v >= 0 && v <= 255 && v == std::floor(v) ? uint8_t(v) : 0; }
 
 inline bool finite(const Vec3d& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
 

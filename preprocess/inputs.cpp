@@ -269,6 +269,7 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
     SC_TRY(forEachInput(options, [&](size_t, PointReader& reader) -> Status {
         SourceStats s;
         s.description = reader.description();
+        AttributeStats& a = stats.attributes;
         while (true) {
             auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
@@ -282,7 +283,13 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
                     uint16_t v = p.color[c];
                     if ((v >> 8) * 257 != v && (v & 0xFF) != 0) s.colors8Bit = false;
                 }
+                if (s.description.hasIntensity) a.intensityHistogram[p.intensity]++;
+                if (s.description.hasClassification) a.classCounts[p.classification]++;
+                if (s.description.hasReturns) a.returnsHistogram[p.returns]++;
             }
+            if (s.description.hasIntensity) a.intensityPoints += *n;
+            if (s.description.hasClassification) a.classifiedPoints += *n;
+            if (s.description.hasReturns) a.returnPoints += *n;
             s.points += *n;
             progress(*n);
         }
@@ -329,6 +336,9 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 s.source = sourceIds[r];
                 for (int c = 0; c < 3; ++c)
                     s.color[c] = src.description.hasColors ? scaled(batch[i].color[c], src.colorScale) : 65535;
+                s.intensity = batch[i].intensity;
+                s.classification = batch[i].classification;
+                s.returns = batch[i].returns;
             }
             SC_TRY(consume(std::span<Surfel>(surfels.data(), *n)));
         }

@@ -52,19 +52,29 @@ struct SourceStats {
     double colorScale = 1;      // multiplier to the 16-bit range (LAS files storing 0..255 get 257)
 };
 
+// What the first pass learns of the LiDAR attributes, over the inputs that
+// carry each one: an attribute is stored only where it varies.
+struct AttributeStats {
+    uint64_t intensityPoints = 0, classifiedPoints = 0, returnPoints = 0;
+    std::vector<uint64_t> intensityHistogram = std::vector<uint64_t>(65536);  // points per value
+    std::vector<uint64_t> classCounts = std::vector<uint64_t>(256);          // points per class
+    std::vector<uint64_t> returnsHistogram = std::vector<uint64_t>(256);     // points per packed returns byte
+};
+
 struct InputStats {
     std::vector<SourceStats> sources;
     uint64_t points = 0, skipped = 0;
     Box3d bounds;
     bool anyColors = false;
     int colorBits = 0;          // 0 (no colour), 8 or 16: what the tile set stores
+    AttributeStats attributes;
 };
 
 // Pass 1. `progress` receives point counts as they are read.
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
-// 16 bits, Surfel::source = sourceIds[input]), in batches.
+// 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input]), in batches.
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
                     std::span<const uint16_t> sourceIds, const std::function<Status(std::span<Surfel>)>& consume);
 

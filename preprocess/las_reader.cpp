@@ -89,8 +89,9 @@ private:
 class LasReader final : public PointReader {
 public:
     LasReader(std::unique_ptr<RecordSource> source, InputDescription desc, uint64_t count, size_t recordLength,
-              size_t rgbOffset, const double scale[3], const double offset[3])
-        : source_(std::move(source)), desc_(std::move(desc)), count_(count), recordLength_(recordLength), rgbOffset_(rgbOffset) {
+              int format, const double scale[3], const double offset[3])
+        : source_(std::move(source)), desc_(std::move(desc)), count_(count), recordLength_(recordLength),
+          rgbOffset_(kFormats[format].rgbOffset), extended_(format >= 6) {
         for (int i = 0; i < 3; ++i) { scale_[i] = scale[i]; offset_[i] = offset[i]; }
     }
 
@@ -113,6 +114,17 @@ public:
             p = InputPoint{};
             for (int a = 0; a < 3; ++a) p.position[a] = le::get<int32_t>(r + 4 * a) * scale_[a] + offset_[a];
             p.intensity = le::get<uint16_t>(r + 12);
+            // Table 7 (formats 0-5): byte 14 holds the return number in bits 0-2
+            // and the number of returns in bits 3-5, byte 15 the class in bits
+            // 0-4 (5-7 are flags). Table 13 (formats 6-10): byte 14 holds them
+            // in bits 0-3 and 4-7, byte 16 the whole class.
+            if (extended_) {
+                p.returns = r[14];
+                p.classification = r[16];
+            } else {
+                p.returns = uint8_t((r[14] & 7) | (r[14] >> 3 & 7) << 4);
+                p.classification = r[15] & 31;
+            }
             if (rgbOffset_)
                 for (int c = 0; c < 3; ++c) p.color[c] = le::get<uint16_t>(r + rgbOffset_ + 2 * c);
             if (finite(p.position)) ++n; else ++skipped_;
@@ -125,6 +137,7 @@ private:
     InputDescription desc_;
     uint64_t count_;
     size_t recordLength_, rgbOffset_;
+    bool extended_;  // point formats 6-10
     double scale_[3], offset_[3];
     uint64_t index_ = 0;           // records fetched from the source
     size_t buffered_ = 0, next_ = 0;
@@ -196,6 +209,8 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.declaredPoints = count;
     desc.hasColors = kFormats[format].rgbOffset != 0;
     desc.hasIntensity = true;
+    desc.hasClassification = true;
+    desc.hasReturns = true;
     desc.colorBits = 16;
     desc.precision = std::min({scale[0], scale[1], scale[2]});
     desc.airborne = true;
@@ -222,7 +237,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
         source = std::make_unique<RawRecords>(std::move(*in), recordLength, count);
     }
     return std::unique_ptr<PointReader>(
-        new LasReader(std::move(source), desc, count, recordLength, kFormats[format].rgbOffset, scale, offset));
+        new LasReader(std::move(source), desc, count, recordLength, format, scale, offset));
 }
 
 }  // namespace surfcast

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdio>
 #include <cmath>
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <thread>
 #include <tuple>
@@ -76,6 +78,9 @@ void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
     points.swap(sorted);
 }
 
+// Bits of the stored intensity (chooseAttributes).
+constexpr int kIntensityBits = 12;
+
 enum Step { kStepNormals, kStepOctree, kStepAttributes, kStepEncode, kStepCount };
 const char* const kStepNames[kStepCount] = {"normals", "octree", "neighbours+h+weights", "encode"};
 
@@ -100,6 +105,8 @@ private:
     Status scan();
     void chooseRootBox();
     Status chooseOrientationRules();
+    Status chooseAttributes();
+    TilesetStatistics statistics() const;
     Status planAndDistribute();
     Status buildChunks();
     Status buildChunk(const Chunk& chunk, int innerThreads);
@@ -130,6 +137,8 @@ private:
 
     BuildOptions opt_;
     int threads_ = 1;
+    bool store_[kLidarCount] = {};  // per kLidarAttributes: stored
+    int intensityOffset_ = 0, intensityStep_ = 1;  // stored intensity = (value - offset) / step
     Progress progress_;
     InputStats stats_;
     Vec3d rootMin_;
@@ -156,7 +165,75 @@ Status Builder::scan() {
         return Status::error("the inputs hold no valid points (" + std::to_string(stats_.skipped) + " skipped as NaN/Inf)");
     chooseRootBox();
     SC_TRY(chooseOrientationRules());
+    SC_TRY(chooseAttributes());
     summary_.colorBits = stats_.colorBits;
+    return {};
+}
+
+TilesetStatistics Builder::statistics() const {
+    TilesetStatistics st;
+    st.elevationMin = stats_.bounds.min.z;
+    st.elevationMax = stats_.bounds.max.z;
+    const AttributeStats& a = stats_.attributes;
+    if (store_[kLidarIntensity]) {
+        st.intensity = true;
+        // The value below which a fraction p of the points lie (the lowest such).
+        auto percentile = [&](double p) {
+            const uint64_t rank = uint64_t(std::ceil(p * double(a.intensityPoints)));
+            uint64_t seen = 0;
+            for (size_t v = 0; v < a.intensityHistogram.size(); ++v)
+                if ((seen += a.intensityHistogram[v]) >= std::max<uint64_t>(rank, 1)) return double(v);
+            return 65535.0;
+        };
+        st.intensityMin = percentile(0);
+        st.intensityMax = percentile(1);
+        st.intensityP2 = percentile(0.02);
+        st.intensityP98 = percentile(0.98);
+    }
+    if (store_[kLidarClassification])
+        for (int c = 0; c < 256; ++c)
+            if (a.classCounts[size_t(c)]) st.classCounts.push_back({c, a.classCounts[size_t(c)]});
+    return st;
+}
+
+// Which LiDAR attributes the set stores (BuildOptions::attributes), and the
+// statistics of those it stores.
+Status Builder::chooseAttributes() {
+    const AttributeStats& a = stats_.attributes;
+    auto distinct = [](const std::vector<uint64_t>& histogram, auto key) {
+        std::set<int> values;
+        for (size_t v = 0; v < histogram.size(); ++v)
+            if (histogram[v]) values.insert(key(int(v)));
+        return values.size();
+    };
+    auto self = [](int v) { return v; };
+    const bool carried[kLidarCount] = {a.intensityPoints > 0, a.classifiedPoints > 0, a.returnPoints > 0, a.returnPoints > 0};
+    const size_t values[kLidarCount] = {distinct(a.intensityHistogram, self), distinct(a.classCounts, self),
+                                        distinct(a.returnsHistogram, [](int v) { return v & 15; }),
+                                        distinct(a.returnsHistogram, [](int v) { return v >> 4; })};
+    for (int i = 0; i < kLidarCount; ++i) store_[i] = carried[i] && (opt_.attributes || values[i] > 1);
+    if (opt_.attributes) {
+        for (const std::string& name : *opt_.attributes) {
+            int i = lidarIndex(name);
+            if (i < 0) return Status::error("--attributes: unknown attribute '" + name + "'");
+            if (!carried[i]) std::fprintf(stderr, "warning: --attributes %s: no input carries it; not stored\n", name.c_str());
+        }
+        for (int i = 0; i < kLidarCount; ++i)
+            store_[i] = store_[i] && std::find(opt_.attributes->begin(), opt_.attributes->end(), kLidarAttributes[i]) !=
+                                         opt_.attributes->end();
+    }
+    for (int i = 0; i < kLidarCount; ++i)
+        if (store_[i]) summary_.attributes.push_back(kLidarAttributes[i]);
+    // Intensity as (value - min) / step with the smallest power-of-two step
+    // that fits the set's range in kIntensityBits: exact for ranges up to 4096
+    // values (Megaplot, autzen, lone-star); a 16-bit range keeps 1/4096 of it,
+    // finer than any display maps it (docs/FORMAT.md).
+    if (store_[kLidarIntensity]) {
+        const TilesetStatistics st = statistics();
+        intensityOffset_ = int(st.intensityMin);
+        intensityStep_ = 1;
+        while ((st.intensityMax - st.intensityMin) / intensityStep_ >= double(1 << kIntensityBits)) intensityStep_ *= 2;
+    }
     return {};
 }
 
@@ -274,8 +351,12 @@ BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, c
         node->inputPoints = true;
         node->surfels.assign(first, last);
         auto& v = node->surfels;
+        // Of exact duplicates, the one kept has the lowest class, then intensity,
+        // returns and colour (docs/FORMAT.md): the same whatever the input order.
         std::sort(v.begin(), v.end(), [](const Surfel& a, const Surfel& c) {
-            return std::tie(a.position.x, a.position.y, a.position.z) < std::tie(c.position.x, c.position.y, c.position.z);
+            return std::tie(a.position.x, a.position.y, a.position.z, a.classification, a.intensity, a.returns, a.color[0],
+                            a.color[1], a.color[2]) < std::tie(c.position.x, c.position.y, c.position.z, c.classification,
+                                                               c.intensity, c.returns, c.color[0], c.color[1], c.color[2]);
         });
         size_t out = 0;
         for (size_t i = 0; i < v.size(); ++i) {
@@ -491,6 +572,18 @@ Status Builder::emit(BuiltNode& node) {
     }
     block.weights = node.level.weights;
     block.radii = node.level.radii;
+    if (store_[kLidarIntensity]) block.intensity.resize(n);
+    if (store_[kLidarClassification]) block.classification.resize(n);
+    if (store_[kLidarReturnNumber]) block.returnNumber.resize(n);
+    if (store_[kLidarNumberOfReturns]) block.numberOfReturns.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        const Surfel& s = node.surfels[i];
+        if (!block.intensity.empty())
+            block.intensity[i] = uint16_t(std::lround(double(s.intensity - intensityOffset_) / intensityStep_));
+        if (!block.classification.empty()) block.classification[i] = s.classification;
+        if (!block.returnNumber.empty()) block.returnNumber[i] = s.returns & 15;
+        if (!block.numberOfReturns.empty()) block.numberOfReturns[i] = s.returns >> 4;
+    }
     BlockCodecOptions codec;
     codec.positionBits = bits;
     codec.normalBits = opt_.normalBits;
@@ -562,6 +655,13 @@ Result<BuildSummary> Builder::run() {
     if (stats_.colorBits) info.attributes.push_back({"color", stats_.colorBits == 8 ? "uint8" : "uint16", 3, 0});
     if (opt_.weights) info.attributes.push_back({"weight", "float32", 1, BlockCodecOptions{}.weightBits});
     info.attributes.push_back({"radius", "float32", 1, BlockCodecOptions{}.radiusBits});  // only in nodes flagged kFlagHasRadius
+    const char* const types[kLidarCount] = {"uint16", "uint8", "uint8", "uint8"};
+    for (int i = 0; i < kLidarCount; ++i)
+        if (store_[i])
+            info.attributes.push_back({kLidarAttributes[i], types[i], 1, 0, i == kLidarIntensity ? "continuous" : "categorical",
+                                       i == kLidarIntensity ? double(intensityStep_) : 1.0,
+                                       i == kLidarIntensity ? double(intensityOffset_) : 0.0});
+    info.statistics = statistics();
     info.normalSource = summary_.normalSource;
     info.weights = opt_.weights ? "analytic" : "none";
     info.kernelScale = opt_.kernelScale;
@@ -590,7 +690,10 @@ std::string BuildSummary::text() const {
     out << "surfels: " << surfels << " in " << nodes << " nodes, " << levels << " levels, " << chunks << " chunks\n";
     for (size_t l = 0; l < surfelsPerLevel.size(); ++l)
         out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";
-    out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none") << "\n";
+    out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none")
+        << "; attributes:";
+    for (const std::string& a : attributes) out << " " << a;
+    out << (attributes.empty() ? " none\n" : "\n");
     out << "bytes: hierarchy " << hierarchyBytes << ", blocks " << blocksBytes << " ("
         << (inputPoints ? double(blocksBytes + hierarchyBytes) / double(inputPoints) : 0) << " per input point)\n";
     out << "time:";

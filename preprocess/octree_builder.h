@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,10 @@ struct BuildOptions {
     bool weights = false;               // store analytic per-surfel normalization weights (ewa-surfel reads them)
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
     int normalBits = 8;                 // Draco quantization bits per normal component (bench/BENCHMARKS.md, "Bytes")
+    // LiDAR attributes to store (names from kLidarAttributes), each where some
+    // input carries it. Unset: all of them, each only where it varies across
+    // the set ("model no more than a scene needs").
+    std::optional<std::vector<std::string>> attributes;
     bool progress = true;
 };
 
@@ -46,6 +51,7 @@ struct BuildSummary {
     uint64_t peakRss = 0;
     std::string normalSource;
     int colorBits = 0;
+    std::vector<std::string> attributes;  // LiDAR attributes stored
 
     std::string text() const;
 };
@@ -53,9 +59,10 @@ struct BuildSummary {
 Result<BuildSummary> buildTileset(const BuildOptions& options);
 
 // Bytes of working memory per point while a chunk is built (points, halo,
-// kd-trees, sort keys, resampled levels), measured on the default scene; the
-// chunk size follows from the budget with it.
-inline constexpr uint64_t kBytesPerChunkPoint = 320;
+// kd-trees, sort keys, resampled levels), measured on the default scene (320
+// with 48-byte surfels, scaled for the 56-byte ones that carry the LiDAR
+// attributes); the chunk size follows from the budget with it.
+inline constexpr uint64_t kBytesPerChunkPoint = 360;
 // Memory the build needs whatever the chunk size: code, libraries, counting
 // grid (16 MiB), file buffers, upper levels.
 inline constexpr uint64_t kBaselineBytes = 48ull << 20;

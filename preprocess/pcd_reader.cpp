@@ -19,7 +19,7 @@ namespace {
 constexpr uint64_t kMaxHeaderBytes = 64 * 1024;
 constexpr size_t kBatchPoints = 4096;
 
-enum class Role { Ignore, X, Y, Z, Rgb, Rgba, NX, NY, NZ, Intensity };
+enum class Role { Ignore, X, Y, Z, Rgb, Rgba, NX, NY, NZ, Intensity, Classification };
 
 struct Field {
     std::string name;
@@ -52,6 +52,7 @@ Role roleOf(const std::string& n) {
     if (n == "normal_y") return Role::NY;
     if (n == "normal_z") return Role::NZ;
     if (n == "intensity") return Role::Intensity;
+    if (n == "label" || n == "classification") return Role::Classification;
     return Role::Ignore;
 }
 
@@ -150,6 +151,7 @@ public:
             if (f.role == Role::Rgb || f.role == Role::Rgba) desc_.hasColors = true;
             if (f.role == Role::NX) desc_.hasNormals = true;
             if (f.role == Role::Intensity) desc_.hasIntensity = true;
+            if (f.role == Role::Classification) desc_.hasClassification = true;
         }
         desc_.colorBits = 8;
         desc_.float32Coordinates = std::any_of(h_.fields.begin(), h_.fields.end(),
@@ -273,6 +275,7 @@ private:
                 q.intensity = uint16_t(std::clamp(f.type == 'F' && v <= 1.0 ? v * 65535 : v, 0.0, 65535.0));
                 break;
             }
+            case Role::Classification: q.classification = classOf(elementValue(f, p)); break;
             case Role::Rgb: case Role::Rgba: {
                 uint32_t c = packedColor(f, p);  // 0x00RRGGBB in the float's or uint's bits
                 q.color[0] = uint16_t(((c >> 16) & 0xFF) * 257);

@@ -133,7 +133,7 @@ uint16_t toChannel(double v, PlyType t) {
 }
 
 struct VertexLayout {
-    int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1, r = -1, g = -1, b = -1, intensity = -1;
+    int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1, r = -1, g = -1, b = -1, intensity = -1, classification = -1;
     PlyType colorType = PlyType::UInt8, intensityType = PlyType::UInt16;
 };
 
@@ -154,6 +154,7 @@ Result<VertexLayout> vertexLayout(const PlyElement& e, const std::string& path) 
     else l.colorType = e.properties[ri].type;
     int ii = findProperty(e, {"intensity", "scalar_intensity"});
     if (ii >= 0) { l.intensity = slots[ii]; l.intensityType = e.properties[ii].type; }
+    l.classification = slot({"classification", "scalar_classification", "label", "class"});
     return l;
 }
 
@@ -174,6 +175,7 @@ public:
         desc_.hasNormals = layout_.nx >= 0;
         desc_.hasColors = layout_.r >= 0;
         desc_.hasIntensity = layout_.intensity >= 0;
+        desc_.hasClassification = layout_.classification >= 0;
         desc_.colorBits = layout_.colorType == PlyType::UInt8 || layout_.colorType == PlyType::Int8 ? 8 : 16;
         const PlyProperty& px = vertex_->properties[findProperty(*vertex_, {"x"})];
         desc_.float32Coordinates = px.type == PlyType::Float32;
@@ -206,6 +208,7 @@ public:
                 for (int c = 0; c < 3; ++c) p.color[c] = toChannel(scalars_[slots[c]], layout_.colorType);
             }
             if (layout_.intensity >= 0) p.intensity = toChannel(scalars_[layout_.intensity], layout_.intensityType);
+            if (layout_.classification >= 0) p.classification = classOf(scalars_[layout_.classification]);
             ++n;
         }
         return n;

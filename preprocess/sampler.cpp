@@ -24,6 +24,25 @@ struct Cell {
     uint32_t begin, end;  // range in the sorted order
 };
 
+// The value with the most input points behind it among a cell's members (the
+// lowest such value on a tie): categorical attributes are never averaged.
+template <typename Get>
+uint8_t majority(std::span<const Surfel> points, const std::vector<std::pair<uint64_t, uint32_t>>& order, const Cell& cell,
+                 std::vector<std::pair<uint8_t, float>>& tally, Get get) {
+    tally.clear();
+    for (uint32_t k = cell.begin; k < cell.end; ++k) {
+        const Surfel& s = points[order[k].second];
+        const uint8_t v = get(s);
+        auto it = std::find_if(tally.begin(), tally.end(), [&](const auto& t) { return t.first == v; });
+        if (it == tally.end()) tally.push_back({v, s.count});
+        else it->second += s.count;
+    }
+    auto best = tally.begin();
+    for (auto it = tally.begin(); it != tally.end(); ++it)
+        if (it->second > best->second || (it->second == best->second && it->first < best->first)) best = it;
+    return best->first;
+}
+
 }  // namespace
 
 std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& grid, bool withAttributes) {
@@ -45,6 +64,7 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
     }
 
     std::vector<Surfel> out(cells.size());
+    std::vector<std::pair<uint8_t, float>> tally;
     for (size_t c = 0; c < cells.size(); ++c) {
         const Cell& cell = cells[c];
         Vec3d centroid;
@@ -67,6 +87,10 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
         s = points[nearest];
         s.normal = normalizeOrZero(normal);
         s.count = float(weight);
+        if (withAttributes && cell.end - cell.begin > 1) {
+            s.classification = majority(points, order, cell, tally, [](const Surfel& p) { return p.classification; });
+            s.returns = majority(points, order, cell, tally, [](const Surfel& p) { return p.returns; });
+        }
     }
     if (!withAttributes) return out;
 
@@ -80,7 +104,7 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
     for (size_t c = 0; c < cells.size(); ++c) {
         int64_t x = int64_t(cells[c].key >> (2 * kAxisBits)), y = int64_t((cells[c].key >> kAxisBits) & kAxisMask),
                 z = int64_t(cells[c].key & kAxisMask);
-        float sum[3] = {0, 0, 0}, wsum = 0;
+        float sum[4] = {0, 0, 0, 0}, wsum = 0;  // colour, intensity
         for (int64_t nx = x - 1; nx <= x + 1; ++nx)
             for (int64_t ny = y - 1; ny <= y + 1; ++ny) {
                 if (nx < 0 || ny < 0 || nx >= grid.cells || ny >= grid.cells) continue;
@@ -94,11 +118,14 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
                         Vec3f d = cast<float>(p.position - out[c].position);
                         float w = p.count * std::exp(-dot(d, d) * inv2Sigma2);
                         for (int ch = 0; ch < 3; ++ch) sum[ch] += w * float(p.color[ch]);
+                        sum[3] += w * float(p.intensity);
                         wsum += w;
                     }
             }
-        if (wsum > 0)
+        if (wsum > 0) {
             for (int ch = 0; ch < 3; ++ch) out[c].color[ch] = uint16_t(std::clamp(std::lround(sum[ch] / wsum), 0l, 65535l));
+            out[c].intensity = uint16_t(std::clamp(std::lround(sum[3] / wsum), 0l, 65535l));
+        }
     }
     return out;
 }

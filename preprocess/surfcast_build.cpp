@@ -10,10 +10,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "block_codec.h"
 #include "octree_builder.h"
 #include "tileset_reader.h"
 
@@ -51,6 +53,11 @@ the text file LIST, one per line.
   --weights MODE          none (default: ewa-pixel, the default renderer mode, reads
                           no weights), analytic (for ewa-surfel), or capture
                           (rendered on Vulkan, Ren 2002 §7.2; see surfcast-weights)
+  --attributes LIST       LiDAR attributes to store: a comma-separated list of
+                          intensity, classification, return_number, number_of_returns;
+                          all; or none. Default: each one some input carries, where it
+                          varies across the set (LAS/LAZ: all four; PLY/PCD/text:
+                          intensity, classification where a field holds them)
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
   --mesh-spacing S        mesh sampling spacing (default: half the median edge)
   --vertices-only         read a mesh file's vertices as points, no sampling
@@ -174,6 +181,21 @@ int main(int argc, char** argv) {
             // Capture starts from analytic weights: they stay for surfels no view sees.
             opt.weights = v != "none";
             captureWeights = v == "capture";
+        } else if (a == "--attributes") {
+            if (!value(&v)) return usageError("--attributes needs a list, all or none");
+            std::vector<std::string> names;
+            if (v == "all") {
+                names.assign(std::begin(surfcast::kLidarAttributes), std::end(surfcast::kLidarAttributes));
+            } else if (v != "none") {
+                std::stringstream list(v);
+                for (std::string name; std::getline(list, name, ',');) {
+                    if (surfcast::lidarIndex(name) < 0)
+                        return usageError("--attributes: unknown attribute '" + name +
+                                          "' (known: intensity, classification, return_number, number_of_returns)");
+                    names.push_back(name);
+                }
+            }
+            opt.attributes = names;
         } else if (a == "--columns") {
             if (!value(&opt.inputs.columns)) return usageError("--columns needs a layout");
         } else if (a == "--mesh-spacing") {

@@ -15,7 +15,12 @@ struct Surfel {
     uint16_t color[3] = {};  // 16-bit channels (8-bit inputs scaled by 257)
     uint16_t source = 0;     // orientation rule of the input it came from (NormalContext::rules)
     float count = 1;         // input points it stands for: weights centroids when resampling
+    // LiDAR attributes (0 where the input has none): resampled levels take the
+    // prefiltered intensity and the majority class and returns (sampler.h).
+    uint16_t intensity = 0;
+    uint8_t classification = 0;
+    uint8_t returns = 0;     // return number in bits 0-3, number of returns in bits 4-7
 };
-static_assert(sizeof(Surfel) == 48, "chunk files store Surfel records raw; keep them compact");
+static_assert(sizeof(Surfel) == 56, "chunk files store Surfel records raw; keep them compact");
 
 }  // namespace surfcast

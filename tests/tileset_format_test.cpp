@@ -8,6 +8,8 @@
 #include "crc32.h"
 #include "tileset_format.h"
 
+#include <nlohmann/json.hpp>
+
 using namespace surfcast;
 
 namespace {
@@ -55,7 +57,7 @@ TEST(TilesetFormat, HierarchyHeaderAndSinglePage) {
     ASSERT_EQ(bytes.size(), 32u + 16u + 64u);
     EXPECT_EQ(0, std::memcmp(bytes.data(), "SCHY", 4));
     auto u32 = [&](size_t at) { return uint32_t(bytes[at] | bytes[at + 1] << 8 | bytes[at + 2] << 16 | uint32_t(bytes[at + 3]) << 24); };
-    EXPECT_EQ(u32(4), 1u);    // version
+    EXPECT_EQ(u32(4), 2u);    // version
     EXPECT_EQ(u32(8), 64u);   // record size
     EXPECT_EQ(u32(12), 1u);   // pages
     EXPECT_EQ(u32(16), kDefaultPageDepth);
@@ -144,7 +146,16 @@ TEST(TilesetFormat, TilesetJsonGoldenText) {
     info.bounds.min = {-1.5, 2.25, 1000000.5};
     info.bounds.max = {2, 3, 1000001};
     info.colorBits = 8;
-    info.attributes = {{"position", "uint32", 3, 0}, {"color", "uint8", 3, 0}};
+    info.attributes = {{"position", "uint32", 3, 0}, {"color", "uint8", 3, 0},
+                       {"intensity", "uint16", 1, 0, "continuous", 4, 100}};
+    info.statistics.elevationMin = 1000000.5;
+    info.statistics.elevationMax = 1000001;
+    info.statistics.intensity = true;
+    info.statistics.intensityMin = 100;
+    info.statistics.intensityMax = 16000;
+    info.statistics.intensityP2 = 180;
+    info.statistics.intensityP98 = 9000;
+    info.statistics.classCounts = {{1, 600}, {2, 400}};
     info.normalSource = "input";
     info.weights = "analytic";
     info.hierarchyBytes = 624;
@@ -153,7 +164,7 @@ TEST(TilesetFormat, TilesetJsonGoldenText) {
     info.blocksBytes = 4096;
     const char* expected = R"({
   "format": "surfcast-tileset",
-  "version": 1,
+  "version": 2,
   "generator": "surfcast-build 0.1.0",
   "input_points": 1000,
   "surfels": 1300,
@@ -193,8 +204,35 @@ TEST(TilesetFormat, TilesetJsonGoldenText) {
       "type": "uint8",
       "components": 3,
       "quantization_bits": 0
+    },
+    {
+      "name": "intensity",
+      "type": "uint16",
+      "components": 1,
+      "quantization_bits": 0,
+      "kind": "continuous",
+      "scale": 4.0,
+      "offset": 100.0
     }
   ],
+  "statistics": {
+    "elevation": {
+      "min": 1000000.5,
+      "max": 1000001.0
+    },
+    "intensity": {
+      "min": 100.0,
+      "max": 16000.0,
+      "p2": 180.0,
+      "p98": 9000.0
+    },
+    "classification": {
+      "counts": {
+        "1": 600,
+        "2": 400
+      }
+    }
+  },
   "normal_source": "input",
   "weights": "analytic",
   "kernel_scale": 1.0,
@@ -217,6 +255,31 @@ TEST(TilesetFormat, TilesetJsonGoldenText) {
     auto back = readTilesetJson(text, "tileset.json");
     ASSERT_TRUE(back.ok()) << back.status().message();
     EXPECT_EQ(*back, info);
+}
+
+// A version-1 set (no statistics, no LiDAR attributes) still opens, with the
+// elevation range from its bounds; an unknown future version does not.
+TEST(TilesetFormat, TilesetJsonReadsVersionOne) {
+    TilesetInfo info;
+    info.rootEdge = 8;
+    info.levels = 1;
+    info.bounds.min = {0, 0, -3};
+    info.bounds.max = {1, 1, 5};
+    info.normalSource = "input";
+    info.weights = "none";
+    nlohmann::json j = nlohmann::json::parse(writeTilesetJson(info));
+    j["version"] = 1;
+    j.erase("statistics");
+    auto back = readTilesetJson(j.dump(), "v1.json");
+    ASSERT_TRUE(back.ok()) << back.status().message();
+    EXPECT_EQ(back->version, 1);
+    EXPECT_EQ(back->statistics.elevationMin, -3);
+    EXPECT_EQ(back->statistics.elevationMax, 5);
+    EXPECT_FALSE(back->statistics.intensity);
+    j["version"] = 3;
+    auto future = readTilesetJson(j.dump(), "v3.json");
+    ASSERT_FALSE(future.ok());
+    EXPECT_NE(future.status().message().find("unsupported version 3"), std::string::npos);
 }
 
 TEST(TilesetFormat, TilesetJsonRejectsBadInput) {

@@ -1,5 +1,6 @@
 #include "view_options.h"
 
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -38,6 +39,12 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)
   --background R,G,B    background colour in [0,1] (default 1,1,1)
   --color R,G,B         draw every surfel in this colour (for brightness measurements)
+  --color-by A          rgb, intensity (through the set's 2-98 % range, gamma 1/2.2),
+                        elevation (viridis), classification (ASPRS palette) or return
+                        (single, first, intermediate, last); default: rgb where the set
+                        has colour, else intensity where it has that, else elevation
+  --classes LIST        draw only these classes, e.g. 2,6 (sets with classification)
+  --hide-classes LIST   draw all classes but these, e.g. 7,18
   --expansion E         quad (instanced quads) or geometry (geometry shader); default:
                         geometry where the device has it (faster on lavapipe)
   --accumulation F      rgba32f (default) or rgba16f accumulation targets
@@ -212,6 +219,23 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
                 return (*exitCode = usageError(a + " wants R,G,B in [0,1]")), false;
             if (a == "--color") o->color = c;
             else o->settings.background = c;
+        } else if (a == "--color-by") {
+            auto by = value() ? parseColorBy(v) : std::nullopt;
+            if (!by)
+                return (*exitCode = usageError("--color-by wants rgb, intensity, elevation, classification or return")), false;
+            o->client.coloring.by = *by;
+        } else if (a == "--classes" || a == "--hide-classes") {
+            std::array<bool, 256> listed{};
+            bool ok = value() && !v.empty();
+            std::stringstream list(v);
+            for (std::string item; ok && std::getline(list, item, ',');) {
+                char* end = nullptr;
+                long c = std::strtol(item.c_str(), &end, 10);
+                ok = !item.empty() && *end == 0 && c >= 0 && c <= 255;
+                if (ok) listed[size_t(c)] = true;
+            }
+            if (!ok) return (*exitCode = usageError(a + " wants class numbers in 0-255, comma-separated")), false;
+            for (size_t c = 0; c < 256; ++c) o->client.coloring.hidden[c] = a == "--classes" ? !listed[c] : listed[c];
         } else if (a == "--expansion") {
             if (!value() || (v != "quad" && v != "geometry"))
                 return (*exitCode = usageError("--expansion wants quad or geometry")), false;

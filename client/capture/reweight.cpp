@@ -1,5 +1,6 @@
 #include "reweight.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 
@@ -22,6 +23,11 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
     ReweightSummary summary;
     auto reader = TilesetReader::open(dir);
     if (!reader) return reader.status();
+    // Blocks are decoded and re-encoded: an attribute this reader does not know
+    // (a newer writer's) would be dropped from them, so such a set is refused.
+    for (const std::string& name : blockExpectation(reader->info(), NodeRecord{}).extra)
+        if (std::find(std::begin(kLidarAttributes), std::end(kLidarAttributes), name) == std::end(kLidarAttributes))
+            return Status::error(dir + ": attribute '" + name + "' is unknown to this version; its blocks cannot be rewritten");
     const auto& nodes = reader->nodes();
     std::vector<BlockData> blocks;
     blocks.reserve(nodes.size());
@@ -66,17 +72,18 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
         if (!blob) return Status::error("node " + nodes[n].key.name() + ": " + blob.status().message());
         SC_TRY(writer.value()->addNode(record, *blob));
     }
-    // The attribute list: weight sits after colour, before radius (FORMAT.md).
+    // The attribute list in block order (FORMAT.md): weight after colour, before
+    // radius; edge_weight (only in nodes flagged EDGE_WEIGHTS, like radius)
+    // after radius; the LiDAR attributes last.
     std::vector<AttributeInfo> attributes;
     for (const auto& a : info.attributes) {
         if (a.name == "weight" || a.name == "edge_weight") continue;
         if (a.name == "radius" && options.method == WeightMethod::Capture)
             attributes.push_back({"weight", "float32", 1, BlockCodecOptions{}.weightBits});
         attributes.push_back(a);
+        if (a.name == "radius" && options.method == WeightMethod::Capture)
+            attributes.push_back({"edge_weight", "float32", 4, BlockCodecOptions{}.edgeWeightBits});
     }
-    // Only in nodes flagged EDGE_WEIGHTS, like radius.
-    if (options.method == WeightMethod::Capture)
-        attributes.push_back({"edge_weight", "float32", 4, BlockCodecOptions{}.edgeWeightBits});
     info.attributes = attributes;
     info.weights = options.method == WeightMethod::Capture ? "captured" : "none";
     SC_TRY(writer.value()->finish(info));

@@ -103,23 +103,51 @@ std::vector<uint32_t> sortMorton(SurfelSet& set) {
     return order;
 }
 
-SurfelSet emptySurfelSet(const TilesetInfo& info) {
+SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring) {
     SurfelSet set;
     set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
     set.hasWeights = info.weights != "none";
-    set.hasColor = info.colorBits > 0;
     set.kernelScale = info.kernelScale;
+    set.coloring = coloring;
+    auto by = resolveColorBy(coloring.by, info);
+    set.coloring.by = by ? *by : *resolveColorBy(ColorBy::Auto, info);
+    set.hasColor = set.coloring.by != ColorBy::Rgb || info.colorBits > 0;
+    set.statistics = info.statistics;
     return set;
 }
 
 void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& b) {
     const int colorBits = info.colorBits;
     const float colorScale = colorBits > 0 ? 1.f / float((1u << colorBits) - 1) : 0.f;
+    const AttributeInfo* intensity = info.attribute("intensity");
+    const bool filter = set.coloring.anyHidden() && !b.classification.empty();
+    const TilesetStatistics& st = set.statistics;
+    const double zRange = st.elevationMax - st.elevationMin;
     for (size_t i = 0; i < b.size(); ++i) {
+        if (filter && set.coloring.hidden[b.classification[i]]) continue;
         Vec3f n = b.normals.empty() ? Vec3f{0, 0, 1} : Vec3f{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]};
-        Vec3f c = b.colors.empty() ? Vec3f{0.8f, 0.8f, 0.8f}
-                                   : Vec3f{b.colors[3 * i] * colorScale, b.colors[3 * i + 1] * colorScale,
-                                           b.colors[3 * i + 2] * colorScale};
+        Vec3f c{0.8f, 0.8f, 0.8f};
+        switch (set.coloring.by) {
+            case ColorBy::Rgb:
+            case ColorBy::Auto:
+                if (!b.colors.empty())
+                    c = {b.colors[3 * i] * colorScale, b.colors[3 * i + 1] * colorScale, b.colors[3 * i + 2] * colorScale};
+                break;
+            case ColorBy::Intensity:
+                if (!b.intensity.empty() && intensity)
+                    c = intensityColor(b.intensity[i] * intensity->scale + intensity->offset, st);
+                break;
+            case ColorBy::Elevation:
+                c = viridis(zRange > 0 ? float((surfelPosition(info, node, b, i).z - st.elevationMin) / zRange) : 0.5f);
+                break;
+            case ColorBy::Classification:
+                if (!b.classification.empty()) c = classColor(b.classification[i]);
+                break;
+            case ColorBy::Return:
+                if (!b.returnNumber.empty() && !b.numberOfReturns.empty())
+                    c = returnColor(b.returnNumber[i], b.numberOfReturns[i]);
+                break;
+        }
         float r = b.radii.empty() ? node.spacing : b.radii[i];
         float w = b.weights.empty() ? 1.f : b.weights[i];
         uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
@@ -127,14 +155,16 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
     }
 }
 
-Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice) {
+Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice, const Coloring& coloring) {
     auto reader = TilesetReader::open(dir);
     if (!reader) return reader.status();
     const TilesetInfo& info = reader->info();
     if (choice.level >= info.levels)
         return Status::error(dir + ": level " + std::to_string(choice.level) + " does not exist (the set has levels 0.." +
                              std::to_string(info.levels - 1) + ")");
-    SurfelSet set = emptySurfelSet(reader->info());
+    auto by = resolveColorBy(coloring.by, info);
+    if (!by) return Status::error(dir + ": " + by.status().message());
+    SurfelSet set = emptySurfelSet(reader->info(), coloring);
     for (const NodeRecord& node : reader->nodes()) {
         bool leaf = node.childMask == 0;
         bool wanted = choice.level < 0 ? leaf : (node.key.level == choice.level || (leaf && node.key.level < choice.level));

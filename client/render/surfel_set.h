@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "coloring.h"
 #include "gpu_types.h"
 #include "tileset_reader.h"
 #include "tileset_format.h"
@@ -21,6 +22,8 @@ struct SurfelSet {
     bool hasWeights = false;                // s_k came from the tile set
     bool hasColor = false;                  // colours came from the data (else grey)
     double kernelScale = kDefaultKernelScale;  // the k its weights assume (tileset.json kernel_scale)
+    Coloring coloring;                      // what appendNode colours by (resolved, never Auto) and hides
+    TilesetStatistics statistics;           // the set's ranges, for the colour ramps
 };
 
 // Which nodes of a tile set to draw: a level (its nodes plus the leaves above
@@ -29,11 +32,13 @@ struct LevelChoice {
     int level = -1;
 };
 
-Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice);
+Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice, const Coloring& coloring = {});
 
 // An empty set for a tile set (origin, flags and kernel scale from its
-// tileset.json), and one decoded node's surfels appended to it.
-SurfelSet emptySurfelSet(const TilesetInfo& info);
+// tileset.json), and one decoded node's surfels appended to it, coloured and
+// filtered by `coloring` (a mode the set cannot show falls back to Auto; check
+// it first with resolveColorBy).
+SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring = {});
 void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& block);
 
 // Append one surfel given in world coordinates (origin must be set first).

@@ -232,7 +232,7 @@ void StreamingSet::decodeLoop() {
             block = decodeBlock(bytes.data(), bytes.size(), blockExpectation(info_, record));
         std::shared_ptr<SurfelSet> surfels;
         if (block) {
-            surfels = std::make_shared<SurfelSet>(emptySurfelSet(info_));
+            surfels = std::make_shared<SurfelSet>(emptySurfelSet(info_, options_.coloring));
             appendNode(*surfels, info_, record, *block);
             sortMorton(*surfels);
         }

@@ -42,6 +42,7 @@ struct StreamOptions {
     // the backoff (0.1 s doubling to 5 s), 8 tries span about 11 s: past a
     // server restart, short of a user's patience.
     int maxTries = 8;
+    Coloring coloring;  // what decoded surfels are coloured by, and which classes are dropped
 };
 
 struct StreamStats {

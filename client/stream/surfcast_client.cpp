@@ -25,9 +25,12 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     stream.decoders = options.decoders;
     stream.memoryBudget = options.gpuBudget ? options.gpuBudget : defaultGpuBudget(ctx);
     stream.granule = SurfelPool::kPageSurfels;
+    stream.coloring = options.coloring;
     auto opened = StreamingSet::open(location, stream);
     if (!opened) return opened.status();
     c->stream_ = std::move(*opened);
+    if (auto by = resolveColorBy(options.coloring.by, c->stream_->info()); !by)
+        return Status::error(location + ": " + by.status().message());
     // Every node must fit (the root at least is always needed).
     size_t largest = 0;
     for (uint32_t i = 0; i < c->stream_->nodes().size(); ++i) largest = std::max(largest, c->stream_->residentCost(i));
@@ -47,7 +50,7 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
 }
 
 RenderSettings SurfcastClient::defaultSettings() const {
-    return settingsForSet(info().kernelScale, info().colorBits > 0);
+    return settingsForSet(info().kernelScale, emptySurfelSet(info(), options_.coloring).hasColor);
 }
 
 Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int height) {

@@ -23,6 +23,9 @@ struct ClientOptions {
     size_t gpuBudget = 0;        // bytes of GPU memory for surfels; 0: 1 GiB or a quarter of the
                                  // device-local heap, whichever is smaller
     RendererOptions renderer;
+    // Colour by an attribute, hide classes: applied as blocks are decoded, so a
+    // change takes effect on a newly opened client (docs/CLIENT.md).
+    Coloring coloring;
 };
 
 struct ClientFrame {
