@@ -208,9 +208,10 @@ Status Builder::chooseAttributes() {
     };
     auto self = [](int v) { return v; };
     const bool carried[kLidarCount] = {a.intensityPoints > 0, a.classifiedPoints > 0, a.returnPoints > 0, a.returnPoints > 0};
+    // The return number and the number of returns go together (one means
+    // little without the other): both are stored where either varies.
     const size_t values[kLidarCount] = {distinct(a.intensityHistogram, self), distinct(a.classCounts, self),
-                                        distinct(a.returnsHistogram, [](int v) { return v & 15; }),
-                                        distinct(a.returnsHistogram, [](int v) { return v >> 4; })};
+                                        distinct(a.returnsHistogram, self), distinct(a.returnsHistogram, self)};
     for (int i = 0; i < kLidarCount; ++i) store_[i] = carried[i] && (opt_.attributes || values[i] > 1);
     if (opt_.attributes) {
         for (const std::string& name : *opt_.attributes) {

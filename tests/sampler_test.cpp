@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "sampler.h"
@@ -61,4 +62,35 @@ TEST(Sampler, PrefilterBlursAStepEdgeSymmetrically) {
     EXPECT_GT(out[3].color[0], 0);
     EXPECT_LT(out[4].color[0], 65535);
     EXPECT_NEAR(double(out[3].color[0]), 65535.0 - out[4].color[0], 2.0);
+}
+
+// Categorical attributes take the majority of the input points behind a cell
+// (surfel counts, not surfels), the lowest value on a tie; intensity is
+// prefiltered like colour, so a constant one survives exactly.
+TEST(Sampler, MajorityClassAndReturnsPrefilteredIntensity) {
+    auto surfel = [](double x, uint8_t cls, float count, uint8_t returns) {
+        Surfel s;
+        s.position = {x, 0.5, 0.5};
+        s.normal = {0, 0, 1};
+        s.classification = cls;
+        s.count = count;
+        s.returns = returns;
+        s.intensity = 700;
+        return s;
+    };
+    // Cell 0: class 5 once (weight 3) against class 2 twice (weight 1 each):
+    // the weight wins, though the surfel nearest the centroid (x = 0.48) is a 2. Cell 2 (far from cell 0, outside its prefilter): a tie
+    // between classes 9 and 3, and between returns 0x21 and 0x12.
+    std::vector<Surfel> pts = {surfel(0.2, 2, 1, 0x12), surfel(0.4, 2, 1, 0x12), surfel(0.6, 5, 3, 0x11),
+                               surfel(20.3, 9, 1, 0x21), surfel(20.7, 3, 1, 0x12)};
+    SampleGrid g{{0, 0, 0}, 1.0, 32};
+    auto out = resample(pts, g);
+    ASSERT_EQ(out.size(), 2u);
+    std::sort(out.begin(), out.end(), [](const Surfel& a, const Surfel& b) { return a.position.x < b.position.x; });
+    EXPECT_EQ(out[0].classification, 5);
+    EXPECT_EQ(out[0].returns, 0x11);
+    EXPECT_EQ(out[1].classification, 3);
+    EXPECT_EQ(out[1].returns, 0x12);
+    EXPECT_EQ(out[0].intensity, 700);
+    EXPECT_EQ(out[1].intensity, 700);
 }
