@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -138,6 +139,9 @@ TEST_F(ViewCli, BadArgumentsAndInputsGiveClearErrors) {
         {{"--headless"}, 2, "no tile set"},
         {{"--headless", set(), "--frobnicate"}, 2, "--frobnicate"},
         {{"--headless", set(), "--out", out.file("no/such/dir/x.png")}, 1, "x.png"},
+        {{"--headless", set(), "--color-by", "height"}, 2, "--color-by"},
+        {{"--headless", set(), "--color-by", "classification"}, 1, "no classification"},
+        {{"--headless", set(), "--hide-classes", "2,300"}, 2, "--hide-classes"},
     };
     for (const auto& c : cases) {
         std::vector<std::string> args = {binary("surfcast-view")};
@@ -164,6 +168,132 @@ TEST_F(ViewCli, WindowRendersUnderXvfbLikeHeadless) {
     ASSERT_TRUE(b);
     ASSERT_EQ(a->width, 320);
     EXPECT_EQ(a->rgba, b->rgba) << "the window's frame is the headless frame of the same camera";
+}
+
+}  // namespace
+}  // namespace surfcast
+
+namespace surfcast {
+namespace {
+
+// These renders use a magenta background, which no colour mode produces
+// (intensity reaches white, elevation and classes reach dark).
+const char* kMagenta = "--background=1,0,1";
+bool isCovered(const Image& a, size_t i) { return !(a.rgba[i] == 255 && a.rgba[i + 1] == 0 && a.rgba[i + 2] == 255); }
+size_t covered(const Image& a) {
+    size_t n = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4) n += isCovered(a, i);
+    return n;
+}
+// Pixels covered in one image and not the other, and the mean absolute colour
+// difference where both are covered.
+size_t coverageDiff(const Image& a, const Image& b, double* colorDiff = nullptr) {
+    size_t diff = 0, both = 0;
+    double sum = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4) {
+        diff += isCovered(a, i) != isCovered(b, i);
+        if (!isCovered(a, i) || !isCovered(b, i)) continue;
+        ++both;
+        for (int c = 0; c < 3; ++c) sum += std::abs(int(a.rgba[i + c]) - int(b.rgba[i + c])) / (3 * 255.0);
+    }
+    if (colorDiff) *colorDiff = sum / double(std::max<size_t>(both, 1));
+    return diff;
+}
+// Pixels covered in only one image, or in both with colours more than 0.1
+// apart (mean over channels): what a viewer sees differ.
+size_t differingPixels(const Image& a, const Image& b) {
+    size_t n = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4) {
+        int d = 0;
+        for (int c = 0; c < 3; ++c) d += std::abs(int(a.rgba[i + c]) - int(b.rgba[i + c]));
+        n += isCovered(a, i) != isCovered(b, i) || (isCovered(a, i) && d > 0.1 * 3 * 255);
+    }
+    return n;
+}
+
+// Autzen (RGB, intensity, classes 1 and 2, returns) seen from above.
+const char* kAutzenCamera = "--camera=636590,848700,1400,636590,849216,463,0,1,0,45";
+
+TEST_F(ViewCli, ColorByModesRenderAndDiffer) {
+    TempDir out;
+    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", out.file("autzen")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    std::vector<std::string> modes = {"gray", "rgb", "intensity", "elevation", "classification", "return"};
+    std::vector<Image> images;
+    for (const std::string& m : modes) {
+        std::vector<std::string> args = {binary("surfcast-view"), "--headless", out.file("autzen"), kAutzenCamera,
+                                         kMagenta, "--size", "320x240", "--out", out.file(m + ".png")};
+        if (m == "gray") args.insert(args.end(), {"--color", "0.8,0.8,0.8"});
+        else args.insert(args.end(), {"--color-by", m});
+        auto r = run(args);
+        ASSERT_EQ(r.exitCode, 0) << m << ": " << r.output;
+        auto img = readPng(out.file(m + ".png"));
+        ASSERT_TRUE(img.ok());
+        images.push_back(*img);
+    }
+    // Same splats, so the same coverage (up to the odd pixel at the coverage
+    // threshold: lavapipe's accumulation order varies between runs); colours
+    // differ between every pair by far more than that noise.
+    for (size_t i = 0; i < images.size(); ++i)
+        for (size_t j = i + 1; j < images.size(); ++j) {
+            double d = 0;
+            size_t coverDiff = coverageDiff(images[i], images[j], &d);
+            EXPECT_LE(coverDiff, covered(images[i]) / 1000) << modes[i] << " vs " << modes[j];
+            EXPECT_GT(d, 0.03) << modes[i] << " vs " << modes[j];
+        }
+}
+
+// --hide-classes 2 against a set built from autzen without its class-2 points.
+// The leaves hold the same class-1 points in both, all drawn in class 1's one
+// palette colour, so the images can differ only where splat sizes differ: h
+// and the per-surfel radii come from neighbours, and the other set lacks the
+// class-2 ones, so class-1 splats bordering ground grow there. That changes
+// coverage in a band about one splat wide along the class boundary: measured
+// 1,436 pixels against 11,879 that showing class 2 changes (brown ground, and
+// its coverage), of 29,012 covered. The bound is a fifth of the latter.
+TEST_F(ViewCli, HiddenClassLeavesWhatAFilteredBuildShows) {
+    TempDir out;
+    const std::string src = test::readFile(test::dataFile("autzen_trim.las"));
+    uint32_t offset;
+    std::memcpy(&offset, src.data() + 96, 4);
+    std::string kept = src.substr(0, offset);
+    uint32_t count = 0;
+    for (size_t i = 0; i < 110000; ++i) {
+        const char* r = src.data() + offset + i * 34;
+        if ((uint8_t(r[15]) & 31) == 2) continue;
+        kept.append(r, 34);
+        ++count;
+    }
+    std::memcpy(kept.data() + 107, &count, 4);
+    test::writeFile(out.file("no2.las"), kept);
+    ASSERT_GT(count, 10000u);
+    ASSERT_LT(count, 100000u);
+    // The filtered set has one class: it stores classification only on request.
+    for (auto [in, name] : {std::pair{test::dataFile("autzen_trim.las"), "all"}, std::pair{out.file("no2.las"), "no2"}}) {
+        auto b = run({binary("surfcast-build"), "-q", in, "-o", out.file(name), "--attributes", "all"});
+        ASSERT_EQ(b.exitCode, 0) << b.output;
+    }
+    auto render = [&](const std::string& set, const std::string& png, std::vector<std::string> extra) {
+        std::vector<std::string> args = {binary("surfcast-view"), "--headless", set, kAutzenCamera, "--size", "320x240",
+                                         kMagenta, "--color-by", "classification", "--out", out.file(png)};
+        args.insert(args.end(), extra.begin(), extra.end());
+        auto r = run(args);
+        EXPECT_EQ(r.exitCode, 0) << r.output;
+        auto img = readPng(out.file(png));
+        EXPECT_TRUE(img.ok());
+        return img ? *img : Image{};
+    };
+    Image hidden = render(out.file("all"), "hidden.png", {"--hide-classes", "2"});
+    Image shown = render(out.file("all"), "shown.png", {});
+    Image filtered = render(out.file("no2"), "filtered.png", {});
+    Image only = render(out.file("all"), "only1.png", {"--classes", "1"});
+    const size_t hiddenDiff = differingPixels(hidden, filtered), shownDiff = differingPixels(shown, filtered);
+    // --classes 1 is --hide-classes 2 on this set (up to threshold noise).
+    EXPECT_LE(coverageDiff(hidden, only), covered(only) / 1000);
+    EXPECT_GT(shownDiff, covered(filtered) / 5) << "class 2 shows little in this view";
+    EXPECT_LT(hiddenDiff * 5, shownDiff) << "hidden " << hiddenDiff << ", shown " << shownDiff;
+    std::printf("pixels differing from the filtered build: hidden %zu, shown %zu (of %zu covered)\n", hiddenDiff,
+                shownDiff, covered(filtered));
 }
 
 }  // namespace
