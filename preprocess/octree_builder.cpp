@@ -223,6 +223,8 @@ Status Builder::chooseAttributes() {
             store_[i] = store_[i] && std::find(opt_.attributes->begin(), opt_.attributes->end(), kLidarAttributes[i]) !=
                                          opt_.attributes->end();
     }
+    // One of the return pair asked for brings the other.
+    store_[kLidarReturnNumber] = store_[kLidarNumberOfReturns] = store_[kLidarReturnNumber] || store_[kLidarNumberOfReturns];
     for (int i = 0; i < kLidarCount; ++i)
         if (store_[i]) summary_.attributes.push_back(kLidarAttributes[i]);
     // Intensity as (value - min) / step with the smallest power-of-two step
