@@ -196,8 +196,8 @@ TilesetStatistics Builder::statistics() const {
     return st;
 }
 
-// Which LiDAR attributes the set stores (BuildOptions::attributes), and the
-// statistics of those it stores.
+// Which LiDAR attributes the set stores (BuildOptions::attributes), and how
+// the intensity is quantized.
 Status Builder::chooseAttributes() {
     const AttributeStats& a = stats_.attributes;
     auto distinct = [](const std::vector<uint64_t>& histogram, auto key) {
@@ -582,7 +582,10 @@ Status Builder::emit(BuiltNode& node) {
     for (size_t i = 0; i < n; ++i) {
         const Surfel& s = node.surfels[i];
         if (!block.intensity.empty())
-            block.intensity[i] = uint16_t(std::lround(double(s.intensity - intensityOffset_) / intensityStep_));
+            // Clamped: an input without intensity (beside ones with it) reads as 0,
+            // below the range of those that carry it.
+            block.intensity[i] = uint16_t(std::clamp(std::lround(double(s.intensity - intensityOffset_) / intensityStep_), 0l,
+                                                     long(1 << kIntensityBits) - 1));
         if (!block.classification.empty()) block.classification[i] = s.classification;
         if (!block.returnNumber.empty()) block.returnNumber[i] = s.returns & 15;
         if (!block.numberOfReturns.empty()) block.numberOfReturns[i] = s.returns >> 4;

@@ -83,3 +83,42 @@ TEST(BlockCodec, EdgeWeightsRoundTripWithTheirPoint) {
         for (int k = 0; k < 4; ++k) EXPECT_NEAR(out->edgeWeights[4 * i + k], in.edgeWeights[4 * j + k], 3.0 / 255 + 1e-6);
     }
 }
+
+// LiDAR attributes travel with their points through the reordering coder; a
+// reader skips an attribute whose name it does not know (a newer writer's),
+// and rejects a block whose attribute count differs from what the set lists.
+TEST(BlockCodec, LidarAttributesRoundTripAndUnknownOnesAreSkipped) {
+    BlockData in = sampleBlock(400);
+    for (size_t i = 0; i < in.size(); ++i) {
+        in.intensity.push_back(uint16_t(i * 37 % 4096));
+        in.classification.push_back(uint8_t(i % 3 == 0 ? 2 : 64 + i % 5));
+    }
+    BlockCodecOptions opt;
+    opt.positionBits = 10;
+    auto bytes = encodeBlock(in, opt);
+    ASSERT_TRUE(bytes.ok()) << bytes.status().message();
+    BlockExpectation e;
+    e.colorBits = 8;
+    e.extra = {"intensity", "classification"};
+    auto out = decodeBlock(bytes->data(), bytes->size(), e);
+    ASSERT_TRUE(out.ok()) << out.status().message();
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, std::pair<uint16_t, uint8_t>> expected;
+    for (size_t i = 0; i < in.size(); ++i)
+        expected[{in.positions[3 * i], in.positions[3 * i + 1], in.positions[3 * i + 2]}] = {in.intensity[i], in.classification[i]};
+    ASSERT_EQ(out->intensity.size(), in.size());
+    for (size_t i = 0; i < out->size(); ++i) {
+        auto it = expected.find({out->positions[3 * i], out->positions[3 * i + 1], out->positions[3 * i + 2]});
+        ASSERT_NE(it, expected.end());
+        EXPECT_EQ(out->intensity[i], it->second.first);
+        EXPECT_EQ(out->classification[i], it->second.second);
+    }
+    e.extra = {"intensity", "wavelength"};  // the second slot under a name this reader does not know
+    auto skipped = decodeBlock(bytes->data(), bytes->size(), e);
+    ASSERT_TRUE(skipped.ok()) << skipped.status().message();
+    EXPECT_EQ(skipped->intensity.size(), in.size());
+    EXPECT_TRUE(skipped->classification.empty());
+    e.extra = {"intensity"};
+    EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), e).ok());
+    e.extra = {"classification", "intensity"};  // listed in the wrong order: the types disagree
+    EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), e).ok());
+}
