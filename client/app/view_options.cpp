@@ -36,7 +36,7 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --lowpass V           low-pass filter variance in pixels^2 (default 0.1, measured;
                         Zwicker's V^h = I is 1)
   --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
-  --shading S           unlit, lambert, phong (default: unlit with colours, else lambert)
+  --shading S           unlit, lambert, phong (default: unlit for rgb and intensity, else lambert)
   --background R,G,B    background colour in [0,1] (default 1,1,1)
   --color R,G,B         draw every surfel in this colour (for brightness measurements)
   --color-by A          rgb, intensity (through the set's 2-98 % range, gamma 1/2.2),

@@ -111,7 +111,10 @@ SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring) {
     set.coloring = coloring;
     auto by = resolveColorBy(coloring.by, info);
     set.coloring.by = by ? *by : *resolveColorBy(ColorBy::Auto, info);
-    set.hasColor = set.coloring.by != ColorBy::Rgb || info.colorBits > 0;
+    // Measured appearance (RGB, intensity) is drawn unlit; the synthetic
+    // colours of elevation, classes and returns are shaded (settingsForSet),
+    // so the surface's shape still shows.
+    set.hasColor = (set.coloring.by == ColorBy::Rgb && info.colorBits > 0) || set.coloring.by == ColorBy::Intensity;
     set.statistics = info.statistics;
     return set;
 }

@@ -20,7 +20,7 @@ struct SurfelSet {
     std::vector<gpu_types::GpuSurfel> surfels;
     Box3d bounds;                           // world bounds of the surfel centres
     bool hasWeights = false;                // s_k came from the tile set
-    bool hasColor = false;                  // colours came from the data (else grey)
+    bool hasColor = false;                  // colours show measured appearance (RGB, intensity): drawn unlit
     double kernelScale = kDefaultKernelScale;  // the k its weights assume (tileset.json kernel_scale)
     Coloring coloring;                      // what appendNode colours by (resolved, never Auto) and hides
     TilesetStatistics statistics;           // the set's ranges, for the colour ramps
