@@ -39,6 +39,10 @@ struct BlockCodecOptions {
 };
 
 Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCodecOptions& options);
+// tileset.json names of the attributes the fixed layout places (FORMAT.md,
+// "blocks.bin"); every other listed attribute follows them in every block.
+inline constexpr const char* kFixedAttributes[] = {"position", "normal", "color", "weight", "radius", "edge_weight"};
+
 // The LiDAR attributes a block can carry: tileset.json names, in block order
 // after the fixed attributes (each block stores those its set lists).
 inline constexpr const char* kLidarAttributes[] = {"intensity", "classification", "return_number", "number_of_returns"};

@@ -1,5 +1,7 @@
 #include "tileset_reader.h"
 
+#include <algorithm>
+
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -54,8 +56,7 @@ BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& nod
     // Every attribute past the fixed ones sits in every block, in the order
     // tileset.json lists them.
     for (const AttributeInfo& a : info.attributes)
-        if (a.name != "position" && a.name != "normal" && a.name != "color" && a.name != "weight" && a.name != "radius" &&
-            a.name != "edge_weight")
+        if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) == std::end(kFixedAttributes))
             e.extra.push_back(a.name);
     return e;
 }

@@ -564,6 +564,10 @@ Status Builder::emit(BuiltNode& node) {
     block.positions.resize(3 * n);
     block.normals.resize(3 * n);
     if (stats_.colorBits) block.colors.resize(3 * n);
+    if (store_[kLidarIntensity]) block.intensity.resize(n);
+    if (store_[kLidarClassification]) block.classification.resize(n);
+    if (store_[kLidarReturnNumber]) block.returnNumber.resize(n);
+    if (store_[kLidarNumberOfReturns]) block.numberOfReturns.resize(n);
     for (size_t i = 0; i < n; ++i) {
         const Surfel& s = node.surfels[i];
         for (int a = 0; a < 3; ++a) {
@@ -572,15 +576,6 @@ Status Builder::emit(BuiltNode& node) {
         }
         if (stats_.colorBits)
             for (int c = 0; c < 3; ++c) block.colors[3 * i + c] = stats_.colorBits == 8 ? uint16_t(s.color[c] >> 8) : s.color[c];
-    }
-    block.weights = node.level.weights;
-    block.radii = node.level.radii;
-    if (store_[kLidarIntensity]) block.intensity.resize(n);
-    if (store_[kLidarClassification]) block.classification.resize(n);
-    if (store_[kLidarReturnNumber]) block.returnNumber.resize(n);
-    if (store_[kLidarNumberOfReturns]) block.numberOfReturns.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-        const Surfel& s = node.surfels[i];
         if (!block.intensity.empty())
             // Clamped: an input without intensity (beside ones with it) reads as 0,
             // below the range of those that carry it.
@@ -590,6 +585,8 @@ Status Builder::emit(BuiltNode& node) {
         if (!block.returnNumber.empty()) block.returnNumber[i] = s.returns & 15;
         if (!block.numberOfReturns.empty()) block.numberOfReturns[i] = s.returns >> 4;
     }
+    block.weights = node.level.weights;
+    block.radii = node.level.radii;
     BlockCodecOptions codec;
     codec.positionBits = bits;
     codec.normalBits = opt_.normalBits;

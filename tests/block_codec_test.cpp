@@ -18,6 +18,9 @@ BlockData sampleBlock(size_t n) {
     }
     return b;
 }
+
+using PositionKey = std::tuple<uint32_t, uint32_t, uint32_t>;
+PositionKey positionOf(const BlockData& b, size_t i) { return {b.positions[3 * i], b.positions[3 * i + 1], b.positions[3 * i + 2]}; }
 }  // namespace
 
 // The kd-tree coder reorders points: check the per-point tuples survive as sets.
@@ -32,11 +35,10 @@ TEST(BlockCodec, RoundTripKeepsEveryPointsAttributesTogether) {
     auto out = decodeBlock(bytes->data(), bytes->size(), e);
     ASSERT_TRUE(out.ok()) << out.status().message();
     ASSERT_EQ(out->size(), in.size());
-    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, std::pair<uint16_t, float>> expected;
-    for (size_t i = 0; i < in.size(); ++i)
-        expected[{in.positions[3 * i], in.positions[3 * i + 1], in.positions[3 * i + 2]}] = {in.colors[3 * i], in.weights[i]};
+    std::map<PositionKey, std::pair<uint16_t, float>> expected;
+    for (size_t i = 0; i < in.size(); ++i) expected[positionOf(in, i)] = {in.colors[3 * i], in.weights[i]};
     for (size_t i = 0; i < out->size(); ++i) {
-        auto it = expected.find({out->positions[3 * i], out->positions[3 * i + 1], out->positions[3 * i + 2]});
+        auto it = expected.find(positionOf(*out, i));
         ASSERT_NE(it, expected.end());
         EXPECT_EQ(out->colors[3 * i], it->second.first);
         // 12-bit quantization over the block's weight range [0.1, 0.199].
@@ -102,12 +104,11 @@ TEST(BlockCodec, LidarAttributesRoundTripAndUnknownOnesAreSkipped) {
     e.extra = {"intensity", "classification"};
     auto out = decodeBlock(bytes->data(), bytes->size(), e);
     ASSERT_TRUE(out.ok()) << out.status().message();
-    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, std::pair<uint16_t, uint8_t>> expected;
-    for (size_t i = 0; i < in.size(); ++i)
-        expected[{in.positions[3 * i], in.positions[3 * i + 1], in.positions[3 * i + 2]}] = {in.intensity[i], in.classification[i]};
+    std::map<PositionKey, std::pair<uint16_t, uint8_t>> expected;
+    for (size_t i = 0; i < in.size(); ++i) expected[positionOf(in, i)] = {in.intensity[i], in.classification[i]};
     ASSERT_EQ(out->intensity.size(), in.size());
     for (size_t i = 0; i < out->size(); ++i) {
-        auto it = expected.find({out->positions[3 * i], out->positions[3 * i + 1], out->positions[3 * i + 2]});
+        auto it = expected.find(positionOf(*out, i));
         ASSERT_NE(it, expected.end());
         EXPECT_EQ(out->intensity[i], it->second.first);
         EXPECT_EQ(out->classification[i], it->second.second);

@@ -351,6 +351,18 @@ bool streamUntilConverged(StreamingSet& stream, const Camera& camera, std::vecto
     return false;
 }
 
+// A stream that must fail: updates from the usual test camera for `seconds`,
+// expects no convergence and that it gave up, and returns its stats.
+StreamStats streamUntilGaveUp(StreamingSet& stream, double seconds) {
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    EXPECT_TRUE(camera);
+    std::vector<uint32_t> drawn;
+    EXPECT_FALSE(streamUntilConverged(stream, *camera, &drawn, seconds));
+    StreamStats st = stream.stats();
+    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    return st;
+}
+
 TEST(Stream, SurvivesTheServerRestartingAndACorruptBlock) {
     TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
@@ -484,11 +496,7 @@ TEST(Stream, ABlockPastTheEndOfBlocksBinIsRejectedAtOpen) {
     options.maxTries = 2;
     auto lying = StreamingSet::open(dir.file("scene"), options);
     ASSERT_TRUE(lying) << lying.status().message();
-    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
-    std::vector<uint32_t> drawn;
-    EXPECT_FALSE(streamUntilConverged(**lying, *camera, &drawn, 3));
-    const StreamStats st = (*lying)->stats();
-    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    const StreamStats st = streamUntilGaveUp(**lying, 3);
     EXPECT_NE(st.lastError.find("reach past the end of the file"), std::string::npos) << st.lastError;
 }
 
@@ -514,16 +522,13 @@ TEST(Stream, APersistentlyCorruptBlockGivesUpWithAClearError) {
     options.maxTries = 3;
     auto set = StreamingSet::open(dir.file("scene"), options);
     ASSERT_TRUE(set) << set.status().message();
-    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
-    ASSERT_TRUE(camera);
-    std::vector<uint32_t> drawn;
-    EXPECT_FALSE(streamUntilConverged(**set, *camera, &drawn, 5));
-    StreamStats st = (*set)->stats();
-    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    StreamStats st = streamUntilGaveUp(**set, 5);
     EXPECT_EQ(st.failures, 3u) << st.lastError;
     EXPECT_NE(st.lastError.find("node 0-0-0-0: gave up after 3 tries"), std::string::npos) << st.lastError;
     EXPECT_NE(st.lastError.find("CRC"), std::string::npos) << st.lastError;
     // Fetching stopped.
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    std::vector<uint32_t> drawn;
     EXPECT_FALSE(streamUntilConverged(**set, *camera, &drawn, 0.5));
     EXPECT_EQ((*set)->stats().failures, 3u);
 
@@ -591,11 +596,7 @@ TEST(Stream, ResponsesLongerThanAskedForAreCutOff) {
     options.maxTries = 1;
     auto longRange = StreamingSet::open(origin + "/longrange", options);
     ASSERT_TRUE(longRange) << longRange.status().message();
-    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
-    std::vector<uint32_t> drawn;
-    EXPECT_FALSE(streamUntilConverged(**longRange, *camera, &drawn, 3));
-    const StreamStats st = (*longRange)->stats();
-    EXPECT_TRUE(st.gaveUp) << st.lastError;
+    const StreamStats st = streamUntilGaveUp(**longRange, 3);
     EXPECT_NE(st.lastError.find("blocks.bin: response longer than the"), std::string::npos) << st.lastError;
 }
 

@@ -128,6 +128,7 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
     const double zRange = st.elevationMax - st.elevationMin;
     for (size_t i = 0; i < b.size(); ++i) {
         if (filter && set.coloring.hidden[b.classification[i]]) continue;
+        const Vec3d position = surfelPosition(info, node, b, i);
         Vec3f n = b.normals.empty() ? Vec3f{0, 0, 1} : Vec3f{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]};
         Vec3f c{0.8f, 0.8f, 0.8f};
         switch (set.coloring.by) {
@@ -141,7 +142,7 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
                     c = intensityColor(b.intensity[i] * intensity->scale + intensity->offset, st);
                 break;
             case ColorBy::Elevation:
-                c = viridis(zRange > 0 ? float((surfelPosition(info, node, b, i).z - st.elevationMin) / zRange) : 0.5f);
+                c = viridis(zRange > 0 ? float((position.z - st.elevationMin) / zRange) : 0.5f);
                 break;
             case ColorBy::Classification:
                 if (!b.classification.empty()) c = classColor(b.classification[i]);
@@ -154,7 +155,7 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
         float r = b.radii.empty() ? node.spacing : b.radii[i];
         float w = b.weights.empty() ? 1.f : b.weights[i];
         uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
-        addSurfel(set, surfelPosition(info, node, b, i), n, r, c, w, edge);
+        addSurfel(set, position, n, r, c, w, edge);
     }
 }
 
