@@ -20,6 +20,22 @@ bool readAttribute(const draco::PointCloud& pc, int index, draco::DataType type,
     for (draco::PointIndex i(0); i < pc.num_points(); ++i) a->GetMappedValue(i, out->data() + size_t(i.value()) * components);
     return true;
 }
+// A scalar attribute: 1 unsigned integer of 8, 16 or 32 bits per point, widened.
+bool readScalar(const draco::PointCloud& pc, int index, const std::string& name, std::vector<ScalarAttribute>* out) {
+    if (index >= pc.num_attributes()) return false;
+    const draco::PointAttribute* a = pc.attribute(index);
+    const draco::DataType type = a->data_type();
+    if ((type != draco::DT_UINT8 && type != draco::DT_UINT16 && type != draco::DT_UINT32) || a->num_components() != 1)
+        return false;
+    ScalarAttribute& s = out->emplace_back();
+    s.name = name;
+    s.bits = type == draco::DT_UINT8 ? 8 : type == draco::DT_UINT16 ? 16 : 32;
+    s.values.resize(size_t(pc.num_points()));
+    for (draco::PointIndex i(0); i < pc.num_points(); ++i)
+        if (!a->ConvertValue<uint32_t>(a->mapped_index(i), &s.values[i.value()])) return false;
+    return true;
+}
+
 }  // namespace
 
 Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCodecOptions& options) {
@@ -73,6 +89,20 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
     addInteger(block.classification, draco::DT_UINT8);
     addInteger(block.returnNumber, draco::DT_UINT8);
     addInteger(block.numberOfReturns, draco::DT_UINT8);
+    std::vector<uint8_t> narrow8;
+    std::vector<uint16_t> narrow16;
+    for (const ScalarAttribute& a : block.scalars) {
+        assert(a.bits >= 1 && a.bits <= 32);
+        if (a.bits <= 8) {
+            narrow8.assign(a.values.begin(), a.values.end());
+            addInteger(narrow8, draco::DT_UINT8);
+        } else if (a.bits <= 16) {
+            narrow16.assign(a.values.begin(), a.values.end());
+            addInteger(narrow16, draco::DT_UINT16);
+        } else {
+            addInteger(a.values, draco::DT_UINT32);
+        }
+    }
     std::unique_ptr<draco::PointCloud> pc = builder.Finalize(false);
     if (!pc) return Status::error("Draco rejected the block's attributes");
 
@@ -119,6 +149,7 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
         else if (name == "classification") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.classification);
         else if (name == "return_number") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.returnNumber);
         else if (name == "number_of_returns") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.numberOfReturns);
+        else if (expect.scalars) ok = readScalar(pc, index, name, &block.scalars);
         ++index;  // any other: a newer writer's attribute, skipped
     }
     if (!ok) return Status::error("block attribute " + std::to_string(index - 1) + " has an unexpected type or size");

@@ -11,6 +11,16 @@
 
 namespace surfcast {
 
+// A scalar field's quantized values (FORMAT.md, "Scalar attributes"): 1 per surfel.
+struct ScalarAttribute {
+    std::string name;  // as tileset.json lists it (decoding fills it)
+    int bits = 32;     // the values' width: stored as uint8, uint16 or uint32 (scalarType)
+    std::vector<uint32_t> values;
+};
+
+// The tileset.json type of a scalar attribute of `bits` bits.
+inline const char* scalarType(int bits) { return bits <= 8 ? "uint8" : bits <= 16 ? "uint16" : "uint32"; }
+
 // What a block carries. Attributes with empty vectors are absent.
 struct BlockData {
     std::vector<uint32_t> positions;  // 3 per surfel: quantized in the node box, [0, 2^bits-1]
@@ -25,6 +35,9 @@ struct BlockData {
     std::vector<uint8_t> classification;
     std::vector<uint8_t> returnNumber;
     std::vector<uint8_t> numberOfReturns;
+    // Scalar attributes, after the LiDAR ones, in tileset.json's order (decoded
+    // only with BlockExpectation::scalars).
+    std::vector<ScalarAttribute> scalars;
 
     size_t size() const { return positions.size() / 3; }
 };
@@ -57,7 +70,9 @@ inline int lidarIndex(const std::string& name) {
 // Decodes untrusted bytes; checks the attribute set against what the tile set
 // declares (expectColorBits 0 = no colour, expect* = attribute present).
 // `extra` names the attributes after the fixed ones, in block order: those of
-// kLidarAttributes are decoded, any other is skipped (a newer writer's).
+// kLidarAttributes are decoded; any other is a scalar attribute, decoded into
+// BlockData::scalars when `scalars` is set (widened to 32 bits) and skipped
+// otherwise, as are a newer writer's attributes.
 struct BlockExpectation {
     int colorBits = 0;
     bool normals = true;
@@ -65,6 +80,7 @@ struct BlockExpectation {
     bool radii = false;
     bool edgeWeights = false;
     std::vector<std::string> extra;
+    bool scalars = false;
 };
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect);
 

@@ -1,6 +1,7 @@
 #include "chunker.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -126,13 +127,16 @@ void ChunkLayout::haloChunksOf(const Vec3d& p, std::vector<int>* out) const {
             }
 }
 
-ChunkWriter::ChunkWriter(ChunkLayout& layout, std::string dir) : layout_(layout), dir_(std::move(dir)) {
+ChunkWriter::ChunkWriter(ChunkLayout& layout, std::string dir, size_t scalarsPerPoint)
+    : layout_(layout), dir_(std::move(dir)), scalarsPerPoint_(scalarsPerPoint) {
     size_t n = layout_.chunks().size();
     buffers_.resize(2 * n);
-    files_.assign(2 * n, nullptr);
+    scalarBuffers_.resize(n);
+    files_.assign(3 * n, nullptr);
     for (size_t i = 0; i < n; ++i) {
         layout_.chunks()[i].file = dir_ + "/chunk-" + std::to_string(i) + ".bin";
         layout_.chunks()[i].haloFile = dir_ + "/chunk-" + std::to_string(i) + ".halo";
+        layout_.chunks()[i].scalarFile = dir_ + "/chunk-" + std::to_string(i) + ".scalars";
     }
 }
 
@@ -141,57 +145,86 @@ ChunkWriter::~ChunkWriter() {
         if (f) std::fclose(f);
 }
 
-Status ChunkWriter::flush(size_t slot) {
-    auto& buf = buffers_[slot];
-    if (buf.empty()) return {};
-    if (!files_[slot]) {
-        const Chunk& c = layout_.chunks()[slot / 2];
-        const std::string& path = slot % 2 ? c.haloFile : c.file;
-        files_[slot] = std::fopen(path.c_str(), "wb");
-        if (!files_[slot]) return Status::error(path + ": cannot create (" + std::strerror(errno) + ")");
+Status ChunkWriter::write(size_t file, const std::string& path, const void* data, size_t size, size_t count) {
+    if (!files_[file]) {
+        files_[file] = std::fopen(path.c_str(), "wb");
+        if (!files_[file]) return Status::error(path + ": cannot create (" + std::strerror(errno) + ")");
     }
-    if (std::fwrite(buf.data(), sizeof(Surfel), buf.size(), files_[slot]) != buf.size())
+    if (std::fwrite(data, size, count, files_[file]) != count)
         return Status::error(dir_ + ": writing chunk files failed (disk full?)");
-    buf.clear();
     return {};
 }
 
-Status ChunkWriter::append(int chunk, bool halo, const Surfel& s) {
+Status ChunkWriter::flush(size_t slot) {
+    auto& buf = buffers_[slot];
+    if (buf.empty()) return {};
+    const size_t chunk = slot / 2;
+    const Chunk& c = layout_.chunks()[chunk];
+    const bool halo = slot % 2;
+    SC_TRY(write(3 * chunk + (halo ? 1 : 0), halo ? c.haloFile : c.file, buf.data(), sizeof(Surfel), buf.size()));
+    buf.clear();
+    auto& scalars = scalarBuffers_[chunk];
+    if (!halo && !scalars.empty()) {
+        SC_TRY(write(3 * chunk + 2, c.scalarFile, scalars.data(), sizeof(uint32_t), scalars.size()));
+        scalars.clear();
+    }
+    return {};
+}
+
+Status ChunkWriter::append(int chunk, bool halo, const Surfel& s, const uint32_t* scalars) {
     size_t slot = size_t(chunk) * 2 + (halo ? 1 : 0);
     buffers_[slot].push_back(s);
+    if (!halo) scalarBuffers_[size_t(chunk)].insert(scalarBuffers_[size_t(chunk)].end(), scalars, scalars + scalarsPerPoint_);
     Chunk& c = layout_.chunks()[chunk];
     (halo ? c.haloPoints : c.points)++;
     if (buffers_[slot].size() >= kBufferedPoints) return flush(slot);
     return {};
 }
 
-Status ChunkWriter::add(std::span<const Surfel> points) {
-    for (const Surfel& s : points) {
-        SC_TRY(append(layout_.chunkOf(s.position), false, s));
+Status ChunkWriter::add(std::span<const Surfel> points, std::span<const uint32_t> scalars) {
+    assert(scalars.size() == points.size() * scalarsPerPoint_);
+    for (size_t i = 0; i < points.size(); ++i) {
+        const Surfel& s = points[i];
+        SC_TRY(append(layout_.chunkOf(s.position), false, s, scalars.data() + i * scalarsPerPoint_));
         layout_.haloChunksOf(s.position, &halo_);
-        for (int h : halo_) SC_TRY(append(h, true, s));
+        for (int h : halo_) SC_TRY(append(h, true, s, nullptr));
     }
     return {};
 }
 
 Status ChunkWriter::finish() {
-    for (size_t slot = 0; slot < buffers_.size(); ++slot) {
-        SC_TRY(flush(slot));
-        if (files_[slot] && std::fclose(files_[slot]) != 0) return Status::error(dir_ + ": closing a chunk file failed");
-        files_[slot] = nullptr;
+    for (size_t slot = 0; slot < buffers_.size(); ++slot) SC_TRY(flush(slot));
+    for (std::FILE*& f : files_) {
+        if (f && std::fclose(f) != 0) {
+            f = nullptr;
+            return Status::error(dir_ + ": closing a chunk file failed");
+        }
+        f = nullptr;
     }
     return {};
 }
 
-Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected) {
-    std::vector<Surfel> points(expected);
-    if (expected == 0) return points;
+namespace {
+template <typename T>
+Result<std::vector<T>> readRecords(const std::string& path, uint64_t expected, const char* what) {
+    std::vector<T> records(expected);
+    if (expected == 0) return records;
     std::FILE* f = std::fopen(path.c_str(), "rb");
     if (!f) return Status::error(path + ": cannot open chunk file");
-    size_t got = std::fread(points.data(), sizeof(Surfel), points.size(), f);
+    size_t got = std::fread(records.data(), sizeof(T), records.size(), f);
     std::fclose(f);
-    if (got != expected) return Status::error(path + ": chunk file holds " + std::to_string(got) + " of " + std::to_string(expected) + " points");
-    return points;
+    if (got != expected)
+        return Status::error(path + ": chunk file holds " + std::to_string(got) + " of " + std::to_string(expected) + " " + what);
+    return records;
+}
+}  // namespace
+
+Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected) {
+    return readRecords<Surfel>(path, expected, "points");
+}
+
+Result<std::vector<uint32_t>> readChunkScalars(const std::string& path, uint64_t expected) {
+    return readRecords<uint32_t>(path, expected, "scalar values");
 }
 
 }  // namespace surfcast

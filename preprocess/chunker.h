@@ -30,6 +30,7 @@ struct Chunk {
     uint64_t points = 0;
     uint64_t haloPoints = 0;
     std::string file, haloFile;
+    std::string scalarFile;  // the points' stored scalar fields (ChunkWriter's scalarsPerPoint each), in file's order
 };
 
 class ChunkLayout {
@@ -56,26 +57,34 @@ private:
     std::vector<uint8_t> interior_;   // per cell: no other chunk's margin reaches it
 };
 
-// Writes points (and halos) to per-chunk files under `dir`.
+// Writes points (and halos) to per-chunk files under `dir`, and each own
+// point's quantized scalar fields (scalarsPerPoint of them) to the chunk's
+// scalar file (halo points need none: they are never stored).
 class ChunkWriter {
 public:
-    ChunkWriter(ChunkLayout& layout, std::string dir);
+    ChunkWriter(ChunkLayout& layout, std::string dir, size_t scalarsPerPoint = 0);
     ~ChunkWriter();
-    Status add(std::span<const Surfel> points);
+    // scalars: scalarsPerPoint per point.
+    Status add(std::span<const Surfel> points, std::span<const uint32_t> scalars = {});
     Status finish();
 
 private:
-    Status append(int chunk, bool halo, const Surfel& s);
+    Status append(int chunk, bool halo, const Surfel& s, const uint32_t* scalars);
     Status flush(size_t slot);
+    Status write(size_t file, const std::string& path, const void* data, size_t size, size_t count);
 
     ChunkLayout& layout_;
     std::string dir_;
+    size_t scalarsPerPoint_;
     std::vector<std::vector<Surfel>> buffers_;  // 2 per chunk: own, halo
-    std::vector<std::FILE*> files_;
+    std::vector<std::vector<uint32_t>> scalarBuffers_;  // per chunk: its own points' scalars
+    std::vector<std::FILE*> files_;             // 3 per chunk: own, halo, scalars
     std::vector<int> halo_;
 };
 
-// Reads a chunk file written by ChunkWriter.
+// Reads a chunk's point or halo file written by ChunkWriter.
 Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected);
+// Reads a chunk's scalar file: `expected` values.
+Result<std::vector<uint32_t>> readChunkScalars(const std::string& path, uint64_t expected);
 
 }  // namespace surfcast

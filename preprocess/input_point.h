@@ -5,7 +5,9 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "status.h"
 #include "vec3.h"
@@ -19,6 +21,23 @@ struct InputPoint {
     uint16_t intensity = 0;
     uint8_t classification = 0;  // ASPRS class (LAS 1.4: 0-255)
     uint8_t returns = 0;         // return number in bits 0-3, number of returns in bits 4-7
+};
+
+// A named per-point scalar beyond the fixed attributes of InputPoint: LAS's
+// gps_time, scan_angle, user_data, point_source_id, nir and extra-byte
+// dimensions, PLY and PCD properties no fixed attribute takes. Read only when
+// asked for (ScalarSelection); the build stores them with --attributes.
+struct ScalarField {
+    std::string name;
+    bool categorical = false;  // values are labels: resampled by majority, never averaged
+    double resolution = 0;     // step of the file's own encoding (1 for integers, the scale of scaled integers); 0: floating point
+};
+
+// Which scalar fields readers decode: every one, or those named.
+struct ScalarSelection {
+    bool all = false;
+    std::vector<std::string> names;
+    bool wants(const std::string& name) const;
 };
 
 struct InputDescription {
@@ -36,6 +55,7 @@ struct InputDescription {
     std::optional<Vec3d> scanOrigin; // where the scanner stood, when the format says
     bool scanOriginIsDefault = false; // the format's default (0,0,0), possibly meaningless
     bool airborne = false;           // aerial LiDAR: normals point up
+    std::vector<ScalarField> scalars; // the scalar fields this reader decodes (its ScalarSelection's), in value order
 };
 
 // A streaming reader: never holds the whole file. Points with NaN or infinite
@@ -47,9 +67,14 @@ public:
     // Fills up to `max` points; 0 means the end. Errors name the file and place.
     virtual Result<size_t> read(InputPoint* out, size_t max) = 0;
     uint64_t skipped() const { return skipped_; }
+    // The scalar fields' values of the points the last read() returned:
+    // description().scalars.size() per point, in that order; NaN where a
+    // point has no valid value.
+    std::span<const double> scalarValues() const { return scalarValues_; }
 
 protected:
     uint64_t skipped_ = 0;
+    std::vector<double> scalarValues_;
 };
 
 // A file name's extension in lower case, with its dot ("" when none).

@@ -48,10 +48,12 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
             if (!header) return header.status();
             if (plyHasFaces(*header)) return openMeshReader(path, options.mesh);
         }
-        return openPlyReader(path);
+        return openPlyReader(path, options.scalars);
     }
-    if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS") return openPcdReader(path);
-    if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF") return openLasReader(path, options.threads);
+    if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
+        return openPcdReader(path, options.scalars);
+    if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF")
+        return openLasReader(path, options.threads, options.scalars);
     if (isMeshExtension(path)) return openMeshReader(path, options.mesh);
     if (isTextExtension(ext)) return openTextReader(path, options.columns);
     return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
@@ -66,6 +68,10 @@ bool readableExtension(const std::string& path) {
 }
 
 }  // namespace
+
+bool ScalarSelection::wants(const std::string& name) const {
+    return all || std::find(names.begin(), names.end(), name) != names.end();
+}
 
 Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>& args) {
     namespace fs = std::filesystem;
@@ -109,14 +115,16 @@ namespace {
 // An input read whole into memory by the read-ahead thread.
 class BufferedReader final : public PointReader {
 public:
-    BufferedReader(InputDescription d, std::vector<InputPoint> points, uint64_t skipped)
-        : desc_(std::move(d)), points_(std::move(points)) {
+    BufferedReader(InputDescription d, std::vector<InputPoint> points, std::vector<double> scalars, uint64_t skipped)
+        : desc_(std::move(d)), points_(std::move(points)), scalars_(std::move(scalars)) {
         skipped_ = skipped;
     }
     const InputDescription& description() const override { return desc_; }
     Result<size_t> read(InputPoint* out, size_t max) override {
         size_t n = std::min(max, points_.size() - next_);
         std::copy_n(points_.begin() + long(next_), n, out);
+        const size_t fields = desc_.scalars.size();
+        scalarValues_.assign(scalars_.begin() + long(next_ * fields), scalars_.begin() + long((next_ + n) * fields));
         next_ += n;
         return n;
     }
@@ -124,6 +132,7 @@ public:
 private:
     InputDescription desc_;
     std::vector<InputPoint> points_;
+    std::vector<double> scalars_;  // desc_.scalars.size() per point
     size_t next_ = 0;
 };
 
@@ -176,13 +185,15 @@ private:
             return item;
         }
         const InputDescription& d = (*r)->description();
-        const uint64_t declared = d.declaredPoints * sizeof(InputPoint);
+        const size_t pointBytes = sizeof(InputPoint) + d.scalars.size() * sizeof(double);
+        const uint64_t declared = d.declaredPoints * pointBytes;
         if (d.declaredPoints == 0 || d.format == "mesh" || declared > kPrefetchBytes / 4) {
             item.reader = std::move(*r);
             item.bytes = kPrefetchBytes / 4;  // an open decoder and its buffers
             return item;
         }
         std::vector<InputPoint> points(d.declaredPoints);
+        std::vector<double> scalars;
         size_t n = 0;
         while (n < points.size()) {
             auto got = (*r)->read(points.data() + n, points.size() - n);
@@ -192,6 +203,7 @@ private:
             }
             if (*got == 0) break;
             n += *got;
+            scalars.insert(scalars.end(), (*r)->scalarValues().begin(), (*r)->scalarValues().end());
         }
         InputPoint extra;
         auto more = (*r)->read(&extra, 1);
@@ -207,8 +219,8 @@ private:
             return item;
         }
         points.resize(n);
-        item.bytes = n * sizeof(InputPoint);
-        item.reader = std::make_unique<BufferedReader>(d, std::move(points), (*r)->skipped());
+        item.bytes = n * pointBytes;
+        item.reader = std::make_unique<BufferedReader>(d, std::move(points), std::move(scalars), (*r)->skipped());
         return item;
     }
 
@@ -270,6 +282,13 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
         SourceStats s;
         s.description = reader.description();
         AttributeStats& a = stats.attributes;
+        // This input's scalar fields among the set's (indices), by name.
+        std::vector<size_t> fields;
+        for (const ScalarField& f : s.description.scalars) {
+            auto it = std::find_if(stats.scalars.begin(), stats.scalars.end(), [&](const ScalarStats& t) { return t.field.name == f.name; });
+            fields.push_back(size_t(it - stats.scalars.begin()));
+            if (it == stats.scalars.end()) stats.scalars.push_back({f});
+        }
         while (true) {
             auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
@@ -286,6 +305,14 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
                 if (s.description.hasIntensity) a.intensityHistogram[p.intensity]++;
                 if (s.description.hasClassification) a.classCounts[p.classification]++;
                 if (s.description.hasReturns) a.returnsHistogram[p.returns]++;
+                for (size_t f = 0; f < fields.size(); ++f) {
+                    const double v = reader.scalarValues()[i * fields.size() + f];
+                    if (std::isnan(v)) continue;
+                    ScalarStats& t = stats.scalars[fields[f]];
+                    t.min = std::min(t.min, v);
+                    t.max = std::max(t.max, v);
+                    t.points++;
+                }
             }
             if (s.description.hasIntensity) a.intensityPoints += *n;
             if (s.description.hasClassification) a.classifiedPoints += *n;
@@ -317,13 +344,21 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
 }
 
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
-                    std::span<const uint16_t> sourceIds, const std::function<Status(std::span<Surfel>)>& consume) {
+                    std::span<const uint16_t> sourceIds, std::span<const ScalarQuantization> stored,
+                    const BatchConsumer& consume) {
     std::vector<InputPoint> batch(kBatchPoints);
     std::vector<Surfel> surfels(kBatchPoints);
+    std::vector<uint32_t> scalars;
     return forEachInput(options, [&](size_t r, PointReader& reader) -> Status {
         if (r >= stats.sources.size() || r >= sourceIds.size())
             return Status::error("the inputs changed while being read: more inputs than the first pass saw");
         const SourceStats& src = stats.sources[r];
+        // Where each stored field is among this input's, or -1.
+        const std::vector<ScalarField>& own = reader.description().scalars;
+        std::vector<int> from(stored.size(), -1);
+        for (size_t f = 0; f < stored.size(); ++f)
+            for (size_t j = 0; j < own.size(); ++j)
+                if (own[j].name == stored[f].name) from[f] = int(j);
         while (true) {
             auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
@@ -340,7 +375,17 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 s.classification = batch[i].classification;
                 s.returns = batch[i].returns;
             }
-            SC_TRY(consume(std::span<Surfel>(surfels.data(), *n)));
+            scalars.assign(*n * stored.size(), 0);
+            for (size_t f = 0; f < stored.size(); ++f) {
+                if (from[f] < 0) continue;
+                const ScalarQuantization& q = stored[f];
+                const double maxQ = std::ldexp(1.0, q.bits) - 1;
+                for (size_t i = 0; i < *n; ++i) {
+                    const double v = reader.scalarValues()[i * own.size() + size_t(from[f])];
+                    if (!std::isnan(v)) scalars[i * stored.size() + f] = uint32_t(std::clamp(std::round((v - q.offset) / q.step), 0.0, maxQ));
+                }
+            }
+            SC_TRY(consume(std::span<Surfel>(surfels.data(), *n), scalars));
         }
         return {};
     });

@@ -2,6 +2,7 @@
 // what each input's colours really hold.
 #pragma once
 
+#include <cmath>
 #include <functional>
 #include <memory>
 #include <span>
@@ -26,6 +27,7 @@ struct InputOptions {
     MeshSampling mesh;
     bool verticesOnly = false;   // treat a mesh file as its vertices
     int threads = 1;             // decoder threads (LAZ chunks)
+    ScalarSelection scalars;     // scalar fields readers decode (none by default)
 };
 
 // The input files that `args` name, in order: a file as itself, a folder as
@@ -61,6 +63,24 @@ struct AttributeStats {
     std::vector<uint64_t> returnsHistogram = std::vector<uint64_t>(256);     // points per packed returns byte
 };
 
+// What the first pass learns of one scalar field (input_point.h), over the
+// inputs that carry it (matched by name; the first input's kind and resolution hold).
+struct ScalarStats {
+    ScalarField field;
+    uint64_t points = 0;  // with a valid (non-NaN) value
+    double min = HUGE_VAL, max = -HUGE_VAL;
+};
+
+// How a stored scalar field maps to the integers blocks carry:
+// q = round((v - offset) / step), clamped to [0, 2^bits - 1]. A point without
+// a valid value (NaN, or an input without the field) gets 0.
+struct ScalarQuantization {
+    std::string name;
+    bool categorical = false;
+    double offset = 0, step = 1;
+    int bits = 1;
+};
+
 struct InputStats {
     std::vector<SourceStats> sources;
     uint64_t points = 0, skipped = 0;
@@ -68,14 +88,18 @@ struct InputStats {
     bool anyColors = false;
     int colorBits = 0;          // 0 (no colour), 8 or 16: what the tile set stores
     AttributeStats attributes;
+    std::vector<ScalarStats> scalars;  // in the order the inputs first offer them
 };
 
 // Pass 1. `progress` receives point counts as they are read.
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
-// 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input]), in batches.
+// 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input]), in
+// batches, with the `stored` scalar fields quantized: stored.size() per point.
+using BatchConsumer = std::function<Status(std::span<Surfel>, std::span<const uint32_t> scalars)>;
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
-                    std::span<const uint16_t> sourceIds, const std::function<Status(std::span<Surfel>)>& consume);
+                    std::span<const uint16_t> sourceIds, std::span<const ScalarQuantization> stored,
+                    const BatchConsumer& consume);
 
 }  // namespace surfcast

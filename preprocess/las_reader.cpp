@@ -6,7 +6,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <optional>
 #include <vector>
 
 #include "byte_io.h"
@@ -26,12 +28,46 @@ constexpr size_t kLazChunksPerThread = 4;     // per read: keeps every thread bu
 constexpr size_t kLazBatchBytes = 32 << 20;   // ...within this much decompressed data
 constexpr char kLaszipUser[] = "laszip encoded";
 constexpr uint16_t kLaszipRecord = 22204;
+constexpr char kSpecUser[] = "LASF_Spec";
+constexpr uint16_t kExtraBytesRecord = 4;
+constexpr size_t kExtraBytesDescriptor = 192;
+// GPS time is a double with no step of its own: it is stored to 2^-20 s
+// (0.95 µs), the pulse spacing of a 1 MHz scanner.
+constexpr double kGpsTimeResolution = 0x1p-20;  // bytes per dimension in the Extra Bytes VLR (LAS 1.4 R15, table 24)
 
 // Bytes each point format needs before any extra bytes, and where RGB starts
 // (0 when the format has no colour).
 struct FormatLayout { size_t minLength; size_t rgbOffset; };
 constexpr FormatLayout kFormats[11] = {
     {20, 0}, {28, 0}, {26, 20}, {34, 28}, {57, 0}, {63, 28}, {30, 0}, {36, 30}, {38, 30}, {59, 0}, {67, 30}};
+
+// A per-point scalar field's place in the record and its decoding:
+// value = raw · scale + offset, NaN where raw equals the no-data value.
+struct ScalarLayout {
+    enum Type { U8, I8, U16, I16, U32, I32, U64, I64, F32, F64 } type = U8;
+    size_t offset = 0;
+    double scale = 1, add = 0;
+    bool hasNoData = false;
+    double noData = 0;
+};
+
+constexpr size_t kTypeSize[] = {1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
+
+double rawValue(const uint8_t* p, ScalarLayout::Type t) {
+    switch (t) {
+    case ScalarLayout::U8: return p[0];
+    case ScalarLayout::I8: return int8_t(p[0]);
+    case ScalarLayout::U16: return le::get<uint16_t>(p);
+    case ScalarLayout::I16: return le::get<int16_t>(p);
+    case ScalarLayout::U32: return le::get<uint32_t>(p);
+    case ScalarLayout::I32: return le::get<int32_t>(p);
+    case ScalarLayout::U64: return double(le::get<uint64_t>(p));
+    case ScalarLayout::I64: return double(le::get<int64_t>(p));
+    case ScalarLayout::F32: return le::get<float>(p);
+    case ScalarLayout::F64: return le::get<double>(p);
+    }
+    return 0;
+}
 
 // Where point records come from: the file itself, or the LAZ decompressor.
 class RecordSource {
@@ -89,9 +125,9 @@ private:
 class LasReader final : public PointReader {
 public:
     LasReader(std::unique_ptr<RecordSource> source, InputDescription desc, uint64_t count, size_t recordLength,
-              int format, const double scale[3], const double offset[3])
+              int format, const double scale[3], const double offset[3], std::vector<ScalarLayout> scalars)
         : source_(std::move(source)), desc_(std::move(desc)), count_(count), recordLength_(recordLength),
-          rgbOffset_(kFormats[format].rgbOffset), extended_(format >= 6) {
+          rgbOffset_(kFormats[format].rgbOffset), extended_(format >= 6), scalars_(std::move(scalars)) {
         for (int i = 0; i < 3; ++i) { scale_[i] = scale[i]; offset_[i] = offset[i]; }
     }
 
@@ -99,6 +135,7 @@ public:
 
     Result<size_t> read(InputPoint* out, size_t max) override {
         size_t n = 0;
+        scalarValues_.resize(max * scalars_.size());
         while (n < max) {
             if (next_ == buffered_) {
                 if (index_ == count_) break;
@@ -127,8 +164,18 @@ public:
             }
             if (rgbOffset_)
                 for (int c = 0; c < 3; ++c) p.color[c] = le::get<uint16_t>(r + rgbOffset_ + 2 * c);
-            if (finite(p.position)) ++n; else ++skipped_;
+            if (!finite(p.position)) {
+                ++skipped_;
+                continue;
+            }
+            double* values = scalarValues_.data() + n * scalars_.size();
+            for (const ScalarLayout& f : scalars_) {
+                const double raw = rawValue(r + f.offset, f.type);
+                *values++ = f.hasNoData && raw == f.noData ? NAN : raw * f.scale + f.add;
+            }
+            ++n;
         }
+        scalarValues_.resize(n * scalars_.size());
         return n;
     }
 
@@ -139,13 +186,20 @@ private:
     size_t recordLength_, rgbOffset_;
     bool extended_;  // point formats 6-10
     double scale_[3], offset_[3];
+    std::vector<ScalarLayout> scalars_;  // per desc_.scalars
     uint64_t index_ = 0;           // records fetched from the source
     size_t buffered_ = 0, next_ = 0;
     std::vector<uint8_t> buffer_;
 };
 
-// The LASzip VLR's payload, or an error.
-Result<std::vector<uint8_t>> findLaszipVlr(ByteStream& in, size_t headerSize, uint32_t vlrCount, uint32_t dataOffset) {
+// The payloads of the VLRs the reader uses (each absent when the file has none).
+struct Vlrs {
+    std::optional<std::vector<uint8_t>> laszip, extraBytes;
+    int extraBytesIndex = -1;
+};
+
+Result<Vlrs> readVlrs(ByteStream& in, size_t headerSize, uint32_t vlrCount, uint32_t dataOffset) {
+    Vlrs out;
     if (!in.seek(headerSize)) return Status::error(in.path() + ": cannot seek to the VLRs");
     for (uint32_t i = 0; i < vlrCount; ++i) {
         uint64_t at = in.offset();
@@ -153,21 +207,96 @@ Result<std::vector<uint8_t>> findLaszipVlr(ByteStream& in, size_t headerSize, ui
         if (at + kVlrHeaderSize > dataOffset || !in.readBytes(h, kVlrHeaderSize))
             return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR " + std::to_string(i) + " runs past the point data");
         uint16_t record = le::get<uint16_t>(h + 18), length = le::get<uint16_t>(h + 20);
-        bool laszip = std::strncmp(reinterpret_cast<const char*>(h + 2), kLaszipUser, 16) == 0 && record == kLaszipRecord;
-        if (laszip) {
-            std::vector<uint8_t> payload(length);
+        auto user = [&](const char* name) { return std::strncmp(reinterpret_cast<const char*>(h + 2), name, 16) == 0; };
+        std::optional<std::vector<uint8_t>>* keep = user(kLaszipUser) && record == kLaszipRecord       ? &out.laszip
+                                                    : user(kSpecUser) && record == kExtraBytesRecord ? &out.extraBytes
+                                                                                                     : nullptr;
+        if (keep) {
+            std::vector<uint8_t> payload(length);  // at most 64 KiB: the field is 16-bit
             if (!in.readBytes(payload.data(), length))
-                return Status::error(in.path() + ": byte " + std::to_string(at) + ": LASzip VLR truncated");
-            return payload;
+                return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR " + std::to_string(i) + " truncated");
+            *keep = std::move(payload);
+            if (keep == &out.extraBytes) out.extraBytesIndex = int(i);
+        } else if (!in.skip(length)) {
+            return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR truncated");
         }
-        if (!in.skip(length)) return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR truncated");
     }
-    return Status::error(in.path() + ": compressed point format but no LASzip VLR (user 'laszip encoded', record 22204)");
+    return out;
+}
+
+// The scalar fields of a record: the standard ones of its format, then the
+// Extra Bytes VLR's dimensions, which follow the format's own fields. Errors
+// name the VLR; deprecated array and undocumented dimensions are skipped (their
+// bytes still counted).
+Status scalarFields(const std::string& path, int format, size_t recordLength, const Vlrs& vlrs,
+                    std::vector<std::pair<ScalarField, ScalarLayout>>* out) {
+    auto add = [&](const char* name, bool categorical, double resolution, ScalarLayout::Type type, size_t offset, double scale) {
+        ScalarLayout l;
+        l.type = type;
+        l.offset = offset;
+        l.scale = scale;
+        out->push_back({{name, categorical, resolution}, l});
+    };
+    if (format < 6) {
+        add("scan_angle", false, 1, ScalarLayout::I8, 16, 1);  // the rank, whole degrees
+        add("user_data", true, 1, ScalarLayout::U8, 17, 1);
+        add("point_source_id", true, 1, ScalarLayout::U16, 18, 1);
+        if (format == 1 || format >= 3) add("gps_time", false, kGpsTimeResolution, ScalarLayout::F64, 20, 1);
+    } else {
+        add("scan_angle", false, 0.006, ScalarLayout::I16, 18, 0.006);  // 0.006 degree units
+        add("user_data", true, 1, ScalarLayout::U8, 17, 1);
+        add("point_source_id", true, 1, ScalarLayout::U16, 20, 1);
+        add("gps_time", false, kGpsTimeResolution, ScalarLayout::F64, 22, 1);
+        if (format == 8 || format == 10) add("nir", false, 1, ScalarLayout::U16, 36, 1);
+    }
+    if (!vlrs.extraBytes) return {};
+    const std::vector<uint8_t>& v = *vlrs.extraBytes;
+    const std::string where = path + ": VLR " + std::to_string(vlrs.extraBytesIndex) + " (Extra Bytes, LASF_Spec 4)";
+    if (v.empty() || v.size() % kExtraBytesDescriptor != 0)
+        return Status::error(where + ": " + std::to_string(v.size()) + " bytes, not a whole number of 192-byte descriptors");
+    const size_t available = recordLength - kFormats[format].minLength;
+    size_t offset = kFormats[format].minLength;
+    for (size_t d = 0; d < v.size() / kExtraBytesDescriptor; ++d) {
+        const uint8_t* e = v.data() + d * kExtraBytesDescriptor;
+        const int type = e[2], options = e[3];
+        std::string name(reinterpret_cast<const char*>(e + 4), strnlen(reinterpret_cast<const char*>(e + 4), 32));
+        const std::string dim = where + ", dimension " + std::to_string(d) + " '" + name + "'";
+        if (type > 30) return Status::error(dim + ": unknown data type " + std::to_string(type));
+        // Type 0: `options` undocumented bytes; 1-10: one scalar; 11-30: deprecated 2- and 3-element arrays.
+        const size_t elements = type == 0 ? 0 : size_t((type - 1) / 10 + 1);
+        const size_t size = type == 0 ? size_t(options) : elements * kTypeSize[(type - 1) % 10];
+        if (size == 0) return Status::error(dim + ": zero bytes");
+        if (offset + size > recordLength)
+            return Status::error(dim + ": the dimensions need more than the " + std::to_string(available) +
+                                 " extra bytes each record holds");
+        if (type >= 1 && type <= 10 && !name.empty()) {
+            const bool duplicate = std::any_of(out->begin(), out->end(), [&](const auto& f) { return f.first.name == name; });
+            if (duplicate) {
+                std::fprintf(stderr, "warning: %s: a dimension of that name exists; skipped\n", dim.c_str());
+            } else {
+                ScalarLayout l;
+                l.type = ScalarLayout::Type(type - 1);
+                l.offset = offset;
+                if (options & 8) l.scale = le::get<double>(e + 112);
+                if (options & 16) l.add = le::get<double>(e + 136);
+                if (!std::isfinite(l.scale) || l.scale == 0 || !std::isfinite(l.add))
+                    return Status::error(dim + ": scale or offset is not a finite non-zero number");
+                if (options & 1) l.noData = l.type >= ScalarLayout::F32 ? le::get<double>(e + 40) : rawValue(e + 40, l.type);
+                l.hasNoData = (options & 1) != 0;
+                const bool integral = l.type < ScalarLayout::F32;
+                out->push_back({{name, false, integral ? std::fabs(l.scale) : 0}, l});
+            }
+        } else if (type != 0) {
+            std::fprintf(stderr, "warning: %s: deprecated array type %d; skipped\n", dim.c_str(), type);
+        }
+        offset += size;
+    }
+    return {};
 }
 
 }  // namespace
 
-Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads) {
+Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads, const ScalarSelection& scalars) {
     auto in = ByteStream::open(path);
     if (!in) return in.status();
     uint8_t h[kLas14HeaderSize] = {};
@@ -215,12 +344,24 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.precision = std::min({scale[0], scale[1], scale[2]});
     desc.airborne = true;
 
+    auto vlrs = readVlrs(*in, headerSize, vlrCount, dataOffset);
+    if (!vlrs) return vlrs.status();
+    std::vector<std::pair<ScalarField, ScalarLayout>> fields;
+    SC_TRY(scalarFields(path, format, recordLength, *vlrs, &fields));
+    std::vector<ScalarLayout> layouts;
+    for (auto& [field, layout] : fields)
+        if (scalars.wants(field.name)) {
+            desc.scalars.push_back(field);
+            layouts.push_back(layout);
+        }
+
     std::unique_ptr<RecordSource> source;
     if (compressed) {
-        auto vlr = findLaszipVlr(*in, headerSize, vlrCount, dataOffset);
-        if (!vlr) return vlr.status();
+        if (!vlrs->laszip)
+            return Status::error(path + ": compressed point format but no LASzip VLR (user 'laszip encoded', record 22204)");
+        const std::vector<uint8_t>& vlr = *vlrs->laszip;
         char err[512] = {};
-        ScLazReader* laz = sc_laz_open(path.c_str(), dataOffset, vlr->data(), vlr->size(), count, threads, err, sizeof err);
+        ScLazReader* laz = sc_laz_open(path.c_str(), dataOffset, vlr.data(), vlr.size(), count, threads, err, sizeof err);
         if (!laz) return Status::error(path + ": LAZ: " + err);
         if (sc_laz_point_size(laz) != recordLength) {
             sc_laz_close(laz);
@@ -237,7 +378,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
         source = std::make_unique<RawRecords>(std::move(*in), recordLength, count);
     }
     return std::unique_ptr<PointReader>(
-        new LasReader(std::move(source), desc, count, recordLength, format, scale, offset));
+        new LasReader(std::move(source), desc, count, recordLength, format, scale, offset, std::move(layouts)));
 }
 
 }  // namespace surfcast

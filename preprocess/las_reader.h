@@ -11,6 +11,12 @@
 
 namespace surfcast {
 
-Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads = 1);
+// Scalar fields (input_point.h) a LAS file offers: scan_angle (degrees),
+// user_data, point_source_id, gps_time (formats 1 and 3-10), nir (8 and 10)
+// and each documented extra-byte dimension of the Extra Bytes VLR (user
+// "LASF_Spec", record 4) under its own name, scaled and offset as the VLR
+// says; the reader decodes those `scalars` selects.
+Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads = 1,
+                                                   const ScalarSelection& scalars = {});
 
 }  // namespace surfcast

@@ -80,6 +80,10 @@ void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
 
 // Bits of the stored intensity (chooseAttributes).
 constexpr int kIntensityBits = 12;
+// Most bits of a stored scalar field (Draco's integer attributes are 32-bit).
+constexpr int kMaxScalarBits = 32;
+// Bits of a stored floating-point scalar field (ScalarField::resolution 0).
+constexpr int kFloatScalarBits = 24;
 
 enum Step { kStepNormals, kStepOctree, kStepAttributes, kStepEncode, kStepCount };
 const char* const kStepNames[kStepCount] = {"normals", "octree", "neighbours+h+weights", "encode"};
@@ -97,6 +101,10 @@ public:
     explicit Builder(const BuildOptions& o) : opt_(o), progress_(o.progress) {
         threads_ = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
         opt_.inputs.threads = threads_;
+        // Scalar fields are decoded only when asked for by name.
+        if (opt_.attributes)
+            for (const std::string& name : *opt_.attributes)
+                if (lidarIndex(name) < 0 && !opt_.inputs.scalars.wants(name)) opt_.inputs.scalars.names.push_back(name);
     }
 
     Result<BuildSummary> run();
@@ -111,9 +119,15 @@ private:
     Status buildChunks();
     Status buildChunk(const Chunk& chunk, int innerThreads);
     BuiltNode* buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
-                            std::vector<std::unique_ptr<BuiltNode>>& nodes);
+                            std::vector<std::unique_ptr<BuiltNode>>& nodes, ScalarTable& scalars);
     Status buildUpperLevels();
-    Status emit(BuiltNode& node);
+    Status emit(BuiltNode& node, const ScalarTable& scalars);
+    uint64_t bytesPerChunkPoint() const { return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size(); }
+    ScalarTable emptyTable() const {
+        ScalarTable t;
+        for (const ScalarQuantization& q : stored_) t.categorical.push_back(q.categorical);
+        return t;
+    }
     int positionBits(const BuiltNode& node) const;
     double edge(int level) const { return std::ldexp(rootEdge_, -level); }
     Vec3d nodeMinRel(const NodeKey& k) const {
@@ -138,6 +152,7 @@ private:
     BuildOptions opt_;
     int threads_ = 1;
     bool store_[kLidarCount] = {};  // per kLidarAttributes: stored
+    std::vector<ScalarQuantization> stored_;  // scalar fields stored, in block order
     int intensityOffset_ = 0, intensityStep_ = 1;  // stored intensity = (value - offset) / step
     Progress progress_;
     InputStats stats_;
@@ -151,6 +166,7 @@ private:
     std::unique_ptr<TilesetWriter> writer_;
     std::mutex mutex_;  // guards retained_ and summary_ counters
     std::map<NodeKey, std::unique_ptr<BuiltNode>> retained_;  // chunk roots, for the levels above
+    ScalarTable upperScalars_;  // rows of retained_ and the levels above them
     BuildSummary summary_;
     std::atomic<uint64_t> stepNs_[kStepCount] = {};
 };
@@ -166,6 +182,7 @@ Status Builder::scan() {
     chooseRootBox();
     SC_TRY(chooseOrientationRules());
     SC_TRY(chooseAttributes());
+    upperScalars_ = emptyTable();
     summary_.colorBits = stats_.colorBits;
     return {};
 }
@@ -216,8 +233,13 @@ Status Builder::chooseAttributes() {
     if (opt_.attributes) {
         for (const std::string& name : *opt_.attributes) {
             int i = lidarIndex(name);
-            if (i < 0) return Status::error("--attributes: unknown attribute '" + name + "'");
-            if (!carried[i]) std::fprintf(stderr, "warning: --attributes %s: no input carries it; not stored\n", name.c_str());
+            if (i >= 0 && !carried[i]) std::fprintf(stderr, "warning: --attributes %s: no input carries it; not stored\n", name.c_str());
+            auto isField = [&](const ScalarStats& f) { return f.field.name == name; };
+            if (i < 0 && std::none_of(stats_.scalars.begin(), stats_.scalars.end(), isField))
+                return Status::error("--attributes: no input has an attribute '" + name +
+                                     "' (LAS/LAZ: intensity, classification, return_number, number_of_returns, scan_angle, "
+                                     "user_data, point_source_id, gps_time, nir and the Extra Bytes dimensions; PLY and PCD: "
+                                     "their property names)");
         }
         for (int i = 0; i < kLidarCount; ++i)
             store_[i] = store_[i] && std::find(opt_.attributes->begin(), opt_.attributes->end(), kLidarAttributes[i]) !=
@@ -227,6 +249,24 @@ Status Builder::chooseAttributes() {
     store_[kLidarReturnNumber] = store_[kLidarNumberOfReturns] = store_[kLidarReturnNumber] || store_[kLidarNumberOfReturns];
     for (int i = 0; i < kLidarCount; ++i)
         if (store_[i]) summary_.attributes.push_back(kLidarAttributes[i]);
+    // Scalar fields (selected by name or with "all", so every one found is
+    // stored): exact at the file's own resolution where it has one and the
+    // range fits 32 bits; floating ones in the power-of-two step that splits
+    // the set's range into at most 2^24 (float32's precision).
+    for (const ScalarStats& f : stats_.scalars) {
+        ScalarQuantization q;
+        q.name = f.field.name;
+        q.categorical = f.field.categorical;
+        const double lo = f.points ? f.min : 0, range = f.points ? f.max - f.min : 0;
+        const double maxSteps = std::ldexp(1.0, kMaxScalarBits) - 1;
+        const double floatSteps = std::ldexp(1.0, kFloatScalarBits) - 1;
+        q.offset = lo;
+        q.step = f.field.resolution > 0 ? f.field.resolution : range > 0 ? std::exp2(std::ceil(std::log2(range / floatSteps))) : 1;
+        while (range / q.step > maxSteps) q.step *= 2;
+        q.bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
+        stored_.push_back(q);
+        summary_.attributes.push_back(q.name);
+    }
     // Intensity as (value - min) / step with the smallest power-of-two step
     // that fits the set's range in kIntensityBits: exact for ranges up to 4096
     // values (Megaplot, autzen, lone-star); a 16-bit range keeps 1/4096 of it,
@@ -306,18 +346,18 @@ Status Builder::chooseOrientationRules() {
 Status Builder::planAndDistribute() {
     // The chunk size depends on the budget alone, never on the thread count,
     // so the same inputs and options give the same chunks and the same bytes.
-    const uint64_t minBytes = kBaselineBytes + kChunksAtOnce * kBytesPerChunkPoint * opt_.capacity * kMinChunkLeaves;
+    const uint64_t minBytes = kBaselineBytes + kChunksAtOnce * bytesPerChunkPoint() * opt_.capacity * kMinChunkLeaves;
     if (opt_.memoryBytes < minBytes)
         return Status::error("--memory " + std::to_string(opt_.memoryBytes >> 20) + " MiB is too small: at least " +
                              std::to_string(minBytes >> 20) + " MiB are needed with capacity " + std::to_string(opt_.capacity));
-    uint64_t maxChunkPoints = (opt_.memoryBytes - kBaselineBytes) / (kChunksAtOnce * kBytesPerChunkPoint);
+    uint64_t maxChunkPoints = (opt_.memoryBytes - kBaselineBytes) / (kChunksAtOnce * bytesPerChunkPoint());
 
     if (stats_.points <= maxChunkPoints) {
         layout_ = ChunkLayout::single(rootEdge_, opt_.grid);
     } else {
         progress_.begin("count", stats_.points);
         std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
-        SC_TRY(forEachBatch(opt_.inputs, stats_, rootMin_, sourceIds_, [&](std::span<Surfel> batch) {
+        SC_TRY(forEachBatch(opt_.inputs, stats_, rootMin_, sourceIds_, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, rootEdge_)]++;
             progress_.advance(batch.size());
             return Status{};
@@ -327,12 +367,12 @@ Status Builder::planAndDistribute() {
     }
 
     progress_.begin("distribute", stats_.points);
-    ChunkWriter chunkWriter(layout_, chunkDir_);
+    ChunkWriter chunkWriter(layout_, chunkDir_, stored_.size());
     uint64_t seen = 0;
-    SC_TRY(forEachBatch(opt_.inputs, stats_, rootMin_, sourceIds_, [&](std::span<Surfel> batch) {
+    SC_TRY(forEachBatch(opt_.inputs, stats_, rootMin_, sourceIds_, stored_, [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
         seen += batch.size();
         progress_.advance(batch.size());
-        return chunkWriter.add(batch);
+        return chunkWriter.add(batch, scalars);
     }));
     SC_TRY(chunkWriter.finish());
     phaseDone("distribute");
@@ -344,7 +384,7 @@ Status Builder::planAndDistribute() {
 }
 
 BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
-                                 std::vector<std::unique_ptr<BuiltNode>>& nodes) {
+                                 std::vector<std::unique_ptr<BuiltNode>>& nodes, ScalarTable& scalars) {
     auto node = std::make_unique<BuiltNode>();
     node->key = key;
     auto first = pts.begin() + long(b), last = pts.begin() + long(e);
@@ -355,11 +395,17 @@ BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, c
         node->surfels.assign(first, last);
         auto& v = node->surfels;
         // Of exact duplicates, the one kept has the lowest class, then intensity,
-        // returns and colour (docs/FORMAT.md): the same whatever the input order.
-        std::sort(v.begin(), v.end(), [](const Surfel& a, const Surfel& c) {
-            return std::tie(a.position.x, a.position.y, a.position.z, a.classification, a.intensity, a.returns, a.color[0],
-                            a.color[1], a.color[2]) < std::tie(c.position.x, c.position.y, c.position.z, c.classification,
-                                                               c.intensity, c.returns, c.color[0], c.color[1], c.color[2]);
+        // returns, colour and scalar fields in order (docs/FORMAT.md): the same
+        // whatever the input order.
+        const size_t fields = scalars.fields();
+        std::sort(v.begin(), v.end(), [&](const Surfel& a, const Surfel& c) {
+            const auto ka = std::tie(a.position.x, a.position.y, a.position.z, a.classification, a.intensity, a.returns,
+                                     a.color[0], a.color[1], a.color[2]);
+            const auto kc = std::tie(c.position.x, c.position.y, c.position.z, c.classification, c.intensity, c.returns,
+                                     c.color[0], c.color[1], c.color[2]);
+            if (ka != kc || fields == 0) return ka < kc;
+            return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
+                                                scalars.row(c.row) + fields);
         });
         size_t out = 0;
         for (size_t i = 0; i < v.size(); ++i) {
@@ -385,11 +431,11 @@ BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, c
         std::vector<Surfel> gathered;
         for (int c = 0; c < 8; ++c) {
             if (bounds[c] == bounds[c + 1]) continue;
-            BuiltNode* child = buildSubtree(pts, bounds[c], bounds[c + 1], key.child(c), nodes);
+            BuiltNode* child = buildSubtree(pts, bounds[c], bounds[c + 1], key.child(c), nodes, scalars);
             node->childMask |= uint8_t(1u << c);
             gathered.insert(gathered.end(), child->surfels.begin(), child->surfels.end());
         }
-        node->surfels = resample(gathered, nodeGrid(key));
+        node->surfels = resample(gathered, nodeGrid(key), true, &scalars);
     }
     nodes.push_back(std::move(node));
     return nodes.back().get();
@@ -400,9 +446,17 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
     if (!pts) return pts.status();
     auto halo = readChunkFile(chunk.haloFile, chunk.haloPoints);
     if (!halo) return halo.status();
+    ScalarTable scalars = emptyTable();
+    if (!stored_.empty()) {
+        auto values = readChunkScalars(chunk.scalarFile, chunk.points * stored_.size());
+        if (!values) return values.status();
+        scalars.values = std::move(*values);
+    }
+    for (size_t i = 0; i < pts->size(); ++i) (*pts)[i].row = uint32_t(i);
     std::error_code ec;
     fs::remove(chunk.file, ec);
     fs::remove(chunk.haloFile, ec);
+    fs::remove(chunk.scalarFile, ec);
     if (pts->empty()) return {};
 
     const double margin = layout_.margin(int(&chunk - layout_.chunks().data()));
@@ -419,7 +473,7 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
     BuiltNode* root = nullptr;
     {
         ScopedTimer t(stepNs_[kStepOctree]);
-        root = buildSubtree(*pts, 0, pts->size(), chunk.key, nodes);
+        root = buildSubtree(*pts, 0, pts->size(), chunk.key, nodes, scalars);
         std::vector<Surfel>().swap(*pts);
     }
 
@@ -447,12 +501,15 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
         computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
     }
     for (auto& n : nodes)
-        if (n.get() != root) SC_TRY(emit(*n));
+        if (n.get() != root) SC_TRY(emit(*n, scalars));
     bool isRoot = chunk.key == NodeKey{};
-    if (isRoot) return emit(*root);
-    // The chunk root is emitted now and kept for the levels above.
-    SC_TRY(emit(*root));
+    if (isRoot) return emit(*root, scalars);
+    // The chunk root is emitted now and kept for the levels above, its scalar
+    // rows moved to their table.
+    SC_TRY(emit(*root, scalars));
     std::lock_guard lock(mutex_);
+    if (!stored_.empty())
+        for (Surfel& s : root->surfels) s.row = upperScalars_.append(scalars.row(s.row));
     for (auto& n : nodes)
         if (n.get() == root) retained_[root->key] = std::move(n);
     return {};
@@ -528,7 +585,7 @@ Status Builder::buildUpperLevels() {
         below.clear();
         std::vector<LevelNode*> members;
         for (auto& [key, node] : current) {
-            node->surfels = resample(gathered[key], nodeGrid(key));
+            node->surfels = resample(gathered[key], nodeGrid(key), true, &upperScalars_);
             node->level.surfels = node->surfels;
             members.push_back(&node->level);
         }
@@ -537,7 +594,7 @@ Status Builder::buildUpperLevels() {
         for (auto& [key, node] : retained_)
             if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
         computeLevelAttributes(members, neighbours, levelParams(level, threads_));
-        for (auto& [key, node] : current) SC_TRY(emit(*node));
+        for (auto& [key, node] : current) SC_TRY(emit(*node, upperScalars_));
         below = std::move(current);
         progress_.advance(1);
     }
@@ -554,7 +611,7 @@ int Builder::positionBits(const BuiltNode& node) const {
     return std::clamp(bits, 1, kMaxPositionBits);
 }
 
-Status Builder::emit(BuiltNode& node) {
+Status Builder::emit(BuiltNode& node, const ScalarTable& scalars) {
     const size_t n = node.surfels.size();
     const int bits = positionBits(node);
     const double maxQ = double((uint64_t(1) << bits) - 1);
@@ -568,6 +625,12 @@ Status Builder::emit(BuiltNode& node) {
     if (store_[kLidarClassification]) block.classification.resize(n);
     if (store_[kLidarReturnNumber]) block.returnNumber.resize(n);
     if (store_[kLidarNumberOfReturns]) block.numberOfReturns.resize(n);
+    for (size_t f = 0; f < stored_.size(); ++f) {
+        ScalarAttribute& a = block.scalars.emplace_back();
+        a.bits = stored_[f].bits;
+        a.values.resize(n);
+        for (size_t i = 0; i < n; ++i) a.values[i] = scalars.row(node.surfels[i].row)[f];
+    }
     for (size_t i = 0; i < n; ++i) {
         const Surfel& s = node.surfels[i];
         for (int a = 0; a < 3; ++a) {
@@ -664,6 +727,8 @@ Result<BuildSummary> Builder::run() {
             info.attributes.push_back({kLidarAttributes[i], types[i], 1, 0, i == kLidarIntensity ? "continuous" : "categorical",
                                        i == kLidarIntensity ? double(intensityStep_) : 1.0,
                                        i == kLidarIntensity ? double(intensityOffset_) : 0.0});
+    for (const ScalarQuantization& q : stored_)
+        info.attributes.push_back({q.name, scalarType(q.bits), 1, 0, q.categorical ? "categorical" : "continuous", q.step, q.offset});
     info.statistics = statistics();
     info.normalSource = summary_.normalSource;
     info.weights = opt_.weights ? "analytic" : "none";

@@ -32,9 +32,11 @@ struct BuildOptions {
     bool weights = false;               // store analytic per-surfel normalization weights (ewa-surfel reads them)
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
     int normalBits = 8;                 // Draco quantization bits per normal component (bench/BENCHMARKS.md, "Bytes")
-    // LiDAR attributes to store (names from kLidarAttributes), each where some
-    // input carries it. Unset: all of them, each only where it varies across
-    // the set ("model no more than a scene needs").
+    // Attributes to store, each where some input carries it: names from
+    // kLidarAttributes, and scalar fields (input_point.h) by name, which
+    // inputs.scalars must select too. Unset: all of kLidarAttributes, each only
+    // where it varies across the set ("model no more than a scene needs"), and
+    // no scalar field.
     std::optional<std::vector<std::string>> attributes;
     bool progress = true;
 };
@@ -63,6 +65,9 @@ Result<BuildSummary> buildTileset(const BuildOptions& options);
 // with 48-byte surfels, scaled for the 56-byte ones that carry the LiDAR
 // attributes); the chunk size follows from the budget with it.
 inline constexpr uint64_t kBytesPerChunkPoint = 360;
+// And per stored scalar field: its value for the point and for the resampled
+// surfels above it (about 0.4 per point), and the chunk file's buffer.
+inline constexpr uint64_t kBytesPerChunkScalar = 12;
 // Memory the build needs whatever the chunk size: code, libraries, counting
 // grid (16 MiB), file buffers, upper levels.
 inline constexpr uint64_t kBaselineBytes = 48ull << 20;

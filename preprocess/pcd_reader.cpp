@@ -19,7 +19,7 @@ namespace {
 constexpr uint64_t kMaxHeaderBytes = 64 * 1024;
 constexpr size_t kBatchPoints = 4096;
 
-enum class Role { Ignore, X, Y, Z, Rgb, Rgba, NX, NY, NZ, Intensity, Classification };
+enum class Role { Ignore, X, Y, Z, Rgb, Rgba, NX, NY, NZ, Intensity, Classification, Scalar };
 
 struct Field {
     std::string name;
@@ -28,6 +28,7 @@ struct Field {
     size_t count = 1;  // elements
     Role role = Role::Ignore;
     size_t offset = 0; // byte offset within a point record (binary)
+    size_t scalar = 0; // Role::Scalar: index in InputDescription::scalars
 };
 
 enum class DataKind { Ascii, Binary, Compressed };
@@ -143,7 +144,16 @@ Result<PcdHeader> parseHeader(ByteStream& in) {
 
 class PcdReader final : public PointReader {
 public:
-    PcdReader(std::string path, PcdHeader h) : path_(std::move(path)), h_(std::move(h)) {
+    PcdReader(std::string path, PcdHeader h, const ScalarSelection& scalars) : path_(std::move(path)), h_(std::move(h)) {
+        // Single-element fields no fixed attribute takes are scalar fields
+        // ("_" marks padding in PCL's files).
+        for (Field& f : h_.fields)
+            if (f.role == Role::Ignore && f.count == 1 && f.name != "_" && scalars.wants(f.name)) {
+                f.role = Role::Scalar;
+                f.scalar = desc_.scalars.size();
+                desc_.scalars.push_back({f.name, false, f.type == 'F' ? 0.0 : 1.0});
+            }
+        pending_.resize(desc_.scalars.size());
         desc_.path = path_;
         desc_.format = "pcd";
         desc_.declaredPoints = h_.points;
@@ -210,7 +220,7 @@ public:
 
     Result<size_t> read(InputPoint* out, size_t max) override {
         size_t n = 0;
-        std::vector<uint8_t> record(h_.recordSize);
+        scalarValues_.clear();
         while (n < max && index_ < h_.points) {
             // Each record gives at most one point: a batch never overfills `out`.
             size_t batch = size_t(std::min<uint64_t>({uint64_t(kBatchPoints), h_.points - index_, uint64_t(max - n)}));
@@ -258,8 +268,12 @@ private:
     void emit(InputPoint& p, InputPoint* out, size_t& n) {
         p.normal = normalizeOrZero(normal_);
         normal_ = {};
-        if (finite(p.position)) out[n++] = p;
-        else ++skipped_;
+        if (finite(p.position)) {
+            out[n++] = p;
+            scalarValues_.insert(scalarValues_.end(), pending_.begin(), pending_.end());
+        } else {
+            ++skipped_;
+        }
     }
 
     void apply(const Field& f, const uint8_t* p, InputPoint& q) {
@@ -276,6 +290,7 @@ private:
                 break;
             }
             case Role::Classification: q.classification = classOf(elementValue(f, p)); break;
+            case Role::Scalar: pending_[f.scalar] = elementValue(f, p); break;
             case Role::Rgb: case Role::Rgba: {
                 uint32_t c = packedColor(f, p);  // 0x00RRGGBB in the float's or uint's bits
                 q.color[0] = uint16_t(((c >> 16) & 0xFF) * 257);
@@ -331,16 +346,17 @@ private:
     std::vector<uint8_t> buffer_;
     uint64_t index_ = 0;
     Vec3f normal_;
+    std::vector<double> pending_;  // the scalar fields' values of the point being read
 };
 
 }  // namespace
 
-Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path) {
+Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars) {
     auto in = ByteStream::open(path);
     if (!in) return in.status();
     auto h = parseHeader(*in);
     if (!h) return h.status();
-    auto reader = std::make_unique<PcdReader>(path, std::move(*h));
+    auto reader = std::make_unique<PcdReader>(path, std::move(*h), scalars);
     SC_TRY(reader->start());
     return std::unique_ptr<PointReader>(std::move(reader));
 }

@@ -13,6 +13,8 @@
 
 namespace surfcast {
 
-Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path);
+// Single-element fields that no fixed attribute takes are scalar fields under
+// their own names; `scalars` selects those decoded.
+Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars = {});
 
 }  // namespace surfcast

@@ -135,9 +135,11 @@ uint16_t toChannel(double v, PlyType t) {
 struct VertexLayout {
     int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1, r = -1, g = -1, b = -1, intensity = -1, classification = -1;
     PlyType colorType = PlyType::UInt8, intensityType = PlyType::UInt16;
+    std::vector<int> scalars;  // slots of the selected scalar fields (InputDescription::scalars)
 };
 
-Result<VertexLayout> vertexLayout(const PlyElement& e, const std::string& path) {
+Result<VertexLayout> vertexLayout(const PlyElement& e, const std::string& path, const ScalarSelection& selection,
+                                  std::vector<ScalarField>* fields) {
     VertexLayout l;
     auto slots = scalarSlots(e);
     auto slot = [&](std::initializer_list<const char*> names) {
@@ -155,6 +157,15 @@ Result<VertexLayout> vertexLayout(const PlyElement& e, const std::string& path) 
     int ii = findProperty(e, {"intensity", "scalar_intensity"});
     if (ii >= 0) { l.intensity = slots[ii]; l.intensityType = e.properties[ii].type; }
     l.classification = slot({"classification", "scalar_classification", "label", "class"});
+    const int taken[] = {l.x, l.y, l.z, l.nx, l.ny, l.nz, l.r, l.g, l.b, l.intensity, l.classification};
+    for (size_t i = 0; i < e.properties.size(); ++i) {
+        const PlyProperty& p = e.properties[i];
+        if (p.isList || std::find(std::begin(taken), std::end(taken), slots[i]) != std::end(taken) || !selection.wants(p.name))
+            continue;
+        const bool floating = p.type == PlyType::Float32 || p.type == PlyType::Float64;
+        fields->push_back({p.name, false, floating ? 0.0 : 1.0});
+        l.scalars.push_back(slots[i]);
+    }
     return l;
 }
 
@@ -166,8 +177,9 @@ const PlyElement* findElement(const PlyHeader& h, const char* name) {
 
 class PlyPointReader final : public PointReader {
 public:
-    PlyPointReader(ByteStream in, PlyHeader header, VertexLayout layout, const PlyElement* vertex)
+    PlyPointReader(ByteStream in, PlyHeader header, VertexLayout layout, const PlyElement* vertex, std::vector<ScalarField> fields)
         : in_(std::move(in)), header_(std::move(header)), layout_(layout), values_(in_, header_.format) {
+        desc_.scalars = std::move(fields);
         vertex_ = findElement(header_, vertex->name.c_str());
         desc_.path = in_.path();
         desc_.format = "ply";
@@ -193,6 +205,8 @@ public:
             }
         }
         size_t n = 0;
+        const size_t fields = layout_.scalars.size();
+        scalarValues_.resize(max * fields);
         while (n < max && index_ < vertex_->count) {
             SC_TRY(values_.readInstance(*vertex_, &scalars_, nullptr));
             ++index_;
@@ -209,8 +223,10 @@ public:
             }
             if (layout_.intensity >= 0) p.intensity = toChannel(scalars_[layout_.intensity], layout_.intensityType);
             if (layout_.classification >= 0) p.classification = classOf(scalars_[layout_.classification]);
+            for (size_t f = 0; f < fields; ++f) scalarValues_[n * fields + f] = scalars_[size_t(layout_.scalars[f])];
             ++n;
         }
+        scalarValues_.resize(n * fields);
         return n;
     }
 
@@ -288,7 +304,7 @@ bool plyHasFaces(const PlyHeader& header) {
     return false;
 }
 
-Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path) {
+Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars) {
     auto in = ByteStream::open(path);
     if (!in) return in.status();
     auto header = parsePlyHeader(*in);
@@ -297,7 +313,8 @@ Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path) {
     if (!vertex) return Status::error(path + ": no vertex element");
     for (const auto& p : vertex->properties)
         if (p.isList) return Status::error(path + ": vertex element has a list property '" + p.name + "'");
-    auto layout = vertexLayout(*vertex, path);
+    std::vector<ScalarField> fields;
+    auto layout = vertexLayout(*vertex, path, scalars, &fields);
     if (!layout) return layout.status();
     // Binary data must be at least as long as the header promises: a cheap check
     // that names the truncation before hours of work.
@@ -310,7 +327,7 @@ Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path) {
                                  " bytes from byte " + std::to_string(in->offset()));
     }
     PlyHeader h = *header;
-    return std::unique_ptr<PointReader>(new PlyPointReader(std::move(*in), std::move(h), *layout, vertex));
+    return std::unique_ptr<PointReader>(new PlyPointReader(std::move(*in), std::move(h), *layout, vertex, std::move(fields)));
 }
 
 Result<PlyMesh> readPlyMesh(const std::string& path) {
@@ -323,7 +340,8 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
     std::vector<double> scalars, list;
     for (const PlyElement& e : header->elements) {
         if (e.name == "vertex") {
-            auto layout = vertexLayout(e, path);
+            std::vector<ScalarField> none;
+            auto layout = vertexLayout(e, path, {}, &none);
             if (!layout) return layout.status();
             mesh.colorBits = layout->colorType == PlyType::UInt8 ? 8 : 16;
             mesh.vertices.reserve(e.count);

@@ -38,7 +38,9 @@ Result<PlyHeader> parsePlyHeader(ByteStream& in);
 // True when the file holds a non-empty face or tristrips element.
 bool plyHasFaces(const PlyHeader& header);
 
-Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path);
+// Vertex properties that no fixed attribute takes are scalar fields under
+// their own names (integer types at resolution 1); `scalars` selects those decoded.
+Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars = {});
 
 // Whole-file read of a PLY mesh: vertex positions and colours (16-bit scale,
 // empty when absent) and triangles from faces (fans of polygons) or strips.

@@ -27,12 +27,12 @@ struct Cell {
 // The value with the most input points behind it among a cell's members (the
 // lowest such value on a tie): categorical attributes are never averaged.
 template <typename Get>
-uint8_t majority(std::span<const Surfel> points, const std::vector<std::pair<uint64_t, uint32_t>>& order, const Cell& cell,
-                 std::vector<std::pair<uint8_t, float>>& tally, Get get) {
+uint32_t majority(std::span<const Surfel> points, const std::vector<std::pair<uint64_t, uint32_t>>& order, const Cell& cell,
+                  std::vector<std::pair<uint32_t, float>>& tally, Get get) {
     tally.clear();
     for (uint32_t k = cell.begin; k < cell.end; ++k) {
         const Surfel& s = points[order[k].second];
-        const uint8_t v = get(s);
+        const uint32_t v = get(s);
         auto it = std::find_if(tally.begin(), tally.end(), [&](const auto& t) { return t.first == v; });
         if (it == tally.end()) tally.push_back({v, s.count});
         else it->second += s.count;
@@ -45,7 +45,7 @@ uint8_t majority(std::span<const Surfel> points, const std::vector<std::pair<uin
 
 }  // namespace
 
-std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& grid, bool withAttributes) {
+std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& grid, bool withAttributes, ScalarTable* table) {
     assert(grid.cells >= 1 && grid.cells <= kMaxGridCells);
     const size_t n = points.size();
     std::vector<std::pair<uint64_t, uint32_t>> order(n);
@@ -64,7 +64,11 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
     }
 
     std::vector<Surfel> out(cells.size());
-    std::vector<std::pair<uint8_t, float>> tally;
+    std::vector<std::pair<uint32_t, float>> tally;
+    const size_t fields = withAttributes && table ? table->fields() : 0;
+    // Per output surfel: its scalar row, categorical fields filled here, the
+    // continuous ones below.
+    std::vector<uint32_t> rows(out.size() * fields);
     for (size_t c = 0; c < cells.size(); ++c) {
         const Cell& cell = cells[c];
         Vec3d centroid;
@@ -88,9 +92,13 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
         s.normal = normalizeOrZero(normal);
         s.count = float(weight);
         if (withAttributes && cell.end - cell.begin > 1) {
-            s.classification = majority(points, order, cell, tally, [](const Surfel& p) { return p.classification; });
-            s.returns = majority(points, order, cell, tally, [](const Surfel& p) { return p.returns; });
+            s.classification = uint8_t(majority(points, order, cell, tally, [](const Surfel& p) { return p.classification; }));
+            s.returns = uint8_t(majority(points, order, cell, tally, [](const Surfel& p) { return p.returns; }));
         }
+        for (size_t f = 0; f < fields; ++f)
+            rows[c * fields + f] = table->categorical[f]
+                                       ? majority(points, order, cell, tally, [&](const Surfel& p) { return table->row(p.row)[f]; })
+                                       : table->row(points[nearest].row)[f];  // until prefiltered below
     }
     if (!withAttributes) return out;
 
@@ -101,7 +109,9 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
     // first key), so one cursor per column offset walks the cells once.
     const float inv2Sigma2 = float(1.0 / (2.0 * std::pow(kPrefilterSigma * grid.cellSize, 2)));
     size_t cursor[9] = {};
+    std::vector<double> scalarSum(fields);
     for (size_t c = 0; c < cells.size(); ++c) {
+        std::fill(scalarSum.begin(), scalarSum.end(), 0.0);
         int64_t x = int64_t(cells[c].key >> (2 * kAxisBits)), y = int64_t((cells[c].key >> kAxisBits) & kAxisMask),
                 z = int64_t(cells[c].key & kAxisMask);
         float sum[4] = {0, 0, 0, 0}, wsum = 0;  // colour, intensity
@@ -120,12 +130,16 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
                         for (int ch = 0; ch < 3; ++ch) sum[ch] += w * float(p.color[ch]);
                         sum[3] += w * float(p.intensity);
                         wsum += w;
+                        for (size_t f = 0; f < fields; ++f) scalarSum[f] += double(w) * table->row(p.row)[f];
                     }
             }
         if (wsum > 0) {
             for (int ch = 0; ch < 3; ++ch) out[c].color[ch] = uint16_t(std::clamp(std::lround(sum[ch] / wsum), 0l, 65535l));
             out[c].intensity = uint16_t(std::clamp(std::lround(sum[3] / wsum), 0l, 65535l));
+            for (size_t f = 0; f < fields; ++f)
+                if (!table->categorical[f]) rows[c * fields + f] = uint32_t(std::llround(scalarSum[f] / wsum));
         }
+        if (fields) out[c].row = table->append(rows.data() + c * fields);
     }
     return out;
 }

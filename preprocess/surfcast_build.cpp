@@ -53,11 +53,14 @@ the text file LIST, one per line.
   --weights MODE          none (default: ewa-pixel, the default renderer mode, reads
                           no weights), analytic (for ewa-surfel), or capture
                           (rendered on Vulkan, Ren 2002 §7.2; see surfcast-weights)
-  --attributes LIST       LiDAR attributes to store: a comma-separated list of
-                          intensity, classification, return_number, number_of_returns;
-                          all; or none. Default: each one some input carries, where it
-                          varies across the set (LAS/LAZ: all four; PLY/PCD/text:
-                          intensity, classification where a field holds them)
+  --attributes LIST       attributes to store: a comma-separated list of names; all;
+                          or none. Default: intensity, classification, return_number
+                          and number_of_returns, each where some input carries it and
+                          it varies across the set (LAS/LAZ: all four; PLY/PCD/text:
+                          intensity, classification where a field holds them). On
+                          request: LAS/LAZ scan_angle, user_data, point_source_id,
+                          gps_time, nir and Extra Bytes dimensions by name; PLY and
+                          PCD properties by name
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
   --mesh-spacing S        mesh sampling spacing (default: half the median edge)
   --vertices-only         read a mesh file's vertices as points, no sampling
@@ -186,12 +189,11 @@ int main(int argc, char** argv) {
             std::vector<std::string> names;
             if (v == "all") {
                 names.assign(std::begin(surfcast::kLidarAttributes), std::end(surfcast::kLidarAttributes));
+                opt.inputs.scalars.all = true;
             } else if (v != "none") {
                 std::stringstream list(v);
                 for (std::string name; std::getline(list, name, ',');) {
-                    if (surfcast::lidarIndex(name) < 0)
-                        return usageError("--attributes: unknown attribute '" + name +
-                                          "' (known: intensity, classification, return_number, number_of_returns)");
+                    if (name.empty()) return usageError("--attributes: an empty name in '" + v + "'");
                     names.push_back(name);
                 }
             }

@@ -20,6 +20,7 @@ struct Surfel {
     uint16_t intensity = 0;
     uint8_t classification = 0;
     uint8_t returns = 0;     // return number in bits 0-3, number of returns in bits 4-7
+    uint32_t row = 0;        // its stored scalar fields' row in the ScalarTable (sampler.h) of the nodes being built
 };
 static_assert(sizeof(Surfel) == 56, "chunk files store Surfel records raw; keep them compact");
 

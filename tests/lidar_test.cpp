@@ -6,9 +6,13 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <functional>
 #include <map>
+#include <set>
 #include <tuple>
 
+#include "block_codec.h"
 #include "las_reader.h"
 #include "test_support.h"
 #include "tileset_reader.h"
@@ -265,11 +269,266 @@ TEST(Lidar, AttributesNoneStoresNoLidarAttribute) {
         EXPECT_TRUE(b->intensity.empty() && b->classification.empty() && b->returnNumber.empty());
     }
     EXPECT_LT(none->info().blocksBytes, all->info().blocksBytes);
-    // An unknown name is a usage error naming it.
+    // A name no input carries (scalar fields are named by the inputs, so it
+    // is known only once they are read) is an error naming it; nothing is written.
     auto bad = test::run({test::binary("surfcast-build"), test::dataFile("Megaplot.laz"), "-o", dir.file("bad"),
                           "--attributes", "intensity,gps_tme"});
-    EXPECT_EQ(bad.exitCode, 2);
+    EXPECT_EQ(bad.exitCode, 1);
     EXPECT_NE(bad.output.find("gps_tme"), std::string::npos);
+    EXPECT_FALSE(std::filesystem::exists(dir.file("bad")));
+}
+
+// ---- Scalar fields: LAS 1.4 format 8 with an Extra Bytes VLR, written here ----
+
+// One Extra Bytes descriptor (LAS 1.4 R15, table 24): type, options, name,
+// no_data (as 8 bytes), scale and offset.
+std::string extraBytesDescriptor(uint8_t type, uint8_t options, const std::string& name, uint64_t noData = 0,
+                                 double scale = 1, double offset = 0) {
+    std::string d(192, '\0');
+    d[2] = char(type);
+    d[3] = char(options);
+    std::memcpy(d.data() + 4, name.data(), std::min<size_t>(name.size(), 32));
+    std::memcpy(d.data() + 40, &noData, 8);
+    std::memcpy(d.data() + 112, &scale, 8);
+    std::memcpy(d.data() + 136, &offset, 8);
+    return d;
+}
+
+// A LAS 1.4 file of `count` records of `length` bytes (filled by `fill`),
+// point format `format`, with one Extra Bytes VLR holding `descriptors`.
+std::string lasWithExtraBytes(int format, size_t length, uint32_t count, const std::string& descriptors,
+                              const std::string& scaleAndOffset, const std::function<void(uint32_t, char*)>& fill) {
+    auto put = [](std::string& s, size_t at, auto v) { std::memcpy(s.data() + at, &v, sizeof v); };
+    std::string vlr(54, '\0');
+    std::memcpy(vlr.data() + 2, "LASF_Spec", 9);
+    put(vlr, 18, uint16_t(4));
+    put(vlr, 20, uint16_t(descriptors.size()));
+    vlr += descriptors;
+    std::string h(375, '\0');
+    std::memcpy(h.data(), "LASF", 4);
+    h[24] = 1, h[25] = 4;
+    put(h, 94, uint16_t(375));
+    put(h, 96, uint32_t(375 + vlr.size()));
+    put(h, 100, uint32_t(1));
+    h[104] = char(format);
+    put(h, 105, uint16_t(length));
+    std::memcpy(h.data() + 131, scaleAndOffset.data(), 48);
+    put(h, 247, uint64_t(count));
+    std::string data(count * length, '\0');
+    for (uint32_t i = 0; i < count; ++i) fill(i, data.data() + i * length);
+    return h + vlr + data;
+}
+
+// Format 8 (38 bytes) then extra bytes: "amplitude" (uint16, scale 0.01,
+// offset 5), "deviation" (double), 2 undocumented bytes, "spare" (uint8, no
+// data 255): 51 bytes a record, from autzen's positions.
+struct ScalarInput {
+    std::string las;
+    std::map<Key, std::map<std::string, double>> unique;  // by position, points no other shares
+};
+
+ScalarInput makeScalarLas() {
+    const std::string src = test::readFile(test::dataFile("autzen_trim.las"));
+    uint32_t srcOffset;
+    std::memcpy(&srcOffset, src.data() + 96, 4);
+    const uint32_t count = 110000;
+    const std::string descriptors = extraBytesDescriptor(3, 8 | 16, "amplitude", 0, 0.01, 5) +
+                                    extraBytesDescriptor(10, 0, "deviation") + extraBytesDescriptor(0, 2, "") +
+                                    extraBytesDescriptor(1, 1, "spare", 255);
+    std::map<Key, int> seen;
+    std::map<Key, std::map<std::string, double>> values;
+    ScalarInput in;
+    in.las = lasWithExtraBytes(8, 51, count, descriptors, src.substr(131, 48), [&](uint32_t i, char* q) {
+        const char* p = src.data() + srcOffset + i * 34;
+        std::memcpy(q, p, 14);  // x, y, z, intensity
+        q[14] = char(1 | 1 << 4);
+        q[16] = char(uint8_t(p[15]) & 31);
+        const uint8_t user = uint8_t(i % 7);
+        const int16_t angle = int16_t(int(i % 1000) - 500);
+        const uint16_t source = i % 2 ? 100 : 102;
+        const double gps = 1000 + i * 1e-4;
+        const uint16_t nir = uint16_t(i % 4096), amplitude = uint16_t(i % 5000);
+        const double deviation = std::sin(double(i));
+        const uint8_t spare = i % 10 == 0 ? 255 : uint8_t(i % 200);
+        q[17] = char(user);
+        std::memcpy(q + 18, &angle, 2);
+        std::memcpy(q + 20, &source, 2);
+        std::memcpy(q + 22, &gps, 8);
+        for (int c = 0; c < 3; ++c) std::memcpy(q + 30 + 2 * c, p + 20 + 2 * c, 2);  // RGB
+        std::memcpy(q + 36, &nir, 2);
+        std::memcpy(q + 38, &amplitude, 2);
+        std::memcpy(q + 40, &deviation, 8);
+        q[48] = char(0xAB), q[49] = char(0xCD);  // undocumented
+        q[50] = char(spare);
+        Key k{};
+        std::memcpy(&std::get<0>(k), p, 4);  // int32 coordinates, widened below
+        int32_t xyz[3];
+        std::memcpy(xyz, p, 12);
+        k = Key{xyz[0], xyz[1], xyz[2]};
+        seen[k]++;
+        values[k] = {{"user_data", user},          {"scan_angle", angle * 0.006},
+                     {"point_source_id", source},  {"gps_time", gps},
+                     {"nir", nir},                 {"amplitude", amplitude * 0.01 + 5},
+                     {"deviation", deviation},     {"spare", spare == 255 ? NAN : spare}};
+    });
+    for (auto& [k, v] : values)
+        if (seen[k] == 1) in.unique[k] = v;
+    return in;
+}
+
+TEST(Lidar, ScalarFieldsRoundTripThroughTheLevels) {
+    REQUIRE_DATA();
+    const ScalarInput input = makeScalarLas();
+    ASSERT_GT(input.unique.size(), 100000u);
+    TempDir dir;
+    test::writeFile(dir.file("f8.las"), input.las);
+    auto r = test::run({test::binary("surfcast-build"), dir.file("f8.las"), "-o", dir.file("set"), "-q", "--attributes", "all"});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto set = TilesetReader::open(dir.file("set"));
+    ASSERT_TRUE(set.ok()) << set.status().message();
+    const TilesetInfo& info = set->info();
+    // Each field with its kind; the undocumented bytes are not one.
+    const std::map<std::string, std::string> kinds = {
+        {"scan_angle", "continuous"}, {"user_data", "categorical"}, {"point_source_id", "categorical"},
+        {"gps_time", "continuous"},   {"nir", "continuous"},        {"amplitude", "continuous"},
+        {"deviation", "continuous"},  {"spare", "continuous"}};
+    for (const auto& [name, kind] : kinds) {
+        const AttributeInfo* a = info.attribute(name);
+        ASSERT_NE(a, nullptr) << name;
+        EXPECT_EQ(a->kind, kind) << name;
+    }
+    EXPECT_EQ(info.attributes.size(), 4u /* position normal color radius */ + 4 /* LiDAR */ + kinds.size());
+
+    // The largest error each may have, from its quantization: integers and
+    // scaled integers exact (the files' own steps: 0.006 degree, 0.01); gps_time
+    // to half of 2^-20 s; "deviation" (a double, no step) to half of the power
+    // of two at or above its range (just under 2) over 2^24 - 1, 2^-22; "spare"
+    // exact, its no-data value read as the field's minimum (stored 0).
+    const std::map<std::string, double> tolerance = {
+        {"scan_angle", 1e-9}, {"user_data", 0}, {"point_source_id", 0}, {"gps_time", 0x1p-21 + 1e-9},
+        {"nir", 0},           {"amplitude", 1e-9}, {"deviation", 0x1p-23 + 1e-12}, {"spare", 0}};
+    std::map<std::string, size_t> checked, wrong;
+    std::set<double> sources;
+    for (const NodeRecord& n : set->nodes()) {
+        auto bytes = set->readBlockBytes(n);
+        ASSERT_TRUE(bytes.ok());
+        BlockExpectation e = set->expectation(n);
+        e.scalars = true;
+        auto block = decodeBlock(bytes->data(), bytes->size(), e);
+        ASSERT_TRUE(block.ok()) << block.status().message();
+        ASSERT_EQ(block->scalars.size(), kinds.size());
+        for (const ScalarAttribute& a : block->scalars) {
+            const AttributeInfo* ai = info.attribute(a.name);
+            ASSERT_NE(ai, nullptr);
+            for (size_t i = 0; i < block->size(); ++i) {
+                const double v = a.values[i] * ai->scale + ai->offset;
+                // Categorical fields are resampled by majority: only values the
+                // input holds, never an average (101 between 100 and 102).
+                if (a.name == "point_source_id") sources.insert(v);
+                if (!(n.flags & kFlagInputPoints)) continue;
+                const Vec3d p = surfelPosition(info, n, *block, i);
+                Key k;
+                int64_t q[3];
+                for (int c = 0; c < 3; ++c) {
+                    double scale, offset;
+                    std::memcpy(&scale, input.las.data() + 131 + 8 * c, 8);
+                    std::memcpy(&offset, input.las.data() + 155 + 8 * c, 8);
+                    q[c] = std::llround((p[c] - offset) / scale);
+                }
+                k = Key{q[0], q[1], q[2]};
+                auto it = input.unique.find(k);
+                if (it == input.unique.end()) continue;
+                double want = it->second.at(a.name);
+                if (std::isnan(want)) want = ai->offset;
+                ++checked[a.name];
+                if (!(std::fabs(v - want) <= tolerance.at(a.name))) {
+                    if (wrong[a.name]++ < 3) ADD_FAILURE() << a.name << ": " << v << " against " << want;
+                }
+            }
+        }
+    }
+    for (const auto& [name, kind] : kinds) {
+        EXPECT_GT(checked[name], 100000u) << name;
+        EXPECT_EQ(wrong[name], 0u) << name;
+    }
+    EXPECT_EQ(sources, (std::set<double>{100, 102}));
+}
+
+TEST(Lidar, ExtraBytesVlrErrorsNameTheVlr) {
+    REQUIRE_DATA();
+    const std::string src = test::readFile(test::dataFile("autzen_trim.las"));
+    const std::string scaleAndOffset = src.substr(131, 48);
+    auto fill = [](uint32_t i, char* q) {
+        const int32_t xyz[3] = {int32_t(i % 100) * 100, int32_t(i / 100) * 100, 0};
+        std::memcpy(q, xyz, 12);
+    };
+    struct Case {
+        const char* name;
+        std::string descriptors;
+        size_t extra;  // extra bytes per record
+        const char* says;
+    };
+    const Case cases[] = {
+        {"partial", std::string(100, '\0'), 2, "192-byte descriptors"},
+        {"unknown-type", extraBytesDescriptor(31, 0, "x"), 2, "unknown data type 31"},
+        {"too-long", extraBytesDescriptor(10, 0, "d"), 2, "more than the 2 extra bytes"},
+        {"zero-size", extraBytesDescriptor(0, 0, "z"), 2, "zero bytes"},
+    };
+    TempDir dir;
+    for (const Case& c : cases) {
+        test::writeFile(dir.file(std::string(c.name) + ".las"), lasWithExtraBytes(6, 30 + c.extra, 1000, c.descriptors, scaleAndOffset, fill));
+        auto r = test::run({test::binary("surfcast-build"), dir.file(std::string(c.name) + ".las"), "-o", dir.file(c.name), "-q"});
+        EXPECT_EQ(r.exitCode, 1) << c.name;
+        EXPECT_NE(r.output.find("VLR 0 (Extra Bytes"), std::string::npos) << c.name << ": " << r.output;
+        EXPECT_NE(r.output.find(c.says), std::string::npos) << c.name << ": " << r.output;
+        EXPECT_FALSE(std::filesystem::exists(dir.file(c.name))) << c.name;
+    }
+}
+
+// PLY properties that no fixed attribute takes, stored by name.
+TEST(Lidar, PlyScalarPropertyStoredByName) {
+    TempDir dir;
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex 10000\nproperty float x\nproperty float y\nproperty float z\n"
+                      "property float confidence\nproperty int band\nend_header\n";
+    std::map<std::pair<int, int>, std::pair<double, int>> want;
+    for (int i = 0; i < 10000; ++i) {
+        const int x = i % 100, y = i / 100;
+        const std::string confidence = std::to_string((i % 97) / 96.0);  // 6 decimals
+        ply += std::to_string(x * 0.01) + " " + std::to_string(y * 0.01) + " 0 " + confidence + " " + std::to_string(i % 5) + "\n";
+        want[{x, y}] = {double(std::stof(confidence)), i % 5};  // as a float property reads
+    }
+    test::writeFile(dir.file("c.ply"), ply);
+    auto r = test::run({test::binary("surfcast-build"), dir.file("c.ply"), "-o", dir.file("set"), "-q", "--attributes",
+                        "confidence,band"});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto set = TilesetReader::open(dir.file("set"));
+    ASSERT_TRUE(set.ok());
+    const AttributeInfo* confidence = set->info().attribute("confidence");
+    const AttributeInfo* band = set->info().attribute("band");
+    ASSERT_TRUE(confidence && band);
+    EXPECT_EQ(band->type, "uint8");  // 0..4 at step 1
+    size_t checked = 0;
+    for (const NodeRecord& n : set->nodes()) {
+        if (!(n.flags & kFlagInputPoints)) continue;
+        auto bytes = set->readBlockBytes(n);
+        ASSERT_TRUE(bytes.ok());
+        BlockExpectation e = set->expectation(n);
+        e.scalars = true;
+        auto block = decodeBlock(bytes->data(), bytes->size(), e);
+        ASSERT_TRUE(block.ok()) << block.status().message();
+        ASSERT_EQ(block->scalars.size(), 2u);
+        for (size_t i = 0; i < block->size(); ++i) {
+            const Vec3d p = surfelPosition(set->info(), n, *block, i);
+            auto it = want.find({int(std::lround(p.x * 100)), int(std::lround(p.y * 100))});
+            ASSERT_NE(it, want.end());
+            // Floating: to half of the power-of-two step at or above its range (1)
+            // over 2^24 - 1, 2^-23.
+            EXPECT_NEAR(block->scalars[0].values[i] * confidence->scale + confidence->offset, it->second.first, 0x1p-24 + 1e-12);
+            EXPECT_EQ(block->scalars[1].values[i] * band->scale + band->offset, it->second.second);
+            ++checked;
+        }
+    }
+    EXPECT_EQ(checked, 10000u);
 }
 
 }  // namespace

@@ -68,7 +68,7 @@ void expectInputsInLeaves(const TilesetReader& set, const std::vector<Decoded>& 
     double worst = 0;
     uint64_t checked = 0;
     const std::vector<uint16_t> sourceIds(stats->sources.size(), 0);
-    ASSERT_TRUE(forEachBatch(inputs, *stats, origin, sourceIds, [&](std::span<Surfel> batch) {
+    ASSERT_TRUE(forEachBatch(inputs, *stats, origin, sourceIds, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
         std::vector<Vec3f> q;
         for (const Surfel& s : batch) q.push_back(cast<float>(s.position));
         std::vector<int> idx;
