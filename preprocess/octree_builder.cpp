@@ -254,14 +254,22 @@ Status Builder::chooseAttributes() {
     // range fits 32 bits; floating ones in the power-of-two step that splits
     // the set's range into at most 2^24 (float32's precision).
     for (const ScalarStats& f : stats_.scalars) {
+        // A constant field carries no information per point; stored, it still
+        // costs Draco's kd-tree coder: seven constant fields beside the usual
+        // attributes doubled the bytes of a scan (bench/BENCHMARKS.md).
+        if (!(f.max > f.min)) {
+            std::fprintf(stderr, "warning: --attributes %s: %s across the set; not stored\n", f.field.name.c_str(),
+                         f.points ? ("constant (" + std::to_string(f.min) + ")").c_str() : "no valid value");
+            continue;
+        }
         ScalarQuantization q;
         q.name = f.field.name;
         q.categorical = f.field.categorical;
-        const double lo = f.points ? f.min : 0, range = f.points ? f.max - f.min : 0;
+        const double lo = f.min, range = f.max - f.min;
         const double maxSteps = std::ldexp(1.0, kMaxScalarBits) - 1;
         const double floatSteps = std::ldexp(1.0, kFloatScalarBits) - 1;
         q.offset = lo;
-        q.step = f.field.resolution > 0 ? f.field.resolution : range > 0 ? std::exp2(std::ceil(std::log2(range / floatSteps))) : 1;
+        q.step = f.field.resolution > 0 ? f.field.resolution : std::exp2(std::ceil(std::log2(range / floatSteps)));
         while (range / q.step > maxSteps) q.step *= 2;
         q.bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
         stored_.push_back(q);

@@ -489,23 +489,26 @@ TEST(Lidar, ExtraBytesVlrErrorsNameTheVlr) {
 TEST(Lidar, PlyScalarPropertyStoredByName) {
     TempDir dir;
     std::string ply = "ply\nformat ascii 1.0\nelement vertex 10000\nproperty float x\nproperty float y\nproperty float z\n"
-                      "property float confidence\nproperty int band\nend_header\n";
+                      "property float confidence\nproperty int band\nproperty int flat\nend_header\n";
     std::map<std::pair<int, int>, std::pair<double, int>> want;
     for (int i = 0; i < 10000; ++i) {
         const int x = i % 100, y = i / 100;
         const std::string confidence = std::to_string((i % 97) / 96.0);  // 6 decimals
-        ply += std::to_string(x * 0.01) + " " + std::to_string(y * 0.01) + " 0 " + confidence + " " + std::to_string(i % 5) + "\n";
+        ply += std::to_string(x * 0.01) + " " + std::to_string(y * 0.01) + " 0 " + confidence + " " + std::to_string(i % 5) + " 7\n";
         want[{x, y}] = {double(std::stof(confidence)), i % 5};  // as a float property reads
     }
     test::writeFile(dir.file("c.ply"), ply);
     auto r = test::run({test::binary("surfcast-build"), dir.file("c.ply"), "-o", dir.file("set"), "-q", "--attributes",
-                        "confidence,band"});
+                        "confidence,band,flat"});
     ASSERT_EQ(r.exitCode, 0) << r.output;
+    // A constant property carries nothing per point: named, it is reported and not stored.
+    EXPECT_NE(r.output.find("flat: constant (7"), std::string::npos) << r.output;
     auto set = TilesetReader::open(dir.file("set"));
     ASSERT_TRUE(set.ok());
     const AttributeInfo* confidence = set->info().attribute("confidence");
     const AttributeInfo* band = set->info().attribute("band");
     ASSERT_TRUE(confidence && band);
+    EXPECT_EQ(set->info().attribute("flat"), nullptr);
     EXPECT_EQ(band->type, "uint8");  // 0..4 at step 1
     size_t checked = 0;
     for (const NodeRecord& n : set->nodes()) {
