@@ -249,10 +249,10 @@ Status Builder::chooseAttributes() {
     store_[kLidarReturnNumber] = store_[kLidarNumberOfReturns] = store_[kLidarReturnNumber] || store_[kLidarNumberOfReturns];
     for (int i = 0; i < kLidarCount; ++i)
         if (store_[i]) summary_.attributes.push_back(kLidarAttributes[i]);
-    // Scalar fields (selected by name or with "all", so every one found is
-    // stored): exact at the file's own resolution where it has one and the
-    // range fits 32 bits; floating ones in the power-of-two step that splits
-    // the set's range into at most 2^24 (float32's precision).
+    // Scalar fields (selected by name or with "all": every one found that
+    // varies is stored): exact at the file's own resolution where it has one
+    // and the range fits 32 bits; floating ones in the power-of-two step that
+    // splits the set's range into at most 2^24 (float32's precision).
     for (const ScalarStats& f : stats_.scalars) {
         // A constant field carries no information per point; stored, it still
         // costs Draco's kd-tree coder: seven constant fields beside the usual
