@@ -280,6 +280,15 @@ TEST(Lidar, AttributesNoneStoresNoLidarAttribute) {
 
 // ---- Scalar fields: LAS 1.4 format 8 with an Extra Bytes VLR, written here ----
 
+// A node's block with its scalar attributes decoded (readBlock skips them).
+Result<BlockData> readBlockWithScalars(const TilesetReader& set, const NodeRecord& n) {
+    auto bytes = set.readBlockBytes(n);
+    if (!bytes) return bytes.status();
+    BlockExpectation e = set.expectation(n);
+    e.scalars = true;
+    return decodeBlock(bytes->data(), bytes->size(), e);
+}
+
 // One Extra Bytes descriptor (LAS 1.4 R15, table 24): type, options, name,
 // no_data (as 8 bytes), scale and offset.
 std::string extraBytesDescriptor(uint8_t type, uint8_t options, const std::string& name, uint64_t noData = 0,
@@ -360,11 +369,9 @@ ScalarInput makeScalarLas() {
         std::memcpy(q + 40, &deviation, 8);
         q[48] = char(0xAB), q[49] = char(0xCD);  // undocumented
         q[50] = char(spare);
-        Key k{};
-        std::memcpy(&std::get<0>(k), p, 4);  // int32 coordinates, widened below
         int32_t xyz[3];
         std::memcpy(xyz, p, 12);
-        k = Key{xyz[0], xyz[1], xyz[2]};
+        const Key k{xyz[0], xyz[1], xyz[2]};
         seen[k]++;
         values[k] = {{"user_data", user},          {"scan_angle", angle * 0.006},
                      {"point_source_id", source},  {"gps_time", gps},
@@ -410,11 +417,7 @@ TEST(Lidar, ScalarFieldsRoundTripThroughTheLevels) {
     std::map<std::string, size_t> checked, wrong;
     std::set<double> sources;
     for (const NodeRecord& n : set->nodes()) {
-        auto bytes = set->readBlockBytes(n);
-        ASSERT_TRUE(bytes.ok());
-        BlockExpectation e = set->expectation(n);
-        e.scalars = true;
-        auto block = decodeBlock(bytes->data(), bytes->size(), e);
+        auto block = readBlockWithScalars(*set, n);
         ASSERT_TRUE(block.ok()) << block.status().message();
         ASSERT_EQ(block->scalars.size(), kinds.size());
         for (const ScalarAttribute& a : block->scalars) {
@@ -513,11 +516,7 @@ TEST(Lidar, PlyScalarPropertyStoredByName) {
     size_t checked = 0;
     for (const NodeRecord& n : set->nodes()) {
         if (!(n.flags & kFlagInputPoints)) continue;
-        auto bytes = set->readBlockBytes(n);
-        ASSERT_TRUE(bytes.ok());
-        BlockExpectation e = set->expectation(n);
-        e.scalars = true;
-        auto block = decodeBlock(bytes->data(), bytes->size(), e);
+        auto block = readBlockWithScalars(*set, n);
         ASSERT_TRUE(block.ok()) << block.status().message();
         ASSERT_EQ(block->scalars.size(), 2u);
         for (size_t i = 0; i < block->size(); ++i) {
