@@ -10,7 +10,7 @@ packages=(
   libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
   libmicrohttpd-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
-  python3 python3-venv xvfb curl nginx-light
+  python3 python3-venv xvfb xdotool curl nginx-light
 )
 # A Rust toolchain for the LAZ decoder (preprocess/laz_ffi): any cargo on PATH,
 # else Debian's.

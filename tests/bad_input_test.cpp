@@ -81,6 +81,15 @@ TEST(BadInput, UnknownPropertyType) {
     expectError(dir, build(dir, dir.file("u.ply")), "u.ply", "unknown property type 'float128'");
 }
 
+TEST(BadInput, PlyListWhereAScalarIsExpected) {
+    // An intensity written as a list property: a clear error naming the file
+    // and the property, never a misread of the following vertices.
+    TempDir dir;
+    test::writeFile(dir.file("l.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                                       "property float z\nproperty list uchar float intensity\nend_header\n0 0 0 2 7 8\n");
+    expectError(dir, build(dir, dir.file("l.ply")), "l.ply", "list property 'intensity'");
+}
+
 TEST(BadInput, MalformedHeaders) {
     TempDir dir;
     test::writeFile(dir.file("h.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n");

@@ -3,8 +3,9 @@
 // folder, downloading no more than the set holds (from surfcast-serve with
 // batched requests, and from nginx); faults (server restart, 500, a stalled
 // response, a corrupt block) end converged; a tight GPU budget evicts and
-// still converges; a host's own VkDevice draws the same image; an
-// unreachable server is a clear error, not a hang.
+// still converges; a host's own VkDevice draws the same image; a colouring
+// change re-decodes what is resident without fetching; an unreachable server
+// is a clear error, not a hang.
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <arpa/inet.h>
@@ -20,6 +21,7 @@
 #include <thread>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 
 #include "context.h"
@@ -302,6 +304,186 @@ TEST(Stream, HostOwnedDeviceDrawsTheSameImage) {
     EXPECT_TRUE(hosted.rgba == owned.rgba) << "the host's device drew another image";
 }
 
+// Updates `client` until converged (60 s at most); the nodes uploaded on the way.
+size_t convergeClient(SurfcastClient& client, const Camera& camera, ClientFrame* last) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    size_t uploaded = 0;
+    while (std::chrono::steady_clock::now() < deadline) {
+        auto frame = client.update(camera, 240, 180);
+        EXPECT_TRUE(frame) << frame.status().message();
+        if (!frame) break;
+        uploaded += frame->uploaded;
+        *last = *frame;
+        if (frame->converged) return uploaded;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ADD_FAILURE() << "did not converge";
+    return uploaded;
+}
+
+Image clientImage(SurfcastClient& client, const RenderSettings* settings = nullptr) {
+    auto image = client.renderImage(settings ? *settings : client.defaultSettings());
+    EXPECT_TRUE(image) << image.status().message();
+    return image ? *image : Image{};
+}
+
+TEST(Stream, ColourKeyStepsThroughTheModesTheSetHas) {
+    // A set with intensity and classes but no colour or returns: C goes
+    // intensity -> elevation -> classification -> intensity; Auto is intensity.
+    TilesetInfo info;
+    info.attributes = {{"position", "float32", 3}, {"intensity", "uint16", 1, 0, "continuous"},
+                       {"classification", "uint8", 1, 0, "categorical"}};
+    EXPECT_EQ(nextColorBy(ColorBy::Auto, info), ColorBy::Elevation);
+    EXPECT_EQ(nextColorBy(ColorBy::Elevation, info), ColorBy::Classification);
+    EXPECT_EQ(nextColorBy(ColorBy::Classification, info), ColorBy::Intensity);
+    EXPECT_EQ(nextColorBy(ColorBy::Rgb, info), ColorBy::Elevation) << "a mode the set lacks steps from Auto's";
+    info.colorBits = 8;
+    EXPECT_EQ(nextColorBy(ColorBy::Classification, info), ColorBy::Rgb);
+    EXPECT_EQ(nextColorBy(ColorBy::Auto, info), ColorBy::Intensity);
+    TilesetInfo bare;  // positions only: elevation is all there is
+    EXPECT_EQ(nextColorBy(ColorBy::Elevation, bare), ColorBy::Elevation);
+}
+
+TEST(Stream, ColoringChangesWithoutFetchingAgain) {
+    // autzen (RGB, intensity, classes 1 and 2) streamed in colour, then
+    // switched to classes with ground hidden: every drawn node is uploaded
+    // again, nothing is fetched, and the converged image is the one a client
+    // opened with that colouring draws. Switching back gives the first image.
+    TempDir dir;
+    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", dir.file("autzen"), "--capacity",
+                  "4000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto camera = parseCamera("636590,848700,1400,636590,849216,463,0,1,0,45");
+    ASSERT_TRUE(camera);
+    auto ctx = gpu::createContext({});
+    ASSERT_TRUE(ctx) << ctx.status().message();
+    Coloring rgb, classes;
+    rgb.by = ColorBy::Rgb;
+    classes.by = ColorBy::Classification;
+    classes.hidden[2] = true;
+    Image inColour, recoloured, opened, back;
+    ClientFrame before, after;
+    size_t reuploaded = 0;
+    {
+        ClientOptions options;
+        options.coloring = rgb;
+        auto client = SurfcastClient::open(**ctx, dir.file("autzen"), options);
+        ASSERT_TRUE(client) << client.status().message();
+        convergeClient(**client, *camera, &before);
+        inColour = clientImage(**client);
+        ASSERT_GT(before.nodes, 1u);
+        EXPECT_GT(before.stream.keptBytes, 0u);
+        EXPECT_LE(before.stream.keptBytes, (*client)->info().blocksBytes);
+
+        const RenderSettings colourSettings = (*client)->defaultSettings();
+        ASSERT_TRUE((*client)->setColoring(classes));
+        EXPECT_EQ((*client)->coloring().by, ColorBy::Classification);
+        EXPECT_EQ(colourSettings.shading, Shading::Unlit);
+        EXPECT_EQ((*client)->defaultSettings().shading, Shading::Lambert) << "class colours are shaded";
+        EXPECT_TRUE(clientImage(**client, &colourSettings).rgba == inColour.rgba)
+            << "nothing changes before an update hands over the new surfels";
+        reuploaded = convergeClient(**client, *camera, &after);
+        recoloured = clientImage(**client);
+        EXPECT_EQ(after.stream.recoloring, 0u);
+
+        ASSERT_TRUE((*client)->setColoring(rgb));
+        ClientFrame again;
+        convergeClient(**client, *camera, &again);
+        back = clientImage(**client);
+        EXPECT_EQ(again.stream.requests, before.stream.requests);
+    }
+    std::printf("recoloured %zu nodes (%zu drawn): kept %zu bytes of blocks for %zu resident bytes\n", reuploaded,
+                before.nodes, before.stream.keptBytes, before.stream.residentBytes);
+    EXPECT_GE(reuploaded, before.nodes) << "every drawn node is decoded and uploaded again";
+    EXPECT_EQ(after.nodes, before.nodes);
+    EXPECT_EQ(after.stream.requests, before.stream.requests) << "recolouring fetched blocks";
+    EXPECT_EQ(after.stream.bytesDownloaded, before.stream.bytesDownloaded);
+    EXPECT_EQ(after.stream.nodesFetched, before.stream.nodesFetched);
+    EXPECT_LT(after.splats, before.splats) << "hidden ground surfels are not drawn";
+    {
+        ClientOptions options;
+        options.coloring = classes;
+        auto client = SurfcastClient::open(**ctx, dir.file("autzen"), options);
+        ASSERT_TRUE(client) << client.status().message();
+        ClientFrame frame;
+        convergeClient(**client, *camera, &frame);
+        opened = clientImage(**client);
+        EXPECT_EQ(frame.splats, after.splats);
+    }
+    EXPECT_TRUE(recoloured.rgba == opened.rgba) << "recoloured differs from a client opened with that colouring";
+    EXPECT_TRUE(back.rgba == inColour.rgba) << "switching back did not give the first image";
+    EXPECT_FALSE(recoloured.rgba == inColour.rgba);
+
+    // A mode the set lacks is an error, and changes nothing.
+    auto scene = test::buildScene(dir.file("scene"), 20000);
+    ASSERT_EQ(scene.exitCode, 0) << scene.output;
+    auto client = SurfcastClient::open(**ctx, dir.file("scene"), {});
+    ASSERT_TRUE(client) << client.status().message();
+    Status s = (*client)->setColoring(classes);
+    EXPECT_FALSE(s);
+    EXPECT_NE(s.message().find("classification"), std::string::npos) << s.message();
+    EXPECT_EQ((*client)->coloring().by, ColorBy::Auto);
+    client->reset();
+    gpu::destroyContext(*ctx);
+}
+
+TEST(Stream, ColoringChangesWhileStreamingAndEvicting) {
+    // Colouring changes while nodes are fetched, decoded, handed over and
+    // evicted under a GPU budget smaller than the set: a block decoded with
+    // an old colouring never stays on screen, and each time the view
+    // converges to the image of a client opened with the last colouring.
+    // Each round lands the change at another moment of the close view's
+    // fetching and decoding (after 0 to 12 ms).
+    TempDir dir;
+    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", dir.file("autzen"), "--capacity",
+                  "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto overview = parseCamera("636590,848700,1400,636590,849216,463,0,1,0,45");
+    auto close = parseCamera("636500,849100,700,636600,849250,430,0,0,1,40");
+    ASSERT_TRUE(overview && close);
+    auto ctx = gpu::createContext({});
+    ASSERT_TRUE(ctx) << ctx.status().message();
+    std::vector<Coloring> sequence(4);
+    sequence[0].by = ColorBy::Elevation;
+    sequence[1].by = ColorBy::Classification;
+    sequence[1].hidden[2] = true;
+    sequence[2].by = ColorBy::Intensity;
+    sequence[3].by = ColorBy::Return;
+    sequence[3].hidden[1] = true;
+    ClientOptions options;
+    options.gpuBudget = 8 << 20;
+    options.decoders = 1;
+    // What a client opened with each colouring converges to at the close view.
+    std::vector<Image> expected;
+    for (const Coloring& c : sequence) {
+        options.coloring = c;
+        auto client = SurfcastClient::open(**ctx, dir.file("autzen"), options);
+        ASSERT_TRUE(client) << client.status().message();
+        ClientFrame frame;
+        convergeClient(**client, *close, &frame);
+        EXPECT_EQ(frame.lod.budgetLimited, 0u) << "the close view alone should fit the budget";
+        expected.push_back(clientImage(**client));
+    }
+    options.coloring = {};
+    auto client = SurfcastClient::open(**ctx, dir.file("autzen"), options);
+    ASSERT_TRUE(client) << client.status().message();
+    ClientFrame frame;
+    for (int round = 0; round < 8; ++round) {
+        const size_t c = size_t(round) % sequence.size();
+        convergeClient(**client, *overview, &frame);
+        ASSERT_TRUE((*client)->update(*close, 240, 180));
+        std::this_thread::sleep_for(std::chrono::milliseconds(round * 3 / 2));
+        ASSERT_TRUE((*client)->setColoring(sequence[c]));
+        convergeClient(**client, *close, &frame);
+        EXPECT_TRUE(clientImage(**client).rgba == expected[c].rgba)
+            << "round " << round << ": the view converged to another image than a fresh client's";
+    }
+    std::printf("%zu evictions; %zu nodes drawn in the close view\n", frame.stream.evictions, frame.nodes);
+    EXPECT_GT(frame.stream.evictions, 0u) << "the budget should not hold both views";
+    client->reset();
+    gpu::destroyContext(*ctx);
+}
+
 TEST(Stream, UnreachableServerIsAClearError) {
     TempDir dir;
     auto start = std::chrono::steady_clock::now();
@@ -327,6 +509,64 @@ TEST(Stream, WindowStreamsUnderXvfb) {
     ASSERT_EQ(headless.exitCode, 0) << headless.output;
     EXPECT_TRUE(test::readFile(dir.file("window.png")) == test::readFile(dir.file("headless.png")))
         << "the window's converged frame differs from the headless one";
+}
+
+TEST(Stream, WindowKeysRecolourTheStream) {
+    // Real key presses (xdotool) in the streaming window under Xvfb: C steps
+    // from autzen's RGB to intensity, G hides ground; after each, once the
+    // title says the view is converged in that colouring, P writes a
+    // screenshot. Each equals the headless render of that colouring, and
+    // nothing was fetched twice (the title's megabytes stay those of the set).
+    TempDir dir;
+    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", dir.file("autzen")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const std::string camera = "--camera=636590,848700,1400,636590,849216,463,0,1,0,45";
+    // Waits for a window title matching a shell pattern (60 s at most).
+    const std::string script = R"(
+        set -u
+        "$VIEW" "$SET" "$CAMERA" --lod 1 --size 240x180 & pid=$!
+        w=$(timeout 60 xdotool search --sync --name surfcast-view | head -n 1) || exit 3
+        until_title() {
+            for i in $(seq 1200); do
+                t=$(xdotool getwindowname "$w") || return 1
+                case "$t" in $1) echo "$t" >> titles.txt; return 0;; esac
+                sleep 0.05
+            done
+            echo "timed out waiting for a title like $1; the last was: $t" >&2; return 1
+        }
+        shot() { xdotool key --window "$w" p; for i in $(seq 600); do [ -s "$1" ] && return 0; sleep 0.05; done; return 1; }
+        until_title '*, rgb - *nodes, *MB' &&
+        xdotool key --window "$w" c && until_title '*, intensity - *nodes, *MB' && shot surfcast-0000.png &&
+        xdotool key --window "$w" g && until_title '*, intensity, ground hidden - *nodes, *MB' && shot surfcast-0001.png
+        status=$?
+        xdotool key --window "$w" Escape
+        wait $pid || status=$?
+        exit $status
+    )";
+    auto window = run({"/usr/bin/env", "VIEW=" + binary("surfcast-view"), "SET=" + dir.file("autzen"), "CAMERA=" + camera,
+                       "/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", "sh", "-c",
+                       "cd '" + dir.path() + "' && " + script});
+    ASSERT_EQ(window.exitCode, 0) << window.output << test::readFile(dir.file("titles.txt"));
+    auto headless = [&](const std::string& out, std::vector<std::string> extra) {
+        std::vector<std::string> args = {binary("surfcast-view"), "--headless", dir.file("autzen"), camera, "--lod", "1",
+                                         "--size", "240x180", "--out", dir.file(out)};
+        args.insert(args.end(), extra.begin(), extra.end());
+        auto r = run(args);
+        EXPECT_EQ(r.exitCode, 0) << r.output;
+    };
+    headless("intensity.png", {"--color-by", "intensity"});
+    headless("no-ground.png", {"--color-by", "intensity", "--hide-classes", "2"});
+    EXPECT_TRUE(test::readFile(dir.file("surfcast-0000.png")) == test::readFile(dir.file("intensity.png")))
+        << "C: the window's intensity view differs from the headless one";
+    EXPECT_TRUE(test::readFile(dir.file("surfcast-0001.png")) == test::readFile(dir.file("no-ground.png")))
+        << "G: the window's view without ground differs from the headless one";
+    // The megabytes downloaded, as the titles report them, do not grow.
+    std::istringstream titles(test::readFile(dir.file("titles.txt")));
+    std::set<std::string> downloaded;
+    for (std::string line; std::getline(titles, line);)
+        if (line.find(" MB") != std::string::npos && line.find("streaming") == std::string::npos)
+            downloaded.insert(line.substr(line.rfind(" - ") + 3));
+    EXPECT_EQ(downloaded.size(), 1u) << test::readFile(dir.file("titles.txt"));
 }
 
 StreamOptions connections(int n) {

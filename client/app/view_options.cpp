@@ -74,7 +74,8 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
 
 Window keys: drag left = orbit, drag right = pan, wheel = zoom, W/A/S/D/Q/E = fly,
 1..5 = mode (points, circles, ewa-noprefilter, ewa-surfel, ewa-pixel),
-L = shading, P = screenshot (surfcast-NNNN.png), Esc = quit.
+L = shading, C = next colour-by mode the set has, G = hide or show ground (class 2),
+P = screenshot (surfcast-NNNN.png), Esc = quit.
 )";
 
 int usageError(const std::string& message) {

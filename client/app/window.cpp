@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <chrono>
-#include <functional>
 #include <cmath>
 #include <cstdio>
+#include <functional>
+#include <optional>
+#include <utility>
 
 #include "context.h"
 #include "surfcast_client.h"
@@ -52,6 +54,7 @@ struct WindowState {
     RenderMode mode = RenderMode::EwaPixel;
     Shading shading = Shading::Unlit;
     bool screenshot = false;
+    bool nextColoring = false, toggleGround = false;  // C, G: handled by the frame loop
 };
 
 void onKey(GLFWwindow* w, int key, int, int action, int) {
@@ -64,6 +67,8 @@ void onKey(GLFWwindow* w, int key, int, int action, int) {
         s->shading = s->shading == Shading::Unlit ? Shading::Lambert
                      : s->shading == Shading::Lambert ? Shading::Phong : Shading::Unlit;
     if (key == GLFW_KEY_P) s->screenshot = true;
+    if (key == GLFW_KEY_C) s->nextColoring = true;
+    if (key == GLFW_KEY_G) s->toggleGround = true;
     if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
 }
 
@@ -115,6 +120,26 @@ int fail(const std::string& message) {
     return 1;
 }
 
+// The colouring after the C and G keys: the next mode the set can show, and
+// ground (ASPRS class 2) hidden or shown. Nullopt, with a message, when a key
+// asks for what the set lacks or --color fixes the colour.
+std::optional<Coloring> keyedColoring(WindowState& s, const ViewOptions& o, const TilesetInfo& info, Coloring c) {
+    const bool next = std::exchange(s.nextColoring, false), ground = std::exchange(s.toggleGround, false);
+    if (!next && !ground) return std::nullopt;
+    if (o.color) {
+        std::fprintf(stderr, "surfcast-view: --color fixes every surfel's colour; C and G do nothing\n");
+        return std::nullopt;
+    }
+    if (ground && !info.attribute("classification")) {
+        std::fprintf(stderr, "surfcast-view: the set stores no classification; G (hide ground) does nothing\n");
+        return std::nullopt;
+    }
+    if (next) c.by = nextColorBy(c.by, info);
+    if (ground) c.hidden[2] = !c.hidden[2];
+    std::fprintf(stderr, "surfcast-view: colour by %s%s\n", colorByName(c.by), c.hidden[2] ? ", ground (class 2) hidden" : "");
+    return c;
+}
+
 }  // namespace
 
 int runWindow(const ViewOptions& o, const SurfelSet& set) {
@@ -140,6 +165,8 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
         // Either a whole set on one renderer, or a streamed one (--lod).
         std::unique_ptr<SplatRenderer> renderer;
         std::unique_ptr<SurfcastClient> client;
+        TilesetInfo info;  // for the colour keys
+        Coloring coloring = o.client.coloring;
         RenderSettings base = o.settings;
         Box3d bounds = set.bounds;
         Status s = swapchain ? Status{} : swapchain.status();
@@ -152,6 +179,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                 client = std::move(*c);
                 base = effectiveSettings(o, client->defaultSettings());
                 bounds = client->info().bounds;
+                info = client->info();
             } else {
                 s = c.status();
             }
@@ -159,6 +187,9 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             auto r = SplatRenderer::create(**ctx, o.renderer);
             s = r ? r.value()->upload(set) : r.status();
             if (r) renderer = std::move(*r);
+            auto reader = TilesetReader::open(o.set);
+            if (reader) info = reader->info();
+            else if (s) s = reader.status();
         }
         if (!s) status = fail(s.message());
         state.orbit.cam = o.cameras.empty() ? frameBox(bounds, double(o.width) / o.height) : o.cameras[0];
@@ -178,6 +209,26 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             double seconds = std::chrono::duration<double>(now - last).count();
             last = now;
             fly(window, state, seconds);
+            if (auto c = keyedColoring(state, o, info, coloring)) {
+                // Streamed: decoded again from the kept blocks. Whole set:
+                // read again from the folder.
+                Status rs = client ? client->setColoring(*c) : Status{};
+                std::optional<RenderSettings> setDefaults;
+                if (client) {
+                    setDefaults = client->defaultSettings();
+                } else {
+                    auto reloaded = loadSurfelSet(o.set, o.level, *c);
+                    rs = reloaded ? renderer->upload(*reloaded) : reloaded.status();
+                    if (reloaded) setDefaults = settingsForSet(reloaded->kernelScale, reloaded->hasColor);
+                }
+                if (!rs) {
+                    status = fail(rs.message());
+                    break;
+                }
+                coloring = *c;
+                base = effectiveSettings(o, *setDefaults);
+                state.shading = base.shading;
+            }
             VkExtent2D extent = swapchain->extent;
             if (extent.width == 0 || extent.height == 0) continue;  // minimized
             RenderSettings settings = base;
@@ -217,9 +268,11 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             if (!*presented) continue;
             vkWaitForFences((*ctx)->device, 1, &swapchain->inFlight, VK_TRUE, UINT64_MAX);
             GpuFrameStats t = client ? client->timings() : renderer->timings();
+            auto shownBy = resolveColorBy(coloring.by, info);
             char title[320];
-            int used = std::snprintf(title, sizeof(title), "surfcast-view - %s - %.1f ms frame, %.1f ms GPU, %zu splats",
-                                     renderModeName(state.mode), seconds * 1e3, t.totalMs, t.splats);
+            int used = std::snprintf(title, sizeof(title), "surfcast-view - %s, %s%s - %.1f ms frame, %.1f ms GPU, %zu splats",
+                                     renderModeName(state.mode), o.color ? "--color" : colorByName(shownBy ? *shownBy : coloring.by),
+                                     coloring.hidden[2] ? ", ground hidden" : "", seconds * 1e3, t.totalMs, t.splats);
             if (client)
                 std::snprintf(title + used, sizeof(title) - size_t(used), " - %zu nodes, %.1f MB%s", streamed.nodes,
                               double(streamed.stream.bytesDownloaded) / 1e6, converged ? "" : ", streaming");

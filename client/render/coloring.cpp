@@ -37,6 +37,19 @@ Result<ColorBy> resolveColorBy(ColorBy by, const TilesetInfo& info) {
     return by;
 }
 
+ColorBy nextColorBy(ColorBy by, const TilesetInfo& info) {
+    static const ColorBy order[] = {ColorBy::Rgb, ColorBy::Intensity, ColorBy::Elevation, ColorBy::Classification,
+                                    ColorBy::Return};
+    auto resolved = resolveColorBy(by, info);
+    const ColorBy from = resolved ? *resolved : *resolveColorBy(ColorBy::Auto, info);
+    size_t at = size_t(std::find(std::begin(order), std::end(order), from) - std::begin(order));
+    for (size_t step = 1; step <= std::size(order); ++step) {
+        ColorBy next = order[(at + step) % std::size(order)];
+        if (resolveColorBy(next, info)) return next;
+    }
+    return from;
+}
+
 Vec3f viridis(float t) {
     // Nine samples of matplotlib's viridis at t = 0, 1/8, ..., 1, linearly interpolated.
     static const float k[9][3] = {{0.267f, 0.005f, 0.329f}, {0.283f, 0.141f, 0.458f}, {0.254f, 0.265f, 0.530f},

@@ -29,6 +29,12 @@ const char* colorByName(ColorBy by);
 // The mode Auto stands for on this set, or an error naming what the set lacks.
 Result<ColorBy> resolveColorBy(ColorBy by, const TilesetInfo& info);
 
+// The mode after `by` (Auto, or a mode the set lacks, stands for Auto's
+// mode) among those the set can show, in the order rgb, intensity, elevation,
+// classification, return, wrapping around: what the window's C key steps
+// through.
+ColorBy nextColorBy(ColorBy by, const TilesetInfo& info);
+
 // Colour ramps and palettes, components in [0, 1].
 Vec3f viridis(float t);                   // t in [0, 1], perceptually uniform (Smith & van der Walt 2015)
 Vec3f classColor(int asprsClass);         // ASPRS standard classes (LAS 1.4 R15 table 17)

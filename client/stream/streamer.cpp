@@ -70,6 +70,10 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
         // What decoded since the last update is resident from now on.
         u.arrived.swap(arrived_);
         for (const ArrivedNode& a : u.arrived) {
+            if (resident_.count(a.index)) {  // recoloured: resident already
+                --recolors_;
+                continue;
+            }
             size_t bytes = residentCost(a.index);
             resident_[a.index] = {0, bytes};  // used from the selection on
             residentBytes_ += bytes;
@@ -101,6 +105,7 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
                 if (residentBytes_ + pendingBytes_ + wantedBytes <= options_.memoryBudget) break;
                 residentBytes_ -= resident_[node].bytes;
                 resident_.erase(node);
+                unkeep(node);
                 u.evicted.push_back(node);
                 ++stats_.evictions;
             }
@@ -110,7 +115,7 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
             std::erase_if(u.arrived, [&](const ArrivedNode& a) { return gone.count(a.index) != 0; });
         }
         stats_.queued = wanted_.size();
-        u.converged = u.lod.missing.empty();
+        u.converged = u.lod.missing.empty() && recolors_ == 0;
     }
     wakeFetch_.notify_all();
     return u;
@@ -122,7 +127,46 @@ StreamStats StreamingSet::stats() const {
     s.inFlight = pending_.size();
     s.resident = resident_.size();
     s.residentBytes = residentBytes_;
+    s.keptBytes = keptBytes_;
+    s.recoloring = recolors_;
     return s;
+}
+
+void StreamingSet::setColoring(const Coloring& coloring) {
+    {
+        std::lock_guard lock(mutex_);
+        options_.coloring = coloring;
+        ++coloringVersion_;
+        // Recolour jobs still queued are superseded by the ones queued here;
+        // those being decoded are dropped when they finish (decodeLoop).
+        recolors_ -= size_t(std::erase_if(fetched_, [](const Fetched& f) { return f.recolor; }));
+        // Decoded but not yet handed over: a recolour is queued again below;
+        // a fetched node is decoded again, as if just fetched.
+        for (const ArrivedNode& a : arrived_) {
+            if (resident_.count(a.index)) {
+                --recolors_;
+                continue;
+            }
+            pending_[a.index] = 1;
+            fetched_.push_back({a.index, kept_.at(a.index)});
+        }
+        arrived_.clear();
+        for (const auto& [node, r] : resident_) fetched_.push_back({node, kept_.at(node), true});
+        recolors_ += resident_.size();
+    }
+    wakeDecode_.notify_all();
+}
+
+void StreamingSet::keep(uint32_t node, Block bytes) {
+    auto [it, added] = kept_.emplace(node, bytes);
+    if (added) keptBytes_ += bytes->size();
+}
+
+void StreamingSet::unkeep(uint32_t node) {
+    auto it = kept_.find(node);
+    if (it == kept_.end()) return;
+    keptBytes_ -= it->second->size();
+    kept_.erase(it);
 }
 
 void StreamingSet::fail(uint32_t node, const std::string& message) {
@@ -207,7 +251,7 @@ void StreamingSet::fetchLoop() {
         }
         for (size_t i = 0; i < indices.size(); ++i) {
             stats_.bytesDownloaded += (*blobs)[i].size();
-            fetched_.push_back({indices[i], std::move((*blobs)[i])});
+            fetched_.push_back({indices[i], std::make_shared<const std::vector<uint8_t>>(std::move((*blobs)[i]))});
         }
         wakeDecode_.notify_all();
     }
@@ -221,28 +265,46 @@ void StreamingSet::decodeLoop() {
         Fetched job = std::move(fetched_.front());
         fetched_.pop_front();
         const NodeRecord record = nodes()[job.node];
+        const Coloring coloring = options_.coloring;
+        const uint64_t version = coloringVersion_;
         lock.unlock();
 
         double t0 = now();
         Result<BlockData> block = Status::error("");
-        const std::vector<uint8_t>& bytes = job.bytes;
+        const std::vector<uint8_t>& bytes = *job.bytes;
         if (crc32(bytes.data(), bytes.size()) != record.blockCrc)
             block = Status::error(source_->describe() + ": node " + record.key.name() + ": CRC mismatch");
         else
             block = decodeBlock(bytes.data(), bytes.size(), blockExpectation(info_, record));
         std::shared_ptr<SurfelSet> surfels;
         if (block) {
-            surfels = std::make_shared<SurfelSet>(emptySurfelSet(info_, options_.coloring));
+            surfels = std::make_shared<SurfelSet>(emptySurfelSet(info_, coloring));
             appendNode(*surfels, info_, record, *block);
             sortMorton(*surfels);
         }
         double t1 = now();
 
         lock.lock();
+        if (job.recolor) {
+            // Superseded by a later setColoring (which queued its own), or
+            // evicted meanwhile: dropped. A kept block decoded before, so a
+            // failure here is not the block's; it is reported, not retried.
+            if (!block) stats_.lastError = block.status().message();
+            if (block && version == coloringVersion_ && resident_.count(job.node))
+                arrived_.push_back({job.node, std::move(surfels)});  // counted in recolors_ until handed over
+            else
+                --recolors_;
+            continue;
+        }
         if (!block) {
             fail(job.node, block.status().message());
             continue;
         }
+        if (version != coloringVersion_) {  // coloured the old way: again, first
+            fetched_.push_front(std::move(job));
+            continue;
+        }
+        keep(job.node, job.bytes);
         pending_.erase(job.node);
         failed_.erase(job.node);
         ++stats_.nodesFetched;

@@ -15,6 +15,10 @@
 // fault, tileset.json is fetched again (at most every 2 s): if the set was
 // rebuilt since it was opened, fetching stops and stats() says so, rather
 // than retrying blocks that can never match the hierarchy.
+//
+// Each resident node keeps its compressed block (about a third of its 32-byte
+// surfels), so setColoring() re-decodes what is resident without fetching:
+// the recoloured nodes arrive again like fetched ones, replacing the old.
 #pragma once
 
 #include <condition_variable>
@@ -42,13 +46,15 @@ struct StreamOptions {
     // the backoff (0.1 s doubling to 5 s), 8 tries span about 11 s: past a
     // server restart, short of a user's patience.
     int maxTries = 8;
-    Coloring coloring;  // what decoded surfels are coloured by, and which classes are dropped
+    Coloring coloring;  // what decoded surfels are coloured by, and which classes are dropped (setColoring)
 };
 
 struct StreamStats {
     uint64_t bytesDownloaded = 0;
     size_t requests = 0, requestsInFlight = 0, nodesFetched = 0, inFlight = 0, queued = 0, resident = 0, failures = 0, evictions = 0;
     size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
+    size_t keptBytes = 0;      // compressed blocks kept for recolouring (resident and arrived nodes)
+    size_t recoloring = 0;     // resident nodes still to be re-decoded for the latest setColoring
     double fetchMs = 0, decodeMs = 0;  // of the last request and the last block
     std::string lastError;
     // The set's tileset.json differs from the one opened (rebuilt on the
@@ -69,10 +75,11 @@ struct ArrivedNode {
 
 struct StreamUpdate {
     std::vector<SelectedNode> draw;      // resident nodes to draw now
-    std::vector<ArrivedNode> arrived;    // resident since the last update: upload these
+    std::vector<ArrivedNode> arrived;    // resident since the last update, or recoloured: upload these
+                                         // (a recoloured node replaces the surfels it had)
     std::vector<uint32_t> evicted;       // no longer resident: free these
     LodStats lod;
-    bool converged = false;              // nothing the view needs is missing
+    bool converged = false;              // nothing the view needs is missing or still to be recoloured
 };
 
 class StreamingSet {
@@ -89,6 +96,11 @@ public:
     // surfels that arrived and must drop the evicted ones.
     StreamUpdate update(const Camera& camera, int width, int height, const LodParams& params);
     StreamStats stats() const;
+    // Colour and filter by `coloring` from now on: nodes decoded later use
+    // it, and every resident node is re-decoded from its kept block (nothing
+    // is fetched) and arrives again in a later update. Until then the old
+    // surfels are drawn, and update() reports converged = false.
+    void setColoring(const Coloring& coloring);
     // Bytes a node occupies when resident (whole granules of 32-byte surfels).
     size_t residentCost(uint32_t index) const;
 
@@ -98,6 +110,9 @@ private:
     void decodeLoop();
     void fail(uint32_t node, const std::string& message);  // with mutex_ held
     void checkForRebuild(std::unique_lock<std::mutex>& lock);
+    using Block = std::shared_ptr<const std::vector<uint8_t>>;
+    void keep(uint32_t node, Block bytes);  // with mutex_ held
+    void unkeep(uint32_t node);             // with mutex_ held
 
     std::unique_ptr<TileSource> source_;
     std::vector<uint8_t> tilesetJson_;  // as opened
@@ -111,7 +126,8 @@ private:
     };
     struct Fetched {
         uint32_t node;
-        std::vector<uint8_t> bytes;
+        Block bytes;
+        bool recolor = false;  // a resident node's kept block, to decode with the new coloring
     };
 
     mutable std::mutex mutex_;
@@ -123,6 +139,10 @@ private:
     std::unordered_map<uint32_t, int> pending_;        // node -> 1 while fetched or decoded
     std::deque<Fetched> fetched_;                       // waiting for a decoder
     std::vector<ArrivedNode> arrived_;                  // decoded, not yet handed over
+    std::unordered_map<uint32_t, Block> kept_;          // blocks of resident and arrived nodes
+    size_t keptBytes_ = 0;
+    uint64_t coloringVersion_ = 0;                      // setColoring calls so far
+    size_t recolors_ = 0;                               // recolour jobs not yet handed over or dropped
     std::unordered_map<uint32_t, std::pair<int, double>> failed_;  // node -> attempts, retry time (s)
     StreamStats stats_;
     bool checkDue_ = false;  // a fault happened: has the set changed?

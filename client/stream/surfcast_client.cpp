@@ -53,12 +53,22 @@ RenderSettings SurfcastClient::defaultSettings() const {
     return settingsForSet(info().kernelScale, emptySurfelSet(info(), options_.coloring).hasColor);
 }
 
+Status SurfcastClient::setColoring(const Coloring& coloring) {
+    if (auto by = resolveColorBy(coloring.by, info()); !by) return by.status();
+    options_.coloring = coloring;
+    stream_->setColoring(coloring);
+    return {};
+}
+
 Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int height) {
     ClientFrame frame;
     StreamUpdate u = stream_->update(camera, width, height, options_.lod);
     for (uint32_t i : u.evicted) pool_->release(i);
     std::vector<std::pair<uint32_t, const SurfelSet*>> uploads;
-    for (const ArrivedNode& a : u.arrived) uploads.push_back({a.index, a.surfels.get()});
+    for (const ArrivedNode& a : u.arrived) {
+        pool_->release(a.index);  // a recoloured node replaces its old surfels
+        uploads.push_back({a.index, a.surfels.get()});
+    }
     SC_TRY(pool_->upload(uploads));
     // Drawn in node order: the image does not depend on arrival order.
     std::vector<uint32_t> drawn;

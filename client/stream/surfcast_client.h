@@ -23,8 +23,8 @@ struct ClientOptions {
     size_t gpuBudget = 0;        // bytes of GPU memory for surfels; 0: 1 GiB or a quarter of the
                                  // device-local heap, whichever is smaller
     RendererOptions renderer;
-    // Colour by an attribute, hide classes: applied as blocks are decoded, so a
-    // change takes effect on a newly opened client (docs/CLIENT.md).
+    // Colour by an attribute, hide classes: applied as blocks are decoded;
+    // setColoring() changes it without fetching again (docs/CLIENT.md).
     Coloring coloring;
 };
 
@@ -46,8 +46,17 @@ public:
                                                         const ClientOptions& options = {});
 
     const TilesetInfo& info() const { return stream_->info(); }
-    // Kernel scale and shading the set was built for (the renderer's defaults).
+    // Kernel scale and shading the set was built for (the renderer's defaults),
+    // for the current colouring: measured colours unlit, synthetic ones shaded.
     RenderSettings defaultSettings() const;
+
+    // Colour by another attribute, or hide other classes: an error (nothing
+    // changes) when the set lacks the attribute. The resident nodes are
+    // decoded again from the blocks the stream kept, without fetching; they
+    // replace the old surfels over the next updates, which report converged
+    // only once all have.
+    Status setColoring(const Coloring& coloring);
+    const Coloring& coloring() const { return options_.coloring; }
 
     // Chooses the nodes for this view, uploads what arrived and frees what
     // the stream evicted (GPU memory stays within gpuBudget). An error when
