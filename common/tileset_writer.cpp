@@ -1,10 +1,12 @@
 #include "tileset_writer.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <stdio.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -42,12 +44,42 @@ Status writeFileSynced(const fs::path& path, const void* data, size_t size) {
     return {};
 }
 
+// Removes the hidden folders that writers into `out` left when they were
+// killed (".NAME.partial-PID", ".NAME.partial-PID-chunks" and
+// ".NAME.old-PID" of a process that no longer runs). An old set that the non-exchanging fallback had moved aside
+// goes back into place if nothing took its place.
+void removeLeftovers(const fs::path& out) {
+    const std::string name = out.filename().string();
+    std::error_code ec;
+    std::vector<std::pair<fs::path, bool>> stale;  // path, is an old set
+    for (const auto& entry : fs::directory_iterator(out.parent_path(), ec))
+        for (const char* kind : {".partial-", ".old-"}) {
+            const std::string prefix = "." + name + kind, file = entry.path().filename().string();
+            if (file.rfind(prefix, 0) != 0) continue;
+            char* end = nullptr;
+            const long pid = std::strtol(file.c_str() + prefix.size(), &end, 10);
+            // ".NAME.partial-PID" and what the process keeps beside it (the
+            // build's ".NAME.partial-PID-chunks").
+            if ((*end != '\0' && *end != '-') || pid <= 0 || pid == ::getpid()) continue;
+            if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // still running (or not ours to judge)
+            stale.push_back({entry.path(), kind[1] == 'o' && *end == '\0'});
+        }
+    for (const auto& [path, old] : stale) {
+        if (old && !fs::exists(out, ec) && fs::exists(path / "tileset.json", ec)) {
+            fs::rename(path, out, ec);
+            if (!ec) continue;
+        }
+        fs::remove_all(path, ec);
+    }
+}
+
 }  // namespace
 
 Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& output) {
     fs::path out = fs::absolute(output).lexically_normal();
     if (out.filename().empty()) out = out.parent_path();
     std::error_code ec;
+    if (fs::is_directory(out.parent_path(), ec)) removeLeftovers(out);
     if (fs::exists(out, ec) && !(fs::is_directory(out) && (fs::is_empty(out) || fs::exists(out / "tileset.json"))))
         return Status::error(out.string() + ": exists and is not a tile set; refusing to replace it");
     fs::create_directories(out.parent_path(), ec);
@@ -125,7 +157,9 @@ Status TilesetWriter::finish(TilesetInfo& info) {
     // the old set (if any) aside and the new one in.
     if (::renameat2(AT_FDCWD, partial_.c_str(), AT_FDCWD, output_.c_str(), RENAME_EXCHANGE) == 0) {
         finished_ = true;
-        fs::remove_all(partial_, ec);  // now the old set
+        // Now the old set: it stops reading as one first, then goes.
+        fs::remove(fs::path(partial_) / "tileset.json", ec);
+        fs::remove_all(partial_, ec);
         return {};
     }
     fs::path old = fs::path(partial_).parent_path() / ("." + fs::path(output_).filename().string() + ".old-" + std::to_string(::getpid()));

@@ -1,10 +1,14 @@
 // Writes a tile set atomically: everything goes into a hidden folder beside the
 // output (".NAME.partial-PID"), tileset.json last, and the folder is renamed
-// into place at the end. A killed build leaves only the hidden folder, which
-// holds no tileset.json and never reads as a tile set. An existing set at the
-// output is exchanged with the new one in one step (renameat2 RENAME_EXCHANGE),
-// so that at no moment does no set exist there; where the file system cannot
-// exchange, the old set is moved aside and the new one moved in.
+// into place at the end. An existing set at the output is exchanged with the
+// new one in one step (renameat2 RENAME_EXCHANGE), so that at no moment does
+// no set exist there; where the file system cannot exchange, the old set is
+// moved aside (".NAME.old-PID") and the new one moved in. A writer killed at
+// any moment leaves the output holding the old set or the new one, whole, or
+// (in the fallback's one gap, or a first build) no set; and hidden folders
+// beside it, which the next writer into the same output removes (an old set
+// moved aside goes back if the output is empty). The kill-anywhere test in
+// bad_input_test checks this at 20 random moments.
 //
 // Blocks are laid out in hierarchy order (hierarchyOrder), whatever order the
 // nodes arrive in: the same nodes give the same bytes, and siblings sit

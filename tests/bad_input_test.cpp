@@ -12,6 +12,8 @@
 #include <cstring>
 #include <cmath>
 #include <filesystem>
+#include <map>
+#include <random>
 #include <thread>
 
 #include "test_support.h"
@@ -201,6 +203,110 @@ TEST(BadInput, KilledBuildLeavesNoTileset) {
     EXPECT_FALSE(fs::exists(dir.file("out")));
     for (const auto& e : fs::recursive_directory_iterator(dir.path()))
         EXPECT_NE(e.path().filename(), "tileset.json") << e.path();
+}
+
+// A tile set's three files (all empty when there is no tileset.json).
+struct SetFiles {
+    std::string json, hierarchy, blocks;
+    bool operator==(const SetFiles&) const = default;
+    bool empty() const { return json.empty(); }
+};
+SetFiles readSet(const std::string& dir) {
+    if (!fs::exists(dir + "/tileset.json")) return {};
+    return {test::readFile(dir + "/tileset.json"), test::readFile(dir + "/hierarchy.bin"),
+            test::readFile(dir + "/blocks.bin")};
+}
+void writeSet(const std::string& dir, const SetFiles& set) {
+    fs::create_directories(dir);
+    test::writeFile(dir + "/hierarchy.bin", set.hierarchy);
+    test::writeFile(dir + "/blocks.bin", set.blocks);
+    test::writeFile(dir + "/tileset.json", set.json);
+}
+
+// Runs `args` and SIGKILLs it after `seconds` (if it is still running);
+// whether it was killed.
+bool runAndKill(const std::vector<std::string>& args, double seconds) {
+    pid_t pid = fork();
+    if (pid == 0) {
+        int devnull = open("/dev/null", O_WRONLY);
+        dup2(devnull, 2);
+        dup2(devnull, 1);
+        std::vector<char*> argv;
+        for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+        argv.push_back(nullptr);
+        execv(argv[0], argv.data());
+        _exit(127);
+    }
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    int status = 0;
+    while (waitpid(pid, &status, WNOHANG) == 0) {
+        if (std::chrono::steady_clock::now() >= deadline) {
+            kill(pid, SIGKILL);
+            waitpid(pid, &status, 0);
+            return WIFSIGNALED(status);
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << args[0] << " failed on its own";
+    return false;
+}
+
+TEST(BadInput, KillAnywhereLeavesTheOldSetOrTheNewOne) {
+    // surfcast-build (set A replaced by set B) and surfcast-weights (A
+    // re-weighted in place into W), each SIGKILLed at 20 moments drawn
+    // uniformly over its whole run. After every kill the output holds A byte
+    // for byte, or the finished result byte for byte, or nothing that reads
+    // as a tile set. The builds are deterministic, so the finished results
+    // are known from one run each. Afterwards one more build leaves no hidden
+    // folder behind: it removed what the killed runs left.
+    TempDir dir;
+    const std::string out = dir.file("out"), bin = test::binary("surfcast-build");
+    const std::vector<std::string> buildA = {bin, "-q", "--default-scene", "--scene-points", "60000", "-o", out};
+    const std::vector<std::string> buildB = {bin, "-q", "--default-scene", "--scene-points", "45000", "-o", out};
+    const std::vector<std::string> reweight = {test::binary("surfcast-weights"), out, "--method", "capture", "--views", "4",
+                                               "--size", "128"};
+    auto timed = [](const std::vector<std::string>& args) {
+        auto t0 = std::chrono::steady_clock::now();
+        auto r = test::run(args);
+        EXPECT_EQ(r.exitCode, 0) << r.output;
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    timed(buildB);
+    const SetFiles setB = readSet(out);
+    timed(buildA);
+    const SetFiles setA = readSet(out);
+    const double weighSeconds = timed(reweight);
+    const SetFiles setW = readSet(out);
+    timed(buildA);
+    const double buildSeconds = timed(buildB);
+    ASSERT_FALSE(setA.empty() || setB.empty() || setW.empty());
+    ASSERT_TRUE(setA != setB && setA != setW);
+    ASSERT_TRUE(readSet(out) == setB) << "surfcast-build is not deterministic: the check below needs it to be";
+
+    std::mt19937 random(15);
+    int killed = 0;
+    std::map<std::string, int> outcomes;
+    for (int i = 0; i < 40; ++i) {
+        const bool weights = i % 2 == 1;
+        // Start from A, whole (the previous kill may have left B, W or nothing).
+        if (readSet(out) != setA) writeSet(out, setA);
+        const double at = std::uniform_real_distribution<double>(0, 1.1 * (weights ? weighSeconds : buildSeconds))(random);
+        killed += runAndKill(weights ? reweight : buildB, at);
+        const SetFiles now = readSet(out);
+        const SetFiles& finished = weights ? setW : setB;
+        const char* outcome = now == setA ? "old" : now == finished ? "new" : "none";
+        ++outcomes[std::string(weights ? "weights " : "build ") + outcome];
+        if (now == setA || now == finished) continue;
+        EXPECT_FALSE(TilesetReader::open(out)) << (weights ? "surfcast-weights" : "surfcast-build") << " killed after "
+                                               << at << " s left a tile set that is neither the old one nor the new one";
+    }
+    for (const auto& [what, n] : outcomes) std::printf("%s: %d\n", what.c_str(), n);
+    EXPECT_GE(killed, 20) << "most runs should be killed before they finish";
+
+    timed(buildB);
+    EXPECT_TRUE(readSet(out) == setB);
+    for (const auto& e : fs::directory_iterator(dir.path()))
+        EXPECT_EQ(e.path().filename(), "out") << "left behind: " << e.path();
 }
 
 TEST(BadInput, BadFileAmongManyIsNamed) {

@@ -1,11 +1,13 @@
 // Level-of-detail selection (client/stream/lod_selection): every drawn node is
-// fine enough or a leaf, no node is drawn together with an ancestor,
+// fine enough or a leaf, and no finer than needed (its parent was too coarse),
+// no node is drawn together with an ancestor,
 // replacement draws parents while children are missing, and culling never
 // changes the image (surfcast-view --lod with and without --no-culling).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <set>
 
 #include "image.h"
@@ -49,12 +51,14 @@ size_t differingPixels(const std::string& pathA, const std::string& pathB) {
 const char* kCameras[] = {"3,-6,2,0,0,0.5,0,0,1,50", "0,0,1,5,5,0.5,0,0,1,70", "-8,-8,6,0,0,0,0,0,1,30",
                           "0,-2,0.4,0,5,0.2,0,0,1,60"};
 
-TEST_F(Lod, DrawnNodesAreFineEnoughOrLeavesAndNeverOverlap) {
+TEST_F(Lod, DrawnNodesAreFineEnoughNoFinerAndNeverOverlap) {
     auto reader = TilesetReader::open(dir_->file("scene"));
     ASSERT_TRUE(reader) << reader.status().message();
     LodSelector lod(reader->info(), reader->nodes());
     const auto& nodes = lod.nodes();
     ASSERT_GT(reader->info().levels, 3);
+    std::map<NodeKey, uint32_t> index;
+    for (uint32_t i = 0; i < nodes.size(); ++i) index[nodes[i].key] = i;
     for (const char* text : kCameras) {
         auto camera = parseCamera(text);
         ASSERT_TRUE(camera);
@@ -68,23 +72,36 @@ TEST_F(Lod, DrawnNodesAreFineEnoughOrLeavesAndNeverOverlap) {
             // Independently: h * eta / (nearest corner depth of the box grown by 2h).
             Vec3d f = normalizeOrZero(camera->target - camera->eye);
             double eta = 240 / (2 * std::tan(0.5 * camera->fovYDegrees * M_PI / 180));
-            for (const auto& s : selected) {
-                const NodeRecord& n = nodes[s.index];
-                Box3d b = lod.box(s.index);
-                double g = 2 * n.spacing, nearest = HUGE_VAL;
+            auto projected = [&](uint32_t i) {
+                Box3d b = lod.box(i);
+                double g = 2 * nodes[i].spacing, nearest = HUGE_VAL;
                 for (int c = 0; c < 8; ++c) {
                     Vec3d p{c & 1 ? b.max.x + g : b.min.x - g, c & 2 ? b.max.y + g : b.min.y - g,
                             c & 4 ? b.max.z + g : b.min.z - g};
                     nearest = std::fmin(nearest, dot(p - camera->eye, f));
                 }
-                double px = nearest > 0 ? n.spacing * eta / nearest : HUGE_VAL;
+                return nearest > 0 ? nodes[i].spacing * eta / nearest : HUGE_VAL;
+            };
+            size_t minimal = 0;
+            for (const auto& s : selected) {
+                const NodeRecord& n = nodes[s.index];
+                double px = projected(s.index);
                 EXPECT_TRUE(px <= target * (1 + 1e-9) || n.childMask == 0)
                     << text << ": node " << n.key.name() << " projects its spacing to " << px << " px";
                 for (NodeKey k = n.key; k.level > 0;) {
                     k = k.parent();
                     EXPECT_EQ(drawn.count(k), 0u) << n.key.name() << " drawn with its ancestor " << k.name();
                 }
+                // Minimal: no finer than needed. A node is drawn only because
+                // its parent was too coarse for the target.
+                if (n.key.level == 0) continue;
+                double parentPx = projected(index.at(n.key.parent()));
+                EXPECT_GT(parentPx, target * (1 - 1e-9))
+                    << text << ": node " << n.key.name() << " is drawn though its parent already projects to "
+                    << parentPx << " px";
+                ++minimal;
             }
+            EXPECT_GT(minimal, 0u) << text << ": only the root drawn; the minimality check saw nothing";
         }
     }
 }

@@ -171,7 +171,6 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["resident_nodes"] = cf.stream.resident;
                 line["resident_bytes"] = cf.stream.residentBytes;
                 line["evictions"] = cf.stream.evictions;
-                line["upload_waits"] = cf.uploadWaits;
                 line["fetch_ms"] = cf.stream.fetchMs;
                 line["decode_ms"] = cf.stream.decodeMs;
                 line["failures"] = cf.stream.failures;

@@ -35,15 +35,9 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
         pagesNeeded += (set->surfels.size() + kPageSurfels - 1) / kPageSurfels;
         bytes += set->surfels.size() * sizeof(GpuSurfel);
     }
-    if (pagesNeeded > free_.size() + retired_.size())
+    if (pagesNeeded > free_.size())
         return Status::error("the GPU surfel pool is full: " + std::to_string(pagesNeeded) + " pages needed, " +
                              std::to_string(freePages()) + " of " + std::to_string(pageCount_) + " free");
-    if (pagesNeeded > free_.size()) {  // reclaim: nothing in flight reads retired pages after this
-        VK_TRY(vkQueueWaitIdle(ctx_.queue));
-        free_.insert(retired_.begin(), retired_.end());
-        retired_.clear();
-        ++queueWaits_;
-    }
     if (bytes == 0) {
         for (const auto& [index, set] : nodes) nodes_[index] = {};
         return {};
@@ -72,6 +66,11 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
         nodes_[index] = std::move(node);
     }
     return gpu::submitAndWait(ctx_, [&](VkCommandBuffer cmd) {
+        // Frames submitted earlier may still read pages freed since: their
+        // vertex reads finish before the copy writes (write after read needs
+        // only this execution dependency).
+        gpu::memoryBarrier(cmd, VK_PIPELINE_STAGE_2_VERTEX_ATTRIBUTE_INPUT_BIT, VK_ACCESS_2_NONE,
+                           VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_NONE);
         vkCmdCopyBuffer(cmd, staging_.buffer, buffer_.buffer, uint32_t(copies.size()), copies.data());
         gpu::memoryBarrier(cmd, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT,
                            VK_PIPELINE_STAGE_2_VERTEX_ATTRIBUTE_INPUT_BIT, VK_ACCESS_2_VERTEX_ATTRIBUTE_READ_BIT);
@@ -81,7 +80,7 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
 void SurfelPool::release(uint32_t index) {
     auto it = nodes_.find(index);
     if (it == nodes_.end()) return;
-    retired_.insert(retired_.end(), it->second.pages.begin(), it->second.pages.end());
+    free_.insert(it->second.pages.begin(), it->second.pages.end());
     nodes_.erase(it);
 }
 

@@ -3,13 +3,15 @@
 // takes whole pages, adjacent or not, so evicting and loading in any order
 // never fragments the pool; a node's draw is one range per run of adjacent
 // pages. The arrivals of a frame are uploaded through one staging buffer in
-// one submission.
+// one submission, which the upload waits for.
 //
-// Released pages are retired, not freed: a frame still in flight may read
-// them. Uploads take free pages only, so they never wait for rendering; only
-// when the free pages run out does an upload wait for the queue to go idle
-// and reclaim the retired ones. (Record a frame after the update that chose
-// its nodes, as SurfcastClient does.)
+// A released page is free at once. An upload's copy starts with a barrier
+// after the vertex reads of everything submitted before it, so a frame in
+// flight finishes reading a page before the copy overwrites it. (Record a
+// frame after the update that chose its nodes, as SurfcastClient does: a
+// command buffer recorded earlier and submitted after the upload would read
+// the new contents.) The queue is the one the frames go to, so the upload's
+// wait also covers the frames submitted before it.
 #pragma once
 
 #include <memory>
@@ -31,9 +33,8 @@ public:
     SurfelPool(const SurfelPool&) = delete;
     SurfelPool& operator=(const SurfelPool&) = delete;
 
-    // Copies each node's surfels into free pages (reclaiming retired pages,
-    // after a queue wait, when the free ones run out). Fails, uploading
-    // nothing, when the pool cannot hold them.
+    // Copies each node's surfels into free pages and waits for the copy.
+    // Fails, uploading nothing, when the pool cannot hold them.
     Status upload(const std::vector<std::pair<uint32_t, const SurfelSet*>>& nodes);
     void release(uint32_t node);
     bool contains(uint32_t node) const { return nodes_.count(node) != 0; }
@@ -42,8 +43,7 @@ public:
 
     VkBuffer buffer() const { return buffer_.buffer; }
     size_t pageCount() const { return pageCount_; }
-    size_t freePages() const { return free_.size() + retired_.size(); }
-    size_t queueWaits() const { return queueWaits_; }  // uploads that had to reclaim retired pages
+    size_t freePages() const { return free_.size(); }
 
 private:
     explicit SurfelPool(gpu::Context& ctx) : ctx_(ctx) {}
@@ -55,8 +55,6 @@ private:
     gpu::Buffer buffer_, staging_;
     size_t pageCount_ = 0;
     std::set<uint32_t> free_;  // lowest first: loads tend to take adjacent pages
-    std::vector<uint32_t> retired_;  // released; maybe still read by a frame in flight
-    size_t queueWaits_ = 0;
     std::unordered_map<uint32_t, Node> nodes_;
 };
 

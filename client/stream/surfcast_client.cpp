@@ -83,7 +83,6 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     frame.splats = renderer_->splatCount();
     frame.uploaded = u.arrived.size();
     frame.evicted = u.evicted.size();
-    frame.uploadWaits = pool_->queueWaits();
     frame.converged = u.converged;
     frame.lod = std::move(u.lod);
     frame.stream = stream_->stats();

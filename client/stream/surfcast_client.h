@@ -32,7 +32,6 @@ struct ClientFrame {
     size_t nodes = 0;            // drawn
     size_t splats = 0;           // drawn
     size_t uploaded = 0, evicted = 0;  // nodes, this update
-    size_t uploadWaits = 0;            // uploads so far that waited for the GPU to reclaim pages
     bool converged = false;      // nothing the view needs is missing
     LodStats lod;
     StreamStats stream;
