@@ -54,7 +54,8 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
     for (const auto& [index, set] : nodes) {
         Node node;
         node.surfels = uint32_t(set->surfels.size());
-        std::memcpy(static_cast<char*>(staging_.mapped) + at, set->surfels.data(), node.surfels * sizeof(GpuSurfel));
+        if (node.surfels > 0)  // an empty node (every class hidden) has no data pointer to copy from
+            std::memcpy(static_cast<char*>(staging_.mapped) + at, set->surfels.data(), node.surfels * sizeof(GpuSurfel));
         for (uint32_t done = 0; done < node.surfels; done += kPageSurfels) {
             uint32_t page = *free_.begin();
             free_.erase(free_.begin());
