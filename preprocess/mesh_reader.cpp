@@ -16,7 +16,10 @@ namespace {
 struct MeshTraits : public OpenMesh::DefaultTraits {
     using Point = OpenMesh::Vec3d;
     using Normal = OpenMesh::Vec3d;
-    using Color = OpenMesh::Vec3uc;
+    // Floats in [0, 1] nominally: OpenMesh reads OBJ colours as floats of any
+    // value and would cast them to bytes unchecked (undefined behaviour outside
+    // 0..255, found by fuzz_read_obj); makePoint clamps instead.
+    using Color = OpenMesh::Vec3f;
 };
 using TriMesh = OpenMesh::TriMesh_ArrayKernelT<MeshTraits>;
 
@@ -45,8 +48,8 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
             const Vec3d& v = ply->vertices[i];
             handles.push_back(mesh.add_vertex({v.x, v.y, v.z}));
             if (!ply->colors.empty())
-                mesh.set_color(handles.back(), {uint8_t(ply->colors[i][0] >> 8), uint8_t(ply->colors[i][1] >> 8),
-                                                uint8_t(ply->colors[i][2] >> 8)});
+                mesh.set_color(handles.back(), {float(ply->colors[i][0] >> 8) / 255.f, float(ply->colors[i][1] >> 8) / 255.f,
+                                                float(ply->colors[i][2] >> 8) / 255.f});
         }
         loaded->hasColors = !ply->colors.empty();
         for (const auto& t : ply->triangles)
@@ -147,8 +150,10 @@ private:
         q.position = {p[0], p[1], p[2]};
         q.normal = normalizeOrZero(Vec3f{float(normal[0]), float(normal[1]), float(normal[2])});
         if (mesh_->hasColors)
-            for (int k = 0; k < 3; ++k)
-                q.color[k] = uint16_t(std::lround((m.color(v0)[k] * a + m.color(v1)[k] * b + m.color(v2)[k] * c) * 257.0));
+            for (int k = 0; k < 3; ++k) {
+                const double unit = m.color(v0)[k] * a + m.color(v1)[k] * b + m.color(v2)[k] * c;
+                q.color[k] = unit > 0 ? (unit < 1 ? uint16_t(std::lround(unit * 65535.0)) : uint16_t(65535)) : 0;  // NaN: 0
+            }
         return q;
     }
 

@@ -128,6 +128,20 @@ TEST(LazPcd, TruncatedCopiesGiveClearErrors) {
     }
 }
 
+TEST(LazPcd, AHugeChunkCountIsAnErrorNotAnAllocation) {
+    // A 1,283-byte LAZ (fuzz_read_laz's find: fuzz/regressions/read_laz)
+    // whose chunk table claims 2,324,398,079 chunks: the laz crate sized a
+    // vector by it (37 GB; the process aborted). The count is checked against
+    // the points and the file size first.
+    test::TempDir dir;
+    auto r = test::run({test::binary("surfcast-build"), "-q", SURFCAST_FUZZ_REGRESSIONS "/read_laz/chunk-count-37GB.laz",
+                        "-o", dir.file("out")});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("chunk-count-37GB.laz"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("the chunk table claims 2324398079 chunks"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir.file("out")));
+}
+
 TEST(LazPcd, WrongCountsAndFieldsGiveClearErrors) {
     REQUIRE_DATA();
     test::TempDir dir;

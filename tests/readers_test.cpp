@@ -288,6 +288,28 @@ TEST(MeshReader, ObjThroughOpenMesh) {
     EXPECT_GT(readAll(**r).points, 4996u);
 }
 
+TEST(MeshReader, ObjColoursOutsideTheUnitRangeAreClamped) {
+    // OBJ vertex colours are floats of any value; OpenMesh cast them to bytes
+    // unchecked (undefined behaviour for -74.3, found by fuzz_read_obj:
+    // fuzz/regressions/read_obj). They are clamped to [0, 1]: a triangle whose
+    // corners all read (-74.3, 2, 0.5) samples red 0, green full,
+    // blue half, wherever it is sampled.
+    test::TempDir dir;
+    test::writeFile(dir.file("c.obj"), "v 0 0 0 -74.3 2 0.5\nv 1 0 0 -74.3 2 0.5\nv 0 1 0 -74.3 2 0.5\nf 1 2 3\n");
+    auto r = openMeshReader(dir.file("c.obj"), MeshSampling{0.05});
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    ASSERT_TRUE((*r)->description().hasColors);
+    auto all = readAll(**r, true);
+    ASSERT_GT(all.points, 10u);
+    for (const InputPoint& p : all.all) {
+        EXPECT_EQ(p.color[0], 0);
+        EXPECT_EQ(p.color[1], 65535);
+        // 0.5 · 65535 = 32767.5: the barycentric weights sum to 1 only up to
+        // rounding, so either neighbour.
+        EXPECT_NEAR(p.color[2], 32767.5, 0.5);
+    }
+}
+
 TEST(Inputs, ScanMergesFilesAndScalesLasColours) {
     REQUIRE_DATA();
     InputOptions opt;

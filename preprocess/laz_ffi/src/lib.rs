@@ -4,7 +4,7 @@
 
 use std::ffi::CStr;
 use std::fs::File;
-use std::io::{BufReader, Seek, SeekFrom};
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::os::raw::{c_char, c_int};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
@@ -70,6 +70,36 @@ fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
     }
 }
 
+fn read_u64_at(f: &mut File, at: u64) -> Result<u64, String> {
+    let mut b = [0u8; 8];
+    f.seek(SeekFrom::Start(at)).and_then(|_| f.read_exact(&mut b)).map_err(|e| format!("cannot read at byte {}: {}", at, e))?;
+    Ok(u64::from_le_bytes(b))
+}
+
+// The chunk table's entry count, checked before the `laz` crate sizes a
+// vector by it (a crafted count made it allocate 37 GB: fuzz_read_laz). The
+// table's offset is the first 8 bytes of the point data (or, when those are
+// -1, the file's last 8 bytes); the table starts with a u32 version and the
+// u32 count. Every chunk holds at least one point, and one byte of the file.
+fn check_chunk_count(path: &str, data_offset: u64, point_count: u64, chunk_size: u64) -> Result<(), String> {
+    let mut f = File::open(path).map_err(|e| format!("cannot open: {}", e))?;
+    let size = f.metadata().map_err(|e| format!("cannot stat: {}", e))?.len();
+    let mut table = read_u64_at(&mut f, data_offset)?;
+    if table == u64::MAX && size >= 8 {
+        table = read_u64_at(&mut f, size - 8)?;
+    }
+    if table < data_offset.saturating_add(8) || table.saturating_add(8) > size {
+        return Err(format!("the chunk table offset {} lies outside the point data (file of {} bytes)", table, size));
+    }
+    let count = read_u64_at(&mut f, table)? >> 32;
+    let most = if chunk_size > 0 { point_count / chunk_size + 1 } else { point_count.max(1) }.min(size);
+    if count > most {
+        return Err(format!("the chunk table claims {} chunks; {} points in a file of {} bytes allow at most {}",
+                           count, point_count, size, most));
+    }
+    Ok(())
+}
+
 fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usize) -> Result<ScLazReader, String> {
     let vlr = LazVlr::from_buffer(vlr).map_err(|e| format!("LASzip VLR: {}", e))?;
     let point_size = vlr.items_size();
@@ -82,6 +112,7 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usi
 
     // The chunk table (at the end of the file) says how many points there are:
     // a truncated file or a wrong header count fails here, before any work.
+    check_chunk_count(path, data_offset, point_count, chunk_size)?;
     match ChunkTable::read_from(open_at_data()?, &vlr) {
         Ok(table) => {
             let chunks = table.len() as u64;

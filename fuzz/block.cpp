@@ -1,0 +1,24 @@
+// libFuzzer target: one node's Draco block, decoded as a client decodes what a
+// server sends. The first byte picks what the tile set declares (colour bits,
+// which optional attributes, LiDAR attributes and scalars), the rest is the
+// block.
+#include <cstdint>
+
+#include "block_codec.h"
+
+using namespace surfcast;
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+    if (size < 1) return 0;
+    const uint8_t flags = data[0];
+    BlockExpectation expect;
+    expect.colorBits = (flags & 3) == 0 ? 0 : (flags & 3) == 1 ? 8 : 16;
+    expect.normals = flags & 4;
+    expect.weights = flags & 8;
+    expect.radii = flags & 16;
+    expect.edgeWeights = flags & 32;
+    if (flags & 64) expect.extra = {"intensity", "classification", "return_number", "gps_time"};
+    expect.scalars = flags & 128;
+    (void)decodeBlock(data + 1, size - 1, expect);
+    return 0;
+}

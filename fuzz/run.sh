@@ -1,0 +1,90 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets (clang, ASan + UBSan; CMake preset "fuzz") and
+# runs them (fuzz/README.md):
+#   fuzz/run.sh replay [SECONDS]         every target over its seeds and regression
+#                                        cases, then SECONDS (default 10) of fuzzing
+#                                        each: what CI runs
+#   fuzz/run.sh campaign SECONDS [TARGET...]
+#                                        fuzz each target for SECONDS or 10^6 runs,
+#                                        whichever comes first, two at a time; the
+#                                        corpora grow in build-fuzz/corpus, findings
+#                                        land in build-fuzz/artifacts
+# Seeds come from ../shared/data and from tile sets built here (make_seeds.py);
+# only small hand-written seeds and regression cases are in the repository.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+mode="${1:?usage: fuzz/run.sh replay [SECONDS] | campaign SECONDS [TARGET...]}"
+shift
+
+packages=(clang libclang-rt-14-dev libomp-14-dev)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  sudo_cmd=()
+  [ "$(id -u)" -eq 0 ] || sudo_cmd=(sudo)
+  export DEBIAN_FRONTEND=noninteractive
+  "${sudo_cmd[@]}" apt-get update -q
+  "${sudo_cmd[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+[ -x build/bin/surfcast-build ] && [ -x build/test-venv/bin/python ] || scripts/test.sh -R cli_test >/dev/null
+cmake --preset fuzz >/dev/null
+cmake --build build-fuzz --target fuzz_all
+
+data="${SURFCAST_DATA_DIR:-../shared/data}"
+if [ ! -f "$data/PROVENANCE.md" ]; then
+  echo "fuzz/run.sh: no scans at $data (../shared/data); the reader seeds come from them" >&2
+  exit 1
+fi
+work=build-fuzz
+rm -rf "$work/sets" "$work/seeds"
+mkdir -p "$work/sets" "$work/seeds" "$work/corpus" "$work/artifacts"
+build/bin/surfcast-build -q --default-scene --scene-points 3000 -o "$work/sets/s" >/dev/null
+build/bin/surfcast-build -q --default-scene --scene-points 3000 --weights analytic -o "$work/sets/weighted" >/dev/null
+build/bin/surfcast-build -q "$data/autzen_trim.las" --attributes all --capacity 20000 -o "$work/sets/autzen" >/dev/null 2>&1
+build/test-venv/bin/python fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
+export SURFCAST_FUZZ_SETS="$PWD/$work/sets"
+
+targets=(read_ply read_las read_laz read_pcd read_xyz read_obj tileset block range http_request client_response)
+corpora() {  # the seed folders a target reads, existing ones only
+  for d in "$work/seeds/$1" "fuzz/seeds/$1" "fuzz/regressions/$1"; do [ -d "$d" ] && echo "$d"; done
+}
+flags=(-rss_limit_mb=2048 -timeout=20 -max_len=65536)
+
+if [ "$mode" = replay ]; then
+  seconds="${1:-10}"
+  for t in "${targets[@]}"; do
+    mapfile -t dirs < <(corpora "$t")
+    mkdir -p "$work/corpus/$t" "$work/artifacts/$t"
+    log="$work/artifacts/$t.log"
+    # Each seed and regression case once, then fuzzing from them.
+    if ! "$work/fuzz/fuzz_$t" "${flags[@]}" -runs=0 "${dirs[@]}" > "$log" 2>&1 ||
+       ! "$work/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -artifact_prefix="$work/artifacts/$t/" \
+         "$work/corpus/$t" "${dirs[@]}" >> "$log" 2>&1; then
+      tail -n 40 "$log" >&2
+      echo "fuzz/run.sh: $t failed (log $log, input in $work/artifacts/$t/)" >&2
+      exit 1
+    fi
+    echo "== $t (${dirs[*]}): $(grep -E '^Done' "$log" | tr '\n' ' ')"
+  done
+  exit 0
+fi
+
+[ "$mode" = campaign ] || { echo "fuzz/run.sh: unknown mode $mode" >&2; exit 2; }
+seconds="${1:?campaign SECONDS}"
+shift
+(($#)) && targets=("$@")
+run_one() {
+  local t="$1"
+  mapfile -t dirs < <(corpora "$t")
+  mkdir -p "$work/corpus/$t" "$work/artifacts/$t"
+  "$work/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -runs=1000000 -print_final_stats=1 \
+    -artifact_prefix="$work/artifacts/$t/" "$work/corpus/$t" "${dirs[@]}" > "$work/artifacts/$t.log" 2>&1
+  echo "== $t: exit $? $(grep -E '^stat::number_of_executed_units|^#[0-9]+ +DONE' "$work/artifacts/$t.log" | tr '\n' ' ')"
+}
+for ((i = 0; i < ${#targets[@]}; i += 2)); do
+  run_one "${targets[i]}" &
+  if ((i + 1 < ${#targets[@]})); then run_one "${targets[i + 1]}" & fi
+  wait
+done
