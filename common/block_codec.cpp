@@ -1,5 +1,6 @@
 #include "block_codec.h"
 
+#include <cstring>
 #include <draco/compression/decode.h>
 #include <draco/compression/expert_encode.h>
 #include <draco/point_cloud/point_cloud_builder.h>
@@ -116,7 +117,30 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
     return std::vector<uint8_t>(buffer.data(), buffer.data() + buffer.size());
 }
 
+namespace {
+// The point count of a Draco point cloud, read from its header before Draco
+// sizes anything by it (a 100-byte block claiming 2^31 points made Draco
+// allocate 2.4 GB: fuzz_block). Header: "DRACO", major, minor, encoder type
+// (0: point cloud), method, u16 flags (no metadata: surfcast-build writes
+// none), then the count as int32.
+Result<uint32_t> dracoPointCount(const uint8_t* data, size_t size) {
+    if (size < 15 || std::memcmp(data, "DRACO", 5) != 0) return Status::error("not a Draco block");
+    if (data[7] != 0) return Status::error("the Draco block is not a point cloud");
+    if ((data[9] | data[10] << 8) & 0x8000) return Status::error("the Draco block carries metadata");
+    int32_t count;
+    std::memcpy(&count, data + 11, 4);
+    if (count < 0) return Status::error("the Draco block declares a negative point count");
+    return uint32_t(count);
+}
+}  // namespace
+
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect) {
+    auto count = dracoPointCount(data, size);
+    if (!count) return count.status();
+    if (expect.points ? *count != expect.points : *count > kMaxBlockPoints)
+        return Status::error("the Draco block declares " + std::to_string(*count) + " points; the tile set " +
+                             (expect.points ? "declares " + std::to_string(expect.points)
+                                            : "allows at most " + std::to_string(kMaxBlockPoints)));
     draco::DecoderBuffer buffer;
     buffer.Init(reinterpret_cast<const char*>(data), size);
     draco::Decoder decoder;

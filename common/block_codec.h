@@ -81,7 +81,14 @@ struct BlockExpectation {
     bool edgeWeights = false;
     std::vector<std::string> extra;
     bool scalars = false;
+    // Surfels the node's record declares: the block must hold exactly these.
+    // Draco sizes its buffers by the count in the block's header before it
+    // decodes anything, so the header is checked first. 0: unknown, then at
+    // most kMaxBlockPoints.
+    uint32_t points = 0;
 };
+// The largest node surfcast-build writes (--capacity's upper bound).
+inline constexpr uint32_t kMaxBlockPoints = 100'000'000;
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect);
 
 }  // namespace surfcast

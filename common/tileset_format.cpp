@@ -1,5 +1,7 @@
 #include "tileset_format.h"
 
+#include "block_codec.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -325,11 +327,16 @@ Result<std::vector<NodeRecord>> readHierarchyOf(const TilesetInfo& info, const s
                              std::to_string(info.hierarchyBytes) + " bytes): a set being rebuilt, or a damaged copy");
     auto nodes = readHierarchy(bytes, what);
     if (!nodes) return nodes.status();
-    for (const NodeRecord& n : *nodes)
+    for (const NodeRecord& n : *nodes) {
         if (n.blockOffset > info.blocksBytes || n.blockSize > info.blocksBytes - n.blockOffset)
             return Status::error(what + ": node " + n.key.name() + " points past the end of blocks.bin (bytes " +
                                  std::to_string(n.blockOffset) + " + " + std::to_string(n.blockSize) + " of " +
                                  std::to_string(info.blocksBytes) + ")");
+        // Decoders size buffers by this count (decodeBlock checks the block against it).
+        if (n.surfelCount > kMaxBlockPoints)
+            return Status::error(what + ": node " + n.key.name() + " declares " + std::to_string(n.surfelCount) +
+                                 " surfels, more than the " + std::to_string(kMaxBlockPoints) + " a node may hold");
+    }
     return nodes;
 }
 

@@ -53,6 +53,7 @@ BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& nod
     e.weights = info.weights != "none";
     e.radii = (node.flags & kFlagHasRadius) != 0;
     e.edgeWeights = (node.flags & kFlagEdgeWeights) != 0;
+    e.points = node.surfelCount;
     // Every attribute past the fixed ones sits in every block, in the order
     // tileset.json lists them.
     for (const AttributeInfo& a : info.attributes)

@@ -1,7 +1,8 @@
 // libFuzzer target: one node's Draco block, decoded as a client decodes what a
 // server sends. The first byte picks what the tile set declares (colour bits,
-// which optional attributes, LiDAR attributes and scalars), the rest is the
-// block.
+// which optional attributes, LiDAR attributes and scalars), the next two the
+// node record's surfel count (readers always pass the record's count), the
+// rest is the block.
 #include <cstdint>
 
 #include "block_codec.h"
@@ -9,7 +10,7 @@
 using namespace surfcast;
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-    if (size < 1) return 0;
+    if (size < 3) return 0;
     const uint8_t flags = data[0];
     BlockExpectation expect;
     expect.colorBits = (flags & 3) == 0 ? 0 : (flags & 3) == 1 ? 8 : 16;
@@ -19,6 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     expect.edgeWeights = flags & 32;
     if (flags & 64) expect.extra = {"intensity", "classification", "return_number", "gps_time"};
     expect.scalars = flags & 128;
-    (void)decodeBlock(data + 1, size - 1, expect);
+    expect.points = uint32_t(data[1] | data[2] << 8);
+    (void)decodeBlock(data + 3, size - 3, expect);
     return 0;
 }

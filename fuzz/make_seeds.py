@@ -189,7 +189,9 @@ def set_seeds(sets, tileset_dst, block_dst):
             flags = struct.unpack_from("<H", hier, rec + 2)[0]
             f = color | 4 | 8 | (16 if flags & 2 else 0) | (32 if flags & 16 else 0)
             f |= 64 if "classification" in meta else 0
-            out(os.path.join(block_dst, "%s-%d" % (name, i)), bytes([f]) + blocks[off:off + size])
+            count = struct.unpack_from("<I", hier, rec + 32)[0]
+            if count < 65536:  # the target takes the record's count as two bytes
+                out(os.path.join(block_dst, "%s-%d" % (name, i)), bytes([f]) + struct.pack("<H", count) + blocks[off:off + size])
         del pages
 
 

@@ -20,6 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     InputOptions options;
     options.paths = {path};
     options.scalars.all = true;
+    options.mesh.maxSurfels = 100000;  // as --mesh-max-surfels: a few faces may ask for any density
     std::vector<InputPoint> points(4096);
     (void)forEachInput(options, [&](size_t, PointReader& reader) -> Status {
         for (;;) {

@@ -4,7 +4,10 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <mutex>
+#include <set>
 
 #include "ply_reader.h"
 #include "random.h"
@@ -98,6 +101,21 @@ public:
             if (!lengths.empty()) {
                 std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
                 spacing_ = 0.5 * lengths[lengths.size() / 2];
+            }
+            double area = 0;
+            for (auto f : m.faces()) area += m.calc_face_area(f);
+            const double cap = double(std::max<uint64_t>(1, sampling.maxSurfels));
+            if (spacing_ > 0 && area / (spacing_ * spacing_) > cap) {
+                const double coarser = std::sqrt(area / cap);
+                // Once per file, though each pass of the build opens it again.
+                static std::mutex mutex;
+                static std::set<std::string> warned;
+                std::lock_guard lock(mutex);
+                if (warned.insert(path).second)
+                    std::fprintf(stderr, "warning: %s: half the median edge (%g) would sample %.3g surfels; spacing %g "
+                                 "keeps them to --mesh-max-surfels %llu\n", path.c_str(), spacing_,
+                                 area / (spacing_ * spacing_), coarser, (unsigned long long)sampling.maxSurfels);
+                spacing_ = coarser;
             }
         }
         desc_.path = path;

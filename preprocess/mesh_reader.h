@@ -13,9 +13,16 @@
 
 namespace surfcast {
 
+// Surfels a mesh gives at most with the default spacing (about this many;
+// the count per face is random). A few faces can ask for any density: one
+// huge triangle beside many tiny ones made a 3 KB OBJ sample without end
+// (fuzz_read_obj). An explicit spacing is taken as given.
+inline constexpr uint64_t kDefaultMeshMaxSurfels = 5'000'000;
+
 struct MeshSampling {
-    double spacing = 0;  // world units; 0: half the median edge length
+    double spacing = 0;  // world units; 0: half the median edge length, coarsened to maxSurfels
     uint64_t seed = 1;
+    uint64_t maxSurfels = kDefaultMeshMaxSurfels;
 };
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling);

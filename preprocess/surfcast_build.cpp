@@ -62,7 +62,9 @@ the text file LIST, one per line.
                           gps_time, nir and Extra Bytes dimensions by name; PLY and
                           PCD properties by name
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
-  --mesh-spacing S        mesh sampling spacing (default: half the median edge)
+  --mesh-spacing S        mesh sampling spacing (default: half the median edge,
+                          coarsened where that would exceed --mesh-max-surfels)
+  --mesh-max-surfels N    most surfels a mesh gives at its default spacing (5000000)
   --vertices-only         read a mesh file's vertices as points, no sampling
   -q, --quiet             no progress output
   -h, --help              this text
@@ -203,6 +205,9 @@ int main(int argc, char** argv) {
         } else if (a == "--mesh-spacing") {
             if (!number(&d, 1e-12, 1e12)) return usageError("--mesh-spacing needs a positive length");
             opt.inputs.mesh.spacing = d;
+        } else if (a == "--mesh-max-surfels") {
+            if (!number(&d, 1, 1e12) || d != std::floor(d)) return usageError("--mesh-max-surfels needs a whole number >= 1");
+            opt.inputs.mesh.maxSurfels = uint64_t(d);
         } else if (a == "--vertices-only") {
             opt.inputs.verticesOnly = true;
         } else if (a == "-q" || a == "--quiet") {

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <map>
 #include <tuple>
 
@@ -60,6 +61,31 @@ TEST(BlockCodec, RejectsTruncatedAndMismatchedBlocks) {
     wrong = e;
     wrong.colorBits = 16;
     EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), wrong).ok());
+}
+
+// Draco sized its buffers by the point count in a block's header before
+// decoding anything: a block claiming 2^31 - 1 points made it allocate
+// gigabytes (fuzz_block). The count is checked against the node's record
+// (or, unknown, against the largest node a set may hold) first.
+TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
+    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{});
+    ASSERT_TRUE(bytes.ok());
+    BlockExpectation e;
+    e.colorBits = 8;
+    e.points = 300;
+    ASSERT_TRUE(decodeBlock(bytes->data(), bytes->size(), e).ok());
+    e.points = 299;
+    auto mismatch = decodeBlock(bytes->data(), bytes->size(), e);
+    ASSERT_FALSE(mismatch.ok());
+    EXPECT_NE(mismatch.status().message().find("declares 300 points; the tile set declares 299"), std::string::npos)
+        << mismatch.status().message();
+    std::vector<uint8_t> huge = *bytes;
+    const int32_t most = 0x7fffffff;
+    std::memcpy(huge.data() + 11, &most, 4);  // the header's count (docs: DRACO, version, type, method, flags)
+    e.points = 0;
+    auto claimed = decodeBlock(huge.data(), huge.size(), e);
+    ASSERT_FALSE(claimed.ok());
+    EXPECT_NE(claimed.status().message().find("declares 2147483647 points"), std::string::npos) << claimed.status().message();
 }
 
 // Edge weights (4 ratios per surfel, 8-bit) travel with their point.

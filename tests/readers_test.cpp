@@ -310,6 +310,28 @@ TEST(MeshReader, ObjColoursOutsideTheUnitRangeAreClamped) {
     }
 }
 
+TEST(MeshReader, DefaultSpacingIsCappedAtMaxSurfels) {
+    // A 3 KB OBJ (fuzz_read_obj's find: fuzz/regressions/read_obj) whose median
+    // edge is tiny beside one huge face: half the median edge would sample
+    // 8.2e9 surfels, and the build ran without end. The default spacing is
+    // coarsened to the cap (the count per face is random: within 1 % of it
+    // here, thousands of faces), with a warning; an explicit spacing is kept.
+    test::TempDir dir;
+    const std::string obj = SURFCAST_FUZZ_REGRESSIONS "/read_obj/huge-triangle-sampling.obj";
+    auto r = test::run({test::binary("surfcast-build"), obj, "--mesh-max-surfels", "20000", "-o", dir.file("out")});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("keeps them to --mesh-max-surfels 20000"), std::string::npos) << r.output;
+    size_t at = r.output.find("points in: ");
+    ASSERT_NE(at, std::string::npos) << r.output;
+    const long points = std::atol(r.output.c_str() + at + 11);
+    EXPECT_NEAR(double(points), 20000.0, 200.0) << r.output;
+    MeshSampling explicitSpacing{0.5};
+    explicitSpacing.maxSurfels = 10;
+    auto reader = openMeshReader(obj, explicitSpacing);
+    ASSERT_TRUE(reader.ok()) << reader.status().message();
+    EXPECT_GT(readAll(**reader).points, 10u) << "an explicit spacing is not capped";
+}
+
 TEST(Inputs, ScanMergesFilesAndScalesLasColours) {
     REQUIRE_DATA();
     InputOptions opt;
