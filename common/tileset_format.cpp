@@ -234,7 +234,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["hierarchy"] = {{"file", "hierarchy.bin"}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
     j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
-    return j.dump(2) + "\n";
+    return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what) {

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <mutex>
 #include <set>
+#include <sstream>
 
 #include "ply_reader.h"
 #include "random.h"
@@ -36,6 +38,34 @@ struct LoadedMesh {
 };
 
 
+// OpenMesh's OBJ reader asserts (aborting the process) on a face none of
+// whose vertices has an index ("f /2/1 //3", found by fuzz_read_obj). Faces
+// are checked first: every vertex of a face starts with a non-zero integer
+// index, and a face has at least three.
+Status checkObjFaces(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return Status::error(path + ": cannot open");
+    std::string line;
+    for (uint64_t number = 1; std::getline(in, line); ++number) {
+        size_t at = line.find_first_not_of(" \t");
+        if (at == std::string::npos || line[at] != 'f' || at + 1 >= line.size() || (line[at + 1] != ' ' && line[at + 1] != '\t'))
+            continue;
+        std::istringstream words(line.substr(at + 1));
+        int vertices = 0;
+        for (std::string word; words >> word; ++vertices) {
+            const std::string index = word.substr(0, word.find('/'));
+            char* end = nullptr;
+            const long v = std::strtol(index.c_str(), &end, 10);
+            if (index.empty() || *end != '\0' || v == 0)
+                return Status::error(path + ": line " + std::to_string(number) + ": face vertex '" + word +
+                                     "' has no vertex index");
+        }
+        if (vertices < 3)
+            return Status::error(path + ": line " + std::to_string(number) + ": a face needs three vertices");
+    }
+    return {};
+}
+
 Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
     auto loaded = std::make_unique<LoadedMesh>();
     TriMesh& mesh = loaded->mesh;
@@ -58,6 +88,7 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
         for (const auto& t : ply->triangles)
             if (!mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) ++loaded->rejectedFaces;
     } else {
+        if (lowerExtension(path) == ".obj") SC_TRY(checkObjFaces(path));
         OpenMesh::IO::Options options = OpenMesh::IO::Options::VertexColor;
         if (!OpenMesh::IO::read_mesh(mesh, path, options)) return Status::error(path + ": OpenMesh could not read the mesh");
         loaded->hasColors = options.check(OpenMesh::IO::Options::VertexColor) && mesh.has_vertex_colors();

@@ -127,7 +127,11 @@ struct HttpServer::Impl {
     void fail(Reply& r, int status, const std::string& kind, const std::string& message) {
         r.status = status;
         r.iov.clear();
-        r.text(nlohmann::json{{"error", message}}.dump() + "\n", "application/json");
+        // Messages quote the request (a batch key, a path), which need not be
+        // UTF-8: such bytes are replaced. (Thrown, the exception ended the
+        // whole server: fuzz_http_request.)
+        r.text(nlohmann::json{{"error", message}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n",
+               "application/json");
         metrics.error(kind);
     }
 

@@ -128,7 +128,7 @@ TEST(LazPcd, TruncatedCopiesGiveClearErrors) {
     }
 }
 
-TEST(LazPcd, AHugeChunkCountIsAnErrorNotAnAllocation) {
+TEST(LazPcd, HugeCountsInTheFileAreErrorsNotAllocations) {
     // A 1,283-byte LAZ (fuzz_read_laz's find: fuzz/regressions/read_laz)
     // whose chunk table claims 2,324,398,079 chunks: the laz crate sized a
     // vector by it (37 GB; the process aborted). The count is checked against
@@ -140,6 +140,13 @@ TEST(LazPcd, AHugeChunkCountIsAnErrorNotAnAllocation) {
     EXPECT_NE(r.output.find("chunk-count-37GB.laz"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("the chunk table claims 2324398079 chunks"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(dir.file("out")));
+    // A layered chunk (format 6-10) whose extra-bytes layer claims 4 GB in a
+    // 1 KB file: the crate allocated it before reading. Layers must fit their chunk.
+    auto layers = test::run({test::binary("surfcast-build"), "-q", SURFCAST_FUZZ_REGRESSIONS "/read_laz/layer-size-4GB.laz",
+                             "-o", dir.file("out")});
+    EXPECT_EQ(layers.exitCode, 1) << layers.output;
+    EXPECT_NE(layers.output.find("chunk 0: its layers claim 4294968106 bytes, the chunk table gives the chunk 1057"),
+              std::string::npos) << layers.output;
 }
 
 TEST(LazPcd, WrongCountsAndFieldsGiveClearErrors) {

@@ -311,25 +311,52 @@ TEST(MeshReader, ObjColoursOutsideTheUnitRangeAreClamped) {
 }
 
 TEST(MeshReader, DefaultSpacingIsCappedAtMaxSurfels) {
-    // A 3 KB OBJ (fuzz_read_obj's find: fuzz/regressions/read_obj) whose median
-    // edge is tiny beside one huge face: half the median edge would sample
-    // 8.2e9 surfels, and the build ran without end. The default spacing is
-    // coarsened to the cap (the count per face is random: within 1 % of it
-    // here, thousands of faces), with a warning; an explicit spacing is kept.
+    // One huge triangle beside many tiny ones (fuzz_read_obj found a 3 KB OBJ
+    // like it that sampled without end): half the median edge, 0.0005, would
+    // sample the big one's 5e5 area with 2e12 surfels. The default spacing is
+    // coarsened to the cap, with a warning (the count per face is random:
+    // 20,000 ± 1 %); an explicit spacing is taken as given.
     test::TempDir dir;
-    const std::string obj = SURFCAST_FUZZ_REGRESSIONS "/read_obj/huge-triangle-sampling.obj";
-    auto r = test::run({test::binary("surfcast-build"), obj, "--mesh-max-surfels", "20000", "-o", dir.file("out")});
+    std::string obj = "v 0 0 0\nv 1000 0 0\nv 0 1000 0\nf 1 2 3\n";
+    for (int i = 0; i < 100; ++i) {
+        const double x = 2000 + i;
+        obj += "v " + std::to_string(x) + " 0 0\nv " + std::to_string(x + 0.001) + " 0 0\nv " + std::to_string(x) +
+               " 0.001 0\nf " + std::to_string(4 + 3 * i) + " " + std::to_string(5 + 3 * i) + " " +
+               std::to_string(6 + 3 * i) + "\n";
+    }
+    test::writeFile(dir.file("huge.obj"), obj);
+    auto r = test::run({test::binary("surfcast-build"), dir.file("huge.obj"), "--mesh-max-surfels", "20000", "-o",
+                        dir.file("out")});
     ASSERT_EQ(r.exitCode, 0) << r.output;
     EXPECT_NE(r.output.find("keeps them to --mesh-max-surfels 20000"), std::string::npos) << r.output;
     size_t at = r.output.find("points in: ");
     ASSERT_NE(at, std::string::npos) << r.output;
     const long points = std::atol(r.output.c_str() + at + 11);
     EXPECT_NEAR(double(points), 20000.0, 200.0) << r.output;
-    MeshSampling explicitSpacing{0.5};
+    MeshSampling explicitSpacing{5.0};
     explicitSpacing.maxSurfels = 10;
-    auto reader = openMeshReader(obj, explicitSpacing);
+    auto reader = openMeshReader(dir.file("huge.obj"), explicitSpacing);
     ASSERT_TRUE(reader.ok()) << reader.status().message();
-    EXPECT_GT(readAll(**reader).points, 10u) << "an explicit spacing is not capped";
+    EXPECT_NEAR(double(readAll(**reader).points), 5e5 / 25, 500) << "an explicit spacing is not capped";
+}
+
+TEST(MeshReader, ObjFacesWithoutVertexIndicesAreErrors) {
+    // OpenMesh's OBJ reader aborted the process (an assertion) on a face none
+    // of whose vertices has an index (fuzz/regressions/read_obj). Such faces,
+    // and faces of fewer than three vertices, are errors naming the line.
+    test::TempDir dir;
+    for (auto [face, message] : {std::pair{"f /2/1 //3//1 /1", "face vertex '/2/1' has no vertex index"},
+                                 std::pair{"f 1 2 0", "face vertex '0' has no vertex index"},
+                                 std::pair{"f 1 2", "a face needs three vertices"}}) {
+        test::writeFile(dir.file("bad.obj"), std::string("v 0 0 0\nv 1 0 0\nv 0 1 0\n") + face + "\n");
+        auto r = openMeshReader(dir.file("bad.obj"), MeshSampling{});
+        ASSERT_FALSE(r.ok()) << face;
+        EXPECT_NE(r.status().message().find(std::string("line 4: ") + message), std::string::npos) << r.status().message();
+    }
+    auto crash = test::run({test::binary("surfcast-build"), SURFCAST_FUZZ_REGRESSIONS "/read_obj/face-without-vertex-index.obj",
+                            "-o", dir.file("out")});
+    EXPECT_EQ(crash.exitCode, 1) << crash.output;
+    EXPECT_NE(crash.output.find("has no vertex index"), std::string::npos) << crash.output;
 }
 
 TEST(Inputs, ScanMergesFilesAndScalesLasColours) {

@@ -258,6 +258,24 @@ TEST_F(ServerTest, MalformedOversizedAndWrongMethods) {
     EXPECT_EQ(c.Get("/healthz")->status, 200);  // still serving
 }
 
+TEST_F(ServerTest, ErrorsQuotingBytesThatAreNotUtf8AreAnswered) {
+    // A batch key with bytes that are not UTF-8 is quoted in the 400's JSON
+    // body; the JSON library threw on it, and the uncaught exception ended the
+    // server (fuzz_http_request; fuzz/regressions/http_request). The bytes are
+    // replaced, and the server goes on answering.
+    start({});
+    std::string body = "0\x08\x00\x00\xfc\x00-0-0-0";
+    auto r = client().Post("/sets/scene/batch", body, "text/plain");
+    ASSERT_TRUE(r) << "the server closed the connection";
+    EXPECT_EQ(r->status, 400);
+    auto parsed = nlohmann::json::parse(r->body, nullptr, false);
+    ASSERT_FALSE(parsed.is_discarded()) << r->body;
+    EXPECT_TRUE(parsed.contains("error")) << r->body;
+    auto health = client().Get("/healthz");
+    ASSERT_TRUE(health) << "the server is gone";
+    EXPECT_EQ(health->status, 200);
+}
+
 TEST_F(ServerTest, TokenRequired) {
     ServerConfig config;
     config.token = "s3cret";

@@ -102,7 +102,7 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
         }
         line["out"] = path;
         if (ctx) line["validation_errors"] = ctx->validationErrors.load();
-        std::printf("%s\n", line.dump().c_str());
+        std::printf("%s\n", line.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
         std::fflush(stdout);
     }
     int errors = ctx ? ctx->validationErrors.load() : 0;
@@ -189,7 +189,7 @@ int runHeadlessLod(const ViewOptions& o) {
                     }
                     line["redraw"] = path;
                 }
-                std::printf("%s\n", line.dump().c_str());
+                std::printf("%s\n", line.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
                 std::fflush(stdout);
                 if (cf.converged) break;
                 if (timedOut) {

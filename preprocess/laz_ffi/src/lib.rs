@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 
 use laz::laszip::ChunkTable;
-use laz::{LasZipDecompressor, LazVlr, ParLasZipDecompressor};
+use laz::{LasZipDecompressor, LazItemType, LazVlr, ParLasZipDecompressor};
 
 enum Decompressor {
     Sequential(LasZipDecompressor<'static, BufReader<File>>),
@@ -100,6 +100,38 @@ fn check_chunk_count(path: &str, data_offset: u64, point_count: u64, chunk_size:
     Ok(())
 }
 
+// Layered chunks (LAS 1.4 point formats 6-10) start with the first point raw,
+// a u32 point count, then a u32 byte size per layer of every item; the `laz`
+// crate sizes a buffer by each before it reads it (4 GB from a 1 KB file:
+// fuzz_read_laz). The layers must fit in the chunk's bytes from the chunk table.
+fn check_layer_sizes(path: &str, data_offset: u64, vlr: &LazVlr, table: &ChunkTable) -> Result<(), String> {
+    let mut layers = 0u64;
+    for item in vlr.items() {
+        layers += match item.item_type() {
+            LazItemType::Point14 => 9,
+            LazItemType::RGB14 | LazItemType::WavePacket14 => 1,
+            LazItemType::RGBNIR14 => 2,
+            LazItemType::Byte14(n) => u64::from(n),
+            _ => return Ok(()),  // not layered (LAS 1.0-1.3 formats): no sizes ahead of the data
+        };
+    }
+    let mut f = File::open(path).map_err(|e| format!("cannot open: {}", e))?;
+    let mut at = data_offset + 8;  // past the chunk table's offset
+    for (k, chunk) in table.as_ref().iter().enumerate() {
+        let head = vlr.items_size() + 4;
+        let mut sizes = vec![0u8; usize::try_from(4 * layers).map_err(|_| "too many layers".to_string())?];
+        f.seek(SeekFrom::Start(at + head)).and_then(|_| f.read_exact(&mut sizes))
+            .map_err(|e| format!("chunk {}: cannot read its layer sizes: {}", k, e))?;
+        let total: u64 = sizes.chunks(4).map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))).sum();
+        if head + 4 * layers + total > chunk.byte_count {
+            return Err(format!("chunk {}: its layers claim {} bytes, the chunk table gives the chunk {}", k,
+                               head + 4 * layers + total, chunk.byte_count));
+        }
+        at += chunk.byte_count;
+    }
+    Ok(())
+}
+
 fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usize) -> Result<ScLazReader, String> {
     let vlr = LazVlr::from_buffer(vlr).map_err(|e| format!("LASzip VLR: {}", e))?;
     let point_size = vlr.items_size();
@@ -115,6 +147,7 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usi
     check_chunk_count(path, data_offset, point_count, chunk_size)?;
     match ChunkTable::read_from(open_at_data()?, &vlr) {
         Ok(table) => {
+            check_layer_sizes(path, data_offset, &vlr, &table)?;
             let chunks = table.len() as u64;
             if chunk_size == 0 {
                 let total: u64 = table.as_ref().iter().map(|e| e.point_count).sum();
