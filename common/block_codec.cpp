@@ -121,11 +121,14 @@ namespace {
 // The point count of a Draco point cloud, read from its header before Draco
 // sizes anything by it (a 100-byte block claiming 2^31 points made Draco
 // allocate 2.4 GB: fuzz_block). Header: "DRACO", major, minor, encoder type
-// (0: point cloud), method, u16 flags (no metadata: surfcast-build writes
-// none), then the count as int32.
+// (0: point cloud), method (1: kd-tree, what surfcast-build writes; Draco's
+// sequential decoder sized buffers by further fields, 3.3 GB from a small
+// block), u16 flags (no metadata: surfcast-build writes none), then the
+// count as int32.
 Result<uint32_t> dracoPointCount(const uint8_t* data, size_t size) {
     if (size < 15 || std::memcmp(data, "DRACO", 5) != 0) return Status::error("not a Draco block");
     if (data[7] != 0) return Status::error("the Draco block is not a point cloud");
+    if (data[8] != 1) return Status::error("the Draco block is not kd-tree coded");
     if ((data[9] | data[10] << 8) & 0x8000) return Status::error("the Draco block carries metadata");
     int32_t count;
     std::memcpy(&count, data + 11, 4);

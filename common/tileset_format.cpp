@@ -9,6 +9,8 @@
 #include <deque>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <utility>
 
 #include "byte_io.h"
 #include "crc32.h"
@@ -237,12 +239,26 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
+// An integer field: a JSON integer within T's range. nlohmann's get<int>()
+// casts a float or an out-of-range number unchecked (undefined for 1e70:
+// fuzz_tileset), so readTilesetJson reads integers through this.
+struct FieldError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+template <class T>
+T integer(const nlohmann::json& v) {
+    if (v.is_number_unsigned() && std::in_range<T>(v.get<uint64_t>())) return T(v.get<uint64_t>());
+    if (v.is_number_integer() && !v.is_number_unsigned() && std::in_range<T>(v.get<int64_t>())) return T(v.get<int64_t>());
+    throw FieldError("an integer field holds " + v.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
+                     ", not an integer in its range");
+}
+
 Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what) {
     nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (j.is_discarded()) return Status::error(what + ": not valid JSON");
     try {
         if (j.at("format").get<std::string>() != "surfcast-tileset") return Status::error(what + ": not a surfcast tile set");
-        const int version = j.at("version").get<int>();
+        const int version = integer<int>(j.at("version"));
         if (version < kOldestFormatVersion || version > kFormatVersion)
             return Status::error(what + ": unsupported version " + j.at("version").dump() + " (this reader takes " +
                                  std::to_string(kOldestFormatVersion) + " to " + std::to_string(kFormatVersion) + ")");
@@ -250,21 +266,21 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
         TilesetInfo info;
         info.version = version;
         info.generator = j.at("generator").get<std::string>();
-        info.inputPoints = j.at("input_points").get<uint64_t>();
-        info.surfels = j.at("surfels").get<uint64_t>();
-        info.nodes = j.at("nodes").get<uint64_t>();
-        info.levels = j.at("levels").get<int>();
-        info.grid = j.at("grid").get<int>();
+        info.inputPoints = integer<uint64_t>(j.at("input_points"));
+        info.surfels = integer<uint64_t>(j.at("surfels"));
+        info.nodes = integer<uint64_t>(j.at("nodes"));
+        info.levels = integer<int>(j.at("levels"));
+        info.grid = integer<int>(j.at("grid"));
         info.rootMin = readVec(j.at("root").at("min"));
         info.rootEdge = j.at("root").at("edge").get<double>();
         info.bounds.min = readVec(j.at("bounds").at("min"));
         info.bounds.max = readVec(j.at("bounds").at("max"));
-        info.colorBits = j.at("color_bits").get<int>();
+        info.colorBits = integer<int>(j.at("color_bits"));
         if (info.colorBits != 0 && info.colorBits != 8 && info.colorBits != 16)
             return Status::error(what + ": color_bits is " + std::to_string(info.colorBits) + ", not 0, 8 or 16");
         for (const auto& a : j.at("attributes")) {
             info.attributes.push_back({a.at("name").get<std::string>(), a.at("type").get<std::string>(),
-                                       a.at("components").get<int>(), a.at("quantization_bits").get<int>(),
+                                       integer<int>(a.at("components")), integer<int>(a.at("quantization_bits")),
                                        a.value("kind", std::string()), a.value("scale", 1.0), a.value("offset", 0.0)});
             const AttributeInfo& added = info.attributes.back();
             if (!std::isfinite(added.scale) || !std::isfinite(added.offset) || added.scale == 0)
@@ -295,7 +311,7 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
                     long c = std::strtol(key.c_str(), &end, 10);
                     if (key.empty() || *end != 0 || c < 0 || c > 255)
                         return Status::error(what + ": statistics.classification: '" + key + "' is not a class (0-255)");
-                    st.classCounts.push_back({int(c), count.get<uint64_t>()});
+                    st.classCounts.push_back({int(c), integer<uint64_t>(count)});
                 }
             std::sort(st.classCounts.begin(), st.classCounts.end());
         }
@@ -306,17 +322,19 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
         if (!(info.kernelScale > 0) || !std::isfinite(info.kernelScale))
             return Status::error(what + ": kernel_scale must be positive");
         const auto& h = j.at("hierarchy");
-        info.hierarchyBytes = h.at("bytes").get<uint64_t>();
-        info.hierarchyPages = h.at("pages").get<uint32_t>();
-        info.pageDepth = h.at("page_depth").get<uint32_t>();
-        info.hierarchyCrc = h.at("crc32").get<uint32_t>();
-        info.blocksBytes = j.at("blocks").at("bytes").get<uint64_t>();
+        info.hierarchyBytes = integer<uint64_t>(h.at("bytes"));
+        info.hierarchyPages = integer<uint32_t>(h.at("pages"));
+        info.pageDepth = integer<uint32_t>(h.at("page_depth"));
+        info.hierarchyCrc = integer<uint32_t>(h.at("crc32"));
+        info.blocksBytes = integer<uint64_t>(j.at("blocks").at("bytes"));
         if (!(info.rootEdge > 0) || !std::isfinite(info.rootEdge) || info.levels < 1 || info.levels > kMaxLevel + 1 ||
             info.grid < 1)
             return Status::error(what + ": root edge, levels or grid out of range");
         return info;
     } catch (const nlohmann::json::exception& e) {
         return Status::error(what + ": missing or mistyped field (" + std::string(e.what()) + ")");
+    } catch (const FieldError& e) {
+        return Status::error(what + ": " + e.what());
     }
 }
 

@@ -84,6 +84,10 @@ std::string lowerExtension(const std::string& path);
 // 0..255 (ASPRS class 0, "never classified").
 inline uint8_t classOf(double v) { return v >= 0 && v <= 255 && v == std::floor(v) ? uint8_t(v) : 0; }
 
+// A value rounded into 0..65535; NaN gives 0 (a float-to-integer cast of NaN
+// or of a value out of range is undefined: found by fuzz_read_ply).
+inline uint16_t saturate16(double v) { return v > 0 ? (v < 65535 ? uint16_t(std::lround(v)) : uint16_t(65535)) : 0; }
+
 inline bool finite(const Vec3d& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
 
 }  // namespace surfcast

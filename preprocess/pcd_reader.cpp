@@ -286,7 +286,7 @@ private:
             case Role::NZ: normal_.z = float(elementValue(f, p)); break;
             case Role::Intensity: {
                 double v = elementValue(f, p);
-                q.intensity = uint16_t(std::clamp(f.type == 'F' && v <= 1.0 ? v * 65535 : v, 0.0, 65535.0));
+                q.intensity = saturate16(f.type == 'F' && v <= 1.0 ? v * 65535 : v);
                 break;
             }
             case Role::Classification: q.classification = classOf(elementValue(f, p)); break;

@@ -129,7 +129,7 @@ uint16_t toChannel(double v, PlyType t) {
     double scaled = t == PlyType::UInt8 || t == PlyType::Int8 ? v * 257.0
                     : (t == PlyType::Float32 || t == PlyType::Float64) ? v * 65535.0
                                                                        : v;
-    return uint16_t(std::clamp(std::round(scaled), 0.0, 65535.0));
+    return saturate16(scaled);
 }
 
 struct VertexLayout {

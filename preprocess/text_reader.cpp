@@ -85,10 +85,10 @@ public:
                     case Y: p.position.y = v; break;
                     case Z: p.position.z = v; break;
                     case R: case G: case B:
-                        p.color[fields_[c] - R] = uint16_t(std::clamp(std::round(v), 0.0, 255.0) * 257);
+                        p.color[fields_[c] - R] = uint16_t(saturate16(std::min(v, 255.0)) * 257);
                         break;
                     case NX: case NY: case NZ: normal[fields_[c] - NX] = float(v); break;
-                    case I: p.intensity = uint16_t(std::clamp(std::round(v), 0.0, 65535.0)); break;
+                    case I: p.intensity = saturate16(v); break;
                     case Ignore: break;
                 }
             }

@@ -87,6 +87,28 @@ TEST(PlyReader, IgeaLittleEndianMatchesProvenance) {
     expectBounds(all.bounds, {-0.034556, -0.049669, -0.049538}, {0.034556, 0.049669, 0.049538}, kProvenanceTolerance);
 }
 
+TEST(PlyReader, NanAndOutOfRangeColoursAndIntensitiesSaturate) {
+    // A float colour or intensity of nan was cast to an integer (undefined:
+    // fuzz_read_ply, fuzz/regressions/read_ply). NaN gives 0; values beyond
+    // the range give its ends.
+    test::TempDir dir;
+    test::writeFile(dir.file("c.ply"), "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                                       "property float z\nproperty float red\nproperty float green\nproperty float blue\n"
+                                       "property float intensity\nend_header\n0 0 0 nan 2 -1 nan\n1 0 0 0.5 inf -inf 70000\n");
+    auto r = openPlyReader(dir.file("c.ply"));
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    auto all = readAll(**r, true);
+    ASSERT_EQ(all.points, 2u);
+    EXPECT_EQ(all.all[0].color[0], 0);
+    EXPECT_EQ(all.all[0].color[1], 65535);
+    EXPECT_EQ(all.all[0].color[2], 0);
+    EXPECT_EQ(all.all[0].intensity, 0);
+    EXPECT_EQ(all.all[1].color[0], 32768);  // lround(0.5 * 65535 = 32767.5)
+    EXPECT_EQ(all.all[1].color[1], 65535);
+    EXPECT_EQ(all.all[1].color[2], 0);
+    EXPECT_EQ(all.all[1].intensity, 65535);
+}
+
 TEST(PlyReader, MeshElementsAreDetected) {
     REQUIRE_DATA();
     for (const char* name : {"bunny.ply", "horse.ply", "igea.ply"}) {

@@ -322,6 +322,19 @@ TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
     auto r = readTilesetJson(with("\"quantization_bits\": 8", "\"quantization_bits\": 99"), "t.json");
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.status().message().find("normal"), std::string::npos) << r.status().message();
+    // Integer fields holding floats or numbers beyond their type were cast
+    // unchecked (undefined behaviour for 1.1e70: fuzz_tileset,
+    // fuzz/regressions/tileset). Each is an error naming the value.
+    for (auto [from, to] : {std::pair{"\"version\": 2", "\"version\": 1.11111e+70"},
+                            std::pair{"\"color_bits\": 8", "\"color_bits\": 8.5"},
+                            std::pair{"\"levels\": 2", "\"levels\": 4294967298"},
+                            std::pair{"\"quantization_bits\": 8", "\"quantization_bits\": -1e300"}}) {
+        auto bad = readTilesetJson(with(from, to), "t.json");
+        ASSERT_FALSE(bad.ok()) << to;
+        EXPECT_NE(bad.status().message().find("t.json"), std::string::npos) << bad.status().message();
+    }
+    auto huge = readTilesetJson(with("\"version\": 2", "\"version\": 1.11111e+70"), "t.json");
+    EXPECT_NE(huge.status().message().find("1.11111e+70"), std::string::npos) << huge.status().message();
 }
 
 // The hierarchy against tileset.json: size and CRC as declared, and every
