@@ -1,6 +1,7 @@
 #include "ply_reader.h"
 
 #include <algorithm>
+#include <utility>
 #include <bit>
 #include <charconv>
 #include <cmath>
@@ -338,13 +339,17 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
     ValueReader values(*in, header->format);
     PlyMesh mesh;
     std::vector<double> scalars, list;
+    bool seenVertices = false;
     for (const PlyElement& e : header->elements) {
         if (e.name == "vertex") {
+            // A second vertex element would leave colours and vertices out of
+            // step (a heap overflow in the mesh reader: fuzz_read_ply).
+            if (std::exchange(seenVertices, true)) return Status::error(path + ": more than one vertex element");
             std::vector<ScalarField> none;
             auto layout = vertexLayout(e, path, {}, &none);
             if (!layout) return layout.status();
             mesh.colorBits = layout->colorType == PlyType::UInt8 ? 8 : 16;
-            mesh.vertices.reserve(e.count);
+            mesh.vertices.reserve(std::min<uint64_t>(e.count, 1u << 20));  // the header's count is not trusted
             for (uint64_t i = 0; i < e.count; ++i) {
                 SC_TRY(values.readInstance(e, &scalars, nullptr));
                 mesh.vertices.push_back({scalars[layout->x], scalars[layout->y], scalars[layout->z]});

@@ -109,6 +109,21 @@ TEST(PlyReader, NanAndOutOfRangeColoursAndIntensitiesSaturate) {
     EXPECT_EQ(all.all[1].intensity, 65535);
 }
 
+TEST(PlyReader, ASecondVertexElementIsAnError) {
+    // Colours from one vertex element and vertices from two fell out of step
+    // and the mesh reader read past the colours (heap overflow: fuzz_read_ply,
+    // fuzz/regressions/read_ply).
+    test::TempDir dir;
+    test::writeFile(dir.file("two.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                         "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+                                         "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                                         "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                         "0 0 0 1 2 3\n1 0 0 1 2 3\n0 1 0 1 2 3\n5 0 0\n6 0 0\n5 1 0\n3 3 4 5\n");
+    auto r = openMeshReader(dir.file("two.ply"), MeshSampling{});
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.status().message().find("more than one vertex element"), std::string::npos) << r.status().message();
+}
+
 TEST(PlyReader, MeshElementsAreDetected) {
     REQUIRE_DATA();
     for (const char* name : {"bunny.ply", "horse.ply", "igea.ply"}) {
