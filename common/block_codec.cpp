@@ -118,40 +118,74 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
 }
 
 namespace {
-// The point count of a Draco point cloud, read from its header before Draco
-// sizes anything by it (a 100-byte block claiming 2^31 points made Draco
-// allocate 2.4 GB: fuzz_block). Header: "DRACO", major, minor, encoder type
-// (0: point cloud), method (1: kd-tree, what surfcast-build writes; Draco's
-// sequential decoder sized buffers by further fields, 3.3 GB from a small
-// block), u16 flags (no metadata: surfcast-build writes none), then the
-// count as int32.
-Result<uint32_t> dracoPointCount(const uint8_t* data, size_t size) {
-    if (size < 15 || std::memcmp(data, "DRACO", 5) != 0) return Status::error("not a Draco block");
+// What Draco sizes its buffers by, read from a block's header before Draco
+// sees it, so that a block cannot make it allocate more than the node's
+// record and the set's attributes allow (fuzz_block: 2.4 GB from a point
+// count, 3.3 GB from the sequential decoder, 2 GB from attribute
+// descriptors). Header: "DRACO", major, minor, encoder type (0: point
+// cloud), method (1: kd-tree, what surfcast-build writes), u16 flags (no
+// metadata: surfcast-build writes none), the point count as int32; then one
+// attribute decoder, its attribute count (varint), and per attribute its
+// type, data type, component count and normalized flag (a byte each) and a
+// unique id (varint).
+struct DracoHeader {
+    uint32_t points = 0;
+    uint32_t attributes = 0;
+};
+Result<DracoHeader> readDracoHeader(const uint8_t* data, size_t size) {
+    if (size < 17 || std::memcmp(data, "DRACO", 5) != 0) return Status::error("not a Draco block");
     if (data[7] != 0) return Status::error("the Draco block is not a point cloud");
     if (data[8] != 1) return Status::error("the Draco block is not kd-tree coded");
     if ((data[9] | data[10] << 8) & 0x8000) return Status::error("the Draco block carries metadata");
     int32_t count;
     std::memcpy(&count, data + 11, 4);
     if (count < 0) return Status::error("the Draco block declares a negative point count");
-    return uint32_t(count);
+    if (data[15] != 1) return Status::error("the Draco block has " + std::to_string(data[15]) + " attribute decoders, not 1");
+    size_t at = 16;
+    auto varint = [&](uint32_t* out) {
+        uint64_t v = 0;
+        for (int shift = 0; shift < 35 && at < size; shift += 7) {
+            const uint8_t b = data[at++];
+            v |= uint64_t(b & 0x7f) << shift;
+            if (!(b & 0x80)) return v <= UINT32_MAX && (*out = uint32_t(v), true);
+        }
+        return false;
+    };
+    DracoHeader h;
+    h.points = uint32_t(count);
+    if (!varint(&h.attributes) || h.attributes > 64) return Status::error("the Draco block's attribute count is unreadable");
+    for (uint32_t i = 0; i < h.attributes; ++i) {
+        if (size - at < 4) return Status::error("the Draco block ends in its attribute descriptors");
+        const uint8_t dataType = data[at + 1], components = data[at + 2];
+        at += 4;
+        uint32_t id;
+        if (dataType < 1 || dataType > 11 || components < 1 || components > 4 || !varint(&id))
+            return Status::error("the Draco block's attribute " + std::to_string(i) + " has " +
+                                 std::to_string(components) + " components of type " + std::to_string(dataType));
+    }
+    return h;
 }
 }  // namespace
 
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect) {
-    auto count = dracoPointCount(data, size);
-    if (!count) return count.status();
-    if (expect.points ? *count != expect.points : *count > kMaxBlockPoints)
-        return Status::error("the Draco block declares " + std::to_string(*count) + " points; the tile set " +
+    auto header = readDracoHeader(data, size);
+    if (!header) return header.status();
+    if (expect.points ? header->points != expect.points : header->points > kMaxBlockPoints)
+        return Status::error("the Draco block declares " + std::to_string(header->points) + " points; the tile set " +
                              (expect.points ? "declares " + std::to_string(expect.points)
                                             : "allows at most " + std::to_string(kMaxBlockPoints)));
+    const int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii + expect.edgeWeights +
+                         int(expect.extra.size());
+    if (header->attributes != uint32_t(expected))
+        return Status::error("block has " + std::to_string(header->attributes) + " attributes; the tile set declares " +
+                             std::to_string(expected));
     draco::DecoderBuffer buffer;
     buffer.Init(reinterpret_cast<const char*>(data), size);
     draco::Decoder decoder;
     auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
     if (!decoded.ok()) return Status::error(std::string("Draco decoding failed: ") + decoded.status().error_msg());
     const draco::PointCloud& pc = *decoded.value();
-    int expected = 1 + expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii + expect.edgeWeights +
-                   int(expect.extra.size());
+
     if (pc.num_attributes() != expected || pc.num_points() == 0)
         return Status::error("block has " + std::to_string(pc.num_attributes()) + " attributes and " +
                              std::to_string(pc.num_points()) + " points; the tile set declares " +

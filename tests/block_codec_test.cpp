@@ -94,6 +94,21 @@ TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
     auto method = decodeBlock(sequential.data(), sequential.size(), e);
     ASSERT_FALSE(method.ok());
     EXPECT_NE(method.status().message().find("not kd-tree coded"), std::string::npos) << method.status().message();
+    // Draco sized each attribute by the descriptors that follow (2 GB from a
+    // small block); their count must be the set's, and each has 1 to 4
+    // components. Byte 16: the attribute count; 17-20 the first descriptor.
+    ASSERT_EQ((*bytes)[16], 4) << "position, normal, colour, weight";
+    std::vector<uint8_t> fewer = *bytes;
+    fewer[16] = 3;
+    auto counted = decodeBlock(fewer.data(), fewer.size(), e);
+    ASSERT_FALSE(counted.ok());
+    EXPECT_NE(counted.status().message().find("block has 3 attributes; the tile set declares 4"), std::string::npos)
+        << counted.status().message();
+    std::vector<uint8_t> wide = *bytes;
+    wide[19] = 200;
+    auto components = decodeBlock(wide.data(), wide.size(), e);
+    ASSERT_FALSE(components.ok());
+    EXPECT_NE(components.status().message().find("has 200 components"), std::string::npos) << components.status().message();
 }
 
 // Edge weights (4 ratios per surfel, 8-bit) travel with their point.
