@@ -185,11 +185,8 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
     if (!decoded.ok()) return Status::error(std::string("Draco decoding failed: ") + decoded.status().error_msg());
     const draco::PointCloud& pc = *decoded.value();
-
-    if (pc.num_attributes() != expected || pc.num_points() == 0)
-        return Status::error("block has " + std::to_string(pc.num_attributes()) + " attributes and " +
-                             std::to_string(pc.num_points()) + " points; the tile set declares " +
-                             std::to_string(expected) + " attributes");
+    // Draco made one attribute per descriptor readDracoHeader counted.
+    if (pc.num_points() == 0) return Status::error("block has no points");
     BlockData block;
     int index = 0;
     bool ok = readAttribute(pc, index++, draco::DT_UINT32, 3, &block.positions);

@@ -70,7 +70,8 @@ protected:
     std::string file(const std::string& name) { return test::readFile(dir_->file("sets/scene/" + name)); }
 
     // Sends raw bytes on a fresh connection; returns what comes back until close or timeout.
-    std::string raw(const std::string& bytes, int timeoutMs = 3000, bool firstDataOnly = false) {
+    // A raw TCP connection to the server, receives timing out after timeoutMs.
+    int connectRaw(int timeoutMs) {
         int fd = ::socket(AF_INET, SOCK_STREAM, 0);
         sockaddr_in addr{};
         addr.sin_family = AF_INET;
@@ -79,6 +80,11 @@ protected:
         EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
         timeval tv{timeoutMs / 1000, (timeoutMs % 1000) * 1000};
         ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+        return fd;
+    }
+
+    std::string raw(const std::string& bytes, int timeoutMs = 3000, bool firstDataOnly = false) {
+        int fd = connectRaw(timeoutMs);
         ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
         std::string out;
         char buf[4096];
@@ -331,12 +337,7 @@ TEST_F(ServerTest, StalledClientDoesNotBlockOthers) {
     ServerConfig config;
     config.timeoutSeconds = 3;
     start(config);
-    int stalled = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_port = htons(uint16_t(server_->port()));
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::connect(stalled, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+    int stalled = connectRaw(10000);
     const std::string half = "GET /healthz HTTP/1.1\r\nHost: x\r\n";
     ASSERT_EQ(::send(stalled, half.data(), half.size(), MSG_NOSIGNAL), ssize_t(half.size()));
     const auto t0 = std::chrono::steady_clock::now();
@@ -349,8 +350,6 @@ TEST_F(ServerTest, StalledClientDoesNotBlockOthers) {
     EXPECT_TRUE(n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
         << "the other client was answered only once the stalled connection was dropped";
 
-    timeval tv{10, 0};
-    ::setsockopt(stalled, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
     std::string got;
     char buf[4096];
     while ((n = ::recv(stalled, buf, sizeof buf, 0)) > 0) got.append(buf, size_t(n));

@@ -203,25 +203,44 @@ TEST(Stream, TightGpuBudgetEvictsAndStillConverges) {
     EXPECT_GT(unlimited, 0u) << "one view should fit the budgets";
 }
 
-// Streams `location` through a client until converged; the rendered image.
-Image streamImage(gpu::Context& ctx, const std::string& location, const Camera& camera) {
-    ClientOptions options;
-    auto client = SurfcastClient::open(ctx, location, options);
-    EXPECT_TRUE(client) << client.status().message();
-    if (!client) return {};
+// Updates `client` until converged (60 s at most); the nodes uploaded on the way.
+size_t convergeClient(SurfcastClient& client, const Camera& camera, ClientFrame* last, int width = 240, int height = 180) {
     auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    bool converged = false;
-    while (!converged && std::chrono::steady_clock::now() < deadline) {
-        auto frame = (*client)->update(camera, 200, 150);
+    size_t uploaded = 0;
+    while (std::chrono::steady_clock::now() < deadline) {
+        auto frame = client.update(camera, width, height);
         EXPECT_TRUE(frame) << frame.status().message();
-        if (!frame) return {};
-        converged = frame->converged;
-        if (!converged) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        if (!frame) break;
+        uploaded += frame->uploaded;
+        *last = *frame;
+        if (frame->converged) return uploaded;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
-    EXPECT_TRUE(converged);
-    auto image = (*client)->renderImage((*client)->defaultSettings());
+    ADD_FAILURE() << "did not converge";
+    return uploaded;
+}
+
+Image clientImage(SurfcastClient& client, const RenderSettings* settings = nullptr) {
+    auto image = client.renderImage(settings ? *settings : client.defaultSettings());
     EXPECT_TRUE(image) << image.status().message();
     return image ? *image : Image{};
+}
+
+// Streams `location` through a client until converged; the rendered image.
+Image streamImage(gpu::Context& ctx, const std::string& location, const Camera& camera) {
+    auto client = SurfcastClient::open(ctx, location, ClientOptions{});
+    EXPECT_TRUE(client) << client.status().message();
+    if (!client) return {};
+    ClientFrame last;
+    convergeClient(**client, camera, &last, 200, 150);
+    return clientImage(**client);
+}
+
+// autzen_trim.las built into dir/autzen with nodes of at most `capacity` surfels.
+void buildAutzen(const TempDir& dir, const char* capacity) {
+    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", dir.file("autzen"), "--capacity",
+                  capacity});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
 }
 
 TEST(Stream, HostOwnedDeviceDrawsTheSameImage) {
@@ -302,29 +321,6 @@ TEST(Stream, HostOwnedDeviceDrawsTheSameImage) {
     EXPECT_TRUE(hosted.rgba == owned.rgba) << "the host's device drew another image";
 }
 
-// Updates `client` until converged (60 s at most); the nodes uploaded on the way.
-size_t convergeClient(SurfcastClient& client, const Camera& camera, ClientFrame* last) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    size_t uploaded = 0;
-    while (std::chrono::steady_clock::now() < deadline) {
-        auto frame = client.update(camera, 240, 180);
-        EXPECT_TRUE(frame) << frame.status().message();
-        if (!frame) break;
-        uploaded += frame->uploaded;
-        *last = *frame;
-        if (frame->converged) return uploaded;
-        std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    ADD_FAILURE() << "did not converge";
-    return uploaded;
-}
-
-Image clientImage(SurfcastClient& client, const RenderSettings* settings = nullptr) {
-    auto image = client.renderImage(settings ? *settings : client.defaultSettings());
-    EXPECT_TRUE(image) << image.status().message();
-    return image ? *image : Image{};
-}
-
 TEST(Stream, ColourKeyStepsThroughTheModesTheSetHas) {
     // A set with intensity and classes but no colour or returns: C goes
     // intensity -> elevation -> classification -> intensity; Auto is intensity.
@@ -348,9 +344,7 @@ TEST(Stream, ColoringChangesWithoutFetchingAgain) {
     // again, nothing is fetched, and the converged image is the one a client
     // opened with that colouring draws. Switching back gives the first image.
     TempDir dir;
-    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", dir.file("autzen"), "--capacity",
-                  "4000"});
-    ASSERT_EQ(b.exitCode, 0) << b.output;
+    ASSERT_NO_FATAL_FAILURE(buildAutzen(dir, "4000"));
     auto camera = parseCamera("636590,848700,1400,636590,849216,463,0,1,0,45");
     ASSERT_TRUE(camera);
     auto ctx = gpu::createContext({});
@@ -433,9 +427,7 @@ TEST(Stream, ColoringChangesWhileStreamingAndEvicting) {
     // Each round lands the change at another moment of the close view's
     // fetching and decoding (after 0 to 12 ms).
     TempDir dir;
-    auto b = run({binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", dir.file("autzen"), "--capacity",
-                  "2000"});
-    ASSERT_EQ(b.exitCode, 0) << b.output;
+    ASSERT_NO_FATAL_FAILURE(buildAutzen(dir, "2000"));
     auto overview = parseCamera("636590,848700,1400,636590,849216,463,0,1,0,45");
     auto close = parseCamera("636500,849100,700,636600,849250,430,0,0,1,40");
     ASSERT_TRUE(overview && close);
