@@ -135,59 +135,105 @@ std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t page
     return out;
 }
 
-Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what) {
+Result<HierarchyIndex> readHierarchyIndex(std::span<const uint8_t> bytes, uint64_t fileBytes, const std::string& what) {
     auto fail = [&](const std::string& why) { return Status::error(what + ": " + why); };
-    if (bytes.size() < kHierarchyHeaderSize) return fail("shorter than the 32-byte header");
+    if (bytes.size() < kHierarchyHeaderSize || fileBytes < kHierarchyHeaderSize)
+        return fail("shorter than the 32-byte header");
     const uint8_t* b = bytes.data();
     if (std::memcmp(b, kHierarchyMagic, 4) != 0) return fail("bad magic at byte 0 (expected SCHY)");
     if (le::get<uint32_t>(b + 4) < uint32_t(kOldestFormatVersion) || le::get<uint32_t>(b + 4) > uint32_t(kFormatVersion))
         return fail("unsupported version " + std::to_string(le::get<uint32_t>(b + 4)) + " at byte 4");
     if (le::get<uint32_t>(b + 8) != kRecordSize) return fail("record size at byte 8 is not 64");
-    uint64_t pageCount = le::get<uint32_t>(b + 12);
-    uint32_t nodeCount = le::get<uint32_t>(b + 20);
-    uint64_t tableEnd = kHierarchyHeaderSize + pageCount * kPageEntrySize;
-    if (tableEnd > bytes.size()) return fail("page table runs past the end of the file");
+    const uint64_t pageCount = le::get<uint32_t>(b + 12);
+    const uint64_t tableEnd = kHierarchyHeaderSize + pageCount * kPageEntrySize;
+    if (tableEnd > fileBytes || tableEnd > bytes.size()) return fail("page table runs past the end of the file");
     if (crc32(b + kHierarchyHeaderSize, tableEnd - kHierarchyHeaderSize) != le::get<uint32_t>(b + 24))
         return fail("page table CRC mismatch");
-
-    std::vector<NodeRecord> nodes;
-    std::vector<int> pageReferenced(pageCount, 0);
-    std::vector<NodeKey> pageRootFromProxy(pageCount);
+    HierarchyIndex index;
+    index.pageDepth = le::get<uint32_t>(b + 16);
+    index.nodeCount = le::get<uint32_t>(b + 20);
+    index.pages.resize(pageCount);  // bounded: the table is inside `bytes`
     for (uint64_t p = 0; p < pageCount; ++p) {
         const uint8_t* entry = b + kHierarchyHeaderSize + p * kPageEntrySize;
-        uint64_t offset = le::get<uint64_t>(entry);
-        uint64_t count = le::get<uint32_t>(entry + 8);
-        std::string where = "page " + std::to_string(p) + " at byte " + std::to_string(offset);
-        if (count == 0 || offset < tableEnd || offset > bytes.size() || count * kRecordSize > bytes.size() - offset)
-            return fail(where + ": out of the file's bounds");
-        if (crc32(b + offset, count * kRecordSize) != le::get<uint32_t>(entry + 12)) return fail(where + ": CRC mismatch");
-        std::vector<NodeRecord> recs(count);
-        for (uint64_t i = 0; i < count; ++i) recs[i] = decodeRecord(b + offset + i * kRecordSize);
-        if (p == 0 ? recs[0].key != NodeKey{} : (pageReferenced[p] != 1 || recs[0].key != pageRootFromProxy[p]))
-            return fail(where + ": page root does not match the record that points to it");
-        size_t next = 1;
-        for (size_t i = 0; i < recs.size(); ++i) {
-            const NodeRecord& r = recs[i];
-            if (r.key.level > kMaxLevel) return fail(where + ": level beyond " + std::to_string(kMaxLevel));
-            if (r.flags & kFlagChildrenInPage) {
-                if (r.childPage <= p || r.childPage >= pageCount || r.childMask == 0)
-                    return fail(where + ": bad child page of node " + r.key.name());
-                pageReferenced[r.childPage]++;
-                pageRootFromProxy[r.childPage] = r.key;
-                continue;
-            }
-            for (int c = 0; c < 8; ++c) {
-                if (!(r.childMask & (1u << c))) continue;
-                if (next >= recs.size() || recs[next].key != r.key.child(c))
-                    return fail(where + ": children of node " + r.key.name() + " out of order");
-                ++next;
-            }
-        }
-        if (next != recs.size()) return fail(where + ": records not reachable from the page root");
-        nodes.insert(nodes.end(), recs.begin() + (p == 0 ? 0 : 1), recs.end());
+        HierarchyPageEntry& e = index.pages[p];
+        e.offset = le::get<uint64_t>(entry);
+        e.records = le::get<uint32_t>(entry + 8);
+        e.crc = le::get<uint32_t>(entry + 12);
+        if (e.records == 0 || e.offset < tableEnd || e.offset > fileBytes || uint64_t(e.records) * kRecordSize > fileBytes - e.offset)
+            return fail("page " + std::to_string(p) + " at byte " + std::to_string(e.offset) + ": out of the file's bounds");
     }
-    if (nodes.size() != nodeCount) return fail("node count in header does not match the pages");
+    return index;
+}
+
+Result<std::vector<NodeRecord>> readHierarchyPage(const HierarchyIndex& index, uint32_t page, std::span<const uint8_t> bytes,
+                                                  const NodeKey& root, uint64_t blocksBytes, const std::string& what) {
+    if (page >= index.pages.size()) return Status::error(what + ": no page " + std::to_string(page));
+    const HierarchyPageEntry& entry = index.pages[page];
+    const std::string where = what + ": page " + std::to_string(page) + " at byte " + std::to_string(entry.offset);
+    auto fail = [&](const std::string& why) { return Status::error(where + ": " + why); };
+    if (bytes.size() != uint64_t(entry.records) * kRecordSize)
+        return fail(std::to_string(bytes.size()) + " bytes, not the " + std::to_string(entry.records) + " records of the page table");
+    if (crc32(bytes.data(), bytes.size()) != entry.crc) return fail("CRC mismatch");
+    std::vector<NodeRecord> recs(entry.records);
+    for (size_t i = 0; i < recs.size(); ++i) recs[i] = decodeRecord(bytes.data() + i * kRecordSize);
+    if (recs[0].key != root) return fail("page root does not match the record that points to it");
+    size_t next = 1;
+    for (const NodeRecord& r : recs) {
+        const std::string node = "node " + r.key.name();
+        if (r.key.level > kMaxLevel) return fail(node + ": level beyond " + std::to_string(kMaxLevel));
+        if (r.blockOffset > blocksBytes || r.blockSize > blocksBytes - r.blockOffset)
+            return fail(node + " points past the end of blocks.bin (block offset + size: " + std::to_string(r.blockOffset) +
+                        " + " + std::to_string(r.blockSize) + " of " + std::to_string(blocksBytes) + " bytes)");
+        // Decoders size buffers by this count (decodeBlock checks the block against it).
+        if (r.surfelCount > kMaxBlockPoints)
+            return fail(node + " declares " + std::to_string(r.surfelCount) + " surfels, more than the " +
+                        std::to_string(kMaxBlockPoints) + " a node may hold");
+        if (r.flags & kFlagChildrenInPage) {
+            if (r.childPage <= page || r.childPage >= index.pages.size() || r.childMask == 0)
+                return fail(node + ": bad child page " + std::to_string(r.childPage));
+            continue;
+        }
+        for (int c = 0; c < 8; ++c) {
+            if (!(r.childMask & (1u << c))) continue;
+            if (next >= recs.size() || recs[next].key != r.key.child(c)) return fail("children of " + node + " out of order");
+            ++next;
+        }
+    }
+    if (next != recs.size()) return fail("records not reachable from the page root");
+    if (page > 0) recs.erase(recs.begin());
+    return recs;
+}
+
+namespace {
+Result<std::vector<NodeRecord>> readPages(const std::vector<uint8_t>& bytes, uint64_t blocksBytes, const std::string& what) {
+    auto index = readHierarchyIndex(bytes, bytes.size(), what);
+    if (!index) return index.status();
+    const size_t pageCount = index->pages.size();
+    std::vector<int> referenced(pageCount, 0);
+    std::vector<NodeKey> rootOf(pageCount);  // from each page's proxy
+    std::vector<NodeRecord> nodes;
+    for (uint32_t p = 0; p < pageCount; ++p) {
+        if (p > 0 && referenced[p] != 1)
+            return Status::error(what + ": page " + std::to_string(p) + " is referenced by " + std::to_string(referenced[p]) +
+                                 " records, not one");
+        const HierarchyPageEntry& e = index->pages[p];
+        auto recs = readHierarchyPage(*index, p, std::span(bytes).subspan(e.offset, size_t(e.records) * kRecordSize), rootOf[p],
+                                      blocksBytes, what);
+        if (!recs) return recs.status();
+        for (const NodeRecord& r : *recs)
+            if (r.flags & kFlagChildrenInPage) {
+                referenced[r.childPage]++;
+                rootOf[r.childPage] = r.key;
+            }
+        nodes.insert(nodes.end(), recs->begin(), recs->end());
+    }
+    if (nodes.size() != index->nodeCount) return Status::error(what + ": node count in header does not match the pages");
     return nodes;
+}
+}  // namespace
+
+Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what) {
+    return readPages(bytes, ~uint64_t(0), what);
 }
 
 namespace {
@@ -343,19 +389,7 @@ Result<std::vector<NodeRecord>> readHierarchyOf(const TilesetInfo& info, const s
     if (bytes.size() != info.hierarchyBytes || crc32(bytes.data(), bytes.size()) != info.hierarchyCrc)
         return Status::error(what + ": " + std::to_string(bytes.size()) + " bytes whose size or CRC differs from tileset.json (" +
                              std::to_string(info.hierarchyBytes) + " bytes): a set being rebuilt, or a damaged copy");
-    auto nodes = readHierarchy(bytes, what);
-    if (!nodes) return nodes.status();
-    for (const NodeRecord& n : *nodes) {
-        if (n.blockOffset > info.blocksBytes || n.blockSize > info.blocksBytes - n.blockOffset)
-            return Status::error(what + ": node " + n.key.name() + " points past the end of blocks.bin (bytes " +
-                                 std::to_string(n.blockOffset) + " + " + std::to_string(n.blockSize) + " of " +
-                                 std::to_string(info.blocksBytes) + ")");
-        // Decoders size buffers by this count (decodeBlock checks the block against it).
-        if (n.surfelCount > kMaxBlockPoints)
-            return Status::error(what + ": node " + n.key.name() + " declares " + std::to_string(n.surfelCount) +
-                                 " surfels, more than the " + std::to_string(kMaxBlockPoints) + " a node may hold");
-    }
-    return nodes;
+    return readPages(bytes, info.blocksBytes, what);
 }
 
 double nodeEdge(const TilesetInfo& info, int level) { return std::ldexp(info.rootEdge, -level); }

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -74,8 +75,38 @@ std::vector<uint8_t> writeHierarchy(std::vector<NodeRecord> nodes, uint32_t page
 // The nodes' keys in the order hierarchy.bin stores their records: the order in
 // which the writer lays out blocks.bin, so siblings sit together.
 std::vector<NodeKey> hierarchyOrder(const std::vector<NodeRecord>& nodes, uint32_t pageDepth = kDefaultPageDepth);
-// Parse and validate hierarchy.bin (magic, sizes, CRCs, tree shape); nodes come
-// back once each, in breadth-first order from the root. `what` names the source.
+
+// hierarchy.bin in the units a reader receives (docs/FORMAT.md): the header
+// and page table first, then pages, each validated on its own as it arrives,
+// so a reader that fetches pages lazily checks exactly what it fetched. Every
+// reader of a set (local, server, streaming) goes through these two.
+struct HierarchyPageEntry {
+    uint64_t offset = 0;   // byte offset of the page in hierarchy.bin
+    uint32_t records = 0;  // records in the page
+    uint32_t crc = 0;      // CRC-32 of the page's records
+};
+struct HierarchyIndex {
+    uint32_t pageDepth = 0;
+    uint32_t nodeCount = 0;  // nodes in the whole hierarchy
+    std::vector<HierarchyPageEntry> pages;
+};
+// The header and page table, from the first 32 + 16·P bytes of a
+// hierarchy.bin of fileBytes bytes (`bytes` may hold more): magic, version,
+// record size, the table's CRC, and every page inside the file. `what` names
+// the file in errors.
+Result<HierarchyIndex> readHierarchyIndex(std::span<const uint8_t> bytes, uint64_t fileBytes, const std::string& what);
+// Page `page` of the index (`bytes`: exactly its records): its CRC, its first
+// record's key `root` (the key of the record that points to the page; the
+// root key for page 0), records in breadth-first order with every child
+// present, child pages after this one, levels up to kMaxLevel, and every
+// node's block inside blocks.bin's blocksBytes with at most kMaxBlockPoints
+// surfels. Returns the page's records, leaving out a later page's first
+// record, which repeats its proxy in an earlier page.
+Result<std::vector<NodeRecord>> readHierarchyPage(const HierarchyIndex& index, uint32_t page, std::span<const uint8_t> bytes,
+                                                  const NodeKey& root, uint64_t blocksBytes, const std::string& what);
+// The whole hierarchy.bin through the two above, plus what only the whole
+// file shows: every page but page 0 referenced by exactly one proxy, and the
+// node count. Nodes come back once each, page by page, each page breadth first.
 Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what);
 
 struct AttributeInfo {
@@ -135,9 +166,10 @@ struct TilesetInfo {
 std::string writeTilesetJson(const TilesetInfo& info);
 Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what);
 // hierarchy.bin as the set's tileset.json describes it: its size and CRC, then
-// readHierarchy, then every node's block inside blocks.bin's declared size.
-// The one check every reader of a set (local, server, streaming) runs, so
-// none trusts a block range the others would reject. `what` names the file.
+// readHierarchy's checks with every node's block inside blocks.bin's declared
+// size. What every reader that takes the whole file at once (local, server,
+// streaming) runs, so none trusts a block range the others would reject.
+// `what` names the file.
 Result<std::vector<NodeRecord>> readHierarchyOf(const TilesetInfo& info, const std::vector<uint8_t>& bytes,
                                                 const std::string& what);
 

@@ -378,3 +378,84 @@ TEST(TilesetFormat, HierarchyOfASetChecksSizesAndBlockRanges) {
     ASSERT_FALSE(crc.ok());
     EXPECT_NE(crc.status().message().find("CRC"), std::string::npos) << crc.status().message();
 }
+
+// The units a lazy reader receives, each validated alone: the header and page
+// table from their own bytes, then each page from its own bytes, with a block
+// range checked in the page that holds it.
+TEST(TilesetFormat, HierarchyValidatesPageByPage) {
+    // The chain of HierarchyPagesRoundTrip: 4 pages of 3 levels.
+    std::vector<NodeRecord> nodes;
+    NodeKey key;
+    for (int level = 0; level <= 8; ++level) {
+        NodeRecord r;
+        r.key = key;
+        r.childMask = level < 8 ? 0x03 : 0;
+        r.blockOffset = uint64_t(level) * 10;
+        r.blockSize = 10;
+        nodes.push_back(r);
+        if (level < 8) {
+            NodeRecord sibling;
+            sibling.key = key.child(1);
+            sibling.blockOffset = 100 + uint64_t(level) * 10;
+            sibling.blockSize = 10;
+            nodes.push_back(sibling);
+        }
+        key = key.child(0);
+    }
+    const std::vector<uint8_t> bytes = writeHierarchy(nodes, 3);
+    const size_t tableEnd = kHierarchyHeaderSize + 4 * kPageEntrySize;
+
+    // Only the header and page table are at hand.
+    auto index = readHierarchyIndex(std::span(bytes).first(tableEnd), bytes.size(), "h.bin");
+    ASSERT_TRUE(index.ok()) << index.status().message();
+    ASSERT_EQ(index->pages.size(), 4u);
+    EXPECT_EQ(index->pageDepth, 3u);
+    EXPECT_EQ(index->nodeCount, nodes.size());
+    EXPECT_EQ(index->pages[0].offset, tableEnd);
+    // The table's pages must fit the file the set declares.
+    auto shorter = readHierarchyIndex(std::span(bytes).first(tableEnd), bytes.size() - 1, "h.bin");
+    ASSERT_FALSE(shorter.ok());
+    EXPECT_NE(shorter.status().message().find("h.bin: page 3"), std::string::npos) << shorter.status().message();
+    EXPECT_FALSE(readHierarchyIndex(std::span(bytes).first(tableEnd - 1), bytes.size(), "h.bin").ok());
+
+    // Pages fetched one at a time, each root the key of the proxy met before.
+    auto pageBytes = [&](uint32_t p) {
+        const HierarchyPageEntry& e = index->pages[p];
+        return std::span(bytes).subspan(e.offset, size_t(e.records) * kRecordSize);
+    };
+    std::map<NodeKey, NodeRecord> seen;
+    std::vector<std::pair<uint32_t, NodeKey>> pending{{0, NodeKey{}}};
+    while (!pending.empty()) {
+        auto [p, root] = pending.back();
+        pending.pop_back();
+        auto recs = readHierarchyPage(*index, p, pageBytes(p), root, 180, "h.bin");
+        ASSERT_TRUE(recs.ok()) << recs.status().message();
+        for (const NodeRecord& r : *recs) {
+            EXPECT_TRUE(seen.emplace(r.key, r).second) << r.key.name() << " twice";
+            if (r.flags & kFlagChildrenInPage) pending.push_back({r.childPage, r.key});
+        }
+    }
+    EXPECT_EQ(seen.size(), nodes.size());
+    for (const NodeRecord& n : nodes) EXPECT_EQ(seen.count(n.key), 1u) << n.key.name();
+
+    // Blocks end at byte 180. Page 2 holds levels 4-6, with the level-6
+    // sibling's block at bytes 150-160: blocks.bin of 159 bytes fails that
+    // page, naming the node, while page 1 (blocks up to byte 140) passes.
+    const NodeKey root2 = NodeKey{}.child(0).child(0).child(0).child(0);
+    EXPECT_TRUE(readHierarchyPage(*index, 1, pageBytes(1), NodeKey{}.child(0).child(0), 159, "h.bin").ok());
+    auto past = readHierarchyPage(*index, 2, pageBytes(2), root2, 159, "h.bin");
+    ASSERT_FALSE(past.ok());
+    EXPECT_NE(past.status().message().find("h.bin: page 2"), std::string::npos) << past.status().message();
+    EXPECT_NE(past.status().message().find("node 6-0-0-1 points past the end of blocks.bin"), std::string::npos)
+        << past.status().message();
+    // The wrong root (a page reached from a record that does not point to it),
+    // a flipped byte and a short read each fail.
+    EXPECT_FALSE(readHierarchyPage(*index, 2, pageBytes(2), NodeKey{}.child(0), 180, "h.bin").ok());
+    std::vector<uint8_t> flipped(pageBytes(2).begin(), pageBytes(2).end());
+    flipped[70] ^= 1;
+    auto crc = readHierarchyPage(*index, 2, flipped, root2, 180, "h.bin");
+    ASSERT_FALSE(crc.ok());
+    EXPECT_NE(crc.status().message().find("CRC"), std::string::npos) << crc.status().message();
+    EXPECT_FALSE(readHierarchyPage(*index, 2, pageBytes(2).first(64), root2, 180, "h.bin").ok());
+    EXPECT_FALSE(readHierarchyPage(*index, 4, pageBytes(2), root2, 180, "h.bin").ok());
+}
