@@ -16,18 +16,7 @@ cd "$(dirname "$0")/.."
 mode="${1:?usage: fuzz/run.sh replay [SECONDS] | campaign SECONDS [TARGET...]}"
 shift
 
-packages=(clang libclang-rt-14-dev libomp-14-dev)
-missing=()
-for p in "${packages[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if ((${#missing[@]})); then
-  sudo_cmd=()
-  [ "$(id -u)" -eq 0 ] || sudo_cmd=(sudo)
-  export DEBIAN_FRONTEND=noninteractive
-  "${sudo_cmd[@]}" apt-get update -q
-  "${sudo_cmd[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
-fi
+scripts/setup.sh --no-build --clang
 [ -x build/bin/surfcast-build ] && [ -x build/test-venv/bin/python ] || scripts/test.sh -R cli_test >/dev/null
 cmake --preset fuzz >/dev/null
 cmake --build build-fuzz --target fuzz_all

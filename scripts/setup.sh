@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Installs what Surfcast needs from Debian's packages (idempotent; run as root on
 # a fresh Debian 12, or with sudo available), then configures and builds.
-# Usage: scripts/setup.sh [--no-build]
+# Usage: scripts/setup.sh [--no-build] [--clang]
+#   --no-build  install only
+#   --clang     also clang, its sanitizer runtimes and LLVM's OpenMP runtime
+#               (the tsan and fuzz presets)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -15,6 +18,14 @@ packages=(
 # A Rust toolchain for the LAZ decoder (preprocess/laz_ffi): any cargo on PATH,
 # else Debian's.
 command -v cargo >/dev/null 2>&1 || packages+=(cargo)
+build=1
+for arg in "$@"; do
+  case "$arg" in
+    --no-build) build=0 ;;
+    --clang) packages+=(clang libclang-rt-14-dev libomp-14-dev) ;;
+    *) echo "usage: scripts/setup.sh [--no-build] [--clang]" >&2; exit 2 ;;
+  esac
+done
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -28,6 +39,6 @@ if ((${#missing[@]})); then
   "${sudo_cmd[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
 fi
 
-[ "${1:-}" = "--no-build" ] && exit 0
+((build)) || exit 0
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" ${CMAKE_ARGS:-}
 cmake --build build --parallel
