@@ -7,12 +7,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <set>
 #include <sstream>
 
 #include "ply_reader.h"
 #include "random.h"
+#include "texture.h"
 
 namespace surfcast {
 
@@ -28,9 +30,24 @@ struct MeshTraits : public OpenMesh::DefaultTraits {
 };
 using TriMesh = OpenMesh::TriMesh_ArrayKernelT<MeshTraits>;
 
+// Once per message, though each pass of the build opens a mesh again.
+void warnOnce(const std::string& message) {
+    static std::mutex mutex;
+    static std::set<std::string> warned;
+    std::lock_guard lock(mutex);
+    if (warned.insert(message).second) std::fprintf(stderr, "warning: %s\n", message.c_str());
+}
+
 struct LoadedMesh {
     TriMesh mesh;
     bool hasColors = false;
+    // Diffuse textures by OpenMesh's face texture index (0: none; an empty
+    // texture: one that could not be loaded, with --allow-missing-textures).
+    std::vector<Texture> textures;
+    bool textured = false;    // some face has a loaded texture
+    // The materials name diffuse maps, and gave faces their Kd: the colour of
+    // faces whose texture could not be loaded and which have no vertex colours.
+    bool faceColors = false;
     uint64_t rejectedFaces = 0;  // faces OpenMesh refused (non-manifold)
     // Faces wound clockwise (negative signed volume): OpenMesh's normals point
     // inward and are flipped, so surfels face out of the object.
@@ -41,13 +58,33 @@ struct LoadedMesh {
 // OpenMesh's OBJ reader asserts (aborting the process) on a face none of
 // whose vertices has an index ("f /2/1 //3", found by fuzz_read_obj). Faces
 // are checked first: every vertex of a face starts with a non-zero integer
-// index, and a face has at least three.
-Status checkObjFaces(const std::string& path) {
+// index, and a face has at least three. Texture coordinates (vt) must be
+// finite numbers (OpenMesh refuses "nan" with no word of where). Also
+// collects the material libraries the file names (mtllib), resolved against
+// its folder.
+Status scanObj(const std::string& path, std::vector<std::string>* libraries) {
     std::ifstream in(path, std::ios::binary);
     if (!in) return Status::error(path + ": cannot open");
     std::string line;
     for (uint64_t number = 1; std::getline(in, line); ++number) {
         size_t at = line.find_first_not_of(" \t");
+        if (at != std::string::npos && line.compare(at, 7, "mtllib ") == 0) {
+            std::istringstream names(line.substr(at + 7));
+            for (std::string name; names >> name;)
+                libraries->push_back((std::filesystem::path(path).parent_path() / name).lexically_normal().string());
+            continue;
+        }
+        if (at != std::string::npos && line.compare(at, 3, "vt ") == 0) {
+            std::istringstream words(line.substr(at + 3));
+            for (std::string word; words >> word;) {
+                char* end = nullptr;
+                const double v = std::strtod(word.c_str(), &end);
+                if (*end != '\0' || !std::isfinite(v))
+                    return Status::error(path + ": line " + std::to_string(number) + ": texture coordinate '" + word +
+                                         "' is not a finite number");
+            }
+            continue;
+        }
         if (at == std::string::npos || line[at] != 'f' || at + 1 >= line.size() || (line[at + 1] != ' ' && line[at + 1] != '\t'))
             continue;
         std::istringstream words(line.substr(at + 1));
@@ -66,7 +103,71 @@ Status checkObjFaces(const std::string& path) {
     return {};
 }
 
-Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
+// A map statement's file name: its last word (options such as "-s 1 1 1" come first).
+std::string lastWord(const std::string& s) {
+    std::istringstream words(s);
+    std::string last;
+    for (std::string w; words >> w;) last = w;
+    return last;
+}
+
+// The diffuse textures OpenMesh's OBJ reader found (its "TextureMapping": texture
+// index to the text after map_Kd), loaded through our own reading of the
+// libraries, so that errors name the library's line.
+Status loadObjTextures(const std::string& path, const std::vector<std::string>& libraries, bool allowMissing,
+                       LoadedMesh& loaded) {
+    TriMesh& mesh = loaded.mesh;
+    OpenMesh::MPropHandleT<std::map<int, std::string>> mapping;
+    if (!mesh.has_halfedge_texcoords2D() || !mesh.get_property_handle(mapping, "TextureMapping")) return {};
+    std::vector<MtlLibrary> libs;
+    for (const std::string& name : libraries) {
+        auto lib = readMtl(name);
+        if (!lib) return Status::error(path + ": " + lib.status().message());
+        for (const std::string& w : lib->missingUnusedMaps) warnOnce(w);
+        libs.push_back(std::move(*lib));
+    }
+    for (const auto& [index, text] : mesh.property(mapping)) {
+        if (index <= 0 || index > 65535) continue;
+        const MtlLibrary* owner = nullptr;
+        const MtlMaterial* material = nullptr;
+        for (const MtlLibrary& lib : libs)
+            for (const MtlMaterial& m : lib.materials)
+                if (!material && !m.diffusePath.empty() && m.diffuseMap == lastWord(text)) {
+                    owner = &lib;
+                    material = &m;
+                }
+        if (!material) return Status::error(path + ": map_Kd '" + text + "' is in no material library the file names");
+        if (loaded.textures.size() <= size_t(index)) loaded.textures.resize(size_t(index) + 1);
+        auto texture = loadTexture(material->diffusePath);
+        if (!texture) {
+            const std::string why = owner->path + ": line " + std::to_string(material->diffuseLine) + ": map_Kd '" +
+                                    material->diffuseMap + "': " + texture.status().message();
+            if (!allowMissing) return Status::error(why + " (with --allow-missing-textures its faces take vertex colours, else the material's Kd)");
+            warnOnce(why + "; its faces take vertex colours, else the material's Kd");
+            continue;
+        }
+        loaded.textures[size_t(index)] = std::move(*texture);
+        loaded.textured = true;
+    }
+    if (!loaded.textured) return {};
+    for (auto f : mesh.faces()) {
+        const int t = mesh.texture_index(f);
+        if (t <= 0 || size_t(t) >= loaded.textures.size() || loaded.textures[size_t(t)].rgb.empty()) continue;
+        for (auto h : mesh.fh_range(f)) {
+            const auto uv = mesh.texcoord2D(h);
+            if (!std::isfinite(uv[0]) || !std::isfinite(uv[1]))
+                return Status::error(path + ": face " + std::to_string(f.idx()) + " has a NaN or infinite texture coordinate");
+        }
+    }
+    return {};
+}
+
+struct LoadOptions {
+    bool textures = true;  // load diffuse textures (only sampling needs them)
+    bool allowMissingTextures = false;
+};
+
+Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const LoadOptions& load = {}) {
     auto loaded = std::make_unique<LoadedMesh>();
     TriMesh& mesh = loaded->mesh;
     mesh.request_vertex_colors();
@@ -88,10 +189,24 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path) {
         for (const auto& t : ply->triangles)
             if (!mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) ++loaded->rejectedFaces;
     } else {
-        if (lowerExtension(path) == ".obj") SC_TRY(checkObjFaces(path));
+        const bool obj = lowerExtension(path) == ".obj";
+        std::vector<std::string> libraries;
+        if (obj) SC_TRY(scanObj(path, &libraries));
         OpenMesh::IO::Options options = OpenMesh::IO::Options::VertexColor;
+        if (obj && load.textures && !libraries.empty()) {
+            mesh.request_halfedge_texcoords2D();
+            mesh.request_face_texture_index();
+            mesh.request_face_colors();
+            options += OpenMesh::IO::Options::FaceTexCoord;
+            options += OpenMesh::IO::Options::FaceColor;
+        }
         if (!OpenMesh::IO::read_mesh(mesh, path, options)) return Status::error(path + ": OpenMesh could not read the mesh");
         loaded->hasColors = options.check(OpenMesh::IO::Options::VertexColor) && mesh.has_vertex_colors();
+        if (options.check(OpenMesh::IO::Options::FaceTexCoord))
+            SC_TRY(loadObjTextures(path, libraries, load.allowMissingTextures, *loaded));
+        OpenMesh::MPropHandleT<std::map<int, std::string>> maps;
+        loaded->faceColors = options.check(OpenMesh::IO::Options::FaceColor) && mesh.has_face_colors() &&
+                             mesh.get_property_handle(maps, "TextureMapping") && !mesh.property(maps).empty();
     }
     if (mesh.n_vertices() == 0) return Status::error(path + ": mesh has no vertices");
     for (auto v : mesh.vertices()) {
@@ -127,32 +242,52 @@ public:
         : mesh_(std::move(mesh)), rng_(sampling.seed), spacing_(sampling.spacing) {
         const TriMesh& m = mesh_->mesh;
         if (!(spacing_ > 0)) {
-            std::vector<double> lengths;
-            for (auto e : m.edges()) lengths.push_back(m.calc_edge_length(e));
-            if (!lengths.empty()) {
-                std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
-                spacing_ = 0.5 * lengths[lengths.size() / 2];
+            const char* rule = "half the median edge";
+            if (mesh_->textured) {
+                // One surfel per texel: the textured faces' area over the texels
+                // their texture coordinates cover.
+                double area = 0, texels = 0;
+                for (auto f : m.faces()) {
+                    const Texture* t = texture(f);
+                    if (!t) continue;
+                    OpenMesh::Vec2f uv[3];
+                    int k = 0;
+                    for (auto h : m.fh_range(f)) uv[k++] = m.texcoord2D(h);
+                    const auto e1 = uv[1] - uv[0], e2 = uv[2] - uv[0];
+                    const double uvArea = 0.5 * std::abs(double(e1[0]) * e2[1] - double(e1[1]) * e2[0]);
+                    area += m.calc_face_area(f);
+                    texels += uvArea * t->width * t->height;
+                }
+                if (texels > 0 && area > 0) {
+                    spacing_ = std::sqrt(area / texels);
+                    rule = "one surfel per texel";
+                }
+            }
+            if (!(spacing_ > 0)) {
+                std::vector<double> lengths;
+                for (auto e : m.edges()) lengths.push_back(m.calc_edge_length(e));
+                if (!lengths.empty()) {
+                    std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
+                    spacing_ = 0.5 * lengths[lengths.size() / 2];
+                }
             }
             double area = 0;
             for (auto f : m.faces()) area += m.calc_face_area(f);
             const double cap = double(std::max<uint64_t>(1, sampling.maxSurfels));
             if (spacing_ > 0 && area / (spacing_ * spacing_) > cap) {
                 const double coarser = std::sqrt(area / cap);
-                // Once per file, though each pass of the build opens it again.
-                static std::mutex mutex;
-                static std::set<std::string> warned;
-                std::lock_guard lock(mutex);
-                if (warned.insert(path).second)
-                    std::fprintf(stderr, "warning: %s: half the median edge (%g) would sample %.3g surfels; spacing %g "
-                                 "keeps them to --mesh-max-surfels %llu\n", path.c_str(), spacing_,
-                                 area / (spacing_ * spacing_), coarser, (unsigned long long)sampling.maxSurfels);
+                char message[512];
+                std::snprintf(message, sizeof message, "%s: %s (spacing %g) would sample %.3g surfels; spacing %g keeps them "
+                              "to --mesh-max-surfels %llu", path.c_str(), rule, spacing_, area / (spacing_ * spacing_), coarser,
+                              (unsigned long long)sampling.maxSurfels);
+                warnOnce(message);
                 spacing_ = coarser;
             }
         }
         desc_.path = path;
         desc_.format = "mesh";
         desc_.hasNormals = true;
-        desc_.hasColors = mesh_->hasColors;
+        desc_.hasColors = mesh_->hasColors || mesh_->textured || mesh_->faceColors;
         desc_.colorBits = 8;
     }
 
@@ -164,18 +299,23 @@ public:
         // Meshes without faces (or with faces too small to sample) still give their vertices.
         if (m.n_faces() == 0 || !(spacing_ > 0)) {
             for (; n < max && vertex_ < m.n_vertices(); ++vertex_, ++n) {
-                TriMesh::VertexHandle v{int(vertex_)};
-                out[n] = makePoint(m.point(v), m.normal(v) * mesh_->normalSign, v, v, v, 1, 0, 0);
+                Corners at;
+                at.v[0] = at.v[1] = at.v[2] = TriMesh::VertexHandle{int(vertex_)};
+                out[n] = makePoint(m.point(at.v[0]), m.normal(at.v[0]) * mesh_->normalSign, at, 1, 0, 0);
             }
             return n;
         }
         while (n < max) {
             if (pending_ == 0) {
                 if (face_ >= m.n_faces()) break;
-                TriMesh::FaceHandle f{int(face_++)};
-                auto fv = m.cfv_iter(f);
-                v_[0] = *fv; ++fv; v_[1] = *fv; ++fv; v_[2] = *fv;
-                double area = 0.5 * ((m.point(v_[1]) - m.point(v_[0])) % (m.point(v_[2]) - m.point(v_[0]))).norm();
+                corners_.face = TriMesh::FaceHandle{int(face_++)};
+                int k = 0;
+                for (auto h : m.fh_range(corners_.face)) {
+                    corners_.v[k] = m.to_vertex_handle(h);
+                    corners_.h[k++] = h;
+                }
+                const auto& p = corners_.v;
+                double area = 0.5 * ((m.point(p[1]) - m.point(p[0])) % (m.point(p[2]) - m.point(p[0]))).norm();
                 double expected = area / (spacing_ * spacing_);
                 pending_ = uint64_t(std::floor(expected + rng_.uniform()));  // unbiased count
                 continue;
@@ -184,25 +324,53 @@ public:
             // Uniform point in the triangle (Osada et al. 2002).
             double r1 = std::sqrt(rng_.uniform()), r2 = rng_.uniform();
             double a = 1 - r1, b = r1 * (1 - r2), c = r1 * r2;
-            auto p = m.point(v_[0]) * a + m.point(v_[1]) * b + m.point(v_[2]) * c;
-            auto normal = (m.normal(v_[0]) * a + m.normal(v_[1]) * b + m.normal(v_[2]) * c) * mesh_->normalSign;
-            out[n++] = makePoint(p, normal, v_[0], v_[1], v_[2], a, b, c);
+            const auto& v = corners_.v;
+            auto p = m.point(v[0]) * a + m.point(v[1]) * b + m.point(v[2]) * c;
+            auto normal = (m.normal(v[0]) * a + m.normal(v[1]) * b + m.normal(v[2]) * c) * mesh_->normalSign;
+            out[n++] = makePoint(p, normal, corners_, a, b, c);
         }
         return n;
     }
 
 private:
-    InputPoint makePoint(const OpenMesh::Vec3d& p, const OpenMesh::Vec3d& normal, TriMesh::VertexHandle v0,
-                         TriMesh::VertexHandle v1, TriMesh::VertexHandle v2, double a, double b, double c) const {
+    // A face's three corners: vertices and the halfedges into them (which
+    // carry the face's texture coordinates).
+    struct Corners {
+        TriMesh::FaceHandle face;
+        TriMesh::VertexHandle v[3];
+        TriMesh::HalfedgeHandle h[3];
+    };
+
+    const Texture* texture(TriMesh::FaceHandle f) const {
+        if (!mesh_->textured || !f.is_valid()) return nullptr;
+        const int t = mesh_->mesh.texture_index(f);
+        if (t <= 0 || size_t(t) >= mesh_->textures.size() || mesh_->textures[size_t(t)].rgb.empty()) return nullptr;
+        return &mesh_->textures[size_t(t)];
+    }
+
+    InputPoint makePoint(const OpenMesh::Vec3d& p, const OpenMesh::Vec3d& normal, const Corners& at, double a, double b,
+                         double c) const {
         const TriMesh& m = mesh_->mesh;
         InputPoint q;
         q.position = {p[0], p[1], p[2]};
         q.normal = normalizeOrZero(Vec3f{float(normal[0]), float(normal[1]), float(normal[2])});
-        if (mesh_->hasColors)
-            for (int k = 0; k < 3; ++k) {
-                const double unit = m.color(v0)[k] * a + m.color(v1)[k] * b + m.color(v2)[k] * c;
-                q.color[k] = unit > 0 ? (unit < 1 ? uint16_t(std::lround(unit * 65535.0)) : uint16_t(65535)) : 0;  // NaN: 0
-            }
+        if (!desc_.hasColors) return q;
+        Vec3f unit{0.5f, 0.5f, 0.5f};
+        if (const Texture* t = texture(at.face)) {
+            const auto uv = m.texcoord2D(at.h[0]) * float(a) + m.texcoord2D(at.h[1]) * float(b) + m.texcoord2D(at.h[2]) * float(c);
+            const Vec3f texel = t->sample(uv[0], uv[1]);
+            // Rounded to the texture's 8 bits (stored as c·257), so that a
+            // textured set stores 8-bit colour.
+            for (int k = 0; k < 3; ++k) q.color[k] = uint16_t(std::lround(std::clamp(texel[k], 0.f, 1.f) * 255.f) * 257);
+            return q;
+        } else if (mesh_->hasColors) {
+            for (int k = 0; k < 3; ++k)
+                unit[k] = float(m.color(at.v[0])[k] * a + m.color(at.v[1])[k] * b + m.color(at.v[2])[k] * c);
+        } else if (mesh_->faceColors && at.face.is_valid()) {
+            for (int k = 0; k < 3; ++k) unit[k] = m.color(at.face)[k];
+        }
+        for (int k = 0; k < 3; ++k)
+            q.color[k] = unit[k] > 0 ? (unit[k] < 1 ? uint16_t(std::lround(unit[k] * 65535.0)) : uint16_t(65535)) : 0;  // NaN: 0
         return q;
     }
 
@@ -212,7 +380,7 @@ private:
     InputDescription desc_;
     size_t face_ = 0, vertex_ = 0;
     uint64_t pending_ = 0;
-    TriMesh::VertexHandle v_[3];
+    Corners corners_;
 };
 
 }  // namespace
@@ -223,7 +391,7 @@ bool isMeshExtension(const std::string& path) {
 }
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling) {
-    auto mesh = loadMesh(path);
+    auto mesh = loadMesh(path, {true, sampling.allowMissingTextures});
     if (!mesh) return mesh.status();
     return std::unique_ptr<PointReader>(new MeshReader(std::move(*mesh), path, sampling));
 }
@@ -243,13 +411,13 @@ MeshVertexNormals vertexNormals(const LoadedMesh& loaded) {
 }  // namespace
 
 Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
-    auto mesh = loadMesh(path);
+    auto mesh = loadMesh(path, {false, false});
     if (!mesh) return mesh.status();
     return vertexNormals(**mesh);
 }
 
 Result<MeshTriangles> readMeshTriangles(const std::string& path) {
-    auto mesh = loadMesh(path);
+    auto mesh = loadMesh(path, {false, false});
     if (!mesh) return mesh.status();
     const TriMesh& m = (*mesh)->mesh;
     MeshTriangles out{vertexNormals(**mesh), {}};

@@ -1,8 +1,12 @@
 // Meshes (PLY with faces or triangle strips, OBJ, OFF, STL) through OpenMesh,
 // sampled into surfels: uniform random samples on every triangle at a target
 // spacing, normals interpolated from OpenMesh's vertex normals (flipped when
-// the faces wind inward, i.e. the signed volume is negative), colours from
-// vertex colours. The mesh itself is held in memory; the samples are streamed.
+// the faces wind inward, i.e. the signed volume is negative). Colours come
+// from the face's diffuse texture where it has one (an OBJ's map_Kd: the
+// texture's bilinear reconstruction at the sample's interpolated texture
+// coordinates, a point sample), else from vertex colours, else, on a textured
+// mesh, from the material's Kd. The mesh and its textures are held in memory;
+// the samples are streamed.
 #pragma once
 
 #include <memory>
@@ -20,9 +24,15 @@ namespace surfcast {
 inline constexpr uint64_t kDefaultMeshMaxSurfels = 5'000'000;
 
 struct MeshSampling {
-    double spacing = 0;  // world units; 0: half the median edge length, coarsened to maxSurfels
+    // World units. 0: on a textured mesh, one surfel per texel of the texture
+    // area its faces use; otherwise half the median edge length. Either is
+    // coarsened to maxSurfels.
+    double spacing = 0;
     uint64_t seed = 1;
     uint64_t maxSurfels = kDefaultMeshMaxSurfels;
+    // A diffuse texture that cannot be loaded is a warning, and its faces take
+    // vertex colours (or Kd), instead of an error.
+    bool allowMissingTextures = false;
 };
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling);

@@ -62,9 +62,13 @@ the text file LIST, one per line.
                           gps_time, nir and Extra Bytes dimensions by name; PLY and
                           PCD properties by name
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
-  --mesh-spacing S        mesh sampling spacing (default: half the median edge,
-                          coarsened where that would exceed --mesh-max-surfels)
+  --mesh-spacing S        mesh sampling spacing (default: one surfel per texel on a
+                          textured mesh, else half the median edge; coarsened where
+                          that would exceed --mesh-max-surfels)
   --mesh-max-surfels N    most surfels a mesh gives at its default spacing (5000000)
+  --allow-missing-textures
+                          a diffuse texture (OBJ map_Kd) that is missing or unreadable
+                          is a warning, its faces take vertex colours (default: error)
   --vertices-only         read a mesh file's vertices as points, no sampling
   -q, --quiet             no progress output
   -h, --help              this text
@@ -208,6 +212,8 @@ int main(int argc, char** argv) {
         } else if (a == "--mesh-max-surfels") {
             if (!number(&d, 1, 1e12) || d != std::floor(d)) return usageError("--mesh-max-surfels needs a whole number >= 1");
             opt.inputs.mesh.maxSurfels = uint64_t(d);
+        } else if (a == "--allow-missing-textures") {
+            opt.inputs.mesh.allowMissingTextures = true;
         } else if (a == "--vertices-only") {
             opt.inputs.verticesOnly = true;
         } else if (a == "-q" || a == "--quiet") {

@@ -1,0 +1,96 @@
+#include "texture.h"
+
+#include <stb_image.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+
+namespace surfcast {
+
+namespace fs = std::filesystem;
+
+Vec3f Texture::sample(double u, double v) const {
+    if (!std::isfinite(u) || !std::isfinite(v)) u = v = 0;
+    // Repeat first, so that huge coordinates never reach an integer conversion.
+    const double x = (u - std::floor(u)) * width - 0.5;
+    const double y = (1 - (v - std::floor(v))) * height - 0.5;
+    const double fx = std::floor(x), fy = std::floor(y);
+    const float ax = float(x - fx), ay = float(y - fy);
+    auto wrap = [](long i, int n) { return size_t(((i % n) + n) % n); };
+    const size_t x0 = wrap(long(fx), width), x1 = wrap(long(fx) + 1, width);
+    const size_t y0 = wrap(long(fy), height), y1 = wrap(long(fy) + 1, height);
+    auto texel = [&](size_t i, size_t j, int c) { return float(rgb[3 * (j * size_t(width) + i) + size_t(c)]); };
+    Vec3f out;
+    for (int c = 0; c < 3; ++c) {
+        const float top = texel(x0, y0, c) * (1 - ax) + texel(x1, y0, c) * ax;
+        const float bottom = texel(x0, y1, c) * (1 - ax) + texel(x1, y1, c) * ax;
+        out[c] = (top * (1 - ay) + bottom * ay) / 255.f;
+    }
+    return out;
+}
+
+Result<Texture> loadTexture(const std::string& path) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) return Status::error(path + ": texture not found");
+    int w = 0, h = 0, channels = 0;
+    if (!stbi_info(path.c_str(), &w, &h, &channels))
+        return Status::error(path + ": not an image stb_image can read, or a corrupt or oversized one (stb_image: " +
+                             std::string(stbi_failure_reason()) + ")");
+    if (w <= 0 || h <= 0) return Status::error(path + ": empty texture (" + std::to_string(w) + " x " + std::to_string(h) + ")");
+    if (uint64_t(w) * uint64_t(h) > kMaxTexels)
+        return Status::error(path + ": texture of " + std::to_string(w) + " x " + std::to_string(h) + " texels, more than the " +
+                             std::to_string(kMaxTexels) + " Surfcast decodes");
+    std::unique_ptr<uint8_t, void (*)(void*)> pixels(stbi_load(path.c_str(), &w, &h, &channels, 3), stbi_image_free);
+    if (!pixels) return Status::error(path + ": corrupt texture (" + std::string(stbi_failure_reason()) + ")");
+    Texture t;
+    t.path = path;
+    t.width = w;
+    t.height = h;
+    t.rgb.assign(pixels.get(), pixels.get() + size_t(w) * size_t(h) * 3);
+    return t;
+}
+
+Result<MtlLibrary> readMtl(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) return Status::error(path + ": cannot open the material library");
+    MtlLibrary lib;
+    lib.path = path;
+    const fs::path folder = fs::path(path).parent_path();
+    auto resolve = [&](std::string name) {
+        std::replace(name.begin(), name.end(), '\\', '/');  // libraries written on Windows
+        return (folder / name).lexically_normal().string();
+    };
+    std::string line;
+    for (int number = 1; std::getline(in, line); ++number) {
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        std::istringstream words(line);
+        std::string key;
+        if (!(words >> key) || key[0] == '#') continue;
+        std::vector<std::string> rest;
+        for (std::string w; words >> w;) rest.push_back(w);
+        const std::string where = path + ": line " + std::to_string(number) + ": ";
+        if (key == "newmtl") {
+            if (rest.empty()) return Status::error(where + "newmtl without a name");
+            lib.materials.push_back({rest[0], "", "", 0});
+        } else if (key == "map_Kd") {
+            if (lib.materials.empty()) return Status::error(where + "map_Kd before any newmtl");
+            if (rest.empty()) return Status::error(where + "map_Kd without a file name");
+            MtlMaterial& m = lib.materials.back();
+            m.diffuseMap = rest.back();
+            m.diffusePath = resolve(rest.back());
+            m.diffuseLine = number;
+        } else if ((key.rfind("map_", 0) == 0 || key == "bump" || key == "disp" || key == "decal" || key == "refl") &&
+                   !rest.empty()) {
+            std::error_code ec;
+            if (!fs::exists(resolve(rest.back()), ec))
+                lib.missingUnusedMaps.push_back(where + key + " '" + rest.back() + "' not found (unused)");
+        }
+    }
+    return lib;
+}
+
+}  // namespace surfcast

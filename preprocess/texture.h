@@ -1,0 +1,53 @@
+// Image textures of textured meshes (Zwicker et al. 2001, §5): decoded with
+// stb_image, reconstructed bilinearly, texture coordinates repeating outside
+// [0, 1]; and the Wavefront material libraries (MTL) that name them.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "status.h"
+#include "vec3.h"
+
+namespace surfcast {
+
+// Largest texture decoded: 16384 x 16384 texels (768 MiB as RGB bytes), checked
+// from the image header before anything is allocated.
+inline constexpr uint64_t kMaxTexels = uint64_t(1) << 28;
+
+struct Texture {
+    std::string path;
+    int width = 0, height = 0;
+    std::vector<uint8_t> rgb;  // 3 bytes per texel, rows from the image's top
+
+    // The bilinear reconstruction at texture coordinates (u, v): u to the
+    // right, v up from the image's bottom row (the OBJ and PLY convention),
+    // both repeating with period 1. Texel (i, j) (column i, row j from the
+    // top) is centred at u = (i + 0.5) / width, v = 1 - (j + 0.5) / height.
+    // Channels in [0, 1]. Non-finite coordinates sample (0, 0).
+    Vec3f sample(double u, double v) const;
+};
+
+// Decodes a JPEG, PNG, BMP, TGA, ... into RGB. Errors name the file and say
+// why: missing, not an image, corrupt, empty or larger than kMaxTexels.
+Result<Texture> loadTexture(const std::string& path);
+
+// A material library: each material's diffuse map (map_Kd), the only map
+// Surfcast uses, as written and resolved against the library's folder.
+struct MtlMaterial {
+    std::string name;
+    std::string diffuseMap;      // as written after map_Kd (its last word: options come first)
+    std::string diffusePath;     // resolved; empty without map_Kd
+    int diffuseLine = 0;         // line of map_Kd in the library
+};
+struct MtlLibrary {
+    std::string path;
+    std::vector<MtlMaterial> materials;
+    // Maps other than map_Kd that name missing files: worth a warning, never
+    // an error (the shared dragon's library names a map_Ks that is not there).
+    std::vector<std::string> missingUnusedMaps;
+};
+Result<MtlLibrary> readMtl(const std::string& path);
+
+}  // namespace surfcast

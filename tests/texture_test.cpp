@@ -1,0 +1,200 @@
+// Texture acquisition from textured meshes (Zwicker et al. 2001, §5): image
+// textures decoded and reconstructed bilinearly, OBJ material libraries,
+// one leaf surfel per texel, and the errors of bad textures.
+#include <gtest/gtest.h>
+#include <stb_image_write.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <functional>
+
+#include "mesh_reader.h"
+#include "test_support.h"
+#include "texture.h"
+
+using namespace surfcast;
+
+namespace {
+
+// A W x H RGB texture whose texel (i, j) (column i, row j from the top) is f(i, j).
+void writePng(const std::string& path, int w, int h, const std::function<Vec3f(int, int)>& f) {
+    std::vector<uint8_t> rgb;
+    for (int j = 0; j < h; ++j)
+        for (int i = 0; i < w; ++i) {
+            Vec3f c = f(i, j);
+            for (int k = 0; k < 3; ++k) rgb.push_back(uint8_t(c[k]));
+        }
+    ASSERT_TRUE(stbi_write_png(path.c_str(), w, h, 3, rgb.data(), w * 3));
+}
+
+// A quad of 2 x 1 world units in the z = 0 plane, (x, y) = (2 u, v) for
+// texture coordinates (u, v) in [0, uvScale]², with material `material`.
+std::string quadObj(const std::string& mtl, const std::string& material, double uvScale = 1) {
+    const std::string s = std::to_string(uvScale);
+    return "mtllib " + mtl + "\nv 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nvt 0 0\nvt " + s + " 0\nvt " + s + " " + s + "\nvt 0 " + s +
+           "\nusemtl " + material + "\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n";
+}
+
+std::vector<InputPoint> readAll(PointReader& reader) {
+    std::vector<InputPoint> all;
+    std::vector<InputPoint> batch(4096);
+    while (true) {
+        auto n = reader.read(batch.data(), batch.size());
+        EXPECT_TRUE(n.ok()) << n.status().message();
+        if (!n.ok() || *n == 0) break;
+        all.insert(all.end(), batch.begin(), batch.begin() + long(*n));
+    }
+    return all;
+}
+
+}  // namespace
+
+TEST(Texture, BilinearReconstructionAndRepeatMatchHandDerivedValues) {
+    test::TempDir dir;
+    // 2 x 2 texels: top row (10, 20), bottom row (30, 40) in red.
+    writePng(dir.file("t.png"), 2, 2, [](int i, int j) { return Vec3f{float(10 + 10 * i + 20 * j), 0, 255}; });
+    auto t = loadTexture(dir.file("t.png"));
+    ASSERT_TRUE(t.ok()) << t.status().message();
+    EXPECT_EQ(t->width, 2);
+    EXPECT_EQ(t->height, 2);
+    // Texel centres: u = 0.25, 0.75; v = 0.75 (top row), 0.25 (bottom row).
+    EXPECT_FLOAT_EQ(t->sample(0.25, 0.75)[0] * 255, 10);
+    EXPECT_FLOAT_EQ(t->sample(0.75, 0.75)[0] * 255, 20);
+    EXPECT_FLOAT_EQ(t->sample(0.25, 0.25)[0] * 255, 30);
+    EXPECT_FLOAT_EQ(t->sample(0.75, 0.25)[0] * 255, 40);
+    EXPECT_FLOAT_EQ(t->sample(0.5, 0.5)[0] * 255, 25);    // the four texels' mean
+    EXPECT_FLOAT_EQ(t->sample(0.5, 0.75)[0] * 255, 15);   // halfway along the top row
+    // Repeat: u = 0 lies halfway between the last column and the first.
+    EXPECT_FLOAT_EQ(t->sample(0.0, 0.75)[0] * 255, 15);
+    EXPECT_FLOAT_EQ(t->sample(3.25, -1.25)[0] * 255, 10);
+    EXPECT_FLOAT_EQ(t->sample(0.25, 0.75)[2], 1.f);
+    EXPECT_FLOAT_EQ(t->sample(NAN, 0.5)[0] * 255, 25);  // as (0, 0): the corner, all four texels' mean
+}
+
+// A ramp texture reconstructed bilinearly is linear between texel centres, so
+// every leaf sample's colour follows from its position alone: on the quad,
+// u = x / 2 and v = y, and red = 4 (64 u - 0.5), green = 4 (63.5 - 64 v)
+// (texel column i has red 4 i, row j from the top green 4 j). Stored colours
+// are rounded to 8 bits: within 0.5 of that.
+TEST(TexturedMesh, LeafColoursAreTheTextureAtEachSampledPoint) {
+    test::TempDir dir;
+    writePng(dir.file("ramp.png"), 64, 64, [](int i, int j) { return Vec3f{float(4 * i), float(4 * j), 77}; });
+    test::writeFile(dir.file("m.mtl"), "newmtl ramp\nKd 1 1 1\nmap_Kd ramp.png\n");
+    test::writeFile(dir.file("quad.obj"), quadObj("m.mtl", "ramp"));
+    auto r = openMeshReader(dir.file("quad.obj"), MeshSampling{});
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    EXPECT_TRUE((*r)->description().hasColors);
+    const auto all = readAll(**r);
+    // One surfel per texel: 4,096 texels over the area 2, each of the two
+    // faces sampled floor(2048 + U) times, U uniform in [0, 1).
+    EXPECT_GE(all.size(), 4096u);
+    EXPECT_LE(all.size(), 4098u);
+    size_t checked = 0;
+    for (const InputPoint& p : all) {
+        const double u = p.position.x / 2, v = p.position.y;
+        // Within half a texel of the border the reconstruction wraps around.
+        if (u < 0.5 / 64 || u > 63.5 / 64 || v < 0.5 / 64 || v > 63.5 / 64) continue;
+        ++checked;
+        EXPECT_NEAR(p.color[0] / 257.0, 4 * (64 * u - 0.5), 0.5 + 1e-3) << u << " " << v;
+        EXPECT_NEAR(p.color[1] / 257.0, 4 * (63.5 - 64 * v), 0.5 + 1e-3) << u << " " << v;
+        EXPECT_EQ(p.color[2], 77 * 257);
+        EXPECT_EQ(p.color[0] % 257, 0) << "8-bit colour, stored as c * 257";
+    }
+    EXPECT_GT(checked, 3800u);
+}
+
+// Texture coordinates in [0, 3]: the texture repeats 3 x 3 times, so the
+// quad uses 9 times the texels, and colours repeat with period 2/3 in x.
+TEST(TexturedMesh, CoordinatesOutsideTheUnitSquareRepeat) {
+    test::TempDir dir;
+    writePng(dir.file("ramp.png"), 16, 16, [](int i, int) { return Vec3f{float(16 * i), 0, 0}; });
+    test::writeFile(dir.file("m.mtl"), "newmtl ramp\nmap_Kd ramp.png\n");
+    test::writeFile(dir.file("quad.obj"), quadObj("m.mtl", "ramp", 3));
+    auto r = openMeshReader(dir.file("quad.obj"), MeshSampling{});
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    const auto all = readAll(**r);
+    EXPECT_GE(all.size(), 9u * 256);
+    EXPECT_LE(all.size(), 9u * 256 + 2);
+    for (const InputPoint& p : all) {
+        const double u = 3 * p.position.x / 2, frac = u - std::floor(u);
+        if (frac < 0.5 / 16 || frac > 15.5 / 16) continue;
+        EXPECT_NEAR(p.color[0] / 257.0, 16 * (16 * frac - 0.5), 0.5 + 1e-3) << u;
+    }
+}
+
+// Several materials in one file: two textures and a material without a map,
+// whose faces take its Kd.
+TEST(TexturedMesh, SeveralMaterialsEachColourTheirFaces) {
+    test::TempDir dir;
+    writePng(dir.file("red.png"), 4, 4, [](int, int) { return Vec3f{255, 0, 0}; });
+    std::filesystem::create_directories(dir.file("maps"));
+    writePng(dir.file("maps/blue.png"), 4, 4, [](int, int) { return Vec3f{0, 0, 255}; });
+    test::writeFile(dir.file("m.mtl"),
+                    "newmtl red\nmap_Kd red.png\nnewmtl blue\nmap_Kd -s 1 1 1 maps/blue.png\nnewmtl green\nKd 0 1 0\n");
+    test::writeFile(dir.file("three.obj"),
+                    "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 2 0 0\nv 2 1 0\nv 3 0 0\nv 3 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n"
+                    "usemtl red\nf 1/1 2/2 3/3\nusemtl blue\nf 2/1 4/2 5/3\nusemtl green\nf 4/1 6/2 7/3\n");
+    auto r = openMeshReader(dir.file("three.obj"), MeshSampling{0.02});
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    size_t seen[3] = {};
+    for (const InputPoint& p : readAll(**r)) {
+        const int face = std::clamp(int(p.position.x), 0, 2);
+        const uint16_t expected[3][3] = {{65535, 0, 0}, {0, 0, 65535}, {0, 65535, 0}};
+        ++seen[face];
+        for (int k = 0; k < 3; ++k) ASSERT_EQ(p.color[k], expected[face][k]) << "face " << face << " at x " << p.position.x;
+    }
+    for (size_t s : seen) EXPECT_GT(s, 1000u);
+}
+
+TEST(TexturedMesh, BadTexturesAreClearErrors) {
+    test::TempDir dir;
+    auto openWith = [&](const std::string& mtl, bool allowMissing = false) {
+        test::writeFile(dir.file("m.mtl"), mtl);
+        test::writeFile(dir.file("quad.obj"), quadObj("m.mtl", "a"));
+        MeshSampling sampling{0.05};
+        sampling.allowMissingTextures = allowMissing;
+        return openMeshReader(dir.file("quad.obj"), sampling);
+    };
+    auto expectError = [&](const Result<std::unique_ptr<PointReader>>& r, const std::string& what) {
+        ASSERT_FALSE(r.ok()) << what;
+        EXPECT_NE(r.status().message().find(what), std::string::npos) << r.status().message();
+    };
+    // A missing diffuse map: an error naming the library's line.
+    expectError(openWith("newmtl a\nKd 0 1 0\nmap_Kd missing.png\n"), "m.mtl: line 3: map_Kd 'missing.png': ");
+    expectError(openWith("newmtl a\nmap_Kd missing.png\n"), "texture not found");
+    // ... or, when allowed, a warning, and the faces take Kd.
+    auto allowed = openWith("newmtl a\nKd 0 1 0\nmap_Kd missing.png\n", true);
+    ASSERT_TRUE(allowed.ok()) << allowed.status().message();
+    for (const InputPoint& p : readAll(**allowed)) EXPECT_EQ(p.color[1], 65535);
+    // A missing map Surfcast does not use is no error.
+    writePng(dir.file("ok.png"), 2, 2, [](int, int) { return Vec3f{1, 2, 3}; });
+    EXPECT_TRUE(openWith("newmtl a\nmap_Kd ok.png\nmap_Ks nowhere.jpg\n").ok());
+    // A corrupt JPEG (a real header, then garbage) and an image of 0 x 0.
+    test::writeFile(dir.file("bad.jpg"), std::string("\xFF\xD8\xFF\xE0\x00\x10JFIF\x00", 11) + std::string(200, '\x55'));
+    expectError(openWith("newmtl a\nmap_Kd bad.jpg\n"), "m.mtl: line 2: map_Kd 'bad.jpg': ");
+    auto png = [](uint32_t w, uint32_t h) {
+        std::string s("\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR", 16);
+        for (uint32_t v : {w, h}) s += std::string{char(v >> 24), char(v >> 16), char(v >> 8), char(v)};
+        return s + std::string("\x08\x02\x00\x00\x00\x00\x00\x00\x00", 9);
+    };
+    test::writeFile(dir.file("empty.png"), png(0, 0));
+    expectError(openWith("newmtl a\nmap_Kd empty.png\n"), "m.mtl: line 2: map_Kd 'empty.png': ");
+    // A header claiming 100,000 x 100,000 texels is refused before decoding.
+    test::writeFile(dir.file("huge.png"), png(100000, 100000));
+    expectError(openWith("newmtl a\nmap_Kd huge.png\n"), "huge.png");
+    // Texture coordinates of NaN or beyond a double.
+    test::writeFile(dir.file("m.mtl"), "newmtl a\nmap_Kd ok.png\n");
+    for (const std::string vt : {"nan nan", "0 1e999"}) {
+        test::writeFile(dir.file("nan.obj"),
+                        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt " + vt + "\nvt 0 1\nusemtl a\nf 1/1 2/2 3/3\n");
+        expectError(openMeshReader(dir.file("nan.obj"), MeshSampling{}), "nan.obj: line 6: texture coordinate '");
+    }
+    // The build itself: exit 1, the message, no set written.
+    test::writeFile(dir.file("m.mtl"), "newmtl a\nmap_Kd missing.png\n");
+    auto build = test::run({test::binary("surfcast-build"), dir.file("quad.obj"), "-o", dir.file("out")});
+    EXPECT_EQ(build.exitCode, 1) << build.output;
+    EXPECT_NE(build.output.find("map_Kd 'missing.png'"), std::string::npos) << build.output;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("out")));
+}
+
