@@ -6,14 +6,17 @@ Usage: make_seeds.py DATA_DIR SETS_DIR OUT_DIR
   DATA_DIR  ../shared/data (PROVENANCE.md lists the scans)
   SETS_DIR  a folder of tile sets (fuzz/run.sh builds them)
   OUT_DIR   gets one folder per target: read_ply, read_las, read_laz, read_pcd,
-            read_xyz, read_obj, tileset, block (client_response, http_request
+            read_xyz, read_obj, read_gltf, read_glb, tileset, block (client_response, http_request
             and range seeds are committed in fuzz/seeds)
 Needs laspy with lazrs (build/test-venv has them).
 """
 import os
 import re
+import base64
+import json
 import struct
 import sys
+import zlib
 
 import laspy
 import numpy as np
@@ -168,6 +171,52 @@ def obj_seeds(data, dst):
     out(os.path.join(dst, "quad.obj"), b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 2//1 4//1 3//1\n")
 
 
+def png(width, height, rgb_of):
+    """A small RGB PNG (filter 0 rows) of texels rgb_of(i, j)."""
+    raw = b"".join(b"\0" + bytes(c for i in range(width) for c in rgb_of(i, j)) for j in range(height))
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def gltf_seeds(gltf_dst, glb_dst):
+    """A textured quad (indexed, with a node transform and baseColorFactor) and
+    an untextured one, as .gltf with a data-URI buffer and image, and as .glb."""
+    geometry = struct.pack("<12f", 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0) + struct.pack("<8f", 0, 1, 1, 1, 1, 0, 0, 0) \
+        + struct.pack("<6H", 0, 1, 2, 0, 2, 3)
+    image = png(4, 4, lambda i, j: (60 * i, 60 * j, 90))
+
+    def scene(buffer, image_entry, image_view):
+        views = [{"buffer": 0, "byteOffset": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 32},
+                 {"buffer": 0, "byteOffset": 80, "byteLength": 12}] + image_view
+        return {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+                "nodes": [{"mesh": 0, "translation": [1, 0, 0], "scale": [2, 2, 2], "children": [1]},
+                          {"mesh": 1, "rotation": [0, 0, 0.7071068, 0.7071068]}],
+                "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]},
+                           {"primitives": [{"attributes": {"POSITION": 0}, "material": 1}]}],
+                "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "baseColorFactor": [1, 0.5, 1, 1]}},
+                              {"pbrMetallicRoughness": {"baseColorFactor": [0, 1, 0, 1]}}],
+                "textures": [{"source": 0}], "images": [image_entry], "buffers": [buffer], "bufferViews": views,
+                "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                               "min": [0, 0, 0], "max": [1, 1, 0]},
+                              {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                              {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}]}
+    uri = "data:application/octet-stream;base64," + base64.b64encode(geometry).decode()
+    text = scene({"uri": uri, "byteLength": len(geometry)},
+                 {"uri": "data:image/png;base64," + base64.b64encode(image).decode()}, [])
+    out(os.path.join(gltf_dst, "quads.gltf"), json.dumps(text).encode())
+    binary = geometry + image
+    binary += b"\0" * (-len(binary) % 4)
+    doc = json.dumps(scene({"byteLength": len(binary)}, {"bufferView": 3, "mimeType": "image/png"},
+                           [{"buffer": 0, "byteOffset": 92, "byteLength": len(image)}])).encode()
+    doc += b" " * (-len(doc) % 4)
+    glb = struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(doc) + 8 + len(binary)) + struct.pack("<I4s", len(doc), b"JSON") + doc \
+        + struct.pack("<I4s", len(binary), b"BIN\0") + binary
+    out(os.path.join(glb_dst, "quads.glb"), glb)
+
+
 def set_seeds(sets, tileset_dst, block_dst):
     for name in sorted(os.listdir(sets)):
         d = os.path.join(sets, name)
@@ -202,6 +251,7 @@ def main():
     pcd_seeds(data, os.path.join(dst, "read_pcd"))
     text_seeds(data, os.path.join(dst, "read_xyz"))
     obj_seeds(data, os.path.join(dst, "read_obj"))
+    gltf_seeds(os.path.join(dst, "read_gltf"), os.path.join(dst, "read_glb"))
     set_seeds(sets, os.path.join(dst, "tileset"), os.path.join(dst, "block"))
 
 

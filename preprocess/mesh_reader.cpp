@@ -12,6 +12,7 @@
 #include <set>
 #include <sstream>
 
+#include "gltf_reader.h"
 #include "ply_reader.h"
 #include "random.h"
 #include "texture.h"
@@ -171,7 +172,37 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
     auto loaded = std::make_unique<LoadedMesh>();
     TriMesh& mesh = loaded->mesh;
     mesh.request_vertex_colors();
-    if (lowerExtension(path) == ".ply") {
+    if (isGltfExtension(path)) {
+        auto gltf = readGltf(path, load.allowMissingTextures);
+        if (!gltf) return gltf.status();
+        for (const std::string& w : gltf->warnings) warnOnce(w);
+        mesh.request_halfedge_texcoords2D();
+        mesh.request_face_texture_index();
+        mesh.request_face_colors();
+        std::vector<TriMesh::VertexHandle> handles;
+        handles.reserve(gltf->positions.size());
+        for (const Vec3d& v : gltf->positions) handles.push_back(mesh.add_vertex({v.x, v.y, v.z}));
+        // Texture index t + 1 is scene texture t (0: none), as OpenMesh numbers an OBJ's.
+        loaded->textures.resize(gltf->textures.size() + 1);
+        for (size_t t = 0; t < gltf->textures.size(); ++t) loaded->textures[t + 1] = std::move(gltf->textures[t]);
+        loaded->textured = !gltf->textures.empty();
+        loaded->faceColors = true;
+        for (size_t i = 0; i < gltf->triangles.size(); ++i) {
+            const auto& t = gltf->triangles[i];
+            auto f = mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]);
+            if (!f.is_valid()) {
+                ++loaded->rejectedFaces;
+                continue;
+            }
+            const GltfMaterial& material = gltf->materials[gltf->triangleMaterial[i]];
+            mesh.set_texture_index(f, material.texture ? int(*material.texture + 1) : 0);
+            mesh.set_color(f, {material.factor[0], material.factor[1], material.factor[2]});
+            for (auto h : mesh.fh_range(f)) {
+                const auto& uv = gltf->uvs[size_t(mesh.to_vertex_handle(h).idx())];
+                mesh.set_texcoord2D(h, {uv[0], uv[1]});
+            }
+        }
+    } else if (lowerExtension(path) == ".ply") {
         // Our PLY parser handles triangle strips and big-endian files, which
         // OpenMesh's PLY reader does not; OpenMesh then owns the topology.
         auto ply = readPlyMesh(path);
@@ -387,7 +418,7 @@ private:
 
 bool isMeshExtension(const std::string& path) {
     std::string ext = lowerExtension(path);
-    return ext == ".obj" || ext == ".off" || ext == ".stl";
+    return ext == ".obj" || ext == ".off" || ext == ".stl" || isGltfExtension(path);
 }
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling) {

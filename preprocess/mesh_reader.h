@@ -1,12 +1,13 @@
-// Meshes (PLY with faces or triangle strips, OBJ, OFF, STL) through OpenMesh,
-// sampled into surfels: uniform random samples on every triangle at a target
-// spacing, normals interpolated from OpenMesh's vertex normals (flipped when
-// the faces wind inward, i.e. the signed volume is negative). Colours come
-// from the face's diffuse texture where it has one (an OBJ's map_Kd: the
+// Meshes (PLY with faces or triangle strips, OBJ, OFF, STL, glTF 2.0) through
+// OpenMesh, sampled into surfels: uniform random samples on every triangle at
+// a target spacing, normals interpolated from OpenMesh's vertex normals
+// (flipped when the faces wind inward, i.e. the signed volume is negative).
+// Colours come from the face's diffuse texture where it has one (an OBJ's
+// map_Kd, a glTF material's baseColorTexture times its baseColorFactor): the
 // texture's bilinear reconstruction at the sample's interpolated texture
-// coordinates, a point sample), else from vertex colours, else, on a textured
-// mesh, from the material's Kd. The mesh and its textures are held in memory;
-// the samples are streamed.
+// coordinates, a point sample. Else from vertex colours, else, on a textured
+// mesh, from the material's Kd (glTF: baseColorFactor). The mesh and its
+// textures are held in memory; the samples are streamed.
 #pragma once
 
 #include <memory>
@@ -53,7 +54,7 @@ struct MeshTriangles {
 };
 Result<MeshTriangles> readMeshTriangles(const std::string& path);
 
-// True for file names the mesh path reads (.obj .off .stl; PLY decides by content).
+// True for file names the mesh path reads (.obj .off .stl .gltf .glb; PLY decides by content).
 bool isMeshExtension(const std::string& path);
 
 }  // namespace surfcast

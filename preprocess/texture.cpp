@@ -6,6 +6,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <limits>
 #include <memory>
 #include <sstream>
 
@@ -33,25 +35,35 @@ Vec3f Texture::sample(double u, double v) const {
     return out;
 }
 
-Result<Texture> loadTexture(const std::string& path) {
-    std::error_code ec;
-    if (!fs::is_regular_file(path, ec)) return Status::error(path + ": texture not found");
+Result<Texture> decodeTexture(std::span<const uint8_t> bytes, const std::string& name) {
+    if (bytes.size() > size_t(std::numeric_limits<int>::max())) return Status::error(name + ": image file over 2 GiB");
     int w = 0, h = 0, channels = 0;
-    if (!stbi_info(path.c_str(), &w, &h, &channels))
-        return Status::error(path + ": not an image stb_image can read, or a corrupt or oversized one (stb_image: " +
+    if (!stbi_info_from_memory(bytes.data(), int(bytes.size()), &w, &h, &channels))
+        return Status::error(name + ": not an image stb_image can read, or a corrupt or oversized one (stb_image: " +
                              std::string(stbi_failure_reason()) + ")");
-    if (w <= 0 || h <= 0) return Status::error(path + ": empty texture (" + std::to_string(w) + " x " + std::to_string(h) + ")");
+    if (w <= 0 || h <= 0) return Status::error(name + ": empty texture (" + std::to_string(w) + " x " + std::to_string(h) + ")");
     if (uint64_t(w) * uint64_t(h) > kMaxTexels)
-        return Status::error(path + ": texture of " + std::to_string(w) + " x " + std::to_string(h) + " texels, more than the " +
+        return Status::error(name + ": texture of " + std::to_string(w) + " x " + std::to_string(h) + " texels, more than the " +
                              std::to_string(kMaxTexels) + " Surfcast decodes");
-    std::unique_ptr<uint8_t, void (*)(void*)> pixels(stbi_load(path.c_str(), &w, &h, &channels, 3), stbi_image_free);
-    if (!pixels) return Status::error(path + ": corrupt texture (" + std::string(stbi_failure_reason()) + ")");
+    std::unique_ptr<uint8_t, void (*)(void*)> pixels(stbi_load_from_memory(bytes.data(), int(bytes.size()), &w, &h, &channels, 3),
+                                                     stbi_image_free);
+    if (!pixels) return Status::error(name + ": corrupt texture (" + std::string(stbi_failure_reason()) + ")");
     Texture t;
-    t.path = path;
+    t.path = name;
     t.width = w;
     t.height = h;
     t.rgb.assign(pixels.get(), pixels.get() + size_t(w) * size_t(h) * 3);
     return t;
+}
+
+Result<Texture> loadTexture(const std::string& path) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) return Status::error(path + ": texture not found");
+    if (fs::file_size(path, ec) > (uint64_t(1) << 30)) return Status::error(path + ": texture file over 1 GiB");
+    std::ifstream in(path, std::ios::binary);
+    std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (!in.good() && !in.eof()) return Status::error(path + ": cannot read");
+    return decodeTexture(bytes, path);
 }
 
 Result<MtlLibrary> readMtl(const std::string& path) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -30,8 +31,11 @@ struct Texture {
 };
 
 // Decodes a JPEG, PNG, BMP, TGA, ... into RGB. Errors name the file and say
-// why: missing, not an image, corrupt, empty or larger than kMaxTexels.
+// why: missing, not an image, corrupt, empty or larger than kMaxTexels (the
+// header's size is checked before anything is allocated).
 Result<Texture> loadTexture(const std::string& path);
+// The same from an image file's bytes (an image inside a .glb); `name` names it in errors.
+Result<Texture> decodeTexture(std::span<const uint8_t> bytes, const std::string& name);
 
 // A material library: each material's diffuse map (map_Kd), the only map
 // Surfcast uses, as written and resolved against the library's folder.

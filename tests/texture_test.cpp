@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iterator>
 
 #include "mesh_reader.h"
 #include "test_support.h"
@@ -198,3 +200,123 @@ TEST(TexturedMesh, BadTexturesAreClearErrors) {
     EXPECT_FALSE(std::filesystem::exists(dir.file("out")));
 }
 
+
+namespace {
+
+// A glTF scene: a textured unit quad (the 64 x 64 ramp times baseColorFactor
+// (0.5, 1, 1)) placed by a node translated by (10, 0, 0) and scaled by 2, and
+// an untextured unit quad of baseColorFactor (0, 1, 0) translated by (0, 5, 0).
+// glTF's texture coordinates run down the image: the vertex at y = 0 has v = 1.
+struct GltfFixture {
+    std::string bin;   // positions, texture coordinates, indices
+    std::string json;  // with "BUFFER" and "IMAGE" left for the caller
+    GltfFixture() {
+        auto put = [&](auto v) { bin.append(reinterpret_cast<const char*>(&v), sizeof v); };
+        for (float p : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 1.f, 0.f, 0.f, 1.f, 0.f}) put(p);  // 48 bytes
+        for (float t : {0.f, 1.f, 1.f, 1.f, 1.f, 0.f, 0.f, 0.f}) put(t);                      // 32 bytes
+        for (uint16_t i : {0, 1, 2, 0, 2, 3}) put(i);                                          // 12 bytes
+        json = R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+  "nodes": [{"mesh": 0, "translation": [10, 0, 0], "scale": [2, 2, 2]}, {"mesh": 1, "translation": [0, 5, 0]}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]},
+             {"primitives": [{"attributes": {"POSITION": 0}, "indices": 2, "material": 1}]}],
+  "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "baseColorFactor": [0.5, 1, 1, 1]}},
+                {"pbrMetallicRoughness": {"baseColorFactor": [0, 1, 0, 1]}}],
+  "textures": [{"source": 0}],
+  "images": [IMAGE],
+  "buffers": [BUFFER],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 32},
+                  {"buffer": 0, "byteOffset": 80, "byteLength": 12}IMAGEVIEW],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+                {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}]})";
+    }
+    static std::string replace(std::string s, const std::string& from, const std::string& to) {
+        s.replace(s.find(from), from.size(), to);
+        return s;
+    }
+};
+
+void expectGltfScene(PointReader& reader) {
+    size_t textured = 0, plain = 0;
+    for (const InputPoint& p : readAll(reader)) {
+        if (p.position.y >= 5) {  // the untextured quad
+            ++plain;
+            EXPECT_EQ(p.color[0], 0);
+            EXPECT_EQ(p.color[1], 65535);
+            EXPECT_EQ(p.color[2], 0);
+            continue;
+        }
+        ++textured;
+        const double u = (p.position.x - 10) / 2, v = p.position.y / 2;
+        EXPECT_GE(u, -1e-9);
+        if (u < 0.5 / 64 || u > 63.5 / 64 || v < 0.5 / 64 || v > 63.5 / 64) continue;
+        // Texel column i: red 4 i times the factor 0.5, i.e. 2 i, exactly.
+        EXPECT_NEAR(p.color[0] / 257.0, 2 * (64 * u - 0.5), 0.5 + 1e-3) << u << " " << v;
+        EXPECT_NEAR(p.color[1] / 257.0, 4 * (63.5 - 64 * v), 0.5 + 1e-3) << u << " " << v;
+    }
+    // One surfel per texel: 4,096 texels over the textured quad's area 4 (so
+    // 1,024 on the unit quad), each face sampled floor(expected + U) times.
+    EXPECT_GE(textured, 4096u);
+    EXPECT_LE(textured, 4098u);
+    EXPECT_GE(plain, 1024u);
+    EXPECT_LE(plain, 1026u);
+}
+
+}  // namespace
+
+TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
+    test::TempDir dir;
+    writePng(dir.file("ramp.png"), 64, 64, [](int i, int j) { return Vec3f{float(4 * i), float(4 * j), 77}; });
+    GltfFixture f;
+    test::writeFile(dir.file("scene.bin"), f.bin);
+    std::string json = GltfFixture::replace(f.json, "BUFFER", R"({"uri": "scene.bin", "byteLength": 92})");
+    json = GltfFixture::replace(json, "IMAGE", R"({"uri": "ramp.png"})");
+    test::writeFile(dir.file("scene.gltf"), GltfFixture::replace(json, "IMAGEVIEW", ""));
+    auto r = openMeshReader(dir.file("scene.gltf"), MeshSampling{});
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    expectGltfScene(**r);
+
+    // The same as one .glb: the PNG inside the binary chunk.
+    std::ifstream png(dir.file("ramp.png"), std::ios::binary);
+    const std::string image((std::istreambuf_iterator<char>(png)), std::istreambuf_iterator<char>());
+    std::string bin = f.bin + image;
+    while (bin.size() % 4) bin += '\0';
+    json = GltfFixture::replace(f.json, "BUFFER", R"({"byteLength": )" + std::to_string(bin.size()) + "}");
+    json = GltfFixture::replace(json, "IMAGE", R"({"bufferView": 3, "mimeType": "image/png"})");
+    json = GltfFixture::replace(json, "IMAGEVIEW",
+                                R"(, {"buffer": 0, "byteOffset": 92, "byteLength": )" + std::to_string(image.size()) + "}");
+    while (json.size() % 4) json += ' ';
+    auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+    const std::string glb = "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) + u32(uint32_t(json.size())) +
+                            "JSON" + json + u32(uint32_t(bin.size())) + std::string("BIN\0", 4) + bin;
+    test::writeFile(dir.file("scene.glb"), glb);
+    auto b = openMeshReader(dir.file("scene.glb"), MeshSampling{});
+    ASSERT_TRUE(b.ok()) << b.status().message();
+    expectGltfScene(**b);
+
+    // Bad scenes are clear errors.
+    auto expectError = [&](const std::string& text, const std::string& what) {
+        test::writeFile(dir.file("bad.gltf"), text);
+        auto bad = openMeshReader(dir.file("bad.gltf"), MeshSampling{});
+        ASSERT_FALSE(bad.ok()) << what;
+        EXPECT_NE(bad.status().message().find(what), std::string::npos) << bad.status().message();
+    };
+    std::string good = GltfFixture::replace(f.json, "BUFFER", R"({"uri": "scene.bin", "byteLength": 92})");
+    good = GltfFixture::replace(GltfFixture::replace(good, "IMAGE", R"({"uri": "ramp.png"})"), "IMAGEVIEW", "");
+    expectError(GltfFixture::replace(good, R"("count": 6)", R"("count": 600)"), "600 elements do not fit the buffer view");
+    expectError(GltfFixture::replace(good, R"("translation": [0, 5, 0]})", R"("translation": [0, 5, 0], "children": [1]})"),
+                "is its own ancestor");
+    expectError(GltfFixture::replace(good, R"({"uri": "ramp.png"})", R"({"uri": "nowhere.png"})"), "baseColorTexture");
+    expectError("{ not json", "not glTF (its JSON does not parse to an object)");
+    // Indices past the quad's four vertices.
+    test::writeFile(dir.file("far.bin"), f.bin.substr(0, 80) + std::string("\x00\x00\x01\x00\x09\x00\x00\x00\x02\x00\x03\x00", 12));
+    expectError(GltfFixture::replace(good, "scene.bin", "far.bin"), "index 9 past its 4 vertices");
+    // A missing texture, allowed: the material keeps its factor (0.5, 1, 1).
+    test::writeFile(dir.file("bad.gltf"), GltfFixture::replace(good, R"({"uri": "ramp.png"})", R"({"uri": "nowhere.png"})"));
+    MeshSampling allow;
+    allow.allowMissingTextures = true;
+    auto allowed = openMeshReader(dir.file("bad.gltf"), allow);
+    ASSERT_TRUE(allowed.ok()) << allowed.status().message();
+    for (const InputPoint& p : readAll(**allowed))
+        if (p.position.y < 5) EXPECT_EQ(p.color[0], 32768) << "0.5 of 65535, rounded";
+}
