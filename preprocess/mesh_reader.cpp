@@ -217,8 +217,50 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
                                                 float(ply->colors[i][2] >> 8) / 255.f});
         }
         loaded->hasColors = !ply->colors.empty();
-        for (const auto& t : ply->triangles)
-            if (!mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) ++loaded->rejectedFaces;
+        const bool uvs = !ply->vertexUvs.empty() || !ply->faceUvs.empty();
+        if (load.textures && uvs && !ply->textureFiles.empty()) {
+            mesh.request_halfedge_texcoords2D();
+            mesh.request_face_texture_index();
+            loaded->textures.resize(ply->textureFiles.size() + 1);  // texture index t + 1 is TextureFile t
+            for (size_t t = 0; t < ply->textureFiles.size(); ++t) {
+                const PlyMesh::TextureFile& file = ply->textureFiles[t];
+                auto texture = loadTexture(file.path);
+                if (!texture) {
+                    const std::string why = path + ": line " + std::to_string(file.line) + ": comment TextureFile '" + file.name +
+                                            "': " + texture.status().message();
+                    if (!load.allowMissingTextures)
+                        return Status::error(why + " (with --allow-missing-textures its faces take vertex colours)");
+                    warnOnce(why + "; its faces take vertex colours");
+                    continue;
+                }
+                loaded->textures[t + 1] = std::move(*texture);
+                loaded->textured = true;
+            }
+        }
+        for (size_t i = 0; i < ply->triangles.size(); ++i) {
+            const auto& t = ply->triangles[i];
+            auto f = mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]);
+            if (!f.is_valid()) {
+                ++loaded->rejectedFaces;
+                continue;
+            }
+            if (!loaded->textured) continue;
+            const int texture = ply->triangleTexture.empty() ? 0 : ply->triangleTexture[i];
+            mesh.set_texture_index(f, texture >= 0 && size_t(texture) + 1 < loaded->textures.size() ? texture + 1 : 0);
+            for (auto h : mesh.fh_range(f)) {
+                const uint32_t v = uint32_t(mesh.to_vertex_handle(h).idx());
+                std::array<float, 2> uv{0, 0};
+                if (!ply->faceUvs.empty()) {
+                    const int corner = v == t[0] ? 0 : v == t[1] ? 1 : 2;
+                    uv = {ply->faceUvs[i][size_t(2 * corner)], ply->faceUvs[i][size_t(2 * corner + 1)]};
+                } else {
+                    uv = ply->vertexUvs[v];
+                }
+                if (!std::isfinite(uv[0]) || !std::isfinite(uv[1]))
+                    return Status::error(path + ": face " + std::to_string(i) + " has a NaN or infinite texture coordinate");
+                mesh.set_texcoord2D(h, {uv[0], uv[1]});
+            }
+        }
     } else {
         const bool obj = lowerExtension(path) == ".obj";
         std::vector<std::string> libraries;

@@ -1,6 +1,7 @@
 #include "ply_reader.h"
 
 #include <algorithm>
+#include <filesystem>
 #include <utility>
 #include <bit>
 #include <charconv>
@@ -79,9 +80,11 @@ public:
 
     // Reads a whole element instance: scalars into `scalars` (one per scalar
     // property, in order), the first list property into `list`.
-    Status readInstance(const PlyElement& e, std::vector<double>* scalars, std::vector<double>* list) {
+    // One element instance: its scalar properties in order, and each list
+    // property's items in its own vector (lists: one per list property, in order).
+    Status readInstance(const PlyElement& e, std::vector<double>* scalars, std::vector<std::vector<double>>* lists) {
         scalars->clear();
-        if (list) list->clear();
+        size_t l = 0;
         for (const PlyProperty& p : e.properties) {
             double v = 0;
             if (!p.isList) {
@@ -93,6 +96,12 @@ public:
             SC_TRY(read(p.countType, &count));
             if (!(count >= 0) || count > kMaxListLength)
                 return Status::error(in_.at() + ": list length " + std::to_string(count) + " out of range");
+            std::vector<double>* list = nullptr;
+            if (lists) {
+                if (lists->size() <= l) lists->resize(l + 1);
+                list = &(*lists)[l++];
+                list->clear();
+            }
             for (size_t i = 0; i < size_t(count); ++i) {
                 SC_TRY(read(p.type, &v));
                 if (list) list->push_back(v);
@@ -257,7 +266,16 @@ Result<PlyHeader> parsePlyHeader(ByteStream& in) {
         std::istringstream words(line);
         std::string word;
         words >> word;
-        if (word.empty() || word == "comment" || word == "obj_info") continue;
+        if (word == "comment") {
+            // MeshLab's texture names: "comment TextureFile NAME", in texnumber order.
+            std::string key, name;
+            if ((words >> key) && key == "TextureFile" && std::getline(words >> std::ws, name)) {
+                while (!name.empty() && (name.back() == '\r' || name.back() == ' ')) name.pop_back();
+                h.textureFiles.push_back({name, int(in.line() - 1)});
+            }
+            continue;
+        }
+        if (word.empty() || word == "obj_info") continue;
         if (word == "end_header") break;
         if (word == "format") {
             std::string f, version;
@@ -338,7 +356,10 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
     if (!header) return header.status();
     ValueReader values(*in, header->format);
     PlyMesh mesh;
-    std::vector<double> scalars, list;
+    for (const auto& [name, line] : header->textureFiles)
+        mesh.textureFiles.push_back({(std::filesystem::path(path).parent_path() / name).lexically_normal().string(), name, line});
+    std::vector<double> scalars;
+    std::vector<std::vector<double>> lists;
     bool seenVertices = false;
     for (const PlyElement& e : header->elements) {
         if (e.name == "vertex") {
@@ -350,9 +371,18 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
             if (!layout) return layout.status();
             mesh.colorBits = layout->colorType == PlyType::UInt8 ? 8 : 16;
             mesh.vertices.reserve(std::min<uint64_t>(e.count, 1u << 20));  // the header's count is not trusted
+            // Per-vertex texture coordinates under any of their usual names.
+            const auto slots = scalarSlots(e);
+            int u = -1, v = -1;
+            for (auto [a, b] : {std::pair{"s", "t"}, {"u", "v"}, {"texture_u", "texture_v"}, {"texture_s", "texture_t"}})
+                if (u < 0 && findProperty(e, {a}) >= 0 && findProperty(e, {b}) >= 0) {
+                    u = slots[size_t(findProperty(e, {a}))];
+                    v = slots[size_t(findProperty(e, {b}))];
+                }
             for (uint64_t i = 0; i < e.count; ++i) {
                 SC_TRY(values.readInstance(e, &scalars, nullptr));
                 mesh.vertices.push_back({scalars[layout->x], scalars[layout->y], scalars[layout->z]});
+                if (u >= 0) mesh.vertexUvs.push_back({float(scalars[size_t(u)]), float(scalars[size_t(v)])});
                 if (layout->r >= 0)
                     mesh.colors.push_back({toChannel(scalars[layout->r], layout->colorType),
                                            toChannel(scalars[layout->g], layout->colorType),
@@ -361,8 +391,21 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
             continue;
         }
         bool faces = e.name == "face", strips = e.name == "tristrips";
+        // Which list holds the vertex indices (by name, else the first), and
+        // the per-face texture coordinates and texture number, if any.
+        int indexList = -1, texcoordList = -1, lists_ = 0;
+        for (const PlyProperty& p : e.properties) {
+            if (!p.isList) continue;
+            if (p.name == "vertex_indices" || p.name == "vertex_index") indexList = lists_;
+            if (p.name == "texcoord") texcoordList = lists_;
+            ++lists_;
+        }
+        if (indexList < 0 && lists_ > 0 && texcoordList != 0) indexList = 0;
+        const int texnumber = findProperty(e, {"texnumber"}) >= 0 ? scalarSlots(e)[size_t(findProperty(e, {"texnumber"}))] : -1;
         for (uint64_t i = 0; i < e.count; ++i) {
-            SC_TRY(values.readInstance(e, &scalars, &list));
+            SC_TRY(values.readInstance(e, &scalars, &lists));
+            if (indexList < 0) continue;
+            const std::vector<double>& list = lists[size_t(indexList)];
             auto index = [&](double v, uint32_t* out) -> Status {
                 if (!(v >= 0) || v >= double(mesh.vertices.size()))
                     return Status::error(in->at() + ": vertex index " + std::to_string(int64_t(v)) + " out of range");
@@ -370,6 +413,10 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
                 return {};
             };
             if (faces) {
+                const std::vector<double>* uv = texcoordList >= 0 ? &lists[size_t(texcoordList)] : nullptr;
+                if (uv && uv->size() != 2 * list.size())
+                    return Status::error(in->at() + ": face " + std::to_string(i) + " has " + std::to_string(uv->size()) +
+                                         " texture coordinates for " + std::to_string(list.size()) + " vertices");
                 // A polygon becomes a triangle fan.
                 for (size_t k = 2; k < list.size(); ++k) {
                     std::array<uint32_t, 3> t{};
@@ -377,6 +424,12 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
                     SC_TRY(index(list[k - 1], &t[1]));
                     SC_TRY(index(list[k], &t[2]));
                     mesh.triangles.push_back(t);
+                    if (uv) {
+                        const std::vector<double>& c = *uv;
+                        mesh.faceUvs.push_back({float(c[0]), float(c[1]), float(c[2 * k - 2]), float(c[2 * k - 1]), float(c[2 * k]),
+                                                float(c[2 * k + 1])});
+                    }
+                    if (texnumber >= 0) mesh.triangleTexture.push_back(int(std::clamp(scalars[size_t(texnumber)], -1.0, 65535.0)));
                 }
             } else if (strips) {
                 // -1 restarts a strip; odd triangles flip to keep one orientation.

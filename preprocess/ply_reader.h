@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "byte_stream.h"
@@ -32,6 +33,7 @@ struct PlyElement {
 struct PlyHeader {
     enum class Format { Ascii, BinaryLittle, BinaryBig } format = Format::Ascii;
     std::vector<PlyElement> elements;
+    std::vector<std::pair<std::string, int>> textureFiles;  // "comment TextureFile NAME": name and header line
 };
 
 Result<PlyHeader> parsePlyHeader(ByteStream& in);
@@ -43,12 +45,26 @@ bool plyHasFaces(const PlyHeader& header);
 Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars = {});
 
 // Whole-file read of a PLY mesh: vertex positions and colours (16-bit scale,
-// empty when absent) and triangles from faces (fans of polygons) or strips.
+// empty when absent), texture coordinates and texture names, and triangles
+// from faces (fans of polygons) or strips.
 struct PlyMesh {
     std::vector<Vec3d> vertices;
     std::vector<std::array<uint16_t, 3>> colors;
     std::vector<std::array<uint32_t, 3>> triangles;
     int colorBits = 8;
+    // Texture coordinates (MeshLab's conventions): per vertex (s/t, u/v,
+    // texture_u/texture_v) or per triangle corner (a face's "texcoord" list),
+    // each empty when absent; per triangle its texture ("texnumber"), empty
+    // when absent (texture 0); the textures from "comment TextureFile".
+    std::vector<std::array<float, 2>> vertexUvs;
+    std::vector<std::array<float, 6>> faceUvs;
+    std::vector<int> triangleTexture;
+    struct TextureFile {
+        std::string path;  // resolved against the PLY's folder
+        std::string name;  // as written
+        int line = 0;      // header line
+    };
+    std::vector<TextureFile> textureFiles;
 };
 Result<PlyMesh> readPlyMesh(const std::string& path);
 

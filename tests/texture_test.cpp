@@ -10,6 +10,7 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <map>
 
 #include "mesh_reader.h"
 #include "test_support.h"
@@ -200,6 +201,60 @@ TEST(TexturedMesh, BadTexturesAreClearErrors) {
     EXPECT_FALSE(std::filesystem::exists(dir.file("out")));
 }
 
+
+// PLY textures in MeshLab's conventions: "comment TextureFile", per-corner
+// "texcoord" lists beside the vertex indices, per-vertex s/t, and polygons.
+// The reader once read a face's lists as one: corners.ply's texture
+// coordinates became vertex indices of extra triangles (1.5 times the quad's
+// area sampled), which the surfel count below catches. Each carries the ramp quad of
+// LeafColoursAreTheTextureAtEachSampledPoint, so the same colours follow.
+TEST(TexturedMesh, PlyTextureCoordinatesPerCornerOrPerVertex) {
+    test::TempDir dir;
+    writePng(dir.file("ramp.png"), 64, 64, [](int i, int j) { return Vec3f{float(4 * i), float(4 * j), 77}; });
+    const std::string head = "ply\nformat ascii 1.0\ncomment made by hand\ncomment TextureFile ramp.png\n";
+    const std::string xyz = "property float x\nproperty float y\nproperty float z\n";
+    const std::map<std::string, std::string> files{
+        {"corners.ply", head + "element vertex 4\n" + xyz +
+                            "element face 2\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\n"
+                            "end_header\n0 0 0\n2 0 0\n2 1 0\n0 1 0\n3 0 1 2 6 0 0 1 0 1 1\n3 0 2 3 6 0 0 1 1 0 1\n"},
+        {"polygon.ply", head + "element vertex 4\n" + xyz +
+                            "element face 1\nproperty list uchar float texcoord\nproperty list uchar int vertex_indices\n"
+                            "property int texnumber\nend_header\n0 0 0\n2 0 0\n2 1 0\n0 1 0\n8 0 0 1 0 1 1 0 1 4 0 1 2 3 0\n"},
+        {"vertices.ply", head + "element vertex 4\n" + xyz +
+                             "property float s\nproperty float t\nelement face 2\nproperty list uchar int vertex_indices\n"
+                             "end_header\n0 0 0 0 0\n2 0 0 1 0\n2 1 0 1 1\n0 1 0 0 1\n3 0 1 2\n3 0 2 3\n"}};
+    for (const auto& [name, text] : files) {
+        test::writeFile(dir.file(name), text);
+        auto r = openMeshReader(dir.file(name), MeshSampling{});
+        ASSERT_TRUE(r.ok()) << name << ": " << r.status().message();
+        const auto all = readAll(**r);
+        EXPECT_GE(all.size(), 4096u) << name;
+        EXPECT_LE(all.size(), 4098u) << name;
+        for (const InputPoint& p : all) {
+            const double u = p.position.x / 2, v = p.position.y;
+            if (u < 0.5 / 64 || u > 63.5 / 64 || v < 0.5 / 64 || v > 63.5 / 64) continue;
+            ASSERT_NEAR(p.color[0] / 257.0, 4 * (64 * u - 0.5), 0.5 + 1e-3) << name << " " << u << " " << v;
+            ASSERT_NEAR(p.color[1] / 257.0, 4 * (63.5 - 64 * v), 0.5 + 1e-3) << name << " " << u << " " << v;
+        }
+    }
+    // A missing texture names the header line.
+    test::writeFile(dir.file("missing.ply"), "ply\nformat ascii 1.0\ncomment TextureFile gone.png\nelement vertex 3\n" + xyz +
+                                                 "property float s\nproperty float t\nelement face 1\n"
+                                                 "property list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n"
+                                                 "0 1 0 0 1\n3 0 1 2\n");
+    auto missing = openMeshReader(dir.file("missing.ply"), MeshSampling{});
+    ASSERT_FALSE(missing.ok());
+    EXPECT_NE(missing.status().message().find("missing.ply: line 3: comment TextureFile 'gone.png'"), std::string::npos)
+        << missing.status().message();
+    // Texture coordinates that do not pair with the vertices.
+    test::writeFile(dir.file("short.ply"), head + "element vertex 3\n" + xyz +
+                                               "element face 1\nproperty list uchar int vertex_indices\n"
+                                               "property list uchar float texcoord\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 4 0 0 1 0\n");
+    auto uneven = openMeshReader(dir.file("short.ply"), MeshSampling{});
+    ASSERT_FALSE(uneven.ok());
+    EXPECT_NE(uneven.status().message().find("has 4 texture coordinates for 3 vertices"), std::string::npos)
+        << uneven.status().message();
+}
 
 namespace {
 
