@@ -405,6 +405,7 @@ Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures) t
                 }
                 tri[size_t(c)] = uint32_t(first + size_t(i));
             }
+            if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;  // OpenMesh's add_face asserts on these
             scene.triangles.push_back(tri);
             scene.triangleMaterial.push_back(material);
         }

@@ -26,7 +26,7 @@ struct GltfMaterial {
 struct GltfScene {
     std::vector<Vec3d> positions;           // world space: every node's transform applied
     std::vector<std::array<float, 2>> uvs;  // per vertex, v up from the image's bottom (the OBJ convention)
-    std::vector<std::array<uint32_t, 3>> triangles;  // indices into positions
+    std::vector<std::array<uint32_t, 3>> triangles;  // indices into positions, never one repeated
     std::vector<uint32_t> triangleMaterial;  // index into materials, per triangle
     std::vector<GltfMaterial> materials;
     std::vector<Texture> textures;

@@ -417,12 +417,15 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
                 if (uv && uv->size() != 2 * list.size())
                     return Status::error(in->at() + ": face " + std::to_string(i) + " has " + std::to_string(uv->size()) +
                                          " texture coordinates for " + std::to_string(list.size()) + " vertices");
-                // A polygon becomes a triangle fan.
+                // A polygon becomes a triangle fan. Triangles that repeat a
+                // vertex are dropped: OpenMesh's add_face asserts (aborting the
+                // process) on one (fuzz_read_ply).
                 for (size_t k = 2; k < list.size(); ++k) {
                     std::array<uint32_t, 3> t{};
                     SC_TRY(index(list[0], &t[0]));
                     SC_TRY(index(list[k - 1], &t[1]));
                     SC_TRY(index(list[k], &t[2]));
+                    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
                     mesh.triangles.push_back(t);
                     if (uv) {
                         const std::vector<double>& c = *uv;

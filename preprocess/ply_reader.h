@@ -46,7 +46,7 @@ Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, cons
 
 // Whole-file read of a PLY mesh: vertex positions and colours (16-bit scale,
 // empty when absent), texture coordinates and texture names, and triangles
-// from faces (fans of polygons) or strips.
+// from faces (fans of polygons) or strips, none repeating a vertex.
 struct PlyMesh {
     std::vector<Vec3d> vertices;
     std::vector<std::array<uint16_t, 3>> colors;

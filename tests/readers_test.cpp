@@ -124,6 +124,22 @@ TEST(PlyReader, ASecondVertexElementIsAnError) {
     EXPECT_NE(r.status().message().find("more than one vertex element"), std::string::npos) << r.status().message();
 }
 
+TEST(PlyReader, FaceTrianglesRepeatingAVertexAreDropped) {
+    // OpenMesh's add_face asserts (aborting the process) on a triangle such as
+    // (0, 1, 0) (fuzz_read_ply: fuzz/regressions/read_ply/face-repeating-a-vertex.ply).
+    // Such triangles have no area and are dropped; the others are sampled.
+    test::TempDir dir;
+    test::writeFile(dir.file("dup.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                         "property float z\nelement face 3\nproperty list uchar int vertex_indices\nend_header\n"
+                                         "0 0 0\n1 0 0\n0 1 0\n3 0 1 0\n4 0 1 1 2\n3 0 1 2\n");
+    auto mesh = readPlyMesh(dir.file("dup.ply"));
+    ASSERT_TRUE(mesh.ok()) << mesh.status().message();
+    ASSERT_EQ(mesh->triangles.size(), 2u);  // the quad's fan (0,1,1) is dropped, (0,1,2) kept twice
+    auto r = openMeshReader(dir.file("dup.ply"), MeshSampling{0.01});
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    EXPECT_GT(readAll(**r).points, 0u);
+}
+
 TEST(PlyReader, MeshElementsAreDetected) {
     REQUIRE_DATA();
     for (const char* name : {"bunny.ply", "horse.ply", "igea.ply"}) {

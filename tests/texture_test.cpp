@@ -366,6 +366,12 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
     // Indices past the quad's four vertices.
     test::writeFile(dir.file("far.bin"), f.bin.substr(0, 80) + std::string("\x00\x00\x01\x00\x09\x00\x00\x00\x02\x00\x03\x00", 12));
     expectError(GltfFixture::replace(good, "scene.bin", "far.bin"), "index 9 past its 4 vertices");
+    // A triangle repeating a vertex (OpenMesh's add_face asserts on one) is dropped.
+    test::writeFile(dir.file("dup.bin"), f.bin.substr(0, 80) + std::string("\x00\x00\x01\x00\x00\x00\x00\x00\x02\x00\x03\x00", 12));
+    test::writeFile(dir.file("dup.gltf"), GltfFixture::replace(good, "scene.bin", "dup.bin"));
+    auto dup = openMeshReader(dir.file("dup.gltf"), MeshSampling{0.05});
+    ASSERT_TRUE(dup.ok()) << dup.status().message();
+    EXPECT_GT(readAll(**dup).size(), 0u);
     // A missing texture, allowed: the material keeps its factor (0.5, 1, 1).
     test::writeFile(dir.file("bad.gltf"), GltfFixture::replace(good, R"({"uri": "ramp.png"})", R"({"uri": "nowhere.png"})"));
     MeshSampling allow;
