@@ -1,9 +1,13 @@
 // surfcast-mesh-reference: the reference image of a triangle mesh for
-// bench/accuracy_bench.py. A z-buffer rasterizer with 4 x 4 samples per pixel
-// (16x supersampling), perspective-correct vertex normals, and the renderer's
-// own shading (shadePixel: headlight Lambert, or Phong, on grey 0.8, white
-// background), with the camera model of surfcast-view (common/camera.h).
-// Usage: surfcast-mesh-reference MESH --camera ex,..,fov --size WxH [--shading lambert|phong] --out PNG
+// bench/accuracy_bench.py and the texture tests. A z-buffer rasterizer with
+// 4 x 4 samples per pixel (16x supersampling), perspective-correct vertex
+// normals and texture coordinates, and the renderer's own shading
+// (shadePixel: unlit, headlight Lambert or Phong; white background), with the
+// camera model of surfcast-view (common/camera.h). Surfaces are grey 0.8, or
+// with --colors the colours the sampler gives surfels: the diffuse texture,
+// filtered trilinearly from a box-filtered mip pyramid at each sample's
+// footprint (GPU-style, isotropic), else the face's colour.
+// Usage: surfcast-mesh-reference MESH --camera ex,..,fov --size WxH [--shading unlit|lambert|phong] [--colors] --out PNG
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -21,12 +25,48 @@ using namespace surfcast;
 
 namespace {
 constexpr int kSamples = 4;  // per axis
+
+// A texture's mip pyramid: level 0 the texture, each next level 2 x 2 texels
+// averaged (the last row or column repeated at odd sizes), down to 1 x 1.
+struct Mip {
+    std::vector<Texture> levels;
+    explicit Mip(const Texture& t) {
+        levels.push_back(t);
+        while (levels.back().width > 1 || levels.back().height > 1) {
+            const Texture& a = levels.back();
+            Texture b;
+            b.width = std::max(1, a.width / 2);
+            b.height = std::max(1, a.height / 2);
+            b.rgb.resize(size_t(b.width) * b.height * 3);
+            for (int y = 0; y < b.height; ++y)
+                for (int x = 0; x < b.width; ++x)
+                    for (int c = 0; c < 3; ++c) {
+                        int sum = 0;
+                        for (int dy = 0; dy < 2; ++dy)
+                            for (int dx = 0; dx < 2; ++dx) {
+                                const int sx = std::min(a.width - 1, 2 * x + dx), sy = std::min(a.height - 1, 2 * y + dy);
+                                sum += a.rgb[3 * (size_t(sy) * a.width + sx) + size_t(c)];
+                            }
+                        b.rgb[3 * (size_t(y) * b.width + x) + size_t(c)] = uint8_t((sum + 2) / 4);
+                    }
+            levels.push_back(std::move(b));
+        }
+    }
+    // Trilinear: bilinear on the two levels around log2(texels per sample).
+    Vec3f sample(double u, double v, double texelsPerSample) const {
+        const double lod = std::clamp(std::log2(std::max(texelsPerSample, 1e-9)), 0.0, double(levels.size() - 1));
+        const size_t l0 = size_t(lod), l1 = std::min(l0 + 1, levels.size() - 1);
+        const float f = float(lod - double(l0));
+        return levels[l0].sample(u, v) * (1 - f) + levels[l1].sample(u, v) * f;
+    }
+};
 }
 
 int main(int argc, char** argv) {
     std::string mesh, cameraText, out;
     int W = 320, H = 240;
     std::optional<Shading> shading = Shading::Lambert;
+    bool colors = false;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         if (a.rfind("--camera=", 0) == 0) cameraText = a.substr(9);
@@ -34,15 +74,16 @@ int main(int argc, char** argv) {
         else if (a == "--size" && i + 1 < argc) std::sscanf(argv[++i], "%dx%d", &W, &H);
         else if (a == "--out" && i + 1 < argc) out = argv[++i];
         else if (a == "--shading" && i + 1 < argc) shading = parseShading(argv[++i]);
+        else if (a == "--colors") colors = true;
         else mesh = a;
     }
     auto camera = parseCamera(cameraText);
     if (mesh.empty() || out.empty() || !camera || W < 1 || H < 1 || !shading) {
         std::fprintf(stderr, "usage: surfcast-mesh-reference MESH --camera ex,ey,ez,tx,ty,tz,ux,uy,uz,fov --size WxH "
-                             "[--shading lambert|phong] --out PNG\n");
+                             "[--shading unlit|lambert|phong] [--colors] --out PNG\n");
         return 2;
     }
-    auto m = readMeshTriangles(mesh);
+    auto m = readMeshTriangles(mesh, colors);
     if (!m) {
         std::fprintf(stderr, "surfcast-mesh-reference: %s\n", m.status().message().c_str());
         return 1;
@@ -58,8 +99,11 @@ int main(int argc, char** argv) {
         cam[i] = view->apply(cast<float>(m->vertices.positions[i] - origin));
         nrm[i] = view->rotate(m->vertices.normals[i]);
     }
+    std::vector<Mip> mips;
+    for (const Texture& t : m->textures) mips.emplace_back(t.rgb.empty() ? Texture{"", 1, 1, {128, 128, 128}} : t);
     std::vector<float> depth(size_t(SW) * SH, INFINITY);
     std::vector<Vec3f> normal(size_t(SW) * SH);
+    std::vector<Vec3f> color(colors ? size_t(SW) * SH : 0);
     const float near = 1e-6f;
     for (size_t t = 0; t + 2 < m->triangles.size(); t += 3) {
         const uint32_t idx[3] = {m->triangles[t], m->triangles[t + 1], m->triangles[t + 2]};
@@ -95,6 +139,31 @@ int main(int argc, char** argv) {
                 // Perspective-correct: interpolate n/z, then multiply by z.
                 Vec3f n = (nrm[idx[0]] * (w0 * iz[0]) + nrm[idx[1]] * (w1 * iz[1]) + nrm[idx[2]] * (w2 * iz[2])) * z;
                 normal[i] = n;
+                if (!colors) continue;
+                const size_t tri = t / 3;
+                const int texture = m->triangleTexture[tri];
+                if (texture < 0) {
+                    color[i] = m->triangleColor[tri];
+                    continue;
+                }
+                // Texture coordinates at this sample and one sample to the
+                // right and below (perspective-correct): their spread in
+                // texels is the footprint that picks the mip level.
+                const auto& uv = m->cornerUvs[tri];
+                auto uvAt = [&](float qx, float qy) {
+                    float a = ((sx[1] - qx) * (sy[2] - qy) - (sx[2] - qx) * (sy[1] - qy)) / area;
+                    float b = ((sx[2] - qx) * (sy[0] - qy) - (sx[0] - qx) * (sy[2] - qy)) / area;
+                    float c = 1 - a - b;
+                    float wa = a * iz[0], wb = b * iz[1], wc = c * iz[2], sum = wa + wb + wc;
+                    return std::array<double, 2>{(wa * uv[0] + wb * uv[2] + wc * uv[4]) / sum,
+                                                 (wa * uv[1] + wb * uv[3] + wc * uv[5]) / sum};
+                };
+                const auto here = uvAt(px, py), right = uvAt(px + 1, py), below = uvAt(px, py + 1);
+                const Texture& level0 = mips[size_t(texture)].levels[0];
+                auto texels = [&](const std::array<double, 2>& o) {
+                    return std::hypot((o[0] - here[0]) * level0.width, (o[1] - here[1]) * level0.height);
+                };
+                color[i] = mips[size_t(texture)].sample(here[0], here[1], std::max(texels(right), texels(below)));
             }
     }
     const Vec3f grey{0.8f, 0.8f, 0.8f}, background{1, 1, 1};
@@ -109,7 +178,7 @@ int main(int argc, char** argv) {
                     size_t i = size_t(Y) * SW + X;
                     if (std::isfinite(depth[i])) {
                         Vec3f ray = view->pixelRay(X + 0.5f, Y + 0.5f);
-                        sum += shadePixel(*shading, grey, normal[i], ray);
+                        sum += shadePixel(*shading, colors ? color[i] : grey, normal[i], ray);
                         ++hits;
                     } else {
                         sum += background;

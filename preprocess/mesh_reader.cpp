@@ -489,13 +489,39 @@ Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
     return vertexNormals(**mesh);
 }
 
-Result<MeshTriangles> readMeshTriangles(const std::string& path) {
-    auto mesh = loadMesh(path, {false, false});
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures) {
+    auto mesh = loadMesh(path, {textures, false});
     if (!mesh) return mesh.status();
-    const TriMesh& m = (*mesh)->mesh;
-    MeshTriangles out{vertexNormals(**mesh), {}};
-    for (auto f : m.faces())
-        for (auto v : m.fv_range(f)) out.triangles.push_back(uint32_t(v.idx()));
+    LoadedMesh& loaded = **mesh;
+    const TriMesh& m = loaded.mesh;
+    MeshTriangles out{vertexNormals(loaded), {}, {}, {}, {}, {}};
+    for (auto f : m.faces()) {
+        for (auto h : m.fh_range(f)) out.triangles.push_back(uint32_t(m.to_vertex_handle(h).idx()));
+        if (!textures) continue;
+        const int t = loaded.textured ? m.texture_index(f) : 0;
+        const bool hasTexture = t > 0 && size_t(t) < loaded.textures.size() && !loaded.textures[size_t(t)].rgb.empty();
+        out.triangleTexture.push_back(hasTexture ? t - 1 : -1);
+        std::array<float, 6> uv{};
+        Vec3f color{0.5f, 0.5f, 0.5f};
+        int k = 0;
+        if (loaded.hasColors) color = {};
+        for (auto h : m.fh_range(f)) {
+            if (hasTexture) {
+                uv[size_t(2 * k)] = m.texcoord2D(h)[0];
+                uv[size_t(2 * k + 1)] = m.texcoord2D(h)[1];
+            }
+            if (loaded.hasColors)
+                for (int c = 0; c < 3; ++c) color[c] += m.color(m.to_vertex_handle(h))[c] / 3;
+            ++k;
+        }
+        if (!loaded.hasColors && loaded.faceColors) color = {m.color(f)[0], m.color(f)[1], m.color(f)[2]};
+        out.cornerUvs.push_back(uv);
+        out.triangleColor.push_back(color);
+    }
+    if (textures) {
+        // Texture index t + 1 is out.textures[t].
+        for (size_t t = 1; t < loaded.textures.size(); ++t) out.textures.push_back(std::move(loaded.textures[t]));
+    }
     return out;
 }
 

@@ -10,11 +10,13 @@
 // textures are held in memory; the samples are streamed.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "input_point.h"
+#include "texture.h"
 
 namespace surfcast {
 
@@ -47,12 +49,19 @@ struct MeshVertexNormals {
 Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path);
 
 // The whole triangle mesh (vertices with outward normals as above, and
-// triangles as vertex index triples), for reference renders of the mesh.
+// triangles as vertex index triples), for reference renders of the mesh. With
+// `textures`, also what the sampler colours surfels from: each triangle's
+// diffuse texture (an index into `textures`, -1 for none) and texture
+// coordinates (v up), else its colour (vertex colours averaged, or Kd).
 struct MeshTriangles {
     MeshVertexNormals vertices;
     std::vector<uint32_t> triangles;  // 3 per triangle
+    std::vector<Texture> textures;
+    std::vector<int> triangleTexture;             // per triangle; empty without `textures`
+    std::vector<std::array<float, 6>> cornerUvs;  // per triangle: (u, v) of its 3 corners
+    std::vector<Vec3f> triangleColor;             // per triangle, where it has no texture (grey 0.5 without colours)
 };
-Result<MeshTriangles> readMeshTriangles(const std::string& path);
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures = false);
 
 // True for file names the mesh path reads (.obj .off .stl .gltf .glb; PLY decides by content).
 bool isMeshExtension(const std::string& path);

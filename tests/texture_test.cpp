@@ -2,6 +2,7 @@
 // textures decoded and reconstructed bilinearly, OBJ material libraries,
 // one leaf surfel per texel, and the errors of bad textures.
 #include <gtest/gtest.h>
+#include <stb_image.h>
 #include <stb_image_write.h>
 
 #include <algorithm>
@@ -380,4 +381,90 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
     ASSERT_TRUE(allowed.ok()) << allowed.status().message();
     for (const InputPoint& p : readAll(**allowed))
         if (p.position.y < 5) EXPECT_EQ(p.color[0], 32768) << "0.5 of 65535, rounded";
+}
+
+namespace {
+struct Rgb {
+    int width = 0, height = 0;
+    std::vector<uint8_t> pixels;
+    const uint8_t* at(int x, int y) const { return &pixels[3 * (size_t(y) * size_t(width) + size_t(x))]; }
+    bool background(int x, int y) const { return at(x, y)[0] == 255 && at(x, y)[1] == 255 && at(x, y)[2] == 255; }
+};
+Rgb readPng(const std::string& path) {
+    Rgb img;
+    int n = 0;
+    uint8_t* p = stbi_load(path.c_str(), &img.width, &img.height, &n, 3);
+    EXPECT_NE(p, nullptr) << path;
+    if (p) img.pixels.assign(p, p + size_t(img.width) * size_t(img.height) * 3);
+    stbi_image_free(p);
+    return img;
+}
+}  // namespace
+
+// The shared textured dragon, built with its 2048² texture and rendered by the
+// streaming client's renderer, against the mesh itself rendered with its
+// texture by surfcast-mesh-reference (16 samples per pixel, trilinear mip
+// filtering), both unlit from the same camera. Compared over the pixels both
+// cover whose neighbours they also cover (silhouette pixels are partial in
+// different ways).
+//
+// Mean colour: both images are linear filters of the same texture over the
+// same surface, so their per-pixel difference has mean zero up to rounding
+// (the surfels' 8-bit colours and both 8-bit images: at most 1.5/255 in all)
+// and a random part from the surfels' random positions, whose mean over N
+// pixels has standard deviation sigma/sqrt(N) (measured: sigma 4.7/255 in
+// luminance, N 30,872, so 0.03/255). Bound: 2/255 per channel; measured
+// differences 0.3-0.4/255. A grey dragon (the texture ignored) is 90/255 off.
+//
+// Histogram of luminance in 16 bins of 16 levels: a per-pixel difference of
+// RMS 4.7 levels can carry the pixels within 4.7 levels of a bin edge, about
+// 30 % of them, into the next bin; were all those moves one way, the L1
+// distance of the normalized histograms would be 0.6, while moves both ways
+// cancel (measured: 0.06). Bound: 0.25. A grey dragon gives 2 (no bin in
+// common).
+TEST(TexturedMesh, DragonRendersLikeItsTexturedMesh) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    const std::string obj = test::dataFile("fg_spkMgDragon/fg_spkMgDragon.obj");
+    auto build = test::run({test::binary("surfcast-build"), "-q", obj, "-o", dir.file("dragon")});
+    ASSERT_EQ(build.exitCode, 0) << build.output;
+    EXPECT_NE(build.output.find("map_Ks 'fg_spkMgDragon_specular.jpg' not found (unused)"), std::string::npos) << build.output;
+    const std::string camera = "--camera=0.0,0.05,0.15,0.005,0.04,0,0,1,0,40";
+    auto view = test::run({test::binary("surfcast-view"), "--headless", dir.file("dragon"), camera, "--size", "400x300", "--out",
+                           dir.file("surfels.png")});
+    ASSERT_EQ(view.exitCode, 0) << view.output;
+    auto ref = test::run({test::binary("surfcast-mesh-reference"), obj, camera, "--size", "400x300", "--shading", "unlit",
+                          "--colors", "--out", dir.file("mesh.png")});
+    ASSERT_EQ(ref.exitCode, 0) << ref.output;
+    const Rgb a = readPng(dir.file("surfels.png")), b = readPng(dir.file("mesh.png"));
+    ASSERT_EQ(a.width, b.width);
+    ASSERT_EQ(a.height, b.height);
+    double sum[2][3] = {}, diff2 = 0;
+    std::vector<double> hist[2] = {std::vector<double>(16), std::vector<double>(16)};
+    size_t n = 0;
+    for (int y = 1; y + 1 < a.height; ++y)
+        for (int x = 1; x + 1 < a.width; ++x) {
+            bool inside = true;
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) inside = inside && !a.background(x + dx, y + dy) && !b.background(x + dx, y + dy);
+            if (!inside) continue;
+            ++n;
+            const Rgb* img[2] = {&a, &b};
+            for (int i = 0; i < 2; ++i) {
+                const uint8_t* p = img[i]->at(x, y);
+                for (int c = 0; c < 3; ++c) sum[i][c] += p[c];
+                const double luminance = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+                hist[i][std::min(15, int(luminance / 16))] += 1;
+            }
+            diff2 += std::pow(0.2126 * (a.at(x, y)[0] - b.at(x, y)[0]) + 0.7152 * (a.at(x, y)[1] - b.at(x, y)[1]) +
+                                  0.0722 * (a.at(x, y)[2] - b.at(x, y)[2]), 2);
+        }
+    ASSERT_GT(n, 10000u) << "the dragon covers too few pixels";
+    double l1 = 0;
+    for (int k = 0; k < 16; ++k) l1 += std::fabs(hist[0][size_t(k)] - hist[1][size_t(k)]) / double(n);
+    std::printf("pixels %zu, mean surfels (%.2f %.2f %.2f), mesh (%.2f %.2f %.2f), per-pixel luminance rms difference %.2f, "
+                "histogram L1 %.3f\n", n, sum[0][0] / n, sum[0][1] / n, sum[0][2] / n, sum[1][0] / n, sum[1][1] / n, sum[1][2] / n,
+                std::sqrt(diff2 / n), l1);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(sum[0][c] / double(n), sum[1][c] / double(n), 2.0) << "channel " << c;
+    EXPECT_LT(l1, 0.25);
 }
