@@ -26,40 +26,6 @@ using namespace surfcast;
 namespace {
 constexpr int kSamples = 4;  // per axis
 
-// A texture's mip pyramid: level 0 the texture, each next level 2 x 2 texels
-// averaged (the last row or column repeated at odd sizes), down to 1 x 1.
-struct Mip {
-    std::vector<Texture> levels;
-    explicit Mip(const Texture& t) {
-        levels.push_back(t);
-        while (levels.back().width > 1 || levels.back().height > 1) {
-            const Texture& a = levels.back();
-            Texture b;
-            b.width = std::max(1, a.width / 2);
-            b.height = std::max(1, a.height / 2);
-            b.rgb.resize(size_t(b.width) * b.height * 3);
-            for (int y = 0; y < b.height; ++y)
-                for (int x = 0; x < b.width; ++x)
-                    for (int c = 0; c < 3; ++c) {
-                        int sum = 0;
-                        for (int dy = 0; dy < 2; ++dy)
-                            for (int dx = 0; dx < 2; ++dx) {
-                                const int sx = std::min(a.width - 1, 2 * x + dx), sy = std::min(a.height - 1, 2 * y + dy);
-                                sum += a.rgb[3 * (size_t(sy) * a.width + sx) + size_t(c)];
-                            }
-                        b.rgb[3 * (size_t(y) * b.width + x) + size_t(c)] = uint8_t((sum + 2) / 4);
-                    }
-            levels.push_back(std::move(b));
-        }
-    }
-    // Trilinear: bilinear on the two levels around log2(texels per sample).
-    Vec3f sample(double u, double v, double texelsPerSample) const {
-        const double lod = std::clamp(std::log2(std::max(texelsPerSample, 1e-9)), 0.0, double(levels.size() - 1));
-        const size_t l0 = size_t(lod), l1 = std::min(l0 + 1, levels.size() - 1);
-        const float f = float(lod - double(l0));
-        return levels[l0].sample(u, v) * (1 - f) + levels[l1].sample(u, v) * f;
-    }
-};
 }
 
 int main(int argc, char** argv) {
@@ -99,7 +65,7 @@ int main(int argc, char** argv) {
         cam[i] = view->apply(cast<float>(m->vertices.positions[i] - origin));
         nrm[i] = view->rotate(m->vertices.normals[i]);
     }
-    std::vector<Mip> mips;
+    std::vector<MipTexture> mips;
     for (const Texture& t : m->textures) mips.emplace_back(t.rgb.empty() ? Texture{"", 1, 1, {128, 128, 128}} : t);
     std::vector<float> depth(size_t(SW) * SH, INFINITY);
     std::vector<Vec3f> normal(size_t(SW) * SH);

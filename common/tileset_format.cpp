@@ -279,6 +279,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["normal_source"] = info.normalSource;
     j["weights"] = info.weights;
     j["kernel_scale"] = info.kernelScale;
+    if (!info.textureFilter.empty()) j["texture_filter"] = info.textureFilter;
     j["hierarchy"] = {{"file", "hierarchy.bin"}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
     j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
@@ -365,6 +366,7 @@ Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& 
         info.weights = j.at("weights").get<std::string>();
         // Absent in sets written before it existed, whose weights assumed k = 1.
         info.kernelScale = j.value("kernel_scale", 1.0);
+        if (j.contains("texture_filter")) info.textureFilter = j.at("texture_filter").get<std::string>();
         if (!(info.kernelScale > 0) || !std::isfinite(info.kernelScale))
             return Status::error(what + ": kernel_scale must be positive");
         const auto& h = j.at("hierarchy");

@@ -147,6 +147,7 @@ struct TilesetInfo {
     TilesetStatistics statistics;
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none
+    std::string textureFilter;  // ewa | nearest where the set was built from textured meshes; empty otherwise
     double kernelScale = 1.0;  // k of the reconstruction kernel V^r = (k h)^2 I the weights assume
     uint64_t hierarchyBytes = 0;
     uint32_t hierarchyPages = 0;

@@ -46,6 +46,7 @@ struct InputDescription {
     uint64_t declaredPoints = 0;     // from the header; 0 when the format has no count
     bool hasNormals = false;
     bool hasColors = false;
+    bool textured = false;           // a mesh whose colours come from image textures
     bool hasIntensity = false;
     bool hasClassification = false;
     bool hasReturns = false;         // return number and number of returns

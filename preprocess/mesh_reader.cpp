@@ -361,6 +361,7 @@ public:
         desc_.format = "mesh";
         desc_.hasNormals = true;
         desc_.hasColors = mesh_->hasColors || mesh_->textured || mesh_->faceColors;
+        desc_.textured = mesh_->textured;
         desc_.colorBits = 8;
     }
 
@@ -489,8 +490,8 @@ Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
     return vertexNormals(**mesh);
 }
 
-Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures) {
-    auto mesh = loadMesh(path, {textures, false});
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, bool allowMissingTextures) {
+    auto mesh = loadMesh(path, {textures, allowMissingTextures});
     if (!mesh) return mesh.status();
     LoadedMesh& loaded = **mesh;
     const TriMesh& m = loaded.mesh;

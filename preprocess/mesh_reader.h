@@ -61,7 +61,7 @@ struct MeshTriangles {
     std::vector<std::array<float, 6>> cornerUvs;  // per triangle: (u, v) of its 3 corners
     std::vector<Vec3f> triangleColor;             // per triangle, where it has no texture (grey 0.5 without colours)
 };
-Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures = false);
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures = false, bool allowMissingTextures = false);
 
 // True for file names the mesh path reads (.obj .off .stl .gltf .glb; PLY decides by content).
 bool isMeshExtension(const std::string& path);

@@ -20,6 +20,7 @@
 #include "normals.h"
 #include "progress.h"
 #include "sampler.h"
+#include "texture_field.h"
 #include "tileset_writer.h"
 
 namespace fs = std::filesystem;
@@ -85,8 +86,8 @@ constexpr int kMaxScalarBits = 32;
 // Bits of a stored floating-point scalar field (ScalarField::resolution 0).
 constexpr int kFloatScalarBits = 24;
 
-enum Step { kStepNormals, kStepOctree, kStepAttributes, kStepEncode, kStepCount };
-const char* const kStepNames[kStepCount] = {"normals", "octree", "neighbours+h+weights", "encode"};
+enum Step { kStepNormals, kStepOctree, kStepAttributes, kStepTextures, kStepEncode, kStepCount };
+const char* const kStepNames[kStepCount] = {"normals", "octree", "neighbours+h+weights", "textures", "encode"};
 
 struct BuiltNode {
     NodeKey key;
@@ -121,6 +122,9 @@ private:
     BuiltNode* buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
                             std::vector<std::unique_ptr<BuiltNode>>& nodes, ScalarTable& scalars);
     Status buildUpperLevels();
+    // EWA texture filtering of a node's surfels from textured meshes, once
+    // the level's h (and radii) are known.
+    void filterTextures(BuiltNode& node, int threads);
     Status emit(BuiltNode& node, const ScalarTable& scalars);
     uint64_t bytesPerChunkPoint() const { return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size(); }
     ScalarTable emptyTable() const {
@@ -161,6 +165,9 @@ private:
     double leafStep_ = 0;  // quantization step at the leaves; 0: unknown precision
     NormalContext normals_;
     std::vector<uint16_t> sourceIds_;  // per input: its orientation rule, Surfel::source
+    // Per orientation rule: the texture of the textured mesh that alone has it
+    // (TextureFilter::Ewa), else null.
+    std::vector<std::shared_ptr<const TextureField>> textureFields_;
     std::string chunkDir_;
     ChunkLayout layout_;
     std::unique_ptr<TilesetWriter> writer_;
@@ -323,7 +330,7 @@ Status Builder::chooseOrientationRules() {
     normals_.k = opt_.normalK;
     normals_.rules.clear();
     sourceIds_.clear();
-    std::map<std::tuple<bool, double, double, double, bool>, uint16_t> ruleIds;
+    std::map<std::tuple<bool, double, double, double, bool, long>, uint16_t> ruleIds;
     std::vector<std::string> sources;
     for (const SourceStats& s : stats_.sources) {
         const InputDescription& d = s.description;
@@ -337,7 +344,11 @@ Status Builder::chooseOrientationRules() {
         bool flat = sb.max.z - sb.min.z < kFlatRatio * std::max(sb.max.x - sb.min.x, sb.max.y - sb.min.y);
         rule.up = d.airborne || (!originUsable && flat);
         Vec3d o = rule.scanOrigin.value_or(Vec3d{});
-        auto [it, added] = ruleIds.try_emplace({rule.scanOrigin.has_value(), o.x, o.y, o.z, rule.up}, uint16_t(normals_.rules.size()));
+        // A textured mesh has a rule of its own: its surfels find their texture by it.
+        const bool ownRule = d.textured && opt_.textureFilter == BuildOptions::TextureFilter::Ewa;
+        auto [it, added] = ruleIds.try_emplace({rule.scanOrigin.has_value(), o.x, o.y, o.z, rule.up,
+                                                ownRule ? long(&s - stats_.sources.data()) : -1L},
+                                               uint16_t(normals_.rules.size()));
         if (added) {
             if (normals_.rules.size() > 0xFFFF)
                 return Status::error(d.path + ": more than 65,536 distinct scan origins among the inputs");
@@ -348,6 +359,17 @@ Status Builder::chooseOrientationRules() {
         if (std::find(sources.begin(), sources.end(), name) == sources.end()) sources.push_back(name);
     }
     for (size_t i = 0; i < sources.size(); ++i) summary_.normalSource += (i ? "+" : "") + sources[i];
+    // The textured meshes, read once more whole for their textures.
+    textureFields_.assign(normals_.rules.size(), nullptr);
+    for (size_t i = 0; i < stats_.sources.size(); ++i) {
+        const InputDescription& d = stats_.sources[i].description;
+        if (!d.textured) continue;
+        summary_.textureFilter = opt_.textureFilter == BuildOptions::TextureFilter::Ewa ? "ewa" : "nearest";
+        if (opt_.textureFilter != BuildOptions::TextureFilter::Ewa) continue;
+        auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh.allowMissingTextures);
+        if (!mesh) return mesh.status();
+        textureFields_[sourceIds_[i]] = std::make_shared<const TextureField>(*mesh, rootMin_);
+    }
     return {};
 }
 
@@ -508,6 +530,7 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
         }
         computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
     }
+    for (auto& n : nodes) filterTextures(*n, innerThreads);
     for (auto& n : nodes)
         if (n.get() != root) SC_TRY(emit(*n, scalars));
     bool isRoot = chunk.key == NodeKey{};
@@ -602,12 +625,32 @@ Status Builder::buildUpperLevels() {
         for (auto& [key, node] : retained_)
             if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
         computeLevelAttributes(members, neighbours, levelParams(level, threads_));
-        for (auto& [key, node] : current) SC_TRY(emit(*node, upperScalars_));
+        for (auto& [key, node] : current) {
+            filterTextures(*node, threads_);
+            SC_TRY(emit(*node, upperScalars_));
+        }
         below = std::move(current);
         progress_.advance(1);
     }
     phaseDone("upper");
     return {};
+}
+
+void Builder::filterTextures(BuiltNode& node, int threads) {
+    if (std::none_of(textureFields_.begin(), textureFields_.end(), [](const auto& f) { return f != nullptr; })) return;
+    ScopedTimer t(stepNs_[kStepTextures]);
+    std::vector<Surfel>& v = node.surfels;
+    const LevelNode& level = node.level;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256)
+    for (size_t i = 0; i < v.size(); ++i) {
+        Surfel& s = v[i];
+        const TextureField* field = s.source < textureFields_.size() ? textureFields_[s.source].get() : nullptr;
+        if (!field) continue;
+        const double radius = level.radii.empty() ? level.h : level.radii[i];
+        Vec3f c;
+        if (field->filter(s.position, s.normal, opt_.kernelScale * radius, &c))
+            for (int k = 0; k < 3; ++k) s.color[k] = uint16_t(std::lround(std::clamp(c[k], 0.f, 1.f) * 255.f) * 257);
+    }
 }
 
 int Builder::positionBits(const BuiltNode& node) const {
@@ -740,6 +783,7 @@ Result<BuildSummary> Builder::run() {
     info.statistics = statistics();
     info.normalSource = summary_.normalSource;
     info.weights = opt_.weights ? "analytic" : "none";
+    info.textureFilter = summary_.textureFilter;
     info.kernelScale = opt_.kernelScale;
     SC_TRY(writer_->finish(info));
     phaseDone("write");
@@ -767,6 +811,7 @@ std::string BuildSummary::text() const {
     for (size_t l = 0; l < surfelsPerLevel.size(); ++l)
         out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";
     out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none")
+        << (textureFilter.empty() ? "" : " (textures: " + textureFilter + ")")
         << "; attributes:";
     for (const std::string& a : attributes) out << " " << a;
     out << (attributes.empty() ? " none\n" : "\n");

@@ -39,6 +39,11 @@ struct BuildOptions {
     // no scalar field.
     std::optional<std::vector<std::string>> attributes;
     bool progress = true;
+    // Colours of textured meshes' surfels (Zwicker et al. 2001, §5): the
+    // texture filtered with each surfel's own kernel on every level (ewa,
+    // texture_field.h), or the texture at the surfel's centre on the leaves
+    // and the resampled averages above (nearest).
+    enum class TextureFilter { Nearest, Ewa } textureFilter = TextureFilter::Ewa;
 };
 
 struct BuildSummary {
@@ -54,6 +59,7 @@ struct BuildSummary {
     std::string normalSource;
     int colorBits = 0;
     std::vector<std::string> attributes;  // LiDAR attributes stored
+    std::string textureFilter;            // "ewa" or "nearest" where a textured mesh was read, else empty
 
     std::string text() const;
 };

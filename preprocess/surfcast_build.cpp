@@ -66,6 +66,9 @@ the text file LIST, one per line.
                           textured mesh, else half the median edge; coarsened where
                           that would exceed --mesh-max-surfels)
   --mesh-max-surfels N    most surfels a mesh gives at its default spacing (5000000)
+  --texture-filter F      colours of textured meshes' surfels: ewa (the texture filtered
+                          with each surfel's kernel on every level; default) or
+                          nearest (the texture at each leaf's centre, averaged above)
   --allow-missing-textures
                           a diffuse texture (OBJ map_Kd) that is missing or unreadable
                           is a warning, its faces take vertex colours (default: error)
@@ -212,6 +215,10 @@ int main(int argc, char** argv) {
         } else if (a == "--mesh-max-surfels") {
             if (!number(&d, 1, 1e12) || d != std::floor(d)) return usageError("--mesh-max-surfels needs a whole number >= 1");
             opt.inputs.mesh.maxSurfels = uint64_t(d);
+        } else if (a == "--texture-filter") {
+            std::string f;
+            if (!value(&f) || (f != "ewa" && f != "nearest")) return usageError("--texture-filter needs ewa or nearest");
+            opt.textureFilter = f == "ewa" ? surfcast::BuildOptions::TextureFilter::Ewa : surfcast::BuildOptions::TextureFilter::Nearest;
         } else if (a == "--allow-missing-textures") {
             opt.inputs.mesh.allowMissingTextures = true;
         } else if (a == "--vertices-only") {

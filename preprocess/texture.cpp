@@ -35,6 +35,37 @@ Vec3f Texture::sample(double u, double v) const {
     return out;
 }
 
+MipTexture::MipTexture(const Texture& texture) {
+    levels.push_back(texture);
+    while (levels.back().width > 1 || levels.back().height > 1) {
+        const Texture& a = levels.back();
+        Texture b;
+        b.path = a.path;
+        b.width = std::max(1, a.width / 2);
+        b.height = std::max(1, a.height / 2);
+        b.rgb.resize(size_t(b.width) * size_t(b.height) * 3);
+        for (int y = 0; y < b.height; ++y)
+            for (int x = 0; x < b.width; ++x)
+                for (int c = 0; c < 3; ++c) {
+                    int sum = 0;
+                    for (int dy = 0; dy < 2; ++dy)
+                        for (int dx = 0; dx < 2; ++dx) {
+                            const int sx = std::min(a.width - 1, 2 * x + dx), sy = std::min(a.height - 1, 2 * y + dy);
+                            sum += a.rgb[3 * (size_t(sy) * size_t(a.width) + size_t(sx)) + size_t(c)];
+                        }
+                    b.rgb[3 * (size_t(y) * size_t(b.width) + size_t(x)) + size_t(c)] = uint8_t((sum + 2) / 4);
+                }
+        levels.push_back(std::move(b));
+    }
+}
+
+Vec3f MipTexture::sample(double u, double v, double texelsPerSample) const {
+    const double lod = std::clamp(std::log2(std::max(texelsPerSample, 1e-9)), 0.0, double(levels.size() - 1));
+    const size_t l0 = size_t(lod), l1 = std::min(l0 + 1, levels.size() - 1);
+    const float f = float(lod - double(l0));
+    return levels[l0].sample(u, v) * (1 - f) + levels[l1].sample(u, v) * f;
+}
+
 Result<Texture> decodeTexture(std::span<const uint8_t> bytes, const std::string& name) {
     if (bytes.size() > size_t(std::numeric_limits<int>::max())) return Status::error(name + ": image file over 2 GiB");
     int w = 0, h = 0, channels = 0;

@@ -30,6 +30,17 @@ struct Texture {
     Vec3f sample(double u, double v) const;
 };
 
+// A texture's mip pyramid: level 0 the texture, each next level its 2 x 2
+// texels averaged (a box filter; the last row or column repeated at odd
+// sizes), down to 1 x 1.
+struct MipTexture {
+    std::vector<Texture> levels;
+    explicit MipTexture(const Texture& texture);
+    // Trilinear: the bilinear reconstructions of the two levels around
+    // log2(texelsPerSample) (level-0 texels per sample spacing), blended.
+    Vec3f sample(double u, double v, double texelsPerSample) const;
+};
+
 // Decodes a JPEG, PNG, BMP, TGA, ... into RGB. Errors name the file and say
 // why: missing, not an image, corrupt, empty or larger than kMaxTexels (the
 // header's size is checked before anything is allocated).

@@ -16,6 +16,8 @@
 #include "mesh_reader.h"
 #include "test_support.h"
 #include "texture.h"
+#include "texture_field.h"
+#include "tileset_reader.h"
 
 using namespace surfcast;
 
@@ -412,16 +414,16 @@ Rgb readPng(const std::string& path) {
 // same surface, so their per-pixel difference has mean zero up to rounding
 // (the surfels' 8-bit colours and both 8-bit images: at most 1.5/255 in all)
 // and a random part from the surfels' random positions, whose mean over N
-// pixels has standard deviation sigma/sqrt(N) (measured: sigma 4.7/255 in
-// luminance, N 30,872, so 0.03/255). Bound: 2/255 per channel; measured
+// pixels has standard deviation sigma/sqrt(N) (measured: sigma 4.1/255 in
+// luminance, N 30,872, so 0.02/255). Bound: 2/255 per channel; measured
 // differences 0.3-0.4/255. A grey dragon (the texture ignored) is 90/255 off.
 //
 // Histogram of luminance in 16 bins of 16 levels: a per-pixel difference of
-// RMS 4.7 levels can carry the pixels within 4.7 levels of a bin edge, about
-// 30 % of them, into the next bin; were all those moves one way, the L1
-// distance of the normalized histograms would be 0.6, while moves both ways
-// cancel (measured: 0.06). Bound: 0.25. A grey dragon gives 2 (no bin in
-// common).
+// RMS 4.1 levels can carry the pixels within 4.1 levels of a bin edge, about
+// a quarter of them, into the next bin; were all those moves one way, the L1
+// distance of the normalized histograms would be 0.5, while moves both ways
+// cancel (measured: 0.034 with --texture-filter ewa, 0.061 with nearest).
+// Bound: 0.25. A grey dragon gives 2 (no bin in common).
 TEST(TexturedMesh, DragonRendersLikeItsTexturedMesh) {
     REQUIRE_DATA();
     test::TempDir dir;
@@ -467,4 +469,140 @@ TEST(TexturedMesh, DragonRendersLikeItsTexturedMesh) {
                 std::sqrt(diff2 / n), l1);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(sum[0][c] / double(n), sum[1][c] / double(n), 2.0) << "channel " << c;
     EXPECT_LT(l1, 0.25);
+}
+
+namespace {
+// A rectangle of 256 x 64 world units in z = 0 carrying a 256 x 64 texture,
+// one texel per unit: texel column i covers x in [i, i + 1].
+MeshTriangles texturedRectangle(const std::function<Vec3f(int, int)>& texel) {
+    MeshTriangles m;
+    m.vertices.positions = {{0, 0, 0}, {256, 0, 0}, {256, 64, 0}, {0, 64, 0}};
+    m.vertices.normals.assign(4, Vec3f{0, 0, 1});
+    m.triangles = {0, 1, 2, 0, 2, 3};
+    Texture t;
+    t.width = 256;
+    t.height = 64;
+    for (int j = 0; j < 64; ++j)
+        for (int i = 0; i < 256; ++i) {
+            const Vec3f c = texel(i, j);
+            for (int k = 0; k < 3; ++k) t.rgb.push_back(uint8_t(c[k]));
+        }
+    m.textures.push_back(t);
+    m.triangleTexture = {0, 0};
+    m.cornerUvs = {{0, 0, 1, 0, 1, 1}, {0, 0, 1, 1, 0, 1}};
+    m.triangleColor.assign(2, Vec3f{});
+    return m;
+}
+}  // namespace
+
+// The view-independent EWA coefficient of a surfel (Zwicker et al. 2001, §5),
+// w = Σ_i c_i ⟨r, n_i⟩ / Σ_i ⟨r, n_i⟩, derived here independently as the
+// Gaussian-weighted average of the texel values at the texel centres within
+// the kernel's support (3 sigma): for a texture black for x < 128 and white
+// beyond, w(x, y) = Σ c_ij g(x_ij - p) / Σ g(x_ij - p) over centres x_ij =
+// (i + 0.5, j + 0.5) within 3 sigma of p = (x, y). Up to sigma = 2 texels
+// the field sums exactly these terms (bar rounding); above, it sums the
+// texels of the mip level at most sigma/2 wide, m x m texel averages whose
+// variance (at most sigma²/48) the Gaussian gives up: the filter keeps its
+// variance, not quite its shape, which moves the step's blurred profile by
+// at most 1 % (measured: 2.2/255 at sigma = 8). Bound: 2.5/255. The point
+// sample at the centre (nearest) misses by up to half the step.
+TEST(TextureField, EwaCoefficientsAreTheGaussianWeightedTexelAverage) {
+    const MeshTriangles rect = texturedRectangle([](int i, int) { return Vec3f{i < 128 ? 0.f : 255.f, 0, 0}; });
+    const TextureField field(rect, Vec3d{});
+    double worstNearest = 0, worstEwa = 0;
+    for (double sigma : {1.0, 2.0, 4.0, 8.0})
+        for (double x = 128 - 2.5 * sigma; x <= 128 + 2.5 * sigma; x += sigma / 4) {
+            const double y = 32.25;
+            double sum = 0, weight = 0;
+            for (int j = 0; j < 64; ++j)
+                for (int i = 0; i < 256; ++i) {
+                    const double d2 = std::pow(i + 0.5 - x, 2) + std::pow(j + 0.5 - y, 2);
+                    if (d2 > 9 * sigma * sigma) continue;
+                    const double g = std::exp(-d2 / (2 * sigma * sigma));
+                    sum += g * (i < 128 ? 0 : 1);
+                    weight += g;
+                }
+            const double expected = sum / weight;
+            Vec3f c;
+            ASSERT_TRUE(field.filter({x, y, 0}, {0, 0, 1}, sigma, &c));
+            EXPECT_NEAR(c[0] * 255, expected * 255, sigma <= 2 ? 0.01 : 2.5) << "sigma " << sigma << " x " << x;
+            worstEwa = std::max(worstEwa, std::fabs(c[0] - expected) * 255);
+            worstNearest = std::max(worstNearest, std::fabs(rect.textures[0].sample(x / 256, y / 64)[0] - expected) * 255);
+        }
+    std::printf("worst difference from the texel average: ewa %.2f/255, nearest %.2f/255\n", worstEwa, worstNearest);
+    EXPECT_GT(worstNearest, 50) << "the step blurred by the kernel is what nearest sampling misses";
+    // The other side of the surface, and no surface in reach, give nothing.
+    Vec3f c;
+    EXPECT_FALSE(field.filter({128, 32, 0}, {0, 0, -1}, 4, &c));
+    EXPECT_FALSE(field.filter({128, 32, 50}, {0, 0, 1}, 4, &c));
+}
+
+namespace {
+// The Gaussian-weighted texel average of the step texture of
+// EwaCoefficientsAreTheGaussianWeightedTexelAverage at (x, y), support 3 sigma.
+double stepAverage(double x, double y, double sigma) {
+    double sum = 0, weight = 0;
+    for (int j = 0; j < 64; ++j)
+        for (int i = 0; i < 256; ++i) {
+            const double d2 = std::pow(i + 0.5 - x, 2) + std::pow(j + 0.5 - y, 2);
+            if (d2 > 9 * sigma * sigma) continue;
+            const double g = std::exp(-d2 / (2 * sigma * sigma));
+            sum += g * (i < 128 ? 0 : 1);
+            weight += g;
+        }
+    return sum / weight;
+}
+}  // namespace
+
+// Every level of a built set carries the texture filtered with its own kernel:
+// each surfel's colour is the step's texel average at its position with
+// sigma = kernel_scale times its node's h (or its own radius). Tolerance per
+// surfel: the field's 2.5/255 (above), 0.5 for the 8-bit colour, and the
+// colour's change over the position's quantization error (half a step of the
+// node's position bits along each axis): the blurred step's slope is at most
+// 255 / (sigma sqrt(2 pi)) per unit. Under --texture-filter nearest the
+// coarse levels average the leaves' point samples instead, which this
+// misses by far more.
+TEST(TexturedMesh, EveryLevelCarriesTheTextureFilteredWithItsKernel) {
+    test::TempDir dir;
+    writePng(dir.file("step.png"), 256, 64, [](int i, int) { return Vec3f{i < 128 ? 0.f : 255.f, 0, 0}; });
+    test::writeFile(dir.file("m.mtl"), "newmtl step\nmap_Kd step.png\n");
+    test::writeFile(dir.file("rect.obj"), "mtllib m.mtl\nv 0 0 0\nv 256 0 0\nv 256 64 0\nv 0 64 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                          "usemtl step\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    auto check = [&](const std::string& filter, double* worstExcess, size_t* coarse) {
+        auto build = test::run({test::binary("surfcast-build"), "-q", dir.file("rect.obj"), "--capacity", "4000", "--texture-filter",
+                                filter, "-o", dir.file(filter)});
+        ASSERT_EQ(build.exitCode, 0) << build.output;
+        auto set = TilesetReader::open(dir.file(filter));
+        ASSERT_TRUE(set.ok()) << set.status().message();
+        EXPECT_EQ(set->info().textureFilter, filter);
+        *worstExcess = -1e9;
+        *coarse = 0;
+        for (const NodeRecord& node : set->nodes()) {
+            auto block = set->readBlock(node);
+            ASSERT_TRUE(block.ok()) << block.status().message();
+            const double edge = nodeEdge(set->info(), node.key.level);
+            const double quantum = edge / double((uint64_t(1) << node.positionBits) - 1) / 2;
+            for (size_t i = 0; i < block->size(); ++i) {
+                const Vec3d p = set->position(node, *block, i);
+                const double sigma = set->info().kernelScale * (block->radii.empty() ? node.spacing : block->radii[i]);
+                // Away from the rectangle's ends, where the texture repeats.
+                if (p.x < 3 * sigma + 1 || p.x > 256 - 3 * sigma - 1 || p.y < 3 * sigma + 1 || p.y > 64 - 3 * sigma - 1) continue;
+                const double expected = 255 * stepAverage(p.x, p.y, sigma);
+                const double tolerance = 2.5 + 0.5 + 255 / (sigma * std::sqrt(2 * M_PI)) * quantum * std::sqrt(3.0);
+                *worstExcess = std::max(*worstExcess, std::fabs(block->colors[3 * i] - expected) - tolerance);
+                if (!(node.flags & kFlagInputPoints)) ++*coarse;
+            }
+        }
+    };
+    double ewaExcess = 0, nearestExcess = 0;
+    size_t coarse = 0, coarseNearest = 0;
+    check("ewa", &ewaExcess, &coarse);
+    check("nearest", &nearestExcess, &coarseNearest);
+    std::printf("largest excess over the tolerance: ewa %.2f, nearest %.2f (%zu resampled surfels checked)\n", ewaExcess, nearestExcess,
+                coarse);
+    EXPECT_GT(coarse, 1000u);
+    EXPECT_LE(ewaExcess, 0);
+    EXPECT_GT(nearestExcess, 10);
 }
