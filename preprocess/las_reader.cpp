@@ -26,6 +26,10 @@ constexpr size_t kBatchRecords = 4096;        // records per read of uncompresse
 constexpr size_t kLazBatchFloor = 50000;      // LAZ: at least a typical chunk per read
 constexpr size_t kLazChunksPerThread = 4;     // per read: keeps every thread busy to the end
 constexpr size_t kLazBatchBytes = 32 << 20;   // ...within this much decompressed data
+// A read never asks for more decompressed bytes than this, whatever chunk size
+// the header claims (a 2 KB LAZ claimed 50 M-point chunks: a 9 GB buffer,
+// fuzz_read_laz); larger chunks are decoded across several reads.
+constexpr size_t kLazMaxBatchBytes = 256 << 20;
 constexpr char kLaszipUser[] = "laszip encoded";
 constexpr uint16_t kLaszipRecord = 22204;
 constexpr char kSpecUser[] = "LASF_Spec";
@@ -112,7 +116,8 @@ public:
     size_t preferredBatch() const override {
         size_t chunk = std::max<size_t>(sc_laz_chunk_size(reader_), kLazBatchFloor);
         size_t want = chunk * size_t(std::max(threads_, 1)) * kLazChunksPerThread;
-        return std::max(chunk, std::min(want, kLazBatchBytes / recordLength_));
+        return std::max<size_t>(1, std::min(std::max(chunk, std::min(want, kLazBatchBytes / recordLength_)),
+                                            kLazMaxBatchBytes / recordLength_));
     }
 
 private:

@@ -147,6 +147,15 @@ TEST(LazPcd, HugeCountsInTheFileAreErrorsNotAllocations) {
     EXPECT_EQ(layers.exitCode, 1) << layers.output;
     EXPECT_NE(layers.output.find("chunk 0: its layers claim 4294968106 bytes, the chunk table gives the chunk 1057"),
               std::string::npos) << layers.output;
+    // A 1,300-byte LAZ claiming chunks of 7.9 M points of 1,156 bytes: the
+    // reader sized one read's buffer by a whole chunk (9 GB). Reads are
+    // capped at 256 MB of decompressed points; the data then runs out.
+    auto chunk = test::run({test::binary("surfcast-build"), "-q", SURFCAST_FUZZ_REGRESSIONS "/read_laz/huge-chunk-size.laz",
+                            "-o", dir.file("out")});
+    EXPECT_EQ(chunk.exitCode, 1) << chunk.output;
+    EXPECT_NE(chunk.output.find("huge-chunk-size.laz: LAZ data, points 0-"), std::string::npos) << chunk.output;
+    if (test::kRssMeaningful) EXPECT_LT(chunk.peakRss, uint64_t(400) << 20) << chunk.output;
+    EXPECT_FALSE(fs::exists(dir.file("out")));
 }
 
 TEST(LazPcd, WrongCountsAndFieldsGiveClearErrors) {
