@@ -11,7 +11,10 @@ namespace surfcast {
 namespace {
 constexpr uint32_t kLeafTriangles = 4;
 constexpr double kReach = 3;          // sigmas of the Gaussian integrated
-constexpr double kStepsPerSigma = 2;  // lattice points per sigma (at most)
+// A footprint's texel rectangle at the chosen mip level is at most this big
+// (about 50 x 50 where texture coordinates are sane); a stretched one takes the
+// texture's mean instead of looping without end.
+constexpr double kMaxFootprintTexels = 1 << 16;
 }  // namespace
 
 TextureField::TextureField(const MeshTriangles& mesh, const Vec3d& origin) {
@@ -131,9 +134,14 @@ bool TextureField::filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* o
         if (dot(t.normal, normal) < 0) return;  // the other side
         const double d = dot(p - t.a, t.normal);
         if (d * d >= reach2) return;
+        Vec3f color = t.color;
         if (t.texture >= 0) {
-            textured(t, p, sigma, add);
-            return;
+            if (textured(t, p, sigma, add)) return;
+            // Texture coordinates so stretched that the footprint holds
+            // more texels than kMaxFootprintTexels even at the chosen level:
+            // the texture repeats many times under it, and its mean stands in.
+            const Texture& top = mips_[size_t(t.texture)].levels.back();
+            color = Vec3f{top.rgb[0] / 255.f, top.rgb[1] / 255.f, top.rgb[2] / 255.f};
         }
         // A plain colour: the Gaussian's integral over the triangle, on a
         // lattice in its plane centred on p's projection.
@@ -160,7 +168,7 @@ bool TextureField::filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* o
                 const double b1 = ((x - u[0]) * (v[2] - v[0]) - (u[2] - u[0]) * (y - v[0])) / det;
                 const double b2 = ((u[1] - u[0]) * (y - v[0]) - (x - u[0]) * (v[1] - v[0])) / det;
                 if (b1 < 0 || b2 < 0 || b1 + b2 > 1) continue;
-                add(t.color, step * step * std::exp(-dist2 * inv2s2));
+                add(color, step * step * std::exp(-dist2 * inv2s2));
             }
     });
     if (!(weight > 0)) return false;
@@ -169,7 +177,7 @@ bool TextureField::filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* o
 }
 
 template <class Add>
-void TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& add) const {
+bool TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& add) const {
     // The paper's sum over texels, w = Σ c_i ⟨r, n_i⟩ / Σ ⟨r, n_i⟩, with ⟨r, n_i⟩
     // taken as the kernel at the texel's centre on the surface times the
     // texel's area there. Texels come from the mip level whose texels are
@@ -196,7 +204,7 @@ void TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& ad
         const double dist2 = dot(c - p, c - p);
         if (dist2 <= reach2)
             add(level.sample((t.uv[0] + t.uv[2] + t.uv[4]) / 3, (t.uv[1] + t.uv[3] + t.uv[5]) / 3), t.area * std::exp(-dist2 * inv2s2));
-        return;
+        return true;
     }
     const double texelArea = t.area / (0.5 * std::fabs(det));
     // The texels whose centres lie in the triangle and, on the surface,
@@ -211,7 +219,7 @@ void TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& ad
     const double j00 = s1 / len1, j10 = q1 / len1;
     const double j01 = (s2 - j00 * x2) / y2, j11 = (q2 - j10 * x2) / y2;
     const double d = dot(p - t.a, t.normal), rr = reach2 - d * d;
-    if (!(rr > 0)) return;
+    if (!(rr > 0)) return true;
     const double r = std::sqrt(rr);
     // p's projection in texture space.
     const double px = dot(p - t.a, f1), py = dot(p - t.a, f2);
@@ -219,6 +227,7 @@ void TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& ad
     const double hs = std::hypot(j00, j01) * r, hq = std::hypot(j10, j11) * r;
     const double sLo = std::max(std::min({0.0, s1, s2}) + s0, ps - hs), sHi = std::min(std::max({0.0, s1, s2}) + s0, ps + hs);
     const double qLo = std::max(std::min({0.0, q1, q2}) + q0, pq - hq), qHi = std::min(std::max({0.0, q1, q2}) + q0, pq + hq);
+    if ((sHi - sLo + 1) * (qHi - qLo + 1) > kMaxFootprintTexels) return false;
     const long c0 = long(std::ceil(qLo - 0.5)), c1 = long(std::floor(qHi - 0.5));
     auto wrap = [](long i, long n) { return size_t(((i % n) + n) % n); };
     // Barycentric b1, b2 of texel (a, b): affine in a along a row.
@@ -252,6 +261,7 @@ void TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& ad
             add(Vec3f{texel[0] / 255.f, texel[1] / 255.f, texel[2] / 255.f}, texelArea * std::exp(-dist2 * inv2s2));
         }
     }
+    return true;
 }
 
 }  // namespace surfcast

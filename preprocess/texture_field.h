@@ -61,8 +61,10 @@ private:
     int32_t build(uint32_t begin, uint32_t end);
     template <class F>
     void forEachNear(const Vec3d& p, double radius, F&& f) const;
+    // A textured triangle's texels under the Gaussian; false where its
+    // footprint would hold too many of them (stretched texture coordinates).
     template <class Add>
-    void textured(const Tri& t, const Vec3d& p, double sigma, Add&& add) const;
+    bool textured(const Tri& t, const Vec3d& p, double sigma, Add&& add) const;
 
     std::vector<Tri> tris_;
     std::vector<MipTexture> mips_;

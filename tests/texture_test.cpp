@@ -536,6 +536,15 @@ TEST(TextureField, EwaCoefficientsAreTheGaussianWeightedTexelAverage) {
     Vec3f c;
     EXPECT_FALSE(field.filter({128, 32, 0}, {0, 0, -1}, 4, &c));
     EXPECT_FALSE(field.filter({128, 32, 50}, {0, 0, 1}, 4, &c));
+
+    // Texture coordinates stretched a million-fold (a hostile or broken file):
+    // the footprint would cover 10^12 texel visits. The texture repeats so
+    // often under it that its mean (the 1 x 1 mip level) stands in.
+    MeshTriangles stretched = texturedRectangle([](int i, int j) { return Vec3f{(i + j) % 2 ? 200.f : 100.f, 0, 0}; });
+    stretched.cornerUvs = {{0, 0, 1e6, 0, 1e6, 1e6}, {0, 0, 1e6, 1e6, 0, 1e6}};
+    const TextureField many(stretched, Vec3d{});
+    ASSERT_TRUE(many.filter({100, 30, 0}, {0, 0, 1}, 4, &c));
+    EXPECT_NEAR(c[0] * 255, 150, 1.0);
 }
 
 namespace {
