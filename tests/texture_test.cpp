@@ -493,6 +493,22 @@ MeshTriangles texturedRectangle(const std::function<Vec3f(int, int)>& texel) {
     m.triangleColor.assign(2, Vec3f{});
     return m;
 }
+
+// The Gaussian-weighted average of the texel values at the texel centres
+// (i + 0.5, j + 0.5) within 3 sigma of (x, y), for the 256 x 64 texture black
+// for i < 128 and white beyond.
+double stepAverage(double x, double y, double sigma) {
+    double sum = 0, weight = 0;
+    for (int j = 0; j < 64; ++j)
+        for (int i = 0; i < 256; ++i) {
+            const double d2 = std::pow(i + 0.5 - x, 2) + std::pow(j + 0.5 - y, 2);
+            if (d2 > 9 * sigma * sigma) continue;
+            const double g = std::exp(-d2 / (2 * sigma * sigma));
+            sum += g * (i < 128 ? 0 : 1);
+            weight += g;
+        }
+    return sum / weight;
+}
 }  // namespace
 
 // The view-independent EWA coefficient of a surfel (Zwicker et al. 2001, §5),
@@ -514,16 +530,7 @@ TEST(TextureField, EwaCoefficientsAreTheGaussianWeightedTexelAverage) {
     for (double sigma : {1.0, 2.0, 4.0, 8.0})
         for (double x = 128 - 2.5 * sigma; x <= 128 + 2.5 * sigma; x += sigma / 4) {
             const double y = 32.25;
-            double sum = 0, weight = 0;
-            for (int j = 0; j < 64; ++j)
-                for (int i = 0; i < 256; ++i) {
-                    const double d2 = std::pow(i + 0.5 - x, 2) + std::pow(j + 0.5 - y, 2);
-                    if (d2 > 9 * sigma * sigma) continue;
-                    const double g = std::exp(-d2 / (2 * sigma * sigma));
-                    sum += g * (i < 128 ? 0 : 1);
-                    weight += g;
-                }
-            const double expected = sum / weight;
+            const double expected = stepAverage(x, y, sigma);
             Vec3f c;
             ASSERT_TRUE(field.filter({x, y, 0}, {0, 0, 1}, sigma, &c));
             EXPECT_NEAR(c[0] * 255, expected * 255, sigma <= 2 ? 0.01 : 2.5) << "sigma " << sigma << " x " << x;
@@ -546,23 +553,6 @@ TEST(TextureField, EwaCoefficientsAreTheGaussianWeightedTexelAverage) {
     ASSERT_TRUE(many.filter({100, 30, 0}, {0, 0, 1}, 4, &c));
     EXPECT_NEAR(c[0] * 255, 150, 1.0);
 }
-
-namespace {
-// The Gaussian-weighted texel average of the step texture of
-// EwaCoefficientsAreTheGaussianWeightedTexelAverage at (x, y), support 3 sigma.
-double stepAverage(double x, double y, double sigma) {
-    double sum = 0, weight = 0;
-    for (int j = 0; j < 64; ++j)
-        for (int i = 0; i < 256; ++i) {
-            const double d2 = std::pow(i + 0.5 - x, 2) + std::pow(j + 0.5 - y, 2);
-            if (d2 > 9 * sigma * sigma) continue;
-            const double g = std::exp(-d2 / (2 * sigma * sigma));
-            sum += g * (i < 128 ? 0 : 1);
-            weight += g;
-        }
-    return sum / weight;
-}
-}  // namespace
 
 // Every level of a built set carries the texture filtered with its own kernel:
 // each surfel's colour is the step's texel average at its position with
