@@ -128,7 +128,8 @@ public:
         const std::string u = uri.get<std::string>();
         if (u.rfind("data:", 0) == 0) {
             const size_t comma = u.find(',');
-            if (comma == std::string::npos || u.compare(comma - 7, 7, ";base64") != 0) fail(what + ": a data uri that is not base64");
+            if (comma == std::string::npos || !std::string_view(u).substr(0, comma).ends_with(";base64"))
+                fail(what + ": a data uri that is not base64");
             return base64(std::string_view(u).substr(comma + 1), what);
         }
         std::string name;  // percent-decoded
@@ -452,6 +453,8 @@ Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures) t
 } catch (const Failure& f) {
     return Status::error(f.message);
 } catch (const json::exception& e) {
+    return Status::error(path + ": malformed glTF (" + e.what() + ")");
+} catch (const std::exception& e) {  // a check missed above: still an error, never an abort
     return Status::error(path + ": malformed glTF (" + e.what() + ")");
 }
 

@@ -366,6 +366,9 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
                 "is its own ancestor");
     expectError(GltfFixture::replace(good, R"({"uri": "ramp.png"})", R"({"uri": "nowhere.png"})"), "baseColorTexture");
     expectError("{ not json", "not glTF (its JSON does not parse to an object)");
+    // A data uri with its comma before where ";base64" would end (fuzz_read_gltf:
+    // std::string::compare threw out of range, uncaught, and the process aborted).
+    expectError(GltfFixture::replace(good, R"("uri": "scene.bin")", R"("uri": "data:,AAAA")"), "a data uri that is not base64");
     // Indices past the quad's four vertices.
     test::writeFile(dir.file("far.bin"), f.bin.substr(0, 80) + std::string("\x00\x00\x01\x00\x09\x00\x00\x00\x02\x00\x03\x00", 12));
     expectError(GltfFixture::replace(good, "scene.bin", "far.bin"), "index 9 past its 4 vertices");
