@@ -26,6 +26,7 @@
 
 #include "context.h"
 #include "crc32.h"
+#include "sigpipe.h"
 #include "streamer.h"
 #include "surfcast_client.h"
 #include "test_support.h"
@@ -874,3 +875,28 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
 
 }  // namespace
 }  // namespace surfcast
+
+// Writing to a socket whose peer has closed raises SIGPIPE, which ends the
+// process by default; cpp-httplib 0.11.4 writes requests that way
+// (client/stream/sigpipe.h), and fuzz_client_response died of it (status 141).
+// Inside SigpipeBlock, the one the tile source holds around every request, the
+// write fails with EPIPE, the signal is taken, and the thread's mask is restored.
+TEST(Stream, AWriteToAClosedSocketDoesNotKillTheClient) {
+    int fds[2];
+    ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, fds), 0);
+    ::close(fds[1]);
+    sigset_t before, after;
+    pthread_sigmask(SIG_SETMASK, nullptr, &before);
+    {
+        surfcast::SigpipeBlock guard;
+        errno = 0;
+        EXPECT_EQ(::write(fds[0], "x", 1), -1);  // without the guard the process ends here
+        EXPECT_EQ(errno, EPIPE);
+    }
+    pthread_sigmask(SIG_SETMASK, nullptr, &after);
+    EXPECT_EQ(sigismember(&after, SIGPIPE), sigismember(&before, SIGPIPE));
+    sigset_t pending;
+    sigpending(&pending);
+    EXPECT_EQ(sigismember(&pending, SIGPIPE), 0) << "the SIGPIPE raised was taken";
+    ::close(fds[0]);
+}

@@ -14,6 +14,8 @@
 #include <thread>
 #include <unordered_map>
 
+#include "sigpipe.h"
+
 namespace surfcast {
 
 Result<std::vector<std::vector<uint8_t>>> TileSource::blobs(const std::vector<NodeRecord>& nodes) {
@@ -138,6 +140,7 @@ public:
             else received.resize(received.size() + length);
             return true;
         };
+        SigpipeBlock noSigpipe;  // sigpipe.h says why
         auto res = client().send(req);
         if (tooLong) return Status::error(origin_ + url + ": response longer than the " + std::to_string(expected) + " bytes asked for");
         if (!res) return Status::error(origin_ + url + ": " + httplib::to_string(res.error()));
@@ -192,6 +195,7 @@ private:
         std::vector<uint8_t> body;
         uint64_t dropped = 0;  // of an error page: not kept, but bounded too
         bool tooLong = false;
+        SigpipeBlock noSigpipe;  // sigpipe.h says why
         auto res = client().Get(
             url, headers,
             [&](const httplib::Response& r) {
