@@ -124,7 +124,7 @@ private:
     Status buildUpperLevels();
     // EWA texture filtering of a node's surfels from textured meshes, once
     // the level's h (and radii) are known.
-    void filterTextures(BuiltNode& node, int threads);
+    void filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<const Surfel> halo, int threads);
     Status emit(BuiltNode& node, const ScalarTable& scalars);
     uint64_t bytesPerChunkPoint() const { return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size(); }
     ScalarTable emptyTable() const {
@@ -166,7 +166,7 @@ private:
     NormalContext normals_;
     std::vector<uint16_t> sourceIds_;  // per input: its orientation rule, Surfel::source
     // Per orientation rule: the texture of the textured mesh that alone has it
-    // (TextureFilter::Ewa), else null.
+    // (--texture-filter ewa or optimal), else null.
     std::vector<std::shared_ptr<const TextureField>> textureFields_;
     std::string chunkDir_;
     ChunkLayout layout_;
@@ -345,7 +345,7 @@ Status Builder::chooseOrientationRules() {
         rule.up = d.airborne || (!originUsable && flat);
         Vec3d o = rule.scanOrigin.value_or(Vec3d{});
         // A textured mesh has a rule of its own: its surfels find their texture by it.
-        const bool ownRule = d.textured && opt_.textureFilter == BuildOptions::TextureFilter::Ewa;
+        const bool ownRule = d.textured && opt_.textureFilter != BuildOptions::TextureFilter::Nearest;
         auto [it, added] = ruleIds.try_emplace({rule.scanOrigin.has_value(), o.x, o.y, o.z, rule.up,
                                                 ownRule ? long(&s - stats_.sources.data()) : -1L},
                                                uint16_t(normals_.rules.size()));
@@ -364,8 +364,8 @@ Status Builder::chooseOrientationRules() {
     for (size_t i = 0; i < stats_.sources.size(); ++i) {
         const InputDescription& d = stats_.sources[i].description;
         if (!d.textured) continue;
-        summary_.textureFilter = opt_.textureFilter == BuildOptions::TextureFilter::Ewa ? "ewa" : "nearest";
-        if (opt_.textureFilter != BuildOptions::TextureFilter::Ewa) continue;
+        summary_.textureFilter = textureFilterName(opt_.textureFilter);
+        if (opt_.textureFilter == BuildOptions::TextureFilter::Nearest) continue;
         auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh.allowMissingTextures);
         if (!mesh) return mesh.status();
         textureFields_[sourceIds_[i]] = std::make_shared<const TextureField>(*mesh, rootMin_);
@@ -508,29 +508,33 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
     }
 
     // Per level: h, radii and weights, with the halo resampled on the level's grid.
-    std::map<int, std::vector<LevelNode*>> levels;
+    std::map<int, std::vector<BuiltNode*>> levels;
     for (auto& n : nodes) {
         n->level.surfels = n->surfels;
-        levels[n->key.level].push_back(&n->level);
+        levels[n->key.level].push_back(n.get());
     }
-    for (auto& [level, members] : levels) {
-        ScopedTimer t(stepNs_[kStepAttributes]);
+    for (auto& [level, built] : levels) {
+        std::vector<LevelNode*> members;
+        for (BuiltNode* n : built) members.push_back(&n->level);
         std::vector<Surfel> haloLevel;
-        double cell = edge(level) / opt_.grid;
-        Vec3d lo = nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
-        SampleGrid g;
-        for (int a = 0; a < 3; ++a) g.origin[a] = std::floor(lo[a] / cell) * cell;  // aligned with the level's cells
-        g.cellSize = cell;
-        double cells = std::ceil((edge(chunk.key.level) + 2 * margin) / cell) + 2;
-        if (cells < kMaxGridCells) {
-            g.cells = uint32_t(cells);
-            haloLevel = resample(*halo, g, false);
-        } else {
-            haloLevel = *halo;  // finer than any resampling grid can address: the points themselves
+        {
+            ScopedTimer t(stepNs_[kStepAttributes]);
+            double cell = edge(level) / opt_.grid;
+            Vec3d lo = nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
+            SampleGrid g;
+            for (int a = 0; a < 3; ++a) g.origin[a] = std::floor(lo[a] / cell) * cell;  // aligned with the level's cells
+            g.cellSize = cell;
+            double cells = std::ceil((edge(chunk.key.level) + 2 * margin) / cell) + 2;
+            if (cells < kMaxGridCells) {
+                g.cells = uint32_t(cells);
+                haloLevel = resample(*halo, g, false);
+            } else {
+                haloLevel = *halo;  // finer than any resampling grid can address: the points themselves
+            }
+            computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
         }
-        computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
+        filterLevelTextures(built, haloLevel, innerThreads);
     }
-    for (auto& n : nodes) filterTextures(*n, innerThreads);
     for (auto& n : nodes)
         if (n.get() != root) SC_TRY(emit(*n, scalars));
     bool isRoot = chunk.key == NodeKey{};
@@ -625,10 +629,10 @@ Status Builder::buildUpperLevels() {
         for (auto& [key, node] : retained_)
             if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
         computeLevelAttributes(members, neighbours, levelParams(level, threads_));
-        for (auto& [key, node] : current) {
-            filterTextures(*node, threads_);
-            SC_TRY(emit(*node, upperScalars_));
-        }
+        std::vector<BuiltNode*> built;
+        for (auto& [key, node] : current) built.push_back(node.get());
+        filterLevelTextures(built, neighbours, threads_);
+        for (auto& [key, node] : current) SC_TRY(emit(*node, upperScalars_));
         below = std::move(current);
         progress_.advance(1);
     }
@@ -636,20 +640,66 @@ Status Builder::buildUpperLevels() {
     return {};
 }
 
-void Builder::filterTextures(BuiltNode& node, int threads) {
+void Builder::filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<const Surfel> halo, int threads) {
     if (std::none_of(textureFields_.begin(), textureFields_.end(), [](const auto& f) { return f != nullptr; })) return;
     ScopedTimer t(stepNs_[kStepTextures]);
-    std::vector<Surfel>& v = node.surfels;
-    const LevelNode& level = node.level;
+    auto fieldOf = [&](const Surfel& s) { return s.source < textureFields_.size() ? textureFields_[s.source].get() : nullptr; };
+    auto sigmaOf = [&](const BuiltNode& node, size_t i) {
+        return opt_.kernelScale * (node.level.radii.empty() ? node.level.h : node.level.radii[i]);
+    };
+    auto store = [](Surfel& s, const Vec3f& c) {
+        for (int k = 0; k < 3; ++k) s.color[k] = uint16_t(std::lround(std::clamp(c[k], 0.f, 1.f) * 255.f) * 257);
+    };
+    // The view-independent EWA coefficients: the result for ewa, the
+    // starting guess for optimal.
+    for (BuiltNode* node : nodes) {
+        std::vector<Surfel>& v = node->surfels;
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256)
-    for (size_t i = 0; i < v.size(); ++i) {
-        Surfel& s = v[i];
-        const TextureField* field = s.source < textureFields_.size() ? textureFields_[s.source].get() : nullptr;
+        for (size_t i = 0; i < v.size(); ++i) {
+            const TextureField* field = fieldOf(v[i]);
+            Vec3f c;
+            if (field && field->filter(v[i].position, v[i].normal, sigmaOf(*node, i), &c)) store(v[i], c);
+        }
+    }
+    if (opt_.textureFilter != BuildOptions::TextureFilter::Optimal) return;
+
+    // The least-squares coefficients, one group per node, each textured
+    // mesh on its own. Halo surfels (other chunks) have no h of their own
+    // and take the level's median.
+    std::vector<float> hs;
+    for (BuiltNode* node : nodes) hs.push_back(node->level.h);
+    std::nth_element(hs.begin(), hs.begin() + long(hs.size() / 2), hs.end());
+    const double haloSigma = opt_.kernelScale * hs[hs.size() / 2];
+    FitParams params;
+    params.cutoff = opt_.cutoff;
+    params.zt = kDefaultZt;
+    params.threads = threads;
+    for (size_t f = 0; f < textureFields_.size(); ++f) {
+        const TextureField* field = textureFields_[f].get();
         if (!field) continue;
-        const double radius = level.radii.empty() ? level.h : level.radii[i];
-        Vec3f c;
-        if (field->filter(s.position, s.normal, opt_.kernelScale * radius, &c))
-            for (int k = 0; k < 3; ++k) s.color[k] = uint16_t(std::lround(std::clamp(c[k], 0.f, 1.f) * 255.f) * 257);
+        std::vector<FitSurfel> fit;
+        std::vector<std::pair<uint32_t, uint32_t>> groups;
+        std::vector<std::pair<BuiltNode*, size_t>> from;  // the surfel each fitted one came from
+        auto toFit = [](const Surfel& s, double sigma) {
+            const double k = 1.0 / 65535;
+            return FitSurfel{s.position, s.normal, sigma, Vec3f{float(s.color[0] * k), float(s.color[1] * k), float(s.color[2] * k)}};
+        };
+        for (BuiltNode* node : nodes) {
+            const uint32_t begin = uint32_t(fit.size());
+            for (size_t i = 0; i < node->surfels.size(); ++i)
+                if (fieldOf(node->surfels[i]) == field) {
+                    fit.push_back(toFit(node->surfels[i], sigmaOf(*node, i)));
+                    from.push_back({node, i});
+                }
+            if (fit.size() > begin) groups.push_back({begin, uint32_t(fit.size())});
+        }
+        if (groups.empty()) continue;
+        for (const Surfel& s : halo)
+            if (fieldOf(s) == field) fit.push_back(toFit(s, haloSigma));
+        FitReport report = field->fitOptimal(fit, groups, params);
+        for (size_t i = 0; i < from.size(); ++i) store(from[i].first->surfels[from[i].second], fit[i].color);
+        std::lock_guard lock(mutex_);
+        summary_.textureFit.add(report);
     }
 }
 
@@ -802,6 +852,15 @@ Result<BuildSummary> Builder::run() {
 
 }  // namespace
 
+const char* textureFilterName(BuildOptions::TextureFilter filter) {
+    switch (filter) {
+    case BuildOptions::TextureFilter::Nearest: return "nearest";
+    case BuildOptions::TextureFilter::Ewa: return "ewa";
+    case BuildOptions::TextureFilter::Optimal: return "optimal";
+    }
+    return "?";
+}
+
 std::string BuildSummary::text() const {
     std::ostringstream out;
     out.setf(std::ios::fixed);
@@ -812,6 +871,13 @@ std::string BuildSummary::text() const {
         out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";
     out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none")
         << (textureFilter.empty() ? "" : " (textures: " + textureFilter + ")")
+        << (textureFit.groups == 0 ? ""
+                                   : "; least squares: " + std::to_string(textureFit.groups) + " solves, " +
+                                         std::to_string(textureFit.unknowns) + " unknowns, " + std::to_string(textureFit.samples) +
+                                         " samples, CG iterations mean " +
+                                         std::to_string(double(textureFit.iterations) / double(textureFit.groups)).substr(0, 5) +
+                                         " max " + std::to_string(textureFit.maxIterations) + ", largest residual " +
+                                         std::to_string(textureFit.maxResidual).substr(0, 8))
         << "; attributes:";
     for (const std::string& a : attributes) out << " " << a;
     out << (attributes.empty() ? " none\n" : "\n");

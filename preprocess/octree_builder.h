@@ -13,6 +13,7 @@
 #include "inputs.h"
 #include "tileset_format.h"
 #include "status.h"
+#include "texture_field.h"
 
 namespace surfcast {
 
@@ -39,11 +40,13 @@ struct BuildOptions {
     // no scalar field.
     std::optional<std::vector<std::string>> attributes;
     bool progress = true;
-    // Colours of textured meshes' surfels (Zwicker et al. 2001, §5): the
-    // texture filtered with each surfel's own kernel on every level (ewa,
-    // texture_field.h), or the texture at the surfel's centre on the leaves
-    // and the resampled averages above (nearest).
-    enum class TextureFilter { Nearest, Ewa } textureFilter = TextureFilter::Ewa;
+    // Colours of textured meshes' surfels (Zwicker et al. 2001, §5), on every
+    // level: the texture filtered with each surfel's own kernel (ewa,
+    // view-independent EWA), or the least-squares coefficients of eq. 10-11
+    // for the renderer's normalized kernels (optimal); both texture_field.h.
+    // Or the texture at the surfel's centre on the leaves and the resampled
+    // averages above (nearest).
+    enum class TextureFilter { Nearest, Ewa, Optimal } textureFilter = TextureFilter::Optimal;
 };
 
 struct BuildSummary {
@@ -59,12 +62,16 @@ struct BuildSummary {
     std::string normalSource;
     int colorBits = 0;
     std::vector<std::string> attributes;  // LiDAR attributes stored
-    std::string textureFilter;            // "ewa" or "nearest" where a textured mesh was read, else empty
+    std::string textureFilter;            // textureFilterName() where a textured mesh was read, else empty
+    FitReport textureFit;                 // the optimal filter's solves
 
     std::string text() const;
 };
 
 Result<BuildSummary> buildTileset(const BuildOptions& options);
+
+// "nearest", "ewa" or "optimal": the --texture-filter and tileset.json spelling.
+const char* textureFilterName(BuildOptions::TextureFilter filter);
 
 // Bytes of working memory per point while a chunk is built (points, halo,
 // kd-trees, sort keys, resampled levels), measured on the default scene (320

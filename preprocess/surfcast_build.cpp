@@ -66,9 +66,11 @@ the text file LIST, one per line.
                           textured mesh, else half the median edge; coarsened where
                           that would exceed --mesh-max-surfels)
   --mesh-max-surfels N    most surfels a mesh gives at its default spacing (5000000)
-  --texture-filter F      colours of textured meshes' surfels: ewa (the texture filtered
-                          with each surfel's kernel on every level; default) or
-                          nearest (the texture at each leaf's centre, averaged above)
+  --texture-filter F      colours of textured meshes' surfels, on every level: optimal
+                          (least-squares coefficients for the renderer's kernels;
+                          default), ewa (the texture filtered with each surfel's
+                          kernel: faster to build, blurrier) or nearest (the texture
+                          at each leaf's centre, averaged above)
   --allow-missing-textures
                           a diffuse texture (OBJ map_Kd) that is missing or unreadable
                           is a warning, its faces take vertex colours (default: error)
@@ -217,8 +219,10 @@ int main(int argc, char** argv) {
             opt.inputs.mesh.maxSurfels = uint64_t(d);
         } else if (a == "--texture-filter") {
             std::string f;
-            if (!value(&f) || (f != "ewa" && f != "nearest")) return usageError("--texture-filter needs ewa or nearest");
-            opt.textureFilter = f == "ewa" ? surfcast::BuildOptions::TextureFilter::Ewa : surfcast::BuildOptions::TextureFilter::Nearest;
+            if (!value(&f) || (f != "ewa" && f != "nearest" && f != "optimal"))
+                return usageError("--texture-filter needs ewa, optimal or nearest");
+            using Filter = surfcast::BuildOptions::TextureFilter;
+            opt.textureFilter = f == "ewa" ? Filter::Ewa : f == "optimal" ? Filter::Optimal : Filter::Nearest;
         } else if (a == "--allow-missing-textures") {
             opt.inputs.mesh.allowMissingTextures = true;
         } else if (a == "--vertices-only") {

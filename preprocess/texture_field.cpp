@@ -1,8 +1,11 @@
 #include "texture_field.h"
 
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/Sparse>
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <unordered_map>
 
 #include "octree_key.h"
 
@@ -91,6 +94,28 @@ int32_t TextureField::build(uint32_t begin, uint32_t end) {
     }
     nodes_[size_t(index)] = node;
     return index;
+}
+
+template <class F>
+void TextureField::forEachInBox(const Vec3d& lo, const Vec3d& hi, F&& f) const {
+    if (nodes_.empty()) return;
+    auto overlaps = [&](const Vec3d& a, const Vec3d& b) {
+        return a.x <= hi.x && b.x >= lo.x && a.y <= hi.y && b.y >= lo.y && a.z <= hi.z && b.z >= lo.z;
+    };
+    int32_t stack[64];
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        const Node& node = nodes_[size_t(stack[--top])];
+        if (!overlaps(node.lo, node.hi)) continue;
+        if (node.left < 0) {
+            for (uint32_t i = node.begin; i < node.end; ++i)
+                if (overlaps(tris_[i].lo, tris_[i].hi)) f(tris_[i]);
+            continue;
+        }
+        stack[top++] = node.left;
+        stack[top++] = node.right;
+    }
 }
 
 template <class F>
@@ -262,6 +287,259 @@ bool TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& ad
         }
     }
     return true;
+}
+
+template <class F>
+void TextureField::forEachSample(const Vec3d& lo, const Vec3d& hi, double step, F&& f) const {
+    auto inBox = [&](const Vec3d& x) {
+        return x.x >= lo.x && x.x <= hi.x && x.y >= lo.y && x.y <= hi.y && x.z >= lo.z && x.z <= hi.z;
+    };
+    forEachInBox(lo, hi, [&](const Tri& t) {
+        auto value = [&](double b1, double b2, double spacing) {
+            if (t.texture < 0) return t.color;
+            const double u = t.uv[0] + b1 * (t.uv[2] - t.uv[0]) + b2 * (t.uv[4] - t.uv[0]);
+            const double v = t.uv[1] + b1 * (t.uv[3] - t.uv[1]) + b2 * (t.uv[5] - t.uv[1]);
+            return mips_[size_t(t.texture)].sample(u, v, t.texelsPerUnit * spacing);
+        };
+        if (t.area < 2 * step * step) {
+            const Vec3d c = (t.a + t.b + t.c) * (1.0 / 3);
+            if (inBox(c)) f(c, t.normal, t.area, value(1.0 / 3, 1.0 / 3, std::sqrt(t.area)));
+            return;
+        }
+        // The lattice in the triangle's frame: origin a, axes f1 along ab and
+        // f2 = normal x f1; c sits at (x2, y2).
+        const Vec3d e1 = t.b - t.a, e2 = t.c - t.a;
+        const double len1 = length(e1);
+        const Vec3d f1 = e1 * (1 / len1), f2 = cross(t.normal, f1);
+        const double x2 = dot(e2, f1), y2 = dot(e2, f2);
+        // The box's extent in the frame, clipped to the triangle's.
+        double x0 = std::min(0.0, x2), x1 = std::max(len1, x2), v0 = std::min(0.0, y2), v1 = std::max(0.0, y2);
+        double bx0 = HUGE_VAL, bx1 = -HUGE_VAL, by0 = HUGE_VAL, by1 = -HUGE_VAL;
+        for (int corner = 0; corner < 8; ++corner) {
+            const Vec3d q{corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z};
+            const double x = dot(q - t.a, f1), y = dot(q - t.a, f2);
+            bx0 = std::min(bx0, x), bx1 = std::max(bx1, x), by0 = std::min(by0, y), by1 = std::max(by1, y);
+        }
+        x0 = std::max(x0, bx0), x1 = std::min(x1, bx1), v0 = std::max(v0, by0), v1 = std::min(v1, by1);
+        if (x0 > x1 || v0 > v1) return;
+        for (long j = long(std::ceil(v0 / step)); j <= long(std::floor(v1 / step)); ++j) {
+            const double y = double(j) * step, b2 = y / y2;
+            if (b2 < 0 || b2 > 1) continue;
+            for (long i = long(std::ceil(x0 / step)); i <= long(std::floor(x1 / step)); ++i) {
+                const double x = double(i) * step, b1 = (x - b2 * x2) / len1;
+                if (b1 < 0 || b1 + b2 > 1) continue;
+                const Vec3d p = t.a + f1 * x + f2 * y;
+                if (inBox(p)) f(p, t.normal, step * step, value(b1, b2, step));
+            }
+        }
+    });
+}
+
+namespace {
+
+// R w = rhs with every w_k in [0, 1], the range of a stored colour. Clamping
+// the unconstrained solution afterwards undoes it: where surfels crowd, the
+// least squares trade large coefficients of opposite signs (measured on a
+// uniformly random sampling of a checkerboard: coefficients from -3 to 4, and
+// clamped they reconstruct worse than the point samples). So an active set
+// that only grows: the unknowns a solution puts out of range are fixed at the
+// bound they passed, their columns moved to the right-hand side, and the rest
+// solved again, at most kBoundRounds times (then clamped).
+constexpr int kBoundRounds = 8;
+
+Eigen::VectorXd solveBounded(const Eigen::SparseMatrix<double>& r, const Eigen::VectorXd& rhs, const Eigen::VectorXd& guess,
+                             const FitParams& params, FitReport* report) {
+    const Eigen::Index n = r.rows();
+    Eigen::VectorXd w = guess.cwiseMax(0.0).cwiseMin(1.0);
+    std::vector<uint8_t> fixed(size_t(n), 0);
+    Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper> cg;
+    cg.setMaxIterations(params.maxIterations);
+    cg.setTolerance(params.tolerance);
+    Eigen::SparseMatrix<double> reduced;
+    Eigen::VectorXd b;
+    int iterations = 0;
+    for (int round = 0; round < kBoundRounds; ++round) {
+        bool anyFixed = false;
+        for (uint8_t x : fixed) anyFixed |= x != 0;
+        if (!anyFixed) {
+            cg.compute(r);
+            b = rhs;
+        } else {
+            // Fixed unknowns: identity rows and columns, their values on the right.
+            Eigen::VectorXd atBounds = Eigen::VectorXd::Zero(n);
+            for (Eigen::Index k = 0; k < n; ++k)
+                if (fixed[size_t(k)]) atBounds[k] = w[k];
+            b = rhs - r * atBounds;
+            reduced = r;
+            for (Eigen::Index col = 0; col < reduced.outerSize(); ++col)
+                for (Eigen::SparseMatrix<double>::InnerIterator it(reduced, col); it; ++it)
+                    if (fixed[size_t(it.row())] || fixed[size_t(col)]) it.valueRef() = it.row() == col ? 1.0 : 0.0;
+            for (Eigen::Index k = 0; k < n; ++k)
+                if (fixed[size_t(k)]) b[k] = w[k];
+            cg.compute(reduced);
+        }
+        w = cg.solveWithGuess(b, w);
+        iterations += int(cg.iterations());
+        report->maxResidual = std::max(report->maxResidual, cg.error());
+        bool added = false;
+        for (Eigen::Index k = 0; k < n; ++k)
+            if (!fixed[size_t(k)] && (w[k] < 0 || w[k] > 1)) {
+                w[k] = w[k] < 0 ? 0 : 1;
+                fixed[size_t(k)] = 1;
+                added = true;
+            }
+        if (!added) break;
+    }
+    report->iterations = std::max<uint64_t>(report->iterations, uint64_t(iterations));
+    report->maxIterations = std::max(report->maxIterations, iterations);
+    return w.cwiseMax(0.0).cwiseMin(1.0);
+}
+
+}  // namespace
+
+void FitReport::add(const FitReport& o) {
+    groups += o.groups;
+    unknowns += o.unknowns;
+    samples += o.samples;
+    iterations += o.iterations;
+    maxIterations = std::max(maxIterations, o.maxIterations);
+    maxResidual = std::max(maxResidual, o.maxResidual);
+}
+
+FitReport TextureField::fitOptimal(std::span<FitSurfel> surfels, std::span<const std::pair<uint32_t, uint32_t>> groups,
+                                   const FitParams& params) const {
+    FitReport total;
+    const double tangent2 = 2 * params.cutoff;  // y'y inside the kernel
+    double maxSigma = 0;
+    Box3d bounds;
+    for (const FitSurfel& s : surfels) {
+        if (s.sigma > 0 && std::isfinite(s.sigma)) maxSigma = std::max(maxSigma, s.sigma);
+        bounds.extend(s.position);
+    }
+    if (tris_.empty() || groups.empty() || !(maxSigma > 0)) return total;
+
+    // A uniform grid over the surfels with cells as wide as the largest
+    // kernel's reach in 3D: the kernels covering a point lie in the 27 cells
+    // around it.
+    const double cell = maxSigma * std::sqrt(tangent2 + params.zt * params.zt);
+    auto cellOf = [&](const Vec3d& p, int axis) { return int64_t(std::floor((p[axis] - bounds.min[axis]) / cell)); };
+    auto key = [](int64_t x, int64_t y, int64_t z) { return uint64_t(x) << 42 | uint64_t(y) << 21 | uint64_t(z); };
+    constexpr int64_t kAxisMax = (int64_t(1) << 21) - 1;
+    std::vector<std::pair<uint64_t, uint32_t>> grid(surfels.size());
+    for (uint32_t i = 0; i < surfels.size(); ++i) {
+        const Vec3d& p = surfels[i].position;
+        grid[i] = {key(std::clamp<int64_t>(cellOf(p, 0), 0, kAxisMax), std::clamp<int64_t>(cellOf(p, 1), 0, kAxisMax),
+                       std::clamp<int64_t>(cellOf(p, 2), 0, kAxisMax)),
+                   i};
+    }
+    std::sort(grid.begin(), grid.end());
+    // Each occupied (x, y) column's run of the sorted grid: a surface crosses
+    // a column in few cells, so a lookup scans its run instead of searching.
+    std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> columns;
+    for (uint32_t i = 0; i < grid.size();) {
+        uint32_t j = i + 1;
+        while (j < grid.size() && grid[j].first >> 21 == grid[i].first >> 21) ++j;
+        columns[grid[i].first >> 21] = {i, j};
+        i = j;
+    }
+
+    std::vector<Vec3f> start(surfels.size());  // the starting guesses, read by every group
+    for (size_t i = 0; i < surfels.size(); ++i) start[i] = surfels[i].color;
+    std::vector<FitReport> reports(groups.size());
+
+#pragma omp parallel num_threads(params.threads)
+    {
+        std::vector<int32_t> column(surfels.size(), -1);  // surfel -> unknown of the current group
+        std::vector<uint32_t> unknowns;
+        std::vector<Eigen::Triplet<double>> entries;
+        std::vector<Vec3f> values;
+        std::vector<std::pair<uint32_t, double>> covering;
+#pragma omp for schedule(dynamic, 1)
+        for (size_t g = 0; g < groups.size(); ++g) {
+            const auto [begin, end] = groups[g];
+            if (begin >= end) continue;
+            Box3d box;
+            double minSigma = HUGE_VAL, groupMax = 0;
+            for (uint32_t i = begin; i < end; ++i) {
+                box.extend(surfels[i].position);
+                if (surfels[i].sigma > 0) minSigma = std::min(minSigma, surfels[i].sigma), groupMax = std::max(groupMax, surfels[i].sigma);
+            }
+            if (!(groupMax > 0)) continue;
+            const Vec3d grow{2 * cell, 2 * cell, 2 * cell};
+            // Lattice step from the group's smallest kernel, but never below
+            // a quarter of its largest (per-surfel radii can be tiny).
+            const double step = params.sampleStep * std::max(minSigma, groupMax / 4);
+            unknowns.clear();
+            entries.clear();
+            values.clear();
+            int32_t row = 0;
+            forEachSample(box.min - grow, box.max + grow, step, [&](const Vec3d& p, const Vec3d& n, double area, const Vec3f& value) {
+                covering.clear();
+                double sum = 0;
+                const int64_t cx = cellOf(p, 0), cy = cellOf(p, 1), cz = cellOf(p, 2);
+                for (int64_t x = cx - 1; x <= cx + 1; ++x)
+                    for (int64_t y = cy - 1; y <= cy + 1; ++y) {
+                        if (x < 0 || y < 0 || x > kAxisMax || y > kAxisMax) continue;
+                        auto column = columns.find(key(x, y, 0) >> 21);
+                        if (column == columns.end()) continue;
+                        for (uint32_t e = column->second.first; e < column->second.second; ++e) {
+                            const int64_t z = int64_t(grid[e].first & uint64_t(kAxisMax));
+                            if (z < cz - 1 || z > cz + 1) continue;
+                            const FitSurfel& s = surfels[grid[e].second];
+                            if (!(s.sigma > 0)) continue;
+                            const Vec3d d = p - s.position;
+                            const Vec3d sn = cast<double>(s.normal);
+                            const double along = dot(d, sn);
+                            if (std::fabs(along) > params.zt * s.sigma || dot(sn, n) < 0) continue;
+                            const double y2 = (dot(d, d) - along * along) / (s.sigma * s.sigma);
+                            if (y2 > tangent2) continue;
+                            const double w = std::exp(-0.5 * y2);
+                            covering.push_back({grid[e].second, w});
+                            sum += w;
+                        }
+                    }
+                if (!(sum > 0)) return;  // no kernel here: a hole the renderer leaves too
+                const double scale = std::sqrt(area) / sum;
+                for (const auto& [k, w] : covering) {
+                    if (column[k] < 0) {
+                        column[k] = int32_t(unknowns.size());
+                        unknowns.push_back(k);
+                    }
+                    entries.emplace_back(row, column[k], w * scale);
+                }
+                values.push_back(value * float(std::sqrt(area)));
+                ++row;
+            });
+            FitReport& report = reports[g];
+            report.groups = 1;
+            report.unknowns = unknowns.size();
+            report.samples = size_t(row);
+            if (!unknowns.empty()) {
+                const Eigen::Index n = Eigen::Index(unknowns.size());
+                Eigen::SparseMatrix<double> a(row, n);
+                a.setFromTriplets(entries.begin(), entries.end());
+                Eigen::SparseMatrix<double> r = Eigen::SparseMatrix<double>(a.transpose()) * a;
+                double meanDiagonal = 0;
+                for (Eigen::Index k = 0; k < n; ++k) meanDiagonal += r.coeff(k, k);
+                const double ridge = params.ridge * meanDiagonal / double(n);
+                for (Eigen::Index k = 0; k < n; ++k) r.coeffRef(k, k) += ridge;
+                Eigen::VectorXd f(row), guess(n);
+                for (int channel = 0; channel < 3; ++channel) {
+                    for (int32_t q = 0; q < row; ++q) f[q] = values[size_t(q)][channel];
+                    for (Eigen::Index k = 0; k < n; ++k) guess[k] = start[unknowns[size_t(k)]][channel];
+                    const Eigen::VectorXd rhs = a.transpose() * f + ridge * guess;
+                    const Eigen::VectorXd w = solveBounded(r, rhs, guess, params, &report);
+                    for (Eigen::Index k = 0; k < n; ++k) {
+                        const uint32_t i = unknowns[size_t(k)];
+                        if (i >= begin && i < end) surfels[i].color[channel] = float(w[k]);
+                    }
+                }
+            }
+            for (uint32_t k : unknowns) column[k] = -1;
+        }
+    }
+    for (const FitReport& r : reports) total.add(r);
+    return total;
 }
 
 }  // namespace surfcast

@@ -18,6 +18,8 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
+#include <utility>
 #include <vector>
 
 #include "mesh_reader.h"
@@ -25,6 +27,46 @@
 #include "vec3.h"
 
 namespace surfcast {
+
+// --texture-filter optimal (§5, eq. 10-11 and Appendix A): the coefficients
+// w that minimize the L2 distance on the surface between the texture and the
+// surfels' reconstruction. Our renderer normalizes per pixel (eq. 9), so the
+// reconstruction it draws under magnification is Σ_k w_k r̂_k with the
+// normalized basis r̂_k = r_k / Σ_j r_j, r_k the renderer's kernel (a Gaussian
+// of standard deviation sigma_k in the surfel's tangent plane, cut off at
+// y'y <= 2c, within z_t sigma_k along its normal, facing the surface's side).
+// Eq. 10 with that basis gives R w = c with R_kj = ⟨r̂_k, r̂_j⟩ and
+// c_k = ⟨r̂_k, f̃⟩, both integrated on the mesh by quadrature: a lattice of
+// step sampleStep x sigma in each triangle's plane (a triangle smaller than
+// two lattice cells is one sample at its centroid), the texture at each
+// sample trilinearly filtered to the lattice step. A small ridge term
+// ridge x mean(diag R) x (w - w0) keeps R positive definite where samples
+// barely touch a kernel (two surfels on one spot), pulling such w towards
+// the starting guess w0 (the ewa coefficients).
+struct FitSurfel {
+    Vec3d position;  // relative to the field's origin
+    Vec3f normal;    // unit; zero: any side
+    double sigma = 0;
+    Vec3f color;     // in: the starting guess w0; out: the fit (a group's own surfels only)
+};
+
+struct FitParams {
+    double cutoff = 1;        // c: the kernel reaches y'y <= 2c
+    double zt = 0.5;          // z_t in units of sigma
+    double sampleStep = 0.5;  // quadrature lattice step, in units of the smallest sigma of a group
+    double ridge = 0.1;
+    int maxIterations = 200;  // conjugate-gradient iterations per channel
+    double tolerance = 1e-4;  // relative residual |R w - c| / |c| at which CG stops
+    int threads = 1;
+};
+
+struct FitReport {
+    size_t groups = 0, unknowns = 0, samples = 0;
+    uint64_t iterations = 0;  // summed over groups (the largest of the three channels each)
+    int maxIterations = 0;
+    double maxResidual = 0;   // largest relative residual CG ended with
+    void add(const FitReport& o);
+};
 
 class TextureField {
 public:
@@ -38,6 +80,15 @@ public:
     bool filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* out) const;
 
     size_t triangles() const { return tris_.size(); }
+
+    // Solves eq. 10-11 for each group [begin, end) of `surfels` on its own:
+    // the unknowns are every surfel whose kernel reaches a quadrature sample
+    // within the group's bounding box grown by twice the largest kernel reach
+    // (the halo, so that the group's border does not show), and only the
+    // group's own surfels take the result. Groups may share no surfels.
+    // Surfels outside every group serve as halo only.
+    FitReport fitOptimal(std::span<FitSurfel> surfels, std::span<const std::pair<uint32_t, uint32_t>> groups,
+                         const FitParams& params) const;
 
 private:
     struct Tri {
@@ -61,6 +112,12 @@ private:
     int32_t build(uint32_t begin, uint32_t end);
     template <class F>
     void forEachNear(const Vec3d& p, double radius, F&& f) const;
+    template <class F>
+    void forEachInBox(const Vec3d& lo, const Vec3d& hi, F&& f) const;
+    // Quadrature samples of the surface inside [lo, hi], lattice step `step`:
+    // f(position, unit normal of the facing side, area, texture value).
+    template <class F>
+    void forEachSample(const Vec3d& lo, const Vec3d& hi, double step, F&& f) const;
     // A textured triangle's texels under the Gaussian; false where its
     // footprint would hold too many of them (stretched texture coordinates).
     template <class Add>
