@@ -79,7 +79,14 @@ Result<std::vector<Camera>> parseCameraPath(const std::string& text, const std::
     return cameras;
 }
 
-Camera frameBox(const Box3d& box, double aspect, double fovYDegrees) {
+std::array<Vec3d, 8> frameDirections() {
+    std::array<Vec3d, 8> d;
+    for (int i = 0; i < 8; ++i)
+        d[size_t(i)] = normalizeOrZero(Vec3d{i & 1 ? -0.35 : 0.35, i & 2 ? 1.0 : -1.0, i & 4 ? -0.55 : 0.55});
+    return d;
+}
+
+Camera frameBox(const Box3d& box, double aspect, double fovYDegrees, int direction) {
     Camera c;
     c.fovYDegrees = fovYDegrees;
     if (box.empty()) {
@@ -93,8 +100,7 @@ Camera frameBox(const Box3d& box, double aspect, double fovYDegrees) {
     double halfFov = 0.5 * fovYDegrees * M_PI / 180.0;
     double halfFovX = std::atan(std::tan(halfFov) * aspect);
     double distance = radius / std::sin(std::min(halfFov, halfFovX));
-    Vec3d direction = normalizeOrZero(Vec3d{0.35, -1.0, 0.55});
-    c.eye = centre + direction * distance;
+    c.eye = centre + frameDirections()[size_t(std::clamp(direction, 0, 7))] * distance;
     c.target = centre;
     c.up = {0, 0, 1};
     return c;

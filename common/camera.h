@@ -9,6 +9,8 @@
 // with the viewport scale eta = H / (2 tan(fov/2)) (fov vertical).
 #pragma once
 
+#include <array>
+
 #include <string>
 #include <vector>
 
@@ -29,9 +31,13 @@ Result<Camera> parseCamera(const std::string& text);
 // A camera path: {"frames": [{"eye": [x,y,z], "target": [..], "up": [..], "fov": deg}, ...]}
 // ("up" defaults to +z, "fov" to 45). `what` names the source in errors.
 Result<std::vector<Camera>> parseCameraPath(const std::string& json, const std::string& what);
+// The directions (from the target towards the eye) frameBox may look from:
+// (±0.35, ±1, ±0.55) normalized, the first, (0.35, -1, 0.55), its usual one:
+// from the -y side and above.
+std::array<Vec3d, 8> frameDirections();
 // A camera that frames the whole box at the given aspect (width / height),
-// looking at its centre from the -y side and above, up +z.
-Camera frameBox(const Box3d& box, double aspect, double fovYDegrees = 45);
+// looking at its centre from frameDirections()[direction], up +z.
+Camera frameBox(const Box3d& box, double aspect, double fovYDegrees = 45, int direction = 0);
 
 // The camera's orthonormal axes in world space (double): x right, y up, z
 // forward, as camera space defines them above.

@@ -356,5 +356,40 @@ TEST(Camera, ParsesChecksAndFrames) {
     }
 }
 
+// Backface culling's default and the framing that goes with it. Normals are
+// oriented where every input's normal_source is: read from the input, or
+// turned towards a scanner. The default view turns to the side a scan's
+// surfaces face when they all face one way (a sensor-frame scan seen from
+// behind), and stays where a closed object faces every way alike.
+TEST(BackfaceCulling, DefaultFollowsNormalSourceAndFramingFacesTheSurfaces) {
+    EXPECT_TRUE(normalsOriented("input"));
+    EXPECT_TRUE(normalsOriented("estimated-scan-origin"));
+    EXPECT_TRUE(normalsOriented("input+estimated-scan-origin"));
+    EXPECT_FALSE(normalsOriented("estimated-up"));
+    EXPECT_FALSE(normalsOriented("estimated-outward"));
+    EXPECT_FALSE(normalsOriented("input+estimated-up"));
+    EXPECT_FALSE(normalsOriented(""));
+    EXPECT_TRUE(settingsForSet(0.5, true, true).backfaceCull);
+    EXPECT_FALSE(settingsForSet(0.5, true, false).backfaceCull);
+
+    // A wall facing -z (a scan in its sensor's frame, sensor at the origin):
+    // the usual view, from +z above, sees its back.
+    SurfelSet wall;
+    for (int i = 0; i < 100; ++i) addSurfel(wall, {double(i % 10), double(i / 10), 5}, {0, 0, -1}, 1.f, {1, 1, 1});
+    const int d = frontDirection(wall);
+    EXPECT_LT(frameDirections()[size_t(d)].z, 0) << "the chosen view looks from the side the wall faces";
+    const Camera c = frameBox(wall.bounds, 1.0, 45, d);
+    EXPECT_LT((c.eye - c.target).z, 0);
+    // A sphere faces every way: the usual view.
+    SurfelSet sphere;
+    for (int i = 0; i < 2000; ++i) {
+        const double z = 1 - 2 * (i + 0.5) / 2000, phi = i * 2.399963;
+        const Vec3d n{std::sqrt(1 - z * z) * std::cos(phi), std::sqrt(1 - z * z) * std::sin(phi), z};
+        addSurfel(sphere, n * 10.0, cast<float>(n), 0.5f, {1, 1, 1});
+    }
+    EXPECT_EQ(frontDirection(sphere), 0);
+    EXPECT_EQ(frameBox(sphere.bounds, 1.0).eye, frameBox(sphere.bounds, 1.0, 45, 0).eye);
+}
+
 }  // namespace
 }  // namespace surfcast

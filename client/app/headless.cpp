@@ -31,7 +31,8 @@ int fail(const std::string& message) {
 
 int runHeadless(const ViewOptions& o, const SurfelSet& set) {
     std::vector<Camera> cameras = o.cameras;
-    if (cameras.empty()) cameras = {frameBox(set.bounds, double(o.width) / o.height)};
+    if (cameras.empty())
+        cameras = {frameBox(set.bounds, double(o.width) / o.height, 45, o.settings.backfaceCull ? frontDirection(set) : 0)};
     const bool cpu = o.settings.mode == RenderMode::CpuReference;
 
     std::unique_ptr<gpu::Context> ctx;

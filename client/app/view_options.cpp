@@ -37,6 +37,12 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
                         Zwicker's V^h = I is 1)
   --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
   --shading S           unlit, lambert, phong (default: unlit for rgb and intensity, else lambert)
+  --backface-cull on|off
+                        drop splats facing away from the eye, in every mode (default:
+                        on where the set's normals are oriented, i.e. its normal_source
+                        is input or estimated-scan-origin; off for estimated-up and
+                        estimated-outward, whose signs hold for ground or closed
+                        objects only)
   --background R,G,B    background colour in [0,1] (default 1,1,1)
   --color R,G,B         draw every surfel in this colour (for brightness measurements)
   --color-by A          rgb, intensity (through the set's 2-98 % range, gamma 1/2.2),
@@ -212,6 +218,10 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             if (!s) return (*exitCode = usageError("--shading wants unlit, lambert or phong")), false;
             o->settings.shading = *s;
             o->shadingGiven = true;
+        } else if (a == "--backface-cull") {
+            if (!value() || (v != "on" && v != "off")) return (*exitCode = usageError("--backface-cull wants on or off")), false;
+            o->settings.backfaceCull = v == "on";
+            o->backfaceCullGiven = true;
         } else if (a == "--background" || a == "--color") {
             Vec3f c;
             char tail = 0;
@@ -295,6 +305,7 @@ RenderSettings effectiveSettings(const ViewOptions& o, const RenderSettings& set
     RenderSettings s = o.settings;
     if (!o.kernelScaleGiven) s.kernelScale = setDefaults.kernelScale;
     if (!o.shadingGiven) s.shading = setDefaults.shading;
+    if (!o.backfaceCullGiven) s.backfaceCull = setDefaults.backfaceCull;
     return s;
 }
 

@@ -22,6 +22,7 @@ struct ViewOptions {
     LevelChoice level;
     RenderSettings settings;
     bool shadingGiven = false;        // else unlit with colour, lambert without
+    bool backfaceCullGiven = false;   // else on where the set's normals are oriented
     bool kernelScaleGiven = false;    // else the set's kernel_scale
     std::optional<Vec3f> color;       // draw every surfel in this colour (measurements)
     RendererOptions renderer;

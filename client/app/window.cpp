@@ -192,7 +192,8 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             else if (s) s = reader.status();
         }
         if (!s) status = fail(s.message());
-        state.orbit.cam = o.cameras.empty() ? frameBox(bounds, double(o.width) / o.height) : o.cameras[0];
+        const int direction = !o.lod && base.backfaceCull ? frontDirection(set) : 0;
+        state.orbit.cam = o.cameras.empty() ? frameBox(bounds, double(o.width) / o.height, 45, direction) : o.cameras[0];
         state.mode = base.mode;
         state.shading = base.shading;
         glfwSetWindowUserPointer(window, &state);
@@ -219,7 +220,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                 } else {
                     auto reloaded = loadSurfelSet(o.set, o.level, *c);
                     rs = reloaded ? renderer->upload(*reloaded) : reloaded.status();
-                    if (reloaded) setDefaults = settingsForSet(reloaded->kernelScale, reloaded->hasColor);
+                    if (reloaded) setDefaults = settingsForSet(reloaded->kernelScale, reloaded->hasColor, reloaded->normalsOriented);
                 }
                 if (!rs) {
                     status = fail(rs.message());

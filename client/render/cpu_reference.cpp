@@ -73,6 +73,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         if (!finite(o) || !(o.z >= near)) continue;  // behind the near plane (or NaN)
         Vec3f n = normalizeOrZero(view.rotate(unpackNormalOct(g.normal)));
         if (!(length(n) > 0)) continue;
+        if (settings.backfaceCull && dot(n, o) > 0) continue;
         if (dot(n, o) > 0) n = n * -1.f;  // two-sided: the normal faces the eye
         Vec3f s = tangentOf(n), t = cross(n, s);
         float r = g.radius * settings.kernelScale;

@@ -58,6 +58,7 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
                 : s.shading == Shading::Lambert ? SC_SHADING_LAMBERT : SC_SHADING_PHONG;
     p.maxFilterPixels = kMaxFilterPixels;
     p.circleScale = s.kernelScale;
+    p.flags = s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u;
     return p;
 }
 
@@ -75,10 +76,24 @@ Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const
     return {std::fmin(out.x, 1.f), std::fmin(out.y, 1.f), std::fmin(out.z, 1.f)};
 }
 
-RenderSettings settingsForSet(double kernelScale, bool hasColor) {
+bool normalsOriented(const std::string& normalSource) {
+    if (normalSource.empty()) return false;
+    size_t begin = 0;
+    while (begin <= normalSource.size()) {
+        size_t end = normalSource.find('+', begin);
+        if (end == std::string::npos) end = normalSource.size();
+        const std::string part = normalSource.substr(begin, end - begin);
+        if (part != "input" && part != "estimated-scan-origin") return false;
+        begin = end + 1;
+    }
+    return true;
+}
+
+RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented) {
     RenderSettings s;
     s.kernelScale = float(kernelScale);
     s.shading = hasColor ? Shading::Unlit : Shading::Lambert;
+    s.backfaceCull = oriented;
     return s;
 }
 

@@ -53,15 +53,25 @@ struct RenderSettings {
     float coverage = 0.05f;       // a pixel shows the surface where the sum of the unscaled
                                   // kernels exp(-y'y/2) exceeds this
     Vec3f background{1.f, 1.f, 1.f};
+    // Drop splats whose normal faces away from the eye (every mode): right
+    // where normals are oriented (normalsOriented below), wrong where their
+    // sign is arbitrary.
+    bool backfaceCull = false;
 };
 
 // Push constants for one frame; `nearPlane` in world units.
 gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& settings, float nearPlane);
 
+// Whether a set's normals point out of its surfaces, from tileset.json's
+// normal_source: normals read from the inputs (meshes, oriented scans) or
+// turned towards the scanner that saw each point. Not those turned up or away
+// from the centre, which hold for ground and closed objects only.
+bool normalsOriented(const std::string& normalSource);
+
 // The settings a tile set is drawn with unless told otherwise: the kernel
 // scale its weights assume (tileset.json kernel_scale), unlit when it has
-// colours, else Lambert.
-RenderSettings settingsForSet(double kernelScale, bool hasColor);
+// colours, else Lambert; backface culling where its normals are oriented.
+RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented);
 
 // The resolve's shading of one pixel (the GLSL resolve shader is its twin):
 // colour, filtered camera-space normal (any length), pixel ray direction.

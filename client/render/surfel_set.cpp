@@ -5,6 +5,7 @@
 #include <numeric>
 
 #include "octree_key.h"
+#include "render_settings.h"
 #include "tileset_reader.h"
 
 namespace surfcast {
@@ -108,6 +109,7 @@ SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring) {
     set.origin = info.bounds.empty() ? info.rootMin : (info.bounds.min + info.bounds.max) * 0.5;
     set.hasWeights = info.weights != "none";
     set.kernelScale = info.kernelScale;
+    set.normalsOriented = normalsOriented(info.normalSource);
     set.coloring = coloring;
     auto by = resolveColorBy(coloring.by, info);
     set.coloring.by = by ? *by : *resolveColorBy(ColorBy::Auto, info);
@@ -179,6 +181,21 @@ Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choic
     }
     sortMorton(set);
     return set;
+}
+
+int frontDirection(const SurfelSet& set) {
+    const auto directions = frameDirections();
+    std::array<size_t, 8> facing{};
+    // A strided sample is plenty to rank eight directions.
+    const size_t stride = std::max<size_t>(1, set.surfels.size() / 100000);
+    for (size_t i = 0; i < set.surfels.size(); i += stride) {
+        const Vec3d n = cast<double>(unpackNormalOct(set.surfels[i].normal));
+        for (size_t d = 0; d < 8; ++d) facing[d] += dot(n, directions[d]) > 0;
+    }
+    size_t best = 0;
+    for (size_t d = 1; d < 8; ++d)
+        if (facing[d] > facing[best]) best = d;
+    return 4 * facing[best] > 5 * facing[0] ? int(best) : 0;
 }
 
 }  // namespace surfcast

@@ -22,6 +22,7 @@ struct SurfelSet {
     bool hasWeights = false;                // s_k came from the tile set
     bool hasColor = false;                  // colours show measured appearance (RGB, intensity): drawn unlit
     double kernelScale = kDefaultKernelScale;  // the k its weights assume (tileset.json kernel_scale)
+    bool normalsOriented = false;           // normalsOriented(tileset.json normal_source)
     Coloring coloring;                      // what appendNode colours by (resolved, never Auto) and hides
     TilesetStatistics statistics;           // the set's ranges, for the colour ramps
 };
@@ -50,6 +51,15 @@ void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float
 // caches (lavapipe measured 1.3-3.9x) run faster on spatially coherent input.
 // Returns the permutation: sorted index -> index before sorting.
 std::vector<uint32_t> sortMorton(SurfelSet& set);
+
+// The frameBox direction from which most surfels face the eye, where their
+// normals are oriented and backfaces culled: a scan in its sensor's frame (z
+// forward, y down) would show its backs from the usual direction. The usual
+// one (0) unless another sees more than 1.25 times as many. Measured ratios
+// of the best to the usual: the closed bunny 1.09, milk_cartoon 1.18 (its
+// usual view is right), table_scene_mug 1.37 (whose usual view shows 21 % of
+// what it shows unculled), fragment 6.5.
+int frontDirection(const SurfelSet& set);
 
 // Packing shared with GLSL's unpack functions.
 uint32_t packNormalOct(const Vec3f& n);

@@ -24,7 +24,7 @@ struct GpuSurfel {
                      // SC_EDGE_RATIO_MAX); 0: none
 };
 
-// Per-frame parameters (push constants, 112 bytes <= the guaranteed 128).
+// Per-frame parameters (push constants, 128 bytes: the guaranteed limit).
 struct FrameParams {
     vec4 view0, view1, view2;  // rows of the world->camera transform (camera: x right, y up, z forward)
     vec4 viewport;   // eta, width, height, near
@@ -34,6 +34,7 @@ struct FrameParams {
     uint shading;    // kShading* below
     float maxFilterPixels;  // clamp of the low-pass extent at grazing angles (pixels)
     float circleScale;      // circles: screen radius = circleScale * r projected
+    uint flags;             // SC_FLAG_* below
 };
 
 #define SC_MODE_POINTS 0u
@@ -44,6 +45,10 @@ struct FrameParams {
 
 // Largest edge-weight ratio a GpuSurfel can carry.
 #define SC_EDGE_RATIO_MAX 4.0
+
+// Splats whose (oriented) normal faces away from the eye are dropped, in every
+// mode (docs/RENDERER.md, "Backface culling").
+#define SC_FLAG_BACKFACE_CULL 1u
 
 #define SC_SHADING_UNLIT 0u
 #define SC_SHADING_LAMBERT 1u

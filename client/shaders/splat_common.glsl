@@ -35,6 +35,10 @@ vec3 decodeNormal(uint packed) {
 
 bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
 
+// Per-splat backface culling: n the camera-space normal as stored, o the
+// camera-space centre (the eye at the origin).
+bool culledAsBackface(vec3 n, vec3 o) { return (frame.flags & SC_FLAG_BACKFACE_CULL) != 0u && dot(n, o) > 0.0; }
+
 // The splat radius at camera depth z: r, or one pixel's worth where r is 0,
 // NaN or infinite (a degenerate h draws as a dot, never as NaN).
 float splatRadius(float r, float z) { return r > 0.0 && !isinf(r) ? r : z / frame.viewport.x; }
@@ -49,7 +53,7 @@ vec3 tangentOf(vec3 n) {
 struct Splat {
     vec3 o;          // centre
     vec3 axisU, axisV;
-    vec3 n;          // unit normal, facing the eye (splats are two-sided)
+    vec3 n;          // unit normal, facing the eye (splats are two-sided unless culled as backfaces)
     float amplitude; // weight at the centre
     vec3 edgeS, edgeT; // camera-space tangentOf basis of the world normal, scaled by 1/r (edge weights)
     uint edge;       // GpuSurfel::edge
@@ -64,7 +68,7 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, uint edg
     // are clipped by the rasterizer, which is safe because o.z >= near > 0.
     if (!finite3(o) || !(o.z >= frame.viewport.w)) return false;
     vec3 n = rotateToCamera(decodeNormal(normal));
-    if (!finite3(n)) return false;
+    if (!finite3(n) || culledAsBackface(n, o)) return false;
     n = dot(n, o) > 0.0 ? -n : n;
     vec3 s = tangentOf(n), t = cross(n, s);
     float r = splatRadius(radius * frame.kernel.x, o.z);

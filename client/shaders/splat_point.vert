@@ -32,7 +32,7 @@ void main() {
     vec3 o = toCamera(inPositionRadius.xyz);
     vec3 n = rotateToCamera(decodeNormal(inNormal));
     outNormal = dot(n, o) > 0.0 ? -n : n;
-    bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n);
+    bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o);
     gl_Position = ok && kExpand == 0 ? project(o) : kCulled;
     gl_PointSize = 1.0;
 }

@@ -26,7 +26,7 @@ void main() {
     if (kPass == 2) {
         vec3 o = toCamera(inPositionRadius.xyz);
         vec3 n = rotateToCamera(decodeNormal(inNormal));
-        bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n);
+        bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o);
         gl_Position = ok ? circleCorner(o, splatRadius(inPositionRadius.w, o.z), gl_VertexIndex, outY) : kCulled;
         outNormal = dot(n, o) > 0.0 ? -n : n;
         outAmplitude = 1.0;

@@ -50,7 +50,7 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
 }
 
 RenderSettings SurfcastClient::defaultSettings() const {
-    return settingsForSet(info().kernelScale, emptySurfelSet(info(), options_.coloring).hasColor);
+    return settingsForSet(info().kernelScale, emptySurfelSet(info(), options_.coloring).hasColor, normalsOriented(info().normalSource));
 }
 
 Status SurfcastClient::setColoring(const Coloring& coloring) {
