@@ -8,6 +8,7 @@
 #include <cmath>
 #include <random>
 
+#include "cpu_reference.h"
 #include "gpu_fixture.h"
 
 namespace surfcast {
@@ -141,6 +142,65 @@ TEST_F(Stability, BoundaryFringeStaysWithinOneSplatOfTheEdge) {
     EXPECT_LT(area, outer);
     // Per-pixel normalization keeps full colour out to the fringe.
     EXPECT_EQ(countColour(img, c, 0.01), covered(img));
+}
+
+// Edge antialiasing (Zwicker 2001 §7) on the same disc: pixels of the fringe
+// take coverage between 0 and 1 (alpha) and blend over the background by it,
+// interior pixels keep alpha 1 and their colour, and the summed coverage
+// (the drawn area) comes closer to the true disc than the hard edge's count,
+// which overshoots by about half the kernel's reach all round. Without it no
+// pixel is partial.
+TEST_F(Stability, EdgeAntialiasingBlendsTheFringeAndKeepsTheInterior) {
+    const Vec3f c{0.2f, 0.7f, 0.3f};
+    SurfelSet set;
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> jit(-0.3, 0.3);
+    for (double x = -30; x <= 30; x += 1)
+        for (double y = -30; y <= 30; y += 1) {
+            Vec3d p{x + jit(rng), y + jit(rng), 0};
+            if (p.x * p.x + p.y * p.y <= 900) addSurfel(set, p, {0, 0, 1}, 1.5f, c);
+        }
+    RenderSettings hard, soft;
+    soft.edgeAA = true;
+    const Image a = render(set, topDown(70), hard), b = render(set, topDown(70), soft);
+    const double pxPerUnit = kH / (2 * 70 * std::tan(30 * M_PI / 180));
+    size_t partialHard = 0, partialSoft = 0, interiorChanged = 0;
+    double coverageSoft = 0;
+    for (int y = 0; y < kH; ++y)
+        for (int x = 0; x < kW; ++x) {
+            const size_t i = 4 * size_t(y * kW + x);
+            partialHard += a.rgba[i + 3] > 0 && a.rgba[i + 3] < 255;
+            partialSoft += b.rgba[i + 3] > 0 && b.rgba[i + 3] < 255;
+            coverageSoft += b.rgba[i + 3] / 255.0;
+            const double dx = (x + 0.5 - kW / 2.0) / pxPerUnit, dy = (y + 0.5 - kH / 2.0) / pxPerUnit;
+            if (dx * dx + dy * dy < 27.0 * 27.0)  // well inside: every pixel sums many kernels
+                for (int k = 0; k < 4; ++k) interiorChanged += a.rgba[i + k] != b.rgba[i + k];
+        }
+    const double disc = M_PI * 30 * 30 * pxPerUnit * pxPerUnit;
+    std::printf("disc %.0f px; hard edge %zu px; edge AA %.0f px, %zu partial\n", disc, covered(a), coverageSoft, partialSoft);
+    EXPECT_EQ(partialHard, 0u);
+    EXPECT_GT(partialSoft, size_t(2 * M_PI * 30 * pxPerUnit / 2)) << "at least half the circumference's pixels are partial";
+    EXPECT_EQ(interiorChanged, 0u);
+    EXPECT_LT(std::fabs(coverageSoft - disc), std::fabs(double(covered(a)) - disc));
+
+    // The CPU reference does the same.
+    auto view = makeViewTransform(topDown(70), set.origin, kW, kH);
+    ASSERT_TRUE(view);
+    const Image ca = renderCpuReference(set, *view, hard), cb = renderCpuReference(set, *view, soft);
+    size_t cpuPartial = 0, cpuInteriorChanged = 0;
+    double cpuCoverage = 0;
+    for (int y = 0; y < kH; ++y)
+        for (int x = 0; x < kW; ++x) {
+            const size_t i = 4 * size_t(y * kW + x);
+            cpuPartial += cb.rgba[i + 3] > 0 && cb.rgba[i + 3] < 255;
+            cpuCoverage += cb.rgba[i + 3] / 255.0;
+            const double dx = (x + 0.5 - kW / 2.0) / pxPerUnit, dy = (y + 0.5 - kH / 2.0) / pxPerUnit;
+            if (dx * dx + dy * dy < 27.0 * 27.0)
+                for (int k = 0; k < 4; ++k) cpuInteriorChanged += ca.rgba[i + k] != cb.rgba[i + k];
+        }
+    EXPECT_GT(cpuPartial, size_t(2 * M_PI * 30 * pxPerUnit / 2));
+    EXPECT_EQ(cpuInteriorChanged, 0u);
+    EXPECT_NEAR(cpuCoverage, coverageSoft, 0.01 * disc) << "the CPU reference and the GPU agree on the area drawn";
 }
 
 TEST_F(Stability, ThousandOverlappingSplatsInHalfAndFullFloat) {

@@ -35,7 +35,10 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
                         (h when magnified; default 0.5)
   --lowpass V           low-pass filter variance in pixels^2 (default 0.1, measured;
                         Zwicker's V^h = I is 1)
-  --coverage T          sum of weights above which a pixel shows the surface (default 0.05)
+  --edge-aa on|off      edge antialiasing (Zwicker 2001 §7): silhouette pixels blend over
+                        the background by their coverage (default: on)
+  --edge-tau T          kernel sum at which a silhouette pixel counts as fully covered
+                        (default 4)
   --shading S           unlit, lambert, phong (default: unlit for rgb and intensity, else lambert)
   --backface-cull on|off
                         drop splats facing away from the eye, in every mode (default:
@@ -210,9 +213,13 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
         } else if (a == "--lowpass") {
             if (!value() || !parseFloat(v, &o->settings.lowpassVariance) || o->settings.lowpassVariance < 0)
                 return (*exitCode = usageError("--lowpass wants a number >= 0")), false;
-        } else if (a == "--coverage") {
-            if (!value() || !parseFloat(v, &o->settings.coverage) || o->settings.coverage < 0)
-                return (*exitCode = usageError("--coverage wants a number >= 0")), false;
+        } else if (a == "--edge-aa") {
+            if (!value() || (v != "on" && v != "off")) return (*exitCode = usageError("--edge-aa wants on or off")), false;
+            o->settings.edgeAA = v == "on";
+            o->edgeAAGiven = true;
+        } else if (a == "--edge-tau") {
+            if (!value() || !parseFloat(v, &o->settings.edgeTau) || !(o->settings.edgeTau > 0))
+                return (*exitCode = usageError("--edge-tau wants a number > 0")), false;
         } else if (a == "--shading") {
             auto s = value() ? parseShading(v) : std::nullopt;
             if (!s) return (*exitCode = usageError("--shading wants unlit, lambert or phong")), false;
@@ -306,6 +313,7 @@ RenderSettings effectiveSettings(const ViewOptions& o, const RenderSettings& set
     if (!o.kernelScaleGiven) s.kernelScale = setDefaults.kernelScale;
     if (!o.shadingGiven) s.shading = setDefaults.shading;
     if (!o.backfaceCullGiven) s.backfaceCull = setDefaults.backfaceCull;
+    if (!o.edgeAAGiven) s.edgeAA = setDefaults.edgeAA;
     return s;
 }
 

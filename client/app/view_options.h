@@ -23,6 +23,7 @@ struct ViewOptions {
     RenderSettings settings;
     bool shadingGiven = false;        // else unlit with colour, lambert without
     bool backfaceCullGiven = false;   // else on where the set's normals are oriented
+    bool edgeAAGiven = false;         // else the set's default (settingsForSet)
     bool kernelScaleGiven = false;    // else the set's kernel_scale
     std::optional<Vec3f> color;       // draw every surfel in this colour (measurements)
     RendererOptions renderer;

@@ -181,16 +181,29 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
             size_t i = size_t(y) * W + x;
             const Accum& a = acc[i];
             Vec3f c = settings.background;
-            bool hit = a.coverage > settings.coverage && a.w > 0;
+            bool hit = a.coverage > 0 && a.w > 0;
+            float alpha = 0;
             if (hit) {
+                // Partial coverage on the covered region's border only, as
+                // the GPU's resolve does.
+                alpha = 1.f;
+                if (settings.edgeAA && a.coverage < settings.edgeTau) {
+                    bool border = false;
+                    for (auto [dx, dy] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}}) {
+                        const int qx = std::clamp(x + dx, 0, W - 1), qy = std::clamp(y + dy, 0, H - 1);
+                        border = border || !(acc[size_t(qy) * W + qx].coverage > 0);
+                    }
+                    if (border) alpha = a.coverage / settings.edgeTau;
+                }
                 c = shadePixel(settings.shading, Vec3f{a.r, a.g, a.b} * (1.f / a.w), {a.nx, a.ny, a.nz}, ray(x, y));
+                c = settings.background + (c - settings.background) * alpha;
                 ++covered;
             }
             uint8_t* px = &image.rgba[4 * i];
             px[0] = uint8_t(std::lround(std::clamp(c.x, 0.f, 1.f) * 255.f));
             px[1] = uint8_t(std::lround(std::clamp(c.y, 0.f, 1.f) * 255.f));
             px[2] = uint8_t(std::lround(std::clamp(c.z, 0.f, 1.f) * 255.f));
-            px[3] = hit ? 255 : 0;
+            px[3] = uint8_t(std::lround(alpha * 255.f));
         }
     if (stats) {
         stats->splats = splats.size();

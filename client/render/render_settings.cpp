@@ -45,7 +45,7 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
     p.viewport = {view.eta, float(view.width), float(view.height), nearPlane};
     float lowpass = s.mode == RenderMode::EwaNoPrefilter ? 0.f : s.lowpassVariance;
     p.kernel = {s.kernelScale, s.cutoff, s.zt, lowpass};
-    p.resolve = {s.background.x, s.background.y, s.background.z, s.coverage};
+    p.resolve = {s.background.x, s.background.y, s.background.z, s.edgeTau};
     switch (s.mode) {
     case RenderMode::Points: p.mode = SC_MODE_POINTS; break;
     case RenderMode::Circles: p.mode = SC_MODE_CIRCLES; break;
@@ -58,7 +58,7 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
                 : s.shading == Shading::Lambert ? SC_SHADING_LAMBERT : SC_SHADING_PHONG;
     p.maxFilterPixels = kMaxFilterPixels;
     p.circleScale = s.kernelScale;
-    p.flags = s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u;
+    p.flags = (s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u) | (s.edgeAA ? SC_FLAG_EDGE_AA : 0u);
     return p;
 }
 
@@ -94,6 +94,7 @@ RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented) 
     s.kernelScale = float(kernelScale);
     s.shading = hasColor ? Shading::Unlit : Shading::Lambert;
     s.backfaceCull = oriented;
+    s.edgeAA = true;
     return s;
 }
 

@@ -38,6 +38,13 @@ inline constexpr float kMaxFilterPixels = 64.f;
 // average (0.137 against 0.135; smooth meshes sampled below a pixel prefer
 // none); v = 1 darkens and widens every silhouette by about a pixel.
 inline constexpr float kDefaultLowpassVariance = 0.1f;
+// Default tau of edge antialiasing, in sums of exp(-y'y/2) (a covered pixel
+// sums at least exp(-c) = 0.37). Measured by bench/edge_aa_bench.py on the
+// meshes' silhouettes (FLIP over silhouette pixels, against 0.30-0.32
+// without edge AA): 0.28-0.30 at 0.75, 0.15-0.18 at 3, 0.13-0.16 at 4, and
+// worse again at 8. Interiors never change: only border pixels take partial
+// coverage.
+inline constexpr float kDefaultEdgeTau = 4.f;
 // Near plane, as a fraction of the set's bounding-box diagonal (reversed-Z
 // depth keeps float precision at every distance, so it can be small).
 inline constexpr double kNearFraction = 1e-4;
@@ -50,8 +57,13 @@ struct RenderSettings {
     float cutoff = 1.f;           // c: splats end at y'y = 2c
     float zt = float(kDefaultZt);  // visibility depth offset z_t, a multiple of the footprint (k r magnified)
     float lowpassVariance = kDefaultLowpassVariance;  // V^h = variance * I, in pixels^2
-    float coverage = 0.05f;       // a pixel shows the surface where the sum of the unscaled
-                                  // kernels exp(-y'y/2) exceeds this
+    // Edge antialiasing (Zwicker 2001 §7): on the covered region's border
+    // (a pixel with an uncovered 4-neighbour), coverage min(1, sum / tau) of
+    // the unscaled kernels exp(-y'y/2) blends the surface over the
+    // background. Off (and inside): the surface shows wherever a kernel
+    // reaches (kernels end at exp(-c), so no covered pixel sums less).
+    bool edgeAA = false;
+    float edgeTau = kDefaultEdgeTau;
     Vec3f background{1.f, 1.f, 1.f};
     // Drop splats whose normal faces away from the eye (every mode): right
     // where normals are oriented (normalsOriented below), wrong where their

@@ -29,7 +29,7 @@ struct FrameParams {
     vec4 view0, view1, view2;  // rows of the world->camera transform (camera: x right, y up, z forward)
     vec4 viewport;   // eta, width, height, near
     vec4 kernel;     // kernel scale (multiple of r), cutoff c, z_t (multiple of r), low-pass variance (px^2)
-    vec4 resolve;    // background r, g, b; coverage threshold on sum(exp(-q/2))
+    vec4 resolve;    // background r, g, b; edge antialiasing's tau on sum(exp(-q/2))
     uint mode;       // kMode* below
     uint shading;    // kShading* below
     float maxFilterPixels;  // clamp of the low-pass extent at grazing angles (pixels)
@@ -49,6 +49,11 @@ struct FrameParams {
 // Splats whose (oriented) normal faces away from the eye are dropped, in every
 // mode (docs/RENDERER.md, "Backface culling").
 #define SC_FLAG_BACKFACE_CULL 1u
+// Edge antialiasing (Zwicker 2001 §7): a pixel on the covered region's border
+// has coverage min(1, sum(g) / tau) and the surface blends over the
+// background by it; without the flag (and inside) a pixel shows the surface
+// wherever a kernel reaches it.
+#define SC_FLAG_EDGE_AA 2u
 
 #define SC_SHADING_UNLIT 0u
 #define SC_SHADING_LAMBERT 1u
