@@ -101,21 +101,18 @@ int32_t TextureField::build(uint32_t begin, uint32_t end) {
     return index;
 }
 
-template <class F>
-void TextureField::forEachInBox(const Vec3d& lo, const Vec3d& hi, F&& f) const {
+template <class Test, class F>
+void TextureField::forEachWhere(Test&& test, F&& f) const {
     if (nodes_.empty()) return;
-    auto overlaps = [&](const Vec3d& a, const Vec3d& b) {
-        return a.x <= hi.x && b.x >= lo.x && a.y <= hi.y && b.y >= lo.y && a.z <= hi.z && b.z >= lo.z;
-    };
     int32_t stack[64];
     int top = 0;
     stack[top++] = 0;
     while (top > 0) {
         const Node& node = nodes_[size_t(stack[--top])];
-        if (!overlaps(node.lo, node.hi)) continue;
+        if (!test(node.lo, node.hi)) continue;
         if (node.left < 0) {
             for (uint32_t i = node.begin; i < node.end; ++i)
-                if (overlaps(tris_[i].lo, tris_[i].hi)) f(tris_[i]);
+                if (test(tris_[i].lo, tris_[i].hi)) f(tris_[i]);
             continue;
         }
         stack[top++] = node.left;
@@ -124,30 +121,22 @@ void TextureField::forEachInBox(const Vec3d& lo, const Vec3d& hi, F&& f) const {
 }
 
 template <class F>
+void TextureField::forEachInBox(const Vec3d& lo, const Vec3d& hi, F&& f) const {
+    forEachWhere([&](const Vec3d& a, const Vec3d& b) {
+        return a.x <= hi.x && b.x >= lo.x && a.y <= hi.y && b.y >= lo.y && a.z <= hi.z && b.z >= lo.z;
+    }, f);
+}
+
+template <class F>
 void TextureField::forEachNear(const Vec3d& p, double radius, F&& f) const {
-    if (nodes_.empty()) return;
-    auto near = [&](const Vec3d& lo, const Vec3d& hi) {
+    forEachWhere([&](const Vec3d& lo, const Vec3d& hi) {
         double d2 = 0;
         for (int a = 0; a < 3; ++a) {
             const double d = p[a] < lo[a] ? lo[a] - p[a] : p[a] > hi[a] ? p[a] - hi[a] : 0;
             d2 += d * d;
         }
         return d2 <= radius * radius;
-    };
-    int32_t stack[64];
-    int top = 0;
-    stack[top++] = 0;
-    while (top > 0) {
-        const Node& node = nodes_[size_t(stack[--top])];
-        if (!near(node.lo, node.hi)) continue;
-        if (node.left < 0) {
-            for (uint32_t i = node.begin; i < node.end; ++i)
-                if (near(tris_[i].lo, tris_[i].hi)) f(tris_[i]);
-            continue;
-        }
-        stack[top++] = node.left;
-        stack[top++] = node.right;
-    }
+    }, f);
 }
 
 bool TextureField::filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* out) const {

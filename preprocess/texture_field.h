@@ -110,6 +110,10 @@ private:
         int32_t left = -1, right = -1;  // children; -1 for a leaf
     };
     int32_t build(uint32_t begin, uint32_t end);
+    // f(triangle) for every triangle whose box passes test(lo, hi), which
+    // must pass every node box containing one that passes.
+    template <class Test, class F>
+    void forEachWhere(Test&& test, F&& f) const;
     template <class F>
     void forEachNear(const Vec3d& p, double radius, F&& f) const;
     template <class F>

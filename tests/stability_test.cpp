@@ -51,6 +51,19 @@ size_t covered(const Image& img) {
     return n;
 }
 
+// A disc of radius 30 in z = 0, surfels on a jittered grid 1 apart, r = 1.5.
+SurfelSet disc(const Vec3f& colour) {
+    SurfelSet set;
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> jit(-0.3, 0.3);
+    for (double x = -30; x <= 30; x += 1)
+        for (double y = -30; y <= 30; y += 1) {
+            Vec3d p{x + jit(rng), y + jit(rng), 0};
+            if (p.x * p.x + p.y * p.y <= 900) addSurfel(set, p, {0, 0, 1}, 1.5f, colour);
+        }
+    return set;
+}
+
 Camera topDown(double height) { return {{0, 0, height}, {0, 0, 0}, {0, 1, 0}, 60}; }
 
 TEST_F(Stability, DensityJumpOfTenStaysConstantAndHoleFree) {
@@ -126,14 +139,7 @@ TEST_F(Stability, BoundaryFringeStaysWithinOneSplatOfTheEdge) {
     // A disc of radius 30 seen from above: the covered area matches the disc
     // grown by at most the kernel's cutoff radius r sqrt(2c) (1.5 sqrt 2).
     const Vec3f c{0.2f, 0.7f, 0.3f};
-    SurfelSet set;
-    std::mt19937 rng(3);
-    std::uniform_real_distribution<double> jit(-0.3, 0.3);
-    for (double x = -30; x <= 30; x += 1)
-        for (double y = -30; y <= 30; y += 1) {
-            Vec3d p{x + jit(rng), y + jit(rng), 0};
-            if (p.x * p.x + p.y * p.y <= 900) addSurfel(set, p, {0, 0, 1}, 1.5f, c);
-        }
+    const SurfelSet set = disc(c);
     Image img = render(set, topDown(70));
     double pxPerUnit = kH / (2 * 70 * std::tan(30 * M_PI / 180));
     double area = double(covered(img)) / (pxPerUnit * pxPerUnit);
@@ -152,14 +158,7 @@ TEST_F(Stability, BoundaryFringeStaysWithinOneSplatOfTheEdge) {
 // pixel is partial.
 TEST_F(Stability, EdgeAntialiasingBlendsTheFringeAndKeepsTheInterior) {
     const Vec3f c{0.2f, 0.7f, 0.3f};
-    SurfelSet set;
-    std::mt19937 rng(3);
-    std::uniform_real_distribution<double> jit(-0.3, 0.3);
-    for (double x = -30; x <= 30; x += 1)
-        for (double y = -30; y <= 30; y += 1) {
-            Vec3d p{x + jit(rng), y + jit(rng), 0};
-            if (p.x * p.x + p.y * p.y <= 900) addSurfel(set, p, {0, 0, 1}, 1.5f, c);
-        }
+    const SurfelSet set = disc(c);
     RenderSettings hard, soft;
     soft.edgeAA = true;
     const Image a = render(set, topDown(70), hard), b = render(set, topDown(70), soft);

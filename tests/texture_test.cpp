@@ -497,6 +497,14 @@ MeshTriangles texturedRectangle(const std::function<Vec3f(int, int)>& texel) {
     return m;
 }
 
+// The same rectangle as rect.obj in `dir`, its texture rect.png.
+void writeTexturedRectangle(const test::TempDir& dir, const std::function<Vec3f(int, int)>& texel) {
+    writePng(dir.file("rect.png"), 256, 64, texel);
+    test::writeFile(dir.file("m.mtl"), "newmtl t\nmap_Kd rect.png\n");
+    test::writeFile(dir.file("rect.obj"), "mtllib m.mtl\nv 0 0 0\nv 256 0 0\nv 256 64 0\nv 0 64 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                          "usemtl t\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+}
+
 // The Gaussian-weighted average of the texel values at the texel centres
 // (i + 0.5, j + 0.5) within 3 sigma of (x, y), for the 256 x 64 texture black
 // for i < 128 and white beyond.
@@ -568,10 +576,7 @@ TEST(TextureField, EwaCoefficientsAreTheGaussianWeightedTexelAverage) {
 // misses by far more.
 TEST(TexturedMesh, EveryLevelCarriesTheTextureFilteredWithItsKernel) {
     test::TempDir dir;
-    writePng(dir.file("step.png"), 256, 64, [](int i, int) { return Vec3f{i < 128 ? 0.f : 255.f, 0, 0}; });
-    test::writeFile(dir.file("m.mtl"), "newmtl step\nmap_Kd step.png\n");
-    test::writeFile(dir.file("rect.obj"), "mtllib m.mtl\nv 0 0 0\nv 256 0 0\nv 256 64 0\nv 0 64 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
-                                          "usemtl step\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    writeTexturedRectangle(dir, [](int i, int) { return Vec3f{i < 128 ? 0.f : 255.f, 0, 0}; });
     auto check = [&](const std::string& filter, double* worstExcess, size_t* coarse) {
         auto build = test::run({test::binary("surfcast-build"), "-q", dir.file("rect.obj"), "--capacity", "4000", "--texture-filter",
                                 filter, "-o", dir.file(filter)});
@@ -720,10 +725,7 @@ TEST(TextureField, OptimalCoefficientsBeatEwaAndNearestInL2) {
 TEST(TexturedMesh, OptimalBuildReconstructsTheTextureBest) {
     test::TempDir dir;
     auto texel = [](int i, int j) { return Vec3f{(i / 3 + j / 3) % 2 ? 230.f : 25.f, 0, 0}; };
-    writePng(dir.file("checker.png"), 256, 64, texel);
-    test::writeFile(dir.file("m.mtl"), "newmtl c\nmap_Kd checker.png\n");
-    test::writeFile(dir.file("rect.obj"), "mtllib m.mtl\nv 0 0 0\nv 256 0 0\nv 256 64 0\nv 0 64 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
-                                          "usemtl c\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    writeTexturedRectangle(dir, texel);
     const MeshTriangles rect = texturedRectangle(texel);
     std::map<std::string, double> error;
     size_t leaves = 0;
