@@ -122,8 +122,9 @@ private:
     BuiltNode* buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
                             std::vector<std::unique_ptr<BuiltNode>>& nodes, ScalarTable& scalars);
     Status buildUpperLevels();
-    // EWA texture filtering of a node's surfels from textured meshes, once
-    // the level's h (and radii) are known.
+    // The colours of one level's surfels from textured meshes
+    // (--texture-filter ewa or optimal), once the level's h (and radii) are
+    // known; `halo`: the level's surfels beyond these nodes (other chunks).
     void filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<const Surfel> halo, int threads);
     Status emit(BuiltNode& node, const ScalarTable& scalars);
     uint64_t bytesPerChunkPoint() const { return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size(); }
@@ -641,7 +642,8 @@ Status Builder::buildUpperLevels() {
 }
 
 void Builder::filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<const Surfel> halo, int threads) {
-    if (std::none_of(textureFields_.begin(), textureFields_.end(), [](const auto& f) { return f != nullptr; })) return;
+    if (nodes.empty() || std::none_of(textureFields_.begin(), textureFields_.end(), [](const auto& f) { return f != nullptr; }))
+        return;
     ScopedTimer t(stepNs_[kStepTextures]);
     auto fieldOf = [&](const Surfel& s) { return s.source < textureFields_.size() ? textureFields_[s.source].get() : nullptr; };
     auto sigmaOf = [&](const BuiltNode& node, size_t i) {

@@ -37,12 +37,14 @@ namespace surfcast {
 // y'y <= 2c, within z_t sigma_k along its normal, facing the surface's side).
 // Eq. 10 with that basis gives R w = c with R_kj = ⟨r̂_k, r̂_j⟩ and
 // c_k = ⟨r̂_k, f̃⟩, both integrated on the mesh by quadrature: a lattice of
-// step sampleStep x sigma in each triangle's plane (a triangle smaller than
+// step about sampleStep x sigma in each triangle's plane (a triangle smaller than
 // two lattice cells is one sample at its centroid), the texture at each
-// sample trilinearly filtered to the lattice step. A small ridge term
+// sample trilinearly filtered to the lattice step. A ridge term
 // ridge x mean(diag R) x (w - w0) keeps R positive definite where samples
 // barely touch a kernel (two surfels on one spot), pulling such w towards
-// the starting guess w0 (the ewa coefficients).
+// the starting guess w0 (the ewa coefficients), and the coefficients stay in
+// [0, 1], the range of a stored colour (an active set of bounds; both
+// measured in bench/BENCHMARKS.md, "Textured meshes").
 struct FitSurfel {
     Vec3d position;  // relative to the field's origin
     Vec3f normal;    // unit; zero: any side
@@ -53,9 +55,10 @@ struct FitSurfel {
 struct FitParams {
     double cutoff = 1;        // c: the kernel reaches y'y <= 2c
     double zt = 0.5;          // z_t in units of sigma
-    double sampleStep = 0.5;  // quadrature lattice step, in units of the smallest sigma of a group
-    double ridge = 0.1;
-    int maxIterations = 200;  // conjugate-gradient iterations per channel
+    double sampleStep = 0.5;  // quadrature lattice step, in units of a group's smallest sigma (or of
+                              // a quarter of its largest, where that is more)
+    double ridge = 0.1;       // measured best of 0.001, 0.03, 0.1 and 0.3
+    int maxIterations = 200;  // conjugate-gradient iterations per channel and round of the bounds
     double tolerance = 1e-4;  // relative residual |R w - c| / |c| at which CG stops
     int threads = 1;
 };

@@ -246,11 +246,13 @@ TEST_F(Stability, ThinSheetShowsTheSideFacingTheEye) {
         s.backfaceCull = true;
         for (auto [camera, colour] : {std::pair{above, red}, std::pair{below, blue}}) {
             Image img = render(set, camera, s);
-            if (mode != RenderMode::Points && mode != RenderMode::Circles)
+            if (mode != RenderMode::Points && mode != RenderMode::Circles) {
                 EXPECT_EQ(covered(img), size_t(kW * kH)) << renderModeName(mode);
+            }
             EXPECT_GT(covered(img), 0u);
-            if (mode != RenderMode::EwaSurfel)  // per-surfel weights of 1 overshoot, but only the facing colour shows
+            if (mode != RenderMode::EwaSurfel) {  // per-surfel weights of 1 overshoot, but only the facing colour shows
                 EXPECT_EQ(countColour(img, colour, 0.01), covered(img)) << renderModeName(mode);
+            }
             const Vec3f other = colour == red ? blue : red;
             size_t wrong = 0;
             for (size_t i = 0; i < img.rgba.size(); i += 4)
