@@ -505,6 +505,18 @@ void writeTexturedRectangle(const test::TempDir& dir, const std::function<Vec3f(
                                           "usemtl t\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
 }
 
+// rect.obj in `dir` built with --texture-filter `filter` and --capacity 4000
+// (several nodes) into dir/filter, and opened; its tileset.json must say
+// which filter made it.
+Result<TilesetReader> buildRectangle(const test::TempDir& dir, const std::string& filter) {
+    auto build = test::run({test::binary("surfcast-build"), "-q", dir.file("rect.obj"), "--capacity", "4000", "--texture-filter",
+                            filter, "-o", dir.file(filter)});
+    if (build.exitCode != 0) return Status::error("surfcast-build failed: " + build.output);
+    auto set = TilesetReader::open(dir.file(filter));
+    if (set.ok()) EXPECT_EQ(set->info().textureFilter, filter);
+    return set;
+}
+
 // The Gaussian-weighted average of the texel values at the texel centres
 // (i + 0.5, j + 0.5) within 3 sigma of (x, y), for the 256 x 64 texture black
 // for i < 128 and white beyond.
@@ -578,12 +590,8 @@ TEST(TexturedMesh, EveryLevelCarriesTheTextureFilteredWithItsKernel) {
     test::TempDir dir;
     writeTexturedRectangle(dir, [](int i, int) { return Vec3f{i < 128 ? 0.f : 255.f, 0, 0}; });
     auto check = [&](const std::string& filter, double* worstExcess, size_t* coarse) {
-        auto build = test::run({test::binary("surfcast-build"), "-q", dir.file("rect.obj"), "--capacity", "4000", "--texture-filter",
-                                filter, "-o", dir.file(filter)});
-        ASSERT_EQ(build.exitCode, 0) << build.output;
-        auto set = TilesetReader::open(dir.file(filter));
+        auto set = buildRectangle(dir, filter);
         ASSERT_TRUE(set.ok()) << set.status().message();
-        EXPECT_EQ(set->info().textureFilter, filter);
         *worstExcess = -1e9;
         *coarse = 0;
         for (const NodeRecord& node : set->nodes()) {
@@ -730,12 +738,8 @@ TEST(TexturedMesh, OptimalBuildReconstructsTheTextureBest) {
     std::map<std::string, double> error;
     size_t leaves = 0;
     for (const char* filter : {"nearest", "ewa", "optimal"}) {
-        auto build = test::run({test::binary("surfcast-build"), "-q", dir.file("rect.obj"), "--capacity", "4000", "--texture-filter",
-                                filter, "-o", dir.file(filter)});
-        ASSERT_EQ(build.exitCode, 0) << build.output;
-        auto set = TilesetReader::open(dir.file(filter));
+        auto set = buildRectangle(dir, filter);
         ASSERT_TRUE(set.ok()) << set.status().message();
-        EXPECT_EQ(set->info().textureFilter, filter);
         std::vector<FitSurfel> surfels;
         size_t leafNodes = 0;
         for (const NodeRecord& node : set->nodes()) {
