@@ -253,14 +253,18 @@ def run(args):
     return subprocess.run(args, check=True, capture_output=True, text=True).stdout
 
 
-def render(tileset, mode, camera, size, repeat, png, kernel=None, shading="unlit", colour=None, lowpass=None):
+def render(tileset, mode, camera, size, repeat, png, kernel=None, shading="unlit", colour=None, lowpass=None,
+           background="1,1,1", options=()):
+    """surfcast-view --headless; camera None: its default framing; options: more of its arguments."""
     extra = ["--kernel-scale", str(kernel)] if kernel else []
     extra += ["--lowpass", str(lowpass)] if lowpass is not None else []
     extra += ["--color", colour] if colour else []
-    out = run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, f"--camera={camera}", "--size", size, "--mode",
-               mode, "--shading", shading, "--background", "1,1,1", "--repeat", str(repeat), "--out", png, *extra])
+    extra += [f"--camera={camera}"] if camera else []
+    out = run([os.path.join(BIN, "surfcast-view"), "--headless", tileset, "--size", size, "--mode", mode, "--shading",
+               shading, "--background", background, "--repeat", str(repeat), "--out", png, *extra, *options])
     line = json.loads(out.strip().splitlines()[-1])
-    ms = line["cpu_ms"] if mode == "cpu-reference" else line["gpu_ms"]["total"]
+    gpu = line.get("gpu_ms")  # per pass; with --lod one number per redraw
+    ms = line["cpu_ms"] if mode == "cpu-reference" else gpu["total"] if isinstance(gpu, dict) else gpu
     img = np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
     return img, ms, line["splats"]
 

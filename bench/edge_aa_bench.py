@@ -24,7 +24,6 @@ Usage: bench/.venv/bin/python bench/edge_aa_bench.py [--size 320x240]
 """
 import argparse
 import os
-import subprocess
 import sys
 import tempfile
 
@@ -37,15 +36,11 @@ import accuracy_bench as ab  # noqa: E402
 TAUS = [0.75, 1.5, 3.0, 4.0, 6.0, 8.0]
 
 
-def view(tileset, camera, size, png, aa, tau=None, background="1,1,1", extra=()):
-    args = [os.path.join(ab.BIN, "surfcast-view"), "--headless", tileset, "--size", size, "--mode", "ewa-pixel",
-            "--background", background, "--edge-aa", "on" if aa else "off", "--out", png, *extra]
-    if camera:
-        args.append(f"--camera={camera}")
-    if tau is not None:
-        args += ["--edge-tau", str(tau)]
-    subprocess.run(args, check=True, capture_output=True)
-    return np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
+def view(tileset, camera, size, png, aa, tau=None, background="1,1,1", shading="unlit", colour=None):
+    """ewa-pixel with --edge-aa on or off."""
+    options = ["--edge-aa", "on" if aa else "off", *(["--edge-tau", str(tau)] if tau is not None else [])]
+    return ab.render(tileset, "ewa-pixel", camera, size, 1, png, shading=shading, colour=colour, background=background,
+                     options=options)[0]
 
 
 def boundary(covered):
@@ -76,15 +71,15 @@ def silhouettes(size, tmp):
     ab.write_ply(ply, pts, nrm, col)
     tileset = os.path.join(tmp, "disc")
     ab.run([os.path.join(ab.BIN, "surfcast-build"), "-q", ply, "-o", tileset])
-    cases = [("open-boundary", tileset, camera, ref, edge, ())]
+    cases = [("open-boundary", tileset, camera, ref, edge, {})]
     for mesh in ab.MESHES:
         _, mesh_set, mesh_camera, mesh_ref = ab.mesh_view(mesh, size, tmp)
         mesh_edge = boundary(np.any(np.abs(mesh_ref - 1.0) > 1e-3, axis=2))
         cases.append(("mesh-" + mesh, mesh_set, mesh_camera, mesh_ref, mesh_edge,
-                      ("--shading", "lambert", "--color", "0.8,0.8,0.8")))
+                      {"shading": "lambert", "colour": "0.8,0.8,0.8"}))
     for name, tileset, camera, ref, edge, extra in cases:
         for aa, tau in [(False, None)] + [(True, t) for t in TAUS]:
-            img = view(tileset, camera, size, os.path.join(tmp, "f.png"), aa, tau, extra=extra)
+            img = view(tileset, camera, size, os.path.join(tmp, "f.png"), aa, tau, **extra)
             s = scores(ref, img, edge)
             rows.append({"scene": name, "edge_aa": "on" if aa else "off", "tau": tau or "", **s, "edge_pixels": int(edge.sum())})
             print(f"{name} aa={aa} tau={tau}: {s}", file=sys.stderr)

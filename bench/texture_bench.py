@@ -176,14 +176,6 @@ def build(obj, method, out):
     return summary(p.stdout + p.stderr)
 
 
-def render(tileset, camera, size, png, lod):
-    """surfcast-view --headless, ewa-pixel, unlit on white; with --lod PX when lod."""
-    extra = ["--lod", str(lod)] if lod else []
-    ab.run([os.path.join(ab.BIN, "surfcast-view"), "--headless", tileset, f"--camera={camera}", "--size", size, "--mode",
-            "ewa-pixel", "--shading", "unlit", "--background", "1,1,1", "--out", png, *extra])
-    return np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
-
-
 DRAGON = os.path.join(ab.DATA, "fg_spkMgDragon", "fg_spkMgDragon.obj")
 DRAGON_FOVS = [40, 10, 2.5]  # the whole dragon, then 4x and 16x magnified
 
@@ -205,7 +197,7 @@ def dragon_views(tmp, size, rows, builds):
                 "--colors", "--out", png])
         ref = np.asarray(Image.open(png).convert("RGB")).astype(np.float64) / 255
         for method in METHODS:
-            img = render(sets[method], camera, size, os.path.join(tmp, "frame.png"), 0)
+            img = ab.render(sets[method], "ewa-pixel", camera, size, 1, os.path.join(tmp, "frame.png"))[0]
             covered = (np.abs(ref - ref[0, 0]).sum(2) > 0.01) & (np.abs(img - img[0, 0]).sum(2) > 0.01)
             inner = covered.copy()
             inner[1:-1, 1:-1] = covered[1:-1, 1:-1] & covered[:-2, 1:-1] & covered[2:, 1:-1] & covered[1:-1, :-2] & covered[1:-1, 2:]
@@ -263,7 +255,8 @@ def main():
                 ref = ab.reference([surface], camera, width, height)
                 mask = interior_mask(shrunk, camera, width, height)
                 for method in METHODS:
-                    img = render(sets[method], camera, args.size, os.path.join(tmp, "frame.png"), 1 if series == "lod" else 0)
+                    img = ab.render(sets[method], "ewa-pixel", camera, args.size, 1, os.path.join(tmp, "frame.png"),
+                                    options=["--lod", "1"] if series == "lod" else [])[0]
                     fl, psnr = masked_metrics(ref, img, mask)
                     rows.append({"scene": scene, "series": series, "x": x, "method": method, "flip": fl, "psnr": psnr,
                                  "pixels": int(mask.sum())})
