@@ -90,6 +90,7 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
     addInteger(block.classification, draco::DT_UINT8);
     addInteger(block.returnNumber, draco::DT_UINT8);
     addInteger(block.numberOfReturns, draco::DT_UINT8);
+    addInteger(block.opacity, draco::DT_UINT8);
     std::vector<uint8_t> narrow8;
     std::vector<uint16_t> narrow16;
     for (const ScalarAttribute& a : block.scalars) {
@@ -207,6 +208,7 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
         else if (name == "classification") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.classification);
         else if (name == "return_number") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.returnNumber);
         else if (name == "number_of_returns") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.numberOfReturns);
+        else if (name == kOpacityAttribute) ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.opacity);
         else if (expect.scalars) ok = readScalar(pc, index, name, &block.scalars);
         ++index;  // any other: a newer writer's attribute, skipped
     }

@@ -35,6 +35,8 @@ struct BlockData {
     std::vector<uint8_t> classification;
     std::vector<uint8_t> returnNumber;
     std::vector<uint8_t> numberOfReturns;
+    // Opacity, 255 = opaque (docs/FORMAT.md, "Opacity"): only in translucent sets.
+    std::vector<uint8_t> opacity;
     // Scalar attributes, after the LiDAR ones, in tileset.json's order (decoded
     // only with BlockExpectation::scalars).
     std::vector<ScalarAttribute> scalars;
@@ -60,6 +62,8 @@ inline constexpr const char* kFixedAttributes[] = {"position", "normal", "color"
 // after the fixed attributes (each block stores those its set lists).
 inline constexpr const char* kLidarAttributes[] = {"intensity", "classification", "return_number", "number_of_returns"};
 enum LidarAttribute { kLidarIntensity, kLidarClassification, kLidarReturnNumber, kLidarNumberOfReturns, kLidarCount };
+// Per-surfel opacity: after the LiDAR attributes, before the scalar ones.
+inline constexpr const char* kOpacityAttribute = "opacity";
 // Index in kLidarAttributes, or -1.
 inline int lidarIndex(const std::string& name) {
     for (int i = 0; i < kLidarCount; ++i)
@@ -70,7 +74,7 @@ inline int lidarIndex(const std::string& name) {
 // Decodes untrusted bytes; checks the attribute set against what the tile set
 // declares (expectColorBits 0 = no colour, expect* = attribute present).
 // `extra` names the attributes after the fixed ones, in block order: those of
-// kLidarAttributes are decoded; any other is a scalar attribute, decoded into
+// kLidarAttributes and the opacity are decoded; any other is a scalar attribute, decoded into
 // BlockData::scalars when `scalars` is set (widened to 32 bits) and skipped
 // otherwise, as are a newer writer's attributes.
 struct BlockExpectation {

@@ -21,6 +21,7 @@ struct InputPoint {
     uint16_t intensity = 0;
     uint8_t classification = 0;  // ASPRS class (LAS 1.4: 0-255)
     uint8_t returns = 0;         // return number in bits 0-3, number of returns in bits 4-7
+    uint8_t alpha = 255;         // opacity, 255 = opaque (PLY alpha/opacity, PCD rgba with --read-alpha)
 };
 
 // A named per-point scalar beyond the fixed attributes of InputPoint: LAS's
@@ -50,6 +51,7 @@ struct InputDescription {
     bool hasIntensity = false;
     bool hasClassification = false;
     bool hasReturns = false;         // return number and number of returns
+    bool hasAlpha = false;           // per-point opacity
     int colorBits = 8;               // bits of the file's colour channels (8 or 16)
     double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
     bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude

@@ -51,7 +51,7 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
         return openPlyReader(path, options.scalars);
     }
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
-        return openPcdReader(path, options.scalars);
+        return openPcdReader(path, options.scalars, options.readAlpha);
     if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF")
         return openLasReader(path, options.threads, options.scalars);
     if (isMeshExtension(path)) return openMeshReader(path, options.mesh);
@@ -305,6 +305,7 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
                 if (s.description.hasIntensity) a.intensityHistogram[p.intensity]++;
                 if (s.description.hasClassification) a.classCounts[p.classification]++;
                 if (s.description.hasReturns) a.returnsHistogram[p.returns]++;
+                a.translucentPoints += pointAlpha(p.alpha, options.opacity) < 255;
                 for (size_t f = 0; f < fields.size(); ++f) {
                     const double v = reader.scalarValues()[i * fields.size() + f];
                     if (std::isnan(v)) continue;
@@ -374,6 +375,7 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 s.intensity = batch[i].intensity;
                 s.classification = batch[i].classification;
                 s.returns = batch[i].returns;
+                s.alpha = pointAlpha(batch[i].alpha, options.opacity);
             }
             scalars.assign(*n * stored.size(), 0);
             for (size_t f = 0; f < stored.size(); ++f) {

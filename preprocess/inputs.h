@@ -28,7 +28,12 @@ struct InputOptions {
     bool verticesOnly = false;   // treat a mesh file as its vertices
     int threads = 1;             // decoder threads (LAZ chunks)
     ScalarSelection scalars;     // scalar fields readers decode (none by default)
+    bool readAlpha = false;      // PCD: take rgba's alpha byte as opacity (often junk, so off)
+    double opacity = 1;          // multiplies every point's opacity (--opacity), in [0, 1]
 };
+
+// A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.
+inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return uint8_t(std::lround(alpha * opacity)); }
 
 // The input files that `args` name, in order: a file as itself, a folder as
 // every file under it with an extension some reader takes (recursively, sorted
@@ -61,6 +66,7 @@ struct AttributeStats {
     std::vector<uint64_t> intensityHistogram = std::vector<uint64_t>(65536);  // points per value
     std::vector<uint64_t> classCounts = std::vector<uint64_t>(256);          // points per class
     std::vector<uint64_t> returnsHistogram = std::vector<uint64_t>(256);     // points per packed returns byte
+    uint64_t translucentPoints = 0;  // points whose stored opacity (pointAlpha) is under 255
 };
 
 // What the first pass learns of one scalar field (input_point.h), over the

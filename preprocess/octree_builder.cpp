@@ -157,6 +157,7 @@ private:
     BuildOptions opt_;
     int threads_ = 1;
     bool store_[kLidarCount] = {};  // per kLidarAttributes: stored
+    bool storeOpacity_ = false;     // some surfel is translucent: "opacity" is stored
     std::vector<ScalarQuantization> stored_;  // scalar fields stored, in block order
     int intensityOffset_ = 0, intensityStep_ = 1;  // stored intensity = (value - offset) / step
     Progress progress_;
@@ -257,6 +258,9 @@ Status Builder::chooseAttributes() {
     store_[kLidarReturnNumber] = store_[kLidarNumberOfReturns] = store_[kLidarReturnNumber] || store_[kLidarNumberOfReturns];
     for (int i = 0; i < kLidarCount; ++i)
         if (store_[i]) summary_.attributes.push_back(kLidarAttributes[i]);
+    // Opacity only where some point is translucent: an opaque set carries none.
+    storeOpacity_ = a.translucentPoints > 0;
+    if (storeOpacity_) summary_.attributes.push_back(kOpacityAttribute);
     // Scalar fields (selected by name or with "all": every one found that
     // varies is stored): exact at the file's own resolution where it has one
     // and the range fits 32 bits; floating ones in the power-of-two step that
@@ -728,6 +732,7 @@ Status Builder::emit(BuiltNode& node, const ScalarTable& scalars) {
     if (store_[kLidarClassification]) block.classification.resize(n);
     if (store_[kLidarReturnNumber]) block.returnNumber.resize(n);
     if (store_[kLidarNumberOfReturns]) block.numberOfReturns.resize(n);
+    if (storeOpacity_) block.opacity.resize(n);
     for (size_t f = 0; f < stored_.size(); ++f) {
         ScalarAttribute& a = block.scalars.emplace_back();
         a.bits = stored_[f].bits;
@@ -750,6 +755,7 @@ Status Builder::emit(BuiltNode& node, const ScalarTable& scalars) {
         if (!block.classification.empty()) block.classification[i] = s.classification;
         if (!block.returnNumber.empty()) block.returnNumber[i] = s.returns & 15;
         if (!block.numberOfReturns.empty()) block.numberOfReturns[i] = s.returns >> 4;
+        if (!block.opacity.empty()) block.opacity[i] = s.alpha;
     }
     block.weights = node.level.weights;
     block.radii = node.level.radii;
@@ -830,6 +836,7 @@ Result<BuildSummary> Builder::run() {
             info.attributes.push_back({kLidarAttributes[i], types[i], 1, 0, i == kLidarIntensity ? "continuous" : "categorical",
                                        i == kLidarIntensity ? double(intensityStep_) : 1.0,
                                        i == kLidarIntensity ? double(intensityOffset_) : 0.0});
+    if (storeOpacity_) info.attributes.push_back({kOpacityAttribute, "uint8", 1, 0, "continuous", 1.0 / 255, 0.0});
     for (const ScalarQuantization& q : stored_)
         info.attributes.push_back({q.name, scalarType(q.bits), 1, 0, q.categorical ? "categorical" : "continuous", q.step, q.offset});
     info.statistics = statistics();

@@ -75,9 +75,10 @@ const char* textureFilterName(BuildOptions::TextureFilter filter);
 
 // Bytes of working memory per point while a chunk is built (points, halo,
 // kd-trees, sort keys, resampled levels), measured on the default scene (320
-// with 48-byte surfels, scaled for the 56-byte ones that carry the LiDAR
-// attributes); the chunk size follows from the budget with it.
-inline constexpr uint64_t kBytesPerChunkPoint = 360;
+// with 48-byte surfels; 360 for the 56-byte ones that carry the LiDAR
+// attributes, each surfel byte held about five times over; 400 for the
+// 64-byte ones with opacity); the chunk size follows from the budget with it.
+inline constexpr uint64_t kBytesPerChunkPoint = 400;
 // And per stored scalar field: its value for the point and for the resampled
 // surfels above it (about 0.4 per point), and the chunk file's buffer.
 inline constexpr uint64_t kBytesPerChunkScalar = 12;

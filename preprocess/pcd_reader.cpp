@@ -144,7 +144,8 @@ Result<PcdHeader> parseHeader(ByteStream& in) {
 
 class PcdReader final : public PointReader {
 public:
-    PcdReader(std::string path, PcdHeader h, const ScalarSelection& scalars) : path_(std::move(path)), h_(std::move(h)) {
+    PcdReader(std::string path, PcdHeader h, const ScalarSelection& scalars, bool readAlpha)
+        : path_(std::move(path)), h_(std::move(h)), readAlpha_(readAlpha) {
         // Single-element fields no fixed attribute takes are scalar fields
         // ("_" marks padding in PCL's files).
         for (Field& f : h_.fields)
@@ -158,11 +159,12 @@ public:
         desc_.format = "pcd";
         desc_.declaredPoints = h_.points;
         for (const Field& f : h_.fields) {
-            if (f.role == Role::Rgb || f.role == Role::Rgba) desc_.hasColors = true;
+            if (f.role == Role::Rgb || f.role == Role::Rgba) desc_.hasColors = desc_.hasAlpha = true;
             if (f.role == Role::NX) desc_.hasNormals = true;
             if (f.role == Role::Intensity) desc_.hasIntensity = true;
             if (f.role == Role::Classification) desc_.hasClassification = true;
         }
+        desc_.hasAlpha = desc_.hasAlpha && readAlpha_;
         desc_.colorBits = 8;
         desc_.float32Coordinates = std::any_of(h_.fields.begin(), h_.fields.end(),
                                                [](const Field& f) { return f.role == Role::X && f.type == 'F' && f.size == 4; });
@@ -296,6 +298,7 @@ private:
                 q.color[0] = uint16_t(((c >> 16) & 0xFF) * 257);
                 q.color[1] = uint16_t(((c >> 8) & 0xFF) * 257);
                 q.color[2] = uint16_t((c & 0xFF) * 257);
+                if (readAlpha_) q.alpha = uint8_t(c >> 24);
                 break;
             }
             case Role::Ignore: break;
@@ -340,6 +343,7 @@ private:
 
     std::string path_;
     PcdHeader h_;
+    bool readAlpha_ = false;
     InputDescription desc_;
     std::unique_ptr<ByteStream> in_;
     std::vector<Column> columns_;
@@ -351,12 +355,12 @@ private:
 
 }  // namespace
 
-Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars) {
+Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars, bool readAlpha) {
     auto in = ByteStream::open(path);
     if (!in) return in.status();
     auto h = parseHeader(*in);
     if (!h) return h.status();
-    auto reader = std::make_unique<PcdReader>(path, std::move(*h), scalars);
+    auto reader = std::make_unique<PcdReader>(path, std::move(*h), scalars, readAlpha);
     SC_TRY(reader->start());
     return std::unique_ptr<PointReader>(std::move(reader));
 }

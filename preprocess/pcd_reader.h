@@ -14,7 +14,10 @@
 namespace surfcast {
 
 // Single-element fields that no fixed attribute takes are scalar fields under
-// their own names; `scalars` selects those decoded.
-Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars = {});
+// their own names; `scalars` selects those decoded. The packed colour's top
+// byte (rgba's alpha, rgb's padding) is opacity only with `readAlpha`: PCL
+// writes 0 or junk there in many files.
+Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars = {},
+                                                   bool readAlpha = false);
 
 }  // namespace surfcast

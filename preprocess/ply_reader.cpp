@@ -143,8 +143,8 @@ uint16_t toChannel(double v, PlyType t) {
 }
 
 struct VertexLayout {
-    int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1, r = -1, g = -1, b = -1, intensity = -1, classification = -1;
-    PlyType colorType = PlyType::UInt8, intensityType = PlyType::UInt16;
+    int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1, r = -1, g = -1, b = -1, intensity = -1, classification = -1, alpha = -1;
+    PlyType colorType = PlyType::UInt8, intensityType = PlyType::UInt16, alphaType = PlyType::UInt8;
     std::vector<int> scalars;  // slots of the selected scalar fields (InputDescription::scalars)
 };
 
@@ -167,7 +167,9 @@ Result<VertexLayout> vertexLayout(const PlyElement& e, const std::string& path, 
     int ii = findProperty(e, {"intensity", "scalar_intensity"});
     if (ii >= 0) { l.intensity = slots[ii]; l.intensityType = e.properties[ii].type; }
     l.classification = slot({"classification", "scalar_classification", "label", "class"});
-    const int taken[] = {l.x, l.y, l.z, l.nx, l.ny, l.nz, l.r, l.g, l.b, l.intensity, l.classification};
+    int ai = findProperty(e, {"alpha", "opacity", "diffuse_alpha"});
+    if (ai >= 0) { l.alpha = slots[ai]; l.alphaType = e.properties[ai].type; }
+    const int taken[] = {l.x, l.y, l.z, l.nx, l.ny, l.nz, l.r, l.g, l.b, l.intensity, l.classification, l.alpha};
     for (size_t i = 0; i < e.properties.size(); ++i) {
         const PlyProperty& p = e.properties[i];
         if (p.isList || std::find(std::begin(taken), std::end(taken), slots[i]) != std::end(taken) || !selection.wants(p.name))
@@ -198,6 +200,7 @@ public:
         desc_.hasColors = layout_.r >= 0;
         desc_.hasIntensity = layout_.intensity >= 0;
         desc_.hasClassification = layout_.classification >= 0;
+        desc_.hasAlpha = layout_.alpha >= 0;
         desc_.colorBits = layout_.colorType == PlyType::UInt8 || layout_.colorType == PlyType::Int8 ? 8 : 16;
         const PlyProperty& px = vertex_->properties[findProperty(*vertex_, {"x"})];
         desc_.float32Coordinates = px.type == PlyType::Float32;
@@ -233,6 +236,7 @@ public:
             }
             if (layout_.intensity >= 0) p.intensity = toChannel(scalars_[layout_.intensity], layout_.intensityType);
             if (layout_.classification >= 0) p.classification = classOf(scalars_[layout_.classification]);
+            if (layout_.alpha >= 0) SC_TRY(readAlpha(scalars_[layout_.alpha], &p.alpha));
             for (size_t f = 0; f < fields; ++f) scalarValues_[n * fields + f] = scalars_[size_t(layout_.scalars[f])];
             ++n;
         }
@@ -241,6 +245,19 @@ public:
     }
 
 private:
+    // Integer alpha scales by its type's range; floating-point opacity must be
+    // in [0, 1]. 3D Gaussian splatting files store a logit under "opacity":
+    // those fail here rather than drawing as noise.
+    Status readAlpha(double v, uint8_t* alpha) const {
+        const bool floating = layout_.alphaType == PlyType::Float32 || layout_.alphaType == PlyType::Float64;
+        if (floating && !(v >= 0 && v <= 1))
+            return Status::error(desc_.path + ": vertex " + std::to_string(index_ - 1) + ": opacity " + std::to_string(v) +
+                                 " is outside [0, 1] (a 3D Gaussian splatting file's logit opacity is not read)");
+        const double unit = floating ? v : toChannel(v, layout_.alphaType) / 65535.0;
+        *alpha = uint8_t(std::lround(unit * 255));
+        return {};
+    }
+
     ByteStream in_;
     PlyHeader header_;
     VertexLayout layout_;

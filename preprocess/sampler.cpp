@@ -114,7 +114,7 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
         std::fill(scalarSum.begin(), scalarSum.end(), 0.0);
         int64_t x = int64_t(cells[c].key >> (2 * kAxisBits)), y = int64_t((cells[c].key >> kAxisBits) & kAxisMask),
                 z = int64_t(cells[c].key & kAxisMask);
-        float sum[4] = {0, 0, 0, 0}, wsum = 0;  // colour, intensity
+        float sum[5] = {0, 0, 0, 0, 0}, wsum = 0;  // colour, intensity, opacity
         for (int64_t nx = x - 1; nx <= x + 1; ++nx)
             for (int64_t ny = y - 1; ny <= y + 1; ++ny) {
                 if (nx < 0 || ny < 0 || nx >= grid.cells || ny >= grid.cells) continue;
@@ -129,6 +129,7 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
                         float w = p.count * std::exp(-dot(d, d) * inv2Sigma2);
                         for (int ch = 0; ch < 3; ++ch) sum[ch] += w * float(p.color[ch]);
                         sum[3] += w * float(p.intensity);
+                        sum[4] += w * float(p.alpha);
                         wsum += w;
                         for (size_t f = 0; f < fields; ++f) scalarSum[f] += double(w) * table->row(p.row)[f];
                     }
@@ -136,6 +137,7 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
         if (wsum > 0) {
             for (int ch = 0; ch < 3; ++ch) out[c].color[ch] = uint16_t(std::clamp(std::lround(sum[ch] / wsum), 0l, 65535l));
             out[c].intensity = uint16_t(std::clamp(std::lround(sum[3] / wsum), 0l, 65535l));
+            out[c].alpha = uint8_t(std::clamp(std::lround(sum[4] / wsum), 0l, 255l));
             for (size_t f = 0; f < fields; ++f)
                 if (!table->categorical[f]) rows[c * fields + f] = uint32_t(std::llround(scalarSum[f] / wsum));
         }

@@ -4,7 +4,7 @@
 // normal the normalized count-weighted average, its colour a Gaussian-weighted
 // average over the cell and its 26 neighbours: the view-independent texture
 // prefilter of Zwicker et al. 2001, §5, with standard deviation kPrefilterSigma
-// cell sizes. Intensity is prefiltered the same way; the class and the returns
+// cell sizes. Intensity and opacity are prefiltered the same way; the class and the returns
 // (categorical) are the majority of the cell's input points, never averaged.
 // Stored scalar fields (--attributes gps_time, ...) follow the same two rules
 // by their kind.

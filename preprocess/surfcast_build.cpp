@@ -61,6 +61,11 @@ the text file LIST, one per line.
                           request: LAS/LAZ scan_angle, user_data, point_source_id,
                           gps_time, nir and Extra Bytes dimensions by name; PLY and
                           PCD properties by name
+  --opacity A             multiply every point's opacity by A in [0, 1] (all inputs);
+                          the set stores opacity only where some point is translucent
+                          (PLY alpha/opacity properties; see --read-alpha)
+  --read-alpha            PCD: take the packed colour's top byte (rgba's alpha) as
+                          opacity; off by default, as many PCD files leave junk there
   --columns LAYOUT        text layout, e.g. x,y,z,r,g,b or x,y,z,_,nx,ny,nz
   --mesh-spacing S        mesh sampling spacing (default: one surfel per texel on a
                           textured mesh, else half the median edge; coarsened where
@@ -209,6 +214,11 @@ int main(int argc, char** argv) {
                 }
             }
             opt.attributes = names;
+        } else if (a == "--opacity") {
+            if (!number(&d, 0, 1)) return usageError("--opacity needs a value in [0, 1]");
+            opt.inputs.opacity = d;
+        } else if (a == "--read-alpha") {
+            opt.inputs.readAlpha = true;
         } else if (a == "--columns") {
             if (!value(&opt.inputs.columns)) return usageError("--columns needs a layout");
         } else if (a == "--mesh-spacing") {

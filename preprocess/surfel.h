@@ -21,7 +21,9 @@ struct Surfel {
     uint8_t classification = 0;
     uint8_t returns = 0;     // return number in bits 0-3, number of returns in bits 4-7
     uint32_t row = 0;        // its stored scalar fields' row in the ScalarTable (sampler.h) of the nodes being built
+    uint8_t alpha = 255;     // opacity, 255 = opaque; resampled levels take it prefiltered, as colour
 };
-static_assert(sizeof(Surfel) == 56, "chunk files store Surfel records raw; keep them compact");
+// 57 bytes of fields padded to the 8-byte alignment of the position.
+static_assert(sizeof(Surfel) == 64, "chunk files store Surfel records raw; keep them compact");
 
 }  // namespace surfcast

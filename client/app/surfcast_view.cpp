@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
     }
     if (options.color)
         for (auto& s : set->surfels) s.color = surfcast::packColor(*options.color);
-    options.settings = surfcast::effectiveSettings(options, surfcast::settingsForSet(set->kernelScale, set->hasColor, set->normalsOriented));
+    options.settings = surfcast::effectiveSettings(options, surfcast::settingsForSet(set->kernelScale, set->hasColor, set->normalsOriented, set->translucent));
     if (options.settings.mode == surfcast::RenderMode::EwaSurfel && !set->hasWeights)
         std::fprintf(stderr, "surfcast-view: warning: %s has no normalization weights; ewa-surfel draws every surfel at "
                              "weight 1 (build with --weights analytic, or run surfcast-weights on the set)\n",

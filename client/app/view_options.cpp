@@ -1,6 +1,7 @@
 #include "view_options.h"
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -39,6 +40,10 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
                         the background by their coverage (default: on)
   --edge-tau T          kernel sum at which a silhouette pixel counts as fully covered
                         (default 4)
+  --opacity A           multiply every surfel's opacity by A in [0, 1]: see through
+                        the whole set (default 1: as stored, opaque unless built translucent)
+  --layers L            translucent frames: surfaces resolved per pixel, nearest first
+                        (Zwicker 2001 §6; default 4); those behind merge into the last
   --shading S           unlit, lambert, phong (default: unlit for rgb and intensity, else lambert)
   --backface-cull on|off
                         drop splats facing away from the eye, in every mode (default:
@@ -220,6 +225,14 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
         } else if (a == "--edge-tau") {
             if (!value() || !parseFloat(v, &o->settings.edgeTau) || !(o->settings.edgeTau > 0))
                 return (*exitCode = usageError("--edge-tau wants a number > 0")), false;
+        } else if (a == "--opacity") {
+            if (!value() || !parseFloat(v, &o->settings.opacity) || !(o->settings.opacity >= 0 && o->settings.opacity <= 1))
+                return (*exitCode = usageError("--opacity wants a number in [0, 1]")), false;
+        } else if (a == "--layers") {
+            float l = 0;
+            if (!value() || !parseFloat(v, &l) || l != std::floor(l) || l < 1 || l > kMaxLayers)
+                return (*exitCode = usageError("--layers wants a whole number in [1, " + std::to_string(kMaxLayers) + "]")), false;
+            o->settings.layers = int(l);
         } else if (a == "--shading") {
             auto s = value() ? parseShading(v) : std::nullopt;
             if (!s) return (*exitCode = usageError("--shading wants unlit, lambert or phong")), false;
@@ -314,6 +327,7 @@ RenderSettings effectiveSettings(const ViewOptions& o, const RenderSettings& set
     if (!o.shadingGiven) s.shading = setDefaults.shading;
     if (!o.backfaceCullGiven) s.backfaceCull = setDefaults.backfaceCull;
     if (!o.edgeAAGiven) s.edgeAA = setDefaults.edgeAA;
+    s.translucent = setDefaults.translucent;
     return s;
 }
 

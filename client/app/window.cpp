@@ -220,7 +220,8 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                 } else {
                     auto reloaded = loadSurfelSet(o.set, o.level, *c);
                     rs = reloaded ? renderer->upload(*reloaded) : reloaded.status();
-                    if (reloaded) setDefaults = settingsForSet(reloaded->kernelScale, reloaded->hasColor, reloaded->normalsOriented);
+                    if (reloaded) setDefaults = settingsForSet(reloaded->kernelScale, reloaded->hasColor, reloaded->normalsOriented,
+                                                               reloaded->translucent);
                 }
                 if (!rs) {
                     status = fail(rs.message());

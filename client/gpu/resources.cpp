@@ -238,6 +238,11 @@ Result<VkPipeline> createGraphicsPipeline(Context& ctx, const PipelineDesc& d, V
             b.srcColorBlendFactor = b.dstColorBlendFactor = VK_BLEND_FACTOR_ONE;
             b.srcAlphaBlendFactor = b.dstAlphaBlendFactor = VK_BLEND_FACTOR_ONE;
             b.colorBlendOp = b.alphaBlendOp = VK_BLEND_OP_ADD;
+        } else if (d.underBlend) {
+            b.blendEnable = VK_TRUE;
+            b.srcColorBlendFactor = b.srcAlphaBlendFactor = VK_BLEND_FACTOR_ONE_MINUS_DST_ALPHA;
+            b.dstColorBlendFactor = b.dstAlphaBlendFactor = VK_BLEND_FACTOR_ONE;
+            b.colorBlendOp = b.alphaBlendOp = VK_BLEND_OP_ADD;
         }
     }
     VkPipelineColorBlendStateCreateInfo blend{VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};

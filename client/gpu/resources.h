@@ -59,6 +59,8 @@ struct PipelineDesc {
     std::vector<VkVertexInputAttributeDescription> attributes;
     std::vector<VkFormat> colorFormats;
     bool additiveBlend = false;
+    // Front-to-back "under" compositing of premultiplied colour: dst += (1 - dst.a) * src.
+    bool underBlend = false;
     VkFormat depthFormat = VK_FORMAT_UNDEFINED;
     bool depthTest = false, depthWrite = false;
     VkCompareOp depthCompare = VK_COMPARE_OP_GREATER;  // reversed Z

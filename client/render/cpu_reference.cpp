@@ -32,7 +32,42 @@ struct ScreenSplat {
     float zt;             // depth offset, world units
     float depthExtent;    // the disc's half-extent in depth, world units
     Vec3f color;
+    float alpha;          // opacity, the set's times settings.opacity
 };
+
+// One surface's fragment in a translucent frame's A-buffer (Zwicker 2001 §6):
+// the sums of every splat that joined it, the depth of its nearest
+// contribution and that one's z threshold.
+struct Fragment {
+    float z, zt;
+    float r, g, b, w, a, nx, ny, nz, coverage;
+};
+
+// Adds contribution `c` (its sums, depth z and threshold zt) to a pixel's
+// fragments, at most `layers` of them kept in depth order: it joins the first
+// fragment it lies within z_t of (either one's z_t, measured from the nearer),
+// else it is a fragment of its own; past `layers`, the two fragments closest
+// in depth merge (§6).
+void addToABuffer(Fragment* frags, uint8_t& count, int layers, const Fragment& c) {
+    auto join = [](Fragment& f, const Fragment& g) {
+        if (g.z < f.z) f.z = g.z, f.zt = g.zt;
+        f.r += g.r, f.g += g.g, f.b += g.b, f.w += g.w, f.a += g.a;
+        f.nx += g.nx, f.ny += g.ny, f.nz += g.nz, f.coverage += g.coverage;
+    };
+    int at = 0;
+    while (at < count && frags[at].z < c.z) ++at;
+    if (at > 0 && c.z - frags[at - 1].z <= frags[at - 1].zt) return join(frags[at - 1], c);
+    if (at < count && frags[at].z - c.z <= c.zt) return join(frags[at], c);
+    for (int i = count; i > at; --i) frags[i] = frags[i - 1];
+    frags[at] = c;
+    if (++count <= layers) return;
+    int closest = 0;
+    for (int i = 1; i + 1 < count; ++i)
+        if (frags[i + 1].z - frags[i].z < frags[closest + 1].z - frags[closest].z) closest = i;
+    join(frags[closest], frags[closest + 1]);
+    for (int i = closest + 1; i + 1 < count; ++i) frags[i] = frags[i + 1];
+    --count;
+}
 
 bool finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
@@ -119,6 +154,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         sp.zt = settings.zt * extent;
         sp.depthExtent = std::sqrt(cutoff2) * extent * std::sqrt(std::max(0.f, 1.f - n.z * n.z));
         sp.color = unpackColor(g.color);
+        sp.alpha = float(g.color >> 24) / 255.f * std::clamp(settings.opacity, 0.f, 1.f);
         splats.push_back(sp);
     }
 
@@ -144,6 +180,68 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
     };
     const int threads = std::max(1, omp_get_max_threads());
     const int band = (H + threads - 1) / threads;
+    auto finish = [&](Image image, size_t covered) {
+        if (stats) {
+            stats->splats = splats.size();
+            stats->pixelsCovered = covered;
+            stats->milliseconds = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        }
+        return image;
+    };
+    auto store = [](uint8_t* px, const Vec3f& c, float alpha) {
+        px[0] = uint8_t(std::lround(std::clamp(c.x, 0.f, 1.f) * 255.f));
+        px[1] = uint8_t(std::lround(std::clamp(c.y, 0.f, 1.f) * 255.f));
+        px[2] = uint8_t(std::lround(std::clamp(c.z, 0.f, 1.f) * 255.f));
+        px[3] = uint8_t(std::lround(std::clamp(alpha, 0.f, 1.f) * 255.f));
+    };
+
+    if (settings.translucent || settings.opacity < 1.f) {
+        // Translucent (§6): every fragment goes to the A-buffer, in the
+        // splats' order; then each pixel's layers blend back to front (eq. 12).
+        const int layers = std::clamp(settings.layers, 1, kMaxLayers);
+        const size_t slots = size_t(layers) + 1;  // one more: the arrival that forces a merge
+        std::vector<Fragment> frags(size_t(W) * H * slots);
+        std::vector<uint8_t> counts(size_t(W) * H, 0);
+#pragma omp parallel for num_threads(threads) schedule(static, 1)
+        for (int b = 0; b < threads; ++b)
+            forEachFragment(b * band, std::min(H, (b + 1) * band), [&](const ScreenSplat& sp, int x, int y, float q) {
+                Vec3f d = ray(x, y);
+                const size_t i = size_t(y) * W + x;
+                const float g = std::exp(-0.5f * q), w = sp.amplitude * g;
+                const Fragment c{rayDistance(sp, d, length(d)), sp.zt, sp.color.x * w, sp.color.y * w, sp.color.z * w, w,
+                                 sp.alpha * w, sp.n.x * w, sp.n.y * w, sp.n.z * w, g};
+                addToABuffer(&frags[i * slots], counts[i], layers, c);
+            });
+        Image image{W, H, std::vector<uint8_t>(size_t(W) * H * 4)};
+        size_t covered = 0;
+        for (int y = 0; y < H; ++y)
+            for (int x = 0; x < W; ++x) {
+                const size_t i = size_t(y) * W + x;
+                Vec3f c = settings.background;
+                float total = 0;
+                for (int k = int(counts[i]) - 1; k >= 0; --k) {
+                    const Fragment& f = frags[i * slots + size_t(k)];
+                    if (!(f.coverage > 0 && f.w > 0)) continue;
+                    float alpha = f.a / f.w;
+                    // Edge antialiasing per layer, on that layer's border: a
+                    // 4-neighbour without a k-th surface (the GPU's rule).
+                    if (settings.edgeAA && f.coverage < settings.edgeTau) {
+                        bool border = false;
+                        for (auto [dx, dy] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}}) {
+                            const int qx = std::clamp(x + dx, 0, W - 1), qy = std::clamp(y + dy, 0, H - 1);
+                            border = border || counts[size_t(qy) * W + qx] <= k;
+                        }
+                        if (border) alpha *= f.coverage / settings.edgeTau;
+                    }
+                    const Vec3f color = shadePixel(settings.shading, Vec3f{f.r, f.g, f.b} * (1.f / f.w), {f.nx, f.ny, f.nz}, ray(x, y));
+                    c = color * alpha + c * (1.f - alpha);
+                    total = alpha + total * (1.f - alpha);
+                }
+                covered += counts[i] > 0;
+                store(&image.rgba[4 * i], c, total);
+            }
+        return finish(std::move(image), covered);
+    }
 #pragma omp parallel for num_threads(threads) schedule(static, 1)
     for (int b = 0; b < threads; ++b) {
         int y0 = b * band, y1 = std::min(H, y0 + band);
@@ -199,18 +297,9 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
                 c = settings.background + (c - settings.background) * alpha;
                 ++covered;
             }
-            uint8_t* px = &image.rgba[4 * i];
-            px[0] = uint8_t(std::lround(std::clamp(c.x, 0.f, 1.f) * 255.f));
-            px[1] = uint8_t(std::lround(std::clamp(c.y, 0.f, 1.f) * 255.f));
-            px[2] = uint8_t(std::lround(std::clamp(c.z, 0.f, 1.f) * 255.f));
-            px[3] = uint8_t(std::lround(alpha * 255.f));
+            store(&image.rgba[4 * i], c, alpha);
         }
-    if (stats) {
-        stats->splats = splats.size();
-        stats->pixelsCovered = covered;
-        stats->milliseconds = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    }
-    return image;
+    return finish(std::move(image), covered);
 }
 
 }  // namespace surfcast

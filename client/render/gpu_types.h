@@ -14,4 +14,5 @@ static_assert(sizeof(FrameParams) == 128);
 static_assert(offsetof(FrameParams, viewport) == 48 && offsetof(FrameParams, kernel) == 64);
 static_assert(offsetof(FrameParams, resolve) == 80 && offsetof(FrameParams, mode) == 96);
 static_assert(offsetof(FrameParams, circleScale) == 108 && offsetof(FrameParams, flags) == 112);
+static_assert(offsetof(FrameParams, opacity) == 116 && offsetof(FrameParams, layers) == 124);
 }  // namespace surfcast::gpu_types

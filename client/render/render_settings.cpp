@@ -1,5 +1,6 @@
 #include "render_settings.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace surfcast {
@@ -58,7 +59,12 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
                 : s.shading == Shading::Lambert ? SC_SHADING_LAMBERT : SC_SHADING_PHONG;
     p.maxFilterPixels = kMaxFilterPixels;
     p.circleScale = s.kernelScale;
-    p.flags = (s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u) | (s.edgeAA ? SC_FLAG_EDGE_AA : 0u);
+    const bool translucent = s.translucent || s.opacity < 1.f;
+    p.flags = (s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u) | (s.edgeAA ? SC_FLAG_EDGE_AA : 0u) |
+              (translucent ? SC_FLAG_TRANSLUCENT : 0u);
+    p.opacity = std::clamp(s.opacity, 0.f, 1.f);
+    p.layer = 0;
+    p.layers = uint32_t(std::clamp(s.layers, 1, kMaxLayers));
     return p;
 }
 
@@ -89,8 +95,9 @@ bool normalsOriented(const std::string& normalSource) {
     return true;
 }
 
-RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented) {
+RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented, bool translucent) {
     RenderSettings s;
+    s.translucent = translucent;
     s.kernelScale = float(kernelScale);
     s.shading = hasColor ? Shading::Unlit : Shading::Lambert;
     s.backfaceCull = oriented;

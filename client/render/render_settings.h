@@ -45,6 +45,10 @@ inline constexpr float kDefaultLowpassVariance = 0.1f;
 // worse again at 8. Interiors never change: only border pixels take partial
 // coverage.
 inline constexpr float kDefaultEdgeTau = 4.f;
+// Default l, the fragment layers per pixel of translucent frames (Zwicker 2001
+// §6): each costs one visibility and one accumulation pass over the splats.
+inline constexpr int kDefaultLayers = 4;
+inline constexpr int kMaxLayers = 16;
 // Near plane, as a fraction of the set's bounding-box diagonal (reversed-Z
 // depth keeps float precision at every distance, so it can be small).
 inline constexpr double kNearFraction = 1e-4;
@@ -69,6 +73,14 @@ struct RenderSettings {
     // where normals are oriented (normalsOriented below), wrong where their
     // sign is arbitrary.
     bool backfaceCull = false;
+    // Transparency (Zwicker 2001 §6): a frame is translucent where the set
+    // stores opacity (SurfelSet::translucent) or `opacity` is under 1, which
+    // multiplies every surfel's. Translucent frames resolve up to `layers`
+    // surfaces per pixel, nearest first, and blend them back to front (eq. 12);
+    // fragments beyond the last merge into it. Points and circles stay opaque.
+    bool translucent = false;
+    float opacity = 1.f;
+    int layers = kDefaultLayers;
 };
 
 // Push constants for one frame; `nearPlane` in world units.
@@ -83,7 +95,7 @@ bool normalsOriented(const std::string& normalSource);
 // The settings a tile set is drawn with unless told otherwise: the kernel
 // scale its weights assume (tileset.json kernel_scale), unlit when it has
 // colours, else Lambert; backface culling where its normals are oriented.
-RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented);
+RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented, bool translucent = false);
 
 // The resolve's shading of one pixel (the GLSL resolve shader is its twin):
 // colour, filtered camera-space normal (any length), pixel ray direction.

@@ -8,6 +8,10 @@
 #include "splat_point.vert.h"
 #include "splat_quad.vert.h"
 #include "splat_visibility.frag.h"
+#include "splat_peel.frag.h"
+#include "splat_layer.frag.h"
+#include "resolve_layer.frag.h"
+#include "composite.frag.h"
 
 namespace surfcast {
 
@@ -17,6 +21,8 @@ ShaderCode shaderCode(ShaderId id) {
         CODE(SplatQuadVert, splat_quad_vert) CODE(SplatPointVert, splat_point_vert) CODE(SplatGeom, splat_geom)
         CODE(SplatVisibilityFrag, splat_visibility_frag) CODE(SplatAccumulateFrag, splat_accumulate_frag)
         CODE(OpaqueFrag, opaque_frag) CODE(FullscreenVert, fullscreen_vert) CODE(ResolveFrag, resolve_frag)
+        CODE(SplatPeelFrag, splat_peel_frag) CODE(SplatLayerFrag, splat_layer_frag)
+        CODE(ResolveLayerFrag, resolve_layer_frag) CODE(CompositeFrag, composite_frag)
 #undef CODE
     }
     return {nullptr, 0};

@@ -12,7 +12,10 @@ struct ShaderCode {
     size_t bytes;
 };
 
-enum class ShaderId { SplatQuadVert, SplatPointVert, SplatGeom, SplatVisibilityFrag, SplatAccumulateFrag, OpaqueFrag, FullscreenVert, ResolveFrag };
+enum class ShaderId {
+    SplatQuadVert, SplatPointVert, SplatGeom, SplatVisibilityFrag, SplatAccumulateFrag, OpaqueFrag, FullscreenVert, ResolveFrag,
+    SplatPeelFrag, SplatLayerFrag, ResolveLayerFrag, CompositeFrag  // translucent frames
+};
 
 ShaderCode shaderCode(ShaderId id);
 

@@ -81,17 +81,39 @@ Status SplatRenderer::createPipelines() {
     layout.setLayoutCount = 1;
     layout.pSetLayouts = &resolveSetLayout_;
     VK_TRY(vkCreatePipelineLayout(dev, &layout, nullptr, &resolveLayout_));
-    VkDescriptorPoolSize poolSize{VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2};
+    // Translucent frames' sets: one image, or the three accumulation targets.
+    VkDescriptorSetLayoutBinding three[3] = {bindings[0], bindings[1], bindings[1]};
+    three[2].binding = 2;
+    setLayout.bindingCount = 1;
+    VK_TRY(vkCreateDescriptorSetLayout(dev, &setLayout, nullptr, &oneImageSetLayout_));
+    setLayout.bindingCount = 3;
+    setLayout.pBindings = three;
+    VK_TRY(vkCreateDescriptorSetLayout(dev, &setLayout, nullptr, &threeImageSetLayout_));
+    layout.pSetLayouts = &oneImageSetLayout_;
+    VK_TRY(vkCreatePipelineLayout(dev, &layout, nullptr, &oneImageLayout_));
+    layout.pSetLayouts = &threeImageSetLayout_;
+    VK_TRY(vkCreatePipelineLayout(dev, &layout, nullptr, &threeImageLayout_));
+
+    // Sets: resolve (2 images), two previous depths and the composite (1
+    // each), the layer's targets (3).
+    VkDescriptorPoolSize poolSize{VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2 + 3 + 3};
     VkDescriptorPoolCreateInfo pool{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
-    pool.maxSets = 1;
+    pool.maxSets = 5;
     pool.poolSizeCount = 1;
     pool.pPoolSizes = &poolSize;
     VK_TRY(vkCreateDescriptorPool(dev, &pool, nullptr, &descriptorPool_));
-    VkDescriptorSetAllocateInfo alloc{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
-    alloc.descriptorPool = descriptorPool_;
-    alloc.descriptorSetCount = 1;
-    alloc.pSetLayouts = &resolveSetLayout_;
-    VK_TRY(vkAllocateDescriptorSets(dev, &alloc, &resolveSet_));
+    auto allocate = [&](VkDescriptorSetLayout l, VkDescriptorSet* set) {
+        VkDescriptorSetAllocateInfo alloc{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+        alloc.descriptorPool = descriptorPool_;
+        alloc.descriptorSetCount = 1;
+        alloc.pSetLayouts = &l;
+        return vkAllocateDescriptorSets(dev, &alloc, set);
+    };
+    VK_TRY(allocate(resolveSetLayout_, &resolveSet_));
+    VK_TRY(allocate(oneImageSetLayout_, &previousDepthSets_[0]));
+    VK_TRY(allocate(oneImageSetLayout_, &previousDepthSets_[1]));
+    VK_TRY(allocate(oneImageSetLayout_, &compositeSet_));
+    VK_TRY(allocate(threeImageSetLayout_, &layerSet_));
     VkSamplerCreateInfo sampler{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};
     sampler.magFilter = sampler.minFilter = VK_FILTER_NEAREST;
     VK_TRY(vkCreateSampler(dev, &sampler, nullptr, &sampler_));
@@ -104,7 +126,8 @@ Status SplatRenderer::createPipelines() {
 
     // Shader modules live only while the pipelines are made.
     ShaderId ids[] = {ShaderId::SplatQuadVert, ShaderId::SplatPointVert, ShaderId::SplatGeom, ShaderId::SplatVisibilityFrag,
-                      ShaderId::SplatAccumulateFrag, ShaderId::OpaqueFrag, ShaderId::FullscreenVert, ShaderId::ResolveFrag};
+                      ShaderId::SplatAccumulateFrag, ShaderId::OpaqueFrag, ShaderId::FullscreenVert, ShaderId::ResolveFrag,
+                      ShaderId::SplatPeelFrag, ShaderId::SplatLayerFrag, ShaderId::ResolveLayerFrag, ShaderId::CompositeFrag};
     VkShaderModule modules[std::size(ids)] = {};
     auto module = [&](ShaderId id) { return modules[size_t(id)]; };
     Status status;
@@ -173,6 +196,24 @@ Status SplatRenderer::createPipelines() {
     resolve.colorFormats = {kOutputFormat};
     make(resolve, resolveLayout_, resolve_);
 
+    gpu::PipelineDesc peel = vis;
+    peel.fragment = module(ShaderId::SplatPeelFrag);
+    make(peel, oneImageLayout_, peel_);
+    gpu::PipelineDesc layer = acc;
+    layer.fragment = module(ShaderId::SplatLayerFrag);
+    layer.colorFormats = {accumFormat_, accumFormat_, alphaFormat()};
+    make(layer, oneImageLayout_, layer_);
+    layer.depthTest = false;  // the last layer: every fragment behind the others
+    make(layer, oneImageLayout_, layerRest_);
+    gpu::PipelineDesc resolveLayer = resolve;
+    resolveLayer.fragment = module(ShaderId::ResolveLayerFrag);
+    resolveLayer.colorFormats = {accumFormat_};
+    resolveLayer.underBlend = true;
+    make(resolveLayer, threeImageLayout_, resolveLayer_);
+    gpu::PipelineDesc composite = resolve;
+    composite.fragment = module(ShaderId::CompositeFrag);
+    make(composite, oneImageLayout_, composite_);
+
     for (VkShaderModule m : modules)
         if (m) vkDestroyShaderModule(dev, m, nullptr);
     return status;
@@ -183,18 +224,20 @@ SplatRenderer::~SplatRenderer() {
     vkDeviceWaitIdle(dev);
     destroyTargets();
     gpu::destroyBuffer(ctx_, surfels_);
-    for (VkPipeline p : {points_, circles_, visibility_, accumulate_, resolve_})
+    for (VkPipeline p : {points_, circles_, visibility_, accumulate_, resolve_, peel_, layer_, layerRest_, resolveLayer_, composite_})
         if (p) vkDestroyPipeline(dev, p, nullptr);
-    if (splatLayout_) vkDestroyPipelineLayout(dev, splatLayout_, nullptr);
-    if (resolveLayout_) vkDestroyPipelineLayout(dev, resolveLayout_, nullptr);
+    for (VkPipelineLayout l : {splatLayout_, resolveLayout_, oneImageLayout_, threeImageLayout_})
+        if (l) vkDestroyPipelineLayout(dev, l, nullptr);
     if (descriptorPool_) vkDestroyDescriptorPool(dev, descriptorPool_, nullptr);
-    if (resolveSetLayout_) vkDestroyDescriptorSetLayout(dev, resolveSetLayout_, nullptr);
+    for (VkDescriptorSetLayout l : {resolveSetLayout_, oneImageSetLayout_, threeImageSetLayout_})
+        if (l) vkDestroyDescriptorSetLayout(dev, l, nullptr);
     if (sampler_) vkDestroySampler(dev, sampler_, nullptr);
     if (queries_) vkDestroyQueryPool(dev, queries_, nullptr);
 }
 
 void SplatRenderer::destroyTargets() {
-    for (gpu::Image* img : {&depth_, &colorWeight_, &normalWeight_, &output_}) gpu::destroyImage(ctx_, *img);
+    for (gpu::Image* img : {&depth_, &colorWeight_, &normalWeight_, &output_, &depth2_, &alphaWeight_, &compositeImage_})
+        gpu::destroyImage(ctx_, *img);
     gpu::destroyBuffer(ctx_, readback_);
 }
 
@@ -230,29 +273,40 @@ Status SplatRenderer::resize(uint32_t width, uint32_t height) {
         return {};
     };
     // TRANSFER_SRC on depth and colour*w: capture() reads them back.
-    SC_TRY(make(depth_, kDepthFormat, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
-                VK_IMAGE_ASPECT_DEPTH_BIT));
+    // SAMPLED on the depths: translucent frames read the previous layer's.
+    const VkImageUsageFlags depthUsage =
+        VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_SAMPLED_BIT;
+    SC_TRY(make(depth_, kDepthFormat, depthUsage, VK_IMAGE_ASPECT_DEPTH_BIT));
+    SC_TRY(make(depth2_, kDepthFormat, depthUsage, VK_IMAGE_ASPECT_DEPTH_BIT));
     const VkImageUsageFlags accum = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT |
                                     VK_IMAGE_USAGE_TRANSFER_SRC_BIT;
     SC_TRY(make(colorWeight_, accumFormat_, accum, VK_IMAGE_ASPECT_COLOR_BIT));
     SC_TRY(make(normalWeight_, accumFormat_, accum, VK_IMAGE_ASPECT_COLOR_BIT));
+    SC_TRY(make(alphaWeight_, alphaFormat(), accum, VK_IMAGE_ASPECT_COLOR_BIT));
+    SC_TRY(make(compositeImage_, accumFormat_, accum, VK_IMAGE_ASPECT_COLOR_BIT));
     SC_TRY(make(output_, kOutputFormat, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
                 VK_IMAGE_ASPECT_COLOR_BIT));
     auto rb = gpu::createBuffer(ctx_, VkDeviceSize(width) * height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
     if (!rb) return rb.status();
     readback_ = *rb;
-    VkDescriptorImageInfo images[2] = {{sampler_, colorWeight_.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
-                                       {sampler_, normalWeight_.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
-    VkWriteDescriptorSet writes[2] = {};
-    for (uint32_t i = 0; i < 2; ++i) {
+    const VkImageLayout read = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+    struct Binding { VkDescriptorSet set; uint32_t binding; VkImageView view; };
+    const Binding bindings[] = {{resolveSet_, 0, colorWeight_.view},     {resolveSet_, 1, normalWeight_.view},
+                                {layerSet_, 0, colorWeight_.view},       {layerSet_, 1, normalWeight_.view},
+                                {layerSet_, 2, alphaWeight_.view},       {compositeSet_, 0, compositeImage_.view},
+                                {previousDepthSets_[0], 0, depth_.view}, {previousDepthSets_[1], 0, depth2_.view}};
+    VkDescriptorImageInfo images[std::size(bindings)];
+    VkWriteDescriptorSet writes[std::size(bindings)];
+    for (size_t i = 0; i < std::size(bindings); ++i) {
+        images[i] = {sampler_, bindings[i].view, read};
         writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-        writes[i].dstSet = resolveSet_;
-        writes[i].dstBinding = i;
+        writes[i].dstSet = bindings[i].set;
+        writes[i].dstBinding = bindings[i].binding;
         writes[i].descriptorCount = 1;
         writes[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
         writes[i].pImageInfo = &images[i];
     }
-    vkUpdateDescriptorSets(ctx_.device, 2, writes, 0, nullptr);
+    vkUpdateDescriptorSets(ctx_.device, uint32_t(std::size(writes)), writes, 0, nullptr);
     return {};
 }
 
@@ -300,9 +354,12 @@ void SplatRenderer::record(VkCommandBuffer cmd, const FrameParams& params) {
     };
     VkShaderStageFlags pushStages = VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT |
                                     (ctx_.geometryShader ? VK_SHADER_STAGE_GEOMETRY_BIT : 0);
+    FrameParams frame = params;  // translucent frames change the layer
+    // Every pipeline layout has the same push-constant range, so pushing
+    // through splatLayout_ serves them all.
     auto draw = [&](VkPipeline pipeline, bool quads) {
         vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
-        vkCmdPushConstants(cmd, splatLayout_, pushStages, 0, sizeof(params), &params);
+        vkCmdPushConstants(cmd, splatLayout_, pushStages, 0, sizeof(frame), &frame);
         if (splatCount_ == 0) return;
         VkDeviceSize offset = 0;
         vkCmdBindVertexBuffers(cmd, 0, 1, &drawBuffer_, &offset);
@@ -313,6 +370,80 @@ void SplatRenderer::record(VkCommandBuffer cmd, const FrameParams& params) {
     };
     const bool quads = options_.expansion == Expansion::Quad;
     ewaFrame_ = params.mode != SC_MODE_POINTS && params.mode != SC_MODE_CIRCLES;
+    auto fullscreen = [&](VkPipeline pipeline, VkPipelineLayout layout, VkDescriptorSet set) {
+        vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
+        vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout, 0, 1, &set, 0, nullptr);
+        vkCmdPushConstants(cmd, layout, pushStages, 0, sizeof(frame), &frame);
+        vkCmdDraw(cmd, 3, 1, 0, 0);
+    };
+    if (ewaFrame_ && (params.flags & SC_FLAG_TRANSLUCENT) != 0u) {
+        // Depth peeling, layer by layer (see the header). Layouts: a depth is
+        // an attachment while its layer draws and sampled (`read`) while the
+        // next one does; depth2_ starts sampled, as layer -1's.
+        const VkImageLayout read = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+        const VkPipelineStageFlags2 shader = VK_PIPELINE_STAGE_2_FRAGMENT_SHADER_BIT;
+        const VkPipelineStageFlags2 colorOut = VK_PIPELINE_STAGE_2_COLOR_ATTACHMENT_OUTPUT_BIT;
+        const VkAccessFlags2 sampled = VK_ACCESS_2_SHADER_SAMPLED_READ_BIT, colorWrite = VK_ACCESS_2_COLOR_ATTACHMENT_WRITE_BIT;
+        imageBarrier(cmd, depth2_.image, VK_IMAGE_ASPECT_DEPTH_BIT, VK_IMAGE_LAYOUT_UNDEFINED, read, depthStages, depthAccess,
+                     shader, sampled);
+        for (gpu::Image* img : {&alphaWeight_, &compositeImage_})
+            imageBarrier(cmd, img->image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_UNDEFINED, colorLayout, shader, 0, colorOut,
+                         colorWrite);
+        const gpu::Image* depths[2] = {&depth_, &depth2_};
+        const uint32_t layers = std::max(1u, params.layers);
+        for (uint32_t k = 0; k < layers; ++k) {
+            frame.layer = k;
+            const gpu::Image& current = *depths[k % 2];
+            const gpu::Image& previous = *depths[(k + 1) % 2];
+            VkDescriptorSet previousSet = previousDepthSets_[(k + 1) % 2];
+            if (k > 0) {
+                imageBarrier(cmd, previous.image, VK_IMAGE_ASPECT_DEPTH_BIT, depthLayout, read, depthStages, depthAccess, shader,
+                             sampled);
+                imageBarrier(cmd, current.image, VK_IMAGE_ASPECT_DEPTH_BIT, read, depthLayout, shader, sampled, depthStages,
+                             depthAccess);
+                for (gpu::Image* img : {&colorWeight_, &normalWeight_, &alphaWeight_})
+                    imageBarrier(cmd, img->image, VK_IMAGE_ASPECT_COLOR_BIT, read, colorLayout, shader, sampled, colorOut,
+                                 colorWrite);
+            }
+            VkRenderingAttachmentInfo clearDepth = attachment(current.view, depthLayout, VK_ATTACHMENT_LOAD_OP_CLEAR, zero);
+            begin(0, nullptr, &clearDepth);
+            if (k > 0)
+                vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, oneImageLayout_, 0, 1, &previousSet, 0, nullptr);
+            draw(k == 0 ? visibility_ : peel_, quads);
+            vkCmdEndRendering(cmd);
+            if (k == 0) timestamp(kQueryVisibility, VK_PIPELINE_STAGE_2_ALL_GRAPHICS_BIT);
+            imageBarrier(cmd, current.image, VK_IMAGE_ASPECT_DEPTH_BIT, depthLayout, depthLayout, depthStages, depthAccess,
+                         depthStages, depthAccess);
+            VkRenderingAttachmentInfo targets[3] = {accum[0], accum[1],
+                                                    attachment(alphaWeight_.view, colorLayout, VK_ATTACHMENT_LOAD_OP_CLEAR, zero)};
+            VkRenderingAttachmentInfo loadDepth = attachment(current.view, depthLayout, VK_ATTACHMENT_LOAD_OP_LOAD);
+            begin(3, targets, &loadDepth);
+            // Layer 0's shader reads no previous depth; depth2_ is bound, sampled, all the same.
+            vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, oneImageLayout_, 0, 1, &previousSet, 0, nullptr);
+            draw(k + 1 == layers ? layerRest_ : layer_, quads);
+            vkCmdEndRendering(cmd);
+            for (gpu::Image* img : {&colorWeight_, &normalWeight_, &alphaWeight_})
+                imageBarrier(cmd, img->image, VK_IMAGE_ASPECT_COLOR_BIT, colorLayout, read, colorOut, colorWrite, shader, sampled);
+            if (k > 0)
+                imageBarrier(cmd, compositeImage_.image, VK_IMAGE_ASPECT_COLOR_BIT, colorLayout, colorLayout, colorOut, colorWrite,
+                             colorOut, colorWrite | VK_ACCESS_2_COLOR_ATTACHMENT_READ_BIT);
+            VkRenderingAttachmentInfo under = attachment(
+                compositeImage_.view, colorLayout, k == 0 ? VK_ATTACHMENT_LOAD_OP_CLEAR : VK_ATTACHMENT_LOAD_OP_LOAD, zero);
+            begin(1, &under, nullptr);
+            fullscreen(resolveLayer_, threeImageLayout_, layerSet_);
+            vkCmdEndRendering(cmd);
+        }
+        timestamp(kQueryAccumulate, VK_PIPELINE_STAGE_2_ALL_GRAPHICS_BIT);
+        imageBarrier(cmd, compositeImage_.image, VK_IMAGE_ASPECT_COLOR_BIT, colorLayout, read, colorOut, colorWrite, shader, sampled);
+        VkRenderingAttachmentInfo out = attachment(output_.view, colorLayout, VK_ATTACHMENT_LOAD_OP_DONT_CARE);
+        begin(1, &out, nullptr);
+        fullscreen(composite_, oneImageLayout_, compositeSet_);
+        vkCmdEndRendering(cmd);
+        timestamp(kQueryResolve, VK_PIPELINE_STAGE_2_ALL_GRAPHICS_BIT);
+        imageBarrier(cmd, output_.image, VK_IMAGE_ASPECT_COLOR_BIT, colorLayout, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, colorOut,
+                     colorWrite, VK_PIPELINE_STAGE_2_TRANSFER_BIT, VK_ACCESS_2_TRANSFER_READ_BIT);
+        return;
+    }
     if (ewaFrame_) {
         begin(0, nullptr, &depthClear);
         draw(visibility_, quads);
@@ -339,10 +470,7 @@ void SplatRenderer::record(VkCommandBuffer cmd, const FrameParams& params) {
                      VK_PIPELINE_STAGE_2_FRAGMENT_SHADER_BIT, VK_ACCESS_2_SHADER_SAMPLED_READ_BIT);
     VkRenderingAttachmentInfo out = attachment(output_.view, colorLayout, VK_ATTACHMENT_LOAD_OP_DONT_CARE);
     begin(1, &out, nullptr);
-    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, resolve_);
-    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, resolveLayout_, 0, 1, &resolveSet_, 0, nullptr);
-    vkCmdPushConstants(cmd, resolveLayout_, pushStages, 0, sizeof(params), &params);
-    vkCmdDraw(cmd, 3, 1, 0, 0);
+    fullscreen(resolve_, resolveLayout_, resolveSet_);
     vkCmdEndRendering(cmd);
     timestamp(kQueryResolve, VK_PIPELINE_STAGE_2_ALL_GRAPHICS_BIT);
     imageBarrier(cmd, output_.image, VK_IMAGE_ASPECT_COLOR_BIT, colorLayout, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
@@ -391,6 +519,8 @@ Status SplatRenderer::capture(const ViewTransform& view, const RenderSettings& s
     SC_TRY(resize(uint32_t(view.width), uint32_t(view.height)));
     RenderSettings s = settings;
     s.mode = RenderMode::EwaNoPrefilter;
+    s.translucent = false;  // the weights are those of the nearest surface
+    s.opacity = 1.f;
     FrameParams params = makeFrameParams(view, s, nearPlane(view));
     const VkDeviceSize pixels = VkDeviceSize(view.width) * view.height;
     const VkDeviceSize colorBytes = pixels * (options_.halfFloatAccumulation ? 8 : 16);

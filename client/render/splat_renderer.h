@@ -7,6 +7,17 @@
 //          accumulation (additive, depth test, no write) ───┘   (normalize, shade)
 //
 // Accumulation targets: RGBA32F (colour*w, w) and (normal*w); RGBA16F on request.
+//
+// Translucent frames (SC_FLAG_TRANSLUCENT, ewa modes; Zwicker 2001 §6 by depth
+// peeling), for each layer k < l, nearest first:
+//
+//   visibility k: the nearest surface behind layer k-1's pushed-back depth ─┐
+//   accumulation k: its fragments, plus (alpha*w) into a third target ──────┼─► resolve layer k, blended
+//                   (the last layer: every fragment left, merged)          ─┘   under layers < k
+//   then the composite over the background ─► RGBA8 output
+//
+// Two depth images alternate: one is written while the other, layer k-1's, is
+// sampled. Opaque frames never touch the translucent targets.
 #pragma once
 
 #include <memory>
@@ -85,6 +96,10 @@ private:
     gpu::Context& ctx_;
     RendererOptions options_;
     VkFormat accumFormat_ = VK_FORMAT_R32G32B32A32_SFLOAT;
+    // The translucent layers' sum of alpha*w, as wide as the other targets.
+    VkFormat alphaFormat() const {
+        return accumFormat_ == VK_FORMAT_R32G32B32A32_SFLOAT ? VK_FORMAT_R32_SFLOAT : VK_FORMAT_R16_SFLOAT;
+    }
     VkDescriptorSetLayout resolveSetLayout_ = VK_NULL_HANDLE;
     VkDescriptorPool descriptorPool_ = VK_NULL_HANDLE;
     VkDescriptorSet resolveSet_ = VK_NULL_HANDLE;
@@ -92,11 +107,19 @@ private:
     VkPipelineLayout splatLayout_ = VK_NULL_HANDLE, resolveLayout_ = VK_NULL_HANDLE;
     VkPipeline points_ = VK_NULL_HANDLE, circles_ = VK_NULL_HANDLE, visibility_ = VK_NULL_HANDLE,
                accumulate_ = VK_NULL_HANDLE, resolve_ = VK_NULL_HANDLE;
+    // Translucent frames: one sampled image (a depth or the composite) or three
+    // (the layer's accumulation targets) per descriptor set.
+    VkDescriptorSetLayout oneImageSetLayout_ = VK_NULL_HANDLE, threeImageSetLayout_ = VK_NULL_HANDLE;
+    VkPipelineLayout oneImageLayout_ = VK_NULL_HANDLE, threeImageLayout_ = VK_NULL_HANDLE;
+    VkDescriptorSet previousDepthSets_[2] = {}, layerSet_ = VK_NULL_HANDLE, compositeSet_ = VK_NULL_HANDLE;
+    VkPipeline peel_ = VK_NULL_HANDLE, layer_ = VK_NULL_HANDLE, layerRest_ = VK_NULL_HANDLE,
+               resolveLayer_ = VK_NULL_HANDLE, composite_ = VK_NULL_HANDLE;
     VkQueryPool queries_ = VK_NULL_HANDLE;
     gpu::Buffer surfels_, readback_;  // surfels_: the uploaded set's
     VkBuffer drawBuffer_ = VK_NULL_HANDLE;  // surfels_ or the caller's
     std::vector<DrawRange> ranges_;
     gpu::Image depth_, colorWeight_, normalWeight_, output_;
+    gpu::Image depth2_, alphaWeight_, compositeImage_;  // translucent frames
     size_t splatCount_ = 0;
     double diagonal_ = 0;  // of the uploaded set, for the near plane
     bool ewaFrame_ = false;

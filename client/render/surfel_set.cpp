@@ -71,10 +71,11 @@ Vec3f tangentOf(const Vec3f& n) {
 }
 
 void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float radius,
-               const Vec3f& color, float weight, uint32_t edge) {
+               const Vec3f& color, float weight, uint32_t edge, float opacity) {
     Vec3d local = position - set.origin;
     set.surfels.push_back({float(local.x), float(local.y), float(local.z), radius, packNormalOct(normal),
-                           packColor(color), weight, edge});
+                           packColor(color, opacity), weight, edge});
+    set.translucent = set.translucent || opacity < 1.f;
     if (std::isfinite(position.x) && std::isfinite(position.y) && std::isfinite(position.z)) set.bounds.extend(position);
 }
 
@@ -110,6 +111,7 @@ SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring) {
     set.hasWeights = info.weights != "none";
     set.kernelScale = info.kernelScale;
     set.normalsOriented = normalsOriented(info.normalSource);
+    set.translucent = info.attribute(kOpacityAttribute) != nullptr;
     set.coloring = coloring;
     auto by = resolveColorBy(coloring.by, info);
     set.coloring.by = by ? *by : *resolveColorBy(ColorBy::Auto, info);
@@ -157,7 +159,8 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
         float r = b.radii.empty() ? node.spacing : b.radii[i];
         float w = b.weights.empty() ? 1.f : b.weights[i];
         uint32_t edge = b.edgeWeights.empty() ? 0 : packEdgeWeights(&b.edgeWeights[4 * i]);
-        addSurfel(set, position, n, r, c, w, edge);
+        float opacity = b.opacity.empty() ? 1.f : float(b.opacity[i]) / 255.f;
+        addSurfel(set, position, n, r, c, w, edge, opacity);
     }
 }
 

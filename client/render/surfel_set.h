@@ -23,6 +23,7 @@ struct SurfelSet {
     bool hasColor = false;                  // colours show measured appearance (RGB, intensity): drawn unlit
     double kernelScale = kDefaultKernelScale;  // the k its weights assume (tileset.json kernel_scale)
     bool normalsOriented = false;           // normalsOriented(tileset.json normal_source)
+    bool translucent = false;               // some surfel's opacity is under 1 (the set stores opacity)
     Coloring coloring;                      // what appendNode colours by (resolved, never Auto) and hides
     TilesetStatistics statistics;           // the set's ranges, for the colour ramps
 };
@@ -43,9 +44,10 @@ SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring = {})
 void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& block);
 
 // Append one surfel given in world coordinates (origin must be set first).
-// Colour components in [0, 1]. Non-finite input is kept: the renderers guard it.
+// Colour components and opacity in [0, 1]; an opacity under 1 marks the set
+// translucent. Non-finite input is kept: the renderers guard it.
 void addSurfel(SurfelSet& set, const Vec3d& position, const Vec3f& normal, float radius,
-               const Vec3f& color, float weight = 1.f, uint32_t edge = 0);
+               const Vec3f& color, float weight = 1.f, uint32_t edge = 0, float opacity = 1.f);
 
 // Reorder along a Morton (Z-order) curve over the bounds: rasterizers with tiled
 // caches (lavapipe measured 1.3-3.9x) run faster on spatially coherent input.

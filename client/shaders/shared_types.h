@@ -35,6 +35,9 @@ struct FrameParams {
     float maxFilterPixels;  // clamp of the low-pass extent at grazing angles (pixels)
     float circleScale;      // circles: screen radius = circleScale * r projected
     uint flags;             // SC_FLAG_* below
+    float opacity;          // multiplies every surfel's stored opacity (--opacity)
+    uint layer;             // translucent frames: the layer being drawn, 0 the nearest
+    uint layers;            // translucent frames: l, the fragment layers per pixel (Zwicker 2001 §6)
 };
 
 #define SC_MODE_POINTS 0u
@@ -54,6 +57,10 @@ struct FrameParams {
 // background by it; without the flag (and inside) a pixel shows the surface
 // wherever a kernel reaches it.
 #define SC_FLAG_EDGE_AA 2u
+// Translucent frame (some opacity under 1): the ewa modes peel `layers`
+// surfaces per pixel, each normalized on its own, and composite them front to
+// back (docs/RENDERER.md, "Transparency"). Without it, opacity is ignored.
+#define SC_FLAG_TRANSLUCENT 4u
 
 #define SC_SHADING_UNLIT 0u
 #define SC_SHADING_LAMBERT 1u

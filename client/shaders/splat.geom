@@ -14,6 +14,7 @@ layout(location = 4) flat in vec4 inPositionRadius[];
 layout(location = 5) flat in uint inPackedNormal[];
 layout(location = 6) flat in float inWeight[];
 layout(location = 7) flat in uint inPackedEdge[];
+layout(location = 8) flat in float inAlpha[];
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
@@ -21,6 +22,8 @@ layout(location = 2) flat out vec3 outNormal;
 layout(location = 3) flat out float outAmplitude;
 layout(location = 4) out vec2 outEdgeUV;
 layout(location = 5) flat out uint outEdge;
+layout(location = 6) flat out float outAlpha;
+layout(location = 7) noperspective out float outDepth;  // as splat_quad.vert's
 
 void main() {
     Splat sp;
@@ -29,6 +32,7 @@ void main() {
     for (int corner = 0; corner < 4; ++corner) {
         vec2 y, edgeUV;
         vec3 p = splatCorner(sp, corner, y, edgeUV);
+        outDepth = frame.viewport.w / p.z;
         if (kPass == 0) p = pushBack(sp, p);
         gl_Position = project(p);
         outY = y;
@@ -37,6 +41,7 @@ void main() {
         outAmplitude = sp.amplitude;
         outEdgeUV = edgeUV;
         outEdge = sp.edge;
+        outAlpha = inAlpha[0];
         EmitVertex();
     }
     EndPrimitive();

@@ -20,6 +20,7 @@ layout(location = 4) flat out vec4 outPositionRadius;
 layout(location = 5) flat out uint outPackedNormal;
 layout(location = 6) flat out float outWeight;
 layout(location = 7) flat out uint outPackedEdge;
+layout(location = 8) flat out float outAlpha;
 
 void main() {
     outY = vec2(0);
@@ -29,6 +30,7 @@ void main() {
     outPackedNormal = inNormal;
     outWeight = inWeight;
     outPackedEdge = inEdge;
+    outAlpha = inColor.a * frame.opacity;
     vec3 o = toCamera(inPositionRadius.xyz);
     vec3 n = rotateToCamera(decodeNormal(inNormal));
     outNormal = dot(n, o) > 0.0 ? -n : n;

@@ -50,7 +50,8 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
 }
 
 RenderSettings SurfcastClient::defaultSettings() const {
-    return settingsForSet(info().kernelScale, emptySurfelSet(info(), options_.coloring).hasColor, normalsOriented(info().normalSource));
+    const SurfelSet empty = emptySurfelSet(info(), options_.coloring);
+    return settingsForSet(info().kernelScale, empty.hasColor, empty.normalsOriented, empty.translucent);
 }
 
 Status SurfcastClient::setColoring(const Coloring& coloring) {
