@@ -43,7 +43,7 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --opacity A           multiply every surfel's opacity by A in [0, 1]: see through
                         the whole set (default 1: as stored, opaque unless built translucent)
   --layers L            translucent frames: surfaces resolved per pixel, nearest first
-                        (Zwicker 2001 §6; default 4); those behind merge into the last
+                        (Zwicker 2001 §6; default 3); those behind merge into the last
   --shading S           unlit, lambert, phong (default: unlit for rgb and intensity, else lambert)
   --backface-cull on|off
                         drop splats facing away from the eye, in every mode (default:

@@ -14,7 +14,8 @@ struct ShaderCode {
 
 enum class ShaderId {
     SplatQuadVert, SplatPointVert, SplatGeom, SplatVisibilityFrag, SplatAccumulateFrag, OpaqueFrag, FullscreenVert, ResolveFrag,
-    SplatPeelFrag, SplatLayerFrag, ResolveLayerFrag, CompositeFrag  // translucent frames
+    // Translucent frames: the splat stages with SC_LAYERED, and their own passes.
+    LayeredSplatQuadVert, LayeredSplatPointVert, LayeredSplatGeom, SplatPeelFrag, SplatLayerFrag, ResolveLayerFrag, CompositeFrag
 };
 
 ShaderCode shaderCode(ShaderId id);

@@ -127,12 +127,13 @@ Status SplatRenderer::createPipelines() {
     // Shader modules live only while the pipelines are made.
     ShaderId ids[] = {ShaderId::SplatQuadVert, ShaderId::SplatPointVert, ShaderId::SplatGeom, ShaderId::SplatVisibilityFrag,
                       ShaderId::SplatAccumulateFrag, ShaderId::OpaqueFrag, ShaderId::FullscreenVert, ShaderId::ResolveFrag,
+                      ShaderId::LayeredSplatQuadVert, ShaderId::LayeredSplatPointVert, ShaderId::LayeredSplatGeom,
                       ShaderId::SplatPeelFrag, ShaderId::SplatLayerFrag, ShaderId::ResolveLayerFrag, ShaderId::CompositeFrag};
     VkShaderModule modules[std::size(ids)] = {};
     auto module = [&](ShaderId id) { return modules[size_t(id)]; };
     Status status;
     for (size_t i = 0; i < std::size(ids) && status.ok(); ++i) {
-        if (ids[i] == ShaderId::SplatGeom && !ctx_.geometryShader) continue;
+        if ((ids[i] == ShaderId::SplatGeom || ids[i] == ShaderId::LayeredSplatGeom) && !ctx_.geometryShader) continue;
         ShaderCode code = shaderCode(ids[i]);
         auto m = gpu::createShaderModule(ctx_, code.code, code.bytes);
         if (m) modules[i] = *m;
@@ -196,10 +197,16 @@ Status SplatRenderer::createPipelines() {
     resolve.colorFormats = {kOutputFormat};
     make(resolve, resolveLayout_, resolve_);
 
-    gpu::PipelineDesc peel = vis;
+    // Translucent frames' splat passes take the SC_LAYERED stages.
+    auto layered = [&](gpu::PipelineDesc d) {
+        d.vertex = module(geometry ? ShaderId::LayeredSplatPointVert : ShaderId::LayeredSplatQuadVert);
+        if (geometry) d.geometry = module(ShaderId::LayeredSplatGeom);
+        return d;
+    };
+    gpu::PipelineDesc peel = layered(vis);
     peel.fragment = module(ShaderId::SplatPeelFrag);
     make(peel, oneImageLayout_, peel_);
-    gpu::PipelineDesc layer = acc;
+    gpu::PipelineDesc layer = layered(acc);
     layer.fragment = module(ShaderId::SplatLayerFrag);
     layer.colorFormats = {accumFormat_, accumFormat_, alphaFormat()};
     make(layer, oneImageLayout_, layer_);

@@ -14,7 +14,6 @@ layout(location = 4) flat in vec4 inPositionRadius[];
 layout(location = 5) flat in uint inPackedNormal[];
 layout(location = 6) flat in float inWeight[];
 layout(location = 7) flat in uint inPackedEdge[];
-layout(location = 8) flat in float inAlpha[];
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
@@ -22,8 +21,14 @@ layout(location = 2) flat out vec3 outNormal;
 layout(location = 3) flat out float outAmplitude;
 layout(location = 4) out vec2 outEdgeUV;
 layout(location = 5) flat out uint outEdge;
+#ifdef SC_LAYERED  // translucent frames' variant (client/CMakeLists.txt)
+layout(location = 8) flat in float inAlpha[];
 layout(location = 6) flat out float outAlpha;
 layout(location = 7) noperspective out float outDepth;  // as splat_quad.vert's
+#define LAYERED(statement) statement
+#else
+#define LAYERED(statement)
+#endif
 
 void main() {
     Splat sp;
@@ -32,7 +37,7 @@ void main() {
     for (int corner = 0; corner < 4; ++corner) {
         vec2 y, edgeUV;
         vec3 p = splatCorner(sp, corner, y, edgeUV);
-        outDepth = frame.viewport.w / p.z;
+        LAYERED(outDepth = frame.viewport.w / p.z);
         if (kPass == 0) p = pushBack(sp, p);
         gl_Position = project(p);
         outY = y;
@@ -41,7 +46,7 @@ void main() {
         outAmplitude = sp.amplitude;
         outEdgeUV = edgeUV;
         outEdge = sp.edge;
-        outAlpha = inAlpha[0];
+        LAYERED(outAlpha = inAlpha[0]);
         EmitVertex();
     }
     EndPrimitive();

@@ -20,7 +20,9 @@ layout(location = 4) flat out vec4 outPositionRadius;
 layout(location = 5) flat out uint outPackedNormal;
 layout(location = 6) flat out float outWeight;
 layout(location = 7) flat out uint outPackedEdge;
+#ifdef SC_LAYERED  // translucent frames' variant (client/CMakeLists.txt)
 layout(location = 8) flat out float outAlpha;
+#endif
 
 void main() {
     outY = vec2(0);
@@ -30,7 +32,9 @@ void main() {
     outPackedNormal = inNormal;
     outWeight = inWeight;
     outPackedEdge = inEdge;
+#ifdef SC_LAYERED
     outAlpha = inColor.a * frame.opacity;
+#endif
     vec3 o = toCamera(inPositionRadius.xyz);
     vec3 n = rotateToCamera(decodeNormal(inNormal));
     outNormal = dot(n, o) > 0.0 ? -n : n;

@@ -18,13 +18,18 @@ layout(location = 2) flat out vec3 outNormal;
 layout(location = 3) flat out float outAmplitude;
 layout(location = 4) out vec2 outEdgeUV;
 layout(location = 5) flat out uint outEdge;
+#ifdef SC_LAYERED  // translucent frames' variant (client/CMakeLists.txt)
 layout(location = 6) flat out float outAlpha;         // opacity: stored times frame.opacity
 layout(location = 7) noperspective out float outDepth; // depth (near / z) of the splat itself, not pushed back
+#define LAYERED(statement) statement
+#else
+#define LAYERED(statement)
+#endif
 
 void main() {
     outColor = inColor.rgb;
-    outAlpha = inColor.a * frame.opacity;
-    outDepth = 0.0;
+    LAYERED(outAlpha = inColor.a * frame.opacity);
+    LAYERED(outDepth = 0.0);
     outEdgeUV = vec2(0);
     outEdge = 0u;
     if (kPass == 2) {
@@ -45,7 +50,7 @@ void main() {
         return;
     }
     vec3 p = splatCorner(sp, gl_VertexIndex, outY, outEdgeUV);
-    outDepth = frame.viewport.w / p.z;  // 1/z is affine in screen space: noperspective interpolates it exactly
+    LAYERED(outDepth = frame.viewport.w / p.z);  // 1/z is affine in screen space: noperspective interpolates it exactly
     outEdge = sp.edge;
     if (kPass == 0) p = pushBack(sp, p);
     gl_Position = project(p);
