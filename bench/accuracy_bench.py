@@ -209,18 +209,23 @@ def camera_rays(camera, width, height):
     return eye, f, r, u, eta
 
 
-def reference(surfaces, camera, width, height):
+def row_rays(camera, width, height):
+    """Per image row y: (y, origins, unit directions) of SUPERSAMPLE² rays per
+    pixel, pixel by pixel (reshape to (width, SUPERSAMPLE², ...) to average)."""
     eye, f, r, u, eta = camera_rays(camera, width, height)
-    image = np.zeros((height, width, 3))
     offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE
-    ox, oy = np.meshgrid(offsets, offsets)
-    ox, oy = ox.ravel(), oy.ravel()
+    ox, oy = (a.ravel() for a in np.meshgrid(offsets, offsets))
     for y in range(height):
         px = np.repeat(np.arange(width), len(ox)) + np.tile(ox, width)
         py = y + np.tile(oy, width)
         d = f[None, :] + ((px - width / 2) / eta)[:, None] * r[None, :] - ((py - height / 2) / eta)[:, None] * u[None, :]
         d /= np.linalg.norm(d, axis=1)[:, None]
-        o = np.repeat(eye[None, :], len(d), axis=0)
+        yield y, np.repeat(eye[None, :], len(d), axis=0), d
+
+
+def reference(surfaces, camera, width, height):
+    image = np.zeros((height, width, 3))
+    for y, o, d in row_rays(camera, width, height):
         best = np.full(len(d), np.inf)
         colour = np.repeat(BACKGROUND[None, :], len(d), axis=0)
         for s in surfaces:
@@ -229,7 +234,7 @@ def reference(surfaces, camera, width, height):
             if hit.any():
                 colour[hit] = s.colour(tuple(p[hit] for p in param))
                 best[hit] = t[hit]
-        image[y] = colour.reshape(width, len(ox), 3).mean(axis=1)
+        image[y] = colour.reshape(width, SUPERSAMPLE ** 2, 3).mean(axis=1)
     return image
 
 

@@ -80,18 +80,10 @@ def scenes():
 def reference(surfaces, camera, width, height):
     """Every hit of every ray composited back to front; and the silhouette
     pixels, whose rays meet different sets of surfaces."""
-    eye, f, r, u, eta = ab.camera_rays(camera, width, height)
-    n = ab.SUPERSAMPLE
-    offsets = (np.arange(n) + 0.5) / n
-    ox, oy = (a.ravel() for a in np.meshgrid(offsets, offsets))
     image = np.zeros((height, width, 3))
     edge = np.zeros((height, width), bool)
-    for y in range(height):
-        px = np.repeat(np.arange(width), len(ox)) + np.tile(ox, width)
-        py = y + np.tile(oy, width)
-        d = f[None, :] + ((px - width / 2) / eta)[:, None] * r[None, :] - ((py - height / 2) / eta)[:, None] * u[None, :]
-        d /= np.linalg.norm(d, axis=1)[:, None]
-        o = np.repeat(eye[None, :], len(d), axis=0)
+    samples = ab.SUPERSAMPLE ** 2
+    for y, o, d in ab.row_rays(camera, width, height):
         ts, colours, alphas = [], [], []
         mask = np.zeros(len(d), np.int64)
         for k, (surface, opacity) in enumerate(surfaces):
@@ -113,8 +105,8 @@ def reference(surfaces, camera, width, height):
         for layer in order:
             a = alps[layer, rows][:, None]
             colour = cols[layer, rows] * a + colour * (1 - a)  # eq. 12
-        image[y] = colour.reshape(width, len(ox), 3).mean(axis=1)
-        m = mask.reshape(width, len(ox))
+        image[y] = colour.reshape(width, samples, 3).mean(axis=1)
+        m = mask.reshape(width, samples)
         edge[y] = m.min(axis=1) != m.max(axis=1)
     return image, edge
 
