@@ -51,7 +51,6 @@ struct InputDescription {
     bool hasIntensity = false;
     bool hasClassification = false;
     bool hasReturns = false;         // return number and number of returns
-    bool hasAlpha = false;           // per-point opacity
     int colorBits = 8;               // bits of the file's colour channels (8 or 16)
     double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
     bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude

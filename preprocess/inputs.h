@@ -33,7 +33,7 @@ struct InputOptions {
 };
 
 // A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.
-inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return uint8_t(std::lround(alpha * opacity)); }
+inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return opacity == 1 ? alpha : uint8_t(std::lround(alpha * opacity)); }
 
 // The input files that `args` name, in order: a file as itself, a folder as
 // every file under it with an extension some reader takes (recursively, sorted

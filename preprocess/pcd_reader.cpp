@@ -159,12 +159,11 @@ public:
         desc_.format = "pcd";
         desc_.declaredPoints = h_.points;
         for (const Field& f : h_.fields) {
-            if (f.role == Role::Rgb || f.role == Role::Rgba) desc_.hasColors = desc_.hasAlpha = true;
+            if (f.role == Role::Rgb || f.role == Role::Rgba) desc_.hasColors = true;
             if (f.role == Role::NX) desc_.hasNormals = true;
             if (f.role == Role::Intensity) desc_.hasIntensity = true;
             if (f.role == Role::Classification) desc_.hasClassification = true;
         }
-        desc_.hasAlpha = desc_.hasAlpha && readAlpha_;
         desc_.colorBits = 8;
         desc_.float32Coordinates = std::any_of(h_.fields.begin(), h_.fields.end(),
                                                [](const Field& f) { return f.role == Role::X && f.type == 'F' && f.size == 4; });

@@ -200,7 +200,6 @@ public:
         desc_.hasColors = layout_.r >= 0;
         desc_.hasIntensity = layout_.intensity >= 0;
         desc_.hasClassification = layout_.classification >= 0;
-        desc_.hasAlpha = layout_.alpha >= 0;
         desc_.colorBits = layout_.colorType == PlyType::UInt8 || layout_.colorType == PlyType::Int8 ? 8 : 16;
         const PlyProperty& px = vertex_->properties[findProperty(*vertex_, {"x"})];
         desc_.float32Coordinates = px.type == PlyType::Float32;
