@@ -71,7 +71,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         std::lock_guard lock(mutex);
         reply.assign(reinterpret_cast<const char*>(data), size);
     }
-    auto source = openTileSource("http://127.0.0.1:" + std::to_string(port) + "/sets/s", 2);
+    HttpOptions http;
+    http.timeoutSeconds = 2;
+    auto source = openTileSource("http://127.0.0.1:" + std::to_string(port) + "/sets/s", http);
     if (!source) return 0;
     (void)(*source)->file("tileset.json", 16u << 20);
     (void)(*source)->file("hierarchy.bin", 4096);

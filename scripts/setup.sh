@@ -12,7 +12,7 @@ packages=(
   build-essential cmake ninja-build pkg-config git
   libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
-  libmicrohttpd-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
+  libmicrohttpd-dev libcurl4-openssl-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
   python3 python3-venv xvfb xdotool curl nginx-light
 )
 # A Rust toolchain for the LAZ decoder (preprocess/laz_ffi): any cargo on PATH,

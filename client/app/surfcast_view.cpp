@@ -18,7 +18,7 @@ int main(int argc, char** argv) {
         if (options.headless) return surfcast::runHeadlessLod(options);
         return surfcast::runWindow(options, surfcast::SurfelSet{});
     }
-    auto set = surfcast::loadSurfelSet(options.set, options.level, options.client.coloring);
+    auto set = surfcast::loadSurfelSet(options.set, options.level, options.client.coloring, options.client.http, options.client.gpuBudget);
     if (!set) {
         std::fprintf(stderr, "surfcast-view: %s\n", set.status().message().c_str());
         return 1;

@@ -79,9 +79,17 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --save-redraws        with --lod, headless: also write every redraw before
                         convergence, as OUT_rNNN.png (progressive streaming studies)
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
-  With --lod, SET may be a URL: http://HOST:PORT/sets/NAME (surfcast-serve) or any
-  folder URL on a static host with Range; frames redraw as blocks arrive, one JSON
-  line per redraw, until converged.
+  With --lod, SET may be a URL: http(s)://HOST[:PORT]/sets/NAME (surfcast-serve) or
+  any folder URL on a static host, object store or CDN with Range (a query string,
+  such as a shared access signature, is sent with every request); frames redraw as
+  blocks arrive, one JSON line per redraw, until converged.
+  --header 'NAME: VALUE'
+                        with a URL: send this header with every request (repeatable)
+  --token-file F        with a URL: send 'Authorization: Bearer TOKEN', the token read
+                        from F (as surfcast-serve --token-file expects); never printed
+  --ca-file F           with an https URL: verify the host against the PEM certificates
+                        in F instead of the system's
+  --insecure            with an https URL: do not verify certificates (tests only)
   --frames N            window: close after N frames
   --screenshot PATH     window: write the last frame to PATH on exit
   -h, --help            this text
@@ -300,6 +308,18 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             o->client.gpuBudget = size_t(double(mib) * (1 << 20));
         } else if (a == "--save-redraws") {
             o->saveRedraws = true;
+        } else if (a == "--header") {
+            if (!value() || v.find(':') == std::string::npos || v.find(':') == 0)
+                return (*exitCode = usageError("--header wants 'Name: value'")), false;
+            o->client.http.headers.push_back(v);
+        } else if (a == "--token-file") {
+            if (!value()) return (*exitCode = usageError("--token-file wants a file")), false;
+            o->client.http.tokenFile = v;
+        } else if (a == "--ca-file") {
+            if (!value()) return (*exitCode = usageError("--ca-file wants a PEM file")), false;
+            o->client.http.caFile = v;
+        } else if (a == "--insecure") {
+            o->client.http.insecure = true;
         } else if (a == "--connections") {
             if (!count(&o->client.connections, "--connections")) return false;
         } else if (a == "--repeat") {

@@ -218,7 +218,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                 if (client) {
                     setDefaults = client->defaultSettings();
                 } else {
-                    auto reloaded = loadSurfelSet(o.set, o.level, *c);
+                    auto reloaded = loadSurfelSet(o.set, o.level, *c, o.client.http, o.client.gpuBudget);
                     rs = reloaded ? renderer->upload(*reloaded) : reloaded.status();
                     if (reloaded) setDefaults = settingsForSet(reloaded->kernelScale, reloaded->hasColor, reloaded->normalsOriented,
                                                                reloaded->translucent);

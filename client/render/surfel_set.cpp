@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numeric>
 
+#include "block_codec.h"
+#include "crc32.h"
 #include "octree_key.h"
 #include "render_settings.h"
 #include "tileset_reader.h"
@@ -164,20 +166,77 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
     }
 }
 
-Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice, const Coloring& coloring) {
-    auto reader = TilesetReader::open(dir);
-    if (!reader) return reader.status();
-    const TilesetInfo& info = reader->info();
+namespace {
+
+// tileset.json is a few kilobytes; this bounds what a broken host can make
+// the viewer hold before the JSON parser rejects it.
+constexpr uint64_t kMaxTilesetJsonBytes = 16u << 20;
+
+bool wantedNode(const NodeRecord& node, const LevelChoice& choice) {
+    const bool leaf = node.childMask == 0;
+    return node.surfelCount > 0 &&
+           (choice.level < 0 ? leaf : (node.key.level == choice.level || (leaf && node.key.level < choice.level)));
+}
+
+Status checkChoice(const std::string& where, const TilesetInfo& info, const LevelChoice& choice, const Coloring& coloring) {
     if (choice.level >= info.levels)
-        return Status::error(dir + ": level " + std::to_string(choice.level) + " does not exist (the set has levels 0.." +
+        return Status::error(where + ": level " + std::to_string(choice.level) + " does not exist (the set has levels 0.." +
                              std::to_string(info.levels - 1) + ")");
     auto by = resolveColorBy(coloring.by, info);
-    if (!by) return Status::error(dir + ": " + by.status().message());
+    if (!by) return Status::error(where + ": " + by.status().message());
+    return {};
+}
+
+// A URL: tileset.json and hierarchy.bin whole, then every wanted node's block,
+// each checked against its record's CRC before it is decoded.
+Result<SurfelSet> loadRemoteSurfelSet(const std::string& url, const LevelChoice& choice, const Coloring& coloring,
+                                      const HttpOptions& http, size_t gpuBudget) {
+    auto source = openTileSource(url, http);
+    if (!source) return source.status();
+    TileSource& src = **source;
+    auto json = src.file("tileset.json", kMaxTilesetJsonBytes);
+    if (!json) return json.status();
+    auto info = readTilesetJson(std::string(json->begin(), json->end()), src.describe() + "/tileset.json");
+    if (!info) return info.status();
+    SC_TRY(checkChoice(src.describe(), *info, choice, coloring));
+    auto hierarchy = src.file("hierarchy.bin", info->hierarchyBytes);
+    if (!hierarchy) return hierarchy.status();
+    auto nodes = readHierarchyOf(*info, *hierarchy, src.describe() + "/hierarchy.bin");
+    if (!nodes) return nodes.status();
+    uint64_t surfels = 0;
+    for (const NodeRecord& node : *nodes) surfels += wantedNode(node, choice) ? node.surfelCount : 0;
+    const uint64_t budget = gpuBudget ? gpuBudget : uint64_t(1) << 30;
+    if (surfels * sizeof(gpu_types::GpuSurfel) > budget)
+        return Status::error(src.describe() + ": the " + std::string(choice.level < 0 ? "leaves" : "level") + " hold " +
+                             std::to_string(surfels) + " surfels (" + std::to_string((surfels * sizeof(gpu_types::GpuSurfel)) >> 20) +
+                             " MiB on the GPU), over the GPU budget of " + std::to_string(budget >> 20) +
+                             " MiB; view it with --lod, which streams what the view needs");
+    SurfelSet set = emptySurfelSet(*info, coloring);
+    for (const NodeRecord& node : *nodes) {
+        if (!wantedNode(node, choice)) continue;
+        auto bytes = src.blocks(node.blockOffset, node.blockSize);
+        if (!bytes) return bytes.status();
+        const std::string where = src.describe() + "/blocks.bin: node " + node.key.name();
+        if (crc32(bytes->data(), bytes->size()) != node.blockCrc) return Status::error(where + ": CRC mismatch");
+        auto block = decodeBlock(bytes->data(), bytes->size(), blockExpectation(*info, node));
+        if (!block) return Status::error(where + ": " + block.status().message());
+        appendNode(set, *info, node, *block);
+    }
+    sortMorton(set);
+    return set;
+}
+
+}  // namespace
+
+Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice, const Coloring& coloring,
+                                const HttpOptions& http, size_t gpuBudget) {
+    if (isUrl(dir)) return loadRemoteSurfelSet(dir, choice, coloring, http, gpuBudget);
+    auto reader = TilesetReader::open(dir);
+    if (!reader) return reader.status();
+    SC_TRY(checkChoice(dir, reader->info(), choice, coloring));
     SurfelSet set = emptySurfelSet(reader->info(), coloring);
     for (const NodeRecord& node : reader->nodes()) {
-        bool leaf = node.childMask == 0;
-        bool wanted = choice.level < 0 ? leaf : (node.key.level == choice.level || (leaf && node.key.level < choice.level));
-        if (!wanted || node.surfelCount == 0) continue;
+        if (!wantedNode(node, choice)) continue;
         auto block = reader->readBlock(node);
         if (!block) return block.status();
         appendNode(set, reader->info(), node, *block);

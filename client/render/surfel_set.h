@@ -11,6 +11,7 @@
 #include "tileset_reader.h"
 #include "tileset_format.h"
 #include "status.h"
+#include "tile_source.h"
 #include "vec3.h"
 
 namespace surfcast {
@@ -34,7 +35,12 @@ struct LevelChoice {
     int level = -1;
 };
 
-Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice, const Coloring& coloring = {});
+// `tilesetDir` is a folder or an http(s) URL (tile_source.h; `http` says how
+// to reach it). A URL's nodes are fetched whole, one range each; more
+// surfels than `gpuBudget` bytes hold (32 each; 0: 1 GiB) is an error that
+// names --lod, which streams only what a view needs.
+Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice, const Coloring& coloring = {},
+                                const HttpOptions& http = {}, size_t gpuBudget = 0);
 
 // An empty set for a tile set (origin, flags and kernel scale from its
 // tileset.json), and one decoded node's surfels appended to it, coloured and

@@ -1,7 +1,8 @@
-// Debian's cpp-httplib (0.11.4) writes with CPPHTTPLIB_SEND_FLAGS = 0, not
-// MSG_NOSIGNAL: a host that closes a connection while a request is being
-// written raises SIGPIPE, whose default action ends the whole process
-// embedding the client (fuzz_client_response died so, with status 141).
+// A host that closes a connection while a request is being written raises
+// SIGPIPE, whose default action ends the whole process embedding the client
+// (fuzz_client_response died so, with status 141, under cpp-httplib). libcurl
+// sends with MSG_NOSIGNAL, but OpenSSL's writes on a TLS connection do not,
+// and with CURLOPT_NOSIGNAL (needed in threads) libcurl leaves SIGPIPE alone.
 // While a request is in flight the calling thread blocks SIGPIPE, so the
 // write fails with EPIPE instead, and a SIGPIPE it raised is taken before
 // unblocking. The process's own SIGPIPE disposition is left alone.

@@ -26,7 +26,7 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     std::unique_ptr<StreamingSet> s(new StreamingSet);
     s->options_ = options;
     s->options_.granule = std::max<size_t>(1, options.granule);
-    auto source = openTileSource(location, options.timeoutSeconds);
+    auto source = openTileSource(location, options.http);
     if (!source) return source.status();
     s->source_ = std::move(*source);
     auto json = s->source_->file("tileset.json", kMaxTilesetJsonBytes);

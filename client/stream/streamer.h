@@ -41,7 +41,7 @@ struct StreamOptions {
     size_t memoryBudget = size_t(1) << 30;  // bytes of resident surfels (32 B each, in granules)
     size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
     size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
-    int timeoutSeconds = 20;   // an HTTP response stalled this long fails (and is retried)
+    HttpOptions http;          // timeout (a stalled response fails and is retried), headers, token, CA
     // Tries of one node before the stream gives up (StreamStats::gaveUp). With
     // the backoff (0.1 s doubling to 5 s), 8 tries span about 11 s: past a
     // server restart, short of a user's patience.

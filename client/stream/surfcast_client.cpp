@@ -22,6 +22,7 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     c->options_ = options;
     StreamOptions stream;
     stream.connections = options.connections;
+    stream.http = options.http;
     stream.decoders = options.decoders;
     stream.memoryBudget = options.gpuBudget ? options.gpuBudget : defaultGpuBudget(ctx);
     stream.granule = SurfelPool::kPageSurfels;

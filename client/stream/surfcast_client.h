@@ -19,6 +19,7 @@ struct ClientOptions {
     ClientOptions() { lod.splatBudget = 5'000'000; }
     LodParams lod;               // target projected spacing (px), culling, splats per frame
     int connections = 6;         // concurrent block requests
+    HttpOptions http;            // URLs: headers, bearer token, CA file, timeout (tile_source.h)
     int decoders = 0;            // decode threads; 0: one per core
     size_t gpuBudget = 0;        // bytes of GPU memory for surfels; 0: 1 GiB or a quarter of the
                                  // device-local heap, whichever is smaller

@@ -1,11 +1,12 @@
 #include "tile_source.h"
 
 #include <fcntl.h>
-#include <httplib.h>
+#include <curl/curl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include <unordered_map>
 
 #include "sigpipe.h"
+
 
 namespace surfcast {
 
@@ -34,6 +36,8 @@ namespace {
 constexpr uint64_t kMaxErrorPageBytes = 1 << 20;
 // A server that does not accept within this fails the request.
 constexpr int kConnectTimeoutSeconds = 5;
+// A bearer token longer than this is not one (a wrong file).
+constexpr size_t kMaxTokenBytes = 16 << 10;
 
 class LocalSource : public TileSource {
 public:
@@ -92,77 +96,68 @@ private:
     int fd_ = -1;
 };
 
+// One request's answer: the status and the body, kept up to a bound.
+struct Response {
+    long status = 0;
+    std::vector<uint8_t> body;
+};
+
 class HttpSource : public TileSource {
 public:
-    HttpSource(std::string origin, std::string path, int timeoutSeconds)
-        : origin_(std::move(origin)), path_(std::move(path)), timeoutSeconds_(timeoutSeconds) {}
+    // base: scheme://host[:port]/path without a trailing slash; query: "" or "?...".
+    HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers)
+        : base_(std::move(base)), query_(std::move(query)), options_(std::move(options)), headers_(headers) {}
+    ~HttpSource() override {
+        for (auto& [id, handle] : handles_) curl_easy_cleanup(handle);
+        curl_slist_free_all(headers_);
+    }
     Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
-        return get(name, nullptr, maxBytes);
+        auto r = request(name, nullptr, nullptr, maxBytes, 200);
+        if (!r) return r.status();
+        return std::move(r->body);
     }
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
         if (size == 0) return std::vector<uint8_t>{};
-        std::pair<uint64_t, uint64_t> range{offset, offset + size - 1};
-        auto bytes = get("blocks.bin", &range, size);
-        if (bytes && bytes->size() != size)
+        const std::string range = std::to_string(offset) + "-" + std::to_string(offset + size - 1);
+        auto r = request("blocks.bin", &range, nullptr, size, 206);
+        if (!r) return r.status();
+        if (r->body.size() != size)
             return Status::error(describe() + "/blocks.bin: asked for " + std::to_string(size) + " bytes at " +
-                                 std::to_string(offset) + ", got " + std::to_string(bytes->size()));
-        return bytes;
+                                 std::to_string(offset) + ", got " + std::to_string(r->body.size()));
+        return std::move(r->body);
     }
-    std::string describe() const override { return origin_ + path_; }
+    std::string describe() const override { return base_; }
 
     // The server's POST {set}/batch where it answers (tried once); a static
     // host refuses it (404/405) and every later call takes the ranges.
     Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes) override {
         if (nodes.size() < 2 || batch_ == Batch::No) return TileSource::blobs(nodes);
-        std::string body, url = path_ + "/batch";
+        std::string body;
         uint64_t expected = 0;  // what the answer holds: a length and a blob per node
         for (const NodeRecord& n : nodes) {
             body += n.key.name() + ",";
             expected += 4 + uint64_t(n.blockSize);
         }
-        httplib::Request req;
-        req.method = "POST";
-        req.path = url;
-        req.body = body;
-        req.set_header("Content-Type", "text/plain");
-        // An error page is not kept (its status decides), but it is bounded too.
-        int status = 0;
-        req.response_handler = [&](const httplib::Response& r) {
-            status = r.status;
-            return true;
-        };
-        std::string received;
-        bool tooLong = false;
-        req.content_receiver = [&](const char* data, size_t length, uint64_t, uint64_t) {
-            const uint64_t limit = status == 200 ? expected : kMaxErrorPageBytes;
-            if (length > limit - received.size()) return !(tooLong = true);
-            if (status == 200) received.append(data, length);
-            else received.resize(received.size() + length);
-            return true;
-        };
-        SigpipeBlock noSigpipe;  // sigpipe.h says why
-        auto res = client().send(req);
-        if (tooLong) return Status::error(origin_ + url + ": response longer than the " + std::to_string(expected) + " bytes asked for");
-        if (!res) return Status::error(origin_ + url + ": " + httplib::to_string(res.error()));
-        if (res->status == 200) res->body = std::move(received);
-        if (res->status != 200) {
-            if (batch_ == Batch::Unknown && res->status >= 400 && res->status < 500) {
+        auto r = request("batch", nullptr, &body, expected, 0);
+        if (!r) return r.status();
+        const std::string url = base_ + "/batch";
+        if (r->status != 200) {
+            if (batch_ == Batch::Unknown && r->status >= 400 && r->status < 500) {
                 batch_ = Batch::No;
                 return TileSource::blobs(nodes);
             }
-            return Status::error(origin_ + url + ": HTTP " + std::to_string(res->status));
+            return Status::error(url + ": HTTP " + std::to_string(r->status));
         }
         batch_ = Batch::Yes;
         // For each key in order: u32 little-endian length, then the blob.
         std::vector<std::vector<uint8_t>> out;
-        const auto* p = reinterpret_cast<const uint8_t*>(res->body.data());
-        size_t at = 0, size = res->body.size();
+        const uint8_t* p = r->body.data();
+        size_t at = 0, size = r->body.size();
         for (size_t i = 0; i < nodes.size(); ++i) {
-            if (size - at < 4) return Status::error(origin_ + url + ": response ends before node " + nodes[i].key.name());
+            if (size - at < 4) return Status::error(url + ": response ends before node " + nodes[i].key.name());
             uint32_t length = uint32_t(p[at]) | uint32_t(p[at + 1]) << 8 | uint32_t(p[at + 2]) << 16 | uint32_t(p[at + 3]) << 24;
             at += 4;
-            if (size - at < length)
-                return Status::error(origin_ + url + ": response ends inside node " + nodes[i].key.name());
+            if (size - at < length) return Status::error(url + ": response ends inside node " + nodes[i].key.name());
             out.emplace_back(p + at, p + at + length);
             at += length;
         }
@@ -172,67 +167,173 @@ public:
 private:
     enum class Batch { Unknown, Yes, No };
 
-    httplib::Client& client() {
-        std::lock_guard lock(mutex_);
-        auto& c = clients_[std::this_thread::get_id()];
-        if (!c) {
-            c = std::make_unique<httplib::Client>(origin_);
-            c->set_keep_alive(true);
-            c->set_connection_timeout(kConnectTimeoutSeconds, 0);
-            c->set_read_timeout(timeoutSeconds_, 0);
-        }
-        return *c;
-    }
-    // The body is kept only up to maxBytes: a longer one (a hostile or broken
-    // host) cancels the request.
-    Result<std::vector<uint8_t>> get(const std::string& name, const std::pair<uint64_t, uint64_t>* range, uint64_t maxBytes) {
-        std::string url = path_ + "/" + name;
-        httplib::Headers headers;
-        if (range)
-            headers.emplace("Range", "bytes=" + std::to_string(range->first) + "-" + std::to_string(range->second));
-        const int wanted = range ? 206 : 200;
-        int status = 0;
-        std::vector<uint8_t> body;
-        uint64_t dropped = 0;  // of an error page: not kept, but bounded too
+    // What the write callback keeps: the body of a `wanted` answer up to
+    // maxBytes (longer cancels the request), and of any other answer (an
+    // error page) nothing, up to kMaxErrorPageBytes.
+    struct Sink {
+        CURL* handle;
+        long wanted;  // 0: any status is kept (the batch decides afterwards)
+        uint64_t maxBytes, dropped = 0;
         bool tooLong = false;
-        SigpipeBlock noSigpipe;  // sigpipe.h says why
-        auto res = client().Get(
-            url, headers,
-            [&](const httplib::Response& r) {
-                status = r.status;
-                return true;
-            },
-            [&](const char* data, size_t length) {
-                if (status != wanted) return (dropped += length) <= kMaxErrorPageBytes;
-                if (length > maxBytes - body.size()) return !(tooLong = true);
-                body.insert(body.end(), data, data + length);
-                return true;
-            });
-        if (tooLong)
-            return Status::error(origin_ + url + ": response longer than the " + std::to_string(maxBytes) + " bytes expected");
-        if (!res) return Status::error(origin_ + url + ": " + httplib::to_string(res.error()));
-        if (res->status != wanted) return Status::error(origin_ + url + ": HTTP " + std::to_string(res->status));
-        return body;
+        std::vector<uint8_t>* body;
+    };
+    static size_t write(char* data, size_t, size_t length, void* user) {
+        Sink& s = *static_cast<Sink*>(user);
+        long status = 0;
+        curl_easy_getinfo(s.handle, CURLINFO_RESPONSE_CODE, &status);
+        const bool keep = s.wanted ? status == s.wanted : status == 200;
+        if (!keep) return (s.dropped += length) <= kMaxErrorPageBytes ? length : 0;
+        if (length > s.maxBytes - s.body->size()) {
+            s.tooLong = true;
+            return 0;
+        }
+        s.body->insert(s.body->end(), data, data + length);
+        return length;
     }
 
-    std::string origin_, path_;
-    int timeoutSeconds_;
+    CURL* handle() {
+        std::lock_guard lock(mutex_);
+        CURL*& h = handles_[std::this_thread::get_id()];
+        if (!h) {
+            h = curl_easy_init();
+            if (!h) return nullptr;
+            curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
+            curl_easy_setopt(h, CURLOPT_FOLLOWLOCATION, 1L);
+            curl_easy_setopt(h, CURLOPT_MAXREDIRS, long(kMaxRedirects));
+            curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, long(kConnectTimeoutSeconds));
+            // Stalled: under one byte per second for the whole timeout.
+            curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
+            curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, long(options_.timeoutSeconds));
+            curl_easy_setopt(h, CURLOPT_ACCEPT_ENCODING, "");  // whatever libcurl decodes
+            curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
+            curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, &HttpSource::write);
+            if (!options_.caFile.empty()) {  // instead of the system's store, folder included
+                curl_easy_setopt(h, CURLOPT_CAINFO, options_.caFile.c_str());
+                curl_easy_setopt(h, CURLOPT_CAPATH, nullptr);
+            }
+            if (options_.insecure) {
+                curl_easy_setopt(h, CURLOPT_SSL_VERIFYPEER, 0L);
+                curl_easy_setopt(h, CURLOPT_SSL_VERIFYHOST, 0L);
+            }
+        }
+        return h;
+    }
+
+    // GET name (a byte range of it), or POST `post` to it. `wanted`: the
+    // status whose body is kept (any other is an error), 0 for any.
+    Result<Response> request(const std::string& name, const std::string* range, const std::string* post, uint64_t maxBytes,
+                             long wanted) {
+        const std::string shown = base_ + "/" + name;  // messages never show the query (it may hold a token)
+        CURL* h = handle();
+        if (!h) return Status::error(shown + ": cannot start a libcurl transfer");
+        Response r;
+        Sink sink{h, wanted, maxBytes, 0, false, &r.body};
+        char error[CURL_ERROR_SIZE] = "";
+        const std::string url = shown + query_;
+        curl_easy_setopt(h, CURLOPT_URL, url.c_str());
+        curl_easy_setopt(h, CURLOPT_WRITEDATA, &sink);
+        curl_easy_setopt(h, CURLOPT_ERRORBUFFER, error);
+        curl_easy_setopt(h, CURLOPT_RANGE, range ? range->c_str() : nullptr);
+        if (post) {
+            curl_easy_setopt(h, CURLOPT_POSTFIELDS, post->c_str());
+            curl_easy_setopt(h, CURLOPT_POSTFIELDSIZE, long(post->size()));
+        } else {
+            curl_easy_setopt(h, CURLOPT_HTTPGET, 1L);
+        }
+        CURLcode code;
+        {
+            SigpipeBlock noSigpipe;  // sigpipe.h says why
+            code = curl_easy_perform(h);
+        }
+        curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
+        if (sink.tooLong)
+            return Status::error(shown + ": response longer than the " + std::to_string(maxBytes) + " bytes expected");
+        if (code != CURLE_OK) return Status::error(shown + ": " + transferError(code, error));
+        curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &r.status);
+        if (wanted && r.status != wanted) {
+            if (r.status == 401 || r.status == 403)
+                return Status::error(shown + ": HTTP " + std::to_string(r.status) +
+                                     ": the host refuses access (send credentials with --header or --token-file)");
+            return Status::error(shown + ": HTTP " + std::to_string(r.status));
+        }
+        // A login page answers 200 in place of the file asked for.
+        char* type = nullptr;
+        curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
+        if (wanted && type && std::strncmp(type, "text/html", 9) == 0)
+            return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
+        return r;
+    }
+
+    std::string transferError(CURLcode code, const char* detail) const {
+        const std::string why = *detail ? detail : curl_easy_strerror(code);
+        switch (code) {
+        case CURLE_PEER_FAILED_VERIFICATION:
+        case CURLE_SSL_CACERT_BADFILE:
+        case CURLE_SSL_CERTPROBLEM:
+        case CURLE_SSL_CONNECT_ERROR: {
+            return "TLS with the host failed (" + why + ")" + (options_.caFile.empty() ? "" : "; --ca-file " + options_.caFile);
+        }
+        case CURLE_TOO_MANY_REDIRECTS: return "more than " + std::to_string(kMaxRedirects) + " redirects (a loop?)";
+        case CURLE_OPERATION_TIMEDOUT: return "no answer for " + std::to_string(options_.timeoutSeconds) + " s (" + why + ")";
+        default: return why;
+        }
+    }
+
+    static constexpr int kMaxRedirects = 8;
+    std::string base_, query_;
+    HttpOptions options_;
+    curl_slist* headers_;
     std::atomic<Batch> batch_{Batch::Unknown};
     std::mutex mutex_;
-    std::unordered_map<std::thread::id, std::unique_ptr<httplib::Client>> clients_;
+    std::unordered_map<std::thread::id, CURL*> handles_;
 };
 
 }  // namespace
 
-bool isUrl(const std::string& location) { return location.rfind("http://", 0) == 0; }
+bool isUrl(const std::string& location) { return location.rfind("http://", 0) == 0 || location.rfind("https://", 0) == 0; }
 
-Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, int timeoutSeconds) {
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http) {
     if (!isUrl(location)) return std::unique_ptr<TileSource>(new LocalSource(location));
-    size_t slash = location.find('/', 7);
-    std::string origin = location.substr(0, slash), path = slash == std::string::npos ? "" : location.substr(slash);
-    while (!path.empty() && path.back() == '/') path.pop_back();
-    if (origin.size() <= 7) return Status::error(location + ": not an http://HOST[:PORT]/PATH URL");
-    return std::unique_ptr<TileSource>(new HttpSource(origin, path, std::max(1, timeoutSeconds)));
+    static const CURLcode init = curl_global_init(CURL_GLOBAL_DEFAULT);  // once, before any thread uses libcurl
+    if (init != CURLE_OK) return Status::error(std::string("libcurl: ") + curl_easy_strerror(init));
+    const size_t scheme = location.find("://") + 3;
+    const size_t q = location.find('?');
+    std::string base = location.substr(0, q), query = q == std::string::npos ? "" : location.substr(q);
+    while (!base.empty() && base.back() == '/') base.pop_back();
+    if (base.size() <= scheme || base.find_first_of(" \t\r\n") != std::string::npos)
+        return Status::error(base + ": not an http(s)://HOST[:PORT]/PATH URL");
+    // Headers: the user's, then the token's; each must be one "Name: value" line.
+    std::vector<std::string> lines = http.headers;
+    if (!http.tokenFile.empty()) {
+        std::FILE* f = std::fopen(http.tokenFile.c_str(), "rb");
+        if (!f) return Status::error(http.tokenFile + ": " + std::strerror(errno));
+        std::string token;
+        char buf[4096];
+        for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0 && token.size() < kMaxTokenBytes;) token.append(buf, n);
+        std::fclose(f);
+        while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+        if (token.empty() || token.size() >= kMaxTokenBytes || token.find_first_of("\r\n") != std::string::npos)
+            return Status::error(http.tokenFile + ": not a token (one line, under " + std::to_string(kMaxTokenBytes) + " bytes)");
+        lines.push_back("Authorization: Bearer " + token);
+    }
+    curl_slist* headers = nullptr;
+    for (const std::string& line : lines) {
+        const size_t colon = line.find(':');
+        if (colon == 0 || colon == std::string::npos || line.find_first_of("\r\n") != std::string::npos) {
+            curl_slist_free_all(headers);
+            return Status::error("--header wants 'Name: value' on one line; got '" + line.substr(0, line.find(':')) + ":...'");
+        }
+        curl_slist* more = curl_slist_append(headers, line.c_str());
+        if (!more) {
+            curl_slist_free_all(headers);
+            return Status::error("libcurl: out of memory");
+        }
+        headers = more;
+    }
+    if (http.insecure)
+        std::fprintf(stderr, "warning: --insecure: TLS certificates are NOT verified; anyone on the way to %s can read and change what is fetched\n",
+                     base.substr(0, base.find('/', scheme)).c_str());
+    return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers));
 }
 
 }  // namespace surfcast

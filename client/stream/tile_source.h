@@ -1,6 +1,8 @@
-// Where a tile set's bytes come from: a local folder, or an HTTP folder URL
-// (the project's server at http://HOST:PORT/sets/NAME, or any static host that
-// honours Range). The only HTTP client code of the client library.
+// Where a tile set's bytes come from: a local folder, or an http(s) folder URL
+// (the project's server at http://HOST:PORT/sets/NAME, or any static host,
+// object store or CDN that honours Range). The only HTTP client code of the
+// client library: libcurl (TLS verified against the system store, HTTP/2 where
+// the host offers it, redirects, proxies from the environment).
 #pragma once
 
 #include <cstdint>
@@ -27,10 +29,20 @@ public:
     virtual std::string describe() const = 0;
 };
 
-// "http://..." opens an HTTP source (keep-alive, one connection per calling
-// thread; a response that stalls for `timeoutSeconds` fails); anything else
-// is a local folder.
-Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, int timeoutSeconds = 20);
+// How an http(s) source talks to its host.
+struct HttpOptions {
+    int timeoutSeconds = 20;           // a response that stalls this long fails
+    std::vector<std::string> headers;  // "Name: value", sent with every request (never logged)
+    std::string tokenFile;             // a file holding a bearer token: "Authorization: Bearer TOKEN"
+    std::string caFile;                // PEM certificates to verify the host with, instead of the system store
+    bool insecure = false;             // no certificate verification (tests only; warns on stderr)
+};
+
+// "http://..." and "https://..." open an HTTP source (keep-alive, one
+// connection per calling thread; a query string, such as a shared access
+// signature, is kept on every request and left out of messages); anything
+// else is a local folder.
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http = {});
 bool isUrl(const std::string& location);
 
 }  // namespace surfcast
