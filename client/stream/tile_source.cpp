@@ -204,7 +204,6 @@ private:
             // Stalled: under one byte per second for the whole timeout.
             curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
             curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, long(options_.timeoutSeconds));
-            curl_easy_setopt(h, CURLOPT_ACCEPT_ENCODING, "");  // whatever libcurl decodes
             curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
             curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, &HttpSource::write);
             if (!options_.caFile.empty()) {  // instead of the system's store, folder included
@@ -234,6 +233,9 @@ private:
         curl_easy_setopt(h, CURLOPT_WRITEDATA, &sink);
         curl_easy_setopt(h, CURLOPT_ERRORBUFFER, error);
         curl_easy_setopt(h, CURLOPT_RANGE, range ? range->c_str() : nullptr);
+        // Whole files may come compressed (whatever libcurl decodes); a range
+        // is of the file's own bytes, so it is asked for without encoding.
+        curl_easy_setopt(h, CURLOPT_ACCEPT_ENCODING, range ? nullptr : "");
         if (post) {
             curl_easy_setopt(h, CURLOPT_POSTFIELDS, post->c_str());
             curl_easy_setopt(h, CURLOPT_POSTFIELDSIZE, long(post->size()));
