@@ -19,7 +19,10 @@ struct CpuFrameStats {
 
 // Renders with per-pixel normalization (eq. 9), V^h = settings.lowpassVariance
 // * I and the two-pass z-threshold visibility the GPU uses (each pixel keeps
-// the fragments within z_t of its nearest surface). settings.mode is ignored.
+// the fragments within z_t of its nearest surface). Translucent frames
+// (settings.translucent, or opacity under 1) keep the paper's A-buffer
+// instead (§6: up to settings.layers fragments per pixel, blended by eq. 12;
+// docs/RENDERER.md, "Transparency"). settings.mode is ignored.
 Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const RenderSettings& settings,
                          CpuFrameStats* stats = nullptr);
 

@@ -80,8 +80,10 @@ struct RenderSettings {
     // Transparency (Zwicker 2001 §6): a frame is translucent where the set
     // stores opacity (SurfelSet::translucent) or `opacity` is under 1, which
     // multiplies every surfel's. Translucent frames resolve up to `layers`
-    // surfaces per pixel, nearest first, and blend them back to front (eq. 12);
-    // fragments beyond the last merge into it. Points and circles stay opaque.
+    // surfaces per pixel and blend them back to front (eq. 12); past that,
+    // surfaces merge (on the GPU the last layer takes all the rest, in the
+    // CPU reference the two closest in depth merge, as in the paper). Points
+    // and circles stay opaque.
     bool translucent = false;
     float opacity = 1.f;
     int layers = kDefaultLayers;
