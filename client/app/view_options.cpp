@@ -17,8 +17,9 @@ namespace {
 const char* kUsage = R"(usage: surfcast-view SET [options]                 (a window)
        surfcast-view --headless SET [options]      (PNG files, one JSON line per frame)
 
-Renders a tile set (a folder with tileset.json) with object-space EWA surface
-splatting on Vulkan, or with the CPU screen-space EWA reference.
+Renders a tile set (a folder with tileset.json, or its http(s) URL) with
+object-space EWA surface splatting on Vulkan, or with the CPU screen-space EWA
+reference.
 
   --camera ex,ey,ez,tx,ty,tz,ux,uy,uz,fov
                         eye, target, up (world coordinates of the input) and
@@ -69,20 +70,21 @@ splatting on Vulkan, or with the CPU screen-space EWA reference.
   --repeat N            headless: render each frame N times, report the median GPU times
   --lod PX              level of detail per frame, refining nodes while their projected
                         spacing exceeds PX pixels (frustum and cone culling); streams
-                        SET (a folder or an http:// URL) in the window or headless
+                        SET (a folder or an http(s) URL) in the window or headless
   --no-culling          with --lod: draw what culling would skip (for comparisons)
   --splat-budget N      with --lod: at most N splats per frame (default 5000000); views
                         that need more stay coarser, evenly
-  --gpu-budget MIB      with --lod: GPU memory for surfels, least recently used nodes
+  --gpu-budget MIB      GPU memory for surfels; with --lod, least recently used nodes
                         evicted beyond it (default 1024, or a quarter of the device's)
   --connections N       with --lod: concurrent block requests (default 6)
   --save-redraws        with --lod, headless: also write every redraw before
                         convergence, as OUT_rNNN.png (progressive streaming studies)
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
-  With --lod, SET may be a URL: http(s)://HOST[:PORT]/sets/NAME (surfcast-serve) or
-  any folder URL on a static host, object store or CDN with Range (a query string,
-  such as a shared access signature, is sent with every request); frames redraw as
-  blocks arrive, one JSON line per redraw, until converged.
+  SET may be a URL: http(s)://HOST[:PORT]/sets/NAME (surfcast-serve) or any folder
+  URL on a static host, object store or CDN with Range (a query string, such as a
+  shared access signature, is sent with every request). With --lod frames redraw
+  as blocks arrive, one JSON line per redraw, until converged; without it every
+  leaf is fetched first (at most --gpu-budget of them).
   --header 'NAME: VALUE'
                         with a URL: send this header with every request (repeatable)
   --token-file F        with a URL: send 'Authorization: Bearer TOKEN', the token read
