@@ -1,0 +1,207 @@
+// Remote hosts (client/stream/tile_source): nginx serving a set as static
+// files, over plain HTTP and over TLS with HTTP/2 and HTTP/1.1 (certificates
+// from the test's own CA); bearer tokens, headers, signed query strings,
+// redirects and their loops; a certificate that does not verify.
+#include <gtest/gtest.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stream_support.h"
+#include "test_support.h"
+
+namespace surfcast {
+namespace {
+
+using test::binary;
+using test::expectStreamsLikeLocal;
+using test::run;
+using test::TempDir;
+
+// A free loopback port (bound and released: a server started right after gets it).
+int freePort() {
+    int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t size = sizeof a;
+    int port = ::bind(fd, reinterpret_cast<sockaddr*>(&a), size) == 0 &&
+                       ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &size) == 0
+                   ? ntohs(a.sin_port)
+                   : -1;
+    ::close(fd);
+    return port;
+}
+
+// Debian's nginx (scripts/setup.sh installs nginx-light) in `prefix`, with
+// the server blocks `servers(ports)` makes for `count` free loopback ports;
+// stopped when the returned object goes. nginx cannot report an ephemeral
+// port, so it gets free ones; another process may take one first, and then
+// nginx exits and other ports are tried.
+struct Nginx {
+    test::Child child;
+    std::vector<int> ports;
+    ~Nginx() {
+        if (child.pid > 0) {
+            ::kill(child.pid, SIGTERM);
+            test::exitCode(child.pid);
+        }
+    }
+};
+std::unique_ptr<Nginx> startNginx(const std::string& prefix, int count,
+                                  const std::function<std::string(const std::vector<int>&)>& servers) {
+    EXPECT_TRUE(std::filesystem::exists("/usr/sbin/nginx")) << "nginx is missing: run scripts/setup.sh";
+    std::filesystem::create_directories(prefix);
+    auto n = std::make_unique<Nginx>();
+    for (int attempt = 0; attempt < 5 && n->ports.empty(); ++attempt) {
+        std::vector<int> candidates;
+        for (int i = 0; i < count; ++i) candidates.push_back(freePort());
+        test::writeFile(prefix + "/nginx.conf",
+                        "daemon off; master_process off; worker_processes 1; pid " + prefix + "/nginx.pid;\n"
+                        "error_log stderr notice;\n"
+                        "events { worker_connections 64; }\n"
+                        "http {\n access_log off;\n client_body_temp_path " + prefix + "/body;\n"
+                        " proxy_temp_path " + prefix + "/proxy;\n fastcgi_temp_path " + prefix + "/fastcgi;\n"
+                        " uwsgi_temp_path " + prefix + "/uwsgi;\n scgi_temp_path " + prefix + "/scgi;\n" +
+                        servers(candidates) + "}\n");
+        n->child = test::spawn({"/usr/sbin/nginx", "-e", "stderr", "-p", prefix, "-c", prefix + "/nginx.conf"});
+        // It binds, then logs its limits (getrlimit); when a port is taken
+        // it logs bind() errors and exits instead.
+        if (n->child.waitFor("getrlimit(")) n->ports = candidates;
+        else test::exitCode(n->child.pid), n->child.pid = -1;
+    }
+    EXPECT_FALSE(n->ports.empty()) << "nginx did not start: " << n->child.log;
+    return n;
+}
+
+TEST(Stream, FromNginxConvergesToTheLocalImage) {
+    // nginx serving the same folder as static files: Range requests, no batch
+    // endpoint (POST is refused, the client falls back to ranges).
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("www/sets"));
+    auto b = test::buildScene(dir.file("www/sets/scene"), 100000, {"--capacity", "3000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto nginx = startNginx(dir.file("nginx"), 1, [&](const std::vector<int>& ports) {
+        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; root " + dir.file("www") + "; }\n";
+    });
+    ASSERT_FALSE(nginx->ports.empty());
+    expectStreamsLikeLocal("http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/sets/scene", dir.file("www/sets/scene"),
+                           "--camera=3,-6,2,0,0,0.5,0,0,1,50", dir);
+}
+
+// A CA and a server certificate for 127.0.0.1 it signs, made with openssl in
+// `dir`: ca.pem, server.pem, server.key; and an unrelated CA, other.pem.
+void makeCertificates(const TempDir& dir) {
+    auto ssl = [&](std::vector<std::string> args) {
+        args.insert(args.begin(), "/usr/bin/openssl");
+        auto r = run(args);
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+    };
+    test::writeFile(dir.file("san.cnf"), "subjectAltName=IP:127.0.0.1\n");
+    for (const char* ca : {"ca", "other"})
+        ssl({"req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", dir.file(std::string(ca) + ".key"), "-out",
+             dir.file(std::string(ca) + ".pem"), "-days", "2", "-subj", std::string("/CN=surfcast test ") + ca});
+    ssl({"req", "-newkey", "rsa:2048", "-nodes", "-keyout", dir.file("server.key"), "-out", dir.file("server.csr"), "-subj",
+         "/CN=127.0.0.1"});
+    ssl({"x509", "-req", "-in", dir.file("server.csr"), "-CA", dir.file("ca.pem"), "-CAkey", dir.file("ca.key"),
+         "-CAcreateserial", "-out", dir.file("server.pem"), "-days", "2", "-extfile", dir.file("san.cnf")});
+}
+
+TEST(Stream, OverHttpsFromNginxWithHttp2AndHttp11) {
+    // nginx with TLS (a certificate from the test's own CA) on two ports,
+    // HTTP/2 on the first and HTTP/1.1 only on the second. Locations: the
+    // set; one that wants a bearer token; one that wants a signature in the
+    // query string (as a shared access signature); one that redirects to the
+    // set; one that redirects to itself.
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("www/sets"));
+    auto b = test::buildScene(dir.file("www/sets/scene"), 100000, {"--capacity", "3000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    makeCertificates(dir);
+    for (const char* place : {"private", "signed"}) {
+        std::filesystem::create_directories(dir.file("www/") + place);
+        std::filesystem::create_directory_symlink(dir.file("www/sets/scene"), dir.file("www/") + place + "/scene");
+    }
+    test::writeFile(dir.file("token"), "s3cret-Token\n");
+    auto nginx = startNginx(dir.file("nginx"), 2, [&](const std::vector<int>& ports) {
+        std::string s;
+        for (size_t i = 0; i < 2; ++i)
+            s += " server {\n  listen 127.0.0.1:" + std::to_string(ports[i]) + (i == 0 ? " ssl http2;\n" : " ssl;\n") +
+                 "  ssl_certificate " + dir.file("server.pem") + "; ssl_certificate_key " + dir.file("server.key") + ";\n"
+                 "  access_log " + dir.file("access.log") + " combined;\n  root " + dir.file("www") + ";\n"
+                 "  location /private/ { if ($http_authorization != \"Bearer s3cret-Token\") { return 401; } }\n"
+                 "  location /signed/ { if ($arg_sig != \"abc\") { return 403; } }\n"
+                 "  location /moved/ { rewrite ^/moved/(.*)$ /sets/$1 redirect; }\n"
+                 "  location /loop/ { rewrite ^/loop/(.*)$ /loop/$1 redirect; }\n }\n";
+        return s;
+    });
+    ASSERT_FALSE(nginx->ports.empty());
+    const std::string local = dir.file("www/sets/scene"), camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
+    const std::string h2 = "https://127.0.0.1:" + std::to_string(nginx->ports[0]),
+                      h1 = "https://127.0.0.1:" + std::to_string(nginx->ports[1]);
+    const std::vector<std::string> ca = {"--ca-file", dir.file("ca.pem")};
+
+    // The streamed image equals the local one byte for byte, over either protocol.
+    for (const std::string& origin : {h2, h1}) expectStreamsLikeLocal(origin + "/sets/scene", local, camera.c_str(), dir, ca);
+    const std::string log = test::readFile(dir.file("access.log"));
+    EXPECT_NE(log.find("HTTP/2.0\" 206"), std::string::npos) << "no HTTP/2 range request in nginx's log";
+    EXPECT_NE(log.find("HTTP/1.1\" 206"), std::string::npos) << "no HTTP/1.1 range request in nginx's log";
+
+    // Without --lod: every leaf, fetched whole, the same image as the folder.
+    auto remote = run({binary("surfcast-view"), "--headless", h2 + "/sets/scene", camera, "--size", "200x150", "--ca-file",
+                       dir.file("ca.pem"), "--out", dir.file("remote-all.png")});
+    ASSERT_EQ(remote.exitCode, 0) << remote.output;
+    auto folder = run({binary("surfcast-view"), "--headless", local, camera, "--size", "200x150", "--out", dir.file("local-all.png")});
+    ASSERT_EQ(folder.exitCode, 0) << folder.output;
+    EXPECT_TRUE(test::readFile(dir.file("remote-all.png")) == test::readFile(dir.file("local-all.png")));
+
+    // A certificate that does not verify: one clear error at once, no retries.
+    for (const std::vector<std::string>& trust : {std::vector<std::string>{"--ca-file", dir.file("other.pem")},
+                                                   std::vector<std::string>{}}) {
+        std::vector<std::string> args = {binary("surfcast-view"), "--headless", h2 + "/sets/scene", "--lod", "1", "--size",
+                                         "64x48", "--out", dir.file("x.png")};
+        args.insert(args.end(), trust.begin(), trust.end());
+        const auto start = std::chrono::steady_clock::now();
+        auto r = run(args);
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.output.find(h2 + "/sets/scene/tileset.json: TLS with the host failed"), std::string::npos) << r.output;
+        EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10.0);
+    }
+
+    // A bearer token from a file opens the private location; without it, 401
+    // names the URL and the remedy. The token is never printed.
+    auto refused = run({binary("surfcast-view"), "--headless", h2 + "/private/scene", "--lod", "1", "--size", "64x48",
+                        "--ca-file", dir.file("ca.pem"), "--out", dir.file("x.png")});
+    EXPECT_NE(refused.exitCode, 0);
+    EXPECT_NE(refused.output.find(h2 + "/private/scene/tileset.json: HTTP 401"), std::string::npos) << refused.output;
+    EXPECT_NE(refused.output.find("--token-file"), std::string::npos) << refused.output;
+    auto last = expectStreamsLikeLocal(h2 + "/private/scene", local, camera.c_str(), dir,
+                                       {"--ca-file", dir.file("ca.pem"), "--token-file", dir.file("token")});
+    EXPECT_EQ(last.dump().find("s3cret"), std::string::npos);
+    auto header = run({binary("surfcast-view"), "--headless", h1 + "/private/scene", "--size", "64x48", "--ca-file",
+                       dir.file("ca.pem"), "--header", "Authorization: Bearer s3cret-Token", "--out", dir.file("x.png")});
+    EXPECT_EQ(header.exitCode, 0) << header.output;
+    EXPECT_EQ(header.output.find("s3cret"), std::string::npos) << header.output;
+
+    // The query string travels with every request (a prefix-scoped signature).
+    expectStreamsLikeLocal(h1 + "/signed/scene?sig=abc", local, camera.c_str(), dir, ca);
+
+    // Redirects are followed; a loop is an error.
+    expectStreamsLikeLocal(h2 + "/moved/scene", local, camera.c_str(), dir, ca);
+    auto loop = run({binary("surfcast-view"), "--headless", h2 + "/loop/scene", "--lod", "1", "--size", "64x48",
+                     "--ca-file", dir.file("ca.pem"), "--out", dir.file("x.png")});
+    EXPECT_NE(loop.exitCode, 0);
+    EXPECT_NE(loop.output.find("redirects (a loop?)"), std::string::npos) << loop.output;
+}
+
+}  // namespace
+}  // namespace surfcast

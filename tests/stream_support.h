@@ -1,0 +1,42 @@
+// Helpers shared by the streaming tests (stream_test.cpp) and the remote-host
+// tests (remote_host_test.cpp): streaming a set headless and comparing the
+// converged image with the local folder's.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "test_support.h"
+
+namespace surfcast::test {
+
+inline nlohmann::json lastLine(const std::string& output) {
+    auto lines = test::jsonLines(output);
+    return lines.empty() ? nlohmann::json() : lines.back();
+}
+
+// Streams `url` headless until converged and checks the image against the
+// same view streamed from the local folder `local`, byte for byte; the last
+// JSON line of the remote run.
+inline nlohmann::json expectStreamsLikeLocal(const std::string& url, const std::string& local, const char* camera,
+                                      const TempDir& dir, const std::vector<std::string>& options = {}) {
+    std::vector<std::string> args = {binary("surfcast-view"), "--headless", url, camera, "--lod", "1", "--size", "200x150",
+                                     "--max-wait", "60", "--out", dir.file("remote.png")};
+    args.insert(args.end(), options.begin(), options.end());
+    auto remote = run(args);
+    EXPECT_EQ(remote.exitCode, 0) << remote.output;
+    auto folder = run({binary("surfcast-view"), "--headless", local, camera, "--lod", "1", "--size", "200x150", "--out",
+                       dir.file("local.png")});
+    EXPECT_EQ(folder.exitCode, 0) << folder.output;
+    auto last = lastLine(remote.output);
+    EXPECT_TRUE(last.is_object() && last["converged"].get<bool>()) << remote.output;
+    EXPECT_TRUE(last.is_object() && last["failures"].get<int>() == 0) << remote.output;
+    EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
+        << url << " " << camera << ": the converged streamed image differs from the local one";
+    return last;
+}
+
+}  // namespace surfcast::test
