@@ -188,6 +188,12 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         }
         return image;
     };
+    // Edge antialiasing's border: a 4-neighbour of (x, y) where `covered` is false.
+    auto onBorder = [&](int x, int y, auto&& covered) {
+        for (auto [dx, dy] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}})
+            if (!covered(size_t(std::clamp(y + dy, 0, H - 1)) * W + size_t(std::clamp(x + dx, 0, W - 1)))) return true;
+        return false;
+    };
     auto store = [](uint8_t* px, const Vec3f& c, float alpha) {
         px[0] = uint8_t(std::lround(std::clamp(c.x, 0.f, 1.f) * 255.f));
         px[1] = uint8_t(std::lround(std::clamp(c.y, 0.f, 1.f) * 255.f));
@@ -195,7 +201,7 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
         px[3] = uint8_t(std::lround(std::clamp(alpha, 0.f, 1.f) * 255.f));
     };
 
-    if (settings.translucent || settings.opacity < 1.f) {
+    if (translucentFrame(settings)) {
         // Translucent (§6): every fragment goes to the A-buffer, in the
         // splats' order; then each pixel's layers blend back to front (eq. 12).
         const int layers = std::clamp(settings.layers, 1, kMaxLayers);
@@ -225,14 +231,9 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
                     float alpha = f.a / f.w;
                     // Edge antialiasing per layer, on that layer's border: a
                     // 4-neighbour without a k-th surface (the GPU's rule).
-                    if (settings.edgeAA && f.coverage < settings.edgeTau) {
-                        bool border = false;
-                        for (auto [dx, dy] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}}) {
-                            const int qx = std::clamp(x + dx, 0, W - 1), qy = std::clamp(y + dy, 0, H - 1);
-                            border = border || counts[size_t(qy) * W + qx] <= k;
-                        }
-                        if (border) alpha *= f.coverage / settings.edgeTau;
-                    }
+                    if (settings.edgeAA && f.coverage < settings.edgeTau &&
+                        onBorder(x, y, [&](size_t q) { return counts[q] > k; }))
+                        alpha *= f.coverage / settings.edgeTau;
                     const Vec3f color = shadePixel(settings.shading, Vec3f{f.r, f.g, f.b} * (1.f / f.w), {f.nx, f.ny, f.nz}, ray(x, y));
                     c = color * alpha + c * (1.f - alpha);
                     total = alpha + total * (1.f - alpha);
@@ -285,14 +286,9 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
                 // Partial coverage on the covered region's border only, as
                 // the GPU's resolve does.
                 alpha = 1.f;
-                if (settings.edgeAA && a.coverage < settings.edgeTau) {
-                    bool border = false;
-                    for (auto [dx, dy] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}}) {
-                        const int qx = std::clamp(x + dx, 0, W - 1), qy = std::clamp(y + dy, 0, H - 1);
-                        border = border || !(acc[size_t(qy) * W + qx].coverage > 0);
-                    }
-                    if (border) alpha = a.coverage / settings.edgeTau;
-                }
+                if (settings.edgeAA && a.coverage < settings.edgeTau &&
+                    onBorder(x, y, [&](size_t q) { return acc[q].coverage > 0; }))
+                    alpha = a.coverage / settings.edgeTau;
                 c = shadePixel(settings.shading, Vec3f{a.r, a.g, a.b} * (1.f / a.w), {a.nx, a.ny, a.nz}, ray(x, y));
                 c = settings.background + (c - settings.background) * alpha;
                 ++covered;

@@ -59,9 +59,8 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
                 : s.shading == Shading::Lambert ? SC_SHADING_LAMBERT : SC_SHADING_PHONG;
     p.maxFilterPixels = kMaxFilterPixels;
     p.circleScale = s.kernelScale;
-    const bool translucent = s.translucent || s.opacity < 1.f;
     p.flags = (s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u) | (s.edgeAA ? SC_FLAG_EDGE_AA : 0u) |
-              (translucent ? SC_FLAG_TRANSLUCENT : 0u);
+              (translucentFrame(s) ? SC_FLAG_TRANSLUCENT : 0u);
     p.opacity = std::clamp(s.opacity, 0.f, 1.f);
     p.layer = 0;
     p.layers = uint32_t(std::clamp(s.layers, 1, kMaxLayers));

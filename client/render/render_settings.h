@@ -89,6 +89,9 @@ struct RenderSettings {
     int layers = kDefaultLayers;
 };
 
+// Whether a frame with these settings is translucent (RenderSettings::translucent).
+inline bool translucentFrame(const RenderSettings& s) { return s.translucent || s.opacity < 1.f; }
+
 // Push constants for one frame; `nearPlane` in world units.
 gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& settings, float nearPlane);
 

@@ -168,10 +168,6 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
 
 namespace {
 
-// tileset.json is a few kilobytes; this bounds what a broken host can make
-// the viewer hold before the JSON parser rejects it.
-constexpr uint64_t kMaxTilesetJsonBytes = 16u << 20;
-
 bool wantedNode(const NodeRecord& node, const LevelChoice& choice) {
     const bool leaf = node.childMask == 0;
     return node.surfelCount > 0 &&

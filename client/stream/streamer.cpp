@@ -17,9 +17,6 @@ double now() { return std::chrono::duration<double>(std::chrono::steady_clock::n
 // comes back without the client hammering it.
 double backoffSeconds(int attempts) { return std::min(5.0, 0.1 * std::pow(2.0, attempts - 1)); }
 constexpr size_t kMaxBatchNodes = 32;
-// tileset.json is a few kilobytes; this bounds what a broken host can make
-// the client hold before the JSON parser rejects it.
-constexpr uint64_t kMaxTilesetJsonBytes = 16u << 20;
 }  // namespace
 
 Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& location, const StreamOptions& options) {

@@ -29,6 +29,10 @@ public:
     virtual std::string describe() const = 0;
 };
 
+// tileset.json is a few kilobytes; this bounds what a broken host can make a
+// reader hold before the JSON parser rejects it.
+inline constexpr uint64_t kMaxTilesetJsonBytes = 16u << 20;
+
 // How an http(s) source talks to its host.
 struct HttpOptions {
     int timeoutSeconds = 20;           // a response that stalls this long fails
