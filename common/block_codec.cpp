@@ -107,6 +107,21 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
     }
     std::unique_ptr<draco::PointCloud> pc = builder.Finalize(false);
     if (!pc) return Status::error("Draco rejected the block's attributes");
+    // Readers refuse a block of more than kMaxBlockPoints points or whose
+    // decoding would take more than kMaxBlockDecodeBytes (a leaf at the
+    // deepest level may pass --capacity): never write one.
+    uint32_t components = 0, valueBytes = 0;
+    for (int i = 0; i < pc->num_attributes(); ++i) {
+        const draco::PointAttribute* a = pc->attribute(i);
+        components += uint32_t(a->num_components());
+        valueBytes += uint32_t(a->num_components() * draco::DataTypeLength(a->data_type()));
+    }
+    const uint64_t footprint = blockDecodeBytes(uint32_t(n), components, valueBytes);
+    if (n > kMaxBlockPoints || footprint > kMaxBlockDecodeBytes)
+        return Status::error("a node of " + std::to_string(n) + " surfels with " + std::to_string(components) +
+                             " attribute components would take " + std::to_string(footprint >> 20) +
+                             " MiB to decode; readers allow " + std::to_string(kMaxBlockPoints) + " surfels and " +
+                             std::to_string(kMaxBlockDecodeBytes >> 20) + " MiB: lower --capacity");
 
     draco::ExpertEncoder encoder(*pc);
     encoder.SetEncodingMethod(draco::POINT_CLOUD_KD_TREE_ENCODING);
@@ -123,7 +138,8 @@ namespace {
 // sees it, so that a block cannot make it allocate more than the node's
 // record and the set's attributes allow (fuzz_block: 2.4 GB from a point
 // count, 3.3 GB from the sequential decoder, 2 GB from attribute
-// descriptors). Header: "DRACO", major, minor, encoder type (0: point
+// descriptors, 3 GB from a count within the record bound times many wide
+// attributes). Header: "DRACO", major, minor, encoder type (0: point
 // cloud), method (1: kd-tree, what surfcast-build writes), u16 flags (no
 // metadata: surfcast-build writes none), the point count as int32; then one
 // attribute decoder, its attribute count (varint), and per attribute its
@@ -132,7 +148,14 @@ namespace {
 struct DracoHeader {
     uint32_t points = 0;
     uint32_t attributes = 0;
+    uint32_t components = 0;  // summed over the attributes
+    uint32_t valueBytes = 0;  // one point's decoded values, summed over the attributes
 };
+// Bytes of one value of Draco's data types 1..11 (INT8 .. BOOL).
+uint32_t dracoTypeBytes(uint8_t type) {
+    static constexpr uint8_t bytes[12] = {0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8, 1};
+    return bytes[type];
+}
 Result<DracoHeader> readDracoHeader(const uint8_t* data, size_t size) {
     if (size < 17 || std::memcmp(data, "DRACO", 5) != 0) return Status::error("not a Draco block");
     if (data[7] != 0) return Status::error("the Draco block is not a point cloud");
@@ -163,6 +186,8 @@ Result<DracoHeader> readDracoHeader(const uint8_t* data, size_t size) {
         if (dataType < 1 || dataType > 11 || components < 1 || components > 4 || !varint(&id))
             return Status::error("the Draco block's attribute " + std::to_string(i) + " has " +
                                  std::to_string(components) + " components of type " + std::to_string(dataType));
+        h.components += components;
+        h.valueBytes += components * dracoTypeBytes(dataType);
     }
     return h;
 }
@@ -180,6 +205,12 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     if (header->attributes != uint32_t(expected))
         return Status::error("block has " + std::to_string(header->attributes) + " attributes; the tile set declares " +
                              std::to_string(expected));
+    const uint64_t footprint = blockDecodeBytes(header->points, header->components, header->valueBytes);
+    if (footprint > kMaxBlockDecodeBytes)
+        return Status::error("the Draco block's " + std::to_string(header->points) + " points of " +
+                             std::to_string(header->components) + " components would take " +
+                             std::to_string(footprint >> 20) + " MiB to decode; at most " +
+                             std::to_string(kMaxBlockDecodeBytes >> 20) + " MiB is allowed");
     draco::DecoderBuffer buffer;
     buffer.Init(reinterpret_cast<const char*>(data), size);
     draco::Decoder decoder;

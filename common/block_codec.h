@@ -91,8 +91,15 @@ struct BlockExpectation {
     // most kMaxBlockPoints.
     uint32_t points = 0;
 };
-// The largest node surfcast-build writes (--capacity's upper bound).
-inline constexpr uint32_t kMaxBlockPoints = 100'000'000;
+// The largest node surfcast-build writes (--capacity's upper bound, 2^22).
+inline constexpr uint32_t kMaxBlockPoints = 4'194'304;
+// What decoding one block may allocate, and so the largest block a writer
+// writes: Draco holds every component as a 32-bit portable value while it
+// decodes and then the point's values in their own types.
+inline constexpr uint64_t kMaxBlockDecodeBytes = uint64_t(512) << 20;
+inline uint64_t blockDecodeBytes(uint32_t points, uint32_t components, uint32_t valueBytes) {
+    return uint64_t(points) * (4 * uint64_t(components) + valueBytes);
+}
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect);
 
 }  // namespace surfcast

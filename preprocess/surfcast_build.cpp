@@ -40,7 +40,7 @@ the text file LIST, one per line.
   --seed N                seed of the built-in scene and mesh sampling (default 1)
   --info SET              print a tile set's summary and verify every checksum
   --grid G                cells per axis of a node's sampling grid (default 128)
-  --capacity N            surfels above which a node splits (default 20000)
+  --capacity N            surfels above which a node splits (default 20000, at most 4194304)
   --memory SIZE           peak memory budget, e.g. 512M, 2G (default 2G)
   --threads N             worker threads (default: all cores)
   --normal-k K            neighbours for normal estimation (default 16)
@@ -170,7 +170,8 @@ int main(int argc, char** argv) {
             if (!number(&d, 4, 1024)) return usageError("--grid needs a value in [4, 1024]");
             opt.grid = int(d);
         } else if (a == "--capacity") {
-            if (!number(&d, 16, 1e8)) return usageError("--capacity needs a value in [16, 1e8]");
+            if (!number(&d, 16, surfcast::kMaxBlockPoints))
+                return usageError("--capacity needs a value in [16, " + std::to_string(surfcast::kMaxBlockPoints) + "]");
             opt.capacity = uint32_t(d);
         } else if (a == "--memory") {
             if (!value(&v) || !parseSize(v, &opt.memoryBytes)) return usageError("--memory needs a size such as 512M or 2G");

@@ -111,6 +111,36 @@ TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
     EXPECT_NE(components.status().message().find("has 200 components"), std::string::npos) << components.status().message();
 }
 
+// A count within the record bound times wide attributes made Draco allocate
+// 3 GB from a 100-byte block (fuzz/regressions/block/kd-tree-buffer-3GB).
+// Decoding holds 4 bytes per component plus the values in their own types.
+// Hand-derived for the sample block, position (3 x u32), normal (3 x f32),
+// colour (3 x u8), weight (1 x f32): 10 components, 31 value bytes, so
+// 71 bytes a point. Widened to four 4-component f64 attributes: 16
+// components, 128 value bytes, 192 bytes a point, and 2^22 points take
+// 768 MiB, over the 512 MiB bound.
+TEST(BlockCodec, ABlockThatWouldTakeOverHalfAGigabyteToDecodeIsRejectedBeforeDraco) {
+    EXPECT_EQ(blockDecodeBytes(1000, 10, 31), 71'000u);
+    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{});
+    ASSERT_TRUE(bytes.ok());
+    BlockExpectation e;
+    e.colorBits = 8;
+    // Descriptors from byte 17, five bytes each: type, data type, components,
+    // normalized, a one-byte id.
+    std::vector<uint8_t> wide = *bytes;
+    for (size_t at = 17; at < 17 + 4 * 5; at += 5) {
+        wide[at + 1] = 10;  // DT_FLOAT64
+        wide[at + 2] = 4;
+    }
+    const int32_t count = int32_t(kMaxBlockPoints);
+    std::memcpy(wide.data() + 11, &count, 4);
+    auto claimed = decodeBlock(wide.data(), wide.size(), e);
+    ASSERT_FALSE(claimed.ok());
+    EXPECT_NE(claimed.status().message().find("4194304 points of 16 components would take 768 MiB to decode"),
+              std::string::npos)
+        << claimed.status().message();
+}
+
 // Edge weights (4 ratios per surfel, 8-bit) travel with their point.
 TEST(BlockCodec, EdgeWeightsRoundTripWithTheirPoint) {
     BlockData in = sampleBlock(400);
