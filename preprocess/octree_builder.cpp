@@ -821,6 +821,7 @@ Result<BuildSummary> Builder::run() {
     info.surfels = summary_.surfels;
     info.levels = int(summary_.nodesPerLevel.size());
     info.grid = opt_.grid;
+    info.pageDepth = opt_.pageDepth;
     info.rootMin = rootMin_;
     info.rootEdge = rootEdge_;
     info.bounds = stats_.bounds;

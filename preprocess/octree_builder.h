@@ -21,6 +21,7 @@ struct BuildOptions {
     InputOptions inputs;
     std::string output;
     int grid = 128;                     // G: cells per axis of a node's grid
+    uint32_t pageDepth = kDefaultPageDepth;  // levels per hierarchy page (docs/FORMAT.md)
     uint32_t capacity = 20000;          // surfels above which a node splits
     uint64_t memoryBytes = 2ull << 30;  // peak RSS budget
     int threads = 0;                    // 0: all cores

@@ -40,6 +40,8 @@ the text file LIST, one per line.
   --seed N                seed of the built-in scene and mesh sampling (default 1)
   --info SET              print a tile set's summary and verify every checksum
   --grid G                cells per axis of a node's sampling grid (default 128)
+  --page-depth D          levels per hierarchy page, which a viewer fetches as it
+                          reaches them (default 5)
   --capacity N            surfels above which a node splits (default 20000, at most 4194304)
   --memory SIZE           peak memory budget, e.g. 512M, 2G (default 2G)
   --threads N             worker threads (default: all cores)
@@ -169,6 +171,9 @@ int main(int argc, char** argv) {
         } else if (a == "--grid") {
             if (!number(&d, 4, 1024)) return usageError("--grid needs a value in [4, 1024]");
             opt.grid = int(d);
+        } else if (a == "--page-depth") {
+            if (!number(&d, 2, surfcast::kMaxLevel + 1)) return usageError("--page-depth needs a value in [2, 21]");
+            opt.pageDepth = uint32_t(d);
         } else if (a == "--capacity") {
             if (!number(&d, 16, surfcast::kMaxBlockPoints))
                 return usageError("--capacity needs a value in [16, " + std::to_string(surfcast::kMaxBlockPoints) + "]");

@@ -98,6 +98,39 @@ TEST(Stream, FromNginxConvergesToTheLocalImage) {
                            "--camera=3,-6,2,0,0,0.5,0,0,1,50", dir);
 }
 
+// The client fetches hierarchy.bin's header, page table and page 0, then the
+// pages traversal reaches (docs/FORMAT.md). A set paged every 2 levels: a
+// close-up reaches few of its 146 pages, and an overview more, each fewer
+// than the whole file; both converge to the image of the same set in one
+// page, which the client takes whole at open (a full download).
+TEST(Stream, PagedHierarchyFetchesOnlyThePagesAViewReaches) {
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("www/sets"));
+    for (const char* depth : {"2", "21"}) {
+        auto b = test::buildScene(dir.file(std::string("www/sets/d") + depth), 100000,
+                                  {"--capacity", "500", "--page-depth", depth});
+        ASSERT_EQ(b.exitCode, 0) << b.output;
+    }
+    const auto paged = std::filesystem::file_size(dir.file("www/sets/d2/hierarchy.bin"));
+    const auto whole = std::filesystem::file_size(dir.file("www/sets/d21/hierarchy.bin"));
+    auto nginx = startNginx(dir.file("nginx"), 1, [&](const std::vector<int>& ports) {
+        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; root " + dir.file("www") + "; }\n";
+    });
+    ASSERT_FALSE(nginx->ports.empty());
+    const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/sets/";
+    const char* closeUp = "--camera=0.6,-1.2,0.9,0.3,0,0.5,0,0,1,25";
+    const char* overview = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
+    auto near = expectStreamsLikeLocal(url + "d2", dir.file("www/sets/d21"), closeUp, dir);
+    auto far = expectStreamsLikeLocal(url + "d2", dir.file("www/sets/d21"), overview, dir);
+    auto one = expectStreamsLikeLocal(url + "d21", dir.file("www/sets/d21"), overview, dir);
+    ASSERT_TRUE(near.is_object() && far.is_object() && one.is_object());
+    EXPECT_EQ(one["hierarchy_pages"].get<int>(), 1);
+    EXPECT_EQ(one["hierarchy_bytes"].get<uint64_t>(), whole);
+    EXPECT_GT(near["hierarchy_pages"].get<int>(), 1) << "the close-up needs pages below page 0";
+    EXPECT_LT(near["hierarchy_bytes"].get<uint64_t>(), far["hierarchy_bytes"].get<uint64_t>());
+    EXPECT_LT(far["hierarchy_bytes"].get<uint64_t>(), paged);
+}
+
 // A CA and a server certificate for 127.0.0.1 it signs, made with openssl in
 // `dir`: ca.pem, server.pem, server.key; and an unrelated CA, other.pem.
 void makeCertificates(const TempDir& dir) {

@@ -167,6 +167,8 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["budget_limited"] = cf.lod.budgetLimited;
                 line["bytes_downloaded"] = cf.stream.bytesDownloaded;
                 line["requests"] = cf.stream.requests;
+                line["hierarchy_bytes"] = cf.stream.hierarchyBytes;
+                line["hierarchy_pages"] = cf.stream.pages;
                 line["requests_in_flight"] = cf.stream.requestsInFlight;
                 line["nodes_in_flight"] = cf.stream.inFlight;
                 line["resident_nodes"] = cf.stream.resident;

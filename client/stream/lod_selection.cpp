@@ -1,5 +1,6 @@
 #include "lod_selection.h"
 
+#include <algorithm>
 #include <cmath>
 #include <queue>
 #include <unordered_map>
@@ -73,19 +74,23 @@ bool backfacing(const NodeRecord& n, const Box3d& b, const Vec3d& eye) {
 
 }  // namespace
 
-LodSelector::LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes) : info_(info), nodes_(std::move(nodes)) {
-    std::unordered_map<NodeKey, int32_t, NodeKeyHash> index;
-    for (size_t i = 0; i < nodes_.size(); ++i) {
-        index[nodes_[i].key] = int32_t(i);
+LodSelector::LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes) : info_(info) { addNodes(nodes); }
+
+void LodSelector::addNodes(const std::vector<NodeRecord>& nodes) {
+    const size_t first = nodes_.size();
+    nodes_.insert(nodes_.end(), nodes.begin(), nodes.end());
+    children_.resize(nodes_.size(), {-1, -1, -1, -1, -1, -1, -1, -1});
+    for (size_t i = first; i < nodes_.size(); ++i) {
+        index_[nodes_[i].key] = int32_t(i);
         if (nodes_[i].key.level == 0) root_ = int32_t(i);
     }
-    children_.assign(nodes_.size(), {-1, -1, -1, -1, -1, -1, -1, -1});
-    for (size_t i = 0; i < nodes_.size(); ++i)
-        for (int c = 0; c < 8; ++c)
-            if (nodes_[i].childMask & (1u << c)) {
-                auto it = index.find(nodes_[i].key.child(c));
-                if (it != index.end()) children_[i][size_t(c)] = it->second;
-            }
+    // Link the new nodes to their parents, which may be in an earlier page.
+    for (size_t i = first; i < nodes_.size(); ++i) {
+        const NodeKey& key = nodes_[i].key;
+        if (key.level == 0) continue;
+        auto parent = index_.find(key.parent());
+        if (parent != index_.end()) children_[size_t(parent->second)][size_t(key.childIndex())] = int32_t(i);
+    }
 }
 
 Box3d LodSelector::box(uint32_t i) const {
@@ -177,6 +182,14 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
     while (!open.empty()) {
         Drawn d = open.top();
         open.pop();
+        // Children in a hierarchy page not added yet: drawn meanwhile.
+        if (nodes_[d.index].flags & kFlagChildrenInPage &&
+            std::all_of(children_[d.index].begin(), children_[d.index].end(), [](int32_t c) { return c < 0; })) {
+            st.missingPages.push_back({d.index, d.priority});
+            ++st.waiting;
+            final.push_back(d);
+            continue;
+        }
         // Replacement: refine only when every child that will be drawn or
         // refined (not culled) is resident; else draw this node meanwhile.
         std::vector<std::pair<uint32_t, Box3d>> needed;

@@ -9,13 +9,17 @@
 // Refinement goes coarsest gap first (largest projected spacing, weighted
 // towards the view centre) and stops at a splat budget and a memory budget,
 // so a view that would need more than a frame can draw or the GPU can hold
-// degrades evenly instead of refining one corner.
+// degrades evenly instead of refining one corner. The tree may be known in
+// part (hierarchy pages fetched as traversal reaches them): a node whose
+// children are in a page not yet added is drawn meanwhile, and the page is
+// reported missing like a node.
 // Pure CPU, no Vulkan, no I/O: the streaming client and surfcast-view use it.
 #pragma once
 
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <unordered_map>
 #include <vector>
 
 #include "camera.h"
@@ -52,6 +56,9 @@ struct LodStats {
     // projected spacing of the node waiting for them, weighted towards the
     // view centre: coarsest gaps first).
     std::vector<std::pair<uint32_t, double>> missing;
+    // Hierarchy pages the view needs that are not added yet, as (the node
+    // whose children the page holds, priority): the node's childPage says which.
+    std::vector<std::pair<uint32_t, double>> missingPages;
     // Every resident node the view relies on: drawn, refined through, or a
     // child waiting for its siblings. A cache must not evict these.
     std::vector<uint32_t> used;
@@ -64,8 +71,13 @@ struct SelectedNode {
 
 class LodSelector {
 public:
-    // `nodes` in any order, one tree rooted at level 0 (readHierarchy's output).
+    // `nodes` in any order, one tree rooted at level 0 (readHierarchy's
+    // output), or its top: page 0 (readHierarchyPage's).
     LodSelector(const TilesetInfo& info, std::vector<NodeRecord> nodes);
+    // The records of a further page (readHierarchyPage's output, which leaves
+    // out the page's first record: its proxy is here already). They get the
+    // next indices; earlier indices stay.
+    void addNodes(const std::vector<NodeRecord>& nodes);
 
     const std::vector<NodeRecord>& nodes() const { return nodes_; }
 
@@ -80,7 +92,8 @@ public:
 private:
     TilesetInfo info_;
     std::vector<NodeRecord> nodes_;
-    std::vector<std::array<int32_t, 8>> children_;  // node index per child slot, -1 if none
+    std::vector<std::array<int32_t, 8>> children_;  // node index per child slot, -1 if none (or not added yet)
+    std::unordered_map<NodeKey, int32_t, NodeKeyHash> index_;
     int32_t root_ = -1;
 };
 

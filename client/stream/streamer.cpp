@@ -32,15 +32,37 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     if (!info) return info.status();
     s->tilesetJson_ = std::move(*json);
     s->info_ = *info;
-    auto hierarchy = s->source_->file("hierarchy.bin", s->info_.hierarchyBytes);
-    if (!hierarchy) return hierarchy.status();
-    auto nodes = readHierarchyOf(s->info_, *hierarchy, location + "/hierarchy.bin");
-    if (!nodes) return nodes.status();
-    s->selector_ = std::make_unique<LodSelector>(s->info_, std::move(*nodes));
+    // hierarchy.bin's header and page table, then page 0.
+    const std::string what = location + "/hierarchy.bin";
+    const uint64_t indexBytes = kHierarchyHeaderSize + uint64_t(kPageEntrySize) * s->info_.hierarchyPages;
+    if (s->info_.hierarchyPages == 0 || indexBytes > s->info_.hierarchyBytes)
+        return Status::error(location + "/tileset.json: " + std::to_string(s->info_.hierarchyPages) +
+                             " hierarchy pages do not fit hierarchy.bin's " + std::to_string(s->info_.hierarchyBytes) + " bytes");
+    auto head = s->source_->range("hierarchy.bin", 0, indexBytes);
+    if (!head) return head.status();
+    auto index = readHierarchyIndex(*head, s->info_.hierarchyBytes, what);
+    if (!index) return index.status();
+    s->hierarchy_ = std::move(*index);
+    auto page = s->fetchPageRecords(0, NodeKey{});
+    if (!page) return page.status();
+    s->selector_ = std::make_unique<LodSelector>(s->info_, std::move(*page));
+    s->pages_[0] = true;
+    s->stats_.pages = 1;
+    s->stats_.hierarchyBytes = indexBytes + uint64_t(s->hierarchy_.pages[0].records) * kRecordSize;
     int decoders = options.decoders > 0 ? options.decoders : int(std::max(1u, std::thread::hardware_concurrency()));
     for (int i = 0; i < std::max(1, options.connections); ++i) s->fetchers_.emplace_back([p = s.get()] { p->fetchLoop(); });
     for (int i = 0; i < decoders; ++i) s->decoders_.emplace_back([p = s.get()] { p->decodeLoop(); });
     return s;
+}
+
+Result<std::vector<NodeRecord>> StreamingSet::fetchPageRecords(uint32_t page, const NodeKey& root) const {
+    if (page >= hierarchy_.pages.size())
+        return Status::error(source_->describe() + "/hierarchy.bin: node " + root.name() + " points to page " +
+                             std::to_string(page) + " of " + std::to_string(hierarchy_.pages.size()));
+    const HierarchyPageEntry& entry = hierarchy_.pages[page];
+    auto bytes = source_->range("hierarchy.bin", entry.offset, uint64_t(entry.records) * kRecordSize);
+    if (!bytes) return bytes.status();
+    return readHierarchyPage(hierarchy_, page, *bytes, root, info_.blocksBytes, source_->describe() + "/hierarchy.bin");
 }
 
 StreamingSet::~StreamingSet() {
@@ -64,6 +86,7 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
     {
         std::lock_guard lock(mutex_);
         ++frame_;
+        addPages();
         // What decoded since the last update is resident from now on.
         u.arrived.swap(arrived_);
         for (const ArrivedNode& a : u.arrived) {
@@ -111,8 +134,18 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
             std::unordered_set<uint32_t> gone(u.evicted.begin(), u.evicted.end());
             std::erase_if(u.arrived, [&](const ArrivedNode& a) { return gone.count(a.index) != 0; });
         }
-        stats_.queued = wanted_.size();
-        u.converged = u.lod.missing.empty() && recolors_ == 0;
+        wantedPages_.clear();
+        for (const auto& [node, priority] : u.lod.missingPages) {
+            auto requested = pages_.find(nodes()[node].childPage);
+            if (requested == pages_.end()) wantedPages_.push_back({node, priority});
+            else if (requested->second)  // in the tree, yet not this node's children
+                stop(source_->describe() + "/hierarchy.bin: node " + nodes()[node].key.name() + " points to page " +
+                     std::to_string(requested->first) + ", which holds another node's children");
+        }
+        if (stats_.setChanged || stats_.gaveUp) wantedPages_.clear();
+        std::stable_sort(wantedPages_.begin(), wantedPages_.end(), [](auto& a, auto& b) { return a.second < b.second; });
+        stats_.queued = wanted_.size() + wantedPages_.size();
+        u.converged = u.lod.missing.empty() && u.lod.missingPages.empty() && recolors_ == 0;
     }
     wakeFetch_.notify_all();
     return u;
@@ -175,12 +208,65 @@ void StreamingSet::fail(uint32_t node, const std::string& message) {
     ++stats_.failures;
     stats_.lastError = message;
     checkDue_ = true;
-    if (f.first >= std::max(1, options_.maxTries) && !stats_.gaveUp && !stats_.setChanged) {
-        stats_.gaveUp = true;
-        stats_.lastError = source_->describe() + ": node " + nodes()[node].key.name() + ": gave up after " +
-                           std::to_string(f.first) + " tries; the last failed with: " + message;
-        wanted_.clear();
+    if (f.first >= std::max(1, options_.maxTries))
+        stop(source_->describe() + ": node " + nodes()[node].key.name() + ": gave up after " + std::to_string(f.first) +
+             " tries; the last failed with: " + message);
+}
+
+void StreamingSet::stop(const std::string& message) {
+    if (stats_.gaveUp || stats_.setChanged) return;
+    stats_.gaveUp = true;
+    stats_.lastError = message;
+    wanted_.clear();
+    wantedPages_.clear();
+}
+
+void StreamingSet::addPages() {
+    for (auto& [page, records] : pagesFetched_) {
+        const size_t first = nodes().size();
+        selector_->addNodes(records);
+        pages_[page] = true;
+        for (size_t i = first; i < nodes().size(); ++i)
+            if (residentCost(uint32_t(i)) > options_.memoryBudget)
+                stop(source_->describe() + ": node " + nodes()[i].key.name() + " needs " +
+                     std::to_string(residentCost(uint32_t(i)) >> 10) + " KiB, more than the memory budget of " +
+                     std::to_string(options_.memoryBudget >> 10) + " KiB");
     }
+    pagesFetched_.clear();
+}
+
+bool StreamingSet::fetchPage(std::unique_lock<std::mutex>& lock) {
+    const double t = now();
+    for (size_t k = wantedPages_.size(); k-- > 0;) {
+        const NodeRecord proxy = nodes()[wantedPages_[k].first];
+        const uint32_t page = proxy.childPage;
+        auto f = failedPages_.find(page);
+        if (pages_.count(page) || (f != failedPages_.end() && f->second.second > t)) continue;
+        wantedPages_.erase(wantedPages_.begin() + long(k));
+        pages_[page] = false;
+        lock.unlock();
+        auto records = fetchPageRecords(page, proxy.key);
+        lock.lock();
+        if (!records) {
+            pages_.erase(page);
+            auto& failed = failedPages_[page];
+            failed.first += 1;
+            failed.second = now() + backoffSeconds(failed.first);
+            ++stats_.failures;
+            stats_.lastError = records.status().message();
+            checkDue_ = true;
+            if (failed.first >= std::max(1, options_.maxTries))
+                stop(source_->describe() + "/hierarchy.bin: page " + std::to_string(page) + ": gave up after " +
+                     std::to_string(failed.first) + " tries; the last failed with: " + records.status().message());
+            return true;
+        }
+        failedPages_.erase(page);
+        ++stats_.pages;
+        stats_.hierarchyBytes += uint64_t(hierarchy_.pages[page].records) * kRecordSize;
+        pagesFetched_.push_back({page, std::move(*records)});
+        return true;
+    }
+    return false;
 }
 
 void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
@@ -193,16 +279,19 @@ void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
         stats_.setChanged = true;
         stats_.lastError = source_->describe() + ": the tile set changed since it was opened (rebuilt); open it again";
         wanted_.clear();
+        wantedPages_.clear();
     }
 }
 
 void StreamingSet::fetchLoop() {
     std::unique_lock lock(mutex_);
     while (true) {
-        wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05), [&] { return stopping_ || !wanted_.empty(); });
+        wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05),
+                            [&] { return stopping_ || !wanted_.empty() || !wantedPages_.empty(); });
         if (stopping_) return;
         if (checkDue_ && !stats_.setChanged && now() - lastCheck_ > 2.0) checkForRebuild(lock);
         if (stats_.setChanged || stats_.gaveUp) continue;
+        if (fetchPage(lock)) continue;  // pages first: they gate the nodes below them
         // The highest-priority wanted nodes that are neither pending nor
         // backing off, as many as one batch takes and the budget admits (at
         // least one when nothing is resident or pending: a node larger than

@@ -1,12 +1,16 @@
-// A tile set streamed from a TileSource (local folder or HTTP): the hierarchy
-// up front, blocks on demand. Each update() traverses from the root
-// (LodSelector), draws what is resident, and queues what the view still needs,
-// coarsest gaps first, replacing the previous wants (requests that left the
-// view are cancelled before they start).
+// A tile set streamed from a TileSource (local folder or HTTP): hierarchy
+// pages and blocks on demand. Opening fetches tileset.json, hierarchy.bin's
+// header and page table, and page 0 (docs/FORMAT.md); a further page is
+// fetched when traversal reaches the node whose children it holds. Each
+// update() traverses from the root (LodSelector), draws what is resident, and
+// queues what the view still needs, pages first, then nodes coarsest gaps
+// first, replacing the previous wants (requests that left the view are
+// cancelled before they start).
 //
 //   update() ─wants─► fetch threads (bounded, keep-alive, batched) ─bytes─►
 //   decode threads (CRC, Draco, pack, Morton) ─surfels─► next update():
-//   `arrived` for the consumer to upload; `evicted` for it to free.
+//   `arrived` for the consumer to upload; `evicted` for it to free. A page
+//   is checked by the fetch thread and joins the tree in the next update().
 //
 // Residency has a byte budget: beyond it, update() evicts the least recently
 // used nodes that the view does not use (neither drawn nor refined through).
@@ -50,7 +54,9 @@ struct StreamOptions {
 };
 
 struct StreamStats {
-    uint64_t bytesDownloaded = 0;
+    uint64_t bytesDownloaded = 0;  // blocks
+    uint64_t hierarchyBytes = 0;   // of hierarchy.bin: header, page table and the pages fetched
+    size_t pages = 0;              // hierarchy pages fetched, page 0 included
     size_t requests = 0, requestsInFlight = 0, nodesFetched = 0, inFlight = 0, queued = 0, resident = 0, failures = 0, evictions = 0;
     size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
     size_t keptBytes = 0;      // compressed blocks kept for recolouring (resident and arrived nodes)
@@ -60,9 +66,10 @@ struct StreamStats {
     // The set's tileset.json differs from the one opened (rebuilt on the
     // server): nothing more is fetched; open it again.
     bool setChanged = false;
-    // A node failed StreamOptions::maxTries times in a row (a server gone for good, a
-    // block that never passes its CRC or never decodes): nothing more is
-    // fetched, and lastError says which node and why.
+    // A node or page failed StreamOptions::maxTries times in a row (a server
+    // gone for good, a block that never passes its CRC or never decodes), or
+    // a node needs more than the memory budget, or two nodes claim one page:
+    // nothing more is fetched, and lastError says which node and why.
     bool gaveUp = false;
 };
 
@@ -88,6 +95,7 @@ public:
     ~StreamingSet();
 
     const TilesetInfo& info() const { return info_; }
+    // The nodes known so far (pages fetched); update() appends, keeping indices.
     const std::vector<NodeRecord>& nodes() const { return selector_->nodes(); }
     const LodSelector& selector() const { return *selector_; }
     const StreamOptions& options() const { return options_; }
@@ -109,6 +117,12 @@ private:
     void fetchLoop();
     void decodeLoop();
     void fail(uint32_t node, const std::string& message);  // with mutex_ held
+    bool fetchPage(std::unique_lock<std::mutex>& lock);    // one wanted page, if any is due
+    // Page `page`, whose first record is `root`'s, fetched and checked
+    // (readHierarchyPage), without mutex_.
+    Result<std::vector<NodeRecord>> fetchPageRecords(uint32_t page, const NodeKey& root) const;
+    void stop(const std::string& message);                 // gave up, with mutex_ held
+    void addPages();                                        // those fetched, to the tree, with mutex_ held
     void checkForRebuild(std::unique_lock<std::mutex>& lock);
     using Block = std::shared_ptr<const std::vector<uint8_t>>;
     void keep(uint32_t node, Block bytes);  // with mutex_ held
@@ -119,6 +133,7 @@ private:
     TilesetInfo info_;
     StreamOptions options_;
     std::unique_ptr<LodSelector> selector_;
+    HierarchyIndex hierarchy_;
 
     struct Resident {
         uint64_t lastUsed = 0;  // frame number
@@ -144,6 +159,14 @@ private:
     uint64_t coloringVersion_ = 0;                      // setColoring calls so far
     size_t recolors_ = 0;                               // recolour jobs not yet handed over or dropped
     std::unordered_map<uint32_t, std::pair<int, double>> failed_;  // node -> attempts, retry time (s)
+    // Pages: wanted as (the node whose children they hold, priority), highest
+    // last; requested by page index (false while fetching or waiting for
+    // update(), true once in the tree); fetched, waiting for update(); failed
+    // by page index: attempts, retry time (s).
+    std::vector<std::pair<uint32_t, double>> wantedPages_;
+    std::unordered_map<uint32_t, bool> pages_;
+    std::vector<std::pair<uint32_t, std::vector<NodeRecord>>> pagesFetched_;
+    std::unordered_map<uint32_t, std::pair<int, double>> failedPages_;
     StreamStats stats_;
     bool checkDue_ = false;  // a fault happened: has the set changed?
     double lastCheck_ = 0;

@@ -32,7 +32,8 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     c->stream_ = std::move(*opened);
     if (auto by = resolveColorBy(options.coloring.by, c->stream_->info()); !by)
         return Status::error(location + ": " + by.status().message());
-    // Every node must fit (the root at least is always needed).
+    // Every node must fit (the root at least is always needed): those of page
+    // 0 here; the streamer stops at a larger one in a later page.
     size_t largest = 0;
     for (uint32_t i = 0; i < c->stream_->nodes().size(); ++i) largest = std::max(largest, c->stream_->residentCost(i));
     if (largest > stream.memoryBudget)

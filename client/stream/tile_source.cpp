@@ -59,28 +59,34 @@ public:
         return out;
     }
     ~LocalSource() override {
-        if (fd_ >= 0) ::close(fd_);
+        for (auto& [name, fd] : fds_) ::close(fd);
     }
-    // blocks.bin is opened once and read with pread from any thread. A set
-    // rebuilt meanwhile (renamed over) is still read from the file opened.
-    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
-        std::string path = dir_ + "/blocks.bin";
+    // Each file is opened once and read with pread from any thread. A set
+    // rebuilt meanwhile (renamed over) is still read from the files opened.
+    Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
+        std::string path = dir_ + "/" + name;
+        int fd;
         {
             std::lock_guard lock(mutex_);
-            if (fd_ < 0) fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-            if (fd_ < 0) return Status::error(path + ": " + std::strerror(errno));
+            auto it = fds_.find(name);
+            if (it == fds_.end()) {
+                const int opened = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+                if (opened < 0) return Status::error(path + ": " + std::strerror(errno));
+                it = fds_.emplace(name, opened).first;
+            }
+            fd = it->second;
         }
         // The range comes from the set's own metadata: checked against the
         // file before anything is allocated for it.
         struct stat st{};
-        if (::fstat(fd_, &st) != 0) return Status::error(path + ": " + std::strerror(errno));
+        if (::fstat(fd, &st) != 0) return Status::error(path + ": " + std::strerror(errno));
         const uint64_t fileSize = uint64_t(st.st_size);
         if (offset > fileSize || size > fileSize - offset)
             return Status::error(path + ": " + std::to_string(size) + " bytes at " + std::to_string(offset) +
                                  " reach past the end of the file (" + std::to_string(fileSize) + " bytes)");
         std::vector<uint8_t> out(size);
         for (uint64_t done = 0; done < size;) {
-            ssize_t n = ::pread(fd_, out.data() + done, size - done, off_t(offset + done));
+            ssize_t n = ::pread(fd, out.data() + done, size - done, off_t(offset + done));
             if (n <= 0)
                 return Status::error(path + ": cannot read " + std::to_string(size) + " bytes at " + std::to_string(offset) +
                                      (n < 0 ? std::string(": ") + std::strerror(errno) : std::string(": end of file")));
@@ -93,7 +99,7 @@ public:
 private:
     std::string dir_;
     std::mutex mutex_;
-    int fd_ = -1;
+    std::unordered_map<std::string, int> fds_;  // opened files by name
 };
 
 // One request's answer: the status and the body, kept up to a bound.
@@ -116,13 +122,13 @@ public:
         if (!r) return r.status();
         return std::move(r->body);
     }
-    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) override {
+    Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
         if (size == 0) return std::vector<uint8_t>{};
-        const std::string range = std::to_string(offset) + "-" + std::to_string(offset + size - 1);
-        auto r = request("blocks.bin", &range, nullptr, size, 206);
+        const std::string bytes = std::to_string(offset) + "-" + std::to_string(offset + size - 1);
+        auto r = request(name, &bytes, nullptr, size, 206);
         if (!r) return r.status();
         if (r->body.size() != size)
-            return Status::error(describe() + "/blocks.bin: asked for " + std::to_string(size) + " bytes at " +
+            return Status::error(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
                                  std::to_string(offset) + ", got " + std::to_string(r->body.size()));
         return std::move(r->body);
     }

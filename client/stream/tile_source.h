@@ -21,8 +21,10 @@ public:
     // A whole file of the set: "tileset.json" or "hierarchy.bin". A file
     // longer than maxBytes is an error, found before more is read or kept.
     virtual Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) = 0;
-    // Bytes [offset, offset + size) of blocks.bin; never more is kept. Thread-safe.
-    virtual Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) = 0;
+    // Bytes [offset, offset + size) of a file of the set ("blocks.bin", or a
+    // page of "hierarchy.bin"); never more is kept. Thread-safe.
+    virtual Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) = 0;
+    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) { return range("blocks.bin", offset, size); }
     // Several nodes' blobs, in order: one request where the source batches
     // (the project's server), else one range each. All or nothing. Thread-safe.
     virtual Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes);
