@@ -3,7 +3,7 @@
 #include <algorithm>
 
 #include <cmath>
-#include <fstream>
+#include <filesystem>
 #include <map>
 #include <sstream>
 
@@ -11,38 +11,33 @@
 
 namespace surfcast {
 
-namespace {
-Result<std::vector<uint8_t>> readWholeFile(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) return Status::error(path + ": cannot open");
-    std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) return Status::error(path + ": read error");
-    return bytes;
-}
-}  // namespace
-
-Result<TilesetReader> TilesetReader::open(const std::string& dir) {
+Result<TilesetReader> TilesetReader::open(const std::string& location, const HttpOptions& http) {
     TilesetReader r;
-    r.dir_ = dir;
-    auto json = readWholeFile(dir + "/tileset.json");
+    auto source = openTileSource(location, http);
+    if (!source) return source.status();
+    r.source_ = std::move(*source);
+    const std::string where = r.source_->describe();
+    auto json = r.source_->file("tileset.json", kMaxTilesetJsonBytes);
     if (!json) return json.status();
-    auto info = readTilesetJson(std::string(json->begin(), json->end()), dir + "/tileset.json");
+    auto info = readTilesetJson(std::string(json->begin(), json->end()), where + "/tileset.json");
     if (!info) return info.status();
     r.info_ = *info;
-    std::string hierarchyPath = dir + "/hierarchy.bin";
-    auto hierarchy = readWholeFile(hierarchyPath);
+    auto hierarchy = r.source_->file("hierarchy.bin", r.info_.hierarchyBytes);
     if (!hierarchy) return hierarchy.status();
-    auto nodes = readHierarchyOf(r.info_, *hierarchy, hierarchyPath);
+    auto nodes = readHierarchyOf(r.info_, *hierarchy, where + "/hierarchy.bin");
     if (!nodes) return nodes.status();
     r.nodes_ = std::move(*nodes);
-    std::string blocksPath = dir + "/blocks.bin";
-    r.blocks_.reset(std::fopen(blocksPath.c_str(), "rb"), [](std::FILE* f) { if (f) std::fclose(f); });
-    if (!r.blocks_) return Status::error(blocksPath + ": cannot open");
-    std::fseek(r.blocks_.get(), 0, SEEK_END);
-    long size = std::ftell(r.blocks_.get());
-    if (size < 0 || uint64_t(size) != r.info_.blocksBytes)
-        return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
-                             std::to_string(r.info_.blocksBytes));
+    // A folder's blocks.bin must be the size tileset.json says (a URL's
+    // ranges are checked as they arrive).
+    if (!isUrl(location)) {
+        std::error_code error;
+        const std::string blocksPath = where + "/blocks.bin";
+        const uint64_t size = std::filesystem::file_size(blocksPath, error);
+        if (error) return Status::error(blocksPath + ": " + error.message());
+        if (size != r.info_.blocksBytes)
+            return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
+                                 std::to_string(r.info_.blocksBytes));
+    }
     return r;
 }
 
@@ -65,12 +60,11 @@ BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& nod
 BlockExpectation TilesetReader::expectation(const NodeRecord& node) const { return blockExpectation(info_, node); }
 
 Result<std::vector<uint8_t>> TilesetReader::readBlockBytes(const NodeRecord& node) const {
-    std::vector<uint8_t> bytes(node.blockSize);
-    std::string where = dir_ + "/blocks.bin: node " + node.key.name() + " at byte " + std::to_string(node.blockOffset);
-    if (std::fseek(blocks_.get(), long(node.blockOffset), SEEK_SET) != 0 ||
-        std::fread(bytes.data(), 1, bytes.size(), blocks_.get()) != bytes.size())
-        return Status::error(where + ": short read");
-    if (crc32(bytes.data(), bytes.size()) != node.blockCrc) return Status::error(where + ": CRC mismatch");
+    auto bytes = source_->blocks(node.blockOffset, node.blockSize);
+    if (!bytes) return bytes.status();
+    if (crc32(bytes->data(), bytes->size()) != node.blockCrc)
+        return Status::error(describe() + "/blocks.bin: node " + node.key.name() + " at byte " +
+                             std::to_string(node.blockOffset) + ": CRC mismatch");
     return bytes;
 }
 
@@ -78,9 +72,9 @@ Result<BlockData> TilesetReader::readBlock(const NodeRecord& node) const {
     auto bytes = readBlockBytes(node);
     if (!bytes) return bytes.status();
     auto block = decodeBlock(bytes->data(), bytes->size(), expectation(node));
-    if (!block) return Status::error(dir_ + "/blocks.bin: node " + node.key.name() + ": " + block.status().message());
+    if (!block) return Status::error(describe() + "/blocks.bin: node " + node.key.name() + ": " + block.status().message());
     if (block->size() != node.surfelCount)
-        return Status::error(dir_ + "/blocks.bin: node " + node.key.name() + " decodes to " +
+        return Status::error(describe() + "/blocks.bin: node " + node.key.name() + " decodes to " +
                              std::to_string(block->size()) + " surfels, hierarchy says " + std::to_string(node.surfelCount));
     return block;
 }
@@ -95,8 +89,8 @@ Vec3d TilesetReader::position(const NodeRecord& node, const BlockData& block, si
     return surfelPosition(info_, node, block, i);
 }
 
-Result<std::string> verifyTileset(const std::string& dir) {
-    auto reader = TilesetReader::open(dir);
+Result<std::string> verifyTileset(const std::string& location, const HttpOptions& http) {
+    auto reader = TilesetReader::open(location, http);
     if (!reader) return reader.status();
     std::map<int, std::pair<uint64_t, uint64_t>> perLevel;  // level -> nodes, surfels
     uint64_t surfels = 0;
@@ -109,9 +103,9 @@ Result<std::string> verifyTileset(const std::string& dir) {
     }
     const TilesetInfo& info = reader->info();
     if (surfels != info.surfels || reader->nodes().size() != info.nodes)
-        return Status::error(dir + ": node or surfel totals differ from tileset.json");
+        return Status::error(reader->describe() + ": node or surfel totals differ from tileset.json");
     std::ostringstream out;
-    out << dir << ": " << info.inputPoints << " input points, " << info.surfels << " surfels in " << info.nodes
+    out << reader->describe() << ": " << info.inputPoints << " input points, " << info.surfels << " surfels in " << info.nodes
         << " nodes, " << info.levels << " levels\n";
     out << "  root min (" << info.rootMin.x << ", " << info.rootMin.y << ", " << info.rootMin.z << "), edge "
         << info.rootEdge << "\n  attributes:";

@@ -1,21 +1,22 @@
-// Read a tile set from a local directory: tileset.json, hierarchy.bin, and
-// blocks on demand. Used by `surfcast-build --info`, the tests and (later) the
-// renderer's local source.
+// Read a tile set from a local folder or an http(s) URL (tile_source.h):
+// tileset.json and hierarchy.bin whole, and blocks on demand. Used by
+// `surfcast-build --info`, `surfcast-view` without `--lod`, the weight
+// capture and the tests.
 #pragma once
 
-#include <cstdio>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "block_codec.h"
+#include "tile_source.h"
 #include "tileset_format.h"
 
 namespace surfcast {
 
 class TilesetReader {
 public:
-    static Result<TilesetReader> open(const std::string& dir);
+    static Result<TilesetReader> open(const std::string& location, const HttpOptions& http = {});
 
     const TilesetInfo& info() const { return info_; }
     const std::vector<NodeRecord>& nodes() const { return nodes_; }
@@ -27,11 +28,13 @@ public:
     // World-space position of quantized surfel i of a decoded block.
     Vec3d position(const NodeRecord& node, const BlockData& block, size_t i) const;
 
+    // Where blocks come from: the folder's path or the URL (without its query).
+    std::string describe() const { return source_->describe(); }
+
 private:
-    std::string dir_;
     TilesetInfo info_;
     std::vector<NodeRecord> nodes_;
-    std::shared_ptr<std::FILE> blocks_;
+    std::shared_ptr<TileSource> source_;
 };
 
 // What a node's block carries, and surfel i's world position, from the set's
@@ -39,8 +42,8 @@ private:
 BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& node);
 Vec3d surfelPosition(const TilesetInfo& info, const NodeRecord& node, const BlockData& block, size_t i);
 
-// Verify a tile set: every CRC, every block decodes with the declared attributes
-// and count. Returns a summary text on success.
-Result<std::string> verifyTileset(const std::string& dir);
+// Verify a tile set (a folder or a URL): every CRC, every block decodes with
+// the declared attributes and count. Returns a summary text on success.
+Result<std::string> verifyTileset(const std::string& location, const HttpOptions& http = {});
 
 }  // namespace surfcast

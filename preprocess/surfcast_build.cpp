@@ -25,7 +25,7 @@ namespace {
 
 const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
-       surfcast-build --info SET
+       surfcast-build --info SET            (SET: a folder or an http(s) URL)
 
 Builds a level-of-detail tile set (tileset.json, hierarchy.bin, blocks.bin)
 from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
@@ -38,7 +38,10 @@ the text file LIST, one per line.
   --default-scene         add the built-in scanned scene (about 1.5 M points)
   --scene-points N        points of the built-in scene (default 1500000)
   --seed N                seed of the built-in scene and mesh sampling (default 1)
-  --info SET              print a tile set's summary and verify every checksum
+  --info SET              print a tile set's summary and verify every checksum; with
+                          a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
+                          --ca-file F and --insecure say how to reach it, as in
+                          surfcast-view
   --grid G                cells per axis of a node's sampling grid (default 128)
   --page-depth D          levels per hierarchy page, which a viewer fetches as it
                           reaches them (default 5)
@@ -140,6 +143,7 @@ int main(int argc, char** argv) {
     surfcast::BuildOptions opt;
     bool captureWeights = false;
     std::string info;
+    surfcast::HttpOptions http;  // how --info reaches a URL
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         auto value = [&](std::string* out) {
@@ -159,7 +163,17 @@ int main(int argc, char** argv) {
         } else if (a == "-o" || a == "--output") {
             if (!value(&opt.output)) return usageError(a + " needs a folder");
         } else if (a == "--info") {
-            if (!value(&info)) return usageError("--info needs a tile set folder");
+            if (!value(&info)) return usageError("--info needs a tile set folder or URL");
+        } else if (a == "--header") {
+            if (!value(&v) || v.find(':') == std::string::npos || v.find(':') == 0)
+                return usageError("--header wants 'Name: value'");
+            http.headers.push_back(v);
+        } else if (a == "--token-file") {
+            if (!value(&http.tokenFile)) return usageError("--token-file wants a file");
+        } else if (a == "--ca-file") {
+            if (!value(&http.caFile)) return usageError("--ca-file wants a PEM file");
+        } else if (a == "--insecure") {
+            http.insecure = true;
         } else if (a == "--default-scene") {
             opt.inputs.defaultScene = true;
         } else if (a == "--scene-points") {
@@ -253,7 +267,7 @@ int main(int argc, char** argv) {
     }
 
     if (!info.empty()) {
-        auto summary = surfcast::verifyTileset(info);
+        auto summary = surfcast::verifyTileset(info, http);
         if (!summary) {
             std::fprintf(stderr, "surfcast-build: %s\n", summary.status().message().c_str());
             return 1;

@@ -131,6 +131,34 @@ TEST(Stream, PagedHierarchyFetchesOnlyThePagesAViewReaches) {
     EXPECT_LT(far["hierarchy_bytes"].get<uint64_t>(), paged);
 }
 
+// A static host that ignores Range (Python's http.server answers 200 with
+// the whole file) gets one clear error, not a confusing transfer failure
+// (libcurl's "Failure writing output" when the unwanted body was dropped).
+TEST(Stream, AHostWithoutRangeSupportIsNamed) {
+    TempDir dir;
+    auto b = test::buildScene(dir.file("www/scene"), 20000, {"--capacity", "3000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const int port = freePort();
+    test::Child server = test::spawn(
+        {"/usr/bin/python3", "-c",
+         "import functools, http.server, sys\n"
+         "s = http.server.ThreadingHTTPServer(('127.0.0.1', " + std::to_string(port) + "), functools.partial("
+         "http.server.SimpleHTTPRequestHandler, directory=sys.argv[1]))\n"
+         "print('listening', file=sys.stderr, flush=True)\n"
+         "s.serve_forever()\n",
+         dir.file("www")});
+    ASSERT_TRUE(server.waitFor("listening")) << server.log;
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/scene";
+    auto info = run({binary("surfcast-build"), "--info", url});
+    auto view = run({binary("surfcast-view"), "--headless", url, "--lod", "1", "--size", "64x48", "--out", dir.file("x.png")});
+    ::kill(server.pid, SIGTERM);
+    test::exitCode(server.pid);
+    for (const auto* r : {&info, &view}) {
+        EXPECT_NE(r->exitCode, 0);
+        EXPECT_NE(r->output.find(".bin: the host ignores Range requests"), std::string::npos) << r->output;
+    }
+}
+
 // A CA and a server certificate for 127.0.0.1 it signs, made with openssl in
 // `dir`: ca.pem, server.pem, server.key; and an unrelated CA, other.pem.
 void makeCertificates(const TempDir& dir) {
@@ -227,6 +255,22 @@ TEST(Stream, OverHttpsFromNginxWithHttp2AndHttp11) {
 
     // The query string travels with every request (a prefix-scoped signature).
     expectStreamsLikeLocal(h1 + "/signed/scene?sig=abc", local, camera.c_str(), dir, ca);
+
+    // surfcast-build --info reaches the same hosts the same way: its summary
+    // of the signed URL is the folder's but for the name in the first line,
+    // which leaves the signature out.
+    auto infoLocal = run({binary("surfcast-build"), "--info", local});
+    ASSERT_EQ(infoLocal.exitCode, 0) << infoLocal.output;
+    auto infoRemote = run({binary("surfcast-build"), "--info", h1 + "/signed/scene?sig=abc", "--ca-file", dir.file("ca.pem")});
+    ASSERT_EQ(infoRemote.exitCode, 0) << infoRemote.output;
+    EXPECT_EQ(infoRemote.output.substr(0, infoRemote.output.find(": ")), h1 + "/signed/scene");
+    EXPECT_EQ(infoRemote.output.substr(infoRemote.output.find(": ")), infoLocal.output.substr(infoLocal.output.find(": ")));
+    auto infoRefused = run({binary("surfcast-build"), "--info", h2 + "/private/scene", "--ca-file", dir.file("ca.pem")});
+    EXPECT_EQ(infoRefused.exitCode, 1);
+    EXPECT_NE(infoRefused.output.find(h2 + "/private/scene/tileset.json: HTTP 401"), std::string::npos) << infoRefused.output;
+    auto infoToken = run({binary("surfcast-build"), "--info", h2 + "/private/scene", "--ca-file", dir.file("ca.pem"),
+                          "--token-file", dir.file("token")});
+    EXPECT_EQ(infoToken.exitCode, 0) << infoToken.output;
 
     // Redirects are followed; a loop is an error.
     expectStreamsLikeLocal(h2 + "/moved/scene", local, camera.c_str(), dir, ca);

@@ -183,59 +183,33 @@ Status checkChoice(const std::string& where, const TilesetInfo& info, const Leve
     return {};
 }
 
-// A URL: tileset.json and hierarchy.bin whole, then every wanted node's block,
-// each checked against its record's CRC before it is decoded.
-Result<SurfelSet> loadRemoteSurfelSet(const std::string& url, const LevelChoice& choice, const Coloring& coloring,
-                                      const HttpOptions& http, size_t gpuBudget) {
-    auto source = openTileSource(url, http);
-    if (!source) return source.status();
-    TileSource& src = **source;
-    auto json = src.file("tileset.json", kMaxTilesetJsonBytes);
-    if (!json) return json.status();
-    auto info = readTilesetJson(std::string(json->begin(), json->end()), src.describe() + "/tileset.json");
-    if (!info) return info.status();
-    SC_TRY(checkChoice(src.describe(), *info, choice, coloring));
-    auto hierarchy = src.file("hierarchy.bin", info->hierarchyBytes);
-    if (!hierarchy) return hierarchy.status();
-    auto nodes = readHierarchyOf(*info, *hierarchy, src.describe() + "/hierarchy.bin");
-    if (!nodes) return nodes.status();
-    uint64_t surfels = 0;
-    for (const NodeRecord& node : *nodes) surfels += wantedNode(node, choice) ? node.surfelCount : 0;
-    const uint64_t budget = gpuBudget ? gpuBudget : uint64_t(1) << 30;
-    if (surfels * sizeof(gpu_types::GpuSurfel) > budget)
-        return Status::error(src.describe() + ": the " + std::string(choice.level < 0 ? "leaves" : "level") + " hold " +
-                             std::to_string(surfels) + " surfels (" + std::to_string((surfels * sizeof(gpu_types::GpuSurfel)) >> 20) +
-                             " MiB on the GPU), over the GPU budget of " + std::to_string(budget >> 20) +
-                             " MiB; view it with --lod, which streams what the view needs");
-    SurfelSet set = emptySurfelSet(*info, coloring);
-    for (const NodeRecord& node : *nodes) {
-        if (!wantedNode(node, choice)) continue;
-        auto bytes = src.blocks(node.blockOffset, node.blockSize);
-        if (!bytes) return bytes.status();
-        const std::string where = src.describe() + "/blocks.bin: node " + node.key.name();
-        if (crc32(bytes->data(), bytes->size()) != node.blockCrc) return Status::error(where + ": CRC mismatch");
-        auto block = decodeBlock(bytes->data(), bytes->size(), blockExpectation(*info, node));
-        if (!block) return Status::error(where + ": " + block.status().message());
-        appendNode(set, *info, node, *block);
-    }
-    sortMorton(set);
-    return set;
-}
-
 }  // namespace
 
 Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice, const Coloring& coloring,
                                 const HttpOptions& http, size_t gpuBudget) {
-    if (isUrl(dir)) return loadRemoteSurfelSet(dir, choice, coloring, http, gpuBudget);
-    auto reader = TilesetReader::open(dir);
+    auto reader = TilesetReader::open(dir, http);
     if (!reader) return reader.status();
-    SC_TRY(checkChoice(dir, reader->info(), choice, coloring));
-    SurfelSet set = emptySurfelSet(reader->info(), coloring);
+    const TilesetInfo& info = reader->info();
+    SC_TRY(checkChoice(reader->describe(), info, choice, coloring));
+    // A URL's set is streamed in whole: refused before any block is fetched
+    // when it cannot fit the GPU budget.
+    if (isUrl(dir)) {
+        uint64_t surfels = 0;
+        for (const NodeRecord& node : reader->nodes()) surfels += wantedNode(node, choice) ? node.surfelCount : 0;
+        const uint64_t budget = gpuBudget ? gpuBudget : uint64_t(1) << 30;
+        if (surfels * sizeof(gpu_types::GpuSurfel) > budget)
+            return Status::error(reader->describe() + ": the " + std::string(choice.level < 0 ? "leaves" : "level") +
+                                 " hold " + std::to_string(surfels) + " surfels (" +
+                                 std::to_string((surfels * sizeof(gpu_types::GpuSurfel)) >> 20) +
+                                 " MiB on the GPU), over the GPU budget of " + std::to_string(budget >> 20) +
+                                 " MiB; view it with --lod, which streams what the view needs");
+    }
+    SurfelSet set = emptySurfelSet(info, coloring);
     for (const NodeRecord& node : reader->nodes()) {
         if (!wantedNode(node, choice)) continue;
         auto block = reader->readBlock(node);
         if (!block) return block.status();
-        appendNode(set, reader->info(), node, *block);
+        appendNode(set, info, node, *block);
     }
     sortMorton(set);
     return set;

@@ -1,8 +1,10 @@
 // Where a tile set's bytes come from: a local folder, or an http(s) folder URL
 // (the project's server at http://HOST:PORT/sets/NAME, or any static host,
-// object store or CDN that honours Range). The only HTTP client code of the
-// client library: libcurl (TLS verified against the system store, HTTP/2 where
-// the host offers it, redirects, proxies from the environment).
+// object store or CDN that honours Range). The project's only HTTP client
+// code, used by the viewer's streamer and by TilesetReader (surfcast-build
+// --info, surfcast-view without --lod): libcurl (TLS verified against the
+// system store, HTTP/2 where the host offers it, redirects, proxies from the
+// environment).
 #pragma once
 
 #include <cstdint>

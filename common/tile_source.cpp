@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
+#include <condition_variable>
 #include <cstring>
 #include <mutex>
 #include <thread>
@@ -108,12 +109,26 @@ struct Response {
     std::vector<uint8_t> body;
 };
 
+// Requests from any number of threads run on one libcurl multi handle,
+// driven by one I/O thread: over HTTP/2 they share one connection
+// (multiplexed: CURLOPT_PIPEWAIT makes a transfer wait for the first
+// connection rather than open its own), over HTTP/1.1 each concurrent request
+// takes a keep-alive connection of the multi's pool. A calling thread
+// prepares its own easy handle, hands it over and waits for it.
 class HttpSource : public TileSource {
 public:
     // base: scheme://host[:port]/path without a trailing slash; query: "" or "?...".
-    HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers)
-        : base_(std::move(base)), query_(std::move(query)), options_(std::move(options)), headers_(headers) {}
+    HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers, CURLM* multi)
+        : base_(std::move(base)), query_(std::move(query)), options_(std::move(options)), headers_(headers), multi_(multi),
+          io_([this] { ioLoop(); }) {}
     ~HttpSource() override {
+        {
+            std::lock_guard lock(ioMutex_);
+            stopping_ = true;
+        }
+        curl_multi_wakeup(multi_);
+        io_.join();
+        curl_multi_cleanup(multi_);
         for (auto& [id, handle] : handles_) curl_easy_cleanup(handle);
         curl_slist_free_all(headers_);
     }
@@ -204,6 +219,7 @@ private:
             h = curl_easy_init();
             if (!h) return nullptr;
             curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
+            curl_easy_setopt(h, CURLOPT_PIPEWAIT, 1L);
             curl_easy_setopt(h, CURLOPT_FOLLOWLOCATION, 1L);
             curl_easy_setopt(h, CURLOPT_MAXREDIRS, long(kMaxRedirects));
             curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, long(kConnectTimeoutSeconds));
@@ -248,20 +264,23 @@ private:
         } else {
             curl_easy_setopt(h, CURLOPT_HTTPGET, 1L);
         }
-        CURLcode code;
-        {
-            SigpipeBlock noSigpipe;  // sigpipe.h says why
-            code = curl_easy_perform(h);
-        }
+        const CURLcode code = perform(h);
         curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
         if (sink.tooLong)
             return Status::error(shown + ": response longer than the " + std::to_string(maxBytes) + " bytes expected");
-        if (code != CURLE_OK) return Status::error(shown + ": " + transferError(code, error));
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &r.status);
-        if (wanted && r.status != wanted) {
+        // The write callback stops an unwanted answer past kMaxErrorPageBytes:
+        // its status says what went wrong, not the stopped transfer.
+        const bool unwanted = wanted && r.status != wanted;
+        if (code != CURLE_OK && !(code == CURLE_WRITE_ERROR && unwanted))
+            return Status::error(shown + ": " + transferError(code, error));
+        if (unwanted) {
             if (r.status == 401 || r.status == 403)
                 return Status::error(shown + ": HTTP " + std::to_string(r.status) +
                                      ": the host refuses access (send credentials with --header or --token-file)");
+            if (wanted == 206 && r.status == 200)
+                return Status::error(shown + ": the host ignores Range requests (it answered 200 with the whole file); "
+                                     "serve the set from one that honours Range (nginx, an object store or CDN, surfcast-serve)");
             return Status::error(shown + ": HTTP " + std::to_string(r.status));
         }
         // A login page answers 200 in place of the file asked for.
@@ -287,6 +306,66 @@ private:
         }
     }
 
+    // Runs the prepared handle `h` on the I/O thread; returns when it is done.
+    CURLcode perform(CURL* h) {
+        Transfer t{h};
+        {
+            std::lock_guard lock(ioMutex_);
+            submitted_.push_back(&t);
+        }
+        curl_multi_wakeup(multi_);
+        std::unique_lock lock(ioMutex_);
+        ioDone_.wait(lock, [&] { return t.done; });
+        return t.code;
+    }
+
+    void ioLoop() {
+        SigpipeBlock noSigpipe;  // for the thread's life: sigpipe.h says why
+        std::unordered_map<CURL*, Transfer*> running;
+        while (true) {
+            {
+                std::lock_guard lock(ioMutex_);
+                if (stopping_) break;
+                for (Transfer* t : submitted_) {
+                    const CURLMcode added = curl_multi_add_handle(multi_, t->handle);
+                    if (added == CURLM_OK) {
+                        running[t->handle] = t;
+                    } else {
+                        t->code = CURLE_FAILED_INIT;
+                        t->done = true;
+                    }
+                }
+                submitted_.clear();
+            }
+            ioDone_.notify_all();  // any that failed to start
+            int active = 0;
+            curl_multi_perform(multi_, &active);
+            int left = 0;
+            while (CURLMsg* m = curl_multi_info_read(multi_, &left)) {
+                if (m->msg != CURLMSG_DONE) continue;
+                CURL* h = m->easy_handle;
+                const CURLcode result = m->data.result;
+                curl_multi_remove_handle(multi_, h);
+                auto it = running.find(h);
+                if (it == running.end()) continue;
+                {
+                    std::lock_guard lock(ioMutex_);
+                    it->second->code = result;
+                    it->second->done = true;
+                }
+                running.erase(it);
+                ioDone_.notify_all();
+            }
+            curl_multi_poll(multi_, nullptr, 0, 1000, nullptr);  // until a socket is ready or a wakeup
+        }
+    }
+
+    struct Transfer {
+        CURL* handle;
+        CURLcode code = CURLE_OK;
+        bool done = false;
+    };
+
     static constexpr int kMaxRedirects = 8;
     std::string base_, query_;
     HttpOptions options_;
@@ -294,6 +373,12 @@ private:
     std::atomic<Batch> batch_{Batch::Unknown};
     std::mutex mutex_;
     std::unordered_map<std::thread::id, CURL*> handles_;
+    CURLM* multi_;
+    std::mutex ioMutex_;
+    std::condition_variable ioDone_;
+    std::vector<Transfer*> submitted_;  // waiting for the I/O thread to start them
+    bool stopping_ = false;
+    std::thread io_;  // last: starts when everything above is ready
 };
 
 }  // namespace
@@ -341,7 +426,12 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
     if (http.insecure)
         std::fprintf(stderr, "warning: --insecure: TLS certificates are NOT verified; anyone on the way to %s can read and change what is fetched\n",
                      base.substr(0, base.find('/', scheme)).c_str());
-    return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers));
+    CURLM* multi = curl_multi_init();
+    if (!multi) {
+        curl_slist_free_all(headers);
+        return Status::error("libcurl: cannot start a multi handle");
+    }
+    return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers, multi));
 }
 
 }  // namespace surfcast
