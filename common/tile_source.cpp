@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <atomic>
 #include <cerrno>
@@ -37,6 +38,9 @@ namespace {
 constexpr uint64_t kMaxErrorPageBytes = 1 << 20;
 // A server that does not accept within this fails the request.
 constexpr int kConnectTimeoutSeconds = 5;
+// HTTP/1.1 connections to the host at once, as browsers allow; more
+// concurrent requests queue for one (HTTP/2 multiplexes them over one).
+constexpr int kMaxHostConnections = 6;
 // A bearer token longer than this is not one (a wrong file).
 constexpr size_t kMaxTokenBytes = 16 << 10;
 
@@ -103,18 +107,14 @@ private:
     std::unordered_map<std::string, int> fds_;  // opened files by name
 };
 
-// One request's answer: the status and the body, kept up to a bound.
-struct Response {
-    long status = 0;
-    std::vector<uint8_t> body;
-};
-
 // Requests from any number of threads run on one libcurl multi handle,
-// driven by one I/O thread: over HTTP/2 they share one connection
+// driven by one I/O thread. Over HTTP/2 they share one connection
 // (multiplexed: CURLOPT_PIPEWAIT makes a transfer wait for the first
-// connection rather than open its own), over HTTP/1.1 each concurrent request
-// takes a keep-alive connection of the multi's pool. A calling thread
-// prepares its own easy handle, hands it over and waits for it.
+// connection rather than open its own); over HTTP/1.1 each concurrent request
+// takes a keep-alive connection of the multi's pool, at most
+// kMaxHostConnections, the rest queued. A calling thread prepares easy handles
+// (from a pool), hands them over together and waits for all of them: the
+// ranges of a batch of nodes are in flight at once.
 class HttpSource : public TileSource {
 public:
     // base: scheme://host[:port]/path without a trailing slash; query: "" or "?...".
@@ -129,43 +129,41 @@ public:
         curl_multi_wakeup(multi_);
         io_.join();
         curl_multi_cleanup(multi_);
-        for (auto& [id, handle] : handles_) curl_easy_cleanup(handle);
+        for (CURL* h : idle_) curl_easy_cleanup(h);
         curl_slist_free_all(headers_);
     }
     Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
-        auto r = request(name, nullptr, nullptr, maxBytes, 200);
+        auto r = std::move(run({{name, "", nullptr, maxBytes, 200}})[0]);
         if (!r) return r.status();
         return std::move(r->body);
     }
     Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
-        if (size == 0) return std::vector<uint8_t>{};
-        const std::string bytes = std::to_string(offset) + "-" + std::to_string(offset + size - 1);
-        auto r = request(name, &bytes, nullptr, size, 206);
+        auto r = ranges(name, {{offset, size}});
         if (!r) return r.status();
-        if (r->body.size() != size)
-            return Status::error(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
-                                 std::to_string(offset) + ", got " + std::to_string(r->body.size()));
-        return std::move(r->body);
+        return std::move((*r)[0]);
     }
     std::string describe() const override { return base_; }
 
     // The server's POST {set}/batch where it answers (tried once); a static
-    // host refuses it (404/405) and every later call takes the ranges.
+    // host refuses it (404/405) and every later call takes the ranges, all in
+    // flight at once.
     Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes) override {
-        if (nodes.size() < 2 || batch_ == Batch::No) return TileSource::blobs(nodes);
+        std::vector<std::pair<uint64_t, uint64_t>> spans;
+        for (const NodeRecord& n : nodes) spans.push_back({n.blockOffset, n.blockSize});
+        if (nodes.size() < 2 || batch_ == Batch::No) return ranges("blocks.bin", spans);
         std::string body;
         uint64_t expected = 0;  // what the answer holds: a length and a blob per node
         for (const NodeRecord& n : nodes) {
             body += n.key.name() + ",";
             expected += 4 + uint64_t(n.blockSize);
         }
-        auto r = request("batch", nullptr, &body, expected, 0);
+        auto r = std::move(run({{"batch", "", &body, expected, 0}})[0]);
         if (!r) return r.status();
         const std::string url = base_ + "/batch";
         if (r->status != 200) {
             if (batch_ == Batch::Unknown && r->status >= 400 && r->status < 500) {
                 batch_ = Batch::No;
-                return TileSource::blobs(nodes);
+                return ranges("blocks.bin", spans);
             }
             return Status::error(url + ": HTTP " + std::to_string(r->status));
         }
@@ -187,6 +185,47 @@ public:
 
 private:
     enum class Batch { Unknown, Yes, No };
+
+    // One GET of `name` (of byte range `range`, if not empty), or POST of
+    // `post` to it. `wanted`: the status whose body is kept (any other is an
+    // error), 0 for any.
+    struct Request {
+        std::string name, range;
+        const std::string* post;
+        uint64_t maxBytes;
+        long wanted;
+    };
+    // One request's answer: the status and the body, kept up to a bound.
+    struct Response {
+        long status = 0;
+        std::vector<uint8_t> body;
+    };
+
+    // Byte ranges (offset, size) of one file, all requested at once; all or nothing.
+    Result<std::vector<std::vector<uint8_t>>> ranges(const std::string& name,
+                                                     const std::vector<std::pair<uint64_t, uint64_t>>& spans) {
+        std::vector<Request> requests;
+        for (const auto& [offset, size] : spans)
+            requests.push_back({name, std::to_string(offset) + "-" + std::to_string(offset + size - 1), nullptr, size, 206});
+        std::vector<std::vector<uint8_t>> out(spans.size());
+        std::vector<size_t> asked;  // empty ranges are not asked for
+        std::vector<Request> nonEmpty;
+        for (size_t i = 0; i < spans.size(); ++i)
+            if (spans[i].second > 0) {
+                asked.push_back(i);
+                nonEmpty.push_back(std::move(requests[i]));
+            }
+        auto answers = run(nonEmpty);
+        for (size_t k = 0; k < asked.size(); ++k) {
+            if (!answers[k]) return answers[k].status();
+            const auto [offset, size] = spans[asked[k]];
+            if (answers[k]->body.size() != size)
+                return Status::error(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
+                                     std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
+            out[asked[k]] = std::move(answers[k]->body);
+        }
+        return out;
+    }
 
     // What the write callback keeps: the body of a `wanted` answer up to
     // maxBytes (longer cancels the request), and of any other answer (an
@@ -212,73 +251,116 @@ private:
         return length;
     }
 
-    CURL* handle() {
-        std::lock_guard lock(mutex_);
-        CURL*& h = handles_[std::this_thread::get_id()];
-        if (!h) {
-            h = curl_easy_init();
-            if (!h) return nullptr;
-            curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
-            curl_easy_setopt(h, CURLOPT_PIPEWAIT, 1L);
-            curl_easy_setopt(h, CURLOPT_FOLLOWLOCATION, 1L);
-            curl_easy_setopt(h, CURLOPT_MAXREDIRS, long(kMaxRedirects));
-            curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, long(kConnectTimeoutSeconds));
-            // Stalled: under one byte per second for the whole timeout.
-            curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
-            curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, long(options_.timeoutSeconds));
-            curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
-            curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, &HttpSource::write);
-            if (!options_.caFile.empty()) {  // instead of the system's store, folder included
-                curl_easy_setopt(h, CURLOPT_CAINFO, options_.caFile.c_str());
-                curl_easy_setopt(h, CURLOPT_CAPATH, nullptr);
+    // An easy handle with the source's fixed options, from the pool.
+    CURL* acquire() {
+        {
+            std::lock_guard lock(mutex_);
+            if (!idle_.empty()) {
+                CURL* h = idle_.back();
+                idle_.pop_back();
+                return h;
             }
-            if (options_.insecure) {
-                curl_easy_setopt(h, CURLOPT_SSL_VERIFYPEER, 0L);
-                curl_easy_setopt(h, CURLOPT_SSL_VERIFYHOST, 0L);
-            }
+        }
+        CURL* h = curl_easy_init();
+        if (!h) return nullptr;
+        curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
+        curl_easy_setopt(h, CURLOPT_PIPEWAIT, 1L);
+        curl_easy_setopt(h, CURLOPT_FOLLOWLOCATION, 1L);
+        curl_easy_setopt(h, CURLOPT_MAXREDIRS, long(kMaxRedirects));
+        curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, long(kConnectTimeoutSeconds));
+        // Stalled: under one byte per second for the whole timeout.
+        curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
+        curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, long(options_.timeoutSeconds));
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
+        curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, &HttpSource::write);
+        if (!options_.caFile.empty()) {  // instead of the system's store, folder included
+            curl_easy_setopt(h, CURLOPT_CAINFO, options_.caFile.c_str());
+            curl_easy_setopt(h, CURLOPT_CAPATH, nullptr);
+        }
+        if (options_.insecure) {
+            curl_easy_setopt(h, CURLOPT_SSL_VERIFYPEER, 0L);
+            curl_easy_setopt(h, CURLOPT_SSL_VERIFYHOST, 0L);
         }
         return h;
     }
+    void release(CURL* h) {
+        std::lock_guard lock(mutex_);
+        idle_.push_back(h);
+    }
 
-    // GET name (a byte range of it), or POST `post` to it. `wanted`: the
-    // status whose body is kept (any other is an error), 0 for any.
-    Result<Response> request(const std::string& name, const std::string* range, const std::string* post, uint64_t maxBytes,
-                             long wanted) {
-        const std::string shown = base_ + "/" + name;  // messages never show the query (it may hold a token)
-        CURL* h = handle();
-        if (!h) return Status::error(shown + ": cannot start a libcurl transfer");
-        Response r;
-        Sink sink{h, wanted, maxBytes, 0, false, &r.body};
-        char error[CURL_ERROR_SIZE] = "";
-        const std::string url = shown + query_;
-        curl_easy_setopt(h, CURLOPT_URL, url.c_str());
-        curl_easy_setopt(h, CURLOPT_WRITEDATA, &sink);
-        curl_easy_setopt(h, CURLOPT_ERRORBUFFER, error);
-        curl_easy_setopt(h, CURLOPT_RANGE, range ? range->c_str() : nullptr);
-        // Whole files may come compressed (whatever libcurl decodes); a range
-        // is of the file's own bytes, so it is asked for without encoding.
-        curl_easy_setopt(h, CURLOPT_ACCEPT_ENCODING, range ? nullptr : "");
-        if (post) {
-            curl_easy_setopt(h, CURLOPT_POSTFIELDS, post->c_str());
-            curl_easy_setopt(h, CURLOPT_POSTFIELDSIZE, long(post->size()));
-        } else {
-            curl_easy_setopt(h, CURLOPT_HTTPGET, 1L);
+    // Runs the requests at once on the I/O thread; an answer or an error each.
+    std::vector<Result<Response>> run(const std::vector<Request>& requests) {
+        const size_t n = requests.size();
+        std::vector<Response> responses(n);
+        std::vector<Sink> sinks(n);
+        std::vector<Transfer> transfers(n);
+        std::vector<std::array<char, CURL_ERROR_SIZE>> errors(n);
+        std::vector<std::string> urls(n);
+        for (size_t i = 0; i < n; ++i) {
+            const Request& q = requests[i];
+            CURL* h = acquire();
+            transfers[i].handle = h;
+            if (!h) continue;
+            sinks[i] = {h, q.wanted, q.maxBytes, 0, false, &responses[i].body};
+            errors[i][0] = 0;
+            urls[i] = base_ + "/" + q.name + query_;
+            curl_easy_setopt(h, CURLOPT_URL, urls[i].c_str());
+            curl_easy_setopt(h, CURLOPT_WRITEDATA, &sinks[i]);
+            curl_easy_setopt(h, CURLOPT_ERRORBUFFER, errors[i].data());
+            curl_easy_setopt(h, CURLOPT_RANGE, q.range.empty() ? nullptr : q.range.c_str());
+            // Whole files may come compressed (whatever libcurl decodes); a
+            // range is of the file's own bytes, so it is asked for without encoding.
+            curl_easy_setopt(h, CURLOPT_ACCEPT_ENCODING, q.range.empty() ? "" : nullptr);
+            if (q.post) {
+                curl_easy_setopt(h, CURLOPT_POSTFIELDS, q.post->c_str());
+                curl_easy_setopt(h, CURLOPT_POSTFIELDSIZE, long(q.post->size()));
+            } else {
+                curl_easy_setopt(h, CURLOPT_HTTPGET, 1L);
+            }
         }
-        const CURLcode code = perform(h);
-        curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
+        {
+            std::lock_guard lock(ioMutex_);
+            for (Transfer& t : transfers)
+                if (t.handle) submitted_.push_back(&t);
+        }
+        curl_multi_wakeup(multi_);
+        {
+            std::unique_lock lock(ioMutex_);
+            ioDone_.wait(lock, [&] {
+                return std::all_of(transfers.begin(), transfers.end(), [](const Transfer& t) { return !t.handle || t.done; });
+            });
+        }
+        std::vector<Result<Response>> out;
+        for (size_t i = 0; i < n; ++i) {
+            CURL* h = transfers[i].handle;
+            const std::string shown = base_ + "/" + requests[i].name;  // messages never show the query (it may hold a token)
+            if (!h) {
+                out.push_back(Status::error(shown + ": cannot start a libcurl transfer"));
+                continue;
+            }
+            out.push_back(answer(h, shown, transfers[i].code, errors[i].data(), sinks[i], requests[i], std::move(responses[i])));
+            curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
+            release(h);
+        }
+        return out;
+    }
+
+    // What a finished transfer means for its request.
+    Result<Response> answer(CURL* h, const std::string& shown, CURLcode code, const char* error, const Sink& sink,
+                            const Request& q, Response r) const {
         if (sink.tooLong)
-            return Status::error(shown + ": response longer than the " + std::to_string(maxBytes) + " bytes expected");
+            return Status::error(shown + ": response longer than the " + std::to_string(q.maxBytes) + " bytes expected");
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &r.status);
         // The write callback stops an unwanted answer past kMaxErrorPageBytes:
         // its status says what went wrong, not the stopped transfer.
-        const bool unwanted = wanted && r.status != wanted;
+        const bool unwanted = q.wanted && r.status != q.wanted;
         if (code != CURLE_OK && !(code == CURLE_WRITE_ERROR && unwanted))
             return Status::error(shown + ": " + transferError(code, error));
         if (unwanted) {
             if (r.status == 401 || r.status == 403)
                 return Status::error(shown + ": HTTP " + std::to_string(r.status) +
                                      ": the host refuses access (send credentials with --header or --token-file)");
-            if (wanted == 206 && r.status == 200)
+            if (q.wanted == 206 && r.status == 200)
                 return Status::error(shown + ": the host ignores Range requests (it answered 200 with the whole file); "
                                      "serve the set from one that honours Range (nginx, an object store or CDN, surfcast-serve)");
             return Status::error(shown + ": HTTP " + std::to_string(r.status));
@@ -286,7 +368,7 @@ private:
         // A login page answers 200 in place of the file asked for.
         char* type = nullptr;
         curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
-        if (wanted && type && std::strncmp(type, "text/html", 9) == 0)
+        if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
         return r;
     }
@@ -306,19 +388,6 @@ private:
         }
     }
 
-    // Runs the prepared handle `h` on the I/O thread; returns when it is done.
-    CURLcode perform(CURL* h) {
-        Transfer t{h};
-        {
-            std::lock_guard lock(ioMutex_);
-            submitted_.push_back(&t);
-        }
-        curl_multi_wakeup(multi_);
-        std::unique_lock lock(ioMutex_);
-        ioDone_.wait(lock, [&] { return t.done; });
-        return t.code;
-    }
-
     void ioLoop() {
         SigpipeBlock noSigpipe;  // for the thread's life: sigpipe.h says why
         std::unordered_map<CURL*, Transfer*> running;
@@ -327,8 +396,7 @@ private:
                 std::lock_guard lock(ioMutex_);
                 if (stopping_) break;
                 for (Transfer* t : submitted_) {
-                    const CURLMcode added = curl_multi_add_handle(multi_, t->handle);
-                    if (added == CURLM_OK) {
+                    if (curl_multi_add_handle(multi_, t->handle) == CURLM_OK) {
                         running[t->handle] = t;
                     } else {
                         t->code = CURLE_FAILED_INIT;
@@ -341,6 +409,7 @@ private:
             int active = 0;
             curl_multi_perform(multi_, &active);
             int left = 0;
+            bool finished = false;
             while (CURLMsg* m = curl_multi_info_read(multi_, &left)) {
                 if (m->msg != CURLMSG_DONE) continue;
                 CURL* h = m->easy_handle;
@@ -348,20 +417,20 @@ private:
                 curl_multi_remove_handle(multi_, h);
                 auto it = running.find(h);
                 if (it == running.end()) continue;
-                {
-                    std::lock_guard lock(ioMutex_);
-                    it->second->code = result;
-                    it->second->done = true;
-                }
+                std::lock_guard lock(ioMutex_);
+                it->second->code = result;
+                it->second->done = true;
                 running.erase(it);
-                ioDone_.notify_all();
+                finished = true;
             }
+            if (finished) ioDone_.notify_all();
             curl_multi_poll(multi_, nullptr, 0, 1000, nullptr);  // until a socket is ready or a wakeup
         }
     }
 
+    // A handle handed to the I/O thread, and how its transfer ended.
     struct Transfer {
-        CURL* handle;
+        CURL* handle = nullptr;
         CURLcode code = CURLE_OK;
         bool done = false;
     };
@@ -372,7 +441,7 @@ private:
     curl_slist* headers_;
     std::atomic<Batch> batch_{Batch::Unknown};
     std::mutex mutex_;
-    std::unordered_map<std::thread::id, CURL*> handles_;
+    std::vector<CURL*> idle_;  // easy handles not in use
     CURLM* multi_;
     std::mutex ioMutex_;
     std::condition_variable ioDone_;
@@ -431,6 +500,7 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
         curl_slist_free_all(headers);
         return Status::error("libcurl: cannot start a multi handle");
     }
+    curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(kMaxHostConnections));
     return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers, multi));
 }
 

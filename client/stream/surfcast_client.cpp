@@ -73,10 +73,13 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
         uploads.push_back({a.index, a.surfels.get()});
     }
     SC_TRY(pool_->upload(uploads));
-    // Drawn in node order: the image does not depend on arrival order.
+    // Drawn in key order: the image depends neither on the order nodes
+    // arrived in nor on the indices pages got (their arrival order, and the
+    // set's page depth).
     std::vector<uint32_t> drawn;
     for (const SelectedNode& s : u.draw) drawn.push_back(s.index);
-    std::sort(drawn.begin(), drawn.end());
+    const std::vector<NodeRecord>& nodes = stream_->nodes();
+    std::sort(drawn.begin(), drawn.end(), [&](uint32_t a, uint32_t b) { return nodes[a].key < nodes[b].key; });
     renderer_->setDraws(pool_->buffer(), pool_->ranges(drawn), diagonal_);
     SC_TRY(renderer_->resize(uint32_t(width), uint32_t(height)));
     camera_ = camera;
