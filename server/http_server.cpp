@@ -421,8 +421,19 @@ Status HttpServer::bind() {
         return Status::error("cannot listen on " + c.host + ": not an IPv4 address");
     unsigned threads = c.threads > 0 ? unsigned(c.threads) : std::max(1u, std::thread::hardware_concurrency());
     unsigned flags = MHD_USE_EPOLL_INTERNAL_THREAD | MHD_USE_ERROR_LOG | MHD_USE_TURBO | MHD_USE_ITC;
+    const bool tls = !c.tlsCertificate.empty();
+    if (tls && MHD_is_feature_supported(MHD_FEATURE_TLS) != MHD_YES)
+        return Status::error("this libmicrohttpd was built without TLS");
+    if (tls) flags |= MHD_USE_TLS;
+    // The key and certificate only with TLS (libmicrohttpd refuses them without).
+    MHD_OptionItem tlsOptions[] = {
+        {tls ? MHD_OPTION_HTTPS_MEM_KEY : MHD_OPTION_END, 0, const_cast<char*>(c.tlsKey.c_str())},
+        {MHD_OPTION_HTTPS_MEM_CERT, 0, const_cast<char*>(c.tlsCertificate.c_str())},
+        {MHD_OPTION_END, 0, nullptr}};
     impl_->daemon = MHD_start_daemon(
         flags, 0, nullptr, nullptr, &Impl::onRequest, impl_.get(),                                   //
+        MHD_OPTION_EXTERNAL_LOGGER, &Impl::onLog, impl_.get(),  /* first: it logs what the others say */  //
+        MHD_OPTION_ARRAY, tlsOptions,                                                                  //
         MHD_OPTION_SOCK_ADDR, reinterpret_cast<sockaddr*>(&addr),                                      //
         MHD_OPTION_THREAD_POOL_SIZE, threads,                                                          //
         MHD_OPTION_CONNECTION_TIMEOUT, unsigned(std::max(c.timeoutSeconds, 1)),                       //
@@ -431,9 +442,10 @@ Status HttpServer::bind() {
         MHD_OPTION_PER_IP_CONNECTION_LIMIT, kPerAddressConnections,                                    //
         MHD_OPTION_URI_LOG_CALLBACK, &Impl::onUri, impl_.get(),                                        //
         MHD_OPTION_NOTIFY_COMPLETED, &Impl::onCompleted, impl_.get(),                                  //
-        MHD_OPTION_EXTERNAL_LOGGER, &Impl::onLog, impl_.get(),                                         //
         MHD_OPTION_END);
-    if (!impl_->daemon) return Status::error("cannot listen on " + c.host + ":" + std::to_string(c.port));
+    if (!impl_->daemon)
+        return Status::error("cannot listen on " + c.host + ":" + std::to_string(c.port) +
+                             (tls ? " (or the TLS certificate and key do not load: are they PEM, and a pair?)" : ""));
     const MHD_DaemonInfo* info = MHD_get_daemon_info(impl_->daemon, MHD_DAEMON_INFO_BIND_PORT);
     impl_->boundPort = info ? int(info->port) : c.port;
     return {};

@@ -24,6 +24,9 @@ struct ServerConfig {
     size_t maxRanges = 16;           // ranges per Range header
     int timeoutSeconds = 10;         // read/write timeout: stalled clients are dropped
     int keepAliveSeconds = 10;       // idle keep-alive connections close after this
+    // HTTPS (libmicrohttpd's GnuTLS) when both are set: the PEM texts of the
+    // certificate chain and of its private key.
+    std::string tlsCertificate, tlsKey;
 };
 
 class HttpServer {

@@ -29,6 +29,8 @@ HTTP: the three files with Range support, single node blocks, batches of nodes,
   --cors ORIGIN        send Access-Control-Allow-Origin: ORIGIN (e.g. *)
   --log LEVEL          requests (default), errors or quiet; one line per request on stderr
   --timeout S          read/write timeout for stalled clients, seconds (default 10)
+  --tls-cert F         serve HTTPS with the PEM certificate chain in F (and --tls-key)
+  --tls-key F          the certificate's PEM private key (unencrypted)
   -h, --help           this text
 )";
 
@@ -79,6 +81,14 @@ int main(int argc, char** argv) {
             config.log = v == "requests" ? surfcast::LogLevel::Requests
                          : v == "errors" ? surfcast::LogLevel::Errors
                                          : surfcast::LogLevel::Quiet;
+        } else if (a == "--tls-cert" || a == "--tls-key") {
+            if (!value(&v)) return usageError(a + " needs a PEM file");
+            std::ifstream f(v, std::ios::binary);
+            std::ostringstream text;
+            text << f.rdbuf();
+            if (!f || text.str().find("-----BEGIN ") == std::string::npos)
+                return usageError("cannot read " + v + " as PEM (" + a + ")");
+            (a == "--tls-cert" ? config.tlsCertificate : config.tlsKey) = text.str();
         } else if (a == "--timeout") {
             if (!value(&v) || (config.timeoutSeconds = std::atoi(v.c_str())) < 1) return usageError("--timeout needs seconds >= 1");
         } else if (!a.empty() && a[0] == '-') {
@@ -90,6 +100,7 @@ int main(int argc, char** argv) {
         }
     }
     if (dir.empty()) return usageError("no folder given");
+    if (config.tlsCertificate.empty() != config.tlsKey.empty()) return usageError("--tls-cert and --tls-key go together");
 
     auto store = surfcast::TilesetStore::open(dir);
     if (!store) {
@@ -110,8 +121,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "surfcast-serve: %s\n", st.message().c_str());
         return 1;
     }
-    std::fprintf(stderr, "surfcast-serve: serving %s on http://%s:%d (%zu tile sets)\n", dir.c_str(), config.host.c_str(),
-                 server.port(), (*store)->list().size());
+    std::fprintf(stderr, "surfcast-serve: serving %s on %s://%s:%d (%zu tile sets)\n", dir.c_str(),
+                 config.tlsCertificate.empty() ? "http" : "https", config.host.c_str(), server.port(), (*store)->list().size());
     std::thread waiter([&] {
         int sig = 0;
         sigwait(&signals, &sig);

@@ -1,7 +1,8 @@
-// Remote hosts (client/stream/tile_source): nginx serving a set as static
+// Remote hosts (common/tile_source): nginx serving a set as static
 // files, over plain HTTP and over TLS with HTTP/2 and HTTP/1.1 (certificates
 // from the test's own CA); bearer tokens, headers, signed query strings,
-// redirects and their loops; a certificate that does not verify.
+// redirects and their loops; a certificate that does not verify; lazily
+// fetched hierarchy pages; a host without Range; surfcast-serve over HTTPS.
 #include <gtest/gtest.h>
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -278,6 +279,40 @@ TEST(Stream, OverHttpsFromNginxWithHttp2AndHttp11) {
                      "--ca-file", dir.file("ca.pem"), "--out", dir.file("x.png")});
     EXPECT_NE(loop.exitCode, 0);
     EXPECT_NE(loop.output.find("redirects (a loop?)"), std::string::npos) << loop.output;
+}
+
+// surfcast-serve --tls-cert/--tls-key: HTTPS from libmicrohttpd (GnuTLS),
+// batches included; the streamed image equals the folder's. A certificate
+// the client does not trust fails at once; a key that is not the
+// certificate's stops the server with a clear message.
+TEST(Stream, SurfcastServeOverHttps) {
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("sets"));
+    auto b = test::buildScene(dir.file("sets/scene"), 100000, {"--capacity", "3000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    makeCertificates(dir);
+    test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0", "--tls-cert",
+                                      dir.file("server.pem"), "--tls-key", dir.file("server.key")});
+    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
+    const size_t at = server.log.find("https://127.0.0.1:");
+    ASSERT_NE(at, std::string::npos) << server.log;
+    const std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
+    auto last = expectStreamsLikeLocal(origin + "/sets/scene", dir.file("sets/scene"), "--camera=3,-6,2,0,0,0.5,0,0,1,50",
+                                       dir, {"--ca-file", dir.file("ca.pem")});
+    auto untrusted = run({binary("surfcast-view"), "--headless", origin + "/sets/scene", "--lod", "1", "--size", "64x48",
+                          "--ca-file", dir.file("other.pem"), "--out", dir.file("x.png")});
+    EXPECT_NE(untrusted.exitCode, 0);
+    EXPECT_NE(untrusted.output.find("TLS with the host failed"), std::string::npos) << untrusted.output;
+    ::kill(server.pid, SIGTERM);
+    EXPECT_EQ(test::exitCode(server.pid), 0) << server.log;
+
+    auto mismatched = run({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0", "--tls-cert",
+                           dir.file("server.pem"), "--tls-key", dir.file("ca.key")});
+    EXPECT_EQ(mismatched.exitCode, 1);
+    EXPECT_NE(mismatched.output.find("the TLS certificate and key do not load"), std::string::npos) << mismatched.output;
+    auto alone = run({binary("surfcast-serve"), dir.file("sets"), "--tls-cert", dir.file("server.pem")});
+    EXPECT_EQ(alone.exitCode, 2);
+    EXPECT_NE(alone.output.find("--tls-cert and --tls-key go together"), std::string::npos) << alone.output;
 }
 
 }  // namespace
