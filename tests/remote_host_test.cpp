@@ -281,24 +281,32 @@ TEST(Stream, OverHttpsFromNginxWithHttp2AndHttp11) {
     EXPECT_NE(loop.output.find("redirects (a loop?)"), std::string::npos) << loop.output;
 }
 
-// surfcast-serve --tls-cert/--tls-key: HTTPS from libmicrohttpd (GnuTLS),
-// batches included; the streamed image equals the folder's. A certificate
-// the client does not trust fails at once; a key that is not the
+// surfcast-serve --tls-cert/--tls-key --token-file: HTTPS from libmicrohttpd
+// (GnuTLS), batches included, behind a bearer token; with the token the
+// streamed image equals the folder's, without it 401 names the URL. A
+// certificate the client does not trust fails at once; a key that is not the
 // certificate's stops the server with a clear message.
-TEST(Stream, SurfcastServeOverHttps) {
+TEST(Stream, SurfcastServeOverHttpsWithAToken) {
     TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));
     auto b = test::buildScene(dir.file("sets/scene"), 100000, {"--capacity", "3000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
     makeCertificates(dir);
+    test::writeFile(dir.file("token"), "s3cret-Token\n");
     test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0", "--tls-cert",
-                                      dir.file("server.pem"), "--tls-key", dir.file("server.key")});
+                                      dir.file("server.pem"), "--tls-key", dir.file("server.key"), "--token-file",
+                                      dir.file("token")});
     ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
     const size_t at = server.log.find("https://127.0.0.1:");
     ASSERT_NE(at, std::string::npos) << server.log;
     const std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
     auto last = expectStreamsLikeLocal(origin + "/sets/scene", dir.file("sets/scene"), "--camera=3,-6,2,0,0,0.5,0,0,1,50",
-                                       dir, {"--ca-file", dir.file("ca.pem")});
+                                       dir, {"--ca-file", dir.file("ca.pem"), "--token-file", dir.file("token")});
+    EXPECT_EQ(last.dump().find("s3cret"), std::string::npos);
+    auto refused = run({binary("surfcast-view"), "--headless", origin + "/sets/scene", "--lod", "1", "--size", "64x48",
+                        "--ca-file", dir.file("ca.pem"), "--out", dir.file("x.png")});
+    EXPECT_NE(refused.exitCode, 0);
+    EXPECT_NE(refused.output.find(origin + "/sets/scene/tileset.json: HTTP 401"), std::string::npos) << refused.output;
     auto untrusted = run({binary("surfcast-view"), "--headless", origin + "/sets/scene", "--lod", "1", "--size", "64x48",
                           "--ca-file", dir.file("other.pem"), "--out", dir.file("x.png")});
     EXPECT_NE(untrusted.exitCode, 0);

@@ -801,9 +801,10 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
 
 // Writing to a socket whose peer has closed raises SIGPIPE, which ends the
 // process by default; cpp-httplib 0.11.4 writes requests that way
-// (client/stream/sigpipe.h), and fuzz_client_response died of it (status 141).
-// Inside SigpipeBlock, the one the tile source holds around every request, the
-// write fails with EPIPE, the signal is taken, and the thread's mask is restored.
+// (common/sigpipe.h), and fuzz_client_response died of it (status 141).
+// Inside SigpipeBlock, the one the tile source's I/O thread holds for its
+// life, the write fails with EPIPE, the signal is taken, and the thread's mask
+// is restored.
 TEST(Stream, AWriteToAClosedSocketDoesNotKillTheClient) {
     int fds[2];
     ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, fds), 0);
