@@ -10,11 +10,19 @@
 
 namespace surfcast::fuzz {
 
-// A per-process file name in the temporary folder ending in `extension`.
-inline std::string scratchFile(const char* extension) {
-    const char* tmp = std::getenv("TMPDIR");
-    return std::string(tmp && *tmp ? tmp : "/tmp") + "/surfcast-fuzz-" + std::to_string(::getpid()) + extension;
-}
+// A per-process file in the temporary folder ending in `extension`, removed
+// when the process exits normally (libFuzzer's exit() at the end of a run;
+// a crash leaves it, next to its artifact).
+struct ScratchFile {
+    std::string path;
+    explicit ScratchFile(const char* extension) {
+        const char* tmp = std::getenv("TMPDIR");
+        path = std::string(tmp && *tmp ? tmp : "/tmp") + "/surfcast-fuzz-" + std::to_string(::getpid()) + extension;
+    }
+    ~ScratchFile() { ::unlink(path.c_str()); }
+    ScratchFile(const ScratchFile&) = delete;
+    ScratchFile& operator=(const ScratchFile&) = delete;
+};
 
 // Replaces the file's contents with the input; false if that failed.
 inline bool writeScratch(const std::string& path, const uint8_t* data, size_t size) {

@@ -15,7 +15,8 @@
 using namespace surfcast;
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-    static const std::string path = fuzz::scratchFile(FUZZ_EXTENSION);
+    static const fuzz::ScratchFile scratch(FUZZ_EXTENSION);
+    const std::string& path = scratch.path;
     if (!fuzz::writeScratch(path, data, size)) return 0;
     InputOptions options;
     options.paths = {path};
