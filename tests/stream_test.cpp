@@ -701,6 +701,32 @@ TEST(Stream, APersistentlyCorruptBlockGivesUpWithAClearError) {
     EXPECT_NE(view.output.find("gave up after 8 tries"), std::string::npos) << view.output;
 }
 
+// Hierarchy pages are fetched as traversal reaches them and checked as they
+// arrive: a damaged page is retried like a block, then the stream stops,
+// naming the page, while page 0 (checked at open) keeps drawing.
+TEST(Stream, APersistentlyCorruptHierarchyPageGivesUpNamingIt) {
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "500", "--page-depth", "2"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const std::string h = test::readFile(dir.file("scene/hierarchy.bin"));
+    auto index = readHierarchyIndex(std::span(reinterpret_cast<const uint8_t*>(h.data()), h.size()), h.size(), "h");
+    ASSERT_TRUE(index) << index.status().message();
+    ASSERT_GT(index->pages.size(), 2u);
+    std::string damaged = h;
+    for (size_t p = 1; p < index->pages.size(); ++p) damaged[size_t(index->pages[p].offset) + 40] ^= 0x5A;  // a spacing byte
+    test::writeFile(dir.file("scene/hierarchy.bin"), damaged);
+    StreamOptions options;
+    options.maxTries = 2;
+    auto set = StreamingSet::open(dir.file("scene"), options);
+    ASSERT_TRUE(set) << set.status().message();
+    const StreamStats st = streamUntilGaveUp(**set, 5);
+    EXPECT_NE(st.lastError.find("/hierarchy.bin: page "), std::string::npos) << st.lastError;
+    EXPECT_NE(st.lastError.find(": gave up after 2 tries"), std::string::npos) << st.lastError;
+    EXPECT_NE(st.lastError.find("CRC mismatch"), std::string::npos) << st.lastError;
+    EXPECT_EQ(st.pages, 1u) << "only page 0 passed its check";
+    EXPECT_GT(st.resident, 0u) << "page 0's nodes kept streaming";
+}
+
 TEST(Stream, ResponsesLongerThanAskedForAreCutOff) {
     // A broken or hostile host answers with more than was asked for: a huge
     // tileset.json, a range response longer than the range. The client keeps

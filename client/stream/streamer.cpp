@@ -205,12 +205,16 @@ void StreamingSet::fail(uint32_t node, const std::string& message) {
     auto& f = failed_[node];
     f.first += 1;
     f.second = now() + backoffSeconds(f.first);
-    ++stats_.failures;
-    stats_.lastError = message;
-    checkDue_ = true;
+    noteFailure(message);
     if (f.first >= std::max(1, options_.maxTries))
         stop(source_->describe() + ": node " + nodes()[node].key.name() + ": gave up after " + std::to_string(f.first) +
              " tries; the last failed with: " + message);
+}
+
+void StreamingSet::noteFailure(const std::string& message) {
+    ++stats_.failures;
+    if (!stats_.gaveUp && !stats_.setChanged) stats_.lastError = message;  // else it says why the stream stopped
+    checkDue_ = true;
 }
 
 void StreamingSet::stop(const std::string& message) {
@@ -252,9 +256,7 @@ bool StreamingSet::fetchPage(std::unique_lock<std::mutex>& lock) {
             auto& failed = failedPages_[page];
             failed.first += 1;
             failed.second = now() + backoffSeconds(failed.first);
-            ++stats_.failures;
-            stats_.lastError = records.status().message();
-            checkDue_ = true;
+            noteFailure(records.status().message());
             if (failed.first >= std::max(1, options_.maxTries))
                 stop(source_->describe() + "/hierarchy.bin: page " + std::to_string(page) + ": gave up after " +
                      std::to_string(failed.first) + " tries; the last failed with: " + records.status().message());
@@ -375,7 +377,7 @@ void StreamingSet::decodeLoop() {
             // Superseded by a later setColoring (which queued its own), or
             // evicted meanwhile: dropped. A kept block decoded before, so a
             // failure here is not the block's; it is reported, not retried.
-            if (!block) stats_.lastError = block.status().message();
+            if (!block && !stats_.gaveUp && !stats_.setChanged) stats_.lastError = block.status().message();
             if (block && version == coloringVersion_ && resident_.count(job.node))
                 arrived_.push_back({job.node, std::move(surfels)});  // counted in recolors_ until handed over
             else

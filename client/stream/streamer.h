@@ -122,6 +122,7 @@ private:
     // (readHierarchyPage), without mutex_.
     Result<std::vector<NodeRecord>> fetchPageRecords(uint32_t page, const NodeKey& root) const;
     void stop(const std::string& message);                 // gave up, with mutex_ held
+    void noteFailure(const std::string& message);          // a transient one, with mutex_ held
     void addPages();                                        // those fetched, to the tree, with mutex_ held
     void checkForRebuild(std::unique_lock<std::mutex>& lock);
     using Block = std::shared_ptr<const std::vector<uint8_t>>;
