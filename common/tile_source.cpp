@@ -205,17 +205,15 @@ private:
     Result<std::vector<std::vector<uint8_t>>> ranges(const std::string& name,
                                                      const std::vector<std::pair<uint64_t, uint64_t>>& spans) {
         std::vector<Request> requests;
-        for (const auto& [offset, size] : spans)
+        std::vector<size_t> asked;  // indices into spans: empty ranges are not asked for
+        for (size_t i = 0; i < spans.size(); ++i) {
+            const auto [offset, size] = spans[i];
+            if (size == 0) continue;
             requests.push_back({name, std::to_string(offset) + "-" + std::to_string(offset + size - 1), nullptr, size, 206});
+            asked.push_back(i);
+        }
         std::vector<std::vector<uint8_t>> out(spans.size());
-        std::vector<size_t> asked;  // empty ranges are not asked for
-        std::vector<Request> nonEmpty;
-        for (size_t i = 0; i < spans.size(); ++i)
-            if (spans[i].second > 0) {
-                asked.push_back(i);
-                nonEmpty.push_back(std::move(requests[i]));
-            }
-        auto answers = run(nonEmpty);
+        auto answers = run(requests);
         for (size_t k = 0; k < asked.size(); ++k) {
             if (!answers[k]) return answers[k].status();
             const auto [offset, size] = spans[asked[k]];
@@ -501,6 +499,9 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
         return Status::error("libcurl: cannot start a multi handle");
     }
     curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(kMaxHostConnections));
+    // Keep that many alive between requests (libcurl's default cache holds
+    // 4 per easy handle in the multi at the time, and closed the rest).
+    curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, long(kMaxHostConnections));
     return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers, multi));
 }
 

@@ -1,5 +1,5 @@
 // Remote hosts (common/tile_source): nginx serving a set as static
-// files, over plain HTTP and over TLS with HTTP/2 and HTTP/1.1 (certificates
+// files to the headless viewer and the window, over plain HTTP and over TLS with HTTP/2 and HTTP/1.1 (certificates
 // from the test's own CA); bearer tokens, headers, signed query strings,
 // redirects and their loops; a certificate that does not verify; lazily
 // fetched hierarchy pages; a host without Range; surfcast-serve over HTTPS.
@@ -97,8 +97,25 @@ TEST(Stream, FromNginxConvergesToTheLocalImage) {
         return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; root " + dir.file("www") + "; }\n";
     });
     ASSERT_FALSE(nginx->ports.empty());
-    expectStreamsLikeLocal("http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/sets/scene", dir.file("www/sets/scene"),
-                           "--camera=3,-6,2,0,0,0.5,0,0,1,50", dir);
+    const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/sets/scene";
+    const char* camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
+    expectStreamsLikeLocal(url, dir.file("www/sets/scene"), camera, dir);
+
+    // The window takes the URL too (under Xvfb): without --lod every leaf is
+    // fetched before the first frame, which is then the local folder's
+    // headless frame; with --lod it streams and closes after its frames.
+    auto window = run({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", binary("surfcast-view"), url, camera,
+                       "--size", "200x150", "--frames", "3", "--screenshot", dir.file("window.png")});
+    ASSERT_EQ(window.exitCode, 0) << window.output;
+    auto headless = run({binary("surfcast-view"), "--headless", dir.file("www/sets/scene"), camera, "--size", "200x150",
+                         "--out", dir.file("headless.png")});
+    ASSERT_EQ(headless.exitCode, 0) << headless.output;
+    EXPECT_TRUE(test::readFile(dir.file("window.png")) == test::readFile(dir.file("headless.png")))
+        << "the window's frame of the URL differs from the folder's headless frame";
+    auto streaming = run({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", binary("surfcast-view"), url, camera,
+                          "--lod", "1", "--size", "200x150", "--frames", "30", "--screenshot", dir.file("streaming.png")});
+    EXPECT_EQ(streaming.exitCode, 0) << streaming.output;
+    EXPECT_TRUE(std::filesystem::exists(dir.file("streaming.png"))) << streaming.output;
 }
 
 // The client fetches hierarchy.bin's header, page table and page 0, then the
