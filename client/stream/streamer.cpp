@@ -227,14 +227,8 @@ void StreamingSet::stop(const std::string& message) {
 
 void StreamingSet::addPages() {
     for (auto& [page, records] : pagesFetched_) {
-        const size_t first = nodes().size();
         selector_->addNodes(records);
         pages_[page] = true;
-        for (size_t i = first; i < nodes().size(); ++i)
-            if (residentCost(uint32_t(i)) > options_.memoryBudget)
-                stop(source_->describe() + ": node " + nodes()[i].key.name() + " needs " +
-                     std::to_string(residentCost(uint32_t(i)) >> 10) + " KiB, more than the memory budget of " +
-                     std::to_string(options_.memoryBudget >> 10) + " KiB");
     }
     pagesFetched_.clear();
 }

@@ -68,7 +68,7 @@ struct StreamStats {
     bool setChanged = false;
     // A node or page failed StreamOptions::maxTries times in a row (a server
     // gone for good, a block that never passes its CRC or never decodes), or
-    // a node needs more than the memory budget, or two nodes claim one page:
+    // two nodes claim one page:
     // nothing more is fetched, and lastError says which node and why.
     bool gaveUp = false;
 };

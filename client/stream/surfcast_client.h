@@ -73,6 +73,11 @@ public:
 
 private:
     SurfcastClient() = default;
+    // Every node known since the last call fits the GPU pool (the streamer
+    // loads a larger one, which the pool could not take).
+    Status checkNewNodesFit();
+    size_t nodesChecked_ = 0;
+    std::string location_;
     std::unique_ptr<StreamingSet> stream_;
     std::unique_ptr<SurfelPool> pool_;
     std::unique_ptr<SplatRenderer> renderer_;
