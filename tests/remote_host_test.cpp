@@ -332,13 +332,11 @@ TEST(Stream, SurfcastServeOverHttpsWithAToken) {
     ASSERT_EQ(b.exitCode, 0) << b.output;
     makeCertificates(dir);
     test::writeFile(dir.file("token"), "s3cret-Token\n");
-    test::Child server = test::spawn({binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0", "--tls-cert",
-                                      dir.file("server.pem"), "--tls-key", dir.file("server.key"), "--token-file",
-                                      dir.file("token")});
-    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
-    const size_t at = server.log.find("https://127.0.0.1:");
-    ASSERT_NE(at, std::string::npos) << server.log;
-    const std::string origin = server.log.substr(at, server.log.find_first_of(" \n", at) - at);
+    test::Child server;
+    const std::string origin =
+        test::startServer(&server, dir.file("sets"), "127.0.0.1:0",
+                          {"--tls-cert", dir.file("server.pem"), "--tls-key", dir.file("server.key"), "--token-file", dir.file("token")});
+    ASSERT_EQ(origin.rfind("https://127.0.0.1:", 0), 0u) << server.log;
     auto last = expectStreamsLikeLocal(origin + "/sets/scene", dir.file("sets/scene"), "--camera=3,-6,2,0,0,0.5,0,0,1,50",
                                        dir, {"--ca-file", dir.file("ca.pem"), "--token-file", dir.file("token")});
     EXPECT_EQ(last.dump().find("s3cret"), std::string::npos);

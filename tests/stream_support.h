@@ -1,6 +1,6 @@
 // Helpers shared by the streaming tests (stream_test.cpp) and the remote-host
-// tests (remote_host_test.cpp): streaming a set headless and comparing the
-// converged image with the local folder's.
+// tests (remote_host_test.cpp): starting surfcast-serve, streaming a set
+// headless and comparing the converged image with the local folder's.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -12,6 +12,21 @@
 #include "test_support.h"
 
 namespace surfcast::test {
+
+// surfcast-serve on an ephemeral loopback port (or `bind`), with any further
+// options; its origin (http(s)://127.0.0.1:PORT) once it listens, "" if it
+// did not start.
+inline std::string startServer(Child* server, const std::string& sets, const std::string& bind = "127.0.0.1:0",
+                               const std::vector<std::string>& options = {}) {
+    std::vector<std::string> args = {binary("surfcast-serve"), sets, "--bind", bind};
+    args.insert(args.end(), options.begin(), options.end());
+    *server = spawn(args);
+    if (!server->waitFor("(1 tile sets)\n")) return "";
+    const size_t at = server->log.find("://127.0.0.1:");
+    if (at == std::string::npos) return "";
+    const size_t begin = server->log.rfind(' ', at) + 1;
+    return server->log.substr(begin, server->log.find_first_of(" \n", at) - begin);
+}
 
 inline nlohmann::json lastLine(const std::string& output) {
     auto lines = test::jsonLines(output);

@@ -43,14 +43,7 @@ using test::lastLine;
 using test::run;
 using test::TempDir;
 
-// surfcast-serve on an ephemeral loopback port (or `bind`); its origin
-// (http://127.0.0.1:PORT) once it listens, "" if it did not start.
-std::string startServer(test::Child* server, const std::string& sets, const std::string& bind = "127.0.0.1:0") {
-    *server = test::spawn({binary("surfcast-serve"), sets, "--bind", bind});
-    if (!server->waitFor("(1 tile sets)\n")) return "";
-    size_t at = server->log.find("http://127.0.0.1:");
-    return at == std::string::npos ? "" : server->log.substr(at, server->log.find_first_of(" \n", at) - at);
-}
+using test::startServer;
 
 
 TEST(Stream, OverHttpConvergesToTheLocalImage) {
