@@ -236,6 +236,7 @@ struct HttpServer::Impl {
             r.header("Cache-Control", kRevalidate);
             return r.text(list.dump(2) + "\n", "application/json");
         }
+        if (!post && isViewerPath(path)) return viewer(c, st, r);
         std::string name, rest;
         if (!splitSetPath(path, &name, &rest)) return fail(r, 404, "not_found", "no such resource");
         if (!post && (rest == "tileset.json" || rest == "hierarchy.bin" || rest == "blocks.bin")) {
@@ -268,6 +269,29 @@ struct HttpServer::Impl {
             return batch(c, st, r, name);
         }
         fail(r, 404, "not_found", "no such resource");
+    }
+
+    // "/" and "/NAME" without further slashes: the viewer's page and assets.
+    static bool isViewerPath(const std::string& path) {
+        return path == "/" || (path.size() > 1 && path.find('/', 1) == std::string::npos && path != "/sets" &&
+                               path != "/healthz" && path != "/metrics");
+    }
+
+    void viewer(MHD_Connection* c, RequestState& st, Reply& r) {
+        st.route = "viewer";
+        if (config.web.empty())
+            return fail(r, 404, "not_found", "no viewer here: surfcast-serve found no built viewer (build web/, or pass --web DIR)");
+        auto it = config.web.find(st.path == "/" ? "index.html" : st.path.substr(1));
+        if (it == config.web.end()) return fail(r, 404, "not_found", "no such resource");
+        const WebFile& f = it->second;
+        r.header("ETag", f.etag);
+        r.header("Cache-Control", kRevalidate);
+        if (etagMatches(header(c, "If-None-Match"), f.etag)) {
+            r.status = 304;
+            return;
+        }
+        r.header("Content-Type", f.type);
+        r.piece(f.bytes.data(), f.bytes.size());
     }
 
     void batch(MHD_Connection* c, RequestState& st, Reply& r, const std::string& name) {
@@ -309,6 +333,7 @@ struct HttpServer::Impl {
 
     bool authorized(MHD_Connection* c, const RequestState& st) const {
         if (config.token.empty() || st.path == "/healthz" || st.method == "OPTIONS") return true;
+        if (st.method != "POST" && isViewerPath(st.path)) return true;  // the viewer's files hold no data
         std::string auth = header(c, "Authorization");
         std::string expected = "Bearer " + config.token;
         // Constant time in the token's length: no timing oracle.

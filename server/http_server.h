@@ -8,6 +8,7 @@
 #include "metrics.h"
 #include "status.h"
 #include "tileset_store.h"
+#include "web_files.h"
 
 namespace surfcast {
 
@@ -27,6 +28,10 @@ struct ServerConfig {
     // HTTPS (libmicrohttpd's GnuTLS) when both are set: the PEM texts of the
     // certificate chain and of its private key.
     std::string tlsCertificate, tlsKey;
+    // The browser viewer, served at / and /NAME (public even with a token:
+    // the page holds no data; it sends the token from its URL's fragment).
+    // Empty: no viewer, / is 404.
+    WebFiles web;
 };
 
 class HttpServer {

@@ -31,6 +31,10 @@ HTTP: the three files with Range support, single node blocks, batches of nodes,
   --timeout S          read/write timeout for stalled clients, seconds (default 10)
   --tls-cert F         serve HTTPS with the PEM certificate chain in F (and --tls-key)
   --tls-key F          the certificate's PEM private key (unencrypted)
+  --web DIR            serve the browser viewer from DIR at / (default: web/ beside
+                       the executable's folder, as the build leaves it: build/web);
+                       open http://HOST:PORT/?set=/sets/NAME
+  --no-web             serve no viewer
   -h, --help           this text
 )";
 
@@ -43,7 +47,8 @@ int usageError(const std::string& m) {
 
 int main(int argc, char** argv) {
     surfcast::ServerConfig config;
-    std::string dir;
+    std::string dir, web;
+    bool noWeb = false;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         auto value = [&](std::string* out) {
@@ -89,6 +94,10 @@ int main(int argc, char** argv) {
             if (!f || text.str().find("-----BEGIN ") == std::string::npos)
                 return usageError("cannot read " + v + " as PEM (" + a + ")");
             (a == "--tls-cert" ? config.tlsCertificate : config.tlsKey) = text.str();
+        } else if (a == "--web") {
+            if (!value(&web)) return usageError("--web needs a folder");
+        } else if (a == "--no-web") {
+            noWeb = true;
         } else if (a == "--timeout") {
             if (!value(&v) || (config.timeoutSeconds = std::atoi(v.c_str())) < 1) return usageError("--timeout needs seconds >= 1");
         } else if (!a.empty() && a[0] == '-') {
@@ -101,6 +110,14 @@ int main(int argc, char** argv) {
     }
     if (dir.empty()) return usageError("no folder given");
     if (config.tlsCertificate.empty() != config.tlsKey.empty()) return usageError("--tls-cert and --tls-key go together");
+
+    if (!noWeb) {
+        // An explicit --web must be a viewer; the default folder is optional
+        // (a server installed without the viewer still serves sets).
+        auto files = surfcast::loadWebFiles(web.empty() ? surfcast::defaultWebFolder() : web);
+        if (files) config.web = std::move(*files);
+        else if (!web.empty()) return usageError(files.status().message());
+    }
 
     auto store = surfcast::TilesetStore::open(dir);
     if (!store) {
@@ -123,6 +140,9 @@ int main(int argc, char** argv) {
     }
     std::fprintf(stderr, "surfcast-serve: serving %s on %s://%s:%d (%zu tile sets)\n", dir.c_str(),
                  config.tlsCertificate.empty() ? "http" : "https", config.host.c_str(), server.port(), (*store)->list().size());
+    if (!config.web.empty())
+        std::fprintf(stderr, "surfcast-serve: viewer at %s://%s:%d/?set=/sets/NAME\n", config.tlsCertificate.empty() ? "http" : "https",
+                     config.host.c_str(), server.port());
     std::thread waiter([&] {
         int sig = 0;
         sigwait(&signals, &sig);

@@ -1,0 +1,19 @@
+// Builds the viewer into one folder (default ../build/web, or argv[2]): the
+// page, its bundled module, the decode worker and draco3d's WASM decoder.
+// Nothing is fetched at run time from anywhere but the folder itself.
+import { build } from "esbuild";
+import { copyFileSync, mkdirSync } from "node:fs";
+import { dirname, join, resolve } from "node:path";
+import { fileURLToPath } from "node:url";
+
+const here = dirname(fileURLToPath(import.meta.url));
+const out = resolve(process.argv[2] ?? join(here, "..", "build", "web"));
+mkdirSync(out, { recursive: true });
+const common = { bundle: true, minify: true, sourcemap: true, target: ["es2020"], logLevel: "warning" };
+await build({ ...common, entryPoints: [join(here, "src/main.ts")], outfile: join(out, "viewer.js"), format: "esm" });
+await build({ ...common, entryPoints: [join(here, "src/decode_worker.ts")], outfile: join(out, "decode_worker.js"), format: "iife" });
+for (const f of ["index.html", "style.css"]) copyFileSync(join(here, f), join(out, f));
+const draco = join(here, "node_modules", "draco3d");
+copyFileSync(join(draco, "draco_decoder_nodejs.js"), join(out, "draco_decoder.js"));
+copyFileSync(join(draco, "draco_decoder.wasm"), join(out, "draco_decoder.wasm"));
+console.log(`web viewer built into ${out}`);

@@ -1,0 +1,240 @@
+// One node's block to GPU surfels: the CRC, the Draco header checked against
+// the node record before Draco allocates anything (common/block_codec.cpp's
+// readDracoHeader), decoding, and packing into the 32-byte GpuSurfel layout of
+// client/shaders/shared_types.h (positions relative to the render origin,
+// octahedral normal as two snorm16, RGBA8 colour, weight, edge weights).
+// Runs in a Web Worker (decode_worker.ts); pure functions of its inputs.
+
+import { crc32 } from "./crc32.js";
+import { classColor, type ColorBy, intensityColor, returnColor, type RGB, viridis } from "./coloring.js";
+
+export interface DecodeJob {
+  id: number;
+  key: string;
+  blob: ArrayBuffer;
+  crc: number;
+  points: number;
+  positionBits: number;
+  min: [number, number, number]; // node minimum relative to the render origin
+  edge: number;
+  spacing: number;
+  hasRadius: boolean;
+  hasEdgeWeights: boolean;
+  colorBits: number;
+  weights: boolean;
+  extra: string[]; // the listed attributes after the fixed ones, in block order
+  coloring: ColoringSpec;
+}
+
+export interface ColoringSpec {
+  by: ColorBy; // resolved: not "auto"
+  originZ: number; // the render origin's z (elevation colours are world z)
+  elevationMin: number;
+  elevationMax: number;
+  intensityScale: number;
+  intensityOffset: number;
+  intensityP2: number;
+  intensityP98: number;
+  hiddenClasses: number[];
+}
+
+export interface DecodeResult {
+  id: number;
+  surfels?: ArrayBuffer; // n * 32 bytes
+  count?: number;
+  error?: string;
+}
+
+// What decoding may allocate (common/block_codec.h kMaxBlockDecodeBytes).
+const kMaxDecodeBytes = 512 * 2 ** 20;
+const kTypeBytes = [0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8, 1];
+
+export function checkDracoHeader(b: Uint8Array, points: number, attributes: number): string | null {
+  if (b.length < 17 || String.fromCharCode(...b.subarray(0, 5)) !== "DRACO") return "not a Draco block";
+  if (b[7] !== 0) return "the Draco block is not a point cloud";
+  if (b[8] !== 1) return "the Draco block is not kd-tree coded";
+  if ((b[9] | (b[10] << 8)) & 0x8000) return "the Draco block carries metadata";
+  const count = new DataView(b.buffer, b.byteOffset + 11, 4).getInt32(0, true);
+  if (count !== points) return `the Draco block declares ${count} points; the tile set declares ${points}`;
+  if (b[15] !== 1) return `the Draco block has ${b[15]} attribute decoders, not 1`;
+  let at = 16;
+  const varint = (): number | null => {
+    let v = 0;
+    for (let shift = 0; shift < 35 && at < b.length; shift += 7) {
+      const x = b[at++];
+      v += (x & 0x7f) * 2 ** shift;
+      if (!(x & 0x80)) return v <= 0xffffffff ? v : null;
+    }
+    return null;
+  };
+  const n = varint();
+  if (n === null || n > 64) return "the Draco block's attribute count is unreadable";
+  if (n !== attributes) return `block has ${n} attributes; the tile set declares ${attributes}`;
+  let components = 0, valueBytes = 0;
+  for (let i = 0; i < n; ++i) {
+    if (b.length - at < 4) return "the Draco block ends in its attribute descriptors";
+    const type = b[at + 1], comps = b[at + 2];
+    at += 4;
+    if (type < 1 || type > 11 || comps < 1 || comps > 4 || varint() === null)
+      return `the Draco block's attribute ${i} has ${comps} components of type ${type}`;
+    components += comps;
+    valueBytes += comps * kTypeBytes[type];
+  }
+  if (points * (4 * components + valueBytes) > kMaxDecodeBytes)
+    return `the Draco block's ${points} points would take over ${kMaxDecodeBytes >> 20} MiB to decode`;
+  return null;
+}
+
+function snorm16(v: number): number {
+  v = Math.min(Math.max(Number.isFinite(v) ? v : 0, -1), 1);
+  return Math.round(v * 32767) & 0xffff;
+}
+
+// Octahedral encoding (client/render/surfel_set.cpp packNormalOct).
+export function packNormalOct(x: number, y: number, z: number): number {
+  const l1 = Math.abs(x) + Math.abs(y) + Math.abs(z);
+  if (!(l1 > 0) || !Number.isFinite(l1)) return 0;
+  let u = x / l1, v = y / l1;
+  if (z < 0) {
+    const fu = (1 - Math.abs(v)) * (u < 0 ? -1 : 1), fv = (1 - Math.abs(u)) * (v < 0 ? -1 : 1);
+    u = fu;
+    v = fv;
+  }
+  return (snorm16(u) | (snorm16(v) << 16)) >>> 0;
+}
+
+// Largest edge-weight ratio a surfel carries (shared_types.h SC_EDGE_RATIO_MAX).
+export const kEdgeRatioMax = 4;
+
+// Edge weights as four unorm8 ratios / kEdgeRatioMax (surfel_set.cpp packEdgeWeights).
+function packEdgeWeights(e: ArrayLike<number>, at: number): number {
+  let packed = 0;
+  for (let i = 0; i < 4; ++i) {
+    const v = Number.isFinite(e[at + i]) ? e[at + i] / kEdgeRatioMax : 1 / kEdgeRatioMax;
+    packed |= Math.round(Math.min(Math.max(v, 1 / 255), 1) * 255) << (8 * i);
+  }
+  return packed >>> 0;
+}
+
+const u8 = (v: number) => Math.round(Math.min(Math.max(Number.isFinite(v) ? v : 0, 0), 1) * 255);
+
+// The subset of the draco3d module this file uses.
+/* eslint-disable @typescript-eslint/no-explicit-any */
+export type DracoModule = any;
+
+export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
+  const bytes = new Uint8Array(job.blob);
+  const where = `node ${job.key}`;
+  if (crc32(bytes) !== job.crc) return { id: job.id, error: `${where}: block CRC mismatch` };
+  const attributes = 2 + (job.colorBits ? 1 : 0) + (job.weights ? 1 : 0) + (job.hasRadius ? 1 : 0) +
+                     (job.hasEdgeWeights ? 1 : 0) + job.extra.length;
+  const problem = checkDracoHeader(bytes, job.points, attributes);
+  if (problem) return { id: job.id, error: `${where}: ${problem}` };
+
+  const decoder = new draco.Decoder();
+  const buffer = new draco.DecoderBuffer();
+  const pc = new draco.PointCloud();
+  const cleanup: any[] = [pc, buffer, decoder];
+  try {
+    buffer.Init(new Int8Array(job.blob), bytes.length);
+    const status = decoder.DecodeBufferToPointCloud(buffer, pc);
+    if (!status.ok()) return { id: job.id, error: `${where}: Draco decoding failed: ${status.error_msg()}` };
+    const n = pc.num_points();
+    if (n !== job.points || pc.num_attributes() !== attributes)
+      return { id: job.id, error: `${where}: the decoded block does not match its record` };
+    const read = (index: number, type: "u8" | "u16" | "u32" | "f32", components: number): ArrayLike<number> => {
+      const a = decoder.GetAttribute(pc, index);
+      if (a.num_components() !== components) throw new Error(`${where}: block attribute ${index} has ${a.num_components()} components, not ${components}`);
+      const count = n * components;
+      if (type === "f32") {
+        const arr = new draco.DracoFloat32Array();
+        try {
+          if (!decoder.GetAttributeFloatForAllPoints(pc, a, arr)) throw new Error(`${where}: block attribute ${index} is not float`);
+          const out = new Float32Array(count);
+          for (let i = 0; i < count; ++i) out[i] = arr.GetValue(i);
+          return out;
+        } finally {
+          draco.destroy(arr);
+        }
+      }
+      const [dt, Ctor, bytesPer] = type === "u8" ? [draco.DT_UINT8, Uint8Array, 1] as const
+        : type === "u16" ? [draco.DT_UINT16, Uint16Array, 2] as const : [draco.DT_UINT32, Uint32Array, 4] as const;
+      const size = count * bytesPer;
+      const ptr = draco._malloc(size);
+      try {
+        if (!decoder.GetAttributeDataArrayForAllPoints(pc, a, dt, size, ptr))
+          throw new Error(`${where}: block attribute ${index} has an unexpected type`);
+        return new Ctor(draco.HEAPU8.buffer.slice(ptr, ptr + size));
+      } finally {
+        draco._free(ptr);
+      }
+    };
+    let index = 0;
+    const positions = read(index++, "u32", 3);
+    const normals = read(index++, "f32", 3);
+    const colors = job.colorBits ? read(index++, job.colorBits === 8 ? "u8" : "u16", 3) : null;
+    const weights = job.weights ? read(index++, "f32", 1) : null;
+    const radii = job.hasRadius ? read(index++, "f32", 1) : null;
+    const edges = job.hasEdgeWeights ? read(index++, "f32", 4) : null;
+    const lidar: Record<string, ArrayLike<number>> = {};
+    for (const name of job.extra) {
+      const type = name === "intensity" ? "u16" : ["classification", "return_number", "number_of_returns", "opacity"].includes(name) ? "u8" : null;
+      if (type) lidar[name] = read(index, type, 1);
+      ++index;
+    }
+    return pack(job, n, positions, normals, colors, weights, radii, edges, lidar);
+  } catch (e) {
+    return { id: job.id, error: (e as Error).message };
+  } finally {
+    for (const o of cleanup) draco.destroy(o);
+  }
+}
+
+function pack(job: DecodeJob, n: number, positions: ArrayLike<number>, normals: ArrayLike<number>,
+              colors: ArrayLike<number> | null, weights: ArrayLike<number> | null, radii: ArrayLike<number> | null,
+              edges: ArrayLike<number> | null, lidar: Record<string, ArrayLike<number>>): DecodeResult {
+  const out = new ArrayBuffer(n * 32);
+  const f = new Float32Array(out), u = new Uint32Array(out);
+  const step = job.edge / (2 ** job.positionBits - 1);
+  const colorScale = job.colorBits ? 1 / (2 ** job.colorBits - 1) : 0;
+  const c = job.coloring;
+  const hidden = new Set(c.hiddenClasses);
+  const classes = lidar.classification;
+  const zRange = c.elevationMax - c.elevationMin;
+  let m = 0;
+  for (let i = 0; i < n; ++i) {
+    if (hidden.size && classes && hidden.has(classes[i])) continue;
+    const x = job.min[0] + positions[3 * i] * step, y = job.min[1] + positions[3 * i + 1] * step,
+          z = job.min[2] + positions[3 * i + 2] * step;
+    let rgb: RGB = [0.8, 0.8, 0.8];
+    switch (c.by) {
+      case "rgb":
+        if (colors) rgb = [colors[3 * i] * colorScale, colors[3 * i + 1] * colorScale, colors[3 * i + 2] * colorScale];
+        break;
+      case "intensity":
+        if (lidar.intensity) rgb = intensityColor(lidar.intensity[i] * c.intensityScale + c.intensityOffset, c.intensityP2, c.intensityP98);
+        break;
+      case "elevation":
+        rgb = viridis(zRange > 0 ? (z + c.originZ - c.elevationMin) / zRange : 0.5);
+        break;
+      case "classification":
+        if (classes) rgb = classColor(classes[i]);
+        break;
+      case "return":
+        if (lidar.return_number && lidar.number_of_returns) rgb = returnColor(lidar.return_number[i], lidar.number_of_returns[i]);
+        break;
+    }
+    const alpha = lidar.opacity ? lidar.opacity[i] : 255;
+    const o = 8 * m;
+    f[o] = x;
+    f[o + 1] = y;
+    f[o + 2] = z;
+    f[o + 3] = radii ? radii[i] : job.spacing;
+    u[o + 4] = packNormalOct(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]);
+    u[o + 5] = (u8(rgb[0]) | (u8(rgb[1]) << 8) | (u8(rgb[2]) << 16) | (alpha << 24)) >>> 0;
+    f[o + 6] = weights ? weights[i] : 1;
+    u[o + 7] = edges ? packEdgeWeights(edges, 4 * i) : 0;
+    ++m;
+  }
+  return { id: job.id, surfels: m === n ? out : out.slice(0, m * 32), count: m };
+}

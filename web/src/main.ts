@@ -1,0 +1,246 @@
+// The viewer page: reads the set, camera and settings from the URL
+// (?set=URL&camera=ex,ey,ez,tx,ty,tz,ux,uy,uz,fov&lod=PX&mode=M&splats=N&color=A&hide=C,..
+// and #token=T), streams the set and redraws as blocks arrive or the camera
+// moves. window.surfcast holds the state tests and scripts read.
+
+import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
+import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
+import { Controls } from "./controls.js";
+import { emptyStats } from "./lod_selection.js";
+import { type DrawnNode, kDefaultEdgeTau, kDefaultLowpassVariance, kDefaultZt, kNearFraction, type RenderMode,
+         type RenderSettings, RendererError, SplatRenderer } from "./renderer.js";
+import { TileSource } from "./source.js";
+import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
+
+interface State {
+  converged: boolean;
+  nodes: number;
+  splats: number;
+  bytes: number;
+  requests: number;
+  errors: string[];
+  notices: string[];
+  mode: string;
+  firstImageMs: number | null;
+  convergedMs: number | null;
+  frames: number;
+  camera: string;
+}
+
+const state: State = { converged: false, nodes: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
+                       firstImageMs: null, convergedMs: null, frames: 0, camera: "" };
+(window as unknown as { surfcast: State }).surfcast = state;
+
+const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
+const params = new URLSearchParams(location.search);
+const hash = new URLSearchParams(location.hash.replace(/^#/, ""));
+
+function showError(message: string) {
+  if (!state.errors.includes(message)) state.errors.push(message);
+  const box = $("errors");
+  box.textContent = state.errors.join("\n");
+  box.hidden = false;
+}
+function showNotice(message: string) {
+  if (!state.notices.includes(message)) state.notices.push(message);
+  const box = $("notices");
+  box.textContent = state.notices.join("\n");
+  box.hidden = false;
+}
+
+function number(name: string, fallback: number, min: number): number {
+  const text = params.get(name);
+  if (text === null) return fallback;
+  const v = Number(text);
+  if (!Number.isFinite(v) || v < min) throw new Error(`?${name}=${text}: expected a number of at least ${min}`);
+  return v;
+}
+
+function normalsOriented(source: string): boolean {
+  return source !== "" && source.split("+").every((p) => p === "input" || p === "estimated-scan-origin");
+}
+
+async function main() {
+  const setParam = params.get("set");
+  if (!setParam) {
+    $("intro").hidden = false;
+    return;
+  }
+  const canvas = $<HTMLCanvasElement>("view");
+  const setUrl = new URL(setParam, location.href).href;
+  let renderer: SplatRenderer;
+  try {
+    renderer = new SplatRenderer(canvas, { forbidFloatBlend: params.get("floatblend") === "off" });
+  } catch (e) {
+    showError((e as Error).message);
+    return;
+  }
+  const targetPixels = number("lod", 1, 0.01);
+  const splatBudget = number("splats", 5_000_000, 1);
+  const source = new TileSource(setUrl, { token: hash.get("token") ?? undefined });
+  let hidden = (params.get("hide") ?? "").split(",").filter((s) => s !== "").map(Number);
+  let colorBy = (params.get("color") ?? "auto") as ColorBy;
+  const workerUrl = new URL("decode_worker.js", document.baseURI);
+  let streamer: Streamer<DrawnNode>;
+  try {
+    streamer = await Streamer.open(source, renderer, workerUrl, (info, origin) => {
+      const by = resolveColorBy(colorBy, info);
+      if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
+      colorBy = by as ColorBy;
+      return coloringFor(info, origin, colorBy, hidden);
+    }, { ...kDefaultStreamOptions, memoryBudget: number("gpu-budget", 512, 16) * 2 ** 20 });
+  } catch (e) {
+    showError(`cannot open ${setUrl}: ${(e as Error).message}`);
+    return;
+  }
+  const info = streamer.info;
+  const hasWeights = info.weights !== "none";
+  const settings: RenderSettings = {
+    mode: (params.get("mode") ?? "ewa-pixel") as RenderMode,
+    shading: colorBy === "rgb" || colorBy === "intensity" ? "unlit" : "lambert",
+    kernelScale: info.kernelScale,
+    cutoff: 1,
+    zt: kDefaultZt,
+    lowpassVariance: kDefaultLowpassVariance,
+    edgeAA: params.get("edge-aa") !== "off",
+    edgeTau: kDefaultEdgeTau,
+    background: [1, 1, 1],
+    backfaceCull: normalsOriented(info.normalSource),
+  };
+  if (!["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel"].includes(settings.mode)) {
+    showError(`?mode=${settings.mode}: expected points, circles, ewa-noprefilter, ewa-surfel or ewa-pixel`);
+    return;
+  }
+  const drawn = () => renderer.effectiveMode(settings.mode, hasWeights);
+  const noteMode = () => {
+    state.mode = drawn();
+    if (state.mode !== settings.mode)
+      showNotice(`this browser cannot blend float targets (EXT_float_blend): drawing ${state.mode} instead of ${settings.mode}` +
+                 (hasWeights ? "" : ", as the set was built without weights (surfcast-build --weights analytic)"));
+  };
+  noteMode();
+
+  const size = () => {
+    const dpr = window.devicePixelRatio || 1;
+    return [Math.max(1, Math.round(canvas.clientWidth * dpr)), Math.max(1, Math.round(canvas.clientHeight * dpr))];
+  };
+  let [width, height] = size();
+  let camera: Camera;
+  try {
+    const text = params.get("camera");
+    camera = text ? parseCamera(text) : frameBox(info.boundsMin, info.boundsMax, width / height);
+  } catch (e) {
+    showError((e as Error).message);
+    return;
+  }
+
+  let dirty = true;
+  const start = performance.now();
+  streamer.onChange = () => (dirty = true);
+  const setCamera = (c: Camera) => {
+    camera = c;
+    state.camera = formatCamera(c);
+    const url = new URL(location.href);
+    url.searchParams.set("camera", state.camera);
+    history.replaceState(null, "", url);
+    dirty = true;
+  };
+  setCamera(camera);
+  new Controls(canvas, () => camera, setCamera);
+
+  // Interface: mode, level of detail, splat budget, colouring, classes.
+  const modeSelect = $<HTMLSelectElement>("mode");
+  modeSelect.value = settings.mode;
+  modeSelect.onchange = () => {
+    settings.mode = modeSelect.value as RenderMode;
+    noteMode();
+    dirty = true;
+  };
+  const lodInput = $<HTMLInputElement>("lod");
+  lodInput.value = String(targetPixels);
+  const budgetInput = $<HTMLInputElement>("splats");
+  budgetInput.value = String(splatBudget);
+  for (const input of [lodInput, budgetInput]) input.onchange = () => (dirty = true);
+  const colorSelect = $<HTMLSelectElement>("color");
+  for (const by of kColorByOrder) {
+    if (resolveColorBy(by, info) !== by) continue;
+    colorSelect.add(new Option(by, by, false, by === colorBy));
+  }
+  const recolor = () => streamer.recolor(coloringFor(info, streamer.origin, colorBy, hidden));
+  colorSelect.onchange = () => {
+    colorBy = colorSelect.value as ColorBy;
+    settings.shading = colorBy === "rgb" || colorBy === "intensity" ? "unlit" : "lambert";
+    recolor();
+  };
+  const classes = $("classes");
+  for (const c of [...info.statistics.classCounts.keys()].sort((a, b) => a - b)) {
+    const label = document.createElement("label");
+    const box = document.createElement("input");
+    box.type = "checkbox";
+    box.checked = !hidden.includes(c);
+    box.onchange = () => {
+      hidden = box.checked ? hidden.filter((h) => h !== c) : [...hidden, c];
+      recolor();
+    };
+    label.append(box, ` ${c}`);
+    classes.append(label);
+  }
+  $("screenshot").onclick = () => {
+    const link = document.createElement("a");
+    link.download = "surfcast.png";
+    link.href = canvas.toDataURL("image/png");
+    link.click();
+  };
+
+  const frame = () => {
+    const [w, h] = size();
+    if (w !== width || h !== height) {
+      [width, height] = [w, h];
+      dirty = true;
+    }
+    if (dirty) {
+      dirty = false;
+      if (canvas.width !== width || canvas.height !== height) {
+        canvas.width = width;
+        canvas.height = height;
+      }
+      const lod = emptyStats();
+      const lodTarget = Number(lodInput.value) > 0 ? Number(lodInput.value) : targetPixels;
+      const budget = Number(budgetInput.value) >= 1 ? Number(budgetInput.value) : splatBudget;
+      const selected = streamer.update(camera, width, height, { targetPixels: lodTarget, frustumCulling: true,
+        backfaceCulling: settings.backfaceCull, splatBudget: budget, memoryBudget: Infinity }, lod);
+      // Drawn in key order, as the Vulkan client draws them.
+      const nodes = selected.map((s) => streamer.selector.nodes[s.index])
+        .sort((a, b) => a.level - b.level || a.x - b.x || a.y - b.y || a.z - b.z);
+      const gpu: DrawnNode[] = [];
+      let splats = 0;
+      for (const n of nodes) {
+        const r = streamer.residentNode(streamer.selector.nodes.indexOf(n));
+        if (!r) continue;
+        gpu.push(r.gpu);
+        splats += r.count;
+      }
+      const eta = viewportScale(camera, height);
+      const rows = viewRows(camera, streamer.origin);
+      const diagonal = Math.hypot(info.boundsMax[0] - info.boundsMin[0], info.boundsMax[1] - info.boundsMin[1],
+                                  info.boundsMax[2] - info.boundsMin[2]);
+      const eye = Math.hypot(rows[3], rows[7], rows[11]);
+      const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
+      renderer.render(gpu, { rows, eta, near }, settings, hasWeights);
+      ++state.frames;
+      const st = streamer.stats;
+      Object.assign(state, { nodes: gpu.length, splats, bytes: st.bytes, requests: st.requests });
+      if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - start;
+      const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
+      if (converged && state.convergedMs === null) state.convergedMs = performance.now() - start;
+      state.converged = converged;
+      if (st.gaveUp) showError(st.lastError);
+      $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
+        `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);
+    }
+    requestAnimationFrame(frame);
+  };
+  requestAnimationFrame(frame);
+}
+
+main().catch((e) => showError(e instanceof RendererError ? e.message : `viewer: ${(e as Error).message}`));

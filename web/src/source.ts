@@ -1,0 +1,103 @@
+// Where a tile set's bytes come from: its folder URL on any host that honours
+// Range (nginx, an object store, a CDN, surfcast-serve), with surfcast-serve's
+// POST {set}/batch where the host is surfcast-serve. Transient faults
+// (network errors, 408, 429, 5xx) are retried with backoff by the caller;
+// everything else is an error naming the URL and the status.
+
+export class HttpError extends Error {
+  constructor(message: string, readonly transient: boolean) {
+    super(message);
+  }
+}
+
+export interface SourceOptions {
+  token?: string; // sent as Authorization: Bearer on every data request
+  timeoutMs?: number;
+}
+
+export class TileSource {
+  readonly base: string; // the set's folder URL, no trailing slash
+  // Whether POST {set}/batch is offered: surfcast-serve tags tileset.json's
+  // ETag "j-<crc>" (docs/PROTOCOL.md, "Caching"); other hosts are sent
+  // ranges only, so a static host never sees (and logs) a refused POST.
+  batch = false;
+  requests = 0;
+  bytes = 0;
+
+  constructor(base: string, private options: SourceOptions = {}) {
+    this.base = base.replace(/\/+$/, "");
+  }
+
+  private headers(extra: Record<string, string> = {}): Record<string, string> {
+    return this.options.token ? { ...extra, Authorization: `Bearer ${this.options.token}` } : extra;
+  }
+
+  private async send(url: string, init: RequestInit, what: string): Promise<Response> {
+    const controller = new AbortController();
+    const timer = setTimeout(() => controller.abort(), this.options.timeoutMs ?? 30000);
+    ++this.requests;
+    try {
+      const r = await fetch(url, { ...init, signal: controller.signal, cache: "no-cache" });
+      if (r.ok) return r;
+      const transient = r.status === 408 || r.status === 429 || r.status >= 500;
+      const why = r.status === 401 ? " (the host wants a token: add #token=... to the page's URL)" : r.status === 404 ? " (not found)" : "";
+      throw new HttpError(`${what}: HTTP ${r.status}${why}`, transient);
+    } catch (e) {
+      if (e instanceof HttpError) throw e;
+      const aborted = (e as Error).name === "AbortError";
+      throw new HttpError(`${what}: ${aborted ? "timed out" : `unreachable (${(e as Error).message})`}`, true);
+    } finally {
+      clearTimeout(timer);
+    }
+  }
+
+  private async body(r: Response, limit: number, what: string): Promise<Uint8Array> {
+    const declared = Number(r.headers.get("Content-Length") ?? "0");
+    if (declared > limit) throw new HttpError(`${what}: ${declared} bytes, more than the ${limit} expected`, false);
+    const bytes = new Uint8Array(await r.arrayBuffer());
+    if (bytes.length > limit) throw new HttpError(`${what}: ${bytes.length} bytes, more than the ${limit} expected`, false);
+    this.bytes += bytes.length;
+    return bytes;
+  }
+
+  async text(name: string, limit: number): Promise<{ text: string; etag: string }> {
+    const url = `${this.base}/${name}`;
+    const r = await this.send(url, { headers: this.headers() }, url);
+    const bytes = await this.body(r, limit, url);
+    return { text: new TextDecoder().decode(bytes), etag: r.headers.get("ETag") ?? "" };
+  }
+
+  // Bytes [offset, offset + size) of `name`, exactly.
+  async range(name: string, offset: number, size: number): Promise<Uint8Array> {
+    const url = `${this.base}/${name}`;
+    const what = `${url} bytes ${offset}-${offset + size - 1}`;
+    const r = await this.send(url, { headers: this.headers({ Range: `bytes=${offset}-${offset + size - 1}` }) }, what);
+    if (r.status !== 206)
+      throw new HttpError(`${url}: the host ignores Range (HTTP ${r.status} instead of 206); serve the set from one that honours it (nginx, an object store or CDN, surfcast-serve)`, false);
+    const bytes = await this.body(r, size, what);
+    if (bytes.length !== size) throw new HttpError(`${what}: ${bytes.length} bytes arrived`, true);
+    return bytes;
+  }
+
+  // Several nodes' blobs in one POST (surfcast-serve's batch): for each key in
+  // order, a little-endian u32 length, then the blob.
+  async blobs(nodes: { key: string; blockSize: number }[]): Promise<Uint8Array[]> {
+    const url = `${this.base}/batch`;
+    const expected = nodes.reduce((s, n) => s + 4 + n.blockSize, 0);
+    const r = await this.send(url, { method: "POST", body: nodes.map((n) => n.key).join(","),
+                                     headers: this.headers({ "Content-Type": "text/plain" }) }, url);
+    const bytes = await this.body(r, expected, url);
+    const v = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+    const out: Uint8Array[] = [];
+    let at = 0;
+    for (const n of nodes) {
+      if (bytes.length - at < 4) throw new HttpError(`${url}: response ends before node ${n.key}`, true);
+      const length = v.getUint32(at, true);
+      at += 4;
+      if (bytes.length - at < length) throw new HttpError(`${url}: response ends inside node ${n.key}`, true);
+      out.push(bytes.slice(at, at + length));
+      at += length;
+    }
+    return out;
+  }
+}

@@ -1,0 +1,326 @@
+// A tile set streamed into the browser (the twin of client/stream/streamer):
+// opening fetches tileset.json, hierarchy.bin's header and page table, and
+// page 0; each update() traverses from the root (LodSelector), and fetches
+// what the view still needs, pages first, then nodes coarsest gap first, at
+// most `connections` requests at a time (batches of nodes where the host is
+// surfcast-serve, Range requests elsewhere). Blocks are checked (CRC, Draco
+// header) and decoded in Web Workers; the surfels are uploaded as they
+// arrive. Faults are retried with backoff (0.1 s doubling to 5 s) up to
+// maxTries times, then the stream stops, naming the node and why. Residency
+// has a byte budget: beyond it the least recently used nodes that the view
+// does not use are evicted.
+
+import type { Camera } from "./camera.js";
+import type { ColoringSpec, DecodeJob, DecodeResult } from "./block_decode.js";
+import { attribute, FormatError, indexBytes, kFixedAttributes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
+         type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, readHierarchyIndex, readHierarchyPage,
+         type TilesetInfo, type Vec3 } from "./format.js";
+import { emptyStats, type LodParams, LodSelector, type LodStats, type SelectedNode } from "./lod_selection.js";
+import { HttpError, TileSource } from "./source.js";
+
+export interface StreamOptions {
+  connections: number;
+  decoders: number;
+  memoryBudget: number; // bytes of resident surfels, 32 each
+  maxTries: number;
+  batchNodes: number;
+  batchBytes: number;
+}
+
+export const kDefaultStreamOptions: StreamOptions = {
+  connections: 6,
+  decoders: Math.max(1, Math.min(4, (globalThis.navigator?.hardwareConcurrency ?? 2))),
+  memoryBudget: 512 * 2 ** 20,
+  maxTries: 8,
+  batchNodes: 32,
+  batchBytes: 512 << 10,
+};
+
+export interface Resident<T> {
+  gpu: T;
+  count: number; // surfels drawn (after class filters)
+  lastUsed: number;
+}
+
+// What the GPU side does with arriving and evicted nodes.
+export interface Uploader<T> {
+  upload(surfels: ArrayBuffer): T;
+  release(gpu: T): void;
+}
+
+async function withRetries<R>(tries: number, attempt: () => Promise<R>, stopped: () => boolean): Promise<R> {
+  let delay = 100;
+  for (let i = 1; ; ++i) {
+    try {
+      return await attempt();
+    } catch (e) {
+      const transient = !(e instanceof HttpError) || e.transient;
+      if (!transient || i >= tries || stopped()) throw e;
+      await new Promise((r) => setTimeout(r, delay));
+      delay = Math.min(2 * delay, 5000);
+    }
+  }
+}
+
+class DecoderPool {
+  private workers: Worker[] = [];
+  private pending = new Map<number, (r: DecodeResult) => void>();
+  private next = 0;
+  private id = 0;
+  constructor(url: URL, count: number, onError: (message: string) => void) {
+    for (let i = 0; i < count; ++i) {
+      const w = new Worker(url);
+      w.onmessage = (e: MessageEvent<DecodeResult>) => {
+        const done = this.pending.get(e.data.id);
+        this.pending.delete(e.data.id);
+        done?.(e.data);
+      };
+      w.onerror = (e) => onError(`decode worker: ${e.message}`);
+      this.workers.push(w);
+    }
+  }
+  decode(job: Omit<DecodeJob, "id">): Promise<DecodeResult> {
+    const id = ++this.id;
+    const w = this.workers[this.next++ % this.workers.length];
+    return new Promise((resolve) => {
+      this.pending.set(id, resolve);
+      w.postMessage({ ...job, id }, [job.blob]);
+    });
+  }
+  terminate() {
+    for (const w of this.workers) w.terminate();
+  }
+}
+
+export interface StreamStats {
+  requests: number;
+  bytes: number;
+  pages: number;
+  nodesFetched: number;
+  inFlight: number;
+  resident: number;
+  residentBytes: number;
+  evictions: number;
+  failures: number;
+  lastError: string;
+  gaveUp: boolean;
+}
+
+export class Streamer<T> {
+  readonly info: TilesetInfo;
+  readonly origin: Vec3; // the render origin: the bounds' centre
+  selector: LodSelector;
+  private index: HierarchyIndex;
+  private resident = new Map<number, Resident<T>>();
+  private inFlight = new Set<number>();
+  private pagesInFlight = new Set<number>();
+  private tries = new Map<number, number>();
+  private pageTries = new Map<number, number>();
+  private requestsInFlight = 0;
+  private decoders: DecoderPool;
+  private clock = 0;
+  private extra: string[];
+  coloring: ColoringSpec;
+  readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
+                                  residentBytes: 0, evictions: 0, failures: 0, lastError: "", gaveUp: false };
+  onChange: () => void = () => {};
+
+  private constructor(readonly source: TileSource, info: TilesetInfo, index: HierarchyIndex, page0: NodeRecord[],
+                      private uploader: Uploader<T>, workerUrl: URL, coloring: ColoringSpec,
+                      readonly options: StreamOptions) {
+    this.info = info;
+    this.index = index;
+    this.origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
+    this.selector = new LodSelector(info, page0);
+    this.extra = info.attributes.map((a) => a.name).filter((n) => !kFixedAttributes.includes(n));
+    this.coloring = coloring;
+    this.decoders = new DecoderPool(workerUrl, options.decoders, (m) => this.fail(m));
+  }
+
+  // Opens the set at `source`, or throws an Error saying why it cannot be shown.
+  static async open<T>(source: TileSource, uploader: Uploader<T>, workerUrl: URL,
+                       coloring: (info: TilesetInfo, origin: Vec3) => ColoringSpec,
+                       options: StreamOptions = kDefaultStreamOptions): Promise<Streamer<T>> {
+    const stop = () => false;
+    const json = await withRetries(options.maxTries, () => source.text("tileset.json", kMaxTilesetJsonBytes), stop);
+    source.batch = json.etag.startsWith('"j-');
+    const info = parseTileset(json.text, `${source.base}/tileset.json`);
+    const what = `${source.base}/hierarchy.bin`;
+    const head = await withRetries(options.maxTries, () => source.range("hierarchy.bin", 0, Math.min(info.hierarchyBytes, 32 + 16 * info.hierarchyPages)), stop);
+    if (head.length < 32 || indexBytes(head) !== head.length)
+      throw new FormatError(`${what}: its header does not declare the ${info.hierarchyPages} pages tileset.json lists`);
+    const index = readHierarchyIndex(head, info.hierarchyBytes, what);
+    const p0 = index.pages[0];
+    if (!p0) throw new FormatError(`${what}: no pages`);
+    const bytes = await withRetries(options.maxTries, () => source.range("hierarchy.bin", p0.offset, p0.records * 64), stop);
+    const page0 = readHierarchyPage(index, 0, bytes, "0-0-0-0", info.blocksBytes, what);
+    const origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
+    return new Streamer(source, info, index, page0, uploader, workerUrl, coloring(info, origin), options);
+  }
+
+  isResident = (i: number) => this.resident.has(i);
+
+  private fail(message: string) {
+    if (this.stats.gaveUp) return;
+    this.stats.gaveUp = true;
+    this.stats.lastError = message;
+    this.onChange();
+  }
+
+  // The nodes to draw now, and what the view still needs queued for fetching.
+  update(camera: Camera, width: number, height: number, params: LodParams, lod: LodStats = emptyStats()): SelectedNode[] {
+    const selected = this.selector.select(camera, width, height, { ...params, memoryBudget: this.options.memoryBudget }, this.isResident, lod);
+    const now = ++this.clock;
+    for (const i of lod.used) {
+      const r = this.resident.get(i);
+      if (r) r.lastUsed = now;
+    }
+    this.evict(now);
+    if (!this.stats.gaveUp) {
+      for (const [node] of lod.missingPages.sort((a, b) => b[1] - a[1])) this.fetchPage(node);
+      const wanted = lod.missing.filter(([i]) => !this.inFlight.has(i)).sort((a, b) => b[1] - a[1]).map(([i]) => i);
+      this.fetchNodes(wanted);
+    }
+    this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size;
+    this.stats.requests = this.source.requests;
+    this.stats.bytes = this.source.bytes;
+    return selected;
+  }
+
+  private evict(now: number) {
+    let bytes = 0;
+    for (const r of this.resident.values()) bytes += r.count * 32;
+    if (bytes > this.options.memoryBudget) {
+      const old = [...this.resident.entries()].filter(([, r]) => r.lastUsed < now).sort((a, b) => a[1].lastUsed - b[1].lastUsed);
+      for (const [i, r] of old) {
+        if (bytes <= this.options.memoryBudget) break;
+        this.uploader.release(r.gpu);
+        this.resident.delete(i);
+        bytes -= r.count * 32;
+        ++this.stats.evictions;
+      }
+    }
+    this.stats.resident = this.resident.size;
+    this.stats.residentBytes = bytes;
+  }
+
+  private fetchPage(node: number) {
+    const record = this.selector.nodes[node];
+    const page = record.childPage;
+    if (this.pagesInFlight.has(page) || this.requestsInFlight >= this.options.connections) return;
+    this.pagesInFlight.add(page);
+    ++this.requestsInFlight;
+    const e = this.index.pages[page];
+    const what = `${this.source.base}/hierarchy.bin`;
+    const attempt = async () => {
+      const bytes = await this.source.range("hierarchy.bin", e.offset, e.records * 64);
+      return readHierarchyPage(this.index, page, bytes, record.key, this.info.blocksBytes, what);
+    };
+    withRetries(this.options.maxTries, attempt, () => this.stats.gaveUp)
+      .then((records) => {
+        this.selector.addNodes(records);
+        ++this.stats.pages;
+      })
+      .catch((err) => this.fail((err as Error).message))
+      .finally(() => {
+        this.pagesInFlight.delete(page);
+        --this.requestsInFlight;
+        this.onChange();
+      });
+  }
+
+  private fetchNodes(wanted: number[]) {
+    let at = 0;
+    while (at < wanted.length && this.requestsInFlight < this.options.connections) {
+      const group: number[] = [];
+      let bytes = 0;
+      const most = this.source.batch ? this.options.batchNodes : 1;
+      while (at < wanted.length && group.length < most && (group.length === 0 || bytes < this.options.batchBytes)) {
+        const i = wanted[at++];
+        group.push(i);
+        bytes += this.selector.nodes[i].blockSize;
+      }
+      for (const i of group) this.inFlight.add(i);
+      ++this.requestsInFlight;
+      const records = group.map((i) => this.selector.nodes[i]);
+      const request = group.length > 1 ? this.source.blobs(records)
+        : this.source.range("blocks.bin", records[0].blockOffset, records[0].blockSize).then((b) => [b]);
+      request
+        .then((blobs) => Promise.all(group.map((i, k) => this.decodeNode(i, blobs[k]))))
+        .catch((err) => group.forEach((i) => this.noteFailure(i, err as Error)))
+        .finally(() => {
+          --this.requestsInFlight;
+          this.onChange();
+        });
+    }
+  }
+
+  private async decodeNode(i: number, blob: Uint8Array) {
+    const n = this.selector.nodes[i];
+    const min = nodeMin(this.info, n);
+    const copy = blob.byteOffset === 0 && blob.byteLength === blob.buffer.byteLength ? blob.buffer as ArrayBuffer : blob.slice().buffer;
+    const result = await this.decoders.decode({
+      key: n.key, blob: copy, crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits,
+      min: [min[0] - this.origin[0], min[1] - this.origin[1], min[2] - this.origin[2]], edge: nodeEdge(this.info, n.level),
+      spacing: n.spacing, hasRadius: !!(n.flags & kFlagHasRadius), hasEdgeWeights: !!(n.flags & kFlagEdgeWeights),
+      colorBits: this.info.colorBits, weights: this.info.weights !== "none", extra: this.extra, coloring: this.coloring,
+    });
+    if (result.error || !result.surfels) {
+      this.noteFailure(i, new Error(result.error ?? "decoding failed"));
+      return;
+    }
+    this.inFlight.delete(i);
+    this.tries.delete(i);
+    if (this.stats.gaveUp) return;
+    this.resident.set(i, { gpu: this.uploader.upload(result.surfels), count: result.count ?? 0, lastUsed: this.clock });
+    ++this.stats.nodesFetched;
+  }
+
+  private noteFailure(i: number, err: Error) {
+    this.inFlight.delete(i);
+    ++this.stats.failures;
+    const tries = (this.tries.get(i) ?? 0) + 1;
+    this.tries.set(i, tries);
+    const transient = !(err instanceof HttpError) || err.transient;
+    this.stats.lastError = err.message;
+    if (!transient || tries >= this.options.maxTries) {
+      this.fail(`node ${this.selector.nodes[i].key}: ${err.message}${tries > 1 ? ` (after ${tries} tries)` : ""}`);
+      return;
+    }
+    // Backoff: the node is asked for again by a later update().
+    this.inFlight.add(i);
+    setTimeout(() => {
+      this.inFlight.delete(i);
+      this.onChange();
+    }, Math.min(100 * 2 ** (tries - 1), 5000));
+  }
+
+  // Every node the view has drawn, drawn again from its block with another
+  // colouring: resident nodes are dropped and fetched anew.
+  recolor(coloring: ColoringSpec) {
+    this.coloring = coloring;
+    for (const r of this.resident.values()) this.uploader.release(r.gpu);
+    this.resident.clear();
+    this.onChange();
+  }
+
+  residentNode(i: number) {
+    return this.resident.get(i);
+  }
+
+  close() {
+    this.decoders.terminate();
+    for (const r of this.resident.values()) this.uploader.release(r.gpu);
+    this.resident.clear();
+  }
+}
+
+export function coloringFor(info: TilesetInfo, origin: Vec3, by: ColoringSpec["by"], hiddenClasses: number[]): ColoringSpec {
+  const intensity = attribute(info, "intensity");
+  const st = info.statistics;
+  return {
+    by, originZ: origin[2], elevationMin: st.elevationMin, elevationMax: st.elevationMax,
+    intensityScale: intensity?.scale ?? 1, intensityOffset: intensity?.offset ?? 0,
+    intensityP2: st.intensity?.p2 ?? 0, intensityP98: st.intensity?.p98 ?? 0, hiddenClasses,
+  };
+}
