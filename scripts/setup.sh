@@ -14,7 +14,12 @@ packages=(
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
   libmicrohttpd-dev libcurl4-openssl-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
   python3 python3-venv xvfb xdotool curl nginx-light
+  chromium
 )
+# Node.js and npm build the browser viewer (web/): any node on PATH (the
+# machines here have 20 from a configured source), else Debian's (18).
+command -v node >/dev/null 2>&1 || packages+=(nodejs)
+command -v npm >/dev/null 2>&1 || packages+=(npm)
 # A Rust toolchain for the LAZ decoder (preprocess/laz_ffi): any cargo on PATH,
 # else Debian's.
 command -v cargo >/dev/null 2>&1 || packages+=(cargo)

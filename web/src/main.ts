@@ -24,11 +24,12 @@ interface State {
   firstImageMs: number | null;
   convergedMs: number | null;
   frames: number;
+  frameMs: number; // the last frame's time on the GPU, from its draw to its fence
   camera: string;
 }
 
 const state: State = { converged: false, nodes: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
-                       firstImageMs: null, convergedMs: null, frames: 0, camera: "" };
+                       firstImageMs: null, convergedMs: null, frames: 0, frameMs: 0, camera: "" };
 (window as unknown as { surfcast: State }).surfcast = state;
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -134,10 +135,17 @@ async function main() {
     return;
   }
 
-  let dirty = true;
+  // Redraws: one frame on the GPU at a time (a fence says when it is done),
+  // at once when the camera moves, and while blocks stream in no more often
+  // than every other frame's cost, so that a slow WebGL (SwiftShader takes
+  // seconds for half a million splats) spends its time decoding, not
+  // redrawing. The state says converged once the converged frame is done.
+  let dirty = true, moved = true, lastDraw = -Infinity, frameCost = 0;
+  let fence: WebGLSync | null = null, fenceConverged = false;
   const start = performance.now();
   streamer.onChange = () => (dirty = true);
   const setCamera = (c: Camera) => {
+    moved = true;
     camera = c;
     state.camera = formatCamera(c);
     const url = new URL(location.href);
@@ -160,7 +168,7 @@ async function main() {
   lodInput.value = String(targetPixels);
   const budgetInput = $<HTMLInputElement>("splats");
   budgetInput.value = String(splatBudget);
-  for (const input of [lodInput, budgetInput]) input.onchange = () => (dirty = true);
+  for (const input of [lodInput, budgetInput]) input.onchange = () => (moved = dirty = true);
   const colorSelect = $<HTMLSelectElement>("color");
   for (const by of kColorByOrder) {
     if (resolveColorBy(by, info) !== by) continue;
@@ -192,14 +200,44 @@ async function main() {
     link.click();
   };
 
-  const frame = () => {
+  let drawLast = () => {};
+  // For benchmarks: draws the current selection n times, each waited for
+  // (a one-pixel read: gl.finish does not wait in Chromium), and returns the
+  // mean milliseconds per frame.
+  (window as unknown as { surfcastTimeFrames: (n: number) => number }).surfcastTimeFrames = (n: number) => {
+    const gl = renderer.gl, pixel = new Uint8Array(4);
+    const sync = () => gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
+    drawLast();
+    sync();
+    const t0 = performance.now();
+    for (let i = 0; i < n; ++i) {
+      drawLast();
+      sync();
+    }
+    return (performance.now() - t0) / n;
+  };
+
+  const frame = (now: number) => {
+    const gl = renderer.gl;
+    if (fence) {
+      if (gl.getSyncParameter(fence, gl.SYNC_STATUS) !== gl.SIGNALED) {
+        requestAnimationFrame(frame);
+        return;
+      }
+      gl.deleteSync(fence);
+      fence = null;
+      frameCost = performance.now() - lastDraw;
+      state.frameMs = frameCost;
+      if (fenceConverged && state.convergedMs === null) state.convergedMs = performance.now() - start;
+      state.converged = fenceConverged && !dirty;
+    }
     const [w, h] = size();
     if (w !== width || h !== height) {
       [width, height] = [w, h];
-      dirty = true;
+      moved = dirty = true;
     }
-    if (dirty) {
-      dirty = false;
+    if (dirty && (moved || now - lastDraw >= 2 * frameCost)) {
+      dirty = moved = false;
       if (canvas.width !== width || canvas.height !== height) {
         canvas.width = width;
         canvas.height = height;
@@ -226,14 +264,18 @@ async function main() {
                                   info.boundsMax[2] - info.boundsMin[2]);
       const eye = Math.hypot(rows[3], rows[7], rows[11]);
       const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
-      renderer.render(gpu, { rows, eta, near }, settings, hasWeights);
+      drawLast = () => renderer.render(gpu, { rows, eta, near }, settings, hasWeights);
+      drawLast();
+      lastDraw = performance.now();
+      fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
+      gl.flush();
       ++state.frames;
       const st = streamer.stats;
       Object.assign(state, { nodes: gpu.length, splats, bytes: st.bytes, requests: st.requests });
       if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - start;
       const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
-      if (converged && state.convergedMs === null) state.convergedMs = performance.now() - start;
-      state.converged = converged;
+      fenceConverged = converged;
+      state.converged = false;
       if (st.gaveUp) showError(st.lastError);
       $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
         `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);

@@ -1,0 +1,256 @@
+// The browser viewer in a real browser: headless Chromium (SwiftShader's
+// WebGL2) driven over the DevTools protocol by puppeteer-core, against a real
+// surfcast-serve and a real nginx on loopback, compared with the Vulkan
+// client (surfcast-view --headless) at the same camera, size and target.
+// Needs SURFCAST_BUILD (the CMake build folder: bin/ and web/); CTest sets it.
+// Without Chromium the tests fail under CI and are skipped elsewhere.
+
+import { after, before, describe, test } from "node:test";
+import assert from "node:assert/strict";
+import { execFileSync, spawn } from "node:child_process";
+import { copyFileSync, cpSync, existsSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { createServer } from "node:net";
+import { tmpdir } from "node:os";
+import { join } from "node:path";
+import { PNG } from "pngjs";
+import puppeteer from "puppeteer-core";
+
+const build = process.env.SURFCAST_BUILD ?? join(import.meta.dirname ?? ".", "..", "..", "build");
+const bin = (name) => join(build, "bin", name);
+const chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"].find(existsSync);
+const nginx = "/usr/sbin/nginx";
+if (!chromium && process.env.CI) throw new Error("Chromium is missing (scripts/setup.sh installs it); CI is set, so this fails");
+const skip = chromium ? false : "Chromium is missing: run scripts/setup.sh";
+
+const size = { width: 640, height: 480 };
+// A close view of the default scene: the objects and the floor receding,
+// deep enough that hierarchy pages beyond the first are fetched.
+const camera = "4,-7,3.5,0,0,0.5,0,0,1,45";
+
+let work, browser, serveUrl, nginxUrl;
+const children = [];
+
+function start(command, args) {
+  const child = spawn(command, args, { stdio: ["ignore", "pipe", "pipe"] });
+  child.log = "";
+  child.stdout.on("data", (d) => (child.log += d));
+  child.stderr.on("data", (d) => (child.log += d));
+  children.push(child);
+  return child;
+}
+
+async function waitFor(predicate, what, ms = 10000) {
+  const end = Date.now() + ms;
+  while (Date.now() < end) {
+    const v = predicate();
+    if (v) return v;
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  throw new Error(`timed out waiting for ${what}`);
+}
+
+async function startServe(dir, extra = []) {
+  const child = start(bin("surfcast-serve"), [dir, "--bind", "127.0.0.1:0", "--log", "errors", ...extra]);
+  const port = await waitFor(() => child.log.match(/on http:\/\/127\.0\.0\.1:(\d+)/)?.[1], `surfcast-serve: ${child.log}`);
+  return `http://127.0.0.1:${port}`;
+}
+
+async function freePort() {
+  return new Promise((resolve) => {
+    const s = createServer().listen(0, "127.0.0.1", () => {
+      const { port } = s.address();
+      s.close(() => resolve(port));
+    });
+  });
+}
+
+// nginx serving `root` as static files (Range, no batch), as any static host would.
+async function startNginx(root) {
+  for (let attempt = 0; attempt < 5; ++attempt) {
+    const port = await freePort();
+    const prefix = mkdtempSync(join(work, "nginx-"));
+    writeFileSync(join(prefix, "nginx.conf"), `daemon off; master_process off; worker_processes 1; pid ${prefix}/nginx.pid;
+error_log stderr; events { worker_connections 64; }
+http { access_log off; types { text/html html; text/javascript js; text/css css; application/wasm wasm; application/json json map; }
+  default_type application/octet-stream; client_body_temp_path ${prefix}; proxy_temp_path ${prefix}; fastcgi_temp_path ${prefix};
+  uwsgi_temp_path ${prefix}; scgi_temp_path ${prefix};
+  server { listen 127.0.0.1:${port}; root ${root}; index index.html; } }
+`);
+    const child = start(nginx, ["-e", "stderr", "-p", prefix, "-c", join(prefix, "nginx.conf")]);
+    try {
+      await waitFor(() => fetch(`http://127.0.0.1:${port}/web/index.html`).then((r) => r.ok, () => false), "nginx", 3000);
+      return `http://127.0.0.1:${port}`;
+    } catch {
+      child.kill();
+    }
+  }
+  throw new Error("nginx did not start");
+}
+
+// Opens `url` at 640x480 and waits until the viewer converges or shows an
+// error. Returns its state, the screenshot and every console error, page
+// error, failed request and HTTP error response.
+async function view(url, { timeout = 60000 } = {}) {
+  const page = await browser.newPage();
+  await page.setViewport(size);
+  const problems = [];
+  page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
+  page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
+  page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
+  page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+  await page.goto(url);
+  await page.waitForFunction("window.surfcast && (window.surfcast.converged || window.surfcast.errors.length > 0)", { timeout });
+  const state = await page.evaluate(() => window.surfcast);
+  const errorsShown = await page.evaluate(() => {
+    const e = document.getElementById("errors");
+    return e && !e.hidden && e.getBoundingClientRect().height > 0 ? e.textContent : "";
+  });
+  await page.evaluate(() => document.body.classList.add("capture"));
+  const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+  await page.close();
+  return { state, png, problems, errorsShown };
+}
+
+function reference(url, extra = []) {
+  const out = join(work, `ref-${Math.random().toString(36).slice(2)}.png`);
+  const lines = execFileSync(bin("surfcast-view"), ["--headless", url, "--lod", "1", "--camera", camera, "--size",
+    `${size.width}x${size.height}`, "--out", out, ...extra], { encoding: "utf8" }).trim().split("\n");
+  return { json: JSON.parse(lines[lines.length - 1]), png: PNG.sync.read(readFileSync(out)) };
+}
+
+// Mean absolute difference over RGB (0-255), and the share of pixels that
+// differ by more than 16 in some channel.
+function compare(a, b) {
+  assert.equal(a.width, b.width);
+  assert.equal(a.height, b.height);
+  let sum = 0, far = 0;
+  for (let i = 0; i < a.data.length; i += 4) {
+    let most = 0;
+    for (let c = 0; c < 3; ++c) {
+      const d = Math.abs(a.data[i + c] - b.data[i + c]);
+      sum += d;
+      most = Math.max(most, d);
+    }
+    if (most > 16) ++far;
+  }
+  const pixels = a.width * a.height;
+  return { mean: sum / (3 * pixels), far: far / pixels };
+}
+
+// Share of pixels that are not the white background.
+function covered(png) {
+  let n = 0;
+  for (let i = 0; i < png.data.length; i += 4) n += png.data[i] < 250 || png.data[i + 1] < 250 || png.data[i + 2] < 250;
+  return n / (png.width * png.height);
+}
+
+function flipByte(file, offset) {
+  const b = readFileSync(file);
+  b[offset] ^= 0xff;
+  writeFileSync(file, b);
+}
+
+// Page 0's byte offset in hierarchy.bin, and the root record's block (FORMAT.md).
+function rootLayout(dir) {
+  const h = readFileSync(join(dir, "hierarchy.bin"));
+  const page0 = Number(h.readBigUInt64LE(32));
+  return { page0, blockOffset: Number(h.readBigUInt64LE(page0 + 16)), blockSize: h.readUInt32LE(page0 + 24) };
+}
+
+describe("browser viewer", { skip }, () => {
+  before(async () => {
+    work = mkdtempSync(join(tmpdir(), "surfcast-browser-"));
+    const sets = join(work, "sets");
+    // The default scene at a sixth of its points: SwiftShader draws about
+    // 40,000 EWA splats a second on this machine's two cores.
+    execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--page-depth", "2", "-o",
+                                        join(sets, "scene")]);
+    // Bad inputs: a block that never passes its CRC, and a damaged hierarchy page.
+    for (const name of ["corrupt-block", "broken-hierarchy"]) cpSync(join(sets, "scene"), join(sets, name), { recursive: true });
+    const layout = rootLayout(join(sets, "scene"));
+    flipByte(join(sets, "corrupt-block", "blocks.bin"), layout.blockOffset + Math.floor(layout.blockSize / 2));
+    flipByte(join(sets, "broken-hierarchy", "hierarchy.bin"), layout.page0 + 40);
+    cpSync(join(build, "web"), join(work, "web"), { recursive: true });
+    writeFileSync(join(work, "token"), "s3cret-token\n");
+    serveUrl = await startServe(sets);
+    nginxUrl = await startNginx(work);
+    browser = await puppeteer.launch({ executablePath: chromium, headless: true,
+      args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", `--window-size=${size.width},${size.height}`] });
+  });
+
+  after(async () => {
+    await browser?.close();
+    for (const c of children) c.kill();
+    if (work) rmSync(work, { recursive: true, force: true });
+  });
+
+  // Both clients draw the same nodes (the same LOD rules at the same camera)
+  // with the same EWA math in float32. What may differ: the rasterizers'
+  // rules for pixels whose centre lies on a splat quad's edge (lavapipe
+  // against SwiftShader), the order of the float additions (the Vulkan
+  // client Morton-orders each node's surfels, the browser keeps Draco's
+  // order), and the final rounding to 8 bits. Rounding and order move a pixel
+  // by about one level, so a mean under 1 of 255 leaves no room for a
+  // systematic error (a missing normalization, a wrong axis or offset moves
+  // most covered pixels by tens of levels); a quad edge moves a single pixel
+  // by up to the checkerboard's full contrast, and such pixels stay under
+  // 1 % of the image.
+  const kMeanLimit = 1.0, kFarLimit = 0.01;
+
+  test("surfcast-serve: converges to the Vulkan client's image", async () => {
+    const url = `${serveUrl}/?set=/sets/scene&camera=${camera}`;
+    const { state, png, problems } = await view(url);
+    assert.deepEqual(problems, []);
+    assert.deepEqual(state.errors, []);
+    assert.equal(state.converged, true);
+    const ref = reference(`${serveUrl}/sets/scene`);
+    assert.equal(ref.json.converged, true);
+    assert.equal(state.nodes, ref.json.nodes, "the same nodes at convergence");
+    assert.equal(state.splats, ref.json.splats);
+    assert.ok(covered(png) > 0.3, `the scene covers ${covered(png)} of the image`);
+    const d = compare(png, ref.png);
+    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+  });
+
+  test("nginx: the built viewer beside the sets on a static host", async () => {
+    const { state, png, problems } = await view(`${nginxUrl}/web/index.html?set=../sets/scene&camera=${camera}`);
+    assert.deepEqual(problems, []);
+    assert.equal(state.converged, true);
+    const ref = reference(`${nginxUrl}/sets/scene`);
+    assert.equal(state.splats, ref.json.splats);
+    const d = compare(png, ref.png);
+    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+  });
+
+  test("a token: the page is public, the data wants the token from the URL's fragment", async () => {
+    const host = await startServe(join(work, "sets"), ["--token-file", join(work, "token")]);
+    const ok = await view(`${host}/?set=/sets/scene&camera=${camera}#token=s3cret-token`);
+    assert.deepEqual(ok.problems, []);
+    assert.equal(ok.state.converged, true);
+    const denied = await view(`${host}/?set=/sets/scene&camera=${camera}`);
+    assert.match(denied.errorsShown, /HTTP 401/);
+    assert.equal(denied.state.converged, false);
+  });
+
+  test("bad input ends in a visible error, never a hang", async () => {
+    const missing = await view(`${serveUrl}/?set=/sets/nothing-here`);
+    assert.match(missing.errorsShown, /nothing-here\/tileset\.json: HTTP 404/);
+    // (surfcast-serve checks a set before serving it: a static host does not.)
+    const hierarchy = await view(`${nginxUrl}/web/?set=../sets/broken-hierarchy&camera=${camera}`);
+    assert.match(hierarchy.errorsShown, /hierarchy\.bin: page 0 at byte \d+: CRC mismatch/);
+    assert.deepEqual(hierarchy.problems, []);
+    // The CRC catches the damaged root block; it is fetched again with backoff
+    // (8 tries over about 11 s), then the viewer gives up, naming the node.
+    const block = await view(`${serveUrl}/?set=/sets/corrupt-block&camera=${camera}`);
+    assert.match(block.errorsShown, /node 0-0-0-0: block CRC mismatch \(after 8 tries\)/);
+    assert.deepEqual(block.problems, []);
+  });
+
+  test("without float blending: per-surfel weights, or circles with a notice", async () => {
+    const { state, png, problems } = await view(`${serveUrl}/?set=/sets/scene&camera=${camera}&floatblend=off`);
+    assert.deepEqual(problems, []);
+    assert.equal(state.mode, "circles", "the set has no weights");
+    assert.match(state.notices.join(" "), /EXT_float_blend.*circles/);
+    assert.ok(covered(png) > 0.3);
+  });
+});
