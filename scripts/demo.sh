@@ -33,6 +33,7 @@ for _ in $(seq 50); do grep -q "http://" "$log" && break; sleep 0.1; done
 url=$(grep -o "http://[0-9.:]*" "$log" | head -n 1)
 [ -n "$url" ] || { cat "$log"; exit 1; }
 echo "server: $url"
+echo "browser viewer: $url/?set=/sets/scene (while the demo runs; afterwards: build/bin/surfcast-serve $out/sets)"
 curl -fsS -o "$out/sets.json" "$url/sets"
 echo "GET /sets: $(grep -c '"name"' "$out/sets.json") tile set(s)"
 curl -fsS -o "$out/tileset.json" "$url/sets/scene/tileset.json"

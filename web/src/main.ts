@@ -1,14 +1,15 @@
 // The viewer page: reads the set, camera and settings from the URL
 // (?set=URL&camera=ex,ey,ez,tx,ty,tz,ux,uy,uz,fov&lod=PX&mode=M&splats=N&color=A&hide=C,..
-// and #token=T), streams the set and redraws as blocks arrive or the camera
+// &opacity=A&layers=L and #token=T; docs/WEB.md), streams the set and redraws as blocks arrive or the camera
 // moves. window.surfcast holds the state tests and scripts read.
 
 import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
 import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
 import { Controls } from "./controls.js";
 import { emptyStats } from "./lod_selection.js";
-import { type DrawnNode, kDefaultEdgeTau, kDefaultLowpassVariance, kDefaultZt, kNearFraction, type RenderMode,
-         type RenderSettings, RendererError, SplatRenderer } from "./renderer.js";
+import { attribute } from "./format.js";
+import { type DrawnNode, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
+         type RenderMode, type RenderSettings, RendererError, SplatRenderer } from "./renderer.js";
 import { TileSource } from "./source.js";
 import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
 
@@ -107,7 +108,14 @@ async function main() {
     edgeTau: kDefaultEdgeTau,
     background: [1, 1, 1],
     backfaceCull: normalsOriented(info.normalSource),
+    translucent: attribute(info, "opacity") !== undefined,
+    opacity: number("opacity", 1, 0),
+    layers: number("layers", kDefaultLayers, 1),
   };
+  if (settings.opacity > 1 || settings.layers > kMaxLayers || !Number.isInteger(settings.layers)) {
+    showError(`?opacity= is in [0, 1] and ?layers= a whole number in [1, ${kMaxLayers}]`);
+    return;
+  }
   if (!["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel"].includes(settings.mode)) {
     showError(`?mode=${settings.mode}: expected points, circles, ewa-noprefilter, ewa-surfel or ewa-pixel`);
     return;
@@ -115,6 +123,8 @@ async function main() {
   const drawn = () => renderer.effectiveMode(settings.mode, hasWeights);
   const noteMode = () => {
     state.mode = drawn();
+    if ((settings.translucent || settings.opacity < 1) && !renderer.floatBlend)
+      showNotice("this browser cannot blend float targets (EXT_float_blend): transparency is drawn opaque");
     if (state.mode !== settings.mode)
       showNotice(`this browser cannot blend float targets (EXT_float_blend): drawing ${state.mode} instead of ${settings.mode}` +
                  (hasWeights ? "" : ", as the set was built without weights (surfcast-build --weights analytic)"));
@@ -138,7 +148,7 @@ async function main() {
   // Redraws: one frame on the GPU at a time (a fence says when it is done),
   // at once when the camera moves, and while blocks stream in no more often
   // than every other frame's cost, so that a slow WebGL (SwiftShader takes
-  // seconds for half a million splats) spends its time decoding, not
+  // about a second for half a million splats) spends its time decoding, not
   // redrawing. The state says converged once the converged frame is done.
   let dirty = true, moved = true, lastDraw = -Infinity, frameCost = 0;
   let fence: WebGLSync | null = null, fenceConverged = false;

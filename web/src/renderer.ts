@@ -3,8 +3,10 @@
 // accumulation pass adds colour·w, w, normal·w and the unscaled kernel into
 // two float targets where the splat is within z_t of the nearest surface, and
 // a resolve normalizes per pixel, shades and antialiases edges (Zwicker 2001
-// §7). Points and circles draw opaque, nearest wins. Each node is one vertex
-// buffer of 32-byte surfels (the GpuSurfel layout), drawn as instanced quads.
+// §7). Points and circles draw opaque, nearest wins. Each node is one texture
+// of 32-byte surfels (the GpuSurfel layout) that the vertex shader reads by
+// gl_VertexID (shaders.ts says why not instancing). Translucent frames peel
+// layers (Zwicker 2001 §6), as the Vulkan client does.
 //
 // Float blending (EXT_float_blend) is what per-pixel normalization needs.
 // Without it the accumulation targets are 8-bit, where only the 2002 paper's
@@ -27,7 +29,16 @@ export interface RenderSettings {
   edgeTau: number;
   background: [number, number, number];
   backfaceCull: boolean;
+  // Transparency (Zwicker 2001 §6): a frame is translucent where the set
+  // stores opacity or `opacity` is under 1; the ewa modes then peel `layers`
+  // surfaces per pixel and blend them front to back. Points and circles stay opaque.
+  translucent: boolean;
+  opacity: number;
+  layers: number;
 }
+
+export const kDefaultLayers = 3;
+export const kMaxLayers = 16;
 
 // The defaults of client/render/render_settings.h.
 export const kDefaultLowpassVariance = 0.1;
@@ -43,10 +54,11 @@ export interface FrameView {
 }
 
 export interface DrawnNode {
-  buffer: WebGLBuffer;
-  vao: WebGLVertexArrayObject;
+  texture: WebGLTexture; // 2 RGBA32UI texels per surfel, kSurfelsPerRow to a row
   count: number;
 }
+
+const kSurfelsPerRow = 1024;
 
 export class RendererError extends Error {}
 
@@ -75,12 +87,30 @@ class Program {
   }
 }
 
+interface Targets {
+  w: number;
+  h: number;
+  fb: WebGLFramebuffer;       // opaque frames: colour·w and normal·w, depth
+  color: WebGLTexture;
+  normal: WebGLTexture;
+  depth: WebGLTexture;
+  // Translucent frames (float targets only): the opacity's sum, a second
+  // depth (layers alternate: one is drawn while the other is read), the
+  // layers' composite, and framebuffers for each kind of pass.
+  alpha: WebGLTexture | null;
+  depth2: WebGLTexture | null;
+  composite: WebGLTexture | null;
+  fbDepth: WebGLFramebuffer | null;
+  fbLayer: WebGLFramebuffer | null;
+  fbComposite: WebGLFramebuffer | null;
+}
+
 export class SplatRenderer {
   readonly gl: WebGL2RenderingContext;
   readonly floatBlend: boolean;
   readonly clipControl: boolean;
   private programs: Record<string, Program>;
-  private targets: { fb: WebGLFramebuffer; color: WebGLTexture; normal: WebGLTexture; depth: WebGLTexture; w: number; h: number } | null = null;
+  private targets: Targets | null = null;
   private emptyVao: WebGLVertexArrayObject;
 
   // Throws RendererError naming what the browser lacks.
@@ -102,6 +132,12 @@ export class SplatRenderer {
       points: new Program(gl, S.splatVertex(S.kPassPoints), S.opaqueFragment(false)),
       resolve: new Program(gl, S.resolveVertex, S.resolveFragment),
     };
+    if (this.floatBlend) {
+      this.programs.peel = new Program(gl, S.splatVertex(S.kPassVisibility, true), S.peelFragment);
+      this.programs.layer = new Program(gl, S.splatVertex(S.kPassAccumulate, true), S.layerFragment);
+      this.programs.resolveLayer = new Program(gl, S.resolveVertex, S.resolveLayerFragment);
+      this.programs.composite = new Program(gl, S.resolveVertex, S.compositeFragment);
+    }
     this.emptyVao = gl.createVertexArray()!;
   }
 
@@ -113,59 +149,69 @@ export class SplatRenderer {
 
   upload(surfels: ArrayBuffer): DrawnNode {
     const gl = this.gl;
-    const buffer = gl.createBuffer()!;
-    gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
-    gl.bufferData(gl.ARRAY_BUFFER, surfels, gl.STATIC_DRAW);
-    const vao = gl.createVertexArray()!;
-    gl.bindVertexArray(vao);
-    gl.enableVertexAttribArray(0);
-    gl.vertexAttribPointer(0, 4, gl.FLOAT, false, 32, 0);
-    gl.enableVertexAttribArray(1);
-    gl.vertexAttribIPointer(1, 1, gl.UNSIGNED_INT, 32, 16);
-    gl.enableVertexAttribArray(2);
-    gl.vertexAttribPointer(2, 4, gl.UNSIGNED_BYTE, true, 32, 20);
-    gl.enableVertexAttribArray(3);
-    gl.vertexAttribPointer(3, 1, gl.FLOAT, false, 32, 24);
-    gl.enableVertexAttribArray(4);
-    gl.vertexAttribIPointer(4, 1, gl.UNSIGNED_INT, 32, 28);
-    for (let i = 0; i < 5; ++i) gl.vertexAttribDivisor(i, 1);
-    gl.bindVertexArray(null);
-    return { buffer, vao, count: surfels.byteLength / 32 };
+    const count = surfels.byteLength / 32;
+    const rows = Math.max(1, Math.ceil(count / kSurfelsPerRow));
+    const data = new Uint32Array(rows * kSurfelsPerRow * 8);
+    data.set(new Uint32Array(surfels));
+    const texture = gl.createTexture()!;
+    gl.bindTexture(gl.TEXTURE_2D, texture);
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32UI, 2 * kSurfelsPerRow, rows);
+    gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, 2 * kSurfelsPerRow, rows, gl.RGBA_INTEGER, gl.UNSIGNED_INT, data);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+    return { texture, count };
   }
 
   release(node: DrawnNode) {
-    this.gl.deleteVertexArray(node.vao);
-    this.gl.deleteBuffer(node.buffer);
+    this.gl.deleteTexture(node.texture);
   }
 
-  private ensureTargets(w: number, h: number) {
+  private ensureTargets(w: number, h: number): Targets {
     const gl = this.gl;
     if (this.targets && this.targets.w === w && this.targets.h === h) return this.targets;
     if (this.targets) {
-      gl.deleteFramebuffer(this.targets.fb);
-      for (const t of [this.targets.color, this.targets.normal, this.targets.depth]) gl.deleteTexture(t);
+      const t = this.targets;
+      for (const fb of [t.fb, t.fbDepth, t.fbLayer, t.fbComposite]) if (fb) gl.deleteFramebuffer(fb);
+      for (const x of [t.color, t.normal, t.depth, t.alpha, t.depth2, t.composite]) if (x) gl.deleteTexture(x);
     }
-    const texture = (internal: number, format: number, type: number) => {
+    const texture = (internal: number) => {
       const t = gl.createTexture()!;
       gl.bindTexture(gl.TEXTURE_2D, t);
       gl.texStorage2D(gl.TEXTURE_2D, 1, internal, w, h);
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
-      void format, type;
       return t;
     };
+    const framebuffer = (colors: WebGLTexture[], depth: WebGLTexture | null) => {
+      const fb = gl.createFramebuffer()!;
+      gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+      colors.forEach((c, i) => gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, c, 0));
+      if (depth) gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.TEXTURE_2D, depth, 0);
+      gl.drawBuffers(colors.length ? colors.map((_, i) => gl.COLOR_ATTACHMENT0 + i) : [gl.NONE]);
+      const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
+      if (status !== gl.FRAMEBUFFER_COMPLETE) throw new RendererError(`the render targets are incomplete (0x${status.toString(16)})`);
+      return fb;
+    };
     const accum = this.floatBlend ? gl.RGBA32F : gl.RGBA8;
-    const color = texture(accum, gl.RGBA, gl.FLOAT), normal = texture(accum, gl.RGBA, gl.FLOAT);
-    const depth = texture(gl.DEPTH_COMPONENT32F, gl.DEPTH_COMPONENT, gl.FLOAT);
-    const fb = gl.createFramebuffer()!;
-    gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
-    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, color, 0);
-    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT1, gl.TEXTURE_2D, normal, 0);
-    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.TEXTURE_2D, depth, 0);
-    const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
-    if (status !== gl.FRAMEBUFFER_COMPLETE) throw new RendererError(`the accumulation targets are incomplete (0x${status.toString(16)})`);
-    this.targets = { fb, color, normal, depth, w, h };
-    return this.targets;
+    const color = texture(accum), normal = texture(accum), depth = texture(gl.DEPTH_COMPONENT32F);
+    const t: Targets = { w, h, fb: framebuffer([color, normal], depth), color, normal, depth, alpha: null, depth2: null,
+                         composite: null, fbDepth: null, fbLayer: null, fbComposite: null };
+    if (this.floatBlend) {
+      t.alpha = texture(gl.R32F);
+      t.depth2 = texture(gl.DEPTH_COMPONENT32F);
+      t.composite = texture(gl.RGBA32F);
+      t.fbDepth = framebuffer([], depth);
+      t.fbLayer = framebuffer([color, normal, t.alpha], depth);
+      t.fbComposite = framebuffer([t.composite], null);
+    }
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    this.targets = t;
+    return t;
+  }
+
+  // Whether frames with these settings peel layers (float targets only).
+  translucentFrame(s: RenderSettings, mode: RenderMode): boolean {
+    return this.floatBlend && (s.translucent || s.opacity < 1) && mode !== "points" && mode !== "circles";
   }
 
   private setFrame(p: Program, view: FrameView, s: RenderSettings, mode: RenderMode, w: number, h: number) {
@@ -186,6 +232,8 @@ export class SplatRenderer {
     gl.uniform1f(p.loc("uMaxFilterPixels"), kMaxFilterPixels);
     gl.uniform1f(p.loc("uCircleScale"), s.kernelScale);
     gl.uniform1i(p.loc("uClipControl"), this.clipControl ? 1 : 0);
+    gl.uniform1i(p.loc("uSurfels"), 2);
+    gl.uniform1f(p.loc("uOpacity"), Math.min(Math.max(s.opacity, 0), 1));
   }
 
   // Draws the nodes into the canvas (its drawing-buffer size).
@@ -203,19 +251,25 @@ export class SplatRenderer {
     gl.clearDepth(0);  // reversed Z: 0 is infinitely far
     gl.clear(gl.DEPTH_BUFFER_BIT);
     gl.enable(gl.DEPTH_TEST);
-    const drawAll = (primitive: number, vertices: number) => {
+    const drawAll = (primitive: number, verticesPerSurfel: number) => {
+      gl.bindVertexArray(this.emptyVao);
+      gl.activeTexture(gl.TEXTURE2);
       for (const n of nodes) {
-        gl.bindVertexArray(n.vao);
-        gl.drawArraysInstanced(primitive, 0, vertices, n.count);
+        gl.bindTexture(gl.TEXTURE_2D, n.texture);
+        gl.drawArrays(primitive, 0, verticesPerSurfel * n.count);
       }
     };
+    if (this.translucentFrame(settings, mode)) {
+      this.renderLayers(t, drawAll, view, settings, mode, w, h);
+      return;
+    }
     if (mode === "points" || mode === "circles") {
       const p = this.programs[mode];
       this.setFrame(p, view, settings, mode, w, h);
       gl.disable(gl.BLEND);
       gl.depthFunc(gl.GREATER);
       gl.depthMask(true);
-      drawAll(mode === "points" ? gl.POINTS : gl.TRIANGLE_STRIP, mode === "points" ? 1 : 4);
+      drawAll(mode === "points" ? gl.POINTS : gl.TRIANGLES, mode === "points" ? 1 : 6);
     } else {
       const vis = this.programs.visibility;
       this.setFrame(vis, view, settings, mode, w, h);
@@ -223,7 +277,7 @@ export class SplatRenderer {
       gl.colorMask(false, false, false, false);
       gl.depthFunc(gl.GREATER);
       gl.depthMask(true);
-      drawAll(gl.TRIANGLE_STRIP, 4);
+      drawAll(gl.TRIANGLES, 6);
       const acc = this.programs.accumulate;
       this.setFrame(acc, view, settings, mode, w, h);
       gl.colorMask(true, true, true, true);
@@ -232,7 +286,7 @@ export class SplatRenderer {
       gl.enable(gl.BLEND);
       gl.blendEquation(gl.FUNC_ADD);
       gl.blendFunc(gl.ONE, gl.ONE);
-      drawAll(gl.TRIANGLE_STRIP, 4);
+      drawAll(gl.TRIANGLES, 6);
       gl.disable(gl.BLEND);
     }
     gl.depthMask(true);
@@ -249,6 +303,82 @@ export class SplatRenderer {
     gl.bindTexture(gl.TEXTURE_2D, t.normal);
     gl.uniform1i(r.loc("uNormalWeight"), 1);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
+    gl.bindVertexArray(null);
+  }
+
+  // Depth peeling (docs/RENDERER.md, "Transparency"; splat_renderer.cpp's
+  // translucent path): for each layer k, a visibility pass (k > 0: behind
+  // layer k-1's pushed-back surface) into one depth while the other holds
+  // layer k-1's, an accumulation pass within z_t of it (the last layer takes
+  // every fragment behind the others), and the layer's resolve blended under
+  // the layers in front; then the composite over the background.
+  private renderLayers(t: Targets, drawAll: (primitive: number, vertices: number) => void, view: FrameView,
+                       s: RenderSettings, mode: RenderMode, w: number, h: number) {
+    const gl = this.gl;
+    const p = this.programs;
+    const layers = Math.min(Math.max(Math.round(s.layers), 1), kMaxLayers);
+    const depths = [t.depth, t.depth2!];
+    const bindTexture = (unit: number, texture: WebGLTexture, program: Program, name: string) => {
+      gl.activeTexture(gl.TEXTURE0 + unit);
+      gl.bindTexture(gl.TEXTURE_2D, texture);
+      gl.uniform1i(program.loc(name), unit);
+    };
+    const fullscreen = () => {
+      gl.bindVertexArray(this.emptyVao);
+      gl.drawArrays(gl.TRIANGLES, 0, 3);
+    };
+    for (let k = 0; k < layers; ++k) {
+      const current = depths[k % 2], previous = depths[(k + 1) % 2];
+      for (const fb of [t.fbDepth!, t.fbLayer!]) {
+        gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+        gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.TEXTURE_2D, current, 0);
+      }
+      gl.bindFramebuffer(gl.FRAMEBUFFER, t.fbDepth);
+      gl.viewport(0, 0, w, h);
+      gl.clearDepth(0);
+      gl.clear(gl.DEPTH_BUFFER_BIT);
+      gl.enable(gl.DEPTH_TEST);
+      gl.depthFunc(gl.GREATER);
+      gl.depthMask(true);
+      gl.disable(gl.BLEND);
+      const vis = k === 0 ? p.visibility : p.peel;
+      this.setFrame(vis, view, s, mode, w, h);
+      if (k > 0) bindTexture(3, previous, vis, "uPreviousDepth");
+      drawAll(gl.TRIANGLES, 6);
+
+      gl.bindFramebuffer(gl.FRAMEBUFFER, t.fbLayer);
+      for (let i = 0; i < 3; ++i) gl.clearBufferfv(gl.COLOR, i, [0, 0, 0, 0]);
+      gl.depthMask(false);
+      if (k + 1 === layers) gl.disable(gl.DEPTH_TEST);  // the last layer: every fragment behind the others
+      else gl.depthFunc(gl.GEQUAL);
+      gl.enable(gl.BLEND);
+      gl.blendEquation(gl.FUNC_ADD);
+      gl.blendFunc(gl.ONE, gl.ONE);
+      this.setFrame(p.layer, view, s, mode, w, h);
+      gl.uniform1ui(p.layer.loc("uLayer"), k);
+      bindTexture(3, previous, p.layer, "uPreviousDepth");
+      drawAll(gl.TRIANGLES, 6);
+      gl.disable(gl.DEPTH_TEST);
+      gl.depthMask(true);
+
+      gl.bindFramebuffer(gl.FRAMEBUFFER, t.fbComposite);
+      if (k === 0) gl.clearBufferfv(gl.COLOR, 0, [0, 0, 0, 0]);
+      gl.blendFuncSeparate(gl.ONE_MINUS_DST_ALPHA, gl.ONE, gl.ONE_MINUS_DST_ALPHA, gl.ONE);  // under: dst += (1 - dst.a) src
+      this.setFrame(p.resolveLayer, view, s, mode, w, h);
+      bindTexture(0, t.color, p.resolveLayer, "uColorWeight");
+      bindTexture(1, t.normal, p.resolveLayer, "uNormalWeight");
+      bindTexture(4, t.alpha!, p.resolveLayer, "uAlphaWeight");
+      fullscreen();
+      gl.disable(gl.BLEND);
+      // Unbind the sampled depth before a later pass draws into it.
+      gl.activeTexture(gl.TEXTURE3);
+      gl.bindTexture(gl.TEXTURE_2D, null);
+    }
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.viewport(0, 0, w, h);
+    this.setFrame(p.composite, view, s, mode, w, h);
+    bindTexture(0, t.composite!, p.composite, "uComposite");
+    fullscreen();
     gl.bindVertexArray(null);
   }
 }

@@ -1,8 +1,11 @@
 // GLSL ES 3.00 twins of client/shaders: the object-space EWA setup of Ren et
 // al. 2002, §5.2 (splat_common.glsl), the visibility and accumulation passes,
-// points and circles, and the resolve (resolve.frag, resolve_common.glsl).
+// points and circles, the resolve (resolve.frag, resolve_common.glsl), and
+// the translucent frames' depth peeling (splat_peel.frag, splat_layer.frag,
+// resolve_layer.frag, composite.frag).
 // Differences from the Vulkan shaders, all of convention: uniforms instead of
-// push constants; OpenGL's clip space (y up, and depth near/z reached through
+// push constants; surfels pulled from a texture by gl_VertexID, six vertices
+// (two triangles) a splat; OpenGL's clip space (y up, and depth near/z reached through
 // z_clip = 2 near - z where EXT_clip_control is missing); gl_FragCoord's
 // origin at the bottom left.
 
@@ -19,24 +22,70 @@ uniform vec4 uResolve;    // background rgb, edge AA tau
 uniform uint uMode, uShading, uFlags;
 uniform float uMaxFilterPixels, uCircleScale;
 uniform bool uClipControl; // depth in [0, 1] straight from clip z (EXT_clip_control)
+uniform float uOpacity;    // multiplies every surfel's stored opacity
+uniform uint uLayer;       // translucent frames: the layer being drawn, 0 the nearest
 const float kEdgeRatioMax = 4.0;
 `;
 
-export const splatVertex = (pass: number) => `#version 300 es
+const edgeFactorSource = `
+float edgeFactor(uint edge, vec2 uv) {
+  if (edge == 0u) return 1.0;
+  vec4 e = vec4(float(edge & 255u), float((edge >> 8) & 255u), float((edge >> 16) & 255u), float(edge >> 24)) / 255.0 * kEdgeRatioMax;
+  float fs = uv.x > 0.0 ? e.x : e.y, ft = uv.y > 0.0 ? e.z : e.w;
+  return clamp(1.0 + (fs - 1.0) * abs(uv.x) + (ft - 1.0) * abs(uv.y), 0.0, kEdgeRatioMax);
+}
+`;
+
+// Edge antialiasing's coverage and the deferred shading (resolve_common.glsl).
+const resolveCommon = `
+const float kAmbient = 0.25, kDiffuse = 0.75, kSpecular = 0.3, kShininess = 32.0;
+float edgeCoverage(ivec2 pixel, float g) {
+  if ((uFlags & 2u) == 0u || !(g < uResolve.a)) return 1.0;
+  ivec2 last = textureSize(uNormalWeight, 0) - 1;
+  bool border = false;
+  for (int k = 0; k < 4; ++k) {
+    ivec2 q = clamp(pixel + ivec2(k == 0 ? 1 : k == 1 ? -1 : 0, k == 2 ? 1 : k == 3 ? -1 : 0), ivec2(0), last);
+    border = border || !(texelFetch(uNormalWeight, q, 0).a > 0.0);
+  }
+  return border ? g / uResolve.a : 1.0;
+}
+vec3 shade(vec3 color, vec3 normalSum) {
+  if (uShading == 0u) return color;
+  float eta = uViewport.x;
+  vec3 ray = vec3((gl_FragCoord.x - 0.5 * uViewport.y) / eta, (gl_FragCoord.y - 0.5 * uViewport.z) / eta, 1.0);
+  vec3 n = dot(normalSum, normalSum) > 0.0 ? normalize(normalSum) : vec3(0);
+  float ndotv = abs(dot(n, -normalize(ray)));
+  vec3 lit = color * (kAmbient + kDiffuse * ndotv);
+  if (uShading == 2u) lit += vec3(kSpecular * pow(ndotv, kShininess));
+  return min(lit, vec3(1.0));
+}
+`;
+
+// `layered`: the translucent frames' variant, which also passes on the
+// opacity and the splat's own depth (near / z, not pushed back), interpolated
+// linearly in screen space as the Vulkan shaders' noperspective varying is:
+// GLSL ES has no noperspective, so it goes as depth * w and w, both
+// perspective-correct, whose ratio is exactly the screen-linear depth.
+export const splatVertex = (pass: number, layered = false) => `#version 300 es
 precision highp float;
 precision highp int;
 ${common}
-layout(location = 0) in vec4 inPositionRadius;
-layout(location = 1) in uint inNormal;
-layout(location = 2) in vec4 inColor;
-layout(location = 3) in float inWeight;
-layout(location = 4) in uint inEdge;
+// The node's surfels, two RGBA32UI texels each (the GpuSurfel layout), 1024
+// to a row, read by gl_VertexID (vertex pulling): instanced attributes cost
+// SwiftShader about 16 times as much (an ewa-pixel frame of 535,000 splats at
+// 640x480: 15.8 s instanced, 0.97 s pulled; points 3.4 s against 0.10 s).
+uniform highp usampler2D uSurfels;
 out vec2 vY;
 flat out vec3 vColor;
 flat out vec3 vNormal;
 flat out float vAmplitude;
 out vec2 vEdgeUV;
 flat out uint vEdge;
+#define LAYERED ${layered ? 1 : 0}
+#if LAYERED
+flat out float vAlpha;
+out float vDepthW, vW;
+#endif
 
 vec3 toCamera(vec3 p) {
   vec4 q = vec4(p, 1.0);
@@ -65,13 +114,30 @@ vec3 tangentOf(vec3 n) {
   return normalize(cross(n, a));
 }
 
+const int kCorners[6] = int[6](0, 1, 2, 2, 1, 3);  // two triangles of the strip's four corners
+
 void main() {
-  int corner = gl_VertexID;
+#if ${pass} == 3
+  int id = gl_VertexID, corner = 0;
+#else
+  int id = gl_VertexID / 6, corner = kCorners[gl_VertexID - 6 * id];
+#endif
+  ivec2 at = ivec2((id & 1023) * 2, id >> 10);
+  uvec4 t0 = texelFetch(uSurfels, at, 0), t1 = texelFetch(uSurfels, at + ivec2(1, 0), 0);
+  vec4 inPositionRadius = uintBitsToFloat(t0);
+  uint inNormal = t1.x, inEdge = t1.w;
+  vec4 inColor = vec4(uvec4(t1.y, t1.y >> 8, t1.y >> 16, t1.y >> 24) & 255u) / 255.0;
+  float inWeight = uintBitsToFloat(t1.z);
   vColor = inColor.rgb;
   vY = vec2(0);
   vEdgeUV = vec2(0);
   vEdge = 0u;
   vAmplitude = 1.0;
+#if LAYERED
+  vAlpha = inColor.a * uOpacity;
+  vDepthW = 0.0;
+  vW = 1.0;
+#endif
   vec3 o = toCamera(inPositionRadius.xyz);
   vec3 nw = decodeNormal(inNormal);
   vec3 n = rotateToCamera(nw);
@@ -129,11 +195,16 @@ void main() {
     vEdge = inEdge;
   }
   vec3 p = o + offset;
+  float ownDepth = uViewport.w / p.z;
 #if ${pass} == 0
   // Visibility: pushed back by z_t times the footprint along the centre's ray.
   p += uKernel.z * max(L0, L1) * normalize(o);
 #endif
   gl_Position = project(p);
+#if LAYERED
+  vDepthW = ownDepth * gl_Position.w;
+  vW = gl_Position.w;
+#endif
 #endif
 }
 `;
@@ -159,12 +230,7 @@ in vec2 vEdgeUV;
 flat in uint vEdge;
 layout(location = 0) out vec4 outColorWeight;
 layout(location = 1) out vec4 outNormalWeight;
-float edgeFactor(uint edge, vec2 uv) {
-  if (edge == 0u) return 1.0;
-  vec4 e = vec4(float(edge & 255u), float((edge >> 8) & 255u), float((edge >> 16) & 255u), float(edge >> 24)) / 255.0 * kEdgeRatioMax;
-  float fs = uv.x > 0.0 ? e.x : e.y, ft = uv.y > 0.0 ? e.z : e.w;
-  return clamp(1.0 + (fs - 1.0) * abs(uv.x) + (ft - 1.0) * abs(uv.y), 0.0, kEdgeRatioMax);
-}
+${edgeFactorSource}
 void main() {
   float q = dot(vY, vY);
   if (q > 2.0 * uKernel.y) discard;
@@ -204,27 +270,7 @@ ${common}
 uniform highp sampler2D uColorWeight;
 uniform highp sampler2D uNormalWeight;
 out vec4 outColor;
-const float kAmbient = 0.25, kDiffuse = 0.75, kSpecular = 0.3, kShininess = 32.0;
-float edgeCoverage(ivec2 pixel, float g) {
-  if ((uFlags & 2u) == 0u || !(g < uResolve.a)) return 1.0;
-  ivec2 last = textureSize(uNormalWeight, 0) - 1;
-  bool border = false;
-  for (int k = 0; k < 4; ++k) {
-    ivec2 q = clamp(pixel + ivec2(k == 0 ? 1 : k == 1 ? -1 : 0, k == 2 ? 1 : k == 3 ? -1 : 0), ivec2(0), last);
-    border = border || !(texelFetch(uNormalWeight, q, 0).a > 0.0);
-  }
-  return border ? g / uResolve.a : 1.0;
-}
-vec3 shade(vec3 color, vec3 normalSum) {
-  if (uShading == 0u) return color;
-  float eta = uViewport.x;
-  vec3 ray = vec3((gl_FragCoord.x - 0.5 * uViewport.y) / eta, (gl_FragCoord.y - 0.5 * uViewport.z) / eta, 1.0);
-  vec3 n = dot(normalSum, normalSum) > 0.0 ? normalize(normalSum) : vec3(0);
-  float ndotv = abs(dot(n, -normalize(ray)));
-  vec3 lit = color * (kAmbient + kDiffuse * ndotv);
-  if (uShading == 2u) lit += vec3(kSpecular * pow(ndotv, kShininess));
-  return min(lit, vec3(1.0));
-}
+${resolveCommon}
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
   vec4 cw = texelFetch(uColorWeight, pixel, 0);
@@ -238,5 +284,87 @@ void main() {
   vec3 color = uMode == ${kModeEwaSurfel}u ? cw.rgb + max(1.0 - cw.a, 0.0) * background : cw.rgb / cw.a;
   color = shade(color, nw.xyz);
   outColor = vec4(mix(background, color, coverage), 1.0);
+}
+`;
+
+// Translucent frames (Zwicker 2001 §6, depth peeling; the twins of
+// splat_peel.frag, splat_layer.frag, resolve_layer.frag and composite.frag).
+// The visibility pass of layer k > 0: fragments at or in front of layer
+// k-1's pushed-back surface belong to the layers already drawn.
+export const peelFragment = `#version 300 es
+precision highp float;
+${common}
+uniform highp sampler2D uPreviousDepth;
+in vec2 vY;
+in float vDepthW, vW;
+void main() {
+  if (dot(vY, vY) > 2.0 * uKernel.y) discard;
+  if (vDepthW / vW >= texelFetch(uPreviousDepth, ivec2(gl_FragCoord.xy), 0).r) discard;
+}
+`;
+
+// The accumulation pass of one layer: as accumulateFragment, without the
+// layers in front, plus the opacity's weighted sum.
+export const layerFragment = `#version 300 es
+precision highp float;
+precision highp int;
+${common}
+uniform highp sampler2D uPreviousDepth;
+in vec2 vY;
+flat in vec3 vColor;
+flat in vec3 vNormal;
+flat in float vAmplitude;
+in vec2 vEdgeUV;
+flat in uint vEdge;
+flat in float vAlpha;
+layout(location = 0) out vec4 outColorWeight;
+layout(location = 1) out vec4 outNormalWeight;
+layout(location = 2) out vec4 outAlphaWeight;
+${edgeFactorSource}
+void main() {
+  float q = dot(vY, vY);
+  if (q > 2.0 * uKernel.y) discard;
+  if (uLayer > 0u && gl_FragCoord.z >= texelFetch(uPreviousDepth, ivec2(gl_FragCoord.xy), 0).r) discard;
+  float g = exp(-0.5 * q);
+  float w = vAmplitude * g * edgeFactor(vEdge, vEdgeUV);
+  outColorWeight = vec4(vColor * w, w);
+  outNormalWeight = vec4(vNormal * w, g);
+  outAlphaWeight = vec4(vAlpha * w, 0.0, 0.0, 0.0);
+}
+`;
+
+// After each layer's accumulation: the layer normalized and shaded, with
+// opacity sum(alpha w) / sum(w) times the edge coverage, premultiplied, and
+// blended under the layers in front (dst += (1 - dst.a) src: eq. 12 front to back).
+export const resolveLayerFragment = `#version 300 es
+precision highp float;
+precision highp int;
+${common}
+uniform highp sampler2D uColorWeight;
+uniform highp sampler2D uNormalWeight;
+uniform highp sampler2D uAlphaWeight;
+out vec4 outColor;
+${resolveCommon}
+void main() {
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  vec4 cw = texelFetch(uColorWeight, pixel, 0);
+  vec4 nw = texelFetch(uNormalWeight, pixel, 0);
+  if (!(nw.a > 0.0) || !(cw.a > 0.0)) discard;
+  vec3 color = shade(cw.rgb / cw.a, nw.xyz);
+  float alpha = clamp(texelFetch(uAlphaWeight, pixel, 0).r / cw.a, 0.0, 1.0) * edgeCoverage(pixel, nw.a);
+  outColor = vec4(color * alpha, alpha);
+}
+`;
+
+// Last: the layers' premultiplied composite over the background.
+export const compositeFragment = `#version 300 es
+precision highp float;
+precision highp int;
+${common}
+uniform highp sampler2D uComposite;
+out vec4 outColor;
+void main() {
+  vec4 c = texelFetch(uComposite, ivec2(gl_FragCoord.xy), 0);
+  outColor = vec4(c.rgb + (1.0 - c.a) * uResolve.rgb, 1.0);
 }
 `;

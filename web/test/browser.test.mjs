@@ -161,10 +161,12 @@ describe("browser viewer", { skip }, () => {
   before(async () => {
     work = mkdtempSync(join(tmpdir(), "surfcast-browser-"));
     const sets = join(work, "sets");
-    // The default scene at a sixth of its points: SwiftShader draws about
-    // 40,000 EWA splats a second on this machine's two cores.
-    execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--page-depth", "2", "-o",
-                                        join(sets, "scene")]);
+    execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--page-depth", "2", "-o", join(sets, "scene")]);
+    // Translucent: every surfel at opacity 0.5 (a smaller scene: each of the
+    // three layers costs two passes over the splats).
+    for (const [name, opacity] of [["translucent", "0.5"], ["opaque", "1"]])
+      execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--opacity", opacity, "-o",
+                                          join(sets, name)]);
     // Bad inputs: a block that never passes its CRC, and a damaged hierarchy page.
     for (const name of ["corrupt-block", "broken-hierarchy"]) cpSync(join(sets, "scene"), join(sets, name), { recursive: true });
     const layout = rootLayout(join(sets, "scene"));
@@ -197,7 +199,7 @@ describe("browser viewer", { skip }, () => {
   // 1 % of the image.
   const kMeanLimit = 1.0, kFarLimit = 0.01;
 
-  test("surfcast-serve: converges to the Vulkan client's image", async () => {
+  test("surfcast-serve: converges to the Vulkan client's image", async (t) => {
     const url = `${serveUrl}/?set=/sets/scene&camera=${camera}`;
     const { state, png, problems } = await view(url);
     assert.deepEqual(problems, []);
@@ -209,7 +211,25 @@ describe("browser viewer", { skip }, () => {
     assert.equal(state.splats, ref.json.splats);
     assert.ok(covered(png) > 0.3, `the scene covers ${covered(png)} of the image`);
     const d = compare(png, ref.png);
+    t.diagnostic(`surfcast-serve: ${state.splats} splats, mean abs ${d.mean.toFixed(3)}, far ${d.far.toFixed(5)}`);
     assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+  });
+
+  test("transparency: the layers peeled and composited as the Vulkan client does", async (t) => {
+    const { state, png, problems } = await view(`${serveUrl}/?set=/sets/translucent&camera=${camera}`);
+    assert.deepEqual(problems, []);
+    assert.equal(state.converged, true);
+    const ref = reference(`${serveUrl}/sets/translucent`);
+    assert.equal(state.splats, ref.json.splats);
+    const d = compare(png, ref.png);
+    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+    // The same surfels drawn opaque hide what lies behind them and do not
+    // mix with the background: that image is tens of levels away.
+    const opaque = await view(`${serveUrl}/?set=/sets/opaque&camera=${camera}`);
+    assert.equal(opaque.state.splats, state.splats);
+    const o = compare(opaque.png, ref.png);
+    t.diagnostic(`translucent: mean abs ${d.mean.toFixed(3)}, far ${d.far.toFixed(5)}; drawn opaque: mean abs ${o.mean.toFixed(2)}`);
+    assert.ok(o.mean > 10 * kMeanLimit, `drawn opaque: mean abs ${o.mean}`);
   });
 
   test("nginx: the built viewer beside the sets on a static host", async () => {
