@@ -24,13 +24,16 @@ interface State {
   mode: string;
   firstImageMs: number | null;
   convergedMs: number | null;
+  residentBytes: number; // surfels held on the GPU, 32 bytes each
+  evictions: number;
   frames: number;
   frameMs: number; // the last frame's time on the GPU, from its draw to its fence
   camera: string;
 }
 
 const state: State = { converged: false, nodes: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
-                       firstImageMs: null, convergedMs: null, frames: 0, frameMs: 0, camera: "" };
+                       firstImageMs: null, convergedMs: null, residentBytes: 0, evictions: 0, frames: 0, frameMs: 0,
+                       camera: "" };
 (window as unknown as { surfcast: State }).surfcast = state;
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -150,12 +153,12 @@ async function main() {
   // than every other frame's cost, so that a slow WebGL (SwiftShader takes
   // about a second for half a million splats) spends its time decoding, not
   // redrawing. The state says converged once the converged frame is done.
-  let dirty = true, moved = true, lastDraw = -Infinity, frameCost = 0;
+  let dirty = true, urgent = true, lastDraw = -Infinity, frameCost = 0;
   let fence: WebGLSync | null = null, fenceConverged = false;
   const start = performance.now();
   streamer.onChange = () => (dirty = true);
   const setCamera = (c: Camera) => {
-    moved = true;
+    urgent = true;
     camera = c;
     state.camera = formatCamera(c);
     const url = new URL(location.href);
@@ -172,13 +175,13 @@ async function main() {
   modeSelect.onchange = () => {
     settings.mode = modeSelect.value as RenderMode;
     noteMode();
-    dirty = true;
+    urgent = dirty = true;
   };
   const lodInput = $<HTMLInputElement>("lod");
   lodInput.value = String(targetPixels);
   const budgetInput = $<HTMLInputElement>("splats");
   budgetInput.value = String(splatBudget);
-  for (const input of [lodInput, budgetInput]) input.onchange = () => (moved = dirty = true);
+  for (const input of [lodInput, budgetInput]) input.onchange = () => (urgent = dirty = true);
   const colorSelect = $<HTMLSelectElement>("color");
   for (const by of kColorByOrder) {
     if (resolveColorBy(by, info) !== by) continue;
@@ -227,47 +230,71 @@ async function main() {
     return (performance.now() - t0) / n;
   };
 
+  // Each animation frame: a new selection (which also queues the fetches the
+  // view needs) whenever something changed, and a draw of the latest one
+  // when the GPU is free and the pacing allows. Selecting never waits for
+  // drawing: on a slow WebGL the stream keeps going while a frame renders.
+  let selection: { gpu: DrawnNode[]; splats: number; converged: boolean } | null = null;
+  const select = () => {
+    const lod = emptyStats();
+    const lodTarget = Number(lodInput.value) > 0 ? Number(lodInput.value) : targetPixels;
+    const budget = Number(budgetInput.value) >= 1 ? Number(budgetInput.value) : splatBudget;
+    const selected = streamer.update(camera, width, height, { targetPixels: lodTarget, frustumCulling: true,
+      backfaceCulling: settings.backfaceCull, splatBudget: budget, memoryBudget: Infinity }, lod);
+    // Drawn in key order, as the Vulkan client draws them. Every selected
+    // node is resident until the next update (eviction spares what a view uses).
+    const nodes = streamer.selector.nodes;
+    selected.sort((a, b) => {
+      const p = nodes[a.index], q = nodes[b.index];
+      return p.level - q.level || p.x - q.x || p.y - q.y || p.z - q.z;
+    });
+    const gpu: DrawnNode[] = [];
+    let splats = 0;
+    for (const s of selected) {
+      const r = streamer.residentNode(s.index);
+      if (!r) continue;
+      gpu.push(r.gpu);
+      splats += r.count;
+    }
+    const st = streamer.stats;
+    const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
+    if (st.gaveUp) showError(st.lastError);
+    Object.assign(state, { bytes: st.bytes, requests: st.requests, residentBytes: st.residentBytes, evictions: st.evictions });
+    $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
+      `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);
+    return { gpu, splats, converged };
+  };
+
   const frame = (now: number) => {
     const gl = renderer.gl;
-    if (fence) {
-      if (gl.getSyncParameter(fence, gl.SYNC_STATUS) !== gl.SIGNALED) {
-        requestAnimationFrame(frame);
-        return;
-      }
+    if (fence && gl.getSyncParameter(fence, gl.SYNC_STATUS) === gl.SIGNALED) {
       gl.deleteSync(fence);
       fence = null;
       frameCost = performance.now() - lastDraw;
       state.frameMs = frameCost;
-      if (fenceConverged && state.convergedMs === null) state.convergedMs = performance.now() - start;
-      state.converged = fenceConverged && !dirty;
+      if (fenceConverged && !dirty && !selection) {
+        state.convergedMs ??= performance.now() - start;
+        state.converged = true;
+      }
     }
     const [w, h] = size();
     if (w !== width || h !== height) {
       [width, height] = [w, h];
-      moved = dirty = true;
+      urgent = dirty = true;
     }
-    if (dirty && (moved || now - lastDraw >= 2 * frameCost)) {
-      dirty = moved = false;
+    if (dirty) {
+      dirty = false;
+      state.converged = false;
+      selection = select();
+    }
+    if (selection && !fence && (urgent || now - lastDraw >= 2 * frameCost)) {
+      urgent = false;
       if (canvas.width !== width || canvas.height !== height) {
         canvas.width = width;
         canvas.height = height;
       }
-      const lod = emptyStats();
-      const lodTarget = Number(lodInput.value) > 0 ? Number(lodInput.value) : targetPixels;
-      const budget = Number(budgetInput.value) >= 1 ? Number(budgetInput.value) : splatBudget;
-      const selected = streamer.update(camera, width, height, { targetPixels: lodTarget, frustumCulling: true,
-        backfaceCulling: settings.backfaceCull, splatBudget: budget, memoryBudget: Infinity }, lod);
-      // Drawn in key order, as the Vulkan client draws them.
-      const nodes = selected.map((s) => streamer.selector.nodes[s.index])
-        .sort((a, b) => a.level - b.level || a.x - b.x || a.y - b.y || a.z - b.z);
-      const gpu: DrawnNode[] = [];
-      let splats = 0;
-      for (const n of nodes) {
-        const r = streamer.residentNode(streamer.selector.nodes.indexOf(n));
-        if (!r) continue;
-        gpu.push(r.gpu);
-        splats += r.count;
-      }
+      const { gpu, splats, converged } = selection;
+      selection = null;
       const eta = viewportScale(camera, height);
       const rows = viewRows(camera, streamer.origin);
       const diagonal = Math.hypot(info.boundsMax[0] - info.boundsMin[0], info.boundsMax[1] - info.boundsMin[1],
@@ -279,16 +306,10 @@ async function main() {
       lastDraw = performance.now();
       fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
       gl.flush();
-      ++state.frames;
-      const st = streamer.stats;
-      Object.assign(state, { nodes: gpu.length, splats, bytes: st.bytes, requests: st.requests });
-      if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - start;
-      const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
       fenceConverged = converged;
-      state.converged = false;
-      if (st.gaveUp) showError(st.lastError);
-      $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
-        `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);
+      ++state.frames;
+      Object.assign(state, { nodes: gpu.length, splats });
+      if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - start;
     }
     requestAnimationFrame(frame);
   };

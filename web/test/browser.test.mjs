@@ -266,6 +266,51 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(block.problems, []);
   });
 
+  test("a GPU budget: the view stays within it and least recently used nodes go", async () => {
+    // 16 MiB holds 524,288 surfels: less than the close-up's 535,029 and
+    // the nodes refined through to reach them.
+    const budget = 16 * 2 ** 20;
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}&gpu-budget=16`);
+    const converged = "window.surfcast.converged || window.surfcast.errors.length > 0";
+    await page.waitForFunction(converged, { timeout: 60000 });
+    const first = await page.evaluate(() => ({ ...window.surfcast }));
+    assert.deepEqual(first.errors, []);
+    assert.ok(first.converged && first.residentBytes <= budget, `resident ${first.residentBytes}`);
+    assert.ok(first.splats < 535029, `the budget keeps the view coarser: ${first.splats} splats`);
+    // Turn to look elsewhere: the new view's nodes evict the old ones.
+    await page.mouse.move(320, 240);
+    await page.mouse.down();
+    await page.mouse.move(600, 240, { steps: 4 });
+    await page.mouse.up();
+    await page.waitForFunction("window.surfcast.converged === false", { timeout: 10000 }).catch(() => {});
+    await page.waitForFunction(converged, { timeout: 60000 });
+    const second = await page.evaluate(() => ({ ...window.surfcast }));
+    await page.close();
+    assert.deepEqual(problems, []);
+    assert.notEqual(second.camera, first.camera, "the drag orbits the camera");
+    assert.ok(second.converged && second.evictions > 0, `evictions ${second.evictions}`);
+    assert.ok(second.residentBytes <= budget, `resident ${second.residentBytes}`);
+  });
+
+  test("a browser without WebGL2 is told so", async () => {
+    const plain = await puppeteer.launch({ executablePath: chromium, headless: true,
+      args: ["--no-sandbox", "--disable-webgl", "--disable-3d-apis"] });
+    try {
+      const page = await plain.newPage();
+      await page.goto(`${serveUrl}/?set=/sets/scene`);
+      await page.waitForFunction("window.surfcast && window.surfcast.errors.length > 0", { timeout: 20000 });
+      const text = await page.evaluate(() => document.getElementById("errors").textContent);
+      assert.match(text, /no WebGL2/);
+    } finally {
+      await plain.close();
+    }
+  });
+
   test("without float blending: per-surfel weights, or circles with a notice", async () => {
     const { state, png, problems } = await view(`${serveUrl}/?set=/sets/scene&camera=${camera}&floatblend=off`);
     assert.deepEqual(problems, []);
