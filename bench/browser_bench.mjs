@@ -53,7 +53,7 @@ for (let i = 0; i < 100 && !/on http:\/\/127\.0\.0\.1:\d+/.test(log); ++i) await
 const base = `http://127.0.0.1:${log.match(/on http:\/\/127\.0\.0\.1:(\d+)/)[1]}`;
 
 const browser = await puppeteer.launch({ executablePath: "/usr/bin/chromium", headless: true,
-  args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"] });
+  args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"], protocolTimeout: 3600000 });
 
 async function browserRun(name) {
   const page = await browser.newPage();
