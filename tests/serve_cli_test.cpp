@@ -241,3 +241,76 @@ TEST(ServeCli, WellBehavedClientsAreServedUnderHostileLoad) {
     // docs/PROTOCOL.md) over the idle server's few MiB; the set is mapped.
     if (test::kRssMeaningful) EXPECT_LT(rss, size_t(192) << 10) << "server peak RSS " << (rss >> 10) << " MiB";
 }
+
+// The browser viewer's folder at / (docs/PROTOCOL.md, "Viewer"): its files
+// with their types and ETags, public under a token while the data is not,
+// nothing outside the folder, and clear errors for a folder that is no viewer.
+TEST(ServeCli, ServesTheViewerFolderAtTheRoot) {
+    test::TempDir dir;
+    std::filesystem::create_directories(dir.file("sets"));
+    auto b = test::buildScene(dir.file("sets/s"), 20000);
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    std::filesystem::create_directories(dir.file("web/sub"));
+    const std::string page = "<!doctype html><title>viewer</title>", script = "console.log(1)";
+    std::ofstream(dir.file("web/index.html")) << page;
+    std::ofstream(dir.file("web/viewer.js")) << script;
+    std::ofstream(dir.file("web/sub/hidden.js")) << "nested";
+    std::ofstream(dir.file("token")) << "t0ken\n";
+    std::filesystem::create_symlink(dir.file("token"), dir.file("web/token.js"));
+
+    test::Child c = test::spawn({test::binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0", "--web",
+                                 dir.file("web"), "--token-file", dir.file("token")});
+    ASSERT_TRUE(c.waitFor("(1 tile sets)\n")) << c.log;
+    ASSERT_TRUE(c.waitFor("viewer at http://127.0.0.1:")) << c.log;
+    int port = std::atoi(c.log.c_str() + c.log.find("http://127.0.0.1:") + 17);
+    httplib::Client client("127.0.0.1", port);
+    auto root = client.Get("/");
+    ASSERT_TRUE(root);
+    EXPECT_EQ(root->status, 200);  // public, although a token is configured
+    EXPECT_EQ(root->body, page);
+    EXPECT_EQ(root->get_header_value("Content-Type"), "text/html; charset=utf-8");
+    auto js = client.Get("/viewer.js");
+    ASSERT_TRUE(js);
+    EXPECT_EQ(js->status, 200);
+    EXPECT_EQ(js->body, script);
+    EXPECT_EQ(js->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
+    const std::string etag = js->get_header_value("ETag");
+    EXPECT_EQ(etag.rfind("\"w-", 0), 0u) << etag;
+    auto again = client.Get("/viewer.js", {{"If-None-Match", etag}});
+    ASSERT_TRUE(again);
+    EXPECT_EQ(again->status, 304);
+    // Only plain files directly in the folder: no symlinks (the token file
+    // behind one stays unread), no sub-folders (a deeper path is not the
+    // viewer's, so it wants the token like any other).
+    for (const char* path : {"/token.js", "/nothing.js"}) {
+        auto r = client.Get(path);
+        ASSERT_TRUE(r);
+        EXPECT_EQ(r->status, 404) << path;
+        EXPECT_EQ(r->body.find("t0ken"), std::string::npos);
+    }
+    auto nested = client.Get("/sub/hidden.js");
+    ASSERT_TRUE(nested);
+    EXPECT_EQ(nested->status, 401);
+    // The data still wants the token.
+    auto data = client.Get("/sets/s/tileset.json");
+    ASSERT_TRUE(data);
+    EXPECT_EQ(data->status, 401);
+    ::kill(c.pid, SIGTERM);
+    EXPECT_EQ(test::exitCode(c.pid), 0);
+    ::close(c.err);
+
+    // --no-web: no viewer; --web on a folder without index.html: a usage error naming it.
+    test::Child none = test::spawn({test::binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0", "--no-web"});
+    ASSERT_TRUE(none.waitFor("(1 tile sets)\n")) << none.log;
+    port = std::atoi(none.log.c_str() + none.log.find("http://127.0.0.1:") + 17);
+    auto noViewer = httplib::Client("127.0.0.1", port).Get("/");
+    ASSERT_TRUE(noViewer);
+    EXPECT_EQ(noViewer->status, 404);
+    EXPECT_NE(noViewer->body.find("no viewer"), std::string::npos) << noViewer->body;
+    ::kill(none.pid, SIGTERM);
+    EXPECT_EQ(test::exitCode(none.pid), 0);
+    ::close(none.err);
+    auto bad = test::run({test::binary("surfcast-serve"), dir.file("sets"), "--web", dir.file("web/sub")});
+    EXPECT_EQ(bad.exitCode, 2);
+    EXPECT_NE(bad.output.find("has no index.html"), std::string::npos) << bad.output;
+}

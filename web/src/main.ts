@@ -149,10 +149,11 @@ async function main() {
   }
 
   // Redraws: one frame on the GPU at a time (a fence says when it is done),
-  // at once when the camera moves, and while blocks stream in no more often
-  // than every other frame's cost, so that a slow WebGL (SwiftShader takes
-  // about a second for half a million splats) spends its time decoding, not
-  // redrawing. The state says converged once the converged frame is done.
+  // as soon as the GPU is free when the camera moves, and while blocks
+  // stream in no more often than every other frame's cost, so that a slow
+  // WebGL (SwiftShader takes about a second for half a million splats)
+  // spends its time decoding, not redrawing. The state says converged once
+  // the converged frame is done.
   let dirty = true, urgent = true, lastDraw = -Infinity, frameCost = 0;
   let fence: WebGLSync | null = null, fenceConverged = false;
   const start = performance.now();
