@@ -127,14 +127,14 @@ export class SplatRenderer {
     if (clip) clip.clipControlEXT(clip.LOWER_LEFT_EXT, clip.ZERO_TO_ONE_EXT);
     this.programs = {
       visibility: new Program(gl, S.splatVertex(S.kPassVisibility), S.visibilityFragment),
-      accumulate: new Program(gl, S.splatVertex(S.kPassAccumulate), S.accumulateFragment),
+      accumulate: new Program(gl, S.splatVertex(S.kPassAccumulate), S.accumulateFragment(false)),
       circles: new Program(gl, S.splatVertex(S.kPassCircles), S.opaqueFragment(true)),
       points: new Program(gl, S.splatVertex(S.kPassPoints), S.opaqueFragment(false)),
       resolve: new Program(gl, S.resolveVertex, S.resolveFragment),
     };
     if (this.floatBlend) {
       this.programs.peel = new Program(gl, S.splatVertex(S.kPassVisibility, true), S.peelFragment);
-      this.programs.layer = new Program(gl, S.splatVertex(S.kPassAccumulate, true), S.layerFragment);
+      this.programs.layer = new Program(gl, S.splatVertex(S.kPassAccumulate, true), S.accumulateFragment(true));
       this.programs.resolveLayer = new Program(gl, S.resolveVertex, S.resolveLayerFragment);
       this.programs.composite = new Program(gl, S.resolveVertex, S.compositeFragment);
     }

@@ -218,7 +218,10 @@ void main() {
 }
 `;
 
-export const accumulateFragment = `#version 300 es
+// The accumulation pass (splat_accumulate.frag); `layered`: of one layer of
+// a translucent frame (splat_layer.frag), without the layers in front (at or
+// nearer than layer k-1's pushed-back surface), plus the opacity's weighted sum.
+export const accumulateFragment = (layered: boolean) => `#version 300 es
 precision highp float;
 precision highp int;
 ${common}
@@ -230,14 +233,25 @@ in vec2 vEdgeUV;
 flat in uint vEdge;
 layout(location = 0) out vec4 outColorWeight;
 layout(location = 1) out vec4 outNormalWeight;
+#if ${layered ? 1 : 0}
+uniform highp sampler2D uPreviousDepth;
+flat in float vAlpha;
+layout(location = 2) out vec4 outAlphaWeight;
+#endif
 ${edgeFactorSource}
 void main() {
   float q = dot(vY, vY);
   if (q > 2.0 * uKernel.y) discard;
+#if ${layered ? 1 : 0}
+  if (uLayer > 0u && gl_FragCoord.z >= texelFetch(uPreviousDepth, ivec2(gl_FragCoord.xy), 0).r) discard;
+#endif
   float g = exp(-0.5 * q);
   float w = vAmplitude * g * edgeFactor(vEdge, vEdgeUV);
   outColorWeight = vec4(vColor * w, w);
   outNormalWeight = vec4(vNormal * w, g);
+#if ${layered ? 1 : 0}
+  outAlphaWeight = vec4(vAlpha * w, 0.0, 0.0, 0.0);
+#endif
 }
 `;
 
@@ -256,6 +270,14 @@ void main() {
 }
 `;
 
+// The accumulated targets the resolves read.
+const resolveHead = `precision highp float;
+precision highp int;
+${common}
+uniform highp sampler2D uColorWeight;
+uniform highp sampler2D uNormalWeight;
+`;
+
 export const resolveVertex = `#version 300 es
 void main() {
   vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
@@ -264,12 +286,7 @@ void main() {
 `;
 
 export const resolveFragment = `#version 300 es
-precision highp float;
-precision highp int;
-${common}
-uniform highp sampler2D uColorWeight;
-uniform highp sampler2D uNormalWeight;
-out vec4 outColor;
+${resolveHead}out vec4 outColor;
 ${resolveCommon}
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
@@ -303,46 +320,12 @@ void main() {
 }
 `;
 
-// The accumulation pass of one layer: as accumulateFragment, without the
-// layers in front, plus the opacity's weighted sum.
-export const layerFragment = `#version 300 es
-precision highp float;
-precision highp int;
-${common}
-uniform highp sampler2D uPreviousDepth;
-in vec2 vY;
-flat in vec3 vColor;
-flat in vec3 vNormal;
-flat in float vAmplitude;
-in vec2 vEdgeUV;
-flat in uint vEdge;
-flat in float vAlpha;
-layout(location = 0) out vec4 outColorWeight;
-layout(location = 1) out vec4 outNormalWeight;
-layout(location = 2) out vec4 outAlphaWeight;
-${edgeFactorSource}
-void main() {
-  float q = dot(vY, vY);
-  if (q > 2.0 * uKernel.y) discard;
-  if (uLayer > 0u && gl_FragCoord.z >= texelFetch(uPreviousDepth, ivec2(gl_FragCoord.xy), 0).r) discard;
-  float g = exp(-0.5 * q);
-  float w = vAmplitude * g * edgeFactor(vEdge, vEdgeUV);
-  outColorWeight = vec4(vColor * w, w);
-  outNormalWeight = vec4(vNormal * w, g);
-  outAlphaWeight = vec4(vAlpha * w, 0.0, 0.0, 0.0);
-}
-`;
 
 // After each layer's accumulation: the layer normalized and shaded, with
 // opacity sum(alpha w) / sum(w) times the edge coverage, premultiplied, and
 // blended under the layers in front (dst += (1 - dst.a) src: eq. 12 front to back).
 export const resolveLayerFragment = `#version 300 es
-precision highp float;
-precision highp int;
-${common}
-uniform highp sampler2D uColorWeight;
-uniform highp sampler2D uNormalWeight;
-uniform highp sampler2D uAlphaWeight;
+${resolveHead}uniform highp sampler2D uAlphaWeight;
 out vec4 outColor;
 ${resolveCommon}
 void main() {
