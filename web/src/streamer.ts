@@ -119,6 +119,7 @@ export class Streamer<T> {
   private requestsInFlight = 0;
   private decoders: DecoderPool;
   private clock = 0;
+  private generation = 0; // of the colouring: recolor() drops what was decoded before it
   private extra: string[];
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
@@ -245,17 +246,26 @@ export class Streamer<T> {
       const records = group.map((i) => this.selector.nodes[i]);
       const request = group.length > 1 ? this.source.blobs(records)
         : this.source.range("blocks.bin", records[0].blockOffset, records[0].blockSize).then((b) => [b]);
+      // The connection is free once the bytes are in; decoding goes on in the workers.
+      let open = true;
+      const release = () => {
+        if (!open) return;
+        open = false;
+        --this.requestsInFlight;
+        this.onChange();
+      };
       request
-        .then((blobs) => Promise.all(group.map((i, k) => this.decodeNode(i, blobs[k]))))
+        .then((blobs) => {
+          release();
+          return Promise.all(group.map((i, k) => this.decodeNode(i, blobs[k])));
+        })
         .catch((err) => group.forEach((i) => this.noteFailure(i, err as Error)))
-        .finally(() => {
-          --this.requestsInFlight;
-          this.onChange();
-        });
+        .finally(release);
     }
   }
 
   private async decodeNode(i: number, blob: Uint8Array) {
+    const generation = this.generation;
     const n = this.selector.nodes[i];
     const min = nodeMin(this.info, n);
     const copy = blob.byteOffset === 0 && blob.byteLength === blob.buffer.byteLength ? blob.buffer as ArrayBuffer : blob.slice().buffer;
@@ -271,9 +281,13 @@ export class Streamer<T> {
     }
     this.inFlight.delete(i);
     this.tries.delete(i);
-    if (this.stats.gaveUp) return;
-    this.resident.set(i, { gpu: this.uploader.upload(result.surfels), count: result.count ?? 0, lastUsed: this.clock });
-    ++this.stats.nodesFetched;
+    // Not kept when the stream stopped, or when it was decoded with a
+    // colouring that recolor() has replaced since (a later update fetches it again).
+    if (!this.stats.gaveUp && generation === this.generation) {
+      this.resident.set(i, { gpu: this.uploader.upload(result.surfels), count: result.count ?? 0, lastUsed: this.clock });
+      ++this.stats.nodesFetched;
+    }
+    this.onChange();
   }
 
   private noteFailure(i: number, err: Error) {
@@ -299,6 +313,7 @@ export class Streamer<T> {
   // colouring: resident nodes are dropped and fetched anew.
   recolor(coloring: ColoringSpec) {
     this.coloring = coloring;
+    ++this.generation;
     for (const r of this.resident.values()) this.uploader.release(r.gpu);
     this.resident.clear();
     this.onChange();

@@ -215,6 +215,32 @@ describe("browser viewer", { skip }, () => {
     assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
   });
 
+  test("colour by elevation, chosen in the page, as surfcast-view draws it", async () => {
+    // Chosen in the panel after the rgb view converged: the resident nodes
+    // are decoded again with the palette, and the view converges again.
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
+    const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
+    await page.waitForFunction(done, { timeout: 60000 });
+    await page.select("#color", "elevation");
+    await page.waitForFunction("window.surfcast.converged === false", { timeout: 10000 }).catch(() => {});
+    await page.waitForFunction(done, { timeout: 60000 });
+    const state = await page.evaluate(() => window.surfcast);
+    await page.evaluate(() => document.body.classList.add("capture"));
+    const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+    await page.close();
+    assert.deepEqual(problems, []);
+    assert.deepEqual(state.errors, []);
+    const ref = reference(`${serveUrl}/sets/scene`, ["--color-by", "elevation"]);
+    assert.equal(state.splats, ref.json.splats);
+    const d = compare(png, ref.png);
+    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+  });
+
   test("transparency: the layers peeled and composited as the Vulkan client does", async (t) => {
     const { state, png, problems } = await view(`${serveUrl}/?set=/sets/translucent&camera=${camera}`);
     assert.deepEqual(problems, []);
