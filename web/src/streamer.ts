@@ -126,12 +126,12 @@ export class Streamer<T> {
                                   residentBytes: 0, evictions: 0, failures: 0, lastError: "", gaveUp: false };
   onChange: () => void = () => {};
 
-  private constructor(readonly source: TileSource, info: TilesetInfo, index: HierarchyIndex, page0: NodeRecord[],
-                      private uploader: Uploader<T>, workerUrl: URL, coloring: ColoringSpec,
+  private constructor(readonly source: TileSource, info: TilesetInfo, origin: Vec3, index: HierarchyIndex,
+                      page0: NodeRecord[], private uploader: Uploader<T>, workerUrl: URL, coloring: ColoringSpec,
                       readonly options: StreamOptions) {
     this.info = info;
     this.index = index;
-    this.origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
+    this.origin = origin;
     this.selector = new LodSelector(info, page0);
     this.extra = info.attributes.map((a) => a.name).filter((n) => !kFixedAttributes.includes(n));
     this.coloring = coloring;
@@ -156,7 +156,7 @@ export class Streamer<T> {
     const bytes = await withRetries(options.maxTries, () => source.range("hierarchy.bin", p0.offset, p0.records * 64), stop);
     const page0 = readHierarchyPage(index, 0, bytes, "0-0-0-0", info.blocksBytes, what);
     const origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
-    return new Streamer(source, info, index, page0, uploader, workerUrl, coloring(info, origin), options);
+    return new Streamer(source, info, origin, index, page0, uploader, workerUrl, coloring(info, origin), options);
   }
 
   isResident = (i: number) => this.resident.has(i);

@@ -137,6 +137,30 @@ function compare(a, b) {
   return { mean: sum / (3 * pixels), far: far / pixels };
 }
 
+// Both clients draw the same nodes (the same LOD rules at the same camera)
+// with the same EWA math in float32. What may differ: the rasterizers'
+// rules for pixels whose centre lies on a splat quad's edge (lavapipe
+// against SwiftShader), the order of the float additions (the Vulkan
+// client Morton-orders each node's surfels, the browser keeps Draco's
+// order), and the final rounding to 8 bits. Rounding and order move a pixel
+// by about one level, so a mean under 1 of 255 leaves no room for a
+// systematic error (a missing normalization, a wrong axis or offset moves
+// most covered pixels by tens of levels); a quad edge moves a single pixel
+// by up to the checkerboard's full contrast, and such pixels stay under
+// 1 % of the image.
+const kMeanLimit = 1.0, kFarLimit = 0.01;
+
+// The converged view against surfcast-view's at `refUrl`: the same splats
+// and an image within the limits derived above.
+function expectLikeReference(state, png, refUrl, extra = []) {
+  const ref = reference(refUrl, extra);
+  assert.equal(ref.json.converged, true);
+  assert.equal(state.splats, ref.json.splats, "the same splats at convergence");
+  const d = compare(png, ref.png);
+  assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+  return { ref, d };
+}
+
 // Share of pixels that are not the white background.
 function covered(png) {
   let n = 0;
@@ -186,18 +210,6 @@ describe("browser viewer", { skip }, () => {
     if (work) rmSync(work, { recursive: true, force: true });
   });
 
-  // Both clients draw the same nodes (the same LOD rules at the same camera)
-  // with the same EWA math in float32. What may differ: the rasterizers'
-  // rules for pixels whose centre lies on a splat quad's edge (lavapipe
-  // against SwiftShader), the order of the float additions (the Vulkan
-  // client Morton-orders each node's surfels, the browser keeps Draco's
-  // order), and the final rounding to 8 bits. Rounding and order move a pixel
-  // by about one level, so a mean under 1 of 255 leaves no room for a
-  // systematic error (a missing normalization, a wrong axis or offset moves
-  // most covered pixels by tens of levels); a quad edge moves a single pixel
-  // by up to the checkerboard's full contrast, and such pixels stay under
-  // 1 % of the image.
-  const kMeanLimit = 1.0, kFarLimit = 0.01;
 
   test("surfcast-serve: converges to the Vulkan client's image", async (t) => {
     const url = `${serveUrl}/?set=/sets/scene&camera=${camera}`;
@@ -205,14 +217,10 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(problems, []);
     assert.deepEqual(state.errors, []);
     assert.equal(state.converged, true);
-    const ref = reference(`${serveUrl}/sets/scene`);
-    assert.equal(ref.json.converged, true);
-    assert.equal(state.nodes, ref.json.nodes, "the same nodes at convergence");
-    assert.equal(state.splats, ref.json.splats);
     assert.ok(covered(png) > 0.3, `the scene covers ${covered(png)} of the image`);
-    const d = compare(png, ref.png);
+    const { ref, d } = expectLikeReference(state, png, `${serveUrl}/sets/scene`);
+    assert.equal(state.nodes, ref.json.nodes, "the same nodes at convergence");
     t.diagnostic(`surfcast-serve: ${state.splats} splats, mean abs ${d.mean.toFixed(3)}, far ${d.far.toFixed(5)}`);
-    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
   });
 
   test("colour by elevation, chosen in the page, as surfcast-view draws it", async () => {
@@ -235,20 +243,14 @@ describe("browser viewer", { skip }, () => {
     await page.close();
     assert.deepEqual(problems, []);
     assert.deepEqual(state.errors, []);
-    const ref = reference(`${serveUrl}/sets/scene`, ["--color-by", "elevation"]);
-    assert.equal(state.splats, ref.json.splats);
-    const d = compare(png, ref.png);
-    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+    expectLikeReference(state, png, `${serveUrl}/sets/scene`, ["--color-by", "elevation"]);
   });
 
   test("transparency: the layers peeled and composited as the Vulkan client does", async (t) => {
     const { state, png, problems } = await view(`${serveUrl}/?set=/sets/translucent&camera=${camera}`);
     assert.deepEqual(problems, []);
     assert.equal(state.converged, true);
-    const ref = reference(`${serveUrl}/sets/translucent`);
-    assert.equal(state.splats, ref.json.splats);
-    const d = compare(png, ref.png);
-    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+    const { ref, d } = expectLikeReference(state, png, `${serveUrl}/sets/translucent`);
     // The same surfels drawn opaque hide what lies behind them and do not
     // mix with the background: that image is tens of levels away.
     const opaque = await view(`${serveUrl}/?set=/sets/opaque&camera=${camera}`);
@@ -262,10 +264,7 @@ describe("browser viewer", { skip }, () => {
     const { state, png, problems } = await view(`${nginxUrl}/web/index.html?set=../sets/scene&camera=${camera}`);
     assert.deepEqual(problems, []);
     assert.equal(state.converged, true);
-    const ref = reference(`${nginxUrl}/sets/scene`);
-    assert.equal(state.splats, ref.json.splats);
-    const d = compare(png, ref.png);
-    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+    expectLikeReference(state, png, `${nginxUrl}/sets/scene`);
   });
 
   test("a token: the page is public, the data wants the token from the URL's fragment", async () => {
