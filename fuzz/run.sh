@@ -1,38 +1,40 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets (clang, ASan + UBSan; CMake preset "fuzz") and
-# runs them (fuzz/README.md):
+# Builds the libFuzzer targets (clang, ASan + UBSan: the CMake preset "asan",
+# whose build scripts/sanitize.sh asan tests too) and runs them (fuzz/README.md):
 #   fuzz/run.sh replay [SECONDS]         every target over its seeds and regression
 #                                        cases, then SECONDS (default 10) of fuzzing
 #                                        each: what CI runs
 #   fuzz/run.sh campaign SECONDS [TARGET...]
 #                                        fuzz each target for SECONDS or 10^6 runs,
 #                                        whichever comes first, two at a time; the
-#                                        corpora grow in build-fuzz/corpus, findings
-#                                        land in build-fuzz/artifacts
+#                                        corpora grow in build-asan/fuzzing/corpus, findings
+#                                        land in build-asan/fuzzing/artifacts
 # Seeds come from ../shared/data and from tile sets built here (make_seeds.py);
 # only small hand-written seeds and regression cases are in the repository.
+# The sets are built by the ASan build's own surfcast-build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode="${1:?usage: fuzz/run.sh replay [SECONDS] | campaign SECONDS [TARGET...]}"
 shift
 
 scripts/setup.sh --no-build --clang
-[ -x build/bin/surfcast-build ] && [ -x build/test-venv/bin/python ] || scripts/test.sh -R cli_test >/dev/null
-cmake --preset fuzz >/dev/null
-cmake --build build-fuzz --target fuzz_all
+build=build-asan
+cmake --preset asan >/dev/null
+cmake --build "$build" --target fuzz_all surfcast-build
+scripts/test-venv.sh "$build"
 
 data="${SURFCAST_DATA_DIR:-../shared/data}"
 if [ ! -f "$data/PROVENANCE.md" ]; then
   echo "fuzz/run.sh: no scans at $data (../shared/data); the reader seeds come from them" >&2
   exit 1
 fi
-work=build-fuzz
+work="$build/fuzzing"
 rm -rf "$work/sets" "$work/seeds"
 mkdir -p "$work/sets" "$work/seeds" "$work/corpus" "$work/artifacts"
-build/bin/surfcast-build -q --default-scene --scene-points 3000 -o "$work/sets/s" >/dev/null
-build/bin/surfcast-build -q --default-scene --scene-points 3000 --weights analytic -o "$work/sets/weighted" >/dev/null
-build/bin/surfcast-build -q "$data/autzen_trim.las" --attributes all --capacity 20000 -o "$work/sets/autzen" >/dev/null 2>&1
-build/test-venv/bin/python fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
+"$build/bin/surfcast-build" -q --default-scene --scene-points 3000 -o "$work/sets/s" >/dev/null
+"$build/bin/surfcast-build" -q --default-scene --scene-points 3000 --weights analytic -o "$work/sets/weighted" >/dev/null
+"$build/bin/surfcast-build" -q "$data/autzen_trim.las" --attributes all --capacity 20000 -o "$work/sets/autzen" >/dev/null 2>&1
+"$build/test-venv/bin/python" fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
 export SURFCAST_FUZZ_SETS="$PWD/$work/sets"
 
 targets=(read_ply read_las read_laz read_pcd read_xyz read_obj read_gltf read_glb tileset block range http_request client_response)
@@ -48,8 +50,8 @@ if [ "$mode" = replay ]; then
     mkdir -p "$work/corpus/$t" "$work/artifacts/$t"
     log="$work/artifacts/$t.log"
     # Each seed and regression case once, then fuzzing from them.
-    if ! "$work/fuzz/fuzz_$t" "${flags[@]}" -runs=0 "${dirs[@]}" > "$log" 2>&1 ||
-       ! "$work/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -artifact_prefix="$work/artifacts/$t/" \
+    if ! "$build/fuzz/fuzz_$t" "${flags[@]}" -runs=0 "${dirs[@]}" > "$log" 2>&1 ||
+       ! "$build/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -artifact_prefix="$work/artifacts/$t/" \
          "$work/corpus/$t" "${dirs[@]}" >> "$log" 2>&1; then
       tail -n 40 "$log" >&2
       echo "fuzz/run.sh: $t failed (log $log, input in $work/artifacts/$t/)" >&2
@@ -68,7 +70,7 @@ run_one() {
   local t="$1"
   mapfile -t dirs < <(corpora "$t")
   mkdir -p "$work/corpus/$t" "$work/artifacts/$t"
-  "$work/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -runs=1000000 -print_final_stats=1 \
+  "$build/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -runs=1000000 -print_final_stats=1 \
     -artifact_prefix="$work/artifacts/$t/" "$work/corpus/$t" "${dirs[@]}" > "$work/artifacts/$t.log" 2>&1
   echo "== $t: exit $? $(grep -E '^stat::number_of_executed_units|^#[0-9]+ +DONE' "$work/artifacts/$t.log" | tr '\n' ' ')"
 }

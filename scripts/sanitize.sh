@@ -1,20 +1,27 @@
 #!/usr/bin/env bash
-# The whole test suite under a sanitizer build (CMakePresets.json):
-#   scripts/sanitize.sh asan [ctest args]   AddressSanitizer + UndefinedBehaviorSanitizer
-#   scripts/sanitize.sh tsan [ctest args]   ThreadSanitizer
+# The test suite under a sanitizer build (CMakePresets.json), two tests at a time:
+#   scripts/sanitize.sh asan [ctest args]   AddressSanitizer + UndefinedBehaviorSanitizer,
+#                                            every test (the build also holds the
+#                                            libFuzzer targets fuzz/run.sh runs)
+#   scripts/sanitize.sh tsan [ctest args]   ThreadSanitizer, the tests labelled
+#                                            "threads" (tests/CMakeLists.txt)
 # Any sanitizer report fails the test that triggered it (UBSan halts, ASan and
-# LeakSanitizer exit non-zero). Builds into build-PRESET beside build/.
+# LeakSanitizer exit non-zero). Builds into build-PRESET beside build/. What
+# each stage runs, and what it leaves to another and why: bench/RELIABILITY.md,
+# "What each CI stage covers".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 preset="${1:?usage: scripts/sanitize.sh asan|tsan [ctest args]}"
 shift
-if [ "$preset" = tsan ]; then scripts/setup.sh --no-build --clang; else scripts/setup.sh --no-build; fi
+case "$preset" in
+  asan) select=() ;;
+  tsan) select=(-L threads) ;;
+  *) echo "usage: scripts/sanitize.sh asan|tsan [ctest args]" >&2; exit 2 ;;
+esac
+scripts/setup.sh --no-build --clang
 cmake --preset "$preset"
 cmake --build "build-$preset" --parallel
-if [ ! -x "build-$preset/test-venv/bin/python" ]; then
-  python3 -m venv "build-$preset/test-venv"
-fi
-"build-$preset/test-venv/bin/pip" install -q -r tests/requirements.txt
+scripts/test-venv.sh "build-$preset"
 
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1
@@ -27,4 +34,4 @@ export ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1
 export OMP_TOOL_LIBRARIES=/usr/lib/llvm-14/lib/libarcher.so
 export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 ignore_noninstrumented_modules=1"
 # (Mesa's lavapipe stays loaded in ASan builds: client/gpu/context.cpp says why.)
-ctest --test-dir "build-$preset" --output-on-failure --timeout 3600 "$@"
+ctest --test-dir "build-$preset" --output-on-failure --timeout 3600 -j "$(nproc)" "${select[@]}" "$@"

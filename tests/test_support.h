@@ -35,8 +35,8 @@ private:
 // of freed blocks (ASan: several times the program's own heap), so peak RSS
 // says nothing about a memory budget there. Tests still run what they
 // measure, for its reports; the release suite checks the budgets.
-// (GCC defines __SANITIZE_*__; clang, which builds the TSan preset, answers
-// __has_feature.)
+// (GCC defines __SANITIZE_*__; clang, which builds both sanitizer presets,
+// answers __has_feature.)
 #if !defined(__has_feature)
 #define SURFCAST_HAS_FEATURE(x) 0
 #else

@@ -1,6 +1,15 @@
 #include "context.h"
 
+// AddressSanitizer builds: GCC defines __SANITIZE_ADDRESS__, clang (the asan
+// preset) answers __has_feature.
 #if defined(__SANITIZE_ADDRESS__)
+#define SURFCAST_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define SURFCAST_ASAN 1
+#endif
+#endif
+#if defined(SURFCAST_ASAN)
 #include <dlfcn.h>
 #endif
 
@@ -38,7 +47,7 @@ namespace {
 // not matchable by a suppression. Keeping the driver loaded for the process
 // keeps those pointers visible and hides nothing of ours.
 void keepDriverLoaded() {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(SURFCAST_ASAN)
     static void* pinned = dlopen("libvulkan_lvp.so", RTLD_NOW | RTLD_NODELETE);
     (void)pinned;
 #endif
