@@ -212,7 +212,7 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
     {
         Block block, wide;
         std::vector<float> cx, cy, cz, d, dw;
-        std::vector<uint32_t> cid, runIds;
+        std::vector<uint32_t> cid, runIds, stackBegin, stackEnd;
         std::vector<float> best(static_cast<size_t>(k));
         std::vector<uint32_t> bestIds(static_cast<size_t>(k)), neighbours(static_cast<size_t>(k));
         std::vector<Vec3f> positions(static_cast<size_t>(k));
@@ -247,9 +247,32 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                     cid[j] = s;
                 }
 
+            // Stacks of coincident points (adjacent in the sorted order): a query
+            // in a stack of k or more has its k nearest at distance 0, and the
+            // stack's first k are an exact answer (the ones the ranking below
+            // keeps, ties going to the earlier candidate, when no other point of
+            // the cell lies at p). Without this a cell of n coincident points
+            // costs n² distances (BadInput.AMillionCoincidentPointsBuild).
+            stackBegin.resize(end - begin), stackEnd.resize(end - begin);
+            for (uint32_t s = begin; s < end; ++s)
+                stackBegin[s - begin] = s > begin && sorted_[s] == sorted_[s - 1] ? stackBegin[s - 1 - begin] : s;
+            for (uint32_t s = end; s-- > begin;)
+                stackEnd[s - begin] = s + 1 < end && sorted_[s + 1] == sorted_[s] ? stackEnd[s + 1 - begin] : s + 1;
+
             for (uint32_t s = begin; s < end; ++s) {
                 if (wanted && !wanted(order_[s])) continue;
                 const Vec3f p = sorted_[s];
+                if (stackEnd[s - begin] - stackBegin[s - begin] >= uint32_t(k)) {
+                    for (int i = 0; i < k; ++i) {
+                        best[size_t(i)] = 0;
+                        neighbours[size_t(i)] = order_[stackBegin[s - begin] + uint32_t(i)];
+                        positions[size_t(i)] = p;
+                    }
+                    prev = p;
+                    prevKth = 0;
+                    visit(order_[s], {{neighbours.data(), size_t(k)}, {best.data(), size_t(k)}, {positions.data(), size_t(k)}});
+                    continue;
+                }
                 for (size_t i = 0; i < count; ++i) {
                     const float dx = cx[i] - p.x, dy = cy[i] - p.y, dz = cz[i] - p.z;
                     d[i] = dx * dx + dy * dy + dz * dz;

@@ -14,13 +14,13 @@ cd "$(dirname "$0")/.."
 preset="${1:?usage: scripts/sanitize.sh asan|tsan [ctest args]}"
 shift
 case "$preset" in
-  asan) select=() ;;
-  tsan) select=(-L threads) ;;
+  asan) target=all select=() ;;
+  tsan) target=threaded_tests select=(-L threads) ;;
   *) echo "usage: scripts/sanitize.sh asan|tsan [ctest args]" >&2; exit 2 ;;
 esac
 scripts/setup.sh --no-build --clang
 cmake --preset "$preset"
-cmake --build "build-$preset" --parallel
+cmake --build "build-$preset" --parallel --target "$target"
 scripts/test-venv.sh "build-$preset"
 
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1

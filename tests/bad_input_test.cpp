@@ -150,6 +150,19 @@ TEST(BadInput, DegenerateGeometriesBuild) {
     }
 }
 
+// A million copies of one point (a scanner left standing, a duplicated
+// tile): the neighbour search once ranked every copy against every other
+// (10^12 distances, hours) and the build never finished; ctest's timeout
+// is what fails here if that comes back.
+TEST(BadInput, AMillionCoincidentPointsBuild) {
+    TempDir dir;
+    test::writeFile(dir.file("in.ply"), asciiPly(std::vector<std::string>(1000000, "1.5 -2 3")));
+    auto r = build(dir, dir.file("in.ply"), {});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("points in: 1000000 "), std::string::npos) << r.output;
+    EXPECT_EQ(surfelsOf(dir.file("out")), 1u);
+}
+
 TEST(BadInput, LasCountMismatch) {
     TempDir dir;
     std::string h(227, '\0');
