@@ -33,7 +33,12 @@ rm -rf "$work/sets" "$work/seeds"
 mkdir -p "$work/sets" "$work/seeds" "$work/corpus" "$work/artifacts"
 "$build/bin/surfcast-build" -q --default-scene --scene-points 3000 -o "$work/sets/s" >/dev/null
 "$build/bin/surfcast-build" -q --default-scene --scene-points 3000 --weights analytic -o "$work/sets/weighted" >/dev/null
-"$build/bin/surfcast-build" -q "$data/autzen_trim.las" --attributes all --capacity 20000 -o "$work/sets/autzen" >/dev/null 2>&1
+if ! "$build/bin/surfcast-build" -q "$data/autzen_trim.las" --attributes all --capacity 20000 -o "$work/sets/autzen" \
+     > "$work/autzen.log" 2>&1; then
+  tail -n 40 "$work/autzen.log" >&2
+  echo "fuzz/run.sh: building the autzen seed set failed (log $work/autzen.log)" >&2
+  exit 1
+fi
 "$build/test-venv/bin/python" fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
 export SURFCAST_FUZZ_SETS="$PWD/$work/sets"
 

@@ -5,6 +5,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "octree_key.h"
 
@@ -96,7 +97,13 @@ GridKnn::GridKnn(std::span<const Vec3f> points) {
             q[a] = uint32_t(std::clamp((double(points[i][a]) - lo_[a]) * scale, 0.0, double(maxQ)));
         keyed[i] = {mortonCode(q[0], q[1], q[2]), uint32_t(i)};
     }
-    std::sort(keyed.begin(), keyed.end());
+    // Within a cell of the finest level, coincident points next to each other
+    // (forEach finds stacks of them by adjacency), then input order.
+    std::sort(keyed.begin(), keyed.end(), [&](const auto& a, const auto& b) {
+        if (a.first != b.first) return a.first < b.first;
+        const Vec3f &p = points[a.second], &q = points[b.second];
+        return std::tie(p.x, p.y, p.z, a.second) < std::tie(q.x, q.y, q.z, b.second);
+    });
     codes_.resize(n);
     order_.resize(n);
     sorted_.resize(n);
@@ -247,7 +254,8 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                     cid[j] = s;
                 }
 
-            // Stacks of coincident points (adjacent in the sorted order): a query
+            // Stacks of coincident points (adjacent in the sorted order, which
+            // puts them together): a query
             // in a stack of k or more has its k nearest at distance 0, and the
             // stack's first k are an exact answer (the ones the ranking below
             // keeps, ties going to the earlier candidate, when no other point of

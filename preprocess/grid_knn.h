@@ -38,7 +38,8 @@ public:
     // Neighbours of one query: indices into the indexed points, their squared
     // distances and positions (as indexed), at most k (fewer only when fewer
     // points exist), nearest first unless asked otherwise. A query finds
-    // itself at distance 0.
+    // itself at distance 0, or, in a stack of more than k coincident points,
+    // k of the stack.
     struct Neighbours {
         std::span<const uint32_t> indices;
         std::span<const float> dist2;

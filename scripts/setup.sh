@@ -4,7 +4,7 @@
 # Usage: scripts/setup.sh [--no-build] [--clang]
 #   --no-build  install only
 #   --clang     also clang, its sanitizer runtimes and LLVM's OpenMP runtime
-#               (the tsan and fuzz presets)
+#               (the asan and tsan presets)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -7,4 +7,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
 scripts/test-venv.sh build
-ctest --test-dir build --output-on-failure --timeout 1200 -j "$(nproc)" "$@"
+ctest --test-dir build --output-on-failure --timeout 1200 -j "${CTEST_PARALLEL_LEVEL:-2}" "$@"

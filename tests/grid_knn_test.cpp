@@ -120,6 +120,49 @@ TEST(GridKnn, OutliersFarClustersAndDuplicates) {
     compareWithFlann(pts, 16, GridKnn::Order::any);
 }
 
+// Stacks of coincident points whose copies alternate in the input with those
+// of a second stack a hair away (in the same finest cell): of k - 1, k and
+// k + 1 copies against FLANN; then two stacks of 200,000, every third point
+// queried, each at distance 0 from all its k nearest. Those once cost n²
+// distances (hours); ctest's timeout is what fails if that comes back.
+TEST(GridKnn, InterleavedStacksOfCoincidentPoints) {
+    const int k = 16;
+    const Vec3f hair{1e-7f, 0, 0};
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> u(0, 1);
+    std::vector<Vec3f> pts;
+    for (int i = 0; i < 3000; ++i) pts.push_back({u(rng), u(rng), 0.01f * u(rng)});
+    for (int copies : {k - 1, k, k + 1}) {
+        const Vec3f at{u(rng), u(rng), 0.5f};
+        for (int i = 0; i < copies; ++i) {
+            pts.push_back(at);
+            pts.push_back(at + hair);
+        }
+    }
+    compareWithFlann(pts, k);
+    compareWithFlann(pts, k, GridKnn::Order::any);
+
+    std::vector<Vec3f> stacks;
+    for (int i = 0; i < 200000; ++i) {
+        stacks.push_back({0.25f, 0.5f, 0.75f});
+        stacks.push_back(Vec3f{0.25f, 0.5f, 0.75f} + hair);
+    }
+    // Corners (not queried: indices 1 and 2 mod 3) that make the grid's cube a
+    // unit one, whose finest cells (2^-21) hold both stacks.
+    stacks.push_back({0, 0, 0});
+    stacks.push_back({1, 1, 1});
+    GridKnn grid(stacks);
+    std::atomic<size_t> visited{0}, atZero{0};
+    grid.forEach(k, 2, [](uint32_t i) { return i % 3 == 0; }, [&](uint32_t q, const GridKnn::Neighbours& n) {
+        visited++;
+        bool all = n.indices.size() == size_t(k);
+        for (size_t j = 0; j < n.indices.size(); ++j) all = all && n.dist2[j] == 0 && stacks[n.indices[j]] == stacks[q];
+        atZero += all;
+    });
+    EXPECT_EQ(visited.load(), 400000u / 3 + 1);
+    EXPECT_EQ(atZero.load(), visited.load());
+}
+
 TEST(GridKnn, FewerPointsThanK) {
     for (size_t n : {1, 2, 5, 15}) {
         std::vector<Vec3f> pts;

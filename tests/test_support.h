@@ -10,6 +10,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "sanitizers.h"
+
 namespace surfcast::test {
 
 // Path of a file in ../shared/data. When the data folder is missing the test
@@ -35,15 +37,7 @@ private:
 // of freed blocks (ASan: several times the program's own heap), so peak RSS
 // says nothing about a memory budget there. Tests still run what they
 // measure, for its reports; the release suite checks the budgets.
-// (GCC defines __SANITIZE_*__; clang, which builds both sanitizer presets,
-// answers __has_feature.)
-#if !defined(__has_feature)
-#define SURFCAST_HAS_FEATURE(x) 0
-#else
-#define SURFCAST_HAS_FEATURE(x) __has_feature(x)
-#endif
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || SURFCAST_HAS_FEATURE(address_sanitizer) || \
-    SURFCAST_HAS_FEATURE(thread_sanitizer)
+#if defined(SURFCAST_ASAN) || defined(SURFCAST_TSAN)
 inline constexpr bool kRssMeaningful = false;
 #else
 inline constexpr bool kRssMeaningful = true;

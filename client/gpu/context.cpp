@@ -1,14 +1,7 @@
 #include "context.h"
 
-// AddressSanitizer builds: GCC defines __SANITIZE_ADDRESS__, clang (the asan
-// preset) answers __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define SURFCAST_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SURFCAST_ASAN 1
-#endif
-#endif
+#include "sanitizers.h"
+
 #if defined(SURFCAST_ASAN)
 #include <dlfcn.h>
 #endif
