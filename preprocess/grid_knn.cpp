@@ -254,13 +254,11 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                     cid[j] = s;
                 }
 
-            // Stacks of coincident points (adjacent in the sorted order, which
-            // puts them together): a query
-            // in a stack of k or more has its k nearest at distance 0, and the
-            // stack's first k are an exact answer (the ones the ranking below
-            // keeps, ties going to the earlier candidate, when no other point of
-            // the cell lies at p). Without this a cell of n coincident points
-            // costs n² distances (BadInput.AMillionCoincidentPointsBuild).
+            // Stacks of coincident points (adjacent: the constructor sorts them
+            // together). A query in a stack of k or more has its k nearest at
+            // distance 0, and the stack's first k are an exact answer; without
+            // this a cell of n coincident points costs n² distances
+            // (BadInput.AMillionCoincidentPointsBuild).
             stackBegin.resize(end - begin), stackEnd.resize(end - begin);
             for (uint32_t s = begin; s < end; ++s)
                 stackBegin[s - begin] = s > begin && sorted_[s] == sorted_[s - 1] ? stackBegin[s - 1 - begin] : s;
