@@ -48,23 +48,30 @@ corpora() {  # the seed folders a target reads, existing ones only
 }
 flags=(-rss_limit_mb=2048 -timeout=20 -max_len=65536)
 
+replay_one() {  # one target over its seeds and regression cases, then $2 s of fuzzing
+  local t="$1" seconds="$2" log="$work/artifacts/$1.log" dirs
+  mapfile -t dirs < <(corpora "$t")
+  mkdir -p "$work/corpus/$t" "$work/artifacts/$t"
+  if ! "$build/fuzz/fuzz_$t" "${flags[@]}" -runs=0 "${dirs[@]}" > "$log" 2>&1 ||
+     ! "$build/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -artifact_prefix="$work/artifacts/$t/" \
+       "$work/corpus/$t" "${dirs[@]}" >> "$log" 2>&1; then
+    tail -n 40 "$log" >&2
+    echo "fuzz/run.sh: $t failed (log $log, input in $work/artifacts/$t/)" >&2
+    return 1
+  fi
+  echo "== $t (${dirs[*]}): $(grep -E '^Done' "$log" | tr '\n' ' ')"
+}
+
 if [ "$mode" = replay ]; then
+  # Two targets at a time (each fuzzer is one process on one core).
   seconds="${1:-10}"
+  failed=0
   for t in "${targets[@]}"; do
-    mapfile -t dirs < <(corpora "$t")
-    mkdir -p "$work/corpus/$t" "$work/artifacts/$t"
-    log="$work/artifacts/$t.log"
-    # Each seed and regression case once, then fuzzing from them.
-    if ! "$build/fuzz/fuzz_$t" "${flags[@]}" -runs=0 "${dirs[@]}" > "$log" 2>&1 ||
-       ! "$build/fuzz/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" -artifact_prefix="$work/artifacts/$t/" \
-         "$work/corpus/$t" "${dirs[@]}" >> "$log" 2>&1; then
-      tail -n 40 "$log" >&2
-      echo "fuzz/run.sh: $t failed (log $log, input in $work/artifacts/$t/)" >&2
-      exit 1
-    fi
-    echo "== $t (${dirs[*]}): $(grep -E '^Done' "$log" | tr '\n' ' ')"
+    replay_one "$t" "$seconds" &
+    if (($(jobs -rp | wc -l) >= 2)); then wait -n || failed=1; fi
   done
-  exit 0
+  while (($(jobs -rp | wc -l) > 0)); do wait -n || failed=1; done
+  exit "$failed"
 fi
 
 [ "$mode" = campaign ] || { echo "fuzz/run.sh: unknown mode $mode" >&2; exit 2; }

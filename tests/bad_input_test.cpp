@@ -197,7 +197,7 @@ TEST(BadInput, KilledBuildLeavesNoTileset) {
         dup2(devnull, 2);
         dup2(devnull, 1);
         std::string bin = test::binary("surfcast-build"), out = dir.file("out");
-        execl(bin.c_str(), bin.c_str(), "--default-scene", "-o", out.c_str(), nullptr);
+        execl(bin.c_str(), bin.c_str(), "--default-scene", "--scene-points", "300000", "-o", out.c_str(), nullptr);
         _exit(127);
     }
     // Killed while it writes blocks (the first has reached the partial
@@ -266,7 +266,8 @@ bool runAndKill(const std::vector<std::string>& args, double seconds) {
 
 TEST(BadInput, KillAnywhereLeavesTheOldSetOrTheNewOne) {
     // surfcast-build (set A replaced by set B) and surfcast-weights (A
-    // re-weighted in place into W), each SIGKILLed at 20 moments drawn
+    // re-weighted in place into W), each SIGKILLed at 20 moments (6 under a
+    // sanitizer, where every run is several times longer) drawn
     // uniformly over its whole run. After every kill the output holds A byte
     // for byte, or the finished result byte for byte, or nothing that reads
     // as a tile set. The builds are deterministic, so the finished results
@@ -299,7 +300,8 @@ TEST(BadInput, KillAnywhereLeavesTheOldSetOrTheNewOne) {
     std::mt19937 random(15);
     int killed = 0;
     std::map<std::string, int> outcomes;
-    for (int i = 0; i < 40; ++i) {
+    const int runs = test::kSanitized ? 12 : 40;
+    for (int i = 0; i < runs; ++i) {
         const bool weights = i % 2 == 1;
         // Start from A, whole (the previous kill may have left B, W or nothing).
         if (readSet(out) != setA) writeSet(out, setA);
@@ -314,7 +316,7 @@ TEST(BadInput, KillAnywhereLeavesTheOldSetOrTheNewOne) {
                                                << at << " s left a tile set that is neither the old one nor the new one";
     }
     for (const auto& [what, n] : outcomes) std::printf("%s: %d\n", what.c_str(), n);
-    EXPECT_GE(killed, 20) << "most runs should be killed before they finish";
+    EXPECT_GE(killed, runs / 2) << "most runs should be killed before they finish";
 
     timed(buildB);
     EXPECT_TRUE(readSet(out) == setB);
