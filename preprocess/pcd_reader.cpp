@@ -16,8 +16,8 @@ namespace surfcast {
 
 namespace {
 
-constexpr uint64_t kMaxHeaderBytes = 64 * 1024;
-constexpr size_t kBatchPoints = 4096;
+constexpr uint64_t kMaxPcdHeaderBytes = 64 * 1024;
+constexpr size_t kPcdBatchPoints = 4096;
 
 enum class Role { Ignore, X, Y, Z, Rgb, Rgba, NX, NY, NZ, Intensity, Classification, Scalar };
 
@@ -78,7 +78,7 @@ Result<PcdHeader> parseHeader(ByteStream& in) {
     bool haveData = false;
     while (!haveData) {
         if (!in.readLine(&line)) return Status::error(in.path() + ": header has no DATA line");
-        if (in.offset() > kMaxHeaderBytes) return Status::error(in.path() + ": header longer than 64 KiB");
+        if (in.offset() > kMaxPcdHeaderBytes) return Status::error(in.path() + ": header longer than 64 KiB");
         uint64_t lineNo = in.line() - 1;
         auto fail = [&](const std::string& why) { return Status::error(in.path() + ": line " + std::to_string(lineNo) + ": " + why); };
         if (line.empty() || line[0] == '#') continue;
@@ -224,7 +224,7 @@ public:
         scalarValues_.clear();
         while (n < max && index_ < h_.points) {
             // Each record gives at most one point: a batch never overfills `out`.
-            size_t batch = size_t(std::min<uint64_t>({uint64_t(kBatchPoints), h_.points - index_, uint64_t(max - n)}));
+            size_t batch = size_t(std::min<uint64_t>({uint64_t(kPcdBatchPoints), h_.points - index_, uint64_t(max - n)}));
             if (h_.data == DataKind::Compressed) {
                 // Gather each used field's column for the batch.
                 for (auto& c : columns_) {

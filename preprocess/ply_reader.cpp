@@ -14,7 +14,7 @@ namespace surfcast {
 namespace {
 
 // A header longer than this is not a PLY header but a corrupt or hostile file.
-constexpr uint64_t kMaxHeaderBytes = 1 << 20;
+constexpr uint64_t kMaxPlyHeaderBytes = 1 << 20;
 
 bool parseType(const std::string& s, PlyType* t) {
     static const std::pair<const char*, PlyType> kNames[] = {
@@ -278,7 +278,7 @@ Result<PlyHeader> parsePlyHeader(ByteStream& in) {
     bool haveFormat = false;
     while (true) {
         if (!in.readLine(&line)) return Status::error(in.path() + ": header has no end_header");
-        if (in.offset() > kMaxHeaderBytes) return Status::error(in.path() + ": header longer than 1 MiB");
+        if (in.offset() > kMaxPlyHeaderBytes) return Status::error(in.path() + ": header longer than 1 MiB");
         std::istringstream words(line);
         std::string word;
         words >> word;

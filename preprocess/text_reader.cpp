@@ -11,10 +11,10 @@ namespace surfcast {
 
 namespace {
 
-enum Field { X, Y, Z, R, G, B, NX, NY, NZ, I, Ignore };
+enum XyzColumn { X, Y, Z, R, G, B, NX, NY, NZ, I, Ignore };
 
-bool parseLayout(const std::string& layout, std::vector<Field>* fields) {
-    static const std::pair<const char*, Field> kNames[] = {{"x", X},   {"y", Y},   {"z", Z},   {"r", R},
+bool parseLayout(const std::string& layout, std::vector<XyzColumn>* fields) {
+    static const std::pair<const char*, XyzColumn> kNames[] = {{"x", X},   {"y", Y},   {"z", Z},   {"r", R},
                                                            {"g", G},   {"b", B},   {"nx", NX}, {"ny", NY},
                                                            {"nz", NZ}, {"i", I},   {"_", Ignore}};
     fields->clear();
@@ -26,7 +26,7 @@ bool parseLayout(const std::string& layout, std::vector<Field>* fields) {
             if (name == n) { fields->push_back(f); found = true; }
         if (!found) return false;
     }
-    auto has = [&](Field f) { return std::find(fields->begin(), fields->end(), f) != fields->end(); };
+    auto has = [&](XyzColumn f) { return std::find(fields->begin(), fields->end(), f) != fields->end(); };
     return has(X) && has(Y) && has(Z);
 }
 
@@ -58,7 +58,7 @@ bool splitNumbers(const std::string& line, std::vector<double>* out) {
 
 class TextReader final : public PointReader {
 public:
-    TextReader(ByteStream in, InputDescription desc, std::vector<Field> fields)
+    TextReader(ByteStream in, InputDescription desc, std::vector<XyzColumn> fields)
         : in_(std::move(in)), desc_(std::move(desc)), fields_(std::move(fields)) {}
 
     const InputDescription& description() const override { return desc_; }
@@ -101,7 +101,7 @@ public:
 private:
     ByteStream in_;
     InputDescription desc_;
-    std::vector<Field> fields_;
+    std::vector<XyzColumn> fields_;
     std::string line_;
     std::vector<double> values_;
     bool sawData_ = false;
@@ -142,7 +142,7 @@ Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, con
             return Status::error(path + ": cannot tell the meaning of " + std::to_string(row.size()) +
                                  " columns; give the layout with --columns (e.g. x,y,z,r,g,b)");
     }
-    std::vector<Field> fields;
+    std::vector<XyzColumn> fields;
     if (!parseLayout(layout, &fields))
         return Status::error("column layout '" + layout + "' is not a comma-separated list of x,y,z,r,g,b,nx,ny,nz,i,_ with x, y and z");
     auto in = ByteStream::open(path);
@@ -150,7 +150,7 @@ Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, con
     InputDescription desc;
     desc.path = path;
     desc.format = "text";
-    auto has = [&](Field f) { return std::find(fields.begin(), fields.end(), f) != fields.end(); };
+    auto has = [&](XyzColumn f) { return std::find(fields.begin(), fields.end(), f) != fields.end(); };
     desc.hasColors = has(R) && has(G) && has(B);
     desc.hasNormals = has(NX) && has(NY) && has(NZ);
     desc.hasIntensity = has(I);

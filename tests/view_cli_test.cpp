@@ -1,7 +1,8 @@
 // surfcast-view end to end: the real programs on a real scan (the bunny), the
 // GPU path against the CPU reference, camera paths, bad arguments, and the
-// window under Xvfb. SURFCAST_VALIDATION=1 is set for this test (CMake), so
-// every GPU run also checks for zero validation errors.
+// window under Xvfb. SURFCAST_VALIDATION=1 is set for this test in the release
+// suite (tests/CMakeLists.txt), so every GPU run also checks for zero
+// validation errors there.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -2,7 +2,8 @@
 // §7.2) against the analytic sum (surfcast-build), on a jittered plane with a
 // boundary: the two agree on interior surfels, a per-surfel render stays
 // within the measured tolerance of per-pixel normalization, and degenerate
-// sets do not fail. Runs with the validation layer (SURFCAST_VALIDATION=1).
+// sets do not fail. Runs with the validation layer (SURFCAST_VALIDATION=1) in
+// the release suite.
 #include <gtest/gtest.h>
 
 #include <algorithm>

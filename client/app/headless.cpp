@@ -22,11 +22,6 @@ double median(std::vector<double> v) {
 // While streaming, frames are redrawn at most this often.
 constexpr int kStreamPollMs = 30;
 
-int fail(const std::string& message) {
-    std::fprintf(stderr, "surfcast-view: %s\n", message.c_str());
-    return 1;
-}
-
 }  // namespace
 
 int runHeadless(const ViewOptions& o, const SurfelSet& set) {
@@ -39,7 +34,7 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
     std::unique_ptr<SplatRenderer> renderer;
     if (!cpu) {
         auto c = gpu::createContext({o.device, o.validation, {}, false});
-        if (!c) return fail(c.status().message());
+        if (!c) return viewError(c.status().message());
         ctx = std::move(*c);
         auto r = SplatRenderer::create(*ctx, o.renderer);
         Status s = r ? r.value()->upload(set) : r.status();
@@ -47,14 +42,14 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
         if (!s) {
             renderer.reset();  // before the device it lives on
             gpu::destroyContext(ctx);
-            return fail(s.message());
+            return viewError(s.message());
         }
     }
     int status = 0;
     for (size_t f = 0; f < cameras.size() && status == 0; ++f) {
         auto view = makeViewTransform(cameras[f], set.origin, o.width, o.height);
         if (!view) {
-            status = fail("frame " + std::to_string(f) + ": " + view.status().message());
+            status = viewError("frame " + std::to_string(f) + ": " + view.status().message());
             break;
         }
         nlohmann::ordered_json line;
@@ -79,7 +74,7 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
             for (int i = 0; i < o.repeat; ++i) {
                 auto img = renderer->render(*view, o.settings, &stats);
                 if (!img) {
-                    status = fail("frame " + std::to_string(f) + ": " + img.status().message());
+                    status = viewError("frame " + std::to_string(f) + ": " + img.status().message());
                     break;
                 }
                 image = std::move(*img);
@@ -98,7 +93,7 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
         }
         std::string path = framePath(o.out, f, cameras.size());
         if (Status s = writePng(image, path); !s) {
-            status = fail(s.message());
+            status = viewError(s.message());
             break;
         }
         line["out"] = path;
@@ -111,13 +106,13 @@ int runHeadless(const ViewOptions& o, const SurfelSet& set) {
     if (ctx) {
         gpu::destroyContext(ctx);
     }
-    if (errors > 0 && status == 0) status = fail(std::to_string(errors) + " Vulkan validation error(s)");
+    if (errors > 0 && status == 0) status = viewError(std::to_string(errors) + " Vulkan validation error(s)");
     return status;
 }
 
 int runHeadlessLod(const ViewOptions& o) {
     auto c = gpu::createContext({o.device, o.validation, {}, false});
-    if (!c) return fail(c.status().message());
+    if (!c) return viewError(c.status().message());
     std::unique_ptr<gpu::Context> ctx = std::move(*c);
     int status = 0;
     const auto start = std::chrono::steady_clock::now();
@@ -127,7 +122,7 @@ int runHeadlessLod(const ViewOptions& o) {
         options.lod.targetPixels = *o.lod;
         options.renderer = o.renderer;
         auto client = SurfcastClient::open(*ctx, o.set, options);
-        if (!client) status = fail(client.status().message());
+        if (!client) status = viewError(client.status().message());
         RenderSettings settings = o.settings;
         std::vector<Camera> cameras = o.cameras;
         if (client) {
@@ -146,7 +141,7 @@ int runHeadlessLod(const ViewOptions& o) {
                 GpuFrameStats gpuStats;
                 auto rendered = frame ? client.value()->renderImage(settings, &gpuStats) : Result<Image>(frame.status());
                 if (!rendered) {
-                    status = fail("frame " + std::to_string(f) + ": " + rendered.status().message());
+                    status = viewError("frame " + std::to_string(f) + ": " + rendered.status().message());
                     break;
                 }
                 image = std::move(*rendered);
@@ -187,7 +182,7 @@ int runHeadlessLod(const ViewOptions& o) {
                     std::snprintf(suffix, sizeof suffix, "_r%03d.png", iteration);
                     path = path.substr(0, path.size() - (path.size() >= 4 && path.ends_with(".png") ? 4 : 0)) + suffix;
                     if (Status w = writePng(image, path); !w) {
-                        status = fail(w.message());
+                        status = viewError(w.message());
                         break;
                     }
                     line["redraw"] = path;
@@ -202,12 +197,12 @@ int runHeadlessLod(const ViewOptions& o) {
                 std::this_thread::sleep_for(std::chrono::milliseconds(kStreamPollMs));
             }
             if (status) break;
-            if (Status w = writePng(image, framePath(o.out, f, cameras.size())); !w) status = fail(w.message());
+            if (Status w = writePng(image, framePath(o.out, f, cameras.size())); !w) status = viewError(w.message());
         }
     }
     int errors = ctx->validationErrors.load();
     gpu::destroyContext(ctx);
-    if (errors > 0 && status == 0) status = fail(std::to_string(errors) + " Vulkan validation error(s)");
+    if (errors > 0 && status == 0) status = viewError(std::to_string(errors) + " Vulkan validation error(s)");
     return status;
 }
 

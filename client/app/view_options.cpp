@@ -117,6 +117,11 @@ bool parseFloat(const std::string& s, float* out) {
 
 }  // namespace
 
+int viewError(const std::string& message) {
+    std::fprintf(stderr, "surfcast-view: %s\n", message.c_str());
+    return 1;
+}
+
 std::string framePath(const std::string& out, size_t frame, size_t frames) {
     if (frames <= 1) return out;
     char suffix[32];

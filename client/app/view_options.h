@@ -49,4 +49,7 @@ RenderSettings effectiveSettings(const ViewOptions& options, const RenderSetting
 // "name_0003.png" for frame 3 of several; the path itself for a single frame.
 std::string framePath(const std::string& out, size_t frame, size_t frames);
 
+// Prints "surfcast-view: <message>" to stderr; returns 1, the exit code.
+int viewError(const std::string& message);
+
 }  // namespace surfcast

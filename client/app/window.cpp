@@ -115,11 +115,6 @@ void fly(GLFWwindow* w, WindowState& s, double seconds) {
     s.orbit.move(move * (0.5 * length(s.orbit.cam.eye - s.orbit.cam.target) * seconds));
 }
 
-int fail(const std::string& message) {
-    std::fprintf(stderr, "surfcast-view: %s\n", message.c_str());
-    return 1;
-}
-
 // The colouring after the C and G keys: the next mode the set can show, and
 // ground (ASPRS class 2) hidden or shown. Nullopt, with a message, when a key
 // asks for what the set lacks or --color fixes the colour.
@@ -144,20 +139,20 @@ std::optional<Coloring> keyedColoring(WindowState& s, const ViewOptions& o, cons
 
 int runWindow(const ViewOptions& o, const SurfelSet& set) {
     if (o.settings.mode == RenderMode::CpuReference)
-        return fail("the window draws the GPU modes; render cpu-reference with --headless");
-    if (!glfwInit()) return fail("cannot open a window (no display?); use --headless");
+        return viewError("the window draws the GPU modes; render cpu-reference with --headless");
+    if (!glfwInit()) return viewError("cannot open a window (no display?); use --headless");
     glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
     GLFWwindow* window = glfwCreateWindow(o.width, o.height, "surfcast-view", nullptr, nullptr);
     if (!window) {
         glfwTerminate();
-        return fail("cannot create a window");
+        return viewError("cannot create a window");
     }
     int status = 0;
     auto ctx = gpu::createContext({o.device, o.validation, gpu::windowInstanceExtensions(), true});
     if (!ctx) {
         glfwDestroyWindow(window);
         glfwTerminate();
-        return fail(ctx.status().message());
+        return viewError(ctx.status().message());
     }
     WindowState state;
     {
@@ -191,7 +186,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             if (reader) info = reader->info();
             else if (s) s = reader.status();
         }
-        if (!s) status = fail(s.message());
+        if (!s) status = viewError(s.message());
         const int direction = !o.lod && base.backfaceCull ? frontDirection(set) : 0;
         state.orbit.cam = o.cameras.empty() ? frameBox(bounds, double(o.width) / o.height, 45, direction) : o.cameras[0];
         state.mode = base.mode;
@@ -224,7 +219,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                                                                reloaded->translucent);
                 }
                 if (!rs) {
-                    status = fail(rs.message());
+                    status = viewError(rs.message());
                     break;
                 }
                 coloring = *c;
@@ -245,7 +240,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             if (client) {
                 auto fr = client->update(state.orbit.cam, W, H);
                 if (!fr) {
-                    status = fail(fr.status().message());
+                    status = viewError(fr.status().message());
                     break;
                 }
                 streamed = *fr;
@@ -254,7 +249,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                 source = client->output().image;
             } else {
                 if (Status rs = renderer->resize(extent.width, extent.height); !rs) {
-                    status = fail(rs.message());
+                    status = viewError(rs.message());
                     break;
                 }
                 if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
@@ -264,7 +259,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             }
             auto presented = gpu::presentFrame(**ctx, *swapchain, window, source, record);
             if (!presented) {
-                status = fail(presented.status().message());
+                status = viewError(presented.status().message());
                 break;
             }
             if (!*presented) continue;
@@ -288,7 +283,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
                 std::snprintf(name, sizeof(name), "surfcast-%04d.png", screenshots++);
                 std::string path = lastFrame && !o.screenshot.empty() ? o.screenshot : name;
                 Status ws = image ? writePng(*image, path) : image.status();
-                if (!ws) status = fail(ws.message());
+                if (!ws) status = viewError(ws.message());
                 else std::fprintf(stderr, "surfcast-view: wrote %s\n", path.c_str());
                 state.screenshot = false;
             }
@@ -302,7 +297,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
     gpu::destroyContext(*ctx);
     glfwDestroyWindow(window);
     glfwTerminate();
-    if (errors > 0 && status == 0) status = fail(std::to_string(errors) + " Vulkan validation error(s)");
+    if (errors > 0 && status == 0) status = viewError(std::to_string(errors) + " Vulkan validation error(s)");
     return status;
 }
 
