@@ -3,7 +3,7 @@
 # whose build scripts/sanitize.sh asan tests too) and runs them (fuzz/README.md):
 #   fuzz/run.sh replay [SECONDS]         every target over its seeds and regression
 #                                        cases, then SECONDS (default 10) of fuzzing
-#                                        each: what CI runs
+#                                        each, two targets at a time: what CI runs
 #   fuzz/run.sh campaign SECONDS [TARGET...]
 #                                        fuzz each target for SECONDS or 10^6 runs,
 #                                        whichever comes first, two at a time; the
@@ -63,14 +63,19 @@ replay_one() {  # one target over its seeds and regression cases, then $2 s of f
 }
 
 if [ "$mode" = replay ]; then
-  # Two targets at a time (each fuzzer is one process on one core).
+  # Two targets at a time (each fuzzer is one process on one core). `unwaited`
+  # counts jobs whose status has not been collected, finished or not, so that
+  # every job's status is read by one `wait -n`.
   seconds="${1:-10}"
   failed=0
+  unwaited=0
+  trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
   for t in "${targets[@]}"; do
+    if ((unwaited >= 2)); then wait -n || failed=1; unwaited=$((unwaited - 1)); fi
     replay_one "$t" "$seconds" &
-    if (($(jobs -rp | wc -l) >= 2)); then wait -n || failed=1; fi
+    unwaited=$((unwaited + 1))
   done
-  while (($(jobs -rp | wc -l) > 0)); do wait -n || failed=1; done
+  while ((unwaited > 0)); do wait -n || failed=1; unwaited=$((unwaited - 1)); done
   exit "$failed"
 fi
 

@@ -3,8 +3,9 @@
 // The solves run in parallel over groups, one per thread. Eigen's own OpenMP
 // (its sparse products) would start a team inside each, and with a single
 // thread per chunk worker (an inactive region) it does: 2 chunk workers then
-// ran 4 spinning threads on 2 cores, a multi-chunk build 25x slower.
-#define EIGEN_DONT_PARALLELIZE
+// ran 4 spinning threads on 2 cores, a multi-chunk build 25x slower. So the
+// library is compiled with EIGEN_DONT_PARALLELIZE (preprocess/CMakeLists.txt:
+// a define here would come too late in a unity batch that included Eigen).
 #include <Eigen/IterativeLinearSolvers>
 #include <Eigen/Sparse>
 #include <algorithm>
