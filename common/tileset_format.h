@@ -116,7 +116,7 @@ struct AttributeInfo {
     int quantizationBits = 0;  // Draco quantization of float attributes; 0 for integers
     // LiDAR attributes only (empty kind elsewhere): categorical or continuous,
     // and the value = stored · scale + offset.
-    std::string kind;
+    std::string kind{};  // ({}: brace lists may end before it, no -Wmissing-field-initializers)
     double scale = 1, offset = 0;
     bool operator==(const AttributeInfo&) const = default;
 };

@@ -29,8 +29,8 @@ struct Chunk {
     NodeKey key;
     uint64_t points = 0;
     uint64_t haloPoints = 0;
-    std::string file, haloFile;
-    std::string scalarFile;  // the points' stored scalar fields (ChunkWriter's scalarsPerPoint each), in file's order
+    std::string file{}, haloFile{};  // ({}: Chunk{key} leaves them empty, no -Wmissing-field-initializers)
+    std::string scalarFile{};  // the points' stored scalar fields (ChunkWriter's scalarsPerPoint each), in file's order
 };
 
 class ChunkLayout {

@@ -261,7 +261,7 @@ private:
     struct Column {
         const Field* field;
         std::unique_ptr<LzfStream> stream;
-        std::vector<uint8_t> values;
+        std::vector<uint8_t> values{};  // ({}: brace lists may end before it, no -Wmissing-field-initializers)
     };
 
     // Points go to `out` unless a coordinate is NaN (invalid pixels of

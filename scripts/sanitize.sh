@@ -5,8 +5,6 @@
 #                                            the libFuzzer targets fuzz/run.sh runs)
 #   scripts/sanitize.sh tsan [ctest args]   ThreadSanitizer, the tests labelled
 #                                            "threads" (tests/CMakeLists.txt)
-#   scripts/sanitize.sh --build-only PRESET  configure and build only (.ci/run builds
-#                                            beside the suites it runs)
 # Any sanitizer report fails the test that triggered it (UBSan halts, ASan and
 # LeakSanitizer exit non-zero). Builds into build-PRESET beside build/ (a
 # folder configured by an older preset, e.g. with GCC, wants `cmake --preset
@@ -14,21 +12,17 @@
 # suite, and why: bench/RELIABILITY.md, "What each CI stage covers".
 set -euo pipefail
 cd "$(dirname "$0")/.."
-usage="usage: scripts/sanitize.sh [--build-only] asan|tsan [ctest args]"
-build_only=0
-if [ "${1:-}" = --build-only ]; then build_only=1; shift; fi
-preset="${1:?$usage}"
+preset="${1:?usage: scripts/sanitize.sh asan|tsan [ctest args]}"
 shift
 case "$preset" in
   asan) target=all select=() ;;
   tsan) target=threaded_tests select=(-L threads) ;;
-  *) echo "$usage" >&2; exit 2 ;;
+  *) echo "usage: scripts/sanitize.sh asan|tsan [ctest args]" >&2; exit 2 ;;
 esac
 scripts/setup.sh --no-build --clang
 cmake --preset "$preset"
 cmake --build "build-$preset" --parallel --target "$target"
 scripts/test-venv.sh "build-$preset"
-((build_only)) && exit 0
 
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1

@@ -175,8 +175,11 @@ TEST(Octree, GeoreferencedLasKeepsCentimetres) {
     ASSERT_TRUE(set.ok());
     EXPECT_EQ(set->info().normalSource, "estimated-up");
     auto nodes = decodeAll(*set);
-    for (const auto& d : nodes)
-        if (!d.node.childMask) EXPECT_LE(stepOf(*set, d.node), 0.01) << d.node.key.name();
+    for (const auto& d : nodes) {
+        if (!d.node.childMask) {
+            EXPECT_LE(stepOf(*set, d.node), 0.01) << d.node.key.name();
+        }
+    }
     expectInputsInLeaves(*set, nodes, o.inputs);
     expectConesAndSpacing(*set, nodes);
 }

@@ -239,7 +239,9 @@ TEST(ServeCli, WellBehavedClientsAreServedUnderHostileLoad) {
     }
     // Memory: at most 4,096 connections with a 32 KiB buffer each (128 MiB,
     // docs/PROTOCOL.md) over the idle server's few MiB; the set is mapped.
-    if (test::kRssMeaningful) EXPECT_LT(rss, size_t(192) << 10) << "server peak RSS " << (rss >> 10) << " MiB";
+    if (test::kRssMeaningful) {
+        EXPECT_LT(rss, size_t(192) << 10) << "server peak RSS " << (rss >> 10) << " MiB";
+    }
 }
 
 // The browser viewer's folder at / (docs/PROTOCOL.md, "Viewer"): its files

@@ -384,8 +384,11 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
     allow.allowMissingTextures = true;
     auto allowed = openMeshReader(dir.file("bad.gltf"), allow);
     ASSERT_TRUE(allowed.ok()) << allowed.status().message();
-    for (const InputPoint& p : readAll(**allowed))
-        if (p.position.y < 5) EXPECT_EQ(p.color[0], 32768) << "0.5 of 65535, rounded";
+    for (const InputPoint& p : readAll(**allowed)) {
+        if (p.position.y < 5) {
+            EXPECT_EQ(p.color[0], 32768) << "0.5 of 65535, rounded";
+        }
+    }
 }
 
 namespace {
@@ -513,7 +516,9 @@ Result<TilesetReader> buildRectangle(const test::TempDir& dir, const std::string
                             filter, "-o", dir.file(filter)});
     if (build.exitCode != 0) return Status::error("surfcast-build failed: " + build.output);
     auto set = TilesetReader::open(dir.file(filter));
-    if (set.ok()) EXPECT_EQ(set->info().textureFilter, filter);
+    if (set.ok()) {
+        EXPECT_EQ(set->info().textureFilter, filter);
+    }
     return set;
 }
 

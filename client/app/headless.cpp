@@ -178,7 +178,7 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["converged"] = cf.converged;
                 if (o.saveRedraws) {
                     std::string path = framePath(o.out, f, cameras.size());
-                    char suffix[16];
+                    char suffix[32];
                     std::snprintf(suffix, sizeof suffix, "_r%03d.png", iteration);
                     path = path.substr(0, path.size() - (path.size() >= 4 && path.ends_with(".png") ? 4 : 0)) + suffix;
                     if (Status w = writePng(image, path); !w) {

@@ -1,0 +1,1 @@
+// Compiles the precompiled headers the test programs share (tests/CMakeLists.txt).
