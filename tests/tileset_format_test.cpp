@@ -146,7 +146,7 @@ TEST(TilesetFormat, TilesetJsonGoldenText) {
     info.bounds.min = {-1.5, 2.25, 1000000.5};
     info.bounds.max = {2, 3, 1000001};
     info.colorBits = 8;
-    info.attributes = {{"position", "uint32", 3, 0, ""}, {"color", "uint8", 3, 0, ""},
+    info.attributes = {{"position", "uint32", 3, 0}, {"color", "uint8", 3, 0},
                        {"intensity", "uint16", 1, 0, "continuous", 4, 100}};
     info.statistics.elevationMin = 1000000.5;
     info.statistics.elevationMax = 1000001;
@@ -299,7 +299,7 @@ TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
     info.bounds.min = {0, 0, 0};
     info.bounds.max = {1, 1, 1};
     info.colorBits = 8;
-    info.attributes = {{"position", "uint32", 3, 0, ""}, {"normal", "float32", 3, 8, ""}};
+    info.attributes = {{"position", "uint32", 3, 0}, {"normal", "float32", 3, 8}};
     info.normalSource = "input";
     info.weights = "none";
     const std::string good = writeTilesetJson(info);
