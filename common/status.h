@@ -12,10 +12,15 @@ namespace surfcast {
 class [[nodiscard]] Status {
 public:
     Status() = default;  // success
-    static Status error(std::string message) { return Status(std::move(message)); }
+    static Status error(std::string message) { return Status(std::move(message), false); }
+    // A fault that asking again may clear (a network error, a timeout, HTTP
+    // 408, 429 or 5xx); every other error is permanent: the same request gets
+    // the same answer, so callers that retry retry only these.
+    static Status transient(std::string message) { return Status(std::move(message), true); }
 
     bool ok() const { return !message_.has_value(); }
     explicit operator bool() const { return ok(); }
+    bool isTransient() const { return transient_; }
     // Human-readable reason; names the file and place where one is known.
     const std::string& message() const {
         assert(!ok());
@@ -23,8 +28,9 @@ public:
     }
 
 private:
-    explicit Status(std::string message) : message_(std::move(message)) {}
+    Status(std::string message, bool transient) : message_(std::move(message)), transient_(transient) {}
     std::optional<std::string> message_;
+    bool transient_ = false;
 };
 
 template <typename T>

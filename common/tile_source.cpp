@@ -14,8 +14,10 @@
 #include <condition_variable>
 #include <cstring>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <unordered_map>
+#include <utility>
 
 #include "sigpipe.h"
 
@@ -107,6 +109,33 @@ private:
     std::unordered_map<std::string, int> fds_;  // opened files by name
 };
 
+// A URL's scheme, host and port (the default one where none is given),
+// lower case; all empty when libcurl cannot parse the URL.
+struct Origin {
+    std::string scheme, host, port;
+    bool operator==(const Origin&) const = default;
+};
+
+Origin originOf(const std::string& url) {
+    Origin o;
+    CURLU* u = curl_url();
+    if (!u) return o;
+    if (curl_url_set(u, CURLUPART_URL, url.c_str(), 0) == CURLUE_OK) {
+        const std::pair<CURLUPart, std::string*> parts[] = {
+            {CURLUPART_SCHEME, &o.scheme}, {CURLUPART_HOST, &o.host}, {CURLUPART_PORT, &o.port}};
+        for (auto [part, out] : parts) {
+            char* value = nullptr;
+            if (curl_url_get(u, part, &value, CURLU_DEFAULT_PORT) == CURLUE_OK && value) {
+                *out = value;
+                for (char& c : *out) c = char(std::tolower(static_cast<unsigned char>(c)));
+            }
+            curl_free(value);
+        }
+    }
+    curl_url_cleanup(u);
+    return o;
+}
+
 // Requests from any number of threads run on one libcurl multi handle,
 // driven by one I/O thread. Over HTTP/2 they share one connection
 // (multiplexed: CURLOPT_PIPEWAIT makes a transfer wait for the first
@@ -119,8 +148,8 @@ class HttpSource : public TileSource {
 public:
     // base: scheme://host[:port]/path without a trailing slash; query: "" or "?...".
     HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers, CURLM* multi)
-        : base_(std::move(base)), query_(std::move(query)), options_(std::move(options)), headers_(headers), multi_(multi),
-          io_([this] { ioLoop(); }) {}
+        : base_(std::move(base)), query_(std::move(query)), origin_(originOf(base_)), options_(std::move(options)),
+          headers_(headers), multi_(multi), io_([this] { ioLoop(); }) {}
     ~HttpSource() override {
         {
             std::lock_guard lock(ioMutex_);
@@ -161,11 +190,12 @@ public:
         if (!r) return r.status();
         const std::string url = base_ + "/batch";
         if (r->status != 200) {
-            if (batch_ == Batch::Unknown && r->status >= 400 && r->status < 500) {
+            // Refused or redirected (a POST is not followed): a static host.
+            if (batch_ == Batch::Unknown && r->status >= 300 && r->status < 500) {
                 batch_ = Batch::No;
                 return ranges("blocks.bin", spans);
             }
-            return Status::error(url + ": HTTP " + std::to_string(r->status));
+            return httpError(url, r->status);
         }
         batch_ = Batch::Yes;
         // For each key in order: u32 little-endian length, then the blob.
@@ -173,10 +203,10 @@ public:
         const uint8_t* p = r->body.data();
         size_t at = 0, size = r->body.size();
         for (size_t i = 0; i < nodes.size(); ++i) {
-            if (size - at < 4) return Status::error(url + ": response ends before node " + nodes[i].key.name());
+            if (size - at < 4) return Status::transient(url + ": response ends before node " + nodes[i].key.name());
             uint32_t length = uint32_t(p[at]) | uint32_t(p[at + 1]) << 8 | uint32_t(p[at + 2]) << 16 | uint32_t(p[at + 3]) << 24;
             at += 4;
-            if (size - at < length) return Status::error(url + ": response ends inside node " + nodes[i].key.name());
+            if (size - at < length) return Status::transient(url + ": response ends inside node " + nodes[i].key.name());
             out.emplace_back(p + at, p + at + length);
             at += length;
         }
@@ -185,6 +215,13 @@ public:
 
 private:
     enum class Batch { Unknown, Yes, No };
+    // A handle handed to the I/O thread, and how its transfer ended.
+    struct Transfer {
+        CURL* handle = nullptr;
+        CURLcode code = CURLE_OK;
+        bool done = false;
+        bool redirected = false;  // pointed at a redirect's target, to run again
+    };
 
     // One GET of `name` (of byte range `range`, if not empty), or POST of
     // `post` to it. `wanted`: the status whose body is kept (any other is an
@@ -217,9 +254,9 @@ private:
         for (size_t k = 0; k < asked.size(); ++k) {
             if (!answers[k]) return answers[k].status();
             const auto [offset, size] = spans[asked[k]];
-            if (answers[k]->body.size() != size)
-                return Status::error(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
-                                     std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
+            if (answers[k]->body.size() != size)  // cut short: a connection that closed early
+                return Status::transient(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
+                                         std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
             out[asked[k]] = std::move(answers[k]->body);
         }
         return out;
@@ -263,8 +300,7 @@ private:
         if (!h) return nullptr;
         curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
         curl_easy_setopt(h, CURLOPT_PIPEWAIT, 1L);
-        curl_easy_setopt(h, CURLOPT_FOLLOWLOCATION, 1L);
-        curl_easy_setopt(h, CURLOPT_MAXREDIRS, long(kMaxRedirects));
+        curl_easy_setopt(h, CURLOPT_PROTOCOLS_STR, "http,https");  // redirects are followed by run()
         curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, long(kConnectTimeoutSeconds));
         // Stalled: under one byte per second for the whole timeout.
         curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
@@ -286,14 +322,16 @@ private:
         idle_.push_back(h);
     }
 
-    // Runs the requests at once on the I/O thread; an answer or an error each.
+    // Runs the requests at once on the I/O thread, following redirects
+    // (redirect() says which); an answer or an error each.
     std::vector<Result<Response>> run(const std::vector<Request>& requests) {
         const size_t n = requests.size();
         std::vector<Response> responses(n);
         std::vector<Sink> sinks(n);
         std::vector<Transfer> transfers(n);
         std::vector<std::array<char, CURL_ERROR_SIZE>> errors(n);
-        std::vector<std::string> urls(n);
+        std::vector<std::optional<Status>> refused(n);  // a redirect not followed, and why
+        std::vector<Transfer*> round;
         for (size_t i = 0; i < n; ++i) {
             const Request& q = requests[i];
             CURL* h = acquire();
@@ -301,8 +339,8 @@ private:
             if (!h) continue;
             sinks[i] = {h, q.wanted, q.maxBytes, 0, false, &responses[i].body};
             errors[i][0] = 0;
-            urls[i] = base_ + "/" + q.name + query_;
-            curl_easy_setopt(h, CURLOPT_URL, urls[i].c_str());
+            curl_easy_setopt(h, CURLOPT_URL, (base_ + "/" + q.name + query_).c_str());
+            curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
             curl_easy_setopt(h, CURLOPT_WRITEDATA, &sinks[i]);
             curl_easy_setopt(h, CURLOPT_ERRORBUFFER, errors[i].data());
             curl_easy_setopt(h, CURLOPT_RANGE, q.range.empty() ? nullptr : q.range.c_str());
@@ -315,18 +353,22 @@ private:
             } else {
                 curl_easy_setopt(h, CURLOPT_HTTPGET, 1L);
             }
+            round.push_back(&transfers[i]);
         }
-        {
-            std::lock_guard lock(ioMutex_);
-            for (Transfer& t : transfers)
-                if (t.handle) submitted_.push_back(&t);
-        }
-        curl_multi_wakeup(multi_);
-        {
-            std::unique_lock lock(ioMutex_);
-            ioDone_.wait(lock, [&] {
-                return std::all_of(transfers.begin(), transfers.end(), [](const Transfer& t) { return !t.handle || t.done; });
-            });
+        for (int hops = 0; !round.empty(); ++hops) {
+            perform(round);
+            round.clear();
+            for (size_t i = 0; i < n; ++i) {
+                CURL* h = transfers[i].handle;
+                if (!h || transfers[i].code != CURLE_OK || requests[i].post) continue;  // a POST is never redirected
+                Status why = redirect(transfers[i], hops);
+                if (!why.ok()) {
+                    refused[i] = std::move(why);
+                } else if (transfers[i].redirected) {
+                    sinks[i].dropped = 0;
+                    round.push_back(&transfers[i]);
+                }
+            }
         }
         std::vector<Result<Response>> out;
         for (size_t i = 0; i < n; ++i) {
@@ -336,11 +378,58 @@ private:
                 out.push_back(Status::error(shown + ": cannot start a libcurl transfer"));
                 continue;
             }
-            out.push_back(answer(h, shown, transfers[i].code, errors[i].data(), sinks[i], requests[i], std::move(responses[i])));
+            if (refused[i])
+                out.push_back(Status::error(shown + ": " + refused[i]->message()));
+            else
+                out.push_back(answer(h, shown, transfers[i].code, errors[i].data(), sinks[i], requests[i], std::move(responses[i])));
             curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
             release(h);
         }
         return out;
+    }
+
+    // Hands the transfers to the I/O thread and waits until all are done.
+    void perform(const std::vector<Transfer*>& transfers) {
+        {
+            std::lock_guard lock(ioMutex_);
+            for (Transfer* t : transfers) {
+                t->done = t->redirected = false;
+                t->code = CURLE_OK;
+                submitted_.push_back(t);
+            }
+        }
+        curl_multi_wakeup(multi_);
+        std::unique_lock lock(ioMutex_);
+        ioDone_.wait(lock, [&] { return std::all_of(transfers.begin(), transfers.end(), [](const Transfer* t) { return t->done; }); });
+    }
+
+    // After a transfer: if the host redirected it and the redirect is to be
+    // followed, points the handle at the new URL (Transfer::redirected) and
+    // returns success; an error says why a redirect is refused. Followed: to
+    // http or https only, never from https to http, at most kMaxRedirects
+    // hops; the user's headers (--header, --token-file) go to the set's own
+    // origin only, unless HttpOptions::redirectCredentials.
+    Status redirect(Transfer& t, int hops) {
+        CURL* h = t.handle;
+        long status = 0;
+        char* location = nullptr;
+        char* from = nullptr;
+        curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
+        curl_easy_getinfo(h, CURLINFO_REDIRECT_URL, &location);
+        curl_easy_getinfo(h, CURLINFO_EFFECTIVE_URL, &from);
+        const bool redirect = status == 301 || status == 302 || status == 303 || status == 307 || status == 308;
+        if (!redirect || !location || !from) return {};  // answered as it is
+        const std::string target = location, shown = target.substr(0, target.find('?'));
+        if (hops >= kMaxRedirects) return Status::error("more than " + std::to_string(kMaxRedirects) + " redirects (a loop?)");
+        const Origin to = originOf(target), at = originOf(from);
+        if (to.scheme != "http" && to.scheme != "https")
+            return Status::error("redirected to " + shown + ", which is not followed: only http and https are");
+        if (at.scheme == "https" && to.scheme == "http")
+            return Status::error("redirected to " + shown + ", which is not followed: https never gives way to plain http");
+        curl_easy_setopt(h, CURLOPT_URL, target.c_str());
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, to == origin_ || options_.redirectCredentials ? headers_ : nullptr);
+        t.redirected = true;
+        return {};
     }
 
     // What a finished transfer means for its request.
@@ -352,8 +441,10 @@ private:
         // The write callback stops an unwanted answer past kMaxErrorPageBytes:
         // its status says what went wrong, not the stopped transfer.
         const bool unwanted = q.wanted && r.status != q.wanted;
-        if (code != CURLE_OK && !(code == CURLE_WRITE_ERROR && unwanted))
-            return Status::error(shown + ": " + transferError(code, error));
+        if (code != CURLE_OK && !(code == CURLE_WRITE_ERROR && unwanted)) {
+            const std::string message = shown + ": " + transferError(code, error);
+            return permanentTransferError(code) ? Status::error(message) : Status::transient(message);
+        }
         if (unwanted) {
             if (r.status == 401 || r.status == 403)
                 return Status::error(shown + ": HTTP " + std::to_string(r.status) +
@@ -361,7 +452,7 @@ private:
             if (q.wanted == 206 && r.status == 200)
                 return Status::error(shown + ": the host ignores Range requests (it answered 200 with the whole file); "
                                      "serve the set from one that honours Range (nginx, an object store or CDN, surfcast-serve)");
-            return Status::error(shown + ": HTTP " + std::to_string(r.status));
+            return httpError(shown, r.status);
         }
         // A login page answers 200 in place of the file asked for.
         char* type = nullptr;
@@ -369,6 +460,27 @@ private:
         if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
         return r;
+    }
+
+    // An HTTP status that is not the answer wanted: transient where asking
+    // again may succeed (408, 429, 5xx), else permanent.
+    static Status httpError(const std::string& shown, long status) {
+        const std::string message = shown + ": HTTP " + std::to_string(status);
+        return status == 408 || status == 429 || status >= 500 ? Status::transient(message) : Status::error(message);
+    }
+
+    // Transfer errors that asking again cannot clear: the URL, the protocol,
+    // the host's certificate. Everything else (refused or reset connections,
+    // timeouts, name lookups) may pass, as when a server restarts.
+    static bool permanentTransferError(CURLcode code) {
+        switch (code) {
+        case CURLE_UNSUPPORTED_PROTOCOL:
+        case CURLE_URL_MALFORMAT:
+        case CURLE_PEER_FAILED_VERIFICATION:
+        case CURLE_SSL_CACERT_BADFILE:
+        case CURLE_SSL_CERTPROBLEM: return true;
+        default: return false;
+        }
     }
 
     std::string transferError(CURLcode code, const char* detail) const {
@@ -380,7 +492,6 @@ private:
         case CURLE_SSL_CONNECT_ERROR: {
             return "TLS with the host failed (" + why + ")" + (options_.caFile.empty() ? "" : "; --ca-file " + options_.caFile);
         }
-        case CURLE_TOO_MANY_REDIRECTS: return "more than " + std::to_string(kMaxRedirects) + " redirects (a loop?)";
         case CURLE_OPERATION_TIMEDOUT: return "no answer for " + std::to_string(options_.timeoutSeconds) + " s (" + why + ")";
         default: return why;
         }
@@ -426,15 +537,10 @@ private:
         }
     }
 
-    // A handle handed to the I/O thread, and how its transfer ended.
-    struct Transfer {
-        CURL* handle = nullptr;
-        CURLcode code = CURLE_OK;
-        bool done = false;
-    };
 
     static constexpr int kMaxRedirects = 8;
     std::string base_, query_;
+    Origin origin_;  // the set's: where the user's headers go
     HttpOptions options_;
     curl_slist* headers_;
     std::atomic<Batch> batch_{Batch::Unknown};

@@ -3,8 +3,9 @@
 // object store or CDN that honours Range). The project's only HTTP client
 // code, used by the viewer's streamer and by TilesetReader (surfcast-build
 // --info, surfcast-view without --lod): libcurl (TLS verified against the
-// system store, HTTP/2 where the host offers it, redirects, proxies from the
-// environment).
+// system store, HTTP/2 where the host offers it, proxies from the
+// environment), following redirects to http(s) only, never from https to
+// http, and with the user's headers to the set's own origin only.
 #pragma once
 
 #include <cstdint>
@@ -44,6 +45,9 @@ struct HttpOptions {
     std::string tokenFile;             // a file holding a bearer token: "Authorization: Bearer TOKEN"
     std::string caFile;                // PEM certificates to verify the host with, instead of the system store
     bool insecure = false;             // no certificate verification (tests only; warns on stderr)
+    // Send `headers` and the token to whatever origin a redirect leads to, too;
+    // by default only the set's own origin gets them.
+    bool redirectCredentials = false;
 };
 
 // "http://..." and "https://..." open an HTTP source (keep-alive, one

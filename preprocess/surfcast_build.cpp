@@ -40,8 +40,8 @@ the text file LIST, one per line.
   --seed N                seed of the built-in scene and mesh sampling (default 1)
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
-                          --ca-file F and --insecure say how to reach it, as in
-                          surfcast-view
+                          --redirect-credentials, --ca-file F and --insecure say how
+                          to reach it, as in surfcast-view
   --grid G                cells per axis of a node's sampling grid (default 128)
   --page-depth D          levels per hierarchy page, which a viewer fetches as it
                           reaches them (default 5)
@@ -174,6 +174,8 @@ int main(int argc, char** argv) {
             if (!value(&http.caFile)) return usageError("--ca-file wants a PEM file");
         } else if (a == "--insecure") {
             http.insecure = true;
+        } else if (a == "--redirect-credentials") {
+            http.redirectCredentials = true;
         } else if (a == "--default-scene") {
             opt.inputs.defaultScene = true;
         } else if (a == "--scene-points") {

@@ -320,6 +320,90 @@ TEST(Stream, OverHttpsFromNginxWithHttp2AndHttp11) {
     EXPECT_NE(loop.output.find("redirects (a loop?)"), std::string::npos) << loop.output;
 }
 
+// Redirects (common/tile_source.h): an https set is never sent on to plain
+// http nor to a scheme but http(s), and the user's credentials (--header,
+// --token-file) go to the set's own origin only, unless
+// --redirect-credentials. nginx on three loopback origins: A (https) wants
+// the credentials and redirects; B (http) and C (https, another port) serve
+// the set to anyone and log the headers they were sent.
+TEST(Stream, RedirectsKeepCredentialsAtHomeAndNeverDowngrade) {
+    TempDir dir;
+    std::filesystem::create_directories(dir.file("www/sets"));
+    auto b = test::buildScene(dir.file("www/sets/scene"), 20000, {"--capacity", "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    makeCertificates(dir);
+    test::writeFile(dir.file("token"), "s3cret-Token\n");
+    auto nginx = startNginx(dir.file("nginx"), 3, [&](const std::vector<int>& ports) {
+        const std::string tls = " ssl;\n  ssl_certificate " + dir.file("server.pem") + "; ssl_certificate_key " +
+                                dir.file("server.key") + ";\n";
+        const std::string a = std::to_string(ports[0]), http = std::to_string(ports[1]), other = std::to_string(ports[2]);
+        auto check = "if ($http_authorization != \"Bearer s3cret-Token\") { return 401; } "
+                     "if ($http_x_api_key != \"k3y-secret\") { return 401; } ";
+        return " log_format sent '\"$request\" auth=\"$http_authorization\" key=\"$http_x_api_key\"';\n"
+               " server {\n  listen 127.0.0.1:" + a + tls + "  root " + dir.file("www") + ";\n"
+               "  access_log " + dir.file("a.log") + " sent;\n"
+               "  location /sets/ { " + check + "}\n"
+               "  location /away/ { " + check + "rewrite ^/away/(.*)$ https://127.0.0.1:" + other + "/sets/$1 redirect; }\n"
+               "  location /down/ { " + check + "rewrite ^/down/(.*)$ http://127.0.0.1:" + http + "/sets/$1 redirect; }\n"
+               "  location /ftp/ { return 302 ftp://127.0.0.1:" + http + "/sets/scene/tileset.json; }\n }\n"
+               " server {\n  listen 127.0.0.1:" + http + ";\n  root " + dir.file("www") + ";\n"
+               "  access_log " + dir.file("http.log") + " sent;\n }\n"
+               " server {\n  listen 127.0.0.1:" + other + tls + "  root " + dir.file("www") + ";\n"
+               "  access_log " + dir.file("other.log") + " sent;\n }\n";
+    });
+    ASSERT_FALSE(nginx->ports.empty());
+    const std::string a = "https://127.0.0.1:" + std::to_string(nginx->ports[0]);
+    auto view = [&](const std::string& url, std::vector<std::string> extra) {
+        std::vector<std::string> args = {binary("surfcast-view"), "--headless", url, "--lod", "1", "--size", "64x48",
+                                         "--ca-file", dir.file("ca.pem"), "--token-file", dir.file("token"),
+                                         "--header", "X-Api-Key: k3y-secret", "--out", dir.file("x.png")};
+        args.insert(args.end(), extra.begin(), extra.end());
+        return run(args);
+    };
+    ASSERT_EQ(view(a + "/sets/scene", {}).exitCode, 0) << "the credentials open A's own set";
+    // So they do in the window without --lod, which once opened the set a
+    // second time without them (and so failed after loading it), once.
+    const size_t before = test::readFile(dir.file("a.log")).size();
+    auto window = run({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", binary("surfcast-view"), a + "/sets/scene",
+                       "--size", "64x48", "--frames", "2", "--ca-file", dir.file("ca.pem"), "--token-file", dir.file("token"),
+                       "--header", "X-Api-Key: k3y-secret", "--screenshot", dir.file("window.png")});
+    EXPECT_EQ(window.exitCode, 0) << window.output;
+    EXPECT_TRUE(std::filesystem::exists(dir.file("window.png"))) << window.output;
+    std::istringstream requests(test::readFile(dir.file("a.log")).substr(before));
+    int tilesetJson = 0;
+    for (std::string line; std::getline(requests, line);) tilesetJson += line.find("GET /sets/scene/tileset.json ") != std::string::npos;
+    EXPECT_EQ(tilesetJson, 1);
+
+    // To another origin: followed, without the credentials.
+    auto away = view(a + "/away/scene", {});
+    EXPECT_EQ(away.exitCode, 0) << away.output;
+    const std::string log = test::readFile(dir.file("other.log"));
+    EXPECT_NE(log.find("GET /sets/scene/blocks.bin"), std::string::npos) << log;
+    EXPECT_EQ(log.find("s3cret"), std::string::npos) << log;
+    EXPECT_EQ(log.find("k3y"), std::string::npos) << log;
+    // Opted in: they go along (so the log above would have shown them).
+    auto trusted = view(a + "/away/scene", {"--redirect-credentials"});
+    EXPECT_EQ(trusted.exitCode, 0) << trusted.output;
+    const std::string after = test::readFile(dir.file("other.log")).substr(log.size());
+    EXPECT_NE(after.find("auth=\"Bearer s3cret-Token\" key=\"k3y-secret\""), std::string::npos) << after;
+
+    // From https to http, or to another scheme: refused at once, naming both;
+    // the http origin never hears of it, opted in or not.
+    for (const std::vector<std::string>& extra : {std::vector<std::string>{}, std::vector<std::string>{"--redirect-credentials"}}) {
+        auto down = view(a + "/down/scene", extra);
+        EXPECT_EQ(down.exitCode, 1) << down.output;
+        EXPECT_NE(down.output.find(a + "/down/scene/tileset.json: redirected to http://127.0.0.1:" +
+                                   std::to_string(nginx->ports[1]) + "/sets/scene/tileset.json, which is not followed: "
+                                   "https never gives way to plain http"), std::string::npos)
+            << down.output;
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir.file("http.log")) && std::filesystem::file_size(dir.file("http.log")) > 0)
+        << test::readFile(dir.file("http.log"));
+    auto ftp = view(a + "/ftp/scene", {});
+    EXPECT_EQ(ftp.exitCode, 1) << ftp.output;
+    EXPECT_NE(ftp.output.find("which is not followed: only http and https are"), std::string::npos) << ftp.output;
+}
+
 // surfcast-serve --tls-cert/--tls-key --token-file: HTTPS from libmicrohttpd
 // (GnuTLS), batches included, behind a bearer token; with the token the
 // streamed image equals the folder's, without it 401 names the URL. A

@@ -16,9 +16,11 @@ int main(int argc, char** argv) {
             return 2;
         }
         if (options.headless) return surfcast::runHeadlessLod(options);
-        return surfcast::runWindow(options, surfcast::SurfelSet{});
+        return surfcast::runWindow(options, surfcast::SurfelSet{}, surfcast::TilesetInfo{});
     }
-    auto set = surfcast::loadSurfelSet(options.set, options.level, options.client.coloring, options.client.http, options.client.gpuBudget);
+    surfcast::TilesetInfo info;
+    auto set = surfcast::loadSurfelSet(options.set, options.level, options.client.coloring, options.client.http,
+                                       options.client.gpuBudget, &info);
     if (!set) {
         std::fprintf(stderr, "surfcast-view: %s\n", set.status().message().c_str());
         return 1;
@@ -30,5 +32,5 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "surfcast-view: warning: %s has no normalization weights; ewa-surfel draws every surfel at "
                              "weight 1 (build with --weights analytic, or run surfcast-weights on the set)\n",
                      options.set.c_str());
-    return options.headless ? surfcast::runHeadless(options, *set) : surfcast::runWindow(options, *set);
+    return options.headless ? surfcast::runHeadless(options, *set) : surfcast::runWindow(options, *set, info);
 }

@@ -89,6 +89,11 @@ reference.
                         with a URL: send this header with every request (repeatable)
   --token-file F        with a URL: send 'Authorization: Bearer TOKEN', the token read
                         from F (as surfcast-serve --token-file expects); never printed
+  --redirect-credentials
+                        with a URL: send --header and --token-file credentials to the
+                        hosts that redirects lead to as well; by default only SET's
+                        own origin (scheme, host, port) gets them. Redirects go to
+                        http(s) only, and never from https to http
   --ca-file F           with an https URL: verify the host against the PEM certificates
                         in F instead of the system's
   --insecure            with an https URL: do not verify certificates (tests only)
@@ -327,6 +332,8 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             o->client.http.caFile = v;
         } else if (a == "--insecure") {
             o->client.http.insecure = true;
+        } else if (a == "--redirect-credentials") {
+            o->client.http.redirectCredentials = true;
         } else if (a == "--connections") {
             if (!count(&o->client.connections, "--connections")) return false;
         } else if (a == "--repeat") {

@@ -137,7 +137,7 @@ std::optional<Coloring> keyedColoring(WindowState& s, const ViewOptions& o, cons
 
 }  // namespace
 
-int runWindow(const ViewOptions& o, const SurfelSet& set) {
+int runWindow(const ViewOptions& o, const SurfelSet& set, const TilesetInfo& setInfo) {
     if (o.settings.mode == RenderMode::CpuReference)
         return viewError("the window draws the GPU modes; render cpu-reference with --headless");
     if (!glfwInit()) return viewError("cannot open a window (no display?); use --headless");
@@ -160,7 +160,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
         // Either a whole set on one renderer, or a streamed one (--lod).
         std::unique_ptr<SplatRenderer> renderer;
         std::unique_ptr<SurfcastClient> client;
-        TilesetInfo info;  // for the colour keys
+        TilesetInfo info = setInfo;  // for the colour keys
         Coloring coloring = o.client.coloring;
         RenderSettings base = o.settings;
         Box3d bounds = set.bounds;
@@ -182,9 +182,6 @@ int runWindow(const ViewOptions& o, const SurfelSet& set) {
             auto r = SplatRenderer::create(**ctx, o.renderer);
             s = r ? r.value()->upload(set) : r.status();
             if (r) renderer = std::move(*r);
-            auto reader = TilesetReader::open(o.set);
-            if (reader) info = reader->info();
-            else if (s) s = reader.status();
         }
         if (!s) status = viewError(s.message());
         const int direction = !o.lod && base.backfaceCull ? frontDirection(set) : 0;

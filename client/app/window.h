@@ -7,9 +7,10 @@
 
 namespace surfcast {
 
-// Draws `set`; with --lod, streams options.set through a SurfcastClient
-// instead (level of detail per frame; `set` is unused) and --frames counts
-// only frames whose view has converged.
-int runWindow(const ViewOptions& options, const SurfelSet& set);
+// Draws `set`, loaded from the tile set `info` describes (its colour keys);
+// with --lod, streams options.set through a SurfcastClient instead (level of
+// detail per frame; `set` and `info` are unused) and --frames counts only
+// frames whose view has converged.
+int runWindow(const ViewOptions& options, const SurfelSet& set, const TilesetInfo& info);
 
 }  // namespace surfcast

@@ -186,10 +186,11 @@ Status checkChoice(const std::string& where, const TilesetInfo& info, const Leve
 }  // namespace
 
 Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice, const Coloring& coloring,
-                                const HttpOptions& http, size_t gpuBudget) {
+                                const HttpOptions& http, size_t gpuBudget, TilesetInfo* infoOut) {
     auto reader = TilesetReader::open(dir, http);
     if (!reader) return reader.status();
     const TilesetInfo& info = reader->info();
+    if (infoOut) *infoOut = info;
     SC_TRY(checkChoice(reader->describe(), info, choice, coloring));
     // A URL's set is streamed in whole: refused before any block is fetched
     // when it cannot fit the GPU budget.

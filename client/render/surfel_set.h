@@ -38,9 +38,10 @@ struct LevelChoice {
 // `tilesetDir` is a folder or an http(s) URL (tile_source.h; `http` says how
 // to reach it). A URL's nodes are fetched whole, one range each; more
 // surfels than `gpuBudget` bytes hold (32 each; 0: 1 GiB) is an error that
-// names --lod, which streams only what a view needs.
+// names --lod, which streams only what a view needs. `info`, if given, gets
+// the set's tileset.json as read.
 Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice& choice, const Coloring& coloring = {},
-                                const HttpOptions& http = {}, size_t gpuBudget = 0);
+                                const HttpOptions& http = {}, size_t gpuBudget = 0, TilesetInfo* info = nullptr);
 
 // An empty set for a tile set (origin, flags and kernel scale from its
 // tileset.json), and one decoded node's surfels appended to it, coloured and

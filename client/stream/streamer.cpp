@@ -199,16 +199,24 @@ void StreamingSet::unkeep(uint32_t node) {
     kept_.erase(it);
 }
 
-void StreamingSet::fail(uint32_t node, const std::string& message) {
+void StreamingSet::fail(uint32_t node, const Status& status) {
     pending_.erase(node);
     pendingBytes_ -= residentCost(node);
-    auto& f = failed_[node];
-    f.first += 1;
-    f.second = now() + backoffSeconds(f.first);
-    noteFailure(message);
-    if (f.first >= std::max(1, options_.maxTries))
-        stop(source_->describe() + ": node " + nodes()[node].key.name() + ": gave up after " + std::to_string(f.first) +
-             " tries; the last failed with: " + message);
+    failed(&failed_[node], source_->describe() + ": node " + nodes()[node].key.name(), status);
+}
+
+void StreamingSet::failed(std::pair<int, double>* attempts, const std::string& what, const Status& status) {
+    attempts->first += 1;
+    attempts->second = status.isTransient() ? now() + backoffSeconds(attempts->first) : HUGE_VAL;  // never again
+    noteFailure(status.message());
+    if (!status.isTransient()) {
+        if (permanent_.empty()) {
+            permanent_ = what + ": failed, not retried (asking again gets the same answer): " + status.message();
+            permanentAt_ = now();
+        }
+    } else if (attempts->first >= std::max(1, options_.maxTries)) {
+        stop(what + ": gave up after " + std::to_string(attempts->first) + " tries; the last failed with: " + status.message());
+    }
 }
 
 void StreamingSet::noteFailure(const std::string& message) {
@@ -247,13 +255,7 @@ bool StreamingSet::fetchPage(std::unique_lock<std::mutex>& lock) {
         lock.lock();
         if (!records) {
             pages_.erase(page);
-            auto& failed = failedPages_[page];
-            failed.first += 1;
-            failed.second = now() + backoffSeconds(failed.first);
-            noteFailure(records.status().message());
-            if (failed.first >= std::max(1, options_.maxTries))
-                stop(source_->describe() + "/hierarchy.bin: page " + std::to_string(page) + ": gave up after " +
-                     std::to_string(failed.first) + " tries; the last failed with: " + records.status().message());
+            failed(&failedPages_[page], source_->describe() + "/hierarchy.bin: page " + std::to_string(page), records.status());
             return true;
         }
         failedPages_.erase(page);
@@ -267,10 +269,12 @@ bool StreamingSet::fetchPage(std::unique_lock<std::mutex>& lock) {
 
 void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
     checkDue_ = false;
+    checking_ = true;
     lastCheck_ = now();
     lock.unlock();
     auto json = source_->file("tileset.json", kMaxTilesetJsonBytes);
     lock.lock();
+    checking_ = false;
     if (json && *json != tilesetJson_ && !stats_.setChanged) {
         stats_.setChanged = true;
         stats_.lastError = source_->describe() + ": the tile set changed since it was opened (rebuilt); open it again";
@@ -285,7 +289,11 @@ void StreamingSet::fetchLoop() {
         wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05),
                             [&] { return stopping_ || !wanted_.empty() || !wantedPages_.empty(); });
         if (stopping_) return;
-        if (checkDue_ && !stats_.setChanged && now() - lastCheck_ > 2.0) checkForRebuild(lock);
+        if (checkDue_ && !checking_ && !stats_.setChanged && (permanentAt_ > lastCheck_ || now() - lastCheck_ > 2.0))
+            checkForRebuild(lock);
+        // A permanent failure stops the stream once a check begun after it
+        // found the set unchanged (a rebuilt set is reported as such instead).
+        if (!permanent_.empty() && !checking_ && lastCheck_ >= permanentAt_) stop(permanent_);
         if (stats_.setChanged || stats_.gaveUp) continue;
         if (fetchPage(lock)) continue;  // pages first: they gate the nodes below them
         // The highest-priority wanted nodes that are neither pending nor
@@ -328,7 +336,7 @@ void StreamingSet::fetchLoop() {
         ++stats_.requests;
         stats_.fetchMs = (t1 - t0) * 1e3;
         if (!blobs) {
-            for (uint32_t node : indices) fail(node, blobs.status().message());
+            for (uint32_t node : indices) fail(node, blobs.status());
             continue;
         }
         for (size_t i = 0; i < indices.size(); ++i) {
@@ -379,7 +387,7 @@ void StreamingSet::decodeLoop() {
             continue;
         }
         if (!block) {
-            fail(job.node, block.status().message());
+            fail(job.node, block.status());
             continue;
         }
         if (version != coloringVersion_) {  // coloured the old way: again, first

@@ -14,11 +14,15 @@
 //
 // Residency has a byte budget: beyond it, update() evicts the least recently
 // used nodes that the view does not use (neither drawn nor refined through).
-// Faults (server gone, HTTP errors, short or corrupt blocks) are retried with
-// exponential backoff; they never stop drawing what is resident. After a
-// fault, tileset.json is fetched again (at most every 2 s): if the set was
-// rebuilt since it was opened, fetching stops and stats() says so, rather
-// than retrying blocks that can never match the hierarchy.
+// Transient faults (server gone, timeouts, resets, short responses, HTTP 408,
+// 429 and 5xx: Status::isTransient) are retried with exponential backoff,
+// up to maxTries; permanent ones (other 4xx, a CRC or decoding failure of the
+// set's fixed bytes, a page that fails its checks) stop fetching at once,
+// naming the node or page. Neither stops drawing what is resident. After a
+// fault, tileset.json is fetched again (at once after a permanent one, else
+// at most every 2 s): if the set was rebuilt since it was opened, fetching
+// stops and stats() says so, rather than failing on blocks that can never
+// match the hierarchy.
 //
 // Each resident node keeps its compressed block (about a third of its 32-byte
 // surfels), so setColoring() re-decodes what is resident without fetching:
@@ -46,9 +50,10 @@ struct StreamOptions {
     size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
     size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
     HttpOptions http;          // timeout (a stalled response fails and is retried), headers, token, CA
-    // Tries of one node before the stream gives up (StreamStats::gaveUp). With
-    // the backoff (0.1 s doubling to 5 s), 8 tries span about 11 s: past a
-    // server restart, short of a user's patience.
+    // Tries of one node or page through transient faults before the stream
+    // gives up (StreamStats::gaveUp). With the backoff (0.1 s doubling to
+    // 5 s), 8 tries span about 11 s: past a server restart, short of a user's
+    // patience. A permanent failure is not retried.
     int maxTries = 8;
     Coloring coloring;  // what decoded surfels are coloured by, and which classes are dropped (setColoring)
 };
@@ -66,10 +71,10 @@ struct StreamStats {
     // The set's tileset.json differs from the one opened (rebuilt on the
     // server): nothing more is fetched; open it again.
     bool setChanged = false;
-    // A node or page failed StreamOptions::maxTries times in a row (a server
-    // gone for good, a block that never passes its CRC or never decodes), or
-    // two nodes claim one page:
-    // nothing more is fetched, and lastError says which node and why.
+    // A node or page failed permanently (refused, not found, a block that
+    // fails its CRC or does not decode), or through StreamOptions::maxTries
+    // transient faults in a row (a server gone for good), or two nodes claim
+    // one page: nothing more is fetched, and lastError says which node and why.
     bool gaveUp = false;
 };
 
@@ -116,13 +121,17 @@ private:
     StreamingSet() = default;
     void fetchLoop();
     void decodeLoop();
-    void fail(uint32_t node, const std::string& message);  // with mutex_ held
+    void fail(uint32_t node, const Status& status);        // with mutex_ held
+    // A node's or page's failed attempt: retried after a backoff while
+    // transient and under maxTries, else the stream stops (a permanent one
+    // after a check for a rebuilt set). With mutex_ held.
+    void failed(std::pair<int, double>* attempts, const std::string& what, const Status& status);
     bool fetchPage(std::unique_lock<std::mutex>& lock);    // one wanted page, if any is due
     // Page `page`, whose first record is `root`'s, fetched and checked
     // (readHierarchyPage), without mutex_.
     Result<std::vector<NodeRecord>> fetchPageRecords(uint32_t page, const NodeKey& root) const;
     void stop(const std::string& message);                 // gave up, with mutex_ held
-    void noteFailure(const std::string& message);          // a transient one, with mutex_ held
+    void noteFailure(const std::string& message);          // counted and kept for stats(), with mutex_ held
     void addPages();                                        // those fetched, to the tree, with mutex_ held
     void checkForRebuild(std::unique_lock<std::mutex>& lock);
     using Block = std::shared_ptr<const std::vector<uint8_t>>;
@@ -170,7 +179,12 @@ private:
     std::unordered_map<uint32_t, std::pair<int, double>> failedPages_;
     StreamStats stats_;
     bool checkDue_ = false;  // a fault happened: has the set changed?
-    double lastCheck_ = 0;
+    bool checking_ = false;  // a check is in flight
+    double lastCheck_ = 0;   // when the last check began
+    // The first permanent failure and when: the stream stops with it unless
+    // the set changed.
+    std::string permanent_;
+    double permanentAt_ = 0;
     bool stopping_ = false;
     std::vector<std::thread> fetchers_, decoders_;
 };

@@ -1,8 +1,11 @@
 // Where a tile set's bytes come from: its folder URL on any host that honours
 // Range (nginx, an object store, a CDN, surfcast-serve), with surfcast-serve's
 // POST {set}/batch where the host is surfcast-serve. Transient faults
-// (network errors, 408, 429, 5xx) are retried with backoff by the caller;
-// everything else is an error naming the URL and the status.
+// (network errors, responses cut short, 408, 429, 5xx: HttpError.transient)
+// are retried with backoff by the caller; everything else, and any error that
+// is not an HttpError (a CRC or decoding failure of the set's fixed bytes),
+// fails at once, naming the URL or node, as in the C++ client
+// (client/stream/streamer.h).
 
 export class HttpError extends Error {
   constructor(message: string, readonly transient: boolean) {
@@ -54,7 +57,12 @@ export class TileSource {
   private async body(r: Response, limit: number, what: string): Promise<Uint8Array> {
     const declared = Number(r.headers.get("Content-Length") ?? "0");
     if (declared > limit) throw new HttpError(`${what}: ${declared} bytes, more than the ${limit} expected`, false);
-    const bytes = new Uint8Array(await r.arrayBuffer());
+    let bytes: Uint8Array;
+    try {
+      bytes = new Uint8Array(await r.arrayBuffer());
+    } catch (e) {
+      throw new HttpError(`${what}: the response broke off (${(e as Error).message})`, true);
+    }
     if (bytes.length > limit) throw new HttpError(`${what}: ${bytes.length} bytes, more than the ${limit} expected`, false);
     this.bytes += bytes.length;
     return bytes;

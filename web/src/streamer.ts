@@ -5,8 +5,10 @@
 // most `connections` requests at a time (batches of nodes where the host is
 // surfcast-serve, Range requests elsewhere). Blocks are checked (CRC, Draco
 // header) and decoded in Web Workers; the surfels are uploaded as they
-// arrive. Faults are retried with backoff (0.1 s doubling to 5 s) up to
-// maxTries times, then the stream stops, naming the node and why. Residency
+// arrive. Transient faults (source.ts) are retried with backoff (0.1 s
+// doubling to 5 s) up to maxTries times; permanent ones (other HTTP errors, a
+// block that fails its CRC or decoding, a page that fails its checks) are
+// not. Either way the stream then stops, naming the node and why. Residency
 // has a byte budget: beyond it the least recently used nodes that the view
 // does not use are evicted.
 
@@ -54,7 +56,7 @@ async function withRetries<R>(tries: number, attempt: () => Promise<R>, stopped:
     try {
       return await attempt();
     } catch (e) {
-      const transient = !(e instanceof HttpError) || e.transient;
+      const transient = e instanceof HttpError && e.transient;
       if (!transient || i >= tries || stopped()) throw e;
       await new Promise((r) => setTimeout(r, delay));
       delay = Math.min(2 * delay, 5000);
@@ -295,7 +297,7 @@ export class Streamer<T> {
     ++this.stats.failures;
     const tries = (this.tries.get(i) ?? 0) + 1;
     this.tries.set(i, tries);
-    const transient = !(err instanceof HttpError) || err.transient;
+    const transient = err instanceof HttpError && err.transient;
     this.stats.lastError = err.message;
     if (!transient || tries >= this.options.maxTries) {
       this.fail(`node ${this.selector.nodes[i].key}: ${err.message}${tries > 1 ? ` (after ${tries} tries)` : ""}`);

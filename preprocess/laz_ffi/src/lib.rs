@@ -145,7 +145,7 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usi
     // The chunk table (at the end of the file) says how many points there are:
     // a truncated file or a wrong header count fails here, before any work.
     check_chunk_count(path, data_offset, point_count, chunk_size)?;
-    match ChunkTable::read_from(open_at_data()?, &vlr) {
+    let chunks = match ChunkTable::read_from(open_at_data()?, &vlr) {
         Ok(table) => {
             check_layer_sizes(path, data_offset, &vlr, &table)?;
             let chunks = table.len() as u64;
@@ -160,11 +160,14 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usi
                     point_count, chunks, chunk_size
                 ));
             }
+            chunks
         }
         Err(e) => return Err(format!("cannot read the chunk table (truncated file?): {}", e)),
-    }
+    };
 
-    let decompressor = if threads > 1 {
+    // Chunks are the unit of parallel decoding: a file of one chunk (small
+    // tiles, thousands per scan) decodes on the caller's thread.
+    let decompressor = if threads > 1 && chunks > 1 {
         let pool = shared_pool(threads)?;
         let d = ParLasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
         Decompressor::Parallel(d, pool)
