@@ -158,6 +158,10 @@ uint32_t dracoTypeBytes(uint8_t type) {
 }
 Result<DracoHeader> readDracoHeader(const uint8_t* data, size_t size) {
     if (size < 17 || std::memcmp(data, "DRACO", 5) != 0) return Status::error("not a Draco block");
+    // The fields below sit where bitstream 2.x (Draco 1.5's) puts them.
+    if (data[5] != 2)
+        return Status::error("the Draco block is bitstream version " + std::to_string(data[5]) + "." + std::to_string(data[6]) +
+                             "; readers take 2.x");
     if (data[7] != 0) return Status::error("the Draco block is not a point cloud");
     if (data[8] != 1) return Status::error("the Draco block is not kd-tree coded");
     if ((data[9] | data[10] << 8) & 0x8000) return Status::error("the Draco block carries metadata");

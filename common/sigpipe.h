@@ -3,9 +3,11 @@
 // (fuzz_client_response died so, with status 141, under cpp-httplib). libcurl
 // sends with MSG_NOSIGNAL, but OpenSSL's writes on a TLS connection do not,
 // and with CURLOPT_NOSIGNAL (needed in threads) libcurl leaves SIGPIPE alone.
-// While a request is in flight the calling thread blocks SIGPIPE, so the
-// write fails with EPIPE instead, and a SIGPIPE it raised is taken before
-// unblocking. The process's own SIGPIPE disposition is left alone.
+// The HTTP tile source's I/O thread, which makes every write, holds a
+// SigpipeBlock for its whole life: SIGPIPE is blocked in that thread, so the
+// write fails with EPIPE instead, and a SIGPIPE raised meanwhile is taken
+// before the mask is restored (unless one was already pending on entry). The
+// process's own SIGPIPE disposition is left alone.
 #pragma once
 
 #include <signal.h>

@@ -50,10 +50,11 @@ struct HttpOptions {
     bool redirectCredentials = false;
 };
 
-// "http://..." and "https://..." open an HTTP source (keep-alive, one
-// connection per calling thread; a query string, such as a shared access
-// signature, is kept on every request and left out of messages); anything
-// else is a local folder.
+// "http://..." and "https://..." open an HTTP source (all requests run on one
+// libcurl multi handle driven by one I/O thread: one multiplexed connection
+// over HTTP/2, up to 6 keep-alive connections over HTTP/1.1; a query string,
+// such as a shared access signature, is kept on every request and left out of
+// messages); anything else is a local folder.
 Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http = {});
 bool isUrl(const std::string& location);
 

@@ -184,6 +184,12 @@ Result<std::vector<NodeRecord>> readHierarchyPage(const HierarchyIndex& index, u
         if (r.blockOffset > blocksBytes || r.blockSize > blocksBytes - r.blockOffset)
             return fail(node + " points past the end of blocks.bin (block offset + size: " + std::to_string(r.blockOffset) +
                         " + " + std::to_string(r.blockSize) + " of " + std::to_string(blocksBytes) + " bytes)");
+        // Positions are min + q * edge / (2^b - 1): b = 0 divides by zero, b >= 64
+        // shifts past a u64; h sizes every splat.
+        if (r.positionBits < 1 || r.positionBits > kMaxPositionBits)
+            return fail(node + ": " + std::to_string(r.positionBits) + " position bits, not 1 to " + std::to_string(kMaxPositionBits));
+        if (!(std::isfinite(r.spacing) && r.spacing > 0))
+            return fail(node + ": spacing " + std::to_string(r.spacing) + " is not a positive number");
         // Decoders size buffers by this count (decodeBlock checks the block against it).
         if (r.surfelCount > kMaxBlockPoints)
             return fail(node + " declares " + std::to_string(r.surfelCount) + " surfels, more than the " +

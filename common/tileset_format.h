@@ -48,6 +48,11 @@ enum NodeFlags : uint16_t {
     kFlagEdgeWeights = 1u << 4,    // block carries per-surfel edge-weight ratios (captured weights)
 };
 
+// Most quantization bits per position axis a record may declare: what
+// surfcast-build writes at most (a node's edge in 2^30 steps is finer than
+// the float positions renderers draw).
+inline constexpr int kMaxPositionBits = 30;
+
 // One node of the octree as stored in hierarchy.bin (64 bytes, little-endian).
 struct NodeRecord {
     NodeKey key;
@@ -60,7 +65,7 @@ struct NodeRecord {
     float spacing = 0;           // h, world units
     Vec3f coneAxis{0, 0, 1};     // unit vector, world space
     float coneCosHalfAngle = -1; // cos of the cone's half-angle; -1 with kFlagConeFull
-    uint8_t positionBits = 0;    // quantization bits per axis of the block's positions
+    uint8_t positionBits = 0;    // quantization bits per axis of the block's positions, 1 to kMaxPositionBits
     uint32_t childPage = kNoPage;
 
     bool operator==(const NodeRecord&) const = default;
@@ -100,7 +105,7 @@ Result<HierarchyIndex> readHierarchyIndex(std::span<const uint8_t> bytes, uint64
 // root key for page 0), records in breadth-first order with every child
 // present, child pages after this one, levels up to kMaxLevel, and every
 // node's block inside blocks.bin's blocksBytes with at most kMaxBlockPoints
-// surfels. Returns the page's records, leaving out a later page's first
+// surfels, 1 to kMaxPositionBits position bits and a finite spacing > 0. Returns the page's records, leaving out a later page's first
 // record, which repeats its proxy in an earlier page.
 Result<std::vector<NodeRecord>> readHierarchyPage(const HierarchyIndex& index, uint32_t page, std::span<const uint8_t> bytes,
                                                   const NodeKey& root, uint64_t blocksBytes, const std::string& what);
@@ -110,12 +115,12 @@ Result<std::vector<NodeRecord>> readHierarchyPage(const HierarchyIndex& index, u
 Result<std::vector<NodeRecord>> readHierarchy(const std::vector<uint8_t>& bytes, const std::string& what);
 
 struct AttributeInfo {
-    std::string name;       // position, normal, color, weight, radius, edge_weight, or a LiDAR attribute
+    std::string name;       // position, normal, color, weight, radius, edge_weight, a LiDAR attribute, opacity or a scalar
     std::string type;       // uint8, uint16, uint32, float32
     int components = 0;
     int quantizationBits = 0;  // Draco quantization of float attributes; 0 for integers
-    // LiDAR attributes only (empty kind elsewhere): categorical or continuous,
-    // and the value = stored · scale + offset.
+    // LiDAR, opacity and scalar attributes only (empty kind for the fixed ones):
+    // categorical or continuous, and the value = stored · scale + offset.
     std::string kind{};  // ({}: brace lists may end before it, no -Wmissing-field-initializers)
     double scale = 1, offset = 0;
     bool operator==(const AttributeInfo&) const = default;
@@ -147,7 +152,7 @@ struct TilesetInfo {
     TilesetStatistics statistics;
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none
-    std::string textureFilter;  // ewa | nearest where the set was built from textured meshes; empty otherwise
+    std::string textureFilter;  // optimal | ewa | nearest where the set was built from textured meshes; empty otherwise
     double kernelScale = 1.0;  // k of the reconstruction kernel V^r = (k h)^2 I the weights assume
     uint64_t hierarchyBytes = 0;
     uint32_t hierarchyPages = 0;

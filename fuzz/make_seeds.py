@@ -225,7 +225,9 @@ def set_seeds(sets, tileset_dst, block_dst):
         js = open(os.path.join(d, "tileset.json"), "rb").read()
         hier = open(os.path.join(d, "hierarchy.bin"), "rb").read()
         blocks = open(os.path.join(d, "blocks.bin"), "rb").read()
-        out(os.path.join(tileset_dst, name), js + b"\0" + hier)
+        # fuzz_tileset reads blocks.bin's first bytes after the hierarchy: as
+        # many as run.sh's -max_len leaves (the first records' blocks).
+        out(os.path.join(tileset_dst, name), js + b"\0" + hier + blocks[:max(0, 65536 - len(js) - 1 - len(hier))])
         # The first records of page 0: each block with the flags its set declares.
         pages = struct.unpack_from("<I", hier, 12)[0]
         page0 = struct.unpack_from("<Q", hier, 32)[0]

@@ -24,8 +24,8 @@ public:
     uint64_t line() const { return line_; }      // 1-based line of the next byte (text formats)
     uint64_t fileSize() const { return fileSize_; }
 
-    // Copies exactly n bytes; false at end of file (nothing partial is consumed... the
-    // offset then names where the data ran out).
+    // Copies exactly n bytes; false at end of file, with what was left consumed
+    // (the offset then names where the data ran out).
     bool readBytes(void* dst, size_t n);
     bool skip(uint64_t n);
     bool seek(uint64_t absolute);

@@ -43,7 +43,7 @@ struct ScalarSelection {
 
 struct InputDescription {
     std::string path;
-    std::string format;              // "ply", "las", "text", "mesh", "scene"
+    std::string format;              // "ply", "las", "laz", "pcd", "text", "mesh", "scene"
     uint64_t declaredPoints = 0;     // from the header; 0 when the format has no count
     bool hasNormals = false;
     bool hasColors = false;

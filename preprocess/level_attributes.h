@@ -20,12 +20,14 @@
 // r_i = clamp(d_k(i), P5, h), so r_i <= h always and h stays the bound the
 // client's level choice relies on.
 //
-// Weights (Ren et al. 2002, §7.1, analytic form): s_k = 1 / Σ_j g_k(u_j - u_k),
+// Weights (Ren et al. 2002, §7.1, analytic form): s_k = 1 / Σ_j g_j(u_j - u_k),
 // summed over surfel k and its neighbours j, with u_j - u_k projected into the
-// tangent plane of k, g_k(u) = exp(-|u|²/(2 r²)), r = r_k (or h), truncated at
-// the renderer's cutoff |u| <= sqrt(2c)·r, and only over neighbours whose
-// normals face the same side (a close opposite surface is hidden by the
-// visibility pass and must not darken this one).
+// tangent plane of k, g_j(u) = exp(-|u|²/(2 ρ_j²)) with each neighbour's own
+// width as the renderer draws it, ρ_j = kernelScale · (r_j, or j's node's h) (a
+// halo surfel takes ρ_k), truncated at the renderer's cutoff |u| <= sqrt(2c)·ρ_j,
+// and only over neighbours within z_t·ρ_k of k's tangent plane whose normals
+// face the same side (a close opposite surface is hidden by the visibility
+// pass and must not darken this one).
 #pragma once
 
 #include <span>

@@ -19,7 +19,7 @@ public:
     // producing exactly `outputSize` bytes.
     LzfStream(ByteStream in, uint64_t compressedSize, uint64_t outputSize);
 
-    // Next n bytes of output (n <= kMaxRead per call).
+    // Next n bytes of output, any n (decoded kRing / 4 bytes at a time).
     Status read(uint8_t* out, size_t n);
     Status skip(uint64_t n);
     uint64_t produced() const { return produced_; }

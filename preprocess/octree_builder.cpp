@@ -34,7 +34,6 @@ namespace {
 constexpr double kUnknownPrecisionFraction = 256;
 // Float32 coordinates: 24 significant bits.
 constexpr double kFloat32Epsilon = 0x1.0p-24;
-constexpr int kMaxPositionBits = 30;
 // A default scan origin farther from the data than this many data extents is ignored.
 constexpr double kFarOrigin = 10;
 // Data whose height is under this fraction of its width is terrain: normals up.

@@ -62,7 +62,7 @@ struct BuildSummary {
     uint64_t peakRss = 0;
     std::string normalSource;
     int colorBits = 0;
-    std::vector<std::string> attributes;  // LiDAR attributes stored
+    std::vector<std::string> attributes;  // LiDAR attributes, opacity and scalar fields stored
     std::string textureFilter;            // textureFilterName() where a textured mesh was read, else empty
     FitReport textureFit;                 // the optimal filter's solves
 

@@ -1,4 +1,4 @@
-// The HTTP front of the server (docs/PROTOCOL.md). cpp-httplib stays inside
+// The HTTP front of the server (docs/PROTOCOL.md). libmicrohttpd stays inside
 // http_server.cpp; this header is free of it.
 #pragma once
 
@@ -23,8 +23,7 @@ struct ServerConfig {
     LogLevel log = LogLevel::Requests;
     size_t maxBatch = 256;           // nodes per batch request
     size_t maxRanges = 16;           // ranges per Range header
-    int timeoutSeconds = 10;         // read/write timeout: stalled clients are dropped
-    int keepAliveSeconds = 10;       // idle keep-alive connections close after this
+    int timeoutSeconds = 10;         // inactivity timeout: stalled clients and idle keep-alive connections are dropped
     // HTTPS (libmicrohttpd's GnuTLS) when both are set: the PEM texts of the
     // certificate chain and of its private key.
     std::string tlsCertificate, tlsKey;
@@ -41,7 +40,7 @@ public:
     Status bind();       // listens; with port 0, port() tells the one chosen
     int port() const;
     void run();          // serves until stop(); call after bind()
-    void stop();         // thread-safe; run() returns after in-flight requests finish
+    void stop();         // thread-safe; run() returns after in-flight requests finish (waiting at most 5 s)
     const Metrics& metrics() const;
 
 private:

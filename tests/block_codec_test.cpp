@@ -94,6 +94,20 @@ TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
     auto method = decodeBlock(sequential.data(), sequential.size(), e);
     ASSERT_FALSE(method.ok());
     EXPECT_NE(method.status().message().find("not kd-tree coded"), std::string::npos) << method.status().message();
+    // Bytes 5 and 6: the bitstream's major and minor version. The fields read
+    // above are where Draco 2.x puts them; any other major is refused before
+    // they are trusted (it once was not looked at).
+    ASSERT_EQ((*bytes)[5], 2) << "Draco 1.5 writes bitstream 2.x";
+    for (uint8_t major : {uint8_t(0), uint8_t(1), uint8_t(3), uint8_t(255)}) {
+        std::vector<uint8_t> other = *bytes;
+        other[5] = major;
+        auto version = decodeBlock(other.data(), other.size(), e);
+        ASSERT_FALSE(version.ok()) << int(major);
+        EXPECT_NE(version.status().message().find("the Draco block is bitstream version " + std::to_string(major) + "." +
+                                                  std::to_string((*bytes)[6]) + "; readers take 2.x"),
+                  std::string::npos)
+            << version.status().message();
+    }
     // Draco sized each attribute by the descriptors that follow (2 GB from a
     // small block); their count must be the set's, and each has 1 to 4
     // components. Byte 16: the attribute count; 17-20 the first descriptor.

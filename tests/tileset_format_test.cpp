@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 #include <map>
 
 #include "crc32.h"
@@ -29,6 +30,14 @@ NodeRecord sampleRecord() {
     r.childPage = kNoPage;
     return r;
 }
+// A record readers accept (readHierarchyPage): position bits and spacing
+// set, the rest as given.
+NodeRecord valid() {
+    NodeRecord r;
+    r.spacing = 0.25f;
+    r.positionBits = 16;
+    return r;
+}
 }  // namespace
 
 TEST(TilesetFormat, RecordGoldenBytes) {
@@ -51,7 +60,7 @@ TEST(TilesetFormat, RecordGoldenBytes) {
 }
 
 TEST(TilesetFormat, HierarchyHeaderAndSinglePage) {
-    NodeRecord root;
+    NodeRecord root = valid();
     root.surfelCount = 7;
     std::vector<uint8_t> bytes = writeHierarchy({root});
     ASSERT_EQ(bytes.size(), 32u + 16u + 64u);
@@ -74,13 +83,13 @@ TEST(TilesetFormat, HierarchyPagesRoundTrip) {
     std::vector<NodeRecord> nodes;
     NodeKey key;
     for (int level = 0; level <= 8; ++level) {
-        NodeRecord r;
+        NodeRecord r = valid();
         r.key = key;
         r.surfelCount = uint32_t(100 + level);
         r.childMask = level < 8 ? 0x03 : 0;
         nodes.push_back(r);
         if (level < 8) {
-            NodeRecord sibling;
+            NodeRecord sibling = valid();
             sibling.key = key.child(1);
             sibling.surfelCount = 1;
             nodes.push_back(sibling);
@@ -113,9 +122,9 @@ TEST(TilesetFormat, HierarchyPagesRoundTrip) {
 }
 
 TEST(TilesetFormat, HierarchyRejectsCorruption) {
-    NodeRecord root;
+    NodeRecord root = valid();
     root.childMask = 1;
-    NodeRecord child;
+    NodeRecord child = valid();
     child.key = NodeKey{}.child(0);
     std::vector<uint8_t> bytes = writeHierarchy({root, child});
     auto flipped = bytes;
@@ -341,11 +350,11 @@ TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
 // block inside blocks.bin's declared size (the streaming client once asked for
 // a block 4 GB past the end and retried forever).
 TEST(TilesetFormat, HierarchyOfASetChecksSizesAndBlockRanges) {
-    NodeRecord root;
+    NodeRecord root = valid();
     root.childMask = 1;
     root.blockOffset = 0;
     root.blockSize = 100;
-    NodeRecord child;
+    NodeRecord child = valid();
     child.key = NodeKey{}.child(0);
     child.blockOffset = 100;
     child.blockSize = 50;
@@ -387,14 +396,14 @@ TEST(TilesetFormat, HierarchyValidatesPageByPage) {
     std::vector<NodeRecord> nodes;
     NodeKey key;
     for (int level = 0; level <= 8; ++level) {
-        NodeRecord r;
+        NodeRecord r = valid();
         r.key = key;
         r.childMask = level < 8 ? 0x03 : 0;
         r.blockOffset = uint64_t(level) * 10;
         r.blockSize = 10;
         nodes.push_back(r);
         if (level < 8) {
-            NodeRecord sibling;
+            NodeRecord sibling = valid();
             sibling.key = key.child(1);
             sibling.blockOffset = 100 + uint64_t(level) * 10;
             sibling.blockSize = 10;
@@ -458,4 +467,48 @@ TEST(TilesetFormat, HierarchyValidatesPageByPage) {
     EXPECT_NE(crc.status().message().find("CRC"), std::string::npos) << crc.status().message();
     EXPECT_FALSE(readHierarchyPage(*index, 2, pageBytes(2).first(64), root2, 180, "h.bin").ok());
     EXPECT_FALSE(readHierarchyPage(*index, 4, pageBytes(2), root2, 180, "h.bin").ok());
+}
+
+TEST(TilesetFormat, PagesRejectBadPositionBitsAndSpacing) {
+    // Untrusted records: 0 position bits made surfelPosition divide by
+    // 2^0 - 1 = 0, 64 or more shifted past a u64 (undefined); a spacing that
+    // is not a positive number sizes every splat of the node. Each is refused
+    // where the page is read, naming the node; 1 and kMaxPositionBits pass.
+    auto readOne = [](NodeRecord r) {
+        const std::vector<uint8_t> bytes = writeHierarchy({r});
+        auto index = readHierarchyIndex(bytes, bytes.size(), "h.bin");
+        EXPECT_TRUE(index.ok()) << index.status().message();
+        const HierarchyPageEntry& e = index->pages[0];
+        return readHierarchyPage(*index, 0, std::span(bytes).subspan(e.offset, size_t(e.records) * kRecordSize), NodeKey{},
+                                 ~uint64_t(0), "h.bin");
+    };
+    for (int bits : {1, kMaxPositionBits}) {
+        NodeRecord r = valid();
+        r.positionBits = uint8_t(bits);
+        EXPECT_TRUE(readOne(r).ok()) << bits;
+    }
+    for (int bits : {0, kMaxPositionBits + 1, 63, 64, 255}) {
+        NodeRecord r = valid();
+        r.positionBits = uint8_t(bits);
+        auto read = readOne(r);
+        ASSERT_FALSE(read.ok()) << bits;
+        EXPECT_NE(read.status().message().find("h.bin: page 0 at byte 48: node 0-0-0-0: " + std::to_string(bits) +
+                                               " position bits, not 1 to 30"),
+                  std::string::npos)
+            << read.status().message();
+    }
+    for (float spacing : {0.f, -1.f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+        NodeRecord r = valid();
+        r.spacing = spacing;
+        auto read = readOne(r);
+        ASSERT_FALSE(read.ok()) << spacing;
+        EXPECT_NE(read.status().message().find("node 0-0-0-0: spacing "), std::string::npos) << read.status().message();
+        EXPECT_NE(read.status().message().find(" is not a positive number"), std::string::npos) << read.status().message();
+    }
+    // The whole-file path (local readers, the server) runs the same check.
+    NodeRecord r = valid();
+    r.positionBits = 64;
+    auto whole = readHierarchy(writeHierarchy({r}), "h.bin");
+    ASSERT_FALSE(whole.ok());
+    EXPECT_NE(whole.status().message().find("64 position bits"), std::string::npos) << whole.status().message();
 }

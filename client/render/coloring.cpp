@@ -51,16 +51,16 @@ ColorBy nextColorBy(ColorBy by, const TilesetInfo& info) {
 }
 
 Vec3f viridis(float t) {
-    // Nine samples of matplotlib's viridis at t = 0, 1/8, ..., 1, linearly interpolated.
-    static const float k[9][3] = {{0.267f, 0.005f, 0.329f}, {0.283f, 0.141f, 0.458f}, {0.254f, 0.265f, 0.530f},
-                                  {0.207f, 0.372f, 0.553f}, {0.164f, 0.471f, 0.558f}, {0.128f, 0.567f, 0.551f},
-                                  {0.135f, 0.659f, 0.518f}, {0.267f, 0.749f, 0.441f}, {0.478f, 0.821f, 0.318f}};
-    static const float top[3] = {0.993f, 0.906f, 0.144f};
-    t = std::clamp(std::isfinite(t) ? t : 0.f, 0.f, 1.f) * 9.f;  // 10 samples with the top one
-    int i = std::min(int(t), 8);
-    float f = t - float(i);
+    // matplotlib's viridis at t = 0, 0.1, ..., 1, linearly interpolated.
+    static const float k[11][3] = {{0.267f, 0.005f, 0.329f}, {0.283f, 0.141f, 0.458f}, {0.254f, 0.265f, 0.530f},
+                                   {0.207f, 0.372f, 0.553f}, {0.164f, 0.471f, 0.558f}, {0.128f, 0.567f, 0.551f},
+                                   {0.135f, 0.659f, 0.518f}, {0.267f, 0.749f, 0.441f}, {0.478f, 0.821f, 0.318f},
+                                   {0.741f, 0.873f, 0.150f}, {0.993f, 0.906f, 0.144f}};
+    t = std::clamp(std::isfinite(t) ? t : 0.f, 0.f, 1.f) * 10.f;
+    const int i = std::min(int(t), 9);
+    const float f = t - float(i);
     const float* a = k[i];
-    const float* b = i + 1 < 9 ? k[i + 1] : top;
+    const float* b = k[i + 1];
     return {a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, a[2] + (b[2] - a[2]) * f};
 }
 

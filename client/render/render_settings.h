@@ -53,8 +53,9 @@ inline constexpr float kDefaultEdgeTau = 4.f;
 // 0.063 from 3), while l = 4 takes 35-48 % longer than 3.
 inline constexpr int kDefaultLayers = 3;
 inline constexpr int kMaxLayers = 16;
-// Near plane, as a fraction of the set's bounding-box diagonal (reversed-Z
-// depth keeps float precision at every distance, so it can be small).
+// Near plane, as a fraction of the larger of the set's bounding-box diagonal
+// and the eye's distance to its centre (nearPlaneFor; reversed-Z depth keeps
+// float precision at every distance, so it can be small).
 inline constexpr double kNearFraction = 1e-4;
 
 struct RenderSettings {
@@ -80,7 +81,8 @@ struct RenderSettings {
     // Transparency (Zwicker 2001 §6): a frame is translucent where the set
     // stores opacity (SurfelSet::translucent) or `opacity` is under 1, which
     // multiplies every surfel's. Translucent frames resolve up to `layers`
-    // surfaces per pixel and blend them back to front (eq. 12); past that,
+    // surfaces per pixel and blend them by eq. 12 (the GPU front to back, each
+    // layer under the nearer ones; the CPU reference back to front); past that,
     // surfaces merge (on the GPU the last layer takes all the rest, in the
     // CPU reference the two closest in depth merge, as in the paper). Points
     // and circles stay opaque.
@@ -103,7 +105,8 @@ bool normalsOriented(const std::string& normalSource);
 
 // The settings a tile set is drawn with unless told otherwise: the kernel
 // scale its weights assume (tileset.json kernel_scale), unlit when it has
-// colours, else Lambert; backface culling where its normals are oriented.
+// colours, else Lambert; backface culling where its normals are oriented;
+// edge antialiasing on; translucent where the set stores opacity.
 RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented, bool translucent = false);
 
 // The resolve's shading of one pixel (the GLSL resolve shader is its twin):

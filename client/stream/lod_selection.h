@@ -86,7 +86,7 @@ public:
     std::vector<SelectedNode> select(const Camera& camera, int width, int height, const LodParams& params,
                                      const std::function<bool(uint32_t)>& resident, LodStats* stats = nullptr) const;
 
-    // World box of node i, and its projected spacing for a camera (pixels).
+    // World box of node i (its octree cell, without the splat extent).
     Box3d box(uint32_t i) const;
 
 private:

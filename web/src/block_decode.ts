@@ -51,6 +51,7 @@ const kTypeBytes = [0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8, 1];
 
 export function checkDracoHeader(b: Uint8Array, points: number, attributes: number): string | null {
   if (b.length < 17 || String.fromCharCode(...b.subarray(0, 5)) !== "DRACO") return "not a Draco block";
+  if (b[5] !== 2) return `the Draco block is bitstream version ${b[5]}.${b[6]}; readers take 2.x`;
   if (b[7] !== 0) return "the Draco block is not a point cloud";
   if (b[8] !== 1) return "the Draco block is not kd-tree coded";
   if ((b[9] | (b[10] << 8)) & 0x8000) return "the Draco block carries metadata";

@@ -22,13 +22,13 @@ export function resolveColorBy(by: ColorBy, info: TilesetInfo): ColorBy | string
 export type RGB = [number, number, number];
 
 export function viridis(t: number): RGB {
+  // matplotlib's viridis at t = 0, 0.1, ..., 1, linearly interpolated (client/render/coloring.cpp).
   const k = [[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.53], [0.207, 0.372, 0.553],
              [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441],
-             [0.478, 0.821, 0.318]];
-  const top = [0.993, 0.906, 0.144];
-  t = Math.min(Math.max(Number.isFinite(t) ? t : 0, 0), 1) * 9;
-  const i = Math.min(Math.floor(t), 8), f = t - i;
-  const a = k[i], b = i + 1 < 9 ? k[i + 1] : top;
+             [0.478, 0.821, 0.318], [0.741, 0.873, 0.15], [0.993, 0.906, 0.144]];
+  t = Math.min(Math.max(Number.isFinite(t) ? t : 0, 0), 1) * 10;
+  const i = Math.min(Math.floor(t), 9), f = t - i;
+  const a = k[i], b = k[i + 1];
   return [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, a[2] + (b[2] - a[2]) * f];
 }
 

@@ -50,6 +50,7 @@ export const kFixedAttributes = ["position", "normal", "color", "weight", "radiu
 export const kMaxTilesetJsonBytes = 1 << 20;
 export const kMaxBlockPoints = 4_194_304;
 export const kMaxLevel = 20;
+export const kMaxPositionBits = 30; // common/tileset_format.h
 
 export class FormatError extends Error {}
 
@@ -262,6 +263,10 @@ export function readHierarchyPage(index: HierarchyIndex, page: number, bytes: Ui
     if (r.level > kMaxLevel) fail(where, `${node}: level beyond ${kMaxLevel}`);
     if (r.blockOffset > blocksBytes || r.blockSize > blocksBytes - r.blockOffset)
       fail(where, `${node} points past the end of blocks.bin`);
+    // Positions are min + q * edge / (2^b - 1): b = 0 divides by zero; h sizes every splat.
+    if (r.positionBits < 1 || r.positionBits > kMaxPositionBits)
+      fail(where, `${node}: ${r.positionBits} position bits, not 1 to ${kMaxPositionBits}`);
+    if (!(Number.isFinite(r.spacing) && r.spacing > 0)) fail(where, `${node}: spacing ${r.spacing} is not a positive number`);
     if (r.surfelCount > kMaxBlockPoints) fail(where, `${node} declares ${r.surfelCount} surfels, more than ${kMaxBlockPoints}`);
     if (r.flags & kFlagChildrenInPage) {
       if (r.childPage <= page || r.childPage >= index.pages.length || r.childMask === 0)
