@@ -31,6 +31,9 @@ using json = nlohmann::json;
 
 // Files and embedded buffers beyond this are refused before they are read.
 constexpr uint64_t kMaxBufferBytes = uint64_t(1) << 32;
+// The most vertices and triangles a scene's node instances may expand to:
+// about 10 GB in OpenMesh's mesh at the bound.
+constexpr uint64_t kMaxSceneVertices = uint64_t(1) << 26, kMaxSceneTriangles = uint64_t(1) << 27;
 
 // A 4 x 4 affine transform, column-major as glTF stores it.
 using Matrix = std::array<double, 16>;
@@ -57,6 +60,7 @@ class Gltf {
 public:
     Gltf(std::string path, json doc, std::vector<uint8_t> glbBin)
         : path_(std::move(path)), doc_(std::move(doc)), glbBin_(std::move(glbBin)) {}
+    bool allowOutsidePaths = false;  // external files may lie outside the model's folder
 
     [[noreturn]] void fail(const std::string& why) const { throw Failure{path_ + ": " + why}; }
 
@@ -141,7 +145,9 @@ public:
                 name += u[i];
             }
         }
-        const std::string file = (fs::path(path_).parent_path() / name).string();
+        auto resolved = resolveModelFile(path_, path_, name, allowOutsidePaths);
+        if (!resolved) fail(what + ": " + resolved.status().message());
+        const std::string& file = *resolved;
         std::error_code ec;
         if (!fs::is_regular_file(file, ec)) fail(what + ": '" + u + "' not found");
         if (fs::file_size(file, ec) > kMaxBufferBytes) fail(what + ": '" + u + "' is over 4 GiB");
@@ -307,8 +313,9 @@ bool isGltfExtension(const std::string& path) {
     return ext == ".gltf" || ext == ".glb";
 }
 
-Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures) try {
+Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures, bool allowOutsidePaths) try {
     Gltf gltf = open(path);
+    gltf.allowOutsidePaths = allowOutsidePaths;
     const json& doc = gltf.doc();
     GltfScene scene;
 
@@ -369,7 +376,6 @@ Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures) t
         if (!attributes.is_object() || !attributes.contains("POSITION")) gltf.fail(what + " has no POSITION");
         const std::vector<double> p = gltf.accessor(gltf.integer(attributes, "POSITION", -1), 3, what + " POSITION");
         const size_t count = p.size() / 3, first = scene.positions.size();
-        if (first + count > (size_t(1) << 31)) gltf.fail("more than 2^31 vertices");
         std::vector<double> uv;
         if (attributes.contains("TEXCOORD_0")) {
             uv = gltf.accessor(gltf.integer(attributes, "TEXCOORD_0", -1), 2, what + " TEXCOORD_0");
@@ -412,42 +418,65 @@ Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures) t
         }
     };
 
-    // The default scene's nodes, depth first. A node met twice on one path (a
-    // cycle) is an error; nodes shared by several parents are instanced each
-    // time, up to a bound that keeps a small file from expanding without end.
+    // The default scene's nodes, depth first, `each` called on every primitive
+    // of every node instance. A node met twice on one path (a cycle) is an
+    // error; nodes shared by several parents are instanced each time, up to a
+    // bound that keeps a small file from expanding without end.
     constexpr size_t kMaxNodeInstances = 1'000'000;
-    size_t instances = 0;
+    using Each = std::function<void(const json& primitive, const Matrix& world, const std::string& what)>;
     const json& nodes = gltf.array(doc, "nodes");
-    std::vector<bool> onPath(nodes.size(), false);
-    std::function<void(int64_t, const Matrix&, int)> visit = [&](int64_t n, const Matrix& parent, int depth) {
-        const json& node = gltf.element("nodes", n);
-        if (onPath[size_t(n)]) gltf.fail("node " + std::to_string(n) + " is its own ancestor");
-        if (depth > 256) gltf.fail("nodes nested deeper than 256");
-        if (++instances > kMaxNodeInstances) gltf.fail("more than " + std::to_string(kMaxNodeInstances) + " node instances");
-        const Matrix world = multiply(parent, gltf.localTransform(node));
-        if (node.contains("mesh")) {
-            const int64_t m = gltf.integer(node, "mesh", -1);
-            const json& primitives = gltf.array(gltf.element("meshes", m), "primitives");
-            for (size_t i = 0; i < primitives.size(); ++i)
-                addPrimitive(primitives[i], world, "mesh " + std::to_string(m) + " primitive " + std::to_string(i));
+    auto walk = [&](const Each& each) {
+        size_t instances = 0;
+        std::vector<bool> onPath(nodes.size(), false);
+        std::function<void(int64_t, const Matrix&, int)> visit = [&](int64_t n, const Matrix& parent, int depth) {
+            const json& node = gltf.element("nodes", n);
+            if (onPath[size_t(n)]) gltf.fail("node " + std::to_string(n) + " is its own ancestor");
+            if (depth > 256) gltf.fail("nodes nested deeper than 256");
+            if (++instances > kMaxNodeInstances) gltf.fail("more than " + std::to_string(kMaxNodeInstances) + " node instances");
+            const Matrix world = multiply(parent, gltf.localTransform(node));
+            if (node.contains("mesh")) {
+                const int64_t m = gltf.integer(node, "mesh", -1);
+                const json& primitives = gltf.array(gltf.element("meshes", m), "primitives");
+                for (size_t i = 0; i < primitives.size(); ++i)
+                    each(primitives[i], world, "mesh " + std::to_string(m) + " primitive " + std::to_string(i));
+            }
+            onPath[size_t(n)] = true;
+            for (const json& child : gltf.array(node, "children")) {
+                if (!child.is_number_integer()) gltf.fail("node " + std::to_string(n) + ": a child that is not an index");
+                visit(child.get<int64_t>(), world, depth + 1);
+            }
+            onPath[size_t(n)] = false;
+        };
+        const json& scenes = gltf.array(doc, "scenes");
+        const int64_t sceneIndex = gltf.integer(doc, "scene", 0);
+        if (!scenes.empty()) {
+            for (const json& root : gltf.array(gltf.element("scenes", sceneIndex), "nodes")) {
+                if (!root.is_number_integer()) gltf.fail("scene " + std::to_string(sceneIndex) + ": a node that is not an index");
+                visit(root.get<int64_t>(), kIdentity, 0);
+            }
+        } else {
+            for (size_t i = 0; i < nodes.size(); ++i) visit(int64_t(i), kIdentity, 0);  // no scene: every node, as a root
         }
-        onPath[size_t(n)] = true;
-        for (const json& child : gltf.array(node, "children")) {
-            if (!child.is_number_integer()) gltf.fail("node " + std::to_string(n) + ": a child that is not an index");
-            visit(child.get<int64_t>(), world, depth + 1);
-        }
-        onPath[size_t(n)] = false;
     };
-    const json& scenes = gltf.array(doc, "scenes");
-    const int64_t sceneIndex = gltf.integer(doc, "scene", 0);
-    if (!scenes.empty()) {
-        for (const json& root : gltf.array(gltf.element("scenes", sceneIndex), "nodes")) {
-            if (!root.is_number_integer()) gltf.fail("scene " + std::to_string(sceneIndex) + ": a node that is not an index");
-            visit(root.get<int64_t>(), kIdentity, 0);
-        }
-    } else {
-        for (size_t i = 0; i < nodes.size(); ++i) visit(int64_t(i), kIdentity, 0);  // no scene: every node, as a root
-    }
+    // What the instances expand to, from the accessors' declared counts,
+    // before anything is decoded: about 1 MB of shared nodes once asked for
+    // 70 GB. Each vertex takes 32 bytes here and about 150 in OpenMesh's mesh.
+    uint64_t vertices = 0, triangles = 0;
+    walk([&](const json& prim, const Matrix&, const std::string&) {
+        if (!prim.is_object() || gltf.integer(prim, "mode", 4) != 4) return;  // addPrimitive says what is wrong
+        const json attributes = prim.value("attributes", json::object());
+        if (!attributes.is_object() || !attributes.contains("POSITION")) return;
+        const uint64_t count = uint64_t(std::max<int64_t>(0, gltf.integer(gltf.element("accessors", gltf.integer(attributes, "POSITION", -1)), "count", 0)));
+        vertices += count;
+        triangles += (prim.contains("indices")
+                          ? uint64_t(std::max<int64_t>(0, gltf.integer(gltf.element("accessors", gltf.integer(prim, "indices", -1)), "count", 0)))
+                          : count) / 3;
+    });
+    if (vertices > kMaxSceneVertices || triangles > kMaxSceneTriangles)
+        gltf.fail("the scene's node instances expand to " + std::to_string(vertices) + " vertices and " +
+                  std::to_string(triangles) + " triangles, more than the " + std::to_string(kMaxSceneVertices) + " and " +
+                  std::to_string(kMaxSceneTriangles) + " a mesh may have");
+    walk(addPrimitive);
     if (scene.triangles.empty()) gltf.fail("the scene has no triangles");
     return scene;
 } catch (const Failure& f) {

@@ -38,7 +38,9 @@ struct GltfScene {
 // is an error, or with allowMissingTextures a warning, its material keeping
 // only its factor. Sparse accessors and texture sets other than TEXCOORD_0
 // are not read; primitives other than triangles are skipped with a warning.
-Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures);
+// External buffers and images must lie in the model's folder unless
+// allowOutsidePaths (resolveModelFile).
+Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures, bool allowOutsidePaths = false);
 
 bool isGltfExtension(const std::string& path);  // .gltf, .glb
 

@@ -62,8 +62,9 @@ struct LoadedMesh {
 // index, and a face has at least three. Texture coordinates (vt) must be
 // finite numbers (OpenMesh refuses "nan" with no word of where). Also
 // collects the material libraries the file names (mtllib), resolved against
-// its folder.
-Status scanObj(const std::string& path, std::vector<std::string>* libraries) {
+// its folder, which they must lie in unless allowOutside (OpenMesh reads them
+// next, so this comes first).
+Status scanObj(const std::string& path, bool allowOutside, std::vector<std::string>* libraries) {
     std::ifstream in(path, std::ios::binary);
     if (!in) return Status::error(path + ": cannot open");
     std::string line;
@@ -71,8 +72,11 @@ Status scanObj(const std::string& path, std::vector<std::string>* libraries) {
         size_t at = line.find_first_not_of(" \t");
         if (at != std::string::npos && line.compare(at, 7, "mtllib ") == 0) {
             std::istringstream names(line.substr(at + 7));
-            for (std::string name; names >> name;)
-                libraries->push_back((std::filesystem::path(path).parent_path() / name).lexically_normal().string());
+            for (std::string name; names >> name;) {
+                auto library = resolveModelFile(path, path, name, allowOutside);
+                if (!library) return Status::error(path + ": line " + std::to_string(number) + ": mtllib " + library.status().message());
+                libraries->push_back(*library);
+            }
             continue;
         }
         if (at != std::string::npos && line.compare(at, 3, "vt ") == 0) {
@@ -116,13 +120,13 @@ std::string lastWord(const std::string& s) {
 // index to the text after map_Kd), loaded through our own reading of the
 // libraries, so that errors name the library's line.
 Status loadObjTextures(const std::string& path, const std::vector<std::string>& libraries, bool allowMissing,
-                       LoadedMesh& loaded) {
+                       bool allowOutside, LoadedMesh& loaded) {
     TriMesh& mesh = loaded.mesh;
     OpenMesh::MPropHandleT<std::map<int, std::string>> mapping;
     if (!mesh.has_halfedge_texcoords2D() || !mesh.get_property_handle(mapping, "TextureMapping")) return {};
     std::vector<MtlLibrary> libs;
     for (const std::string& name : libraries) {
-        auto lib = readMtl(name);
+        auto lib = readMtl(name, path, allowOutside);
         if (!lib) return Status::error(path + ": " + lib.status().message());
         for (const std::string& w : lib->missingUnusedMaps) warnOnce(w);
         libs.push_back(std::move(*lib));
@@ -166,6 +170,7 @@ Status loadObjTextures(const std::string& path, const std::vector<std::string>& 
 struct LoadOptions {
     bool textures = true;  // load diffuse textures (only sampling needs them)
     bool allowMissingTextures = false;
+    bool allowOutsidePaths = false;
 };
 
 Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const LoadOptions& load = {}) {
@@ -173,7 +178,7 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
     TriMesh& mesh = loaded->mesh;
     mesh.request_vertex_colors();
     if (isGltfExtension(path)) {
-        auto gltf = readGltf(path, load.allowMissingTextures);
+        auto gltf = readGltf(path, load.allowMissingTextures, load.allowOutsidePaths);
         if (!gltf) return gltf.status();
         for (const std::string& w : gltf->warnings) warnOnce(w);
         mesh.request_halfedge_texcoords2D();
@@ -224,7 +229,11 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
             loaded->textures.resize(ply->textureFiles.size() + 1);  // texture index t + 1 is TextureFile t
             for (size_t t = 0; t < ply->textureFiles.size(); ++t) {
                 const PlyMesh::TextureFile& file = ply->textureFiles[t];
-                auto texture = loadTexture(file.path);
+                auto resolved = resolveModelFile(path, path, file.name, load.allowOutsidePaths);
+                if (!resolved)
+                    return Status::error(path + ": line " + std::to_string(file.line) + ": comment TextureFile " +
+                                         resolved.status().message());
+                auto texture = loadTexture(*resolved);
                 if (!texture) {
                     const std::string why = path + ": line " + std::to_string(file.line) + ": comment TextureFile '" + file.name +
                                             "': " + texture.status().message();
@@ -264,7 +273,7 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
     } else {
         const bool obj = lowerExtension(path) == ".obj";
         std::vector<std::string> libraries;
-        if (obj) SC_TRY(scanObj(path, &libraries));
+        if (obj) SC_TRY(scanObj(path, load.allowOutsidePaths, &libraries));
         OpenMesh::IO::Options options = OpenMesh::IO::Options::VertexColor;
         if (obj && load.textures && !libraries.empty()) {
             mesh.request_halfedge_texcoords2D();
@@ -276,7 +285,7 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
         if (!OpenMesh::IO::read_mesh(mesh, path, options)) return Status::error(path + ": OpenMesh could not read the mesh");
         loaded->hasColors = options.check(OpenMesh::IO::Options::VertexColor) && mesh.has_vertex_colors();
         if (options.check(OpenMesh::IO::Options::FaceTexCoord))
-            SC_TRY(loadObjTextures(path, libraries, load.allowMissingTextures, *loaded));
+            SC_TRY(loadObjTextures(path, libraries, load.allowMissingTextures, load.allowOutsidePaths, *loaded));
         OpenMesh::MPropHandleT<std::map<int, std::string>> maps;
         loaded->faceColors = options.check(OpenMesh::IO::Options::FaceColor) && mesh.has_face_colors() &&
                              mesh.get_property_handle(maps, "TextureMapping") && !mesh.property(maps).empty();
@@ -465,7 +474,7 @@ bool isMeshExtension(const std::string& path) {
 }
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling) {
-    auto mesh = loadMesh(path, {true, sampling.allowMissingTextures});
+    auto mesh = loadMesh(path, {true, sampling.allowMissingTextures, sampling.allowOutsidePaths});
     if (!mesh) return mesh.status();
     return std::unique_ptr<PointReader>(new MeshReader(std::move(*mesh), path, sampling));
 }
@@ -490,8 +499,8 @@ Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
     return vertexNormals(**mesh);
 }
 
-Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, bool allowMissingTextures) {
-    auto mesh = loadMesh(path, {textures, allowMissingTextures});
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, const MeshSampling& options) {
+    auto mesh = loadMesh(path, {textures, options.allowMissingTextures, options.allowOutsidePaths});
     if (!mesh) return mesh.status();
     LoadedMesh& loaded = **mesh;
     const TriMesh& m = loaded.mesh;

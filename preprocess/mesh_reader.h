@@ -36,6 +36,8 @@ struct MeshSampling {
     // A diffuse texture that cannot be loaded is a warning, and its faces take
     // vertex colours (or Kd), instead of an error.
     bool allowMissingTextures = false;
+    // Files the model names may lie outside its folder (resolveModelFile).
+    bool allowOutsidePaths = false;
 };
 
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling);
@@ -61,7 +63,8 @@ struct MeshTriangles {
     std::vector<std::array<float, 6>> cornerUvs;  // per triangle: (u, v) of its 3 corners
     std::vector<Vec3f> triangleColor;             // per triangle, where it has no texture (grey 0.5 without colours)
 };
-Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures = false, bool allowMissingTextures = false);
+// `options`: what to allow (allowMissingTextures, allowOutsidePaths).
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures = false, const MeshSampling& options = {});
 
 // True for file names the mesh path reads (.obj .off .stl .gltf .glb; PLY decides by content).
 bool isMeshExtension(const std::string& path);

@@ -370,7 +370,7 @@ Status Builder::chooseOrientationRules() {
         if (!d.textured) continue;
         summary_.textureFilter = textureFilterName(opt_.textureFilter);
         if (opt_.textureFilter == BuildOptions::TextureFilter::Nearest) continue;
-        auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh.allowMissingTextures);
+        auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh);
         if (!mesh) return mesh.status();
         textureFields_[sourceIds_[i]] = std::make_shared<const TextureField>(*mesh, rootMin_);
     }

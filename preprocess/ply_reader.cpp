@@ -372,8 +372,7 @@ Result<PlyMesh> readPlyMesh(const std::string& path) {
     if (!header) return header.status();
     ValueReader values(*in, header->format);
     PlyMesh mesh;
-    for (const auto& [name, line] : header->textureFiles)
-        mesh.textureFiles.push_back({(std::filesystem::path(path).parent_path() / name).lexically_normal().string(), name, line});
+    for (const auto& [name, line] : header->textureFiles) mesh.textureFiles.push_back({name, line});
     std::vector<double> scalars;
     std::vector<std::vector<double>> lists;
     bool seenVertices = false;

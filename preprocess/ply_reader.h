@@ -60,8 +60,7 @@ struct PlyMesh {
     std::vector<std::array<float, 6>> faceUvs;
     std::vector<int> triangleTexture;
     struct TextureFile {
-        std::string path;  // resolved against the PLY's folder
-        std::string name;  // as written
+        std::string name;  // as written (resolveModelFile resolves it)
         int line = 0;      // header line
     };
     std::vector<TextureFile> textureFiles;

@@ -84,6 +84,10 @@ the text file LIST, one per line.
   --allow-missing-textures
                           a diffuse texture (OBJ map_Kd) that is missing or unreadable
                           is a warning, its faces take vertex colours (default: error)
+  --allow-outside-paths   let a mesh's external files (glTF buffers and images, OBJ
+                          material libraries and maps, PLY TextureFile) lie outside
+                          its folder (default: an error naming the file, so that a
+                          model from elsewhere cannot read any file you can)
   --vertices-only         read a mesh file's vertices as points, no sampling
   -q, --quiet             no progress output
   -h, --help              this text
@@ -257,6 +261,8 @@ int main(int argc, char** argv) {
             opt.textureFilter = f == "ewa" ? Filter::Ewa : f == "optimal" ? Filter::Optimal : Filter::Nearest;
         } else if (a == "--allow-missing-textures") {
             opt.inputs.mesh.allowMissingTextures = true;
+        } else if (a == "--allow-outside-paths") {
+            opt.inputs.mesh.allowOutsidePaths = true;
         } else if (a == "--vertices-only") {
             opt.inputs.verticesOnly = true;
         } else if (a == "-q" || a == "--quiet") {

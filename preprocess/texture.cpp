@@ -97,15 +97,26 @@ Result<Texture> loadTexture(const std::string& path) {
     return decodeTexture(bytes, path);
 }
 
-Result<MtlLibrary> readMtl(const std::string& path) {
+Result<std::string> resolveModelFile(const std::string& model, const std::string& from, const std::string& name,
+                                     bool allowOutside) {
+    const fs::path file = (fs::path(from).parent_path() / name).lexically_normal();
+    if (allowOutside) return file.string();
+    const fs::path root = fs::path(model).parent_path().lexically_normal();
+    const fs::path inside = root.empty() ? file : file.lexically_relative(root);
+    if (inside.empty() || inside.is_absolute() || *inside.begin() == "..")
+        return Status::error("'" + name + "' lies outside the model's folder " + (root.empty() ? "." : root.string()) +
+                             " (--allow-outside-paths reads it)");
+    return file.string();
+}
+
+Result<MtlLibrary> readMtl(const std::string& path, const std::string& model, bool allowOutside) {
     std::ifstream in(path);
     if (!in) return Status::error(path + ": cannot open the material library");
     MtlLibrary lib;
     lib.path = path;
-    const fs::path folder = fs::path(path).parent_path();
     auto resolve = [&](std::string name) {
         std::replace(name.begin(), name.end(), '\\', '/');  // libraries written on Windows
-        return (folder / name).lexically_normal().string();
+        return resolveModelFile(model, path, name, allowOutside);
     };
     std::string line;
     for (int number = 1; std::getline(in, line); ++number) {
@@ -123,13 +134,16 @@ Result<MtlLibrary> readMtl(const std::string& path) {
             if (lib.materials.empty()) return Status::error(where + "map_Kd before any newmtl");
             if (rest.empty()) return Status::error(where + "map_Kd without a file name");
             MtlMaterial& m = lib.materials.back();
+            auto file = resolve(rest.back());
+            if (!file) return Status::error(where + "map_Kd " + file.status().message());
             m.diffuseMap = rest.back();
-            m.diffusePath = resolve(rest.back());
+            m.diffusePath = *file;
             m.diffuseLine = number;
         } else if ((key.rfind("map_", 0) == 0 || key == "bump" || key == "disp" || key == "decal" || key == "refl") &&
                    !rest.empty()) {
             std::error_code ec;
-            if (!fs::exists(resolve(rest.back()), ec))
+            auto file = resolve(rest.back());  // unused: outside the folder is not looked at
+            if (file && !fs::exists(*file, ec))
                 lib.missingUnusedMaps.push_back(where + key + " '" + rest.back() + "' not found (unused)");
         }
     }

@@ -63,6 +63,17 @@ struct MtlLibrary {
     // an error (the shared dragon's library names a map_Ks that is not there).
     std::vector<std::string> missingUnusedMaps;
 };
-Result<MtlLibrary> readMtl(const std::string& path);
+// `model`'s folder, inside which `allowOutside` (--allow-outside-paths) is
+// needed to read anything else. The library must lie there; so must its maps.
+Result<MtlLibrary> readMtl(const std::string& path, const std::string& model, bool allowOutside);
+
+// A file a model names (a glTF buffer or image, an OBJ material library or
+// map_Kd, a PLY TextureFile), `name` resolved against the folder of `from`,
+// the file that names it. It must lie inside `model`'s folder: an absolute
+// path elsewhere, or one that climbs out with "..", is an error naming it,
+// unless allowOutside (--allow-outside-paths). A model from elsewhere must not
+// make the build read whatever file the user can.
+Result<std::string> resolveModelFile(const std::string& model, const std::string& from, const std::string& name,
+                                     bool allowOutside);
 
 }  // namespace surfcast

@@ -391,6 +391,100 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
     }
 }
 
+// Nodes shared by many parents are instanced each time: 1 x 1,000 x 998 paths
+// to a mesh of 100 unindexed vertices (33 triangles) in a file of a few
+// kilobytes expand to 998,000 x 100 = 99.8 M vertices and 32,934,000
+// triangles (3 GB here, about 15 in OpenMesh; a megabyte of such nodes once
+// asked for 70 GB). Counted from the accessors before anything is decoded,
+// and refused.
+TEST(TexturedMesh, GltfInstancesAreCountedBeforeTheyExpand) {
+    test::TempDir dir;
+    std::string bin;
+    for (int v = 0; v < 100; ++v)
+        for (float c : {float(v % 10), float(v / 10), 0.f}) bin.append(reinterpret_cast<const char*>(&c), 4);
+    test::writeFile(dir.file("many.bin"), bin);
+    auto children = [](int node, int n) {
+        std::string s = "[";
+        for (int i = 0; i < n; ++i) s += (i ? "," : "") + std::to_string(node);
+        return s + "]";
+    };
+    test::writeFile(dir.file("many.gltf"),
+                    R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+  "nodes": [{"children": )" + children(1, 1000) + R"(}, {"children": )" + children(2, 998) + R"(}, {"mesh": 0}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+  "buffers": [{"uri": "many.bin", "byteLength": 1200}], "bufferViews": [{"buffer": 0, "byteLength": 1200}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 100, "type": "VEC3"}]})");
+    auto r = openMeshReader(dir.file("many.gltf"), MeshSampling{});
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.status().message().find("many.gltf: the scene's node instances expand to 99800000 vertices and 32934000 "
+                                        "triangles, more than the 67108864 and 134217728 a mesh may have"),
+              std::string::npos)
+        << r.status().message();
+}
+
+// A model's external files resolve inside its folder: a model from elsewhere
+// once made the build read any file the user could ("../" or an absolute
+// path in a glTF uri, an OBJ mtllib or map_Kd, a PLY TextureFile). Each is an
+// error naming it; --allow-outside-paths reads them. A library in a subfolder
+// may still name a map beside the model.
+TEST(TexturedMesh, ExternalFilesStayInsideTheModelsFolder) {
+    test::TempDir dir;
+    std::filesystem::create_directories(dir.file("model/mats"));
+    std::filesystem::create_directories(dir.file("elsewhere"));
+    auto ramp = [](int i, int j) { return Vec3f{float(4 * i), float(4 * j), 77}; };
+    writePng(dir.file("elsewhere/secret.png"), 64, 64, ramp);
+    writePng(dir.file("model/ramp.png"), 64, 64, ramp);
+    GltfFixture f;
+    test::writeFile(dir.file("elsewhere/scene.bin"), f.bin);
+    test::writeFile(dir.file("model/scene.bin"), f.bin);
+    auto gltf = [&](const std::string& buffer, const std::string& image) {
+        std::string json = GltfFixture::replace(f.json, "BUFFER", R"({"uri": ")" + buffer + R"(", "byteLength": 92})");
+        return GltfFixture::replace(GltfFixture::replace(json, "IMAGE", R"({"uri": ")" + image + R"("})"), "IMAGEVIEW", "");
+    };
+    const std::string secret = dir.file("elsewhere/secret.png");
+    test::writeFile(dir.file("elsewhere/x.mtl"), "newmtl a\nmap_Kd secret.png\n");
+    test::writeFile(dir.file("model/map.mtl"), "newmtl a\nmap_Kd ../elsewhere/secret.png\n");
+    test::writeFile(dir.file("model/mats/sub.mtl"), "newmtl a\nmap_Kd ../ramp.png\n");
+    const std::string xyz = "property float x\nproperty float y\nproperty float z\n";
+    const std::vector<std::pair<std::string, std::string>> escapes = {
+        {"up.gltf", "up.gltf: buffer 0: '../elsewhere/scene.bin' lies outside the model's folder"},
+        {"absolute.gltf", "absolute.gltf: image 0: '" + secret + "' lies outside the model's folder"},
+        {"up.obj", "up.obj: line 1: mtllib '../elsewhere/x.mtl' lies outside the model's folder"},
+        {"map.obj", "map.mtl: line 2: map_Kd '../elsewhere/secret.png' lies outside the model's folder"},
+        {"up.ply", "up.ply: line 3: comment TextureFile '../elsewhere/secret.png' lies outside the model's folder"}};
+    test::writeFile(dir.file("model/up.gltf"), gltf("../elsewhere/scene.bin", "ramp.png"));
+    test::writeFile(dir.file("model/absolute.gltf"), gltf("scene.bin", secret));
+    test::writeFile(dir.file("model/up.obj"), quadObj("../elsewhere/x.mtl", "a"));
+    test::writeFile(dir.file("model/map.obj"), quadObj("map.mtl", "a"));
+    test::writeFile(dir.file("model/up.ply"), "ply\nformat ascii 1.0\ncomment TextureFile ../elsewhere/secret.png\n"
+                                              "element vertex 3\n" + xyz + "property float s\nproperty float t\n"
+                                              "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                              "0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n");
+    MeshSampling allowed;
+    allowed.allowOutsidePaths = true;
+    for (const auto& [name, message] : escapes) {
+        auto refused = openMeshReader(dir.file("model/" + name), MeshSampling{});
+        ASSERT_FALSE(refused.ok()) << name;
+        EXPECT_NE(refused.status().message().find(message), std::string::npos) << refused.status().message();
+        EXPECT_NE(refused.status().message().find("(--allow-outside-paths reads it)"), std::string::npos)
+            << refused.status().message();
+        auto read = openMeshReader(dir.file("model/" + name), allowed);
+        ASSERT_TRUE(read.ok()) << name << ": " << read.status().message();
+        EXPECT_GT(readAll(**read).size(), 0u) << name;
+    }
+    test::writeFile(dir.file("model/sub.obj"), quadObj("mats/sub.mtl", "a"));
+    auto sub = openMeshReader(dir.file("model/sub.obj"), MeshSampling{});
+    ASSERT_TRUE(sub.ok()) << sub.status().message();
+    // surfcast-build says so, writes nothing, and takes the option.
+    auto build = test::run({test::binary("surfcast-build"), dir.file("model/map.obj"), "-o", dir.file("out")});
+    EXPECT_EQ(build.exitCode, 1) << build.output;
+    EXPECT_NE(build.output.find("map_Kd '../elsewhere/secret.png' lies outside"), std::string::npos) << build.output;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("out")));
+    auto opted = test::run({test::binary("surfcast-build"), "-q", dir.file("model/map.obj"), "--allow-outside-paths", "-o",
+                            dir.file("out")});
+    EXPECT_EQ(opted.exitCode, 0) << opted.output;
+}
+
 namespace {
 struct Rgb {
     int width = 0, height = 0;
