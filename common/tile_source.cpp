@@ -172,6 +172,13 @@ public:
         return std::move((*r)[0]);
     }
     std::string describe() const override { return base_; }
+    void cancel() override {
+        {
+            std::lock_guard lock(ioMutex_);
+            cancelled_ = true;
+        }
+        curl_multi_wakeup(multi_);
+    }
 
     // The server's POST {set}/batch where it answers (tried once); a static
     // host refuses it (404/405) and every later call takes the ranges, all in
@@ -493,6 +500,7 @@ private:
             return "TLS with the host failed (" + why + ")" + (options_.caFile.empty() ? "" : "; --ca-file " + options_.caFile);
         }
         case CURLE_OPERATION_TIMEDOUT: return "no answer for " + std::to_string(options_.timeoutSeconds) + " s (" + why + ")";
+        case CURLE_ABORTED_BY_CALLBACK: return "cancelled: the reader is closing";
         default: return why;
         }
     }
@@ -504,6 +512,19 @@ private:
             {
                 std::lock_guard lock(ioMutex_);
                 if (stopping_) break;
+                if (cancelled_) {  // every transfer ends now, those waiting to start too
+                    for (auto& [h, t] : running) {
+                        curl_multi_remove_handle(multi_, h);
+                        t->code = CURLE_ABORTED_BY_CALLBACK;
+                        t->done = true;
+                    }
+                    running.clear();
+                    for (Transfer* t : submitted_) {
+                        t->code = CURLE_ABORTED_BY_CALLBACK;
+                        t->done = true;
+                    }
+                    submitted_.clear();
+                }
                 for (Transfer* t : submitted_) {
                     if (curl_multi_add_handle(multi_, t->handle) == CURLM_OK) {
                         running[t->handle] = t;
@@ -551,6 +572,7 @@ private:
     std::condition_variable ioDone_;
     std::vector<Transfer*> submitted_;  // waiting for the I/O thread to start them
     bool stopping_ = false;
+    bool cancelled_ = false;  // cancel(): no transfer runs from now on
     std::thread io_;  // last: starts when everything above is ready
 };
 

@@ -32,6 +32,10 @@ public:
     // (the project's server), else one range each. All or nothing. Thread-safe.
     virtual Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes);
     virtual std::string describe() const = 0;
+    // Ends every request in flight at once, with an error, and fails every
+    // later one: so that a reader closes at once while its host stalls,
+    // rather than after the timeout. Thread-safe; for shutting down.
+    virtual void cancel() {}
 };
 
 // tileset.json is a few kilobytes; this bounds what a broken host can make a

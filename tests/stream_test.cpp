@@ -842,6 +842,64 @@ TEST(Stream, ResponsesLongerThanAskedForAreCutOff) {
     EXPECT_NE(st.lastError.find("blocks.bin: response longer than the"), std::string::npos) << st.lastError;
 }
 
+TEST(Stream, ClosingDoesNotWaitForAStalledHost) {
+    // A host that answers tileset.json and hierarchy.bin but never a block:
+    // closing a stream, or surfcast-view once its --max-wait is up, once
+    // waited for the requests in flight to time out (20 s by default). The
+    // transfers are cancelled instead.
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    httplib::Server host;
+    std::atomic<bool> release{false};
+    std::atomic<int> stalled{0};
+    host.Get(R"(/scene/(tileset\.json|hierarchy\.bin|blocks\.bin))", [&](const httplib::Request& req, httplib::Response& res) {
+        const std::string name = req.matches[1];
+        if (name == "blocks.bin") {
+            ++stalled;
+            for (int i = 0; i < 600 && !release; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+            res.status = 503;
+            return;
+        }
+        res.set_content(test::readFile(dir.file("scene/" + name)), "application/octet-stream");
+    });
+    const int port = host.bind_to_any_port("127.0.0.1");
+    std::thread serving([&] { host.listen_after_bind(); });
+    struct Stop {
+        httplib::Server& host;
+        std::thread& thread;
+        std::atomic<bool>& release;
+        ~Stop() {
+            release = true;
+            host.stop();
+            if (thread.joinable()) thread.join();
+        }
+    } stop{host, serving, release};
+    for (int i = 0; i < 500 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    ASSERT_TRUE(host.is_running());
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/scene";
+
+    auto set = StreamingSet::open(url, connections(2));
+    ASSERT_TRUE(set) << set.status().message();
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    ASSERT_TRUE(camera);
+    for (int i = 0; i < 500 && (*set)->stats().requestsInFlight == 0; ++i) {
+        (void)(*set)->update(*camera, 200, 150, {});
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    ASSERT_GT((*set)->stats().requestsInFlight, 0u);
+    auto start = std::chrono::steady_clock::now();
+    set->reset();
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(1));
+
+    start = std::chrono::steady_clock::now();
+    auto view = run({binary("surfcast-view"), "--headless", url, "--camera", "3,-6,2,0,0,0.5,0,0,1,50", "--lod", "1",
+                     "--size", "64x48", "--max-wait", "1", "--out", dir.file("x.png")});
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_LT(seconds, 8.0) << view.output;  // 1 s of waiting, the process's start and the Vulkan device's
+    EXPECT_GE(stalled.load(), 2);
+}
+
 TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
     // The set is rebuilt on the server (renamed over the old folder) while a
     // client streams it: its hierarchy no longer matches blocks.bin. The

@@ -70,6 +70,7 @@ StreamingSet::~StreamingSet() {
         std::lock_guard lock(mutex_);
         stopping_ = true;
     }
+    if (source_) source_->cancel();  // fetch threads waiting on a stalled host return now
     wakeFetch_.notify_all();
     wakeDecode_.notify_all();
     for (auto& t : fetchers_) t.join();
