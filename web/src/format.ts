@@ -102,7 +102,7 @@ export function parseTileset(text: string, what: string): TilesetInfo {
     };
   });
   const stats = typeof j.statistics === "object" && j.statistics !== null ? (j.statistics as Record<string, any>) : {};
-  const bmin = vec3(bounds.min, what, "bounds.min");
+  const bmin = vec3(bounds.min, what, "bounds.min"), bmax = vec3(bounds.max, what, "bounds.max");
   const classCounts = new Map<number, number>();
   for (const [k, v] of Object.entries(stats.classification?.counts ?? {})) classCounts.set(Number(k), Number(v));
   const rootEdge = num(root.edge, what, "root.edge");
@@ -114,7 +114,7 @@ export function parseTileset(text: string, what: string): TilesetInfo {
     rootMin: vec3(root.min, what, "root.min"),
     rootEdge,
     boundsMin: bmin,
-    boundsMax: vec3(bounds.max, what, "bounds.max"),
+    boundsMax: bmax,
     levels: num(j.levels, what, "levels"),
     nodes: num(j.nodes, what, "nodes"),
     surfels: num(j.surfels, what, "surfels"),
@@ -128,8 +128,9 @@ export function parseTileset(text: string, what: string): TilesetInfo {
     hierarchyCrc: num(hierarchy.crc32, what, "hierarchy.crc32"),
     blocksBytes: num(blocks.bytes, what, "blocks.bytes"),
     statistics: {
+      // Without statistics (version 1), the bounds' z range, as in C++.
       elevationMin: typeof stats.elevation?.min === "number" ? stats.elevation.min : bmin[2],
-      elevationMax: typeof stats.elevation?.max === "number" ? stats.elevation.max : bmin[2],
+      elevationMax: typeof stats.elevation?.max === "number" ? stats.elevation.max : bmax[2],
       intensity: stats.intensity,
       classCounts,
     },

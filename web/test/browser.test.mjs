@@ -192,7 +192,12 @@ describe("browser viewer", { skip }, () => {
       execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--opacity", opacity, "-o",
                                           join(sets, name)]);
     // Bad inputs: a block that never passes its CRC, and a damaged hierarchy page.
-    for (const name of ["corrupt-block", "broken-hierarchy"]) cpSync(join(sets, "scene"), join(sets, name), { recursive: true });
+    for (const name of ["corrupt-block", "broken-hierarchy", "nostats"]) cpSync(join(sets, "scene"), join(sets, name), { recursive: true });
+    // A set without statistics (optional in tileset.json): elevation spans the bounds.
+    const nostats = join(sets, "nostats", "tileset.json");
+    const json = JSON.parse(readFileSync(nostats, "utf8"));
+    delete json.statistics;
+    writeFileSync(nostats, JSON.stringify(json, null, 2));
     const layout = rootLayout(join(sets, "scene"));
     flipByte(join(sets, "corrupt-block", "blocks.bin"), layout.blockOffset + Math.floor(layout.blockSize / 2));
     flipByte(join(sets, "broken-hierarchy", "hierarchy.bin"), layout.page0 + 40);
@@ -244,6 +249,15 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(problems, []);
     assert.deepEqual(state.errors, []);
     expectLikeReference(state, png, `${serveUrl}/sets/scene`, ["--color-by", "elevation"]);
+  });
+
+  test("colour by elevation without statistics: the bounds' z range, as surfcast-view draws it", async () => {
+    // The browser once took the bounds' minimum for both ends of the range,
+    // and coloured every surfel alike.
+    const { state, png, problems } = await view(`${serveUrl}/?set=/sets/nostats&camera=${camera}&color=elevation`);
+    assert.deepEqual(problems, []);
+    assert.equal(state.converged, true);
+    expectLikeReference(state, png, `${serveUrl}/sets/nostats`, ["--color-by", "elevation"]);
   });
 
   test("transparency: the layers peeled and composited as the Vulkan client does", async (t) => {
