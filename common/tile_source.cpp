@@ -228,6 +228,7 @@ private:
         CURLcode code = CURLE_OK;
         bool done = false;
         bool redirected = false;  // pointed at a redirect's target, to run again
+        bool withoutCredentials = false;  // a redirect left the user's headers behind
     };
 
     // One GET of `name` (of byte range `range`, if not empty), or POST of
@@ -364,16 +365,18 @@ private:
         }
         for (int hops = 0; !round.empty(); ++hops) {
             perform(round);
-            round.clear();
-            for (size_t i = 0; i < n; ++i) {
-                CURL* h = transfers[i].handle;
-                if (!h || transfers[i].code != CURLE_OK || requests[i].post) continue;  // a POST is never redirected
-                Status why = redirect(transfers[i], hops);
+            const std::vector<Transfer*> performed = std::exchange(round, {});
+            for (Transfer* t : performed) {
+                const size_t i = size_t(t - transfers.data());
+                // A POST is never redirected; a redirect's body past
+                // kMaxErrorPageBytes stopped the transfer, not the redirect.
+                if (requests[i].post || (t->code != CURLE_OK && t->code != CURLE_WRITE_ERROR)) continue;
+                Status why = redirect(*t, hops);
                 if (!why.ok()) {
                     refused[i] = std::move(why);
-                } else if (transfers[i].redirected) {
+                } else if (t->redirected) {
                     sinks[i].dropped = 0;
-                    round.push_back(&transfers[i]);
+                    round.push_back(t);
                 }
             }
         }
@@ -388,7 +391,7 @@ private:
             if (refused[i])
                 out.push_back(Status::error(shown + ": " + refused[i]->message()));
             else
-                out.push_back(answer(h, shown, transfers[i].code, errors[i].data(), sinks[i], requests[i], std::move(responses[i])));
+                out.push_back(answer(h, shown, transfers[i], errors[i].data(), sinks[i], requests[i], std::move(responses[i])));
             curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
             release(h);
         }
@@ -434,14 +437,17 @@ private:
         if (at.scheme == "https" && to.scheme == "http")
             return Status::error("redirected to " + shown + ", which is not followed: https never gives way to plain http");
         curl_easy_setopt(h, CURLOPT_URL, target.c_str());
-        curl_easy_setopt(h, CURLOPT_HTTPHEADER, to == origin_ || options_.redirectCredentials ? headers_ : nullptr);
+        const bool credentials = to == origin_ || options_.redirectCredentials;
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, credentials ? headers_ : nullptr);
+        t.withoutCredentials |= !credentials && headers_;
         t.redirected = true;
         return {};
     }
 
     // What a finished transfer means for its request.
-    Result<Response> answer(CURL* h, const std::string& shown, CURLcode code, const char* error, const Sink& sink,
+    Result<Response> answer(CURL* h, const std::string& shown, const Transfer& t, const char* error, const Sink& sink,
                             const Request& q, Response r) const {
+        const CURLcode code = t.code;
         if (sink.tooLong)
             return Status::error(shown + ": response longer than the " + std::to_string(q.maxBytes) + " bytes expected");
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &r.status);
@@ -454,8 +460,10 @@ private:
         }
         if (unwanted) {
             if (r.status == 401 || r.status == 403)
-                return Status::error(shown + ": HTTP " + std::to_string(r.status) +
-                                     ": the host refuses access (send credentials with --header or --token-file)");
+                return Status::error(shown + ": HTTP " + std::to_string(r.status) + ": the host refuses access " +
+                                     (t.withoutCredentials ? "(a redirect led to another origin, which was not sent the "
+                                                             "credentials: --redirect-credentials sends them)"
+                                                           : "(send credentials with --header or --token-file)"));
             if (q.wanted == 206 && r.status == 200)
                 return Status::error(shown + ": the host ignores Range requests (it answered 200 with the whole file); "
                                      "serve the set from one that honours Range (nginx, an object store or CDN, surfcast-serve)");

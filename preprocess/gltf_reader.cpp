@@ -461,21 +461,22 @@ Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures, b
     // What the instances expand to, from the accessors' declared counts,
     // before anything is decoded: about 1 MB of shared nodes once asked for
     // 70 GB. Each vertex takes 32 bytes here and about 150 in OpenMesh's mesh.
+    // Checked as it adds up (under the bound, one more count cannot wrap).
     uint64_t vertices = 0, triangles = 0;
+    auto declared = [&](int64_t accessor) {
+        return uint64_t(std::max<int64_t>(0, gltf.integer(gltf.element("accessors", accessor), "count", 0)));
+    };
     walk([&](const json& prim, const Matrix&, const std::string&) {
         if (!prim.is_object() || gltf.integer(prim, "mode", 4) != 4) return;  // addPrimitive says what is wrong
         const json attributes = prim.value("attributes", json::object());
         if (!attributes.is_object() || !attributes.contains("POSITION")) return;
-        const uint64_t count = uint64_t(std::max<int64_t>(0, gltf.integer(gltf.element("accessors", gltf.integer(attributes, "POSITION", -1)), "count", 0)));
+        const uint64_t count = declared(gltf.integer(attributes, "POSITION", -1));
         vertices += count;
-        triangles += (prim.contains("indices")
-                          ? uint64_t(std::max<int64_t>(0, gltf.integer(gltf.element("accessors", gltf.integer(prim, "indices", -1)), "count", 0)))
-                          : count) / 3;
+        triangles += (prim.contains("indices") ? declared(gltf.integer(prim, "indices", -1)) : count) / 3;
+        if (vertices > kMaxSceneVertices || triangles > kMaxSceneTriangles)
+            gltf.fail("the scene's node instances expand to over " + std::to_string(kMaxSceneVertices) + " vertices or " +
+                      std::to_string(kMaxSceneTriangles) + " triangles, more than a mesh may have");
     });
-    if (vertices > kMaxSceneVertices || triangles > kMaxSceneTriangles)
-        gltf.fail("the scene's node instances expand to " + std::to_string(vertices) + " vertices and " +
-                  std::to_string(triangles) + " triangles, more than the " + std::to_string(kMaxSceneVertices) + " and " +
-                  std::to_string(kMaxSceneTriangles) + " a mesh may have");
     walk(addPrimitive);
     if (scene.triangles.empty()) gltf.fail("the scene has no triangles");
     return scene;

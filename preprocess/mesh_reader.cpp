@@ -63,21 +63,36 @@ struct LoadedMesh {
 // finite numbers (OpenMesh refuses "nan" with no word of where). Also
 // collects the material libraries the file names (mtllib), resolved against
 // its folder, which they must lie in unless allowOutside (OpenMesh reads them
-// next, so this comes first).
+// next, so this comes first). A statement is found as OpenMesh 9 finds it:
+// the line trimmed of " \t\r\n", its first word; OpenMesh opens the rest of
+// the line as one name, the texture loader each word of it, so both are checked.
 Status scanObj(const std::string& path, bool allowOutside, std::vector<std::string>* libraries) {
     std::ifstream in(path, std::ios::binary);
     if (!in) return Status::error(path + ": cannot open");
     std::string line;
     for (uint64_t number = 1; std::getline(in, line); ++number) {
         size_t at = line.find_first_not_of(" \t");
-        if (at != std::string::npos && line.compare(at, 7, "mtllib ") == 0) {
-            std::istringstream names(line.substr(at + 7));
-            for (std::string name; names >> name;) {
-                auto library = resolveModelFile(path, path, name, allowOutside);
-                if (!library) return Status::error(path + ": line " + std::to_string(number) + ": mtllib " + library.status().message());
-                libraries->push_back(*library);
+        {
+            std::istringstream words(line);
+            std::string keyword;
+            if (words >> keyword && keyword == "mtllib") {
+                std::string rest;
+                std::getline(words, rest);
+                const size_t first = rest.find_first_not_of(" \t\r\n"), last = rest.find_last_not_of(" \t\r\n");
+                rest = first == std::string::npos ? "" : rest.substr(first, last - first + 1);
+                std::istringstream names(rest);
+                std::vector<std::string> each;
+                for (std::string name; names >> name;) each.push_back(name);
+                if (each.size() > 1)  // OpenMesh's reading: one name, spaces and all
+                    if (auto whole = resolveModelFile(path, path, rest, allowOutside); !whole)
+                        return Status::error(path + ": line " + std::to_string(number) + ": mtllib " + whole.status().message());
+                for (const std::string& name : each) {
+                    auto library = resolveModelFile(path, path, name, allowOutside);
+                    if (!library) return Status::error(path + ": line " + std::to_string(number) + ": mtllib " + library.status().message());
+                    libraries->push_back(*library);
+                }
+                continue;
             }
-            continue;
         }
         if (at != std::string::npos && line.compare(at, 3, "vt ") == 0) {
             std::istringstream words(line.substr(at + 3));

@@ -63,8 +63,9 @@ struct MtlLibrary {
     // an error (the shared dragon's library names a map_Ks that is not there).
     std::vector<std::string> missingUnusedMaps;
 };
-// `model`'s folder, inside which `allowOutside` (--allow-outside-paths) is
-// needed to read anything else. The library must lie there; so must its maps.
+// `model`: the OBJ that names the library (scanObj has checked that the
+// library lies in its folder); its maps must lie there too, unless
+// `allowOutside` (--allow-outside-paths).
 Result<MtlLibrary> readMtl(const std::string& path, const std::string& model, bool allowOutside);
 
 // A file a model names (a glTF buffer or image, an OBJ material library or
@@ -72,7 +73,8 @@ Result<MtlLibrary> readMtl(const std::string& path, const std::string& model, bo
 // the file that names it. It must lie inside `model`'s folder: an absolute
 // path elsewhere, or one that climbs out with "..", is an error naming it,
 // unless allowOutside (--allow-outside-paths). A model from elsewhere must not
-// make the build read whatever file the user can.
+// make the build read whatever file the user can. The check is lexical: a
+// symbolic link inside the folder is the user's own, and is followed.
 Result<std::string> resolveModelFile(const std::string& model, const std::string& from, const std::string& name,
                                      bool allowOutside);
 

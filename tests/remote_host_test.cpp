@@ -345,11 +345,14 @@ TEST(Stream, RedirectsKeepCredentialsAtHomeAndNeverDowngrade) {
                "  location /sets/ { " + check + "}\n"
                "  location /away/ { " + check + "rewrite ^/away/(.*)$ https://127.0.0.1:" + other + "/sets/$1 redirect; }\n"
                "  location /down/ { " + check + "rewrite ^/down/(.*)$ http://127.0.0.1:" + http + "/sets/$1 redirect; }\n"
-               "  location /ftp/ { return 302 ftp://127.0.0.1:" + http + "/sets/scene/tileset.json; }\n }\n"
+               "  location /locked/ { " + check + "rewrite ^/locked/(.*)$ https://127.0.0.1:" + other + "/locked/$1 redirect; }\n"
+               "  location /ftp/ { return 302 ftp://127.0.0.1:" + http + "/sets/scene/tileset.json; }\n"
+               "  location /here/ { " + check + "absolute_redirect off; rewrite ^/here/(.*)$ /sets/$1 permanent; }\n }\n"
                " server {\n  listen 127.0.0.1:" + http + ";\n  root " + dir.file("www") + ";\n"
                "  access_log " + dir.file("http.log") + " sent;\n }\n"
                " server {\n  listen 127.0.0.1:" + other + tls + "  root " + dir.file("www") + ";\n"
-               "  access_log " + dir.file("other.log") + " sent;\n }\n";
+               "  access_log " + dir.file("other.log") + " sent;\n"
+               "  location /locked/ { return 401; }\n }\n";
     });
     ASSERT_FALSE(nginx->ports.empty());
     const std::string a = "https://127.0.0.1:" + std::to_string(nginx->ports[0]);
@@ -374,6 +377,10 @@ TEST(Stream, RedirectsKeepCredentialsAtHomeAndNeverDowngrade) {
     for (std::string line; std::getline(requests, line);) tilesetJson += line.find("GET /sets/scene/tileset.json ") != std::string::npos;
     EXPECT_EQ(tilesetJson, 1);
 
+    // A relative Location (a 301 within A): followed, with the credentials.
+    auto here = view(a + "/here/scene", {});
+    EXPECT_EQ(here.exitCode, 0) << here.output;
+
     // To another origin: followed, without the credentials.
     auto away = view(a + "/away/scene", {});
     EXPECT_EQ(away.exitCode, 0) << away.output;
@@ -381,6 +388,13 @@ TEST(Stream, RedirectsKeepCredentialsAtHomeAndNeverDowngrade) {
     EXPECT_NE(log.find("GET /sets/scene/blocks.bin"), std::string::npos) << log;
     EXPECT_EQ(log.find("s3cret"), std::string::npos) << log;
     EXPECT_EQ(log.find("k3y"), std::string::npos) << log;
+    // Another origin that wants credentials: the refusal says why none went.
+    auto locked = view(a + "/locked/scene", {});
+    EXPECT_EQ(locked.exitCode, 1) << locked.output;
+    EXPECT_NE(locked.output.find("HTTP 401: the host refuses access (a redirect led to another origin, which was not sent "
+                                 "the credentials: --redirect-credentials sends them)"),
+              std::string::npos)
+        << locked.output;
     // Opted in: they go along (so the log above would have shown them).
     auto trusted = view(a + "/away/scene", {"--redirect-credentials"});
     EXPECT_EQ(trusted.exitCode, 0) << trusted.output;

@@ -391,35 +391,50 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
     }
 }
 
-// Nodes shared by many parents are instanced each time: 1 x 1,000 x 998 paths
-// to a mesh of 100 unindexed vertices (33 triangles) in a file of a few
-// kilobytes expand to 998,000 x 100 = 99.8 M vertices and 32,934,000
-// triangles (3 GB here, about 15 in OpenMesh; a megabyte of such nodes once
-// asked for 70 GB). Counted from the accessors before anything is decoded,
-// and refused.
+// Nodes shared by many parents are instanced each time: 1 x 1,000 x 68 paths
+// to a mesh of 1,000 unindexed vertices in a file of a few kilobytes expand
+// to 68,000 x 1,000 = 68 M vertices (2.2 GB here, about 10 in OpenMesh; a
+// megabyte of such nodes once asked for 70 GB). Counted from the accessors
+// before anything is decoded, and refused once past 2^26 = 67,108,864.
 TEST(TexturedMesh, GltfInstancesAreCountedBeforeTheyExpand) {
     test::TempDir dir;
     std::string bin;
-    for (int v = 0; v < 100; ++v)
+    for (int v = 0; v < 1000; ++v)
         for (float c : {float(v % 10), float(v / 10), 0.f}) bin.append(reinterpret_cast<const char*>(&c), 4);
     test::writeFile(dir.file("many.bin"), bin);
     auto children = [](int node, int n) {
         std::string s = "[";
-        for (int i = 0; i < n; ++i) s += (i ? "," : "") + std::to_string(node);
+        for (int i = 0; i < n; ++i) {
+            if (i) s += ',';
+            s += std::to_string(node);
+        }
         return s + "]";
     };
     test::writeFile(dir.file("many.gltf"),
                     R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
-  "nodes": [{"children": )" + children(1, 1000) + R"(}, {"children": )" + children(2, 998) + R"(}, {"mesh": 0}],
+  "nodes": [{"children": )" + children(1, 1000) + R"(}, {"children": )" + children(2, 68) + R"(}, {"mesh": 0}],
   "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-  "buffers": [{"uri": "many.bin", "byteLength": 1200}], "bufferViews": [{"buffer": 0, "byteLength": 1200}],
-  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 100, "type": "VEC3"}]})");
+  "buffers": [{"uri": "many.bin", "byteLength": 12000}], "bufferViews": [{"buffer": 0, "byteLength": 12000}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 1000, "type": "VEC3"}]})");
     auto r = openMeshReader(dir.file("many.gltf"), MeshSampling{});
     ASSERT_FALSE(r.ok());
-    EXPECT_NE(r.status().message().find("many.gltf: the scene's node instances expand to 99800000 vertices and 32934000 "
-                                        "triangles, more than the 67108864 and 134217728 a mesh may have"),
-              std::string::npos)
-        << r.status().message();
+    const std::string refused = "the scene's node instances expand to over 67108864 vertices or 134217728 triangles";
+    EXPECT_NE(r.status().message().find("many.gltf: " + refused), std::string::npos) << r.status().message();
+    // Counts that lie: four primitives of 2^62 vertices each would sum to 0
+    // in 64 bits; the sum is checked as it grows.
+    std::string lying = test::readFile(dir.file("many.gltf"));
+    auto swap = [&](const std::string& from, const std::string& to) {
+        ASSERT_NE(lying.find(from), std::string::npos) << from;
+        lying.replace(lying.find(from), from.size(), to);
+    };
+    const std::string primitive = R"({"attributes": {"POSITION": 0}})";
+    swap(R"("nodes": [0]}])", R"("nodes": [2]}])");  // the mesh's node alone
+    swap(primitive, primitive + ", " + primitive + ", " + primitive + ", " + primitive);
+    swap(R"("count": 1000)", R"("count": 4611686018427387904)");
+    test::writeFile(dir.file("lying.gltf"), lying);
+    auto l = openMeshReader(dir.file("lying.gltf"), MeshSampling{});
+    ASSERT_FALSE(l.ok());
+    EXPECT_NE(l.status().message().find("lying.gltf: " + refused), std::string::npos) << l.status().message();
 }
 
 // A model's external files resolve inside its folder: a model from elsewhere
@@ -450,11 +465,17 @@ TEST(TexturedMesh, ExternalFilesStayInsideTheModelsFolder) {
         {"up.gltf", "up.gltf: buffer 0: '../elsewhere/scene.bin' lies outside the model's folder"},
         {"absolute.gltf", "absolute.gltf: image 0: '" + secret + "' lies outside the model's folder"},
         {"up.obj", "up.obj: line 1: mtllib '../elsewhere/x.mtl' lies outside the model's folder"},
+        // Separators OpenMesh takes too: a tab after the keyword, a carriage return before it.
+        {"tab.obj", "tab.obj: line 1: mtllib '../elsewhere/x.mtl' lies outside the model's folder"},
+        {"cr.obj", "cr.obj: line 1: mtllib '../elsewhere/x.mtl' lies outside the model's folder"},
         {"map.obj", "map.mtl: line 2: map_Kd '../elsewhere/secret.png' lies outside the model's folder"},
         {"up.ply", "up.ply: line 3: comment TextureFile '../elsewhere/secret.png' lies outside the model's folder"}};
     test::writeFile(dir.file("model/up.gltf"), gltf("../elsewhere/scene.bin", "ramp.png"));
     test::writeFile(dir.file("model/absolute.gltf"), gltf("scene.bin", secret));
     test::writeFile(dir.file("model/up.obj"), quadObj("../elsewhere/x.mtl", "a"));
+    const std::string quad = quadObj("../elsewhere/x.mtl", "a");
+    test::writeFile(dir.file("model/tab.obj"), "mtllib\t" + quad.substr(7));
+    test::writeFile(dir.file("model/cr.obj"), "\r" + quad);
     test::writeFile(dir.file("model/map.obj"), quadObj("map.mtl", "a"));
     test::writeFile(dir.file("model/up.ply"), "ply\nformat ascii 1.0\ncomment TextureFile ../elsewhere/secret.png\n"
                                               "element vertex 3\n" + xyz + "property float s\nproperty float t\n"

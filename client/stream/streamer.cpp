@@ -293,8 +293,14 @@ void StreamingSet::fetchLoop() {
         if (checkDue_ && !checking_ && !stats_.setChanged && (permanentAt_ > lastCheck_ || now() - lastCheck_ > 2.0))
             checkForRebuild(lock);
         // A permanent failure stops the stream once a check begun after it
-        // found the set unchanged (a rebuilt set is reported as such instead).
+        // has ended without finding the set changed (a rebuilt set is reported
+        // as such instead; a check that cannot read tileset.json stops it too).
+        // Meanwhile nothing new starts.
         if (!permanent_.empty() && !checking_ && lastCheck_ >= permanentAt_) stop(permanent_);
+        if (!permanent_.empty() && !stats_.gaveUp && !stats_.setChanged) {
+            wakeFetch_.wait_for(lock, std::chrono::milliseconds(20));
+            continue;
+        }
         if (stats_.setChanged || stats_.gaveUp) continue;
         if (fetchPage(lock)) continue;  // pages first: they gate the nodes below them
         // The highest-priority wanted nodes that are neither pending nor

@@ -102,6 +102,9 @@ export function parseTileset(text: string, what: string): TilesetInfo {
     };
   });
   const stats = typeof j.statistics === "object" && j.statistics !== null ? (j.statistics as Record<string, any>) : {};
+  // As in C++: statistics, where present, carry the elevation range.
+  if (j.statistics !== undefined && (typeof stats.elevation?.min !== "number" || typeof stats.elevation?.max !== "number"))
+    fail(what, "statistics.elevation.min and .max are not both numbers");
   const bmin = vec3(bounds.min, what, "bounds.min"), bmax = vec3(bounds.max, what, "bounds.max");
   const classCounts = new Map<number, number>();
   for (const [k, v] of Object.entries(stats.classification?.counts ?? {})) classCounts.set(Number(k), Number(v));
@@ -129,8 +132,8 @@ export function parseTileset(text: string, what: string): TilesetInfo {
     blocksBytes: num(blocks.bytes, what, "blocks.bytes"),
     statistics: {
       // Without statistics (version 1), the bounds' z range, as in C++.
-      elevationMin: typeof stats.elevation?.min === "number" ? stats.elevation.min : bmin[2],
-      elevationMax: typeof stats.elevation?.max === "number" ? stats.elevation.max : bmax[2],
+      elevationMin: j.statistics !== undefined ? stats.elevation.min : bmin[2],
+      elevationMax: j.statistics !== undefined ? stats.elevation.max : bmax[2],
       intensity: stats.intensity,
       classCounts,
     },

@@ -4,8 +4,10 @@
 // (network errors, responses cut short, 408, 429, 5xx: HttpError.transient)
 // are retried with backoff by the caller; everything else, and any error that
 // is not an HttpError (a CRC or decoding failure of the set's fixed bytes),
-// fails at once, naming the URL or node, as in the C++ client
-// (client/stream/streamer.h).
+// fails at once, naming the URL or node: the C++ client's classes
+// (client/stream/streamer.h), though only it reads tileset.json again to tell
+// a rebuilt set from a damaged one. Redirects are the browser's: it keeps
+// https pages from http data, and drops Authorization across origins.
 
 export class HttpError extends Error {
   constructor(message: string, readonly transient: boolean) {
