@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "block_codec.h"
+#include "byte_io.h"
 #include "crc32.h"
 #include "surfel_set.h"
 #include "tileset_format.h"
@@ -30,25 +31,18 @@ namespace {
 
 constexpr size_t kMaxBlocksDecoded = 16;  // per input: bounds a run's time
 
-void putU32(uint8_t* at, uint32_t v) {
-    for (int i = 0; i < 4; ++i) at[i] = uint8_t(v >> (8 * i));
-}
-
 void streamPages(const TilesetInfo& info, std::vector<uint8_t> hierarchy, std::span<const uint8_t> blocks) {
     if (hierarchy.size() < kHierarchyHeaderSize) return;
-    const uint64_t pageCount = uint64_t(hierarchy[12]) | uint64_t(hierarchy[13]) << 8 | uint64_t(hierarchy[14]) << 16 |
-                               uint64_t(hierarchy[15]) << 24;
+    const uint64_t pageCount = le::get<uint32_t>(hierarchy.data() + 12);
     const uint64_t tableEnd = kHierarchyHeaderSize + pageCount * kPageEntrySize;
     if (tableEnd > hierarchy.size()) return;
     for (uint64_t p = 0; p < pageCount; ++p) {  // each page's CRC, where its records lie in the bytes given
         uint8_t* entry = hierarchy.data() + kHierarchyHeaderSize + p * kPageEntrySize;
-        uint64_t offset = 0;
-        for (int i = 0; i < 8; ++i) offset |= uint64_t(entry[i]) << (8 * i);
-        const uint64_t bytes = uint64_t(entry[8] | entry[9] << 8 | entry[10] << 16 | uint32_t(entry[11]) << 24) * kRecordSize;
+        const uint64_t offset = le::get<uint64_t>(entry), bytes = uint64_t(le::get<uint32_t>(entry + 8)) * kRecordSize;
         if (offset <= hierarchy.size() && bytes <= hierarchy.size() - offset)
-            putU32(entry + 12, crc32(hierarchy.data() + offset, bytes));
+            le::put<uint32_t>(entry + 12, crc32(hierarchy.data() + offset, bytes));
     }
-    putU32(hierarchy.data() + 24, crc32(hierarchy.data() + kHierarchyHeaderSize, tableEnd - kHierarchyHeaderSize));
+    le::put<uint32_t>(hierarchy.data() + 24, crc32(hierarchy.data() + kHierarchyHeaderSize, tableEnd - kHierarchyHeaderSize));
     // The header and table alone, as StreamingSet::open fetches them.
     auto index = readHierarchyIndex(std::span(hierarchy).first(tableEnd), info.hierarchyBytes, "hierarchy.bin");
     if (!index) return;
