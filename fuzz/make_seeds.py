@@ -8,7 +8,7 @@ Usage: make_seeds.py DATA_DIR SETS_DIR OUT_DIR
   OUT_DIR   gets one folder per target: read_ply, read_las, read_laz, read_pcd,
             read_xyz, read_obj, read_gltf, read_glb, tileset, block (client_response, http_request
             and range seeds are committed in fuzz/seeds)
-Needs laspy with lazrs (scripts/test-venv.sh installs them into BUILD/test-venv).
+Needs laspy with lazrs (scripts/test-venv.sh installs them into build/test-venv).
 """
 import os
 import re

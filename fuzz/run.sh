@@ -21,7 +21,7 @@ scripts/setup.sh --no-build --clang
 build=build-asan
 cmake --preset asan >/dev/null
 cmake --build "$build" --target fuzz_all surfcast-build
-scripts/test-venv.sh "$build"
+scripts/test-venv.sh
 
 data="${SURFCAST_DATA_DIR:-../shared/data}"
 if [ ! -f "$data/PROVENANCE.md" ]; then
@@ -39,7 +39,7 @@ if ! "$build/bin/surfcast-build" -q "$data/autzen_trim.las" --attributes all --c
   echo "fuzz/run.sh: building the autzen seed set failed (log $work/autzen.log)" >&2
   exit 1
 fi
-"$build/test-venv/bin/python" fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
+build/test-venv/bin/python fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
 export SURFCAST_FUZZ_SETS="$PWD/$work/sets"
 
 targets=(read_ply read_las read_laz read_pcd read_xyz read_obj read_gltf read_glb tileset block range http_request client_response)

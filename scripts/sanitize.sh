@@ -22,7 +22,7 @@ esac
 scripts/setup.sh --no-build --clang
 cmake --preset "$preset"
 cmake --build "build-$preset" --parallel --target "$target"
-scripts/test-venv.sh "build-$preset"
+scripts/test-venv.sh
 
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1

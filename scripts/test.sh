@@ -6,5 +6,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-scripts/test-venv.sh build
+scripts/test-venv.sh
 ctest --test-dir build --output-on-failure --timeout 1200 -j "${CTEST_PARALLEL_LEVEL:-2}" "$@"
