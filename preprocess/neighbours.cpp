@@ -1,7 +1,11 @@
 #include "neighbours.h"
 
 #include <algorithm>
-#include <flann/flann.hpp>
+// The one index type used, not flann/flann.hpp: flann::Index builds any index
+// type from its parameters, so it compiles all of them (half a minute of
+// this file's compile under ASan; bench/RELIABILITY.md, "CI stages").
+#include <flann/algorithms/dist.h>
+#include <flann/algorithms/kdtree_single_index.h>
 
 namespace surfcast {
 
@@ -13,7 +17,7 @@ constexpr int kLeafSize = 10;
 
 struct NeighbourIndex::Impl {
     std::vector<Vec3f> data;
-    std::unique_ptr<flann::Index<flann::L2_Simple<float>>> index;
+    std::unique_ptr<flann::KDTreeSingleIndex<flann::L2_Simple<float>>> index;
     int threads = 1;
 };
 
@@ -22,7 +26,7 @@ NeighbourIndex::NeighbourIndex(const std::vector<Vec3f>& points, int threads) : 
     impl_->threads = std::max(1, threads);
     if (size_ == 0) return;
     flann::Matrix<float> m(&impl_->data[0].x, size_, 3);
-    impl_->index = std::make_unique<flann::Index<flann::L2_Simple<float>>>(m, flann::KDTreeSingleIndexParams(kLeafSize));
+    impl_->index = std::make_unique<flann::KDTreeSingleIndex<flann::L2_Simple<float>>>(m, flann::KDTreeSingleIndexParams(kLeafSize));
     impl_->index->buildIndex();
 }
 
