@@ -779,6 +779,48 @@ TEST(Stream, APersistentlyCorruptHierarchyPageGivesUpNamingIt) {
     EXPECT_GT(st.resident, 0u) << "page 0's nodes kept streaming";
 }
 
+// A node larger than the memory budget could never be resident. One in
+// page 0 fails open(); one in a later page stops the stream when that page
+// arrives, naming the node, before the page joins the tree (the client's
+// check came after the stream had handed over and evicted, and every later
+// update failed on it: issue 31, finding 7). The stream keeps what it has.
+TEST(Stream, ANodeLargerThanTheBudgetStopsTheStreamNamingIt) {
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "500", "--page-depth", "2"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    // An octree's largest nodes are near its root, in page 0 (levels 0 and
+    // 1 here). So every node below claims more surfels than a budget that
+    // holds page 0 twice over: the check reads the records, before any block.
+    const std::string h = test::readFile(dir.file("scene/hierarchy.bin"));
+    auto all = readHierarchy(std::vector<uint8_t>(h.begin(), h.end()), "hierarchy.bin");
+    ASSERT_TRUE(all) << all.status().message();
+    uint32_t pageZeroMost = 0, pageZeroAll = 0;
+    for (const NodeRecord& r : *all)
+        if (r.key.level < 2) pageZeroMost = std::max(pageZeroMost, r.surfelCount), pageZeroAll += r.surfelCount;
+    for (NodeRecord& r : *all)
+        if (r.key.level >= 2) r.surfelCount = 2 * pageZeroAll + 1;
+    const std::vector<uint8_t> inflated = writeHierarchy(*all, 2);
+    ASSERT_EQ(inflated.size(), h.size());
+    test::writeFile(dir.file("scene/hierarchy.bin"), std::string(inflated.begin(), inflated.end()));
+
+    StreamOptions options = connections(1);  // granule 1: a node needs 32 bytes per surfel
+    options.memoryBudget = 32 * size_t(pageZeroMost) - 1;
+    auto refused = StreamingSet::open(dir.file("scene"), options);
+    ASSERT_FALSE(refused);
+    EXPECT_NE(refused.status().message().find("KiB resident, more than the memory budget of"), std::string::npos)
+        << refused.status().message();
+
+    options.memoryBudget = 32 * 2 * size_t(pageZeroAll);  // page 0 fits, and room to refine
+    auto set = StreamingSet::open(dir.file("scene"), options);
+    ASSERT_TRUE(set) << set.status().message();
+    const StreamStats st = streamUntilGaveUp(**set, 10);
+    EXPECT_NE(st.lastError.find(": node "), std::string::npos) << st.lastError;
+    EXPECT_NE(st.lastError.find("KiB resident, more than the memory budget of"), std::string::npos) << st.lastError;
+    EXPECT_EQ(st.pages, 2u) << "page 0 and the page that stopped it";
+    EXPECT_GT(st.resident, 0u) << "what page 0 brought stays drawable";
+    for (const NodeRecord& r : (*set)->nodes()) EXPECT_LT(r.key.level, 2) << r.key.name() << " joined the tree";
+}
+
 TEST(Stream, ResponsesLongerThanAskedForAreCutOff) {
     // A broken or hostile host answers with more than was asked for: a huge
     // tileset.json, a range response longer than the range. The client keeps

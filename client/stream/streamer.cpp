@@ -45,6 +45,7 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     s->hierarchy_ = std::move(*index);
     auto page = s->fetchPageRecords(0, NodeKey{});
     if (!page) return page.status();
+    SC_TRY(s->checkFitsBudget(*page));
     s->selector_ = std::make_unique<LodSelector>(s->info_, std::move(*page));
     s->pages_[0] = true;
     s->stats_.pages = 1;
@@ -80,6 +81,17 @@ StreamingSet::~StreamingSet() {
 static_assert(sizeof(gpu_types::GpuSurfel) == 32, "residentBytes() counts 32 bytes per surfel");
 size_t StreamingSet::residentCost(uint32_t index) const {
     return residentBytes(nodes()[index].surfelCount, options_.granule);
+}
+
+Status StreamingSet::checkFitsBudget(const std::vector<NodeRecord>& records) const {
+    for (const NodeRecord& r : records) {
+        const size_t cost = residentBytes(r.surfelCount, options_.granule);
+        if (cost > options_.memoryBudget)
+            return Status::error(source_->describe() + ": node " + r.key.name() + " needs " + std::to_string(cost >> 10) +
+                                 " KiB resident, more than the memory budget of " +
+                                 std::to_string(options_.memoryBudget >> 10) + " KiB (--gpu-budget)");
+    }
+    return {};
 }
 
 StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, const LodParams& params) {
@@ -262,6 +274,12 @@ bool StreamingSet::fetchPage(std::unique_lock<std::mutex>& lock) {
         failedPages_.erase(page);
         ++stats_.pages;
         stats_.hierarchyBytes += uint64_t(hierarchy_.pages[page].records) * kRecordSize;
+        // Stopped here, before the page joins the tree: update() still hands
+        // over and evicts as usual, and its frame reports gaveUp.
+        if (Status fits = checkFitsBudget(*records); !fits) {
+            stop(fits.message());
+            return true;
+        }
         pagesFetched_.push_back({page, std::move(*records)});
         return true;
     }

@@ -46,7 +46,10 @@ namespace surfcast {
 struct StreamOptions {
     int connections = 6;       // concurrent requests
     int decoders = 0;          // decode threads; 0: one per core
-    size_t memoryBudget = size_t(1) << 30;  // bytes of resident surfels (32 B each, in granules)
+    // Bytes of resident surfels (32 B each, in granules). A node larger than
+    // this could never be drawn: open() fails on one in page 0, and a later
+    // page holding one stops the stream (StreamStats::gaveUp), naming it.
+    size_t memoryBudget = size_t(1) << 30;
     size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
     size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
     HttpOptions http;          // timeout (a stalled response fails and is retried), headers, token, CA
@@ -133,6 +136,9 @@ private:
     void stop(const std::string& message);                 // gave up, with mutex_ held
     void noteFailure(const std::string& message);          // counted and kept for stats(), with mutex_ held
     void addPages();                                        // those fetched, to the tree, with mutex_ held
+    // An error naming the first of `records` that could never be resident
+    // (larger than memoryBudget).
+    Status checkFitsBudget(const std::vector<NodeRecord>& records) const;
     void checkForRebuild(std::unique_lock<std::mutex>& lock);
     using Block = std::shared_ptr<const std::vector<uint8_t>>;
     void keep(uint32_t node, Block bytes);  // with mutex_ held

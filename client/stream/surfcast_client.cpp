@@ -20,7 +20,6 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
                                                              const ClientOptions& options) {
     std::unique_ptr<SurfcastClient> c(new SurfcastClient);
     c->options_ = options;
-    c->location_ = location;
     StreamOptions stream;
     stream.connections = options.connections;
     stream.http = options.http;
@@ -33,7 +32,6 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     c->stream_ = std::move(*opened);
     if (auto by = resolveColorBy(options.coloring.by, c->stream_->info()); !by)
         return Status::error(location + ": " + by.status().message());
-    SC_TRY(c->checkNewNodesFit());  // page 0's; later pages' in update()
     auto pool = SurfelPool::create(ctx, stream.memoryBudget);
     if (!pool) return pool.status();
     c->pool_ = std::move(*pool);
@@ -44,18 +42,6 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     const Box3d& b = c->stream_->info().bounds;
     c->diagonal_ = b.empty() ? 0 : length(b.max - b.min);
     return c;
-}
-
-Status SurfcastClient::checkNewNodesFit() {
-    const size_t budget = stream_->options().memoryBudget;
-    for (; nodesChecked_ < stream_->nodes().size(); ++nodesChecked_) {
-        const size_t cost = stream_->residentCost(uint32_t(nodesChecked_));
-        if (cost > budget)
-            return Status::error(location_ + ": the GPU budget of " + std::to_string(budget >> 10) +
-                                 " KiB is smaller than node " + stream_->nodes()[nodesChecked_].key.name() + " (" +
-                                 std::to_string(cost >> 10) + " KiB)");
-    }
-    return {};
 }
 
 RenderSettings SurfcastClient::defaultSettings() const {
@@ -73,7 +59,6 @@ Status SurfcastClient::setColoring(const Coloring& coloring) {
 Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int height) {
     ClientFrame frame;
     StreamUpdate u = stream_->update(camera, width, height, options_.lod);
-    SC_TRY(checkNewNodesFit());
     for (uint32_t i : u.evicted) pool_->release(i);
     std::vector<std::pair<uint32_t, const SurfelSet*>> uploads;
     for (const ArrivedNode& a : u.arrived) {

@@ -60,7 +60,10 @@ public:
 
     // Chooses the nodes for this view, uploads what arrived and frees what
     // the stream evicted (GPU memory stays within gpuBudget). An error when
-    // the set was rebuilt on the server since open(): open it again.
+    // the set was rebuilt on the server since open() (open it again) or the
+    // stream stopped (StreamStats::gaveUp: a permanent failure, a node
+    // larger than gpuBudget), each time after this frame's uploads and
+    // evictions are applied.
     Result<ClientFrame> update(const Camera& camera, int width, int height);
     // Records the frame of the last update into `cmd`; output() is then in
     // TRANSFER_SRC_OPTIMAL for the host to blit or copy.
@@ -73,11 +76,6 @@ public:
 
 private:
     SurfcastClient() = default;
-    // Every node known since the last call fits the GPU pool (the streamer
-    // loads a larger one, which the pool could not take).
-    Status checkNewNodesFit();
-    size_t nodesChecked_ = 0;
-    std::string location_;
     std::unique_ptr<StreamingSet> stream_;
     std::unique_ptr<SurfelPool> pool_;
     std::unique_ptr<SplatRenderer> renderer_;
