@@ -153,19 +153,23 @@ async function main() {
   // stream in no more often than every other frame's cost, so that a slow
   // WebGL (SwiftShader takes about a second for half a million splats)
   // spends its time decoding, not redrawing. The state says converged once
-  // the converged frame is done.
+  // the converged frame is done, and not converged from the moment the user
+  // changes the view (camera, settings, colouring) until then.
   let dirty = true, urgent = true, lastDraw = -Infinity, frameCost = 0;
   let fence: WebGLSync | null = null, fenceConverged = false;
   const start = performance.now();
   streamer.onChange = () => (dirty = true);
+  const changed = () => {
+    urgent = dirty = true;
+    state.converged = false;
+  };
   const setCamera = (c: Camera) => {
-    urgent = true;
+    changed();
     camera = c;
     state.camera = formatCamera(c);
     const url = new URL(location.href);
     url.searchParams.set("camera", state.camera);
     history.replaceState(null, "", url);
-    dirty = true;
   };
   setCamera(camera);
   new Controls(canvas, () => camera, setCamera);
@@ -176,19 +180,22 @@ async function main() {
   modeSelect.onchange = () => {
     settings.mode = modeSelect.value as RenderMode;
     noteMode();
-    urgent = dirty = true;
+    changed();
   };
   const lodInput = $<HTMLInputElement>("lod");
   lodInput.value = String(targetPixels);
   const budgetInput = $<HTMLInputElement>("splats");
   budgetInput.value = String(splatBudget);
-  for (const input of [lodInput, budgetInput]) input.onchange = () => (urgent = dirty = true);
+  for (const input of [lodInput, budgetInput]) input.onchange = changed;
   const colorSelect = $<HTMLSelectElement>("color");
   for (const by of kColorByOrder) {
     if (resolveColorBy(by, info) !== by) continue;
     colorSelect.add(new Option(by, by, false, by === colorBy));
   }
-  const recolor = () => streamer.recolor(coloringFor(info, streamer.origin, colorBy, hidden));
+  const recolor = () => {
+    changed();
+    streamer.recolor(coloringFor(info, streamer.origin, colorBy, hidden));
+  };
   colorSelect.onchange = () => {
     colorBy = colorSelect.value as ColorBy;
     settings.shading = colorBy === "rgb" || colorBy === "intensity" ? "unlit" : "lambert";

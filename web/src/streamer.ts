@@ -10,7 +10,8 @@
 // block that fails its CRC or decoding, a page that fails its checks) are
 // not. Either way the stream then stops, naming the node and why. Residency
 // has a byte budget: beyond it the least recently used nodes that the view
-// does not use are evicted.
+// does not use are evicted. A resident node keeps its compressed block, so
+// that recolor() decodes it again without fetching it.
 
 import type { Camera } from "./camera.js";
 import type { ColoringSpec, DecodeJob, DecodeResult } from "./block_decode.js";
@@ -42,6 +43,7 @@ export interface Resident<T> {
   gpu: T;
   count: number; // surfels drawn (after class filters)
   lastUsed: number;
+  block: Uint8Array; // compressed, as fetched: recolor() decodes it again
 }
 
 // What the GPU side does with arriving and evicted nodes.
@@ -121,7 +123,8 @@ export class Streamer<T> {
   private requestsInFlight = 0;
   private decoders: DecoderPool;
   private clock = 0;
-  private generation = 0; // of the colouring: recolor() drops what was decoded before it
+  private generation = 0; // of the colouring: what was decoded with an older one is decoded again
+  private recoloring = new Set<number>(); // resident nodes being decoded again with a new colouring
   private extra: string[];
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
@@ -184,7 +187,7 @@ export class Streamer<T> {
       const wanted = lod.missing.filter(([i]) => !this.inFlight.has(i)).sort((a, b) => b[1] - a[1]).map(([i]) => i);
       this.fetchNodes(wanted);
     }
-    this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size;
+    this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
     this.stats.requests = this.source.requests;
     this.stats.bytes = this.source.bytes;
     return selected;
@@ -266,28 +269,41 @@ export class Streamer<T> {
     }
   }
 
-  private async decodeNode(i: number, blob: Uint8Array) {
+  // Decodes node i's block with the current colouring (again, if the
+  // colouring changes meanwhile) and makes it resident, or, for a resident
+  // node being recoloured, replaces its surfels on the GPU.
+  private async decodeNode(i: number, blob: Uint8Array, recolor = false) {
     const generation = this.generation;
     const n = this.selector.nodes[i];
     const min = nodeMin(this.info, n);
-    const copy = blob.byteOffset === 0 && blob.byteLength === blob.buffer.byteLength ? blob.buffer as ArrayBuffer : blob.slice().buffer;
+    // The worker takes a copy (transferred); the block stays here, its own
+    // bytes (not a view of a whole batch response).
+    const block = blob.byteOffset === 0 && blob.byteLength === blob.buffer.byteLength ? blob : blob.slice();
     const result = await this.decoders.decode({
-      key: n.key, blob: copy, crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits,
+      key: n.key, blob: block.slice().buffer, crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits,
       min: [min[0] - this.origin[0], min[1] - this.origin[1], min[2] - this.origin[2]], edge: nodeEdge(this.info, n.level),
       spacing: n.spacing, hasRadius: !!(n.flags & kFlagHasRadius), hasEdgeWeights: !!(n.flags & kFlagEdgeWeights),
       colorBits: this.info.colorBits, weights: this.info.weights !== "none", extra: this.extra, coloring: this.coloring,
     });
     if (result.error || !result.surfels) {
+      this.recoloring.delete(i);
       this.noteFailure(i, new Error(result.error ?? "decoding failed"));
+      return;
+    }
+    const old = this.resident.get(i);
+    if (!this.stats.gaveUp && generation !== this.generation && (!recolor || old)) {
+      await this.decodeNode(i, block, recolor);  // recoloured meanwhile: its surfels would show the old colouring
       return;
     }
     this.inFlight.delete(i);
     this.tries.delete(i);
-    // Not kept when the stream stopped, or when it was decoded with a
-    // colouring that recolor() has replaced since (a later update fetches it again).
-    if (!this.stats.gaveUp && generation === this.generation) {
-      this.resident.set(i, { gpu: this.uploader.upload(result.surfels), count: result.count ?? 0, lastUsed: this.clock });
-      ++this.stats.nodesFetched;
+    if (recolor) this.recoloring.delete(i);
+    // Not kept when the stream stopped, nor a recolouring of a node evicted meanwhile.
+    if (!this.stats.gaveUp && (!recolor || old)) {
+      if (old) this.uploader.release(old.gpu);
+      this.resident.set(i, { gpu: this.uploader.upload(result.surfels), count: result.count ?? 0,
+                             lastUsed: old?.lastUsed ?? this.clock, block });
+      if (!recolor) ++this.stats.nodesFetched;
     }
     this.onChange();
   }
@@ -311,13 +327,18 @@ export class Streamer<T> {
     }, Math.min(100 * 2 ** (tries - 1), 5000));
   }
 
-  // Every node the view has drawn, drawn again from its block with another
-  // colouring: resident nodes are dropped and fetched anew.
+  // Every resident node decoded again from its kept block with another
+  // colouring, nothing fetched; each is drawn with its old surfels until its
+  // new ones arrive, and the stream counts them in flight until then.
   recolor(coloring: ColoringSpec) {
     this.coloring = coloring;
     ++this.generation;
-    for (const r of this.resident.values()) this.uploader.release(r.gpu);
-    this.resident.clear();
+    for (const [i, r] of this.resident) {
+      if (this.recoloring.has(i)) continue;  // decoded again when it finishes
+      this.recoloring.add(i);
+      void this.decodeNode(i, r.block, true);
+    }
+    this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
     this.onChange();
   }
 

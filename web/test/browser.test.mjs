@@ -230,7 +230,10 @@ describe("browser viewer", { skip }, () => {
 
   test("colour by elevation, chosen in the page, as surfcast-view draws it", async () => {
     // Chosen in the panel after the rgb view converged: the resident nodes
-    // are decoded again with the palette, and the view converges again.
+    // are decoded again from their kept blocks with the palette, nothing is
+    // fetched again, the old surfels stay drawn meanwhile (the viewer once
+    // dropped every node: a blank view, and the whole set downloaded again),
+    // and the view converges again.
     const page = await browser.newPage();
     await page.setViewport(size);
     const problems = [];
@@ -239,15 +242,32 @@ describe("browser viewer", { skip }, () => {
     await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
     const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(done, { timeout: 60000 });
+    const before = await page.evaluate(() => ({ ...window.surfcast }));
+    // The fewest nodes any frame draws from here on.
+    await page.evaluate(() => {
+      window.fewestNodes = Infinity;
+      const frames = window.surfcast.frames;
+      const watch = () => {
+        if (window.surfcast.frames > frames) window.fewestNodes = Math.min(window.fewestNodes, window.surfcast.nodes);
+        requestAnimationFrame(watch);
+      };
+      requestAnimationFrame(watch);
+    });
+    // The viewer says not converged from the change on, until the
+    // recoloured frame is done.
     await page.select("#color", "elevation");
-    await page.waitForFunction("window.surfcast.converged === false", { timeout: 10000 }).catch(() => {});
+    assert.equal(await page.evaluate(() => window.surfcast.converged), false);
     await page.waitForFunction(done, { timeout: 60000 });
-    const state = await page.evaluate(() => window.surfcast);
+    const state = await page.evaluate(() => ({ ...window.surfcast, fewestNodes: window.fewestNodes }));
     await page.evaluate(() => document.body.classList.add("capture"));
     const png = PNG.sync.read(await page.screenshot({ type: "png" }));
     await page.close();
     assert.deepEqual(problems, []);
     assert.deepEqual(state.errors, []);
+    assert.ok(state.frames > before.frames, "the recoloured view was drawn");
+    assert.equal(state.requests, before.requests, "nothing fetched again");
+    assert.equal(state.bytes, before.bytes);
+    assert.equal(state.fewestNodes, before.nodes, "every frame drew every node the converged view drew");
     expectLikeReference(state, png, `${serveUrl}/sets/scene`, ["--color-by", "elevation"]);
   });
 
@@ -327,13 +347,14 @@ describe("browser viewer", { skip }, () => {
     await page.mouse.down();
     await page.mouse.move(600, 240, { steps: 4 });
     await page.mouse.up();
-    await page.waitForFunction("window.surfcast.converged === false", { timeout: 10000 }).catch(() => {});
+    assert.equal(await page.evaluate(() => window.surfcast.converged), false, "the drag makes the view unconverged");
     await page.waitForFunction(converged, { timeout: 60000 });
     const second = await page.evaluate(() => ({ ...window.surfcast }));
     await page.close();
     assert.deepEqual(problems, []);
     assert.notEqual(second.camera, first.camera, "the drag orbits the camera");
-    assert.ok(second.converged && second.evictions > 0, `evictions ${second.evictions}`);
+    assert.ok(second.converged && second.evictions > first.evictions,
+              `evictions ${first.evictions} before the drag, ${second.evictions} after`);
     assert.ok(second.residentBytes <= budget, `resident ${second.residentBytes}`);
   });
 
