@@ -11,7 +11,8 @@
 // Float blending (EXT_float_blend) is what per-pixel normalization needs.
 // Without it the accumulation targets are 8-bit, where only the 2002 paper's
 // per-surfel weights work (ewa-surfel, no division): that is what the
-// renderer falls back to, and to circles for sets without weights.
+// renderer falls back to, and to circles for sets without weights. 8-bit
+// targets hold no negative sums: the normal is accumulated offset to [0, 1].
 
 import * as S from "./shaders.js";
 
@@ -125,12 +126,13 @@ export class SplatRenderer {
     const clip = gl.getExtension("EXT_clip_control");
     this.clipControl = !!clip;
     if (clip) clip.clipControlEXT(clip.LOWER_LEFT_EXT, clip.ZERO_TO_ONE_EXT);
+    const unsigned8 = !this.floatBlend;  // RGBA8 accumulation targets (ensureTargets)
     this.programs = {
       visibility: new Program(gl, S.splatVertex(S.kPassVisibility), S.visibilityFragment),
-      accumulate: new Program(gl, S.splatVertex(S.kPassAccumulate), S.accumulateFragment(false)),
+      accumulate: new Program(gl, S.splatVertex(S.kPassAccumulate), S.accumulateFragment(false, unsigned8)),
       circles: new Program(gl, S.splatVertex(S.kPassCircles), S.opaqueFragment(true)),
       points: new Program(gl, S.splatVertex(S.kPassPoints), S.opaqueFragment(false)),
-      resolve: new Program(gl, S.resolveVertex, S.resolveFragment),
+      resolve: new Program(gl, S.resolveVertex, S.resolveFragment(unsigned8)),
     };
     if (this.floatBlend) {
       this.programs.peel = new Program(gl, S.splatVertex(S.kPassVisibility, true), S.peelFragment);

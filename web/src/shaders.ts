@@ -221,7 +221,10 @@ void main() {
 // The accumulation pass (splat_accumulate.frag); `layered`: of one layer of
 // a translucent frame (splat_layer.frag), without the layers in front (at or
 // nearer than layer k-1's pushed-back surface), plus the opacity's weighted sum.
-export const accumulateFragment = (layered: boolean) => `#version 300 es
+// `unsigned8`: the targets are RGBA8 (no float blending), which clamp
+// negative sums, so the normal is accumulated as (n + 1) / 2 · w and the
+// resolve takes 2 Σ(...) - Σw.
+export const accumulateFragment = (layered: boolean, unsigned8 = false) => `#version 300 es
 precision highp float;
 precision highp int;
 ${common}
@@ -248,7 +251,11 @@ void main() {
   float g = exp(-0.5 * q);
   float w = vAmplitude * g * edgeFactor(vEdge, vEdgeUV);
   outColorWeight = vec4(vColor * w, w);
+#if ${unsigned8 ? 1 : 0}
+  outNormalWeight = vec4((0.5 * vNormal + 0.5) * w, g);
+#else
   outNormalWeight = vec4(vNormal * w, g);
+#endif
 #if ${layered ? 1 : 0}
   outAlphaWeight = vec4(vAlpha * w, 0.0, 0.0, 0.0);
 #endif
@@ -285,7 +292,8 @@ void main() {
 }
 `;
 
-export const resolveFragment = `#version 300 es
+// `unsigned8`: the normal was accumulated as accumulateFragment's unsigned8 writes it.
+export const resolveFragment = (unsigned8 = false) => `#version 300 es
 ${resolveHead}out vec4 outColor;
 ${resolveCommon}
 void main() {
@@ -299,7 +307,11 @@ void main() {
   }
   float coverage = edgeCoverage(pixel, nw.a);
   vec3 color = uMode == ${kModeEwaSurfel}u ? cw.rgb + max(1.0 - cw.a, 0.0) * background : cw.rgb / cw.a;
+#if ${unsigned8 ? 1 : 0}
+  color = shade(color, 2.0 * nw.xyz - cw.a);
+#else
   color = shade(color, nw.xyz);
+#endif
   outColor = vec4(mix(background, color, coverage), 1.0);
 }
 `;
