@@ -12,6 +12,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <condition_variable>
+#include <cstdlib>
 #include <cstring>
 #include <mutex>
 #include <optional>
@@ -164,6 +165,7 @@ public:
     Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
         auto r = std::move(run({{name, "", nullptr, maxBytes, 200}})[0]);
         if (!r) return r.status();
+        if (name == "tileset.json") batchNodes_ = r->batchNodes;
         return std::move(r->body);
     }
     Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
@@ -180,13 +182,28 @@ public:
         curl_multi_wakeup(multi_);
     }
 
-    // The server's POST {set}/batch where it answers (tried once); a static
-    // host refuses it (404/405) and every later call takes the ranges, all in
+    // The server's POST {set}/batch where tileset.json's answer offered it
+    // (Surfcast-Batch: up to N keys a request), else the ranges, all in
     // flight at once.
     Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes) override {
-        std::vector<std::pair<uint64_t, uint64_t>> spans;
-        for (const NodeRecord& n : nodes) spans.push_back({n.blockOffset, n.blockSize});
-        if (nodes.size() < 2 || batch_ == Batch::No) return ranges("blocks.bin", spans);
+        const size_t most = batchNodes_;
+        if (nodes.size() < 2 || most < 2) {
+            std::vector<std::pair<uint64_t, uint64_t>> spans;
+            for (const NodeRecord& n : nodes) spans.push_back({n.blockOffset, n.blockSize});
+            return ranges("blocks.bin", spans);
+        }
+        std::vector<std::vector<uint8_t>> out;
+        for (size_t at = 0; at < nodes.size(); at += most) {
+            auto part = batch(std::vector<NodeRecord>(nodes.begin() + long(at), nodes.begin() + long(std::min(nodes.size(), at + most))));
+            if (!part) return part.status();
+            for (auto& b : *part) out.push_back(std::move(b));
+        }
+        return out;
+    }
+
+private:
+    // One POST {set}/batch of `nodes`: their blobs in order.
+    Result<std::vector<std::vector<uint8_t>>> batch(const std::vector<NodeRecord>& nodes) {
         std::string body;
         uint64_t expected = 0;  // what the answer holds: a length and a blob per node
         for (const NodeRecord& n : nodes) {
@@ -196,15 +213,7 @@ public:
         auto r = std::move(run({{"batch", "", &body, expected, 0}})[0]);
         if (!r) return r.status();
         const std::string url = base_ + "/batch";
-        if (r->status != 200) {
-            // Refused or redirected (a POST is not followed): a static host.
-            if (batch_ == Batch::Unknown && r->status >= 300 && r->status < 500) {
-                batch_ = Batch::No;
-                return ranges("blocks.bin", spans);
-            }
-            return httpError(url, r->status);
-        }
-        batch_ = Batch::Yes;
+        if (r->status != 200) return httpError(url, r->status);
         // For each key in order: u32 little-endian length, then the blob.
         std::vector<std::vector<uint8_t>> out;
         const uint8_t* p = r->body.data();
@@ -220,8 +229,6 @@ public:
         return out;
     }
 
-private:
-    enum class Batch { Unknown, Yes, No };
     // A handle handed to the I/O thread, and how its transfer ended.
     struct Transfer {
         CURL* handle = nullptr;
@@ -240,10 +247,12 @@ private:
         uint64_t maxBytes;
         long wanted;
     };
-    // One request's answer: the status and the body, kept up to a bound.
+    // One request's answer: the status, the body, kept up to a bound, and
+    // its Surfcast-Batch header (0 where absent or not a count).
     struct Response {
         long status = 0;
         std::vector<uint8_t> body;
+        size_t batchNodes = 0;
     };
 
     // Byte ranges (offset, size) of one file, all requested at once; all or nothing.
@@ -474,6 +483,13 @@ private:
         curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
         if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
+        curl_header* batch = nullptr;
+        if (curl_easy_header(h, "Surfcast-Batch", 0, CURLH_HEADER, -1, &batch) == CURLHE_OK) {
+            const char* v = batch->value;
+            char* end = nullptr;
+            const unsigned long n = std::strtoul(v, &end, 10);
+            if (end != v && *end == '\0' && n <= 1'000'000) r.batchNodes = size_t(n);
+        }
         return r;
     }
 
@@ -572,7 +588,7 @@ private:
     Origin origin_;  // the set's: where the user's headers go
     HttpOptions options_;
     curl_slist* headers_;
-    std::atomic<Batch> batch_{Batch::Unknown};
+    std::atomic<size_t> batchNodes_{0};  // tileset.json's Surfcast-Batch: 0 where it offers none
     std::mutex mutex_;
     std::vector<CURL*> idle_;  // easy handles not in use
     CURLM* multi_;

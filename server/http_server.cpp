@@ -244,6 +244,9 @@ struct HttpServer::Impl {
             auto snap = snapshot(name, r);
             if (!snap) return;
             const MappedFile& m = rest == "tileset.json" ? *snap->json : rest == "hierarchy.bin" ? *snap->hierarchy : *snap->blocks;
+            // Clients batch only where tileset.json's answer offers it
+            // (docs/PROTOCOL.md, "Batch"); a static host never does.
+            if (rest == "tileset.json") r.header("Surfcast-Batch", std::to_string(config.maxBatch));
             // The JSON's CRC changes whenever any byte of the set does.
             std::string etag = "\"" + std::string(1, rest[0] == 't' ? 'j' : rest[0]) + "-" + hex8(snap->version) + "\"";
             return serveBytes(c, r, snap, m.data(), m.size(), rest == "tileset.json" ? "application/json" : "application/octet-stream",
@@ -358,7 +361,7 @@ struct HttpServer::Impl {
             r.header("Access-Control-Allow-Origin", config.corsOrigin);
             r.header("Access-Control-Allow-Methods", "GET, HEAD, POST, OPTIONS");
             r.header("Access-Control-Allow-Headers", "Authorization, Range, If-None-Match, Content-Type");
-            r.header("Access-Control-Expose-Headers", "Content-Range, Content-Length, ETag, Accept-Ranges");
+            r.header("Access-Control-Expose-Headers", "Content-Range, Content-Length, ETag, Accept-Ranges, Surfcast-Batch");
             r.header("Vary", "Origin");
         }
         MHD_Response* res = nullptr;

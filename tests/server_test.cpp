@@ -153,6 +153,9 @@ TEST_F(ServerTest, NodesAndBatches) {
             expected.push_back(r->body);
         }
     }
+    // tileset.json's answer offers the batches, and how many keys one takes.
+    EXPECT_EQ(c.Get("/sets/scene/tileset.json")->get_header_value("Surfcast-Batch"), "256");
+    EXPECT_FALSE(c.Get("/sets/scene/hierarchy.bin")->has_header("Surfcast-Batch"));
     auto b = c.Post("/sets/scene/batch", batchBody, "text/plain");
     ASSERT_TRUE(b);
     ASSERT_EQ(b->status, 200) << b->body;

@@ -22,10 +22,10 @@ export interface SourceOptions {
 
 export class TileSource {
   readonly base: string; // the set's folder URL, no trailing slash
-  // Whether POST {set}/batch is offered: surfcast-serve tags tileset.json's
-  // ETag "j-<crc>" (docs/PROTOCOL.md, "Caching"); other hosts are sent
-  // ranges only, so a static host never sees (and logs) a refused POST.
-  batch = false;
+  // The most node keys one POST {set}/batch may hold: tileset.json's answer
+  // offers it (Surfcast-Batch: N, docs/PROTOCOL.md "Batch"); 0 elsewhere,
+  // where nodes go by Range only, so a static host never sees a POST.
+  batchNodes = 0;
   requests = 0;
   bytes = 0;
 
@@ -70,11 +70,16 @@ export class TileSource {
     return bytes;
   }
 
-  async text(name: string, limit: number): Promise<{ text: string; etag: string }> {
+  // A whole small file; tileset.json's answer also says whether the host batches.
+  async text(name: string, limit: number): Promise<string> {
     const url = `${this.base}/${name}`;
     const r = await this.send(url, { headers: this.headers() }, url);
     const bytes = await this.body(r, limit, url);
-    return { text: new TextDecoder().decode(bytes), etag: r.headers.get("ETag") ?? "" };
+    if (name === "tileset.json") {
+      const offered = r.headers.get("Surfcast-Batch") ?? "";
+      this.batchNodes = /^[0-9]{1,7}$/.test(offered) ? Number(offered) : 0;
+    }
+    return new TextDecoder().decode(bytes);
   }
 
   // Bytes [offset, offset + size) of `name`, exactly.

@@ -2,8 +2,8 @@
 // opening fetches tileset.json, hierarchy.bin's header and page table, and
 // page 0; each update() traverses from the root (LodSelector), and fetches
 // what the view still needs, pages first, then nodes coarsest gap first, at
-// most `connections` requests at a time (batches of nodes where the host is
-// surfcast-serve, Range requests elsewhere). Blocks are checked (CRC, Draco
+// most `connections` requests at a time (batches of nodes where tileset.json's
+// answer offers them, as surfcast-serve's does; Range requests elsewhere). Blocks are checked (CRC, Draco
 // header) and decoded in Web Workers; the surfels are uploaded as they
 // arrive. Transient faults (source.ts) are retried with backoff (0.1 s
 // doubling to 5 s) up to maxTries times; permanent ones (other HTTP errors, a
@@ -149,8 +149,7 @@ export class Streamer<T> {
                        options: StreamOptions = kDefaultStreamOptions): Promise<Streamer<T>> {
     const stop = () => false;
     const json = await withRetries(options.maxTries, () => source.text("tileset.json", kMaxTilesetJsonBytes), stop);
-    source.batch = json.etag.startsWith('"j-');
-    const info = parseTileset(json.text, `${source.base}/tileset.json`);
+    const info = parseTileset(json, `${source.base}/tileset.json`);
     const what = `${source.base}/hierarchy.bin`;
     const head = await withRetries(options.maxTries, () => source.range("hierarchy.bin", 0, Math.min(info.hierarchyBytes, 32 + 16 * info.hierarchyPages)), stop);
     if (head.length < 32 || indexBytes(head) !== head.length)
@@ -240,7 +239,7 @@ export class Streamer<T> {
     while (at < wanted.length && this.requestsInFlight < this.options.connections) {
       const group: number[] = [];
       let bytes = 0;
-      const most = this.source.batch ? this.options.batchNodes : 1;
+      const most = Math.max(1, Math.min(this.options.batchNodes, this.source.batchNodes));
       while (at < wanted.length && group.length < most && (group.length === 0 || bytes < this.options.batchBytes)) {
         const i = wanted[at++];
         group.push(i);

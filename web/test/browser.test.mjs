@@ -221,10 +221,16 @@ describe("browser viewer", { skip }, () => {
 
   test("surfcast-serve: converges to the Vulkan client's image", async (t) => {
     const url = `${serveUrl}/?set=/sets/scene&camera=${camera}`;
+    const batches = async () => {
+      const metrics = await (await fetch(`${serveUrl}/metrics`)).text();
+      return Number(/surfcast_requests_total\{route="batch",status="200"\} (\d+)/.exec(metrics)?.[1] ?? 0);
+    };
+    const batchesBefore = await batches();
     const { state, png, problems } = await view(url);
     assert.deepEqual(problems, []);
     assert.deepEqual(state.errors, []);
     assert.equal(state.converged, true);
+    assert.ok(await batches() > batchesBefore, "the viewer batches where tileset.json's answer offers it");
     assert.ok(covered(png) > 0.3, `the scene covers ${covered(png)} of the image`);
     const { ref, d } = expectLikeReference(state, png, `${serveUrl}/sets/scene`);
     assert.equal(state.nodes, ref.json.nodes, "the same nodes at convergence");
