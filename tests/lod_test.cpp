@@ -247,5 +247,46 @@ TEST_F(Lod, ConesCullTheFarSideOfASphere) {
     EXPECT_LE(differing, 200u * 150 / 2000) << "backface culling changed " << differing << " pixels";
 }
 
+// The conformance case both clients' selections run (tests/conformance/
+// lod_order.json, which derives its answer): nodes of equal priority are
+// refined smaller key first, so that a budget cuts the same nodes in both.
+TEST(LodOrder, EqualPrioritiesRefineSmallerKeyFirstAsInTheBrowser) {
+    const nlohmann::json c = nlohmann::json::parse(test::readFile(SURFCAST_TEST_TOOLS "/../conformance/lod_order.json"));
+    TilesetInfo info;
+    info.rootMin = {c["root_min"][0].get<double>(), c["root_min"][1].get<double>(), c["root_min"][2].get<double>()};
+    info.rootEdge = c["root_edge"].get<double>();
+    const auto& levels = c["levels"];
+    info.levels = int(levels.size());
+    std::vector<NodeRecord> nodes;
+    for (int level = 0; level < info.levels; ++level)
+        for (uint32_t x = 0; x < (1u << level); ++x)
+            for (uint32_t y = 0; y < (1u << level); ++y)
+                for (uint32_t z = 0; z < (1u << level); ++z) {
+                    NodeRecord r;
+                    r.key = {uint8_t(level), x, y, z};
+                    r.childMask = level + 1 < info.levels ? 0xff : 0;
+                    r.flags = kFlagConeFull;
+                    r.surfelCount = levels[size_t(level)]["surfels"].get<uint32_t>();
+                    r.spacing = levels[size_t(level)]["spacing"].get<float>();
+                    nodes.push_back(r);
+                }
+    LodSelector lod(info, nodes);
+    auto camera = parseCamera(c["camera"].get<std::string>());
+    ASSERT_TRUE(camera) << camera.status().message();
+    LodParams params;
+    params.targetPixels = c["target_pixels"].get<double>();
+    params.frustumCulling = params.backfaceCulling = false;
+    params.splatBudget = c["splat_budget"].get<size_t>();
+    LodStats stats;
+    auto drawn = lod.select(*camera, c["width"].get<int>(), c["height"].get<int>(), params, [](uint32_t) { return true; }, &stats);
+    std::vector<NodeKey> keys;
+    for (const auto& s : drawn) keys.push_back(lod.nodes()[s.index].key);
+    std::sort(keys.begin(), keys.end());
+    std::vector<std::string> names;
+    for (const NodeKey& k : keys) names.push_back(k.name());
+    EXPECT_EQ(names, c["drawn"].get<std::vector<std::string>>());
+    EXPECT_GT(stats.budgetLimited, 0u);
+}
+
 }  // namespace
 }  // namespace surfcast

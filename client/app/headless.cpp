@@ -153,6 +153,7 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["time_s"] = seconds();
                 line["lod_target_px"] = *o.lod;
                 line["nodes"] = cf.nodes;
+                line["nodes_crc"] = cf.nodesCrc;
                 line["splats"] = gpuStats.splats;
                 line["pixels_covered"] = gpuStats.pixelsCovered;
                 line["nodes_visited"] = cf.lod.visited;

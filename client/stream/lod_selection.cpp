@@ -145,13 +145,17 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
     };
 
     // Greedy replacement refinement from the root: the drawn node with the
-    // largest weighted gap is replaced by its children next. Without a budget
-    // the result is the plain recursive traversal (each node is refined or
-    // not on its own test), only the order differs.
+    // largest weighted gap is replaced by its children next, of equal gaps
+    // the one with the smaller key (a total order, the browser's too:
+    // web/src/lod_selection.ts), so that a budget cuts the same nodes in both.
+    // Without a budget the result is the plain recursive traversal (each node
+    // is refined or not on its own test), only the order differs.
     struct Drawn {
         uint32_t index;
         double spacing, priority;
-        bool operator<(const Drawn& o) const { return priority < o.priority; }
+        NodeKey key;
+        // std::priority_queue pops the largest: the larger priority, then the smaller key.
+        bool operator<(const Drawn& o) const { return priority != o.priority ? priority < o.priority : o.key < key; }
     };
     std::vector<Drawn> final;
     std::priority_queue<Drawn> open;  // drawn nodes that want refining
@@ -164,7 +168,7 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
     auto cost = [&](uint32_t i) { return residentBytes(nodes_[i].surfelCount, params.granule); };
     auto place = [&](uint32_t i, const Box3d& grown) {
         double spacing = projectedSpacing(i, grown);
-        Drawn d{i, spacing, spacing * centreWeight(grown)};
+        Drawn d{i, spacing, spacing * centreWeight(grown), nodes_[i].key};
         if (spacing > params.targetPixels && nodes_[i].childMask != 0) open.push(d);
         else final.push_back(d);
         reserved += nodes_[i].surfelCount;

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "crc32.h"
+
 namespace surfcast {
 
 namespace {
@@ -79,6 +81,12 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     width_ = width;
     height_ = height;
     frame.nodes = drawn.size();
+    std::string names;
+    for (uint32_t i : drawn) {
+        if (!names.empty()) names += ',';
+        names += nodes[i].key.name();
+    }
+    frame.nodesCrc = crc32(names.data(), names.size());
     frame.splats = renderer_->splatCount();
     frame.uploaded = u.arrived.size();
     frame.evicted = u.evicted.size();

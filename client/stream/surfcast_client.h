@@ -31,6 +31,9 @@ struct ClientOptions {
 
 struct ClientFrame {
     size_t nodes = 0;            // drawn
+    // CRC-32 of the drawn nodes' names ("L-X-Y-Z") in key order, joined by
+    // commas: equal where the same nodes are drawn (the browser's nodesCrc).
+    uint32_t nodesCrc = 0;
     size_t splats = 0;           // drawn
     size_t uploaded = 0, evicted = 0;  // nodes, this update
     bool converged = false;      // nothing the view needs is missing

@@ -20,10 +20,15 @@ export interface LodParams {
   frustumCulling: boolean;
   backfaceCulling: boolean;
   splatBudget: number;
-  memoryBudget: number; // bytes of the nodes a view uses, 32 per surfel
+  memoryBudget: number; // bytes of the nodes a view uses, 32 per surfel in whole granules
 }
 
-export const residentBytes = (surfels: number) => surfels * 32;
+// Surfels per granule of GPU memory: a row of a node's texture (renderer.ts),
+// as a page of the Vulkan client's pool (SurfelPool::kPageSurfels), so that
+// both clients count a node alike under a memory budget.
+export const kGranuleSurfels = 1024;
+// Bytes a node occupies when resident: its surfels, 32 bytes each, in whole granules.
+export const residentBytes = (surfels: number) => Math.ceil(surfels / kGranuleSurfels) * kGranuleSurfels * 32;
 
 export interface LodStats {
   visited: number;
@@ -81,8 +86,21 @@ function backfacing(n: NodeRecord, b: Box, eye: Vec3): boolean {
   return gamma > 0.5 * Math.PI + alpha + beta;
 }
 
-// A max-heap of drawn nodes by priority.
-class Heap<T extends { priority: number }> {
+// The order nodes are refined in: larger priority first, and of equal
+// priorities the smaller key (level, x, y, z), as the C++ client orders them
+// (client/stream/lod_selection.cpp), so that both choose the same nodes
+// under a budget.
+interface Ranked { priority: number; level: number; x: number; y: number; z: number }
+function before(a: Ranked, b: Ranked): boolean {
+  if (a.priority !== b.priority) return a.priority > b.priority;
+  if (a.level !== b.level) return a.level < b.level;
+  if (a.x !== b.x) return a.x < b.x;
+  if (a.y !== b.y) return a.y < b.y;
+  return a.z < b.z;
+}
+
+// A max-heap of drawn nodes in that order.
+class Heap<T extends Ranked> {
   private a: T[] = [];
   get size() { return this.a.length; }
   push(v: T) {
@@ -90,7 +108,7 @@ class Heap<T extends { priority: number }> {
     a.push(v);
     for (let i = a.length - 1; i > 0;) {
       const p = (i - 1) >> 1;
-      if (a[p].priority >= a[i].priority) break;
+      if (!before(a[i], a[p])) break;
       [a[p], a[i]] = [a[i], a[p]];
       i = p;
     }
@@ -102,8 +120,8 @@ class Heap<T extends { priority: number }> {
       for (let i = 0; ;) {
         const l = 2 * i + 1, r = l + 1;
         let m = i;
-        if (l < a.length && a[l].priority > a[m].priority) m = l;
-        if (r < a.length && a[r].priority > a[m].priority) m = r;
+        if (l < a.length && before(a[l], a[m])) m = l;
+        if (r < a.length && before(a[r], a[m])) m = r;
         if (m === i) break;
         [a[m], a[i]] = [a[i], a[m]];
         i = m;
@@ -190,14 +208,15 @@ export class LodSelector {
       return 1 + Math.max(0, 1 - Math.sqrt(0.5 * (x * x + y * y)));
     };
 
-    interface Drawn { index: number; spacing: number; priority: number }
+    interface Drawn extends Ranked { index: number; spacing: number }
     const final: Drawn[] = [];
     const open = new Heap<Drawn>();
     let reserved = 0, memory = 0;
     const cost = (i: number) => residentBytes(nodes[i].surfelCount);
     const place = (i: number, grown: Box) => {
       const spacing = projectedSpacing(i, grown);
-      const d = { index: i, spacing, priority: spacing * centreWeight(grown) };
+      const { level, x, y, z } = nodes[i];
+      const d = { index: i, spacing, priority: spacing * centreWeight(grown), level, x, y, z };
       if (spacing > params.targetPixels && nodes[i].childMask !== 0) open.push(d);
       else final.push(d);
       reserved += nodes[i].surfelCount;

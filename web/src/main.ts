@@ -6,6 +6,7 @@
 import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
 import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
 import { Controls } from "./controls.js";
+import { crc32 } from "./crc32.js";
 import { emptyStats } from "./lod_selection.js";
 import { attribute } from "./format.js";
 import { type DrawnNode, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
@@ -16,6 +17,9 @@ import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
 interface State {
   converged: boolean;
   nodes: number;
+  // CRC-32 of the drawn nodes' keys in key order, joined by commas:
+  // surfcast-view's nodes_crc where both draw the same nodes.
+  nodesCrc: number;
   splats: number;
   bytes: number;
   requests: number;
@@ -24,14 +28,14 @@ interface State {
   mode: string;
   firstImageMs: number | null;
   convergedMs: number | null;
-  residentBytes: number; // surfels held on the GPU, 32 bytes each
+  residentBytes: number; // the resident nodes' surfels, 32 bytes each in whole granules (lod_selection.ts)
   evictions: number;
   frames: number;
   frameMs: number; // the last frame's time on the GPU, from its draw to its fence
   camera: string;
 }
 
-const state: State = { converged: false, nodes: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
+const state: State = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
                        firstImageMs: null, convergedMs: null, residentBytes: 0, evictions: 0, frames: 0, frameMs: 0,
                        camera: "" };
 (window as unknown as { surfcast: State }).surfcast = state;
@@ -242,7 +246,7 @@ async function main() {
   // view needs) whenever something changed, and a draw of the latest one
   // when the GPU is free and the pacing allows. Selecting never waits for
   // drawing: on a slow WebGL the stream keeps going while a frame renders.
-  let selection: { gpu: DrawnNode[]; splats: number; converged: boolean } | null = null;
+  let selection: { gpu: DrawnNode[]; splats: number; converged: boolean; nodesCrc: number } | null = null;
   const select = () => {
     const lod = emptyStats();
     const lodTarget = Number(lodInput.value) > 0 ? Number(lodInput.value) : targetPixels;
@@ -257,11 +261,13 @@ async function main() {
       return p.level - q.level || p.x - q.x || p.y - q.y || p.z - q.z;
     });
     const gpu: DrawnNode[] = [];
+    const keys: string[] = [];
     let splats = 0;
     for (const s of selected) {
       const r = streamer.residentNode(s.index);
       if (!r) continue;
       gpu.push(r.gpu);
+      keys.push(nodes[s.index].key);
       splats += r.count;
     }
     const st = streamer.stats;
@@ -270,7 +276,7 @@ async function main() {
     Object.assign(state, { bytes: st.bytes, requests: st.requests, residentBytes: st.residentBytes, evictions: st.evictions });
     $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
       `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);
-    return { gpu, splats, converged };
+    return { gpu, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
   };
 
   const frame = (now: number) => {
@@ -301,7 +307,7 @@ async function main() {
         canvas.width = width;
         canvas.height = height;
       }
-      const { gpu, splats, converged } = selection;
+      const { gpu, splats, converged, nodesCrc } = selection;
       selection = null;
       const eta = viewportScale(camera, height);
       const rows = viewRows(camera, streamer.origin);
@@ -316,7 +322,7 @@ async function main() {
       gl.flush();
       fenceConverged = converged;
       ++state.frames;
-      Object.assign(state, { nodes: gpu.length, splats });
+      Object.assign(state, { nodes: gpu.length, nodesCrc, splats });
       if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - start;
     }
     requestAnimationFrame(frame);

@@ -18,13 +18,13 @@ import type { ColoringSpec, DecodeJob, DecodeResult } from "./block_decode.js";
 import { attribute, FormatError, indexBytes, kFixedAttributes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
          type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, readHierarchyIndex, readHierarchyPage,
          type TilesetInfo, type Vec3 } from "./format.js";
-import { emptyStats, type LodParams, LodSelector, type LodStats, type SelectedNode } from "./lod_selection.js";
+import { emptyStats, type LodParams, LodSelector, type LodStats, residentBytes, type SelectedNode } from "./lod_selection.js";
 import { HttpError, TileSource } from "./source.js";
 
 export interface StreamOptions {
   connections: number;
   decoders: number;
-  memoryBudget: number; // bytes of resident surfels, 32 each
+  memoryBudget: number; // bytes of resident surfels, 32 each in whole granules (residentBytes)
   maxTries: number;
   batchNodes: number;
   batchBytes: number;
@@ -192,16 +192,19 @@ export class Streamer<T> {
     return selected;
   }
 
+  // Residency counts each node as the selection does (residentBytes: all
+  // its surfels, in whole granules), as the C++ stream does.
   private evict(now: number) {
+    const cost = (i: number) => residentBytes(this.selector.nodes[i].surfelCount);
     let bytes = 0;
-    for (const r of this.resident.values()) bytes += r.count * 32;
+    for (const i of this.resident.keys()) bytes += cost(i);
     if (bytes > this.options.memoryBudget) {
       const old = [...this.resident.entries()].filter(([, r]) => r.lastUsed < now).sort((a, b) => a[1].lastUsed - b[1].lastUsed);
       for (const [i, r] of old) {
         if (bytes <= this.options.memoryBudget) break;
         this.uploader.release(r.gpu);
         this.resident.delete(i);
-        bytes -= r.count * 32;
+        bytes -= cost(i);
         ++this.stats.evictions;
       }
     }

@@ -351,6 +351,11 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(first.errors, []);
     assert.ok(first.converged && first.residentBytes <= budget, `resident ${first.residentBytes}`);
     assert.ok(first.splats < 535029, `the budget keeps the view coarser: ${first.splats} splats`);
+    // The Vulkan client under the same budget draws the same nodes: one
+    // order of refinement, one cost per node (whole 1024-surfel granules).
+    const ref = reference(`${serveUrl}/sets/scene`, ["--gpu-budget", "16"]);
+    assert.equal(first.nodes, ref.json.nodes, "as many nodes as surfcast-view --gpu-budget 16");
+    assert.equal(first.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --gpu-budget 16");
     // Turn to look elsewhere: the new view's nodes evict the old ones.
     await page.mouse.move(320, 240);
     await page.mouse.down();
@@ -365,6 +370,18 @@ describe("browser viewer", { skip }, () => {
     assert.ok(second.converged && second.evictions > first.evictions,
               `evictions ${first.evictions} before the drag, ${second.evictions} after`);
     assert.ok(second.residentBytes <= budget, `resident ${second.residentBytes}`);
+  });
+
+  test("a splat budget: the same nodes as surfcast-view under it", async () => {
+    // 150,000 splats: a quarter of the close-up; the budget stops refinement
+    // part way down, where the order nodes are refined in decides which.
+    const { state, problems } = await view(`${serveUrl}/?set=/sets/scene&camera=${camera}&splats=150000`);
+    assert.deepEqual(problems, []);
+    assert.equal(state.converged, true);
+    const ref = reference(`${serveUrl}/sets/scene`, ["--splat-budget", "150000"]);
+    assert.equal(state.nodes, ref.json.nodes);
+    assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --splat-budget 150000");
+    assert.equal(state.splats, ref.json.splats);
   });
 
   test("a browser without WebGL2 is told so", async () => {
