@@ -46,6 +46,8 @@ constexpr int kConnectTimeoutSeconds = 5;
 constexpr int kMaxHostConnections = 6;
 // A bearer token longer than this is not one (a wrong file).
 constexpr size_t kMaxTokenBytes = 16 << 10;
+// A Surfcast-Batch count above this is not taken (the browser's bound too).
+constexpr unsigned long kMaxBatchNodesOffered = 1'000'000;
 
 class LocalSource : public TileSource {
 public:
@@ -236,6 +238,7 @@ private:
         bool done = false;
         bool redirected = false;  // pointed at a redirect's target, to run again
         bool withoutCredentials = false;  // a redirect left the user's headers behind
+        bool moved = false;               // answered at a redirect's target
     };
 
     // One GET of `name` (of byte range `range`, if not empty), or POST of
@@ -248,7 +251,8 @@ private:
         long wanted;
     };
     // One request's answer: the status, the body, kept up to a bound, and
-    // its Surfcast-Batch header (0 where absent or not a count).
+    // its Surfcast-Batch header (0 where absent, not a count up to
+    // kMaxBatchNodesOffered, or answered after a redirect).
     struct Response {
         long status = 0;
         std::vector<uint8_t> body;
@@ -385,6 +389,7 @@ private:
                     refused[i] = std::move(why);
                 } else if (t->redirected) {
                     sinks[i].dropped = 0;
+                    t->moved = true;
                     round.push_back(t);
                 }
             }
@@ -483,12 +488,14 @@ private:
         curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
         if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
+        // Batches go to the set's own URL (a POST is not redirected): one
+        // offered at a redirect's target is not taken.
         curl_header* batch = nullptr;
-        if (curl_easy_header(h, "Surfcast-Batch", 0, CURLH_HEADER, -1, &batch) == CURLHE_OK) {
-            const char* v = batch->value;
+        if (!t.moved && curl_easy_header(h, "Surfcast-Batch", 0, CURLH_HEADER, -1, &batch) == CURLHE_OK &&
+            std::isdigit(static_cast<unsigned char>(batch->value[0]))) {
             char* end = nullptr;
-            const unsigned long n = std::strtoul(v, &end, 10);
-            if (end != v && *end == '\0' && n <= 1'000'000) r.batchNodes = size_t(n);
+            const unsigned long n = std::strtoul(batch->value, &end, 10);
+            if (*end == '\0' && n <= kMaxBatchNodesOffered) r.batchNodes = size_t(n);
         }
         return r;
     }

@@ -28,8 +28,10 @@ public:
     // page of "hierarchy.bin"); never more is kept. Thread-safe.
     virtual Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) = 0;
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) { return range("blocks.bin", offset, size); }
-    // Several nodes' blobs, in order: one request where the source batches
-    // (the project's server), else one range each. All or nothing. Thread-safe.
+    // Several nodes' blobs, in order: POST {set}/batch requests of up to N
+    // keys where tileset.json's answer (file(), read first) offered
+    // Surfcast-Batch: N without a redirect (surfcast-serve), else one range
+    // each, all in flight at once. All or nothing. Thread-safe.
     virtual Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes);
     virtual std::string describe() const = 0;
     // Ends every request in flight at once, with an error, and fails every

@@ -87,19 +87,30 @@ std::unique_ptr<Nginx> startNginx(const std::string& prefix, int count,
 }
 
 TEST(Stream, FromNginxConvergesToTheLocalImage) {
-    // nginx serving the same folder as static files: Range requests, no batch
-    // endpoint (POST is refused, the client falls back to ranges).
+    // nginx serving the same folder as static files: Range requests only
+    // (its answers offer no batches, so it is never sent a POST).
     TempDir dir;
     std::filesystem::create_directories(dir.file("www/sets"));
     auto b = test::buildScene(dir.file("www/sets/scene"), 100000, {"--capacity", "3000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
+    // /served/ redirects to surfcast-serve, whose answers offer batches at
+    // its own URL; the client's POSTs would go to nginx's (not redirected),
+    // so after a redirect it takes ranges.
+    test::Child server;
+    const std::string origin = test::startServer(&server, dir.file("www/sets"));
+    ASSERT_FALSE(origin.empty()) << server.log;
     auto nginx = startNginx(dir.file("nginx"), 1, [&](const std::vector<int>& ports) {
-        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; root " + dir.file("www") + "; }\n";
+        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; root " + dir.file("www") + ";\n"
+               "  location /served/ { rewrite ^/served/(.*)$ " + origin + "/sets/$1 redirect; } }\n";
     });
     ASSERT_FALSE(nginx->ports.empty());
     const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/sets/scene";
     const char* camera = "--camera=3,-6,2,0,0,0.5,0,0,1,50";
     expectStreamsLikeLocal(url, dir.file("www/sets/scene"), camera, dir);
+    expectStreamsLikeLocal("http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/served/scene", dir.file("www/sets/scene"),
+                           camera, dir);
+    ::kill(server.pid, SIGTERM);
+    EXPECT_EQ(test::exitCode(server.pid), 0);
 
     // The window takes the URL too (under Xvfb): without --lod every leaf is
     // fetched before the first frame, which is then the local folder's

@@ -322,9 +322,8 @@ void StreamingSet::fetchLoop() {
         if (stats_.setChanged || stats_.gaveUp) continue;
         if (fetchPage(lock)) continue;  // pages first: they gate the nodes below them
         // The highest-priority wanted nodes that are neither pending nor
-        // backing off, as many as one batch takes and the budget admits (at
-        // least one when nothing is resident or pending: a node larger than
-        // the budget still loads).
+        // backing off, as many as one batch takes and the budget admits
+        // (every node fits it alone: checkFitsBudget).
         std::vector<NodeRecord> batch;
         std::vector<uint32_t> indices;
         size_t batchBytes = 0;
@@ -338,8 +337,7 @@ void StreamingSet::fetchLoop() {
                 continue;
             }
             size_t cost = residentCost(candidate);
-            bool empty = residentBytes_ + pendingBytes_ == 0;
-            if (!empty && residentBytes_ + pendingBytes_ + cost > options_.memoryBudget) continue;
+            if (residentBytes_ + pendingBytes_ + cost > options_.memoryBudget) continue;
             wanted_.erase(wanted_.begin() + long(k));
             pending_[candidate] = 1;
             pendingBytes_ += cost;

@@ -77,7 +77,8 @@ struct StreamStats {
     // A node or page failed permanently (refused, not found, a block that
     // fails its CRC or does not decode), or through StreamOptions::maxTries
     // transient faults in a row (a server gone for good), or two nodes claim
-    // one page: nothing more is fetched, and lastError says which node and why.
+    // one page, or a page holds a node larger than memoryBudget: nothing
+    // more is fetched, and lastError says which node and why.
     bool gaveUp = false;
 };
 

@@ -14,6 +14,7 @@
 // renderer falls back to, and to circles for sets without weights. 8-bit
 // targets hold no negative sums: the normal is accumulated offset to [0, 1].
 
+import { kGranuleSurfels } from "./lod_selection.js";
 import * as S from "./shaders.js";
 
 export type RenderMode = "points" | "circles" | "ewa-noprefilter" | "ewa-surfel" | "ewa-pixel";
@@ -59,7 +60,7 @@ export interface DrawnNode {
   count: number;
 }
 
-const kSurfelsPerRow = 1024;
+const kSurfelsPerRow = kGranuleSurfels;  // the granule the selection counts memory in
 
 export class RendererError extends Error {}
 

@@ -1,6 +1,7 @@
 // Where a tile set's bytes come from: its folder URL on any host that honours
-// Range (nginx, an object store, a CDN, surfcast-serve), with surfcast-serve's
-// POST {set}/batch where the host is surfcast-serve. Transient faults
+// Range (nginx, an object store, a CDN, surfcast-serve), with POST
+// {set}/batch where tileset.json's answer offers it (surfcast-serve's
+// Surfcast-Batch header) without a redirect. Transient faults
 // (network errors, responses cut short, 408, 429, 5xx: HttpError.transient)
 // are retried with backoff by the caller; everything else, and any error that
 // is not an HttpError (a CRC or decoding failure of the set's fixed bytes),
@@ -76,8 +77,10 @@ export class TileSource {
     const r = await this.send(url, { headers: this.headers() }, url);
     const bytes = await this.body(r, limit, url);
     if (name === "tileset.json") {
-      const offered = r.headers.get("Surfcast-Batch") ?? "";
-      this.batchNodes = /^[0-9]{1,7}$/.test(offered) ? Number(offered) : 0;
+      // Batches go to the set's own URL (fetch would turn a redirected POST
+      // into a GET): one offered at a redirect's target is not taken.
+      const offered = r.redirected ? "" : r.headers.get("Surfcast-Batch") ?? "";
+      this.batchNodes = /^[0-9]{1,7}$/.test(offered) && Number(offered) <= 1e6 ? Number(offered) : 0;
     }
     return new TextDecoder().decode(bytes);
   }

@@ -104,6 +104,7 @@ export interface StreamStats {
   inFlight: number;
   resident: number;
   residentBytes: number;
+  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (in no budget)
   evictions: number;
   failures: number;
   lastError: string;
@@ -128,7 +129,7 @@ export class Streamer<T> {
   private extra: string[];
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
-                                  residentBytes: 0, evictions: 0, failures: 0, lastError: "", gaveUp: false };
+                                  residentBytes: 0, keptBytes: 0, evictions: 0, failures: 0, lastError: "", gaveUp: false };
   onChange: () => void = () => {};
 
   private constructor(readonly source: TileSource, info: TilesetInfo, origin: Vec3, index: HierarchyIndex,
@@ -210,6 +211,8 @@ export class Streamer<T> {
     }
     this.stats.resident = this.resident.size;
     this.stats.residentBytes = bytes;
+    this.stats.keptBytes = 0;
+    for (const r of this.resident.values()) this.stats.keptBytes += r.block.byteLength;
   }
 
   private fetchPage(node: number) {
@@ -288,8 +291,11 @@ export class Streamer<T> {
       colorBits: this.info.colorBits, weights: this.info.weights !== "none", extra: this.extra, coloring: this.coloring,
     });
     if (result.error || !result.surfels) {
-      this.recoloring.delete(i);
-      this.noteFailure(i, new Error(result.error ?? "decoding failed"));
+      if (!recolor) this.noteFailure(i, new Error(result.error ?? "decoding failed"));
+      else {  // bytes that decoded before: not retried
+        this.recoloring.delete(i);
+        this.fail(`node ${n.key}: ${result.error ?? "decoding failed"}`);
+      }
       return;
     }
     const old = this.resident.get(i);
@@ -297,9 +303,13 @@ export class Streamer<T> {
       await this.decodeNode(i, block, recolor);  // recoloured meanwhile: its surfels would show the old colouring
       return;
     }
-    this.inFlight.delete(i);
-    this.tries.delete(i);
+    // A recolouring owns only its place in `recoloring`: the node may be
+    // fetched again meanwhile (evicted), with its own tries.
     if (recolor) this.recoloring.delete(i);
+    else {
+      this.inFlight.delete(i);
+      this.tries.delete(i);
+    }
     // Not kept when the stream stopped, nor a recolouring of a node evicted meanwhile.
     if (!this.stats.gaveUp && (!recolor || old)) {
       if (old) this.uploader.release(old.gpu);
@@ -338,7 +348,10 @@ export class Streamer<T> {
     for (const [i, r] of this.resident) {
       if (this.recoloring.has(i)) continue;  // decoded again when it finishes
       this.recoloring.add(i);
-      void this.decodeNode(i, r.block, true);
+      this.decodeNode(i, r.block, true).catch((e) => {
+        this.recoloring.delete(i);
+        this.fail(`node ${this.selector.nodes[i].key}: ${(e as Error).message}`);
+      });
     }
     this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
     this.onChange();
