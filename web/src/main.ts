@@ -29,6 +29,7 @@ interface State {
   firstImageMs: number | null;
   convergedMs: number | null;
   residentBytes: number; // the resident nodes' surfels, 32 bytes each in whole granules (lod_selection.ts)
+  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring
   evictions: number;
   frames: number;
   frameMs: number; // the last frame's time on the GPU, from its draw to its fence
@@ -36,7 +37,7 @@ interface State {
 }
 
 const state: State = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
-                       firstImageMs: null, convergedMs: null, residentBytes: 0, evictions: 0, frames: 0, frameMs: 0,
+                       firstImageMs: null, convergedMs: null, residentBytes: 0, keptBytes: 0, evictions: 0, frames: 0, frameMs: 0,
                        camera: "" };
 (window as unknown as { surfcast: State }).surfcast = state;
 
@@ -273,7 +274,8 @@ async function main() {
     const st = streamer.stats;
     const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
     if (st.gaveUp) showError(st.lastError);
-    Object.assign(state, { bytes: st.bytes, requests: st.requests, residentBytes: st.residentBytes, evictions: st.evictions });
+    Object.assign(state, { bytes: st.bytes, requests: st.requests, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
+                           evictions: st.evictions });
     $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
       `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);
     return { gpu, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };

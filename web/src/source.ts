@@ -77,10 +77,11 @@ export class TileSource {
     const r = await this.send(url, { headers: this.headers() }, url);
     const bytes = await this.body(r, limit, url);
     if (name === "tileset.json") {
-      // Batches go to the set's own URL (fetch would turn a redirected POST
-      // into a GET): one offered at a redirect's target is not taken.
+      // Batches go to the set's own URL (the host that redirected would be
+      // posted to, and fetch turns a POST redirected by 301-303 into a
+      // GET): one offered at a redirect's target is not taken.
       const offered = r.redirected ? "" : r.headers.get("Surfcast-Batch") ?? "";
-      this.batchNodes = /^[0-9]{1,7}$/.test(offered) && Number(offered) <= 1e6 ? Number(offered) : 0;
+      this.batchNodes = /^[0-9]+$/.test(offered) && Number(offered) <= 1e6 ? Number(offered) : 0;  // as C++ takes it
     }
     return new TextDecoder().decode(bytes);
   }

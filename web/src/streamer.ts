@@ -292,10 +292,7 @@ export class Streamer<T> {
     });
     if (result.error || !result.surfels) {
       if (!recolor) this.noteFailure(i, new Error(result.error ?? "decoding failed"));
-      else {  // bytes that decoded before: not retried
-        this.recoloring.delete(i);
-        this.fail(`node ${n.key}: ${result.error ?? "decoding failed"}`);
-      }
+      else this.recolorFailed(i, result.error ?? "decoding failed");
       return;
     }
     const old = this.resident.get(i);
@@ -348,12 +345,19 @@ export class Streamer<T> {
     for (const [i, r] of this.resident) {
       if (this.recoloring.has(i)) continue;  // decoded again when it finishes
       this.recoloring.add(i);
-      this.decodeNode(i, r.block, true).catch((e) => {
-        this.recoloring.delete(i);
-        this.fail(`node ${this.selector.nodes[i].key}: ${(e as Error).message}`);
-      });
+      this.decodeNode(i, r.block, true).catch((e) => this.recolorFailed(i, (e as Error).message));
     }
     this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
+    this.onChange();
+  }
+
+  // A recolouring that failed (bytes that decoded before, or the upload): the
+  // node keeps its old surfels, and the failure is counted and kept, as the
+  // C++ stream does.
+  private recolorFailed(i: number, message: string) {
+    this.recoloring.delete(i);
+    ++this.stats.failures;
+    this.stats.lastError = `node ${this.selector.nodes[i].key}: recolouring: ${message}`;
     this.onChange();
   }
 
