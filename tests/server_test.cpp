@@ -12,6 +12,7 @@
 #include <atomic>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <chrono>
 #include <random>
 #include <thread>
 
@@ -325,10 +326,20 @@ TEST_F(ServerTest, ConcurrentClientsAndMetrics) {
     for (auto& t : clients) t.join();
     EXPECT_EQ(good, 640);
     EXPECT_EQ(bad, 0);
-    auto m = client().Get("/metrics");
-    ASSERT_TRUE(m);
-    EXPECT_NE(m->body.find("surfcast_requests_total{route=\"nodes\",status=\"200\"} 640"), std::string::npos) << m->body;
-    EXPECT_NE(m->body.find("surfcast_request_duration_seconds_count"), std::string::npos);
+    // A request is counted when libmicrohttpd reports it completed, which
+    // may come just after its client has the whole response (a run under
+    // ASan once read 639): wait for the count, up to 5 s.
+    const std::string counted = "surfcast_requests_total{route=\"nodes\",status=\"200\"} 640\n";
+    std::string body;
+    for (auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);;) {
+        auto m = client().Get("/metrics");
+        ASSERT_TRUE(m);
+        body = m->body;
+        if (body.find(counted) != std::string::npos || std::chrono::steady_clock::now() > deadline) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    EXPECT_NE(body.find(counted), std::string::npos) << body;
+    EXPECT_NE(body.find("surfcast_request_duration_seconds_count"), std::string::npos);
 }
 
 TEST_F(ServerTest, StalledClientDoesNotBlockOthers) {
