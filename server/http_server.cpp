@@ -8,6 +8,7 @@
 #include <microhttpd.h>
 #include <netinet/in.h>
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -121,6 +122,9 @@ struct HttpServer::Impl {
     std::mutex mutex;
     std::condition_variable stopped;
     bool stopRequested = false;
+    // Requests whose line has arrived and whose completion MHD has not yet
+    // reported: what run() drains (idle keep-alive connections are not waited for).
+    std::atomic<int> inFlight{0};
 
     Impl(TilesetStore& s, ServerConfig c) : store(s), config(std::move(c)) {}
 
@@ -388,7 +392,7 @@ struct HttpServer::Impl {
 
     // MHD callbacks.
     static void* onUri(void* cls, const char*, MHD_Connection*) {
-        (void)cls;
+        static_cast<Impl*>(cls)->inFlight.fetch_add(1);
         return new RequestState;
     }
 
@@ -416,7 +420,9 @@ struct HttpServer::Impl {
         auto* self = static_cast<Impl*>(cls);
         std::unique_ptr<RequestState> st(static_cast<RequestState*>(*reqCls));
         *reqCls = nullptr;
-        if (!st || st->method.empty()) return;
+        if (!st) return;
+        self->inFlight.fetch_sub(1);
+        if (st->method.empty()) return;
         double seconds = std::chrono::duration<double>(Clock::now() - st->start).count();
         int status = st->status ? st->status : 500;
         self->metrics.record(st->route, status, st->bytes, seconds);
@@ -485,13 +491,12 @@ void HttpServer::run() {
     std::unique_lock lock(impl_->mutex);
     impl_->stopped.wait(lock, [&] { return impl_->stopRequested; });
     if (!impl_->daemon) return;
-    // Stop accepting, let requests in flight finish, then close.
+    // Stop accepting, let requests in flight finish (up to kDrainTime), then
+    // close every connection, idle keep-alive ones included.
     MHD_socket listener = MHD_quiesce_daemon(impl_->daemon);
     if (listener != MHD_INVALID_SOCKET) ::close(listener);
     auto deadline = Clock::now() + kDrainTime;
-    while (Clock::now() < deadline) {
-        const MHD_DaemonInfo* info = MHD_get_daemon_info(impl_->daemon, MHD_DAEMON_INFO_CURRENT_CONNECTIONS);
-        if (!info || info->num_connections == 0) break;
+    while (Clock::now() < deadline && impl_->inFlight.load() > 0) {
         lock.unlock();
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
         lock.lock();

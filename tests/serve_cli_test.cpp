@@ -104,12 +104,29 @@ TEST(ServeCli, ServesLogsAndStopsGracefully) {
         ASSERT_NE(at, std::string::npos);
         int port = std::atoi(c.log.c_str() + at + 17);
         httplib::Client client("127.0.0.1", port);
+        client.set_keep_alive(true);
         auto r = client.Get("/sets/s/tileset.json");
         ASSERT_TRUE(r);
         EXPECT_EQ(r->status, 200);
         EXPECT_TRUE(c.waitFor("GET /sets/s/tileset.json 200 ")) << c.log;
+        // A request in flight when the signal comes (its head not yet ended)
+        // is answered; `client`'s idle keep-alive connection does not hold
+        // the stop up: it once waited out the 5 s drain for every connection.
+        int inFlight = connectFrom("127.0.0.1", port);
+        ASSERT_GE(inFlight, 0);
+        const std::string head = "GET /sets/s/tileset.json HTTP/1.1\r\nHost: x\r\n";
+        ASSERT_EQ(::send(inFlight, head.data(), head.size(), MSG_NOSIGNAL), ssize_t(head.size()));
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the server has read the request line
+        const auto signalled = std::chrono::steady_clock::now();
         ::kill(c.pid, sig);
+        EXPECT_TRUE(c.waitFor("finishing requests in flight")) << c.log;
+        ASSERT_EQ(::send(inFlight, "\r\n", 2, MSG_NOSIGNAL), 2);
+        char reply[64] = {};
+        EXPECT_GT(::recv(inFlight, reply, sizeof reply - 1, 0), 12);
+        EXPECT_EQ(std::string(reply).rfind("HTTP/1.1 200", 0), 0u) << reply;
+        ::close(inFlight);
         EXPECT_EQ(test::exitCode(c.pid), 0);
+        EXPECT_LT(std::chrono::steady_clock::now() - signalled, std::chrono::seconds(2));
         EXPECT_TRUE(c.waitFor("stopped")) << c.log;
         ::close(c.err);
     }
