@@ -292,101 +292,156 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
-// An integer field: a JSON integer within T's range. nlohmann's get<int>()
-// casts a float or an out-of-range number unchecked (undefined for 1e70:
-// fuzz_tileset), so readTilesetJson reads integers through this.
+namespace {
+// tileset.json's fields, each read with its path ("hierarchy.bytes",
+// "attributes[2].scale") in the error, which tests/conformance/tileset_json.json
+// asks of both readers. Integers are JSON integers within the field's range:
+// nlohmann's get<int>() casts a float or an out-of-range number unchecked
+// (undefined for 1e70: fuzz_tileset).
 struct FieldError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
+// A value quoted in an error: at most about 60 bytes of it, cut between characters.
+std::string shown(const nlohmann::json& v) {
+    std::string s = v.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+    if (s.size() <= 64) return s;
+    size_t cut = 60;
+    while (cut > 0 && (uint8_t(s[cut]) & 0xC0) == 0x80) --cut;
+    return s.substr(0, cut) + "...";
+}
+std::string joined(const std::string& parent, const std::string& key) { return parent.empty() ? key : parent + "." + key; }
+[[noreturn]] void fieldError(const std::string& path, const std::string& why) { throw FieldError(path + ": " + why); }
+
+const nlohmann::json& member(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    if (!o.is_object() || !o.contains(key)) fieldError(joined(parent, key), "missing");
+    return o.at(key);
+}
+const nlohmann::json& object(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    const nlohmann::json& v = member(o, parent, key);
+    if (!v.is_object()) fieldError(joined(parent, key), "not an object");
+    return v;
+}
 template <class T>
-T integer(const nlohmann::json& v) {
+T integer(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    const nlohmann::json& v = member(o, parent, key);
     if (v.is_number_unsigned() && std::in_range<T>(v.get<uint64_t>())) return T(v.get<uint64_t>());
     if (v.is_number_integer() && !v.is_number_unsigned() && std::in_range<T>(v.get<int64_t>())) return T(v.get<int64_t>());
-    throw FieldError("an integer field holds " + v.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-                     ", not an integer in its range");
+    fieldError(joined(parent, key), shown(v) + " is not an integer in its range");
 }
+double number(const nlohmann::json& v, const std::string& path) {
+    if (!v.is_number() || !std::isfinite(v.get<double>())) fieldError(path, shown(v) + " is not a finite number");
+    return v.get<double>();
+}
+double number(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    return number(member(o, parent, key), joined(parent, key));
+}
+std::string text(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    const nlohmann::json& v = member(o, parent, key);
+    if (!v.is_string()) fieldError(joined(parent, key), shown(v) + " is not a string");
+    return v.get<std::string>();
+}
+Vec3d vec3(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    const nlohmann::json& v = member(o, parent, key);
+    const std::string path = joined(parent, key);
+    if (!v.is_array() || v.size() != 3) fieldError(path, "not an array of three numbers");
+    return {number(v[0], path), number(v[1], path), number(v[2], path)};
+}
+}  // namespace
 
-Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what) {
-    nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& what) {
+    const nlohmann::json j = nlohmann::json::parse(json, nullptr, /*allow_exceptions=*/false);
     if (j.is_discarded()) return Status::error(what + ": not valid JSON");
+    if (!j.is_object()) return Status::error(what + ": not a JSON object");
     try {
-        if (j.at("format").get<std::string>() != "surfcast-tileset") return Status::error(what + ": not a surfcast tile set");
-        const int version = integer<int>(j.at("version"));
-        if (version < kOldestFormatVersion || version > kFormatVersion)
-            return Status::error(what + ": unsupported version " + j.at("version").dump() + " (this reader takes " +
-                                 std::to_string(kOldestFormatVersion) + " to " + std::to_string(kFormatVersion) + ")");
-        auto readVec = [](const nlohmann::json& a) { return Vec3d{a.at(0).get<double>(), a.at(1).get<double>(), a.at(2).get<double>()}; };
+        if (text(j, "", "format") != "surfcast-tileset") fieldError("format", "not \"surfcast-tileset\"");
         TilesetInfo info;
-        info.version = version;
-        info.generator = j.at("generator").get<std::string>();
-        info.inputPoints = integer<uint64_t>(j.at("input_points"));
-        info.surfels = integer<uint64_t>(j.at("surfels"));
-        info.nodes = integer<uint64_t>(j.at("nodes"));
-        info.levels = integer<int>(j.at("levels"));
-        info.grid = integer<int>(j.at("grid"));
-        info.rootMin = readVec(j.at("root").at("min"));
-        info.rootEdge = j.at("root").at("edge").get<double>();
-        info.bounds.min = readVec(j.at("bounds").at("min"));
-        info.bounds.max = readVec(j.at("bounds").at("max"));
-        info.colorBits = integer<int>(j.at("color_bits"));
+        info.version = integer<int>(j, "", "version");
+        if (info.version < kOldestFormatVersion || info.version > kFormatVersion)
+            fieldError("version", "unsupported version " + std::to_string(info.version) + " (this reader takes " +
+                                      std::to_string(kOldestFormatVersion) + " to " + std::to_string(kFormatVersion) + ")");
+        info.generator = text(j, "", "generator");
+        info.inputPoints = integer<uint64_t>(j, "", "input_points");
+        info.surfels = integer<uint64_t>(j, "", "surfels");
+        info.nodes = integer<uint64_t>(j, "", "nodes");
+        info.levels = integer<int>(j, "", "levels");
+        if (info.levels < 1 || info.levels > kMaxLevel + 1)
+            fieldError("levels", std::to_string(info.levels) + " is not 1 to " + std::to_string(kMaxLevel + 1));
+        info.grid = integer<int>(j, "", "grid");
+        if (info.grid < 1) fieldError("grid", std::to_string(info.grid) + " is not positive");
+        const nlohmann::json& root = object(j, "", "root");
+        info.rootMin = vec3(root, "root", "min");
+        info.rootEdge = number(root, "root", "edge");
+        if (!(info.rootEdge > 0)) fieldError("root.edge", "not positive");
+        const nlohmann::json& bounds = object(j, "", "bounds");
+        info.bounds.min = vec3(bounds, "bounds", "min");
+        info.bounds.max = vec3(bounds, "bounds", "max");
+        info.colorBits = integer<int>(j, "", "color_bits");
         if (info.colorBits != 0 && info.colorBits != 8 && info.colorBits != 16)
-            return Status::error(what + ": color_bits is " + std::to_string(info.colorBits) + ", not 0, 8 or 16");
-        for (const auto& a : j.at("attributes")) {
-            info.attributes.push_back({a.at("name").get<std::string>(), a.at("type").get<std::string>(),
-                                       integer<int>(a.at("components")), integer<int>(a.at("quantization_bits")),
-                                       a.value("kind", std::string()), a.value("scale", 1.0), a.value("offset", 0.0)});
-            const AttributeInfo& added = info.attributes.back();
-            if (!std::isfinite(added.scale) || !std::isfinite(added.offset) || added.scale == 0)
-                return Status::error(what + ": attribute " + added.name + ": scale or offset is not a finite number");
+            fieldError("color_bits", std::to_string(info.colorBits) + ", not 0, 8 or 16");
+        const nlohmann::json& attributes = member(j, "", "attributes");
+        if (!attributes.is_array()) fieldError("attributes", "not an array");
+        for (size_t i = 0; i < attributes.size(); ++i) {
+            const nlohmann::json& a = attributes[i];
+            const std::string at = "attributes[" + std::to_string(i) + "]";
+            AttributeInfo added{text(a, at, "name"), text(a, at, "type"), integer<int>(a, at, "components"),
+                                integer<int>(a, at, "quantization_bits")};
+            if (a.contains("kind")) added.kind = text(a, at, "kind");
+            if (a.contains("scale")) added.scale = number(a, at, "scale");
+            if (a.contains("offset")) added.offset = number(a, at, "offset");
+            const std::string of = " (attribute " + added.name + ")";
+            if (added.scale == 0) fieldError(at + ".scale", "0" + of);
+            if (added.components < 1 || added.components > 4)
+                fieldError(at + ".components", std::to_string(added.components) + " is not 1 to 4" + of);
             // Draco quantizes with 1 to 30 bits; 0 means not quantized.
-            if (added.quantizationBits < 0 || added.quantizationBits > 30 || added.components < 1 || added.components > 4)
-                return Status::error(what + ": attribute " + added.name + ": components or quantization_bits out of range");
+            if (added.quantizationBits < 0 || added.quantizationBits > 30)
+                fieldError(at + ".quantization_bits", std::to_string(added.quantizationBits) + " is not 0 to 30" + of);
+            info.attributes.push_back(std::move(added));
         }
         // Absent in version 1: the elevation range is the bounds'.
         TilesetStatistics& st = info.statistics;
         st.elevationMin = info.bounds.min.z;
         st.elevationMax = info.bounds.max.z;
         if (j.contains("statistics")) {
-            const auto& js = j.at("statistics");
-            st.elevationMin = js.at("elevation").at("min").get<double>();
-            st.elevationMax = js.at("elevation").at("max").get<double>();
+            const nlohmann::json& js = object(j, "", "statistics");
+            const nlohmann::json& elevation = object(js, "statistics", "elevation");
+            st.elevationMin = number(elevation, "statistics.elevation", "min");
+            st.elevationMax = number(elevation, "statistics.elevation", "max");
             if (js.contains("intensity")) {
-                const auto& ji = js.at("intensity");
+                const nlohmann::json& ji = object(js, "statistics", "intensity");
                 st.intensity = true;
-                st.intensityMin = ji.at("min").get<double>();
-                st.intensityMax = ji.at("max").get<double>();
-                st.intensityP2 = ji.at("p2").get<double>();
-                st.intensityP98 = ji.at("p98").get<double>();
+                st.intensityMin = number(ji, "statistics.intensity", "min");
+                st.intensityMax = number(ji, "statistics.intensity", "max");
+                st.intensityP2 = number(ji, "statistics.intensity", "p2");
+                st.intensityP98 = number(ji, "statistics.intensity", "p98");
             }
-            if (js.contains("classification"))
-                for (const auto& [key, count] : js.at("classification").at("counts").items()) {
-                    char* end = nullptr;
-                    long c = std::strtol(key.c_str(), &end, 10);
-                    if (key.empty() || *end != 0 || c < 0 || c > 255)
-                        return Status::error(what + ": statistics.classification: '" + key + "' is not a class (0-255)");
-                    st.classCounts.push_back({int(c), integer<uint64_t>(count)});
+            if (js.contains("classification")) {
+                const nlohmann::json& counts = object(object(js, "statistics", "classification"), "statistics.classification", "counts");
+                for (const auto& [key, count] : counts.items()) {
+                    // Decimal digits only (strtol would take " 7", "+7" and "-0").
+                    const bool digits = !key.empty() && key.size() <= 3 &&
+                                        std::all_of(key.begin(), key.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
+                    if (!digits || std::stoi(key) > 255)
+                        fieldError("statistics.classification.counts", "'" + key + "' is not a class (0-255)");
+                    st.classCounts.push_back({std::stoi(key), integer<uint64_t>(counts, "statistics.classification.counts", key)});
                 }
+            }
             std::sort(st.classCounts.begin(), st.classCounts.end());
         }
-        info.normalSource = j.at("normal_source").get<std::string>();
-        info.weights = j.at("weights").get<std::string>();
+        info.normalSource = text(j, "", "normal_source");
+        info.weights = text(j, "", "weights");
         // Absent in sets written before it existed, whose weights assumed k = 1.
-        info.kernelScale = j.value("kernel_scale", 1.0);
-        if (j.contains("texture_filter")) info.textureFilter = j.at("texture_filter").get<std::string>();
-        if (!(info.kernelScale > 0) || !std::isfinite(info.kernelScale))
-            return Status::error(what + ": kernel_scale must be positive");
-        const auto& h = j.at("hierarchy");
-        info.hierarchyBytes = integer<uint64_t>(h.at("bytes"));
-        info.hierarchyPages = integer<uint32_t>(h.at("pages"));
-        info.pageDepth = integer<uint32_t>(h.at("page_depth"));
-        info.hierarchyCrc = integer<uint32_t>(h.at("crc32"));
-        info.blocksBytes = integer<uint64_t>(j.at("blocks").at("bytes"));
-        if (!(info.rootEdge > 0) || !std::isfinite(info.rootEdge) || info.levels < 1 || info.levels > kMaxLevel + 1 ||
-            info.grid < 1)
-            return Status::error(what + ": root edge, levels or grid out of range");
+        info.kernelScale = j.contains("kernel_scale") ? number(j, "", "kernel_scale") : 1.0;
+        if (!(info.kernelScale > 0)) fieldError("kernel_scale", "not positive");
+        if (j.contains("texture_filter")) info.textureFilter = text(j, "", "texture_filter");
+        const nlohmann::json& h = object(j, "", "hierarchy");
+        info.hierarchyBytes = integer<uint64_t>(h, "hierarchy", "bytes");
+        info.hierarchyPages = integer<uint32_t>(h, "hierarchy", "pages");
+        info.pageDepth = integer<uint32_t>(h, "hierarchy", "page_depth");
+        info.hierarchyCrc = integer<uint32_t>(h, "hierarchy", "crc32");
+        const nlohmann::json& blocks = object(j, "", "blocks");
+        info.blocksBytes = integer<uint64_t>(blocks, "blocks", "bytes");
+        if (text(blocks, "blocks", "codec") != "draco") fieldError("blocks.codec", "not \"draco\"");
         return info;
-    } catch (const nlohmann::json::exception& e) {
-        return Status::error(what + ": missing or mistyped field (" + std::string(e.what()) + ")");
     } catch (const FieldError& e) {
         return Status::error(what + ": " + e.what());
     }

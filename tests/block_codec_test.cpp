@@ -1,10 +1,15 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <string>
+#include <vector>
 #include <map>
 #include <tuple>
 
 #include "block_codec.h"
+#include "test_support.h"
+
+#include <nlohmann/json.hpp>
 
 using namespace surfcast;
 
@@ -215,4 +220,36 @@ TEST(BlockCodec, LidarAttributesRoundTripAndUnknownOnesAreSkipped) {
     EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), e).ok());
     e.extra = {"classification", "intensity"};  // listed in the wrong order: the types disagree
     EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), e).ok());
+}
+
+// The format's block corpus (tests/conformance/blocks.json), which
+// web/test/format.test.mjs runs through the browser's decoder too: both decode
+// and reject the same blocks.
+TEST(FormatConformance, BlockCases) {
+    const nlohmann::json corpus =
+        nlohmann::json::parse(test::readFile(SURFCAST_TEST_TOOLS "/../conformance/blocks.json"));
+    for (const auto& c : corpus["cases"]) {
+        SCOPED_TRACE(c["name"].get<std::string>());
+        nlohmann::json e = corpus["expect"];
+        if (c.contains("expect")) e.update(c["expect"]);
+        BlockExpectation expect;
+        expect.points = e["points"].get<uint32_t>();
+        expect.colorBits = e["color_bits"].get<int>();
+        expect.normals = e["normals"].get<bool>();
+        expect.weights = e["weights"].get<bool>();
+        expect.radii = e["radii"].get<bool>();
+        expect.edgeWeights = e["edge_weights"].get<bool>();
+        const std::string hex = c["block"].get<std::string>();
+        std::vector<uint8_t> bytes(hex.size() / 2);
+        for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(std::stoul(hex.substr(2 * i, 2), nullptr, 16));
+        auto block = decodeBlock(bytes.data(), bytes.size(), expect);
+        if (c.contains("error")) {
+            ASSERT_FALSE(block.ok());
+            EXPECT_NE(block.status().message().find(c["error"].get<std::string>()), std::string::npos)
+                << block.status().message();
+        } else {
+            ASSERT_TRUE(block.ok()) << block.status().message();
+            EXPECT_EQ(block->positions.size(), 3 * c["count"].get<size_t>());
+        }
+    }
 }

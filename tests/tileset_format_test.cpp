@@ -1,12 +1,17 @@
-// Pins docs/FORMAT.md: record bytes, hierarchy header and paging, tileset.json text.
+// Pins docs/FORMAT.md: record bytes, hierarchy header and paging, tileset.json text,
+// and runs the format's conformance corpus (tests/conformance/).
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cstring>
 #include <limits>
 #include <map>
+#include <span>
+#include <string>
+#include <vector>
 
 #include "crc32.h"
+#include "test_support.h"
 #include "tileset_format.h"
 
 #include <nlohmann/json.hpp>
@@ -511,4 +516,108 @@ TEST(TilesetFormat, PagesRejectBadPositionBitsAndSpacing) {
     auto whole = readHierarchy(writeHierarchy({r}), "h.bin");
     ASSERT_FALSE(whole.ok());
     EXPECT_NE(whole.status().message().find("64 position bits"), std::string::npos) << whole.status().message();
+}
+
+// The format's conformance corpus, which web/test/format.test.mjs runs through
+// the browser's reader too: both accept and reject the same cases.
+namespace {
+nlohmann::json conformance(const char* name) {
+    return nlohmann::json::parse(test::readFile(std::string(SURFCAST_TEST_TOOLS "/../conformance/") + name));
+}
+
+// A case's tileset.json text: `good` with the case's changes (the corpus's "about" says which).
+std::string tilesetText(const nlohmann::json& good, const nlohmann::json& c) {
+    if (c.contains("text")) return c["text"].get<std::string>();
+    nlohmann::json doc = good;
+    const nlohmann::json set = c.value("set", nlohmann::json::object()), remove = c.value("remove", nlohmann::json::array());
+    for (const auto& [pointer, value] : set.items()) doc[nlohmann::json::json_pointer(pointer)] = value;
+    for (const auto& pointer : remove) {
+        const nlohmann::json::json_pointer p(pointer.get<std::string>());
+        nlohmann::json& parent = doc[p.parent_pointer()];
+        if (parent.is_array()) parent.erase(std::stoul(p.back()));
+        else parent.erase(p.back());
+    }
+    return doc.dump(2);
+}
+
+std::vector<uint8_t> fromHex(const std::string& hex) {
+    std::vector<uint8_t> bytes(hex.size() / 2);
+    for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(std::stoul(hex.substr(2 * i, 2), nullptr, 16));
+    return bytes;
+}
+}  // namespace
+
+TEST(FormatConformance, TilesetJsonCases) {
+    const nlohmann::json corpus = conformance("tileset_json.json");
+    for (const auto& c : corpus["cases"]) {
+        SCOPED_TRACE(c["name"].get<std::string>());
+        auto info = readTilesetJson(tilesetText(corpus["good"], c), "tileset.json");
+        if (c.contains("error")) {
+            ASSERT_FALSE(info.ok());
+            const std::string message = info.status().message();
+            EXPECT_EQ(message.rfind("tileset.json: ", 0), 0u) << message;
+            EXPECT_NE(message.find(c["error"].get<std::string>()), std::string::npos) << message;
+            continue;
+        }
+        ASSERT_TRUE(info.ok()) << info.status().message();
+        for (const auto& [field, want] : c["read"].items()) {
+            if (field == "version") EXPECT_EQ(info->version, want.get<int>());
+            else if (field == "levels") EXPECT_EQ(info->levels, want.get<int>());
+            else if (field == "grid") EXPECT_EQ(info->grid, want.get<int>());
+            else if (field == "color_bits") EXPECT_EQ(info->colorBits, want.get<int>());
+            else if (field == "kernel_scale") EXPECT_EQ(info->kernelScale, want.get<double>());
+            else if (field == "weights") EXPECT_EQ(info->weights, want.get<std::string>());
+            else if (field == "blocks_bytes") EXPECT_EQ(info->blocksBytes, want.get<uint64_t>());
+            else if (field == "hierarchy_bytes") EXPECT_EQ(info->hierarchyBytes, want.get<uint64_t>());
+            else if (field == "hierarchy_pages") EXPECT_EQ(info->hierarchyPages, want.get<uint32_t>());
+            else if (field == "hierarchy_crc") EXPECT_EQ(info->hierarchyCrc, want.get<uint32_t>());
+            else if (field == "elevation") {
+                EXPECT_EQ(info->statistics.elevationMin, want[0].get<double>());
+                EXPECT_EQ(info->statistics.elevationMax, want[1].get<double>());
+            } else if (field == "attributes") {
+                std::vector<std::string> names;
+                for (const auto& a : info->attributes) names.push_back(a.name);
+                EXPECT_EQ(names, want.get<std::vector<std::string>>());
+            } else ADD_FAILURE() << "the corpus reads a field this test does not know: " << field;
+        }
+    }
+}
+
+// The hierarchy read as a streaming client reads it: the header and page
+// table, then page 0 from the root, then each page its proxy record reaches.
+TEST(FormatConformance, HierarchyCases) {
+    const nlohmann::json corpus = conformance("hierarchy.json");
+    const uint64_t blocksBytes = corpus["blocks_bytes"].get<uint64_t>();
+    for (const auto& c : corpus["cases"]) {
+        SCOPED_TRACE(c["name"].get<std::string>());
+        const std::vector<uint8_t> bytes = fromHex(c["hierarchy"].get<std::string>());
+        std::vector<std::string> keys;
+        Status status;
+        auto index = readHierarchyIndex(bytes, bytes.size(), "h.bin");
+        if (!index) status = index.status();
+        std::vector<std::pair<uint32_t, NodeKey>> due;  // pages to read, with their roots
+        if (index) due.push_back({0, NodeKey{}});
+        for (size_t i = 0; i < due.size() && status.ok(); ++i) {
+            const auto [page, root] = due[i];
+            const HierarchyPageEntry& e = index->pages[page];
+            auto recs = readHierarchyPage(*index, page, std::span(bytes).subspan(e.offset, size_t(e.records) * kRecordSize),
+                                          root, blocksBytes, "h.bin");
+            if (!recs) {
+                status = recs.status();
+                break;
+            }
+            for (const NodeRecord& r : *recs) {
+                keys.push_back(r.key.name());
+                if (r.flags & kFlagChildrenInPage) due.push_back({r.childPage, r.key});
+            }
+        }
+        if (c.contains("error")) {
+            ASSERT_FALSE(status.ok()) << "read " << keys.size() << " nodes";
+            EXPECT_EQ(status.message().rfind("h.bin: ", 0), 0u) << status.message();
+            EXPECT_NE(status.message().find(c["error"].get<std::string>()), std::string::npos) << status.message();
+        } else {
+            ASSERT_TRUE(status.ok()) << status.message();
+            EXPECT_EQ(keys, c["nodes"].get<std::vector<std::string>>());
+        }
+    }
 }

@@ -56,6 +56,7 @@ export function checkDracoHeader(b: Uint8Array, points: number, attributes: numb
   if (b[8] !== 1) return "the Draco block is not kd-tree coded";
   if ((b[9] | (b[10] << 8)) & 0x8000) return "the Draco block carries metadata";
   const count = new DataView(b.buffer, b.byteOffset + 11, 4).getInt32(0, true);
+  if (count < 0) return "the Draco block declares a negative point count";
   if (count !== points) return `the Draco block declares ${count} points; the tile set declares ${points}`;
   if (b[15] !== 1) return `the Draco block has ${b[15]} attribute decoders, not 1`;
   let at = 16;

@@ -23,6 +23,7 @@ export interface TilesetInfo {
   boundsMin: Vec3;
   boundsMax: Vec3;
   levels: number;
+  grid: number;
   nodes: number;
   surfels: number;
   colorBits: number;
@@ -46,11 +47,13 @@ export interface TilesetInfo {
 // attribute follows them in every block (FORMAT.md, "blocks.bin").
 export const kFixedAttributes = ["position", "normal", "color", "weight", "radius", "edge_weight"];
 
-// Largest tileset.json a reader accepts: the format's is a few kilobytes.
-export const kMaxTilesetJsonBytes = 1 << 20;
+// Largest tileset.json a reader accepts (common/tile_source.h's
+// kMaxTilesetJsonBytes): the format's is a few kilobytes.
+export const kMaxTilesetJsonBytes = 16 << 20;
 export const kMaxBlockPoints = 4_194_304;
 export const kMaxLevel = 20;
 export const kMaxPositionBits = 30; // common/tileset_format.h
+const kOldestFormatVersion = 1, kFormatVersion = 2;
 
 export class FormatError extends Error {}
 
@@ -58,86 +61,150 @@ function fail(what: string, why: string): never {
   throw new FormatError(`${what}: ${why}`);
 }
 
-function num(v: unknown, what: string, field: string): number {
-  if (typeof v !== "number" || !Number.isFinite(v)) fail(what, `"${field}" is missing or not a number`);
+// tileset.json's fields, each read with its path ("hierarchy.bytes",
+// "attributes[2].scale") in the error, as common/tileset_format.cpp does: both
+// run tests/conformance/tileset_json.json. Integers are JSON integers within
+// the field's range (u64 fields: within 2^53, what a double holds exactly).
+type Json = Record<string, unknown>;
+const joined = (parent: string, key: string) => (parent ? `${parent}.${key}` : key);
+// A value quoted in an error: at most about 60 characters of it.
+function shown(v: unknown): string {
+  const s = JSON.stringify(v) ?? String(v);
+  return s.length <= 64 ? s : `${s.slice(0, 60)}...`;
+}
+function member(o: Json, parent: string, key: string): unknown {
+  if (!Object.hasOwn(o, key)) throw new FormatError(`${joined(parent, key)}: missing`);
+  return o[key];
+}
+function isObject(v: unknown): v is Json {
+  return typeof v === "object" && v !== null && !Array.isArray(v);
+}
+function object(o: Json, parent: string, key: string): Json {
+  const v = member(o, parent, key);
+  if (!isObject(v)) throw new FormatError(`${joined(parent, key)}: not an object`);
   return v;
 }
-function vec3(v: unknown, what: string, field: string): Vec3 {
-  if (!Array.isArray(v) || v.length !== 3) fail(what, `"${field}" is not an array of three numbers`);
-  return [num(v[0], what, field), num(v[1], what, field), num(v[2], what, field)];
+function integer(o: Json, parent: string, key: string, min: number, max: number): number {
+  const v = member(o, parent, key);
+  if (typeof v !== "number" || !Number.isInteger(v) || v < min || v > max)
+    throw new FormatError(`${joined(parent, key)}: ${shown(v)} is not an integer in its range`);
+  return v;
 }
-function obj(v: unknown, what: string, field: string): Record<string, unknown> {
-  if (typeof v !== "object" || v === null || Array.isArray(v)) fail(what, `"${field}" is missing or not an object`);
-  return v as Record<string, unknown>;
+const kU32 = 0xffffffff, kI32 = 0x7fffffff, kU64 = Number.MAX_SAFE_INTEGER;
+function finite(v: unknown, path: string): number {
+  if (typeof v !== "number" || !Number.isFinite(v)) throw new FormatError(`${path}: ${shown(v)} is not a finite number`);
+  return v;
+}
+const number = (o: Json, parent: string, key: string) => finite(member(o, parent, key), joined(parent, key));
+function text(o: Json, parent: string, key: string): string {
+  const v = member(o, parent, key);
+  if (typeof v !== "string") throw new FormatError(`${joined(parent, key)}: ${shown(v)} is not a string`);
+  return v;
+}
+function vec3(o: Json, parent: string, key: string): Vec3 {
+  const v = member(o, parent, key), path = joined(parent, key);
+  if (!Array.isArray(v) || v.length !== 3) throw new FormatError(`${path}: not an array of three numbers`);
+  return [finite(v[0], path), finite(v[1], path), finite(v[2], path)];
 }
 
-export function parseTileset(text: string, what: string): TilesetInfo {
-  let j: Record<string, unknown>;
+export function parseTileset(json: string, what: string): TilesetInfo {
+  let j: unknown;
   try {
-    j = obj(JSON.parse(text), what, "(top level)");
+    j = JSON.parse(json);
   } catch (e) {
-    if (e instanceof FormatError) throw e;
-    fail(what, `not JSON (${(e as Error).message})`);
+    fail(what, `not valid JSON (${(e as Error).message})`);
   }
-  if (j.format !== "surfcast-tileset") fail(what, `"format" is not "surfcast-tileset"`);
-  const version = num(j.version, what, "version");
-  if (version !== 1 && version !== 2) fail(what, `unsupported version ${version}`);
-  const root = obj(j.root, what, "root");
-  const bounds = obj(j.bounds, what, "bounds");
-  const hierarchy = obj(j.hierarchy, what, "hierarchy");
-  const blocks = obj(j.blocks, what, "blocks");
-  if (blocks.codec !== "draco") fail(what, `blocks.codec is not "draco"`);
-  if (!Array.isArray(j.attributes)) fail(what, `"attributes" is not an array`);
-  const attributes = (j.attributes as unknown[]).map((a, i) => {
-    const o = obj(a, what, `attributes[${i}]`);
-    if (typeof o.name !== "string") fail(what, `attributes[${i}].name is not a string`);
-    return {
-      name: o.name,
-      type: String(o.type ?? ""),
-      components: num(o.components, what, `attributes[${i}].components`),
-      quantizationBits: typeof o.quantization_bits === "number" ? o.quantization_bits : 0,
-      kind: typeof o.kind === "string" ? o.kind : "",
-      scale: typeof o.scale === "number" ? o.scale : 1,
-      offset: typeof o.offset === "number" ? o.offset : 0,
+  if (!isObject(j)) fail(what, "not a JSON object");
+  try {
+    return readFields(j);
+  } catch (e) {
+    if (e instanceof FormatError) fail(what, e.message);
+    throw e;
+  }
+}
+
+function readFields(j: Json): TilesetInfo {
+  if (text(j, "", "format") !== "surfcast-tileset") throw new FormatError(`format: not "surfcast-tileset"`);
+  const version = integer(j, "", "version", -kI32 - 1, kI32);
+  if (version < kOldestFormatVersion || version > kFormatVersion)
+    throw new FormatError(`version: unsupported version ${version} (this reader takes ${kOldestFormatVersion} to ${kFormatVersion})`);
+  text(j, "", "generator");
+  integer(j, "", "input_points", 0, kU64);
+  const surfels = integer(j, "", "surfels", 0, kU64);
+  const nodes = integer(j, "", "nodes", 0, kU64);
+  const levels = integer(j, "", "levels", -kI32 - 1, kI32);
+  if (levels < 1 || levels > kMaxLevel + 1) throw new FormatError(`levels: ${levels} is not 1 to ${kMaxLevel + 1}`);
+  const grid = integer(j, "", "grid", -kI32 - 1, kI32);
+  if (grid < 1) throw new FormatError(`grid: ${grid} is not positive`);
+  const root = object(j, "", "root");
+  const rootMin = vec3(root, "root", "min");
+  const rootEdge = number(root, "root", "edge");
+  if (!(rootEdge > 0)) throw new FormatError("root.edge: not positive");
+  const bounds = object(j, "", "bounds");
+  const boundsMin = vec3(bounds, "bounds", "min"), boundsMax = vec3(bounds, "bounds", "max");
+  const colorBits = integer(j, "", "color_bits", -kI32 - 1, kI32);
+  if (colorBits !== 0 && colorBits !== 8 && colorBits !== 16)
+    throw new FormatError(`color_bits: ${colorBits}, not 0, 8 or 16`);
+  const list = member(j, "", "attributes");
+  if (!Array.isArray(list)) throw new FormatError("attributes: not an array");
+  const attributes = list.map((a: unknown, i): AttributeInfo => {
+    const at = `attributes[${i}]`, o = isObject(a) ? a : {};
+    const added = {
+      name: text(o, at, "name"),
+      type: text(o, at, "type"),
+      components: integer(o, at, "components", -kI32 - 1, kI32),
+      quantizationBits: integer(o, at, "quantization_bits", -kI32 - 1, kI32),
+      kind: Object.hasOwn(o, "kind") ? text(o, at, "kind") : "",
+      scale: Object.hasOwn(o, "scale") ? number(o, at, "scale") : 1,
+      offset: Object.hasOwn(o, "offset") ? number(o, at, "offset") : 0,
     };
+    const of = ` (attribute ${added.name})`;
+    if (added.scale === 0) throw new FormatError(`${at}.scale: 0${of}`);
+    if (added.components < 1 || added.components > 4)
+      throw new FormatError(`${at}.components: ${added.components} is not 1 to 4${of}`);
+    // Draco quantizes with 1 to 30 bits; 0 means not quantized.
+    if (added.quantizationBits < 0 || added.quantizationBits > 30)
+      throw new FormatError(`${at}.quantization_bits: ${added.quantizationBits} is not 0 to 30${of}`);
+    return added;
   });
-  const stats = typeof j.statistics === "object" && j.statistics !== null ? (j.statistics as Record<string, any>) : {};
-  // As in C++: statistics, where present, carry the elevation range.
-  if (j.statistics !== undefined && (typeof stats.elevation?.min !== "number" || typeof stats.elevation?.max !== "number"))
-    fail(what, "statistics.elevation.min and .max are not both numbers");
-  const bmin = vec3(bounds.min, what, "bounds.min"), bmax = vec3(bounds.max, what, "bounds.max");
-  const classCounts = new Map<number, number>();
-  for (const [k, v] of Object.entries(stats.classification?.counts ?? {})) classCounts.set(Number(k), Number(v));
-  const rootEdge = num(root.edge, what, "root.edge");
-  if (!(rootEdge > 0)) fail(what, "root.edge is not positive");
-  const colorBits = num(j.color_bits, what, "color_bits");
-  if (colorBits !== 0 && colorBits !== 8 && colorBits !== 16) fail(what, `color_bits ${colorBits} is not 0, 8 or 16`);
-  return {
-    version,
-    rootMin: vec3(root.min, what, "root.min"),
-    rootEdge,
-    boundsMin: bmin,
-    boundsMax: bmax,
-    levels: num(j.levels, what, "levels"),
-    nodes: num(j.nodes, what, "nodes"),
-    surfels: num(j.surfels, what, "surfels"),
-    colorBits,
-    attributes,
-    weights: typeof j.weights === "string" ? j.weights : "none",
-    kernelScale: typeof j.kernel_scale === "number" ? j.kernel_scale : 1,
-    normalSource: typeof j.normal_source === "string" ? j.normal_source : "",
-    hierarchyBytes: num(hierarchy.bytes, what, "hierarchy.bytes"),
-    hierarchyPages: num(hierarchy.pages, what, "hierarchy.pages"),
-    hierarchyCrc: num(hierarchy.crc32, what, "hierarchy.crc32"),
-    blocksBytes: num(blocks.bytes, what, "blocks.bytes"),
-    statistics: {
-      // Without statistics (version 1), the bounds' z range, as in C++.
-      elevationMin: j.statistics !== undefined ? stats.elevation.min : bmin[2],
-      elevationMax: j.statistics !== undefined ? stats.elevation.max : bmax[2],
-      intensity: stats.intensity,
-      classCounts,
-    },
-  };
+  // Absent in version 1: the elevation range is the bounds'.
+  const statistics: TilesetInfo["statistics"] = { elevationMin: boundsMin[2], elevationMax: boundsMax[2], classCounts: new Map() };
+  if (Object.hasOwn(j, "statistics")) {
+    const js = object(j, "", "statistics");
+    const elevation = object(js, "statistics", "elevation");
+    statistics.elevationMin = number(elevation, "statistics.elevation", "min");
+    statistics.elevationMax = number(elevation, "statistics.elevation", "max");
+    if (Object.hasOwn(js, "intensity")) {
+      const ji = object(js, "statistics", "intensity");
+      const at = "statistics.intensity";
+      statistics.intensity = { min: number(ji, at, "min"), max: number(ji, at, "max"), p2: number(ji, at, "p2"),
+                               p98: number(ji, at, "p98") };
+    }
+    if (Object.hasOwn(js, "classification")) {
+      const at = "statistics.classification.counts";
+      const counts = object(object(js, "statistics", "classification"), "statistics.classification", "counts");
+      for (const key of Object.keys(counts)) {
+        if (!/^\d+$/.test(key) || Number(key) > 255) throw new FormatError(`${at}: '${key}' is not a class (0-255)`);
+        statistics.classCounts.set(Number(key), integer(counts, at, key, 0, kU64));
+      }
+    }
+  }
+  const normalSource = text(j, "", "normal_source");
+  const weights = text(j, "", "weights");
+  // Absent in sets written before it existed, whose weights assumed k = 1.
+  const kernelScale = Object.hasOwn(j, "kernel_scale") ? number(j, "", "kernel_scale") : 1;
+  if (!(kernelScale > 0)) throw new FormatError("kernel_scale: not positive");
+  if (Object.hasOwn(j, "texture_filter")) text(j, "", "texture_filter");
+  const hierarchy = object(j, "", "hierarchy");
+  const hierarchyBytes = integer(hierarchy, "hierarchy", "bytes", 0, kU64);
+  const hierarchyPages = integer(hierarchy, "hierarchy", "pages", 0, kU32);
+  integer(hierarchy, "hierarchy", "page_depth", 0, kU32);
+  const hierarchyCrc = integer(hierarchy, "hierarchy", "crc32", 0, kU32);
+  const blocks = object(j, "", "blocks");
+  const blocksBytes = integer(blocks, "blocks", "bytes", 0, kU64);
+  if (text(blocks, "blocks", "codec") !== "draco") throw new FormatError(`blocks.codec: not "draco"`);
+  return { version, rootMin, rootEdge, boundsMin, boundsMax, levels, grid, nodes, surfels, colorBits, attributes, weights,
+           kernelScale, normalSource, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, statistics };
 }
 
 export function attribute(info: TilesetInfo, name: string): AttributeInfo | undefined {

@@ -1,33 +1,14 @@
 // The browser's level-of-detail selection (web/src/lod_selection.ts) under
-// node, without a browser: esbuild (the build's bundler) turns the module into
-// JavaScript in a temporary folder, and the cases are the ones the C++
-// selection runs (tests/conformance/, read by tests/lod_test.cpp too).
+// node, without a browser, on the cases the C++ selection runs
+// (tests/conformance/, read by tests/lod_test.cpp too).
 
 import { test } from "node:test";
 import assert from "node:assert/strict";
-import { mkdtempSync, readFileSync, rmSync } from "node:fs";
-import { tmpdir } from "node:os";
-import { dirname, join } from "node:path";
-import { fileURLToPath, pathToFileURL } from "node:url";
-import { build } from "esbuild";
+import { readFileSync } from "node:fs";
+import { join } from "node:path";
+import { conformance, loadModule } from "./load_module.mjs";
 
-const web = join(dirname(fileURLToPath(import.meta.url)), "..");
-const conformance = join(web, "..", "tests", "conformance");
-
-async function loadModules() {
-  const out = mkdtempSync(join(tmpdir(), "surfcast-lod-"));
-  try {
-    const file = join(out, "lod.mjs");
-    await build({
-      stdin: { contents: 'export * from "./src/lod_selection.ts"; export { parseCamera } from "./src/camera.ts";',
-               resolveDir: web, loader: "ts" },
-      bundle: true, format: "esm", platform: "node", outfile: file, logLevel: "warning",
-    });
-    return await import(pathToFileURL(file).href);
-  } finally {
-    rmSync(out, { recursive: true, force: true });
-  }
-}
+const loadModules = () => loadModule('export * from "./src/lod_selection.ts"; export { parseCamera } from "./src/camera.ts";');
 
 test("equal priorities refine smaller key first, as in the C++ client (conformance/lod_order.json)", async () => {
   const { LodSelector, emptyStats, parseCamera } = await loadModules();
