@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "octree_key.h"
+#include "render_defaults.h"  // generated from render_defaults.json
 #include "status.h"
 #include "vec3.h"
 
@@ -34,11 +35,11 @@ inline constexpr uint32_t kDefaultPageDepth = 5;
 // 0.34 at k = 1 to 0.21 at k = 0.5. Single-pixel pinholes in the scanned
 // default scene (demo view): 10 of 116 K covered pixels at 0.5, 135 at 0.4,
 // 3 at 0.6, none at 0.7.
-inline constexpr double kDefaultKernelScale = 0.5;
+inline constexpr double kDefaultKernelScale = defaults::kKernelScale;  // render_defaults.json
 // Default visibility offset z_t as a multiple of a splat's footprint (k h when
 // magnified): fragments within it of the nearest surface blend. The analytic
 // weights count only neighbours that blend, i.e. within it along the normal.
-inline constexpr double kDefaultZt = 0.5;
+inline constexpr double kDefaultZt = defaults::kZt;  // render_defaults.json
 
 enum NodeFlags : uint16_t {
     kFlagConeFull = 1u << 0,       // normals span more than a hemisphere: never backface-cull

@@ -27,9 +27,11 @@ std::optional<RenderMode> parseRenderMode(const std::string& name);
 const char* renderModeName(RenderMode mode);
 std::optional<Shading> parseShading(const std::string& name);
 
+// The defaults' values come from common/render_defaults.json, which the
+// browser reads too; why each has its value is said here.
 // Clamp of the low-pass filter's object-space extent where J is near singular
 // (grazing angles): at most this many pixels' worth at the surfel's depth.
-inline constexpr float kMaxFilterPixels = 64.f;
+inline constexpr float kMaxFilterPixels = defaults::kMaxFilterPixels;
 // Default low-pass filter V^h = v I (pixels^2). Zwicker 2001 uses V^h = I; a
 // supersampled pixel's box filter has variance 1/12. Measured by
 // bench/accuracy_bench.py (mean FLIP, ewa-pixel): v = 0.1 is best on the
@@ -37,26 +39,26 @@ inline constexpr float kMaxFilterPixels = 64.f;
 // 0.197 at v = 1 and 0.185 without a filter), and ties with no filter on
 // average (0.137 against 0.135; smooth meshes sampled below a pixel prefer
 // none); v = 1 darkens and widens every silhouette by about a pixel.
-inline constexpr float kDefaultLowpassVariance = 0.1f;
+inline constexpr float kDefaultLowpassVariance = defaults::kLowpassVariance;
 // Default tau of edge antialiasing, in sums of exp(-y'y/2) (a covered pixel
 // sums at least exp(-c) = 0.37). Measured by bench/edge_aa_bench.py on the
 // meshes' silhouettes (FLIP over silhouette pixels, against 0.30-0.32
 // without edge AA): 0.28-0.30 at 0.75, 0.15-0.18 at 3, 0.13-0.16 at 4, and
 // worse again at 8. Interiors never change: only border pixels take partial
 // coverage.
-inline constexpr float kDefaultEdgeTau = 4.f;
+inline constexpr float kDefaultEdgeTau = defaults::kEdgeTau;
 // Default l, the fragment layers per pixel of translucent frames (Zwicker 2001
 // §6): each costs one visibility and one accumulation pass over the splats.
 // Measured by bench/transparency_bench.py: every scene's FLIP stops falling
 // at l = 3 (crossing planes 0.247 at 1, 0.074 from 2; a translucent sphere
 // over a floor 0.222, 0.168, 0.151 from 3; three stacked layers 0.182, 0.101,
 // 0.063 from 3), while l = 4 takes 35-48 % longer than 3.
-inline constexpr int kDefaultLayers = 3;
-inline constexpr int kMaxLayers = 16;
+inline constexpr int kDefaultLayers = defaults::kLayers;
+inline constexpr int kMaxLayers = defaults::kMaxLayers;
 // Near plane, as a fraction of the larger of the set's bounding-box diagonal
 // and the eye's distance to its centre (nearPlaneFor; reversed-Z depth keeps
 // float precision at every distance, so it can be small).
-inline constexpr double kNearFraction = 1e-4;
+inline constexpr double kNearFraction = defaults::kNearFraction;
 
 struct RenderSettings {
     RenderMode mode = RenderMode::EwaPixel;

@@ -14,6 +14,7 @@
 // renderer falls back to, and to circles for sets without weights. 8-bit
 // targets hold no negative sums: the normal is accumulated offset to [0, 1].
 
+import defaults from "../../common/render_defaults.json";
 import { kGranuleSurfels } from "./lod_selection.js";
 import * as S from "./shaders.js";
 
@@ -39,15 +40,16 @@ export interface RenderSettings {
   layers: number;
 }
 
-export const kDefaultLayers = 3;
-export const kMaxLayers = 16;
-
-// The defaults of client/render/render_settings.h.
-export const kDefaultLowpassVariance = 0.1;
-export const kDefaultEdgeTau = 4;
-export const kDefaultZt = 0.5;
-export const kMaxFilterPixels = 64;
-export const kNearFraction = 1e-4;
+// The defaults of client/render/render_settings.h (which says why each has
+// its value), from the file both clients take them from.
+const { renderer: kDefaults } = defaults;
+export const kDefaultLayers = kDefaults.layers;
+export const kMaxLayers = kDefaults.max_layers;
+export const kDefaultLowpassVariance = kDefaults.lowpass_variance;
+export const kDefaultEdgeTau = kDefaults.edge_tau;
+export const kDefaultZt = kDefaults.zt;
+export const kMaxFilterPixels = kDefaults.max_filter_pixels;
+export const kNearFraction = kDefaults.near_fraction;
 
 export interface FrameView {
   rows: Float32Array; // world (relative to the render origin) -> camera, 3 x 4 row-major
