@@ -490,11 +490,11 @@ private:
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
         // Batches go to the set's own URL (a POST is not redirected): one
         // offered at a redirect's target is not taken.
-        curl_header* batch = nullptr;
-        if (!t.moved && curl_easy_header(h, "Surfcast-Batch", 0, CURLH_HEADER, -1, &batch) == CURLHE_OK &&
-            std::isdigit(static_cast<unsigned char>(batch->value[0]))) {
+        curl_header* offered = nullptr;
+        if (!t.moved && curl_easy_header(h, "Surfcast-Batch", 0, CURLH_HEADER, -1, &offered) == CURLHE_OK &&
+            std::isdigit(static_cast<unsigned char>(offered->value[0]))) {
             char* end = nullptr;
-            const unsigned long n = std::strtoul(batch->value, &end, 10);
+            const unsigned long n = std::strtoul(offered->value, &end, 10);
             if (*end == '\0' && n <= kMaxBatchNodesOffered) r.batchNodes = size_t(n);
         }
         return r;
