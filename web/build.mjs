@@ -2,6 +2,7 @@
 // page, its bundled module, the decode worker and draco3d's WASM decoder.
 // Nothing is fetched at run time from anywhere but the folder itself.
 import { build } from "esbuild";
+import { programs, shaderDir, sharedConstants } from "./glsl_es.mjs";
 import { copyFileSync, mkdirSync } from "node:fs";
 import { dirname, join, resolve } from "node:path";
 import { fileURLToPath } from "node:url";
@@ -9,7 +10,17 @@ import { fileURLToPath } from "node:url";
 const here = dirname(fileURLToPath(import.meta.url));
 const out = resolve(process.argv[2] ?? join(here, "..", "build", "web"));
 mkdirSync(out, { recursive: true });
-const common = { bundle: true, minify: true, sourcemap: true, target: ["es2020"], logLevel: "warning" };
+// "surfcast:shaders": the programs glsl_es.mjs generates from client/shaders.
+const shaders = {
+  name: "surfcast-shaders",
+  setup(b) {
+    b.onResolve({ filter: /^surfcast:shaders$/ }, (args) => ({ path: args.path, namespace: "surfcast" }));
+    b.onLoad({ filter: /.*/, namespace: "surfcast" }, () => ({
+      contents: `export const programs = ${JSON.stringify(programs())};\nexport const constants = ${JSON.stringify(sharedConstants())};\n`,
+      loader: "js", watchDirs: [shaderDir] }));
+  },
+};
+const common = { bundle: true, minify: true, sourcemap: true, target: ["es2020"], logLevel: "warning", plugins: [shaders] };
 await build({ ...common, entryPoints: [join(here, "src/main.ts")], outfile: join(out, "viewer.js"), format: "esm" });
 await build({ ...common, entryPoints: [join(here, "src/decode_worker.ts")], outfile: join(out, "decode_worker.js"), format: "iife" });
 for (const f of ["index.html", "style.css"]) copyFileSync(join(here, f), join(out, f));

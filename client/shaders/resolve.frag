@@ -30,6 +30,10 @@ void main() {
     } else {
         color = cw.rgb / cw.a;
     }
+#ifdef SC_UNSIGNED_TARGETS  // splat_accumulate.frag says why
+    color = shade(color, 2.0 * nw.xyz - cw.a);
+#else
     color = shade(color, nw.xyz);
+#endif
     outColor = vec4(mix(background, color, coverage), coverage);
 }

@@ -24,7 +24,7 @@ float edgeCoverage(sampler2D kernelSums, ivec2 pixel, float g) {
 vec3 shade(vec3 color, vec3 normalSum) {
     if (frame.shading == SC_SHADING_UNLIT) return color;
     float eta = frame.viewport.x;
-    vec3 ray = vec3((gl_FragCoord.x - 0.5 * frame.viewport.y) / eta, -(gl_FragCoord.y - 0.5 * frame.viewport.z) / eta, 1.0);
+    vec3 ray = vec3((gl_FragCoord.x - 0.5 * frame.viewport.y) / eta, kYSign * (gl_FragCoord.y - 0.5 * frame.viewport.z) / eta, 1.0);
     vec3 n = dot(normalSum, normalSum) > 0.0 ? normalize(normalSum) : vec3(0);
     float ndotv = abs(dot(n, -normalize(ray)));
     vec3 lit = color * (kAmbient + kDiffuse * ndotv);

@@ -21,5 +21,11 @@ void main() {
     float g = exp(-0.5 * q);
     float w = inAmplitude * g * edgeFactor(inEdge, inEdgeUV);
     outColorWeight = vec4(inColor * w, w);
+#ifdef SC_UNSIGNED_TARGETS
+    // RGBA8 targets (a browser without float blending) clamp negative sums:
+    // the normal goes as (n + 1) / 2 · w, and resolve.frag takes 2 Σ(...) - Σw.
+    outNormalWeight = vec4((0.5 * inNormal + 0.5) * w, g);
+#else
     outNormalWeight = vec4(inNormal * w, g);
+#endif
 }

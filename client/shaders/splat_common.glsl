@@ -2,9 +2,28 @@
 // object-space EWA setup of Ren et al. 2002, §5.2 and appendix A (DESIGN.md,
 // "Object-space EWA in one screen"). The CPU reference
 // (client/render/cpu_reference.cpp) evaluates the same kernel in screen space.
+// The browser's GLSL ES 3.00 is generated from these files (web/glsl_es.mjs),
+// with SC_GLSL_ES defined: the blocks under it are the two APIs' differences.
 #include "shared_types.h"
 
+#ifdef SC_GLSL_ES
+uniform FrameParams frame;
+// Depth in [0, 1] straight from clip z where EXT_clip_control is present;
+// without it, OpenGL maps clip z in [-w, w], and z_clip = 2 near - z gives
+// the same window depth near / z.
+uniform bool scClipControl;
+float clipDepth(float z) { return scClipControl ? frame.viewport.w : 2.0 * frame.viewport.w - z; }
+// Framebuffer y runs up in OpenGL.
+const float kYSign = 1.0;
+// GLSL ES 3.00 has no unpackUnorm4x8.
+vec4 scUnpackUnorm4x8(uint v) { return vec4(v & 255u, (v >> 8) & 255u, (v >> 16) & 255u, v >> 24) / 255.0; }
+#define unpackUnorm4x8 scUnpackUnorm4x8
+#else
 layout(push_constant) uniform Push { FrameParams frame; };
+float clipDepth(float z) { return frame.viewport.w; }
+// Framebuffer y runs down in Vulkan.
+const float kYSign = -1.0;
+#endif
 
 vec3 toCamera(vec3 p) {
     vec4 q = vec4(p, 1.0);
@@ -19,7 +38,7 @@ vec3 rotateToCamera(vec3 v) {
 // offset z_t must survive the depth test far away too).
 vec4 project(vec3 c) {
     float eta = frame.viewport.x;
-    return vec4(2.0 * eta / frame.viewport.y * c.x, -2.0 * eta / frame.viewport.z * c.y, frame.viewport.w, c.z);
+    return vec4(2.0 * eta / frame.viewport.y * c.x, kYSign * 2.0 * eta / frame.viewport.z * c.y, clipDepth(c.z), c.z);
 }
 // A clip position outside the view volume: the primitive is dropped.
 const vec4 kCulled = vec4(2.0, 2.0, 2.0, 1.0);
@@ -147,6 +166,6 @@ vec4 circleCorner(vec3 o, float radius, int corner, out vec2 y) {
     float rpx = max(eta * radius * frame.circleScale / o.z, 0.5);
     y = 2.0 * vec2(corner & 1, corner >> 1) - 1.0;
     vec4 clip = project(o);
-    clip.xy += vec2(y.x * 2.0 * rpx / frame.viewport.y, -y.y * 2.0 * rpx / frame.viewport.z) * o.z;
+    clip.xy += vec2(y.x * 2.0 * rpx / frame.viewport.y, kYSign * y.y * 2.0 * rpx / frame.viewport.z) * o.z;
     return clip;
 }

@@ -9,9 +9,17 @@
 layout(set = 0, binding = 0) uniform sampler2D previousDepth;
 
 layout(location = 0) in vec2 inY;
-layout(location = 7) noperspective in float inDepth;  // the fragment's own depth, not pushed back
+// The fragment's own depth, not pushed back.
+#ifdef SC_GLSL_ES  // splat_quad.vert says why
+layout(location = 7) in float inDepthW;
+layout(location = 8) in float inW;
+float ownDepth() { return inDepthW / inW; }
+#else
+layout(location = 7) noperspective in float inDepth;
+float ownDepth() { return inDepth; }
+#endif
 
 void main() {
     if (dot(inY, inY) > 2.0 * frame.kernel.y) discard;
-    if (inDepth >= texelFetch(previousDepth, ivec2(gl_FragCoord.xy), 0).r) discard;
+    if (ownDepth() >= texelFetch(previousDepth, ivec2(gl_FragCoord.xy), 0).r) discard;
 }

@@ -3,14 +3,10 @@
 // directly; the geometry-shader expansion (kExpand = 1) passes the surfel on.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
+#define SC_SURFEL_VERTICES 1
+#include "surfel_input.glsl"
 
 layout(constant_id = 1) const int kExpand = 0;
-
-layout(location = 0) in vec4 inPositionRadius;
-layout(location = 1) in uint inNormal;
-layout(location = 2) in vec4 inColor;
-layout(location = 3) in float inWeight;
-layout(location = 4) in uint inEdge;
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
@@ -25,6 +21,7 @@ layout(location = 8) flat out float outAlpha;
 #endif
 
 void main() {
+    loadSurfel();
     outY = vec2(0);
     outColor = inColor.rgb;
     outAmplitude = 1.0;

@@ -3,14 +3,10 @@
 // kPass 0: visibility (pushed back), 1: accumulation, 2: circles.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
+#define SC_SURFEL_VERTICES 6
+#include "surfel_input.glsl"
 
 layout(constant_id = 0) const int kPass = 1;
-
-layout(location = 0) in vec4 inPositionRadius;
-layout(location = 1) in uint inNormal;
-layout(location = 2) in vec4 inColor;
-layout(location = 3) in float inWeight;
-layout(location = 4) in uint inEdge;
 
 layout(location = 0) out vec2 outY;
 layout(location = 1) flat out vec3 outColor;
@@ -20,23 +16,33 @@ layout(location = 4) out vec2 outEdgeUV;
 layout(location = 5) flat out uint outEdge;
 #ifdef SC_LAYERED  // translucent frames' variant (client/CMakeLists.txt)
 layout(location = 6) flat out float outAlpha;         // opacity: stored times frame.opacity
+#ifdef SC_GLSL_ES
+// No noperspective in GLSL ES: the depth goes as depth * w and w, both
+// perspective-correct, whose ratio is exactly the screen-linear depth.
+layout(location = 7) out float outDepthW;
+layout(location = 8) out float outW;
+#define SET_DEPTH(depth, w) outDepthW = (depth) * (w); outW = (w)
+#else
 layout(location = 7) noperspective out float outDepth; // depth (near / z) of the splat itself, not pushed back
+#define SET_DEPTH(depth, w) outDepth = (depth)
+#endif
 #define LAYERED(statement) statement
 #else
 #define LAYERED(statement)
 #endif
 
 void main() {
+    loadSurfel();
     outColor = inColor.rgb;
     LAYERED(outAlpha = inColor.a * frame.opacity);
-    LAYERED(outDepth = 0.0);
+    LAYERED(SET_DEPTH(0.0, 1.0));
     outEdgeUV = vec2(0);
     outEdge = 0u;
     if (kPass == 2) {
         vec3 o = toCamera(inPositionRadius.xyz);
         vec3 n = rotateToCamera(decodeNormal(inNormal));
         bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o);
-        gl_Position = ok ? circleCorner(o, splatRadius(inPositionRadius.w, o.z), gl_VertexIndex, outY) : kCulled;
+        gl_Position = ok ? circleCorner(o, splatRadius(inPositionRadius.w, o.z), cornerIndex(), outY) : kCulled;
         outNormal = dot(n, o) > 0.0 ? -n : n;
         outAmplitude = 1.0;
         return;
@@ -49,11 +55,12 @@ void main() {
         outAmplitude = 0.0;
         return;
     }
-    vec3 p = splatCorner(sp, gl_VertexIndex, outY, outEdgeUV);
-    LAYERED(outDepth = frame.viewport.w / p.z);  // 1/z is affine in screen space: noperspective interpolates it exactly
+    vec3 p = splatCorner(sp, cornerIndex(), outY, outEdgeUV);
+    float ownDepth = frame.viewport.w / p.z;  // 1/z is affine in screen space: noperspective interpolates it exactly
     outEdge = sp.edge;
     if (kPass == 0) p = pushBack(sp, p);
     gl_Position = project(p);
+    LAYERED(SET_DEPTH(ownDepth, gl_Position.w));
     outNormal = sp.n;
     outAmplitude = sp.amplitude;
 }

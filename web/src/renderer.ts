@@ -130,18 +130,19 @@ export class SplatRenderer {
     this.clipControl = !!clip;
     if (clip) clip.clipControlEXT(clip.LOWER_LEFT_EXT, clip.ZERO_TO_ONE_EXT);
     const unsigned8 = !this.floatBlend;  // RGBA8 accumulation targets (ensureTargets)
+    const program = (name: S.ProgramName) => new Program(gl, ...S.programs[name]);
     this.programs = {
-      visibility: new Program(gl, S.splatVertex(S.kPassVisibility), S.visibilityFragment),
-      accumulate: new Program(gl, S.splatVertex(S.kPassAccumulate), S.accumulateFragment(false, unsigned8)),
-      circles: new Program(gl, S.splatVertex(S.kPassCircles), S.opaqueFragment(true)),
-      points: new Program(gl, S.splatVertex(S.kPassPoints), S.opaqueFragment(false)),
-      resolve: new Program(gl, S.resolveVertex, S.resolveFragment(unsigned8)),
+      visibility: program("visibility"),
+      accumulate: program(unsigned8 ? "accumulate8" : "accumulate"),
+      circles: program("circles"),
+      points: program("points"),
+      resolve: program(unsigned8 ? "resolve8" : "resolve"),
     };
     if (this.floatBlend) {
-      this.programs.peel = new Program(gl, S.splatVertex(S.kPassVisibility, true), S.peelFragment);
-      this.programs.layer = new Program(gl, S.splatVertex(S.kPassAccumulate, true), S.accumulateFragment(true));
-      this.programs.resolveLayer = new Program(gl, S.resolveVertex, S.resolveLayerFragment);
-      this.programs.composite = new Program(gl, S.resolveVertex, S.compositeFragment);
+      this.programs.peel = program("peel");
+      this.programs.layer = program("layer");
+      this.programs.resolveLayer = program("resolveLayer");
+      this.programs.composite = program("composite");
     }
     this.emptyVao = gl.createVertexArray()!;
   }
@@ -222,23 +223,26 @@ export class SplatRenderer {
   private setFrame(p: Program, view: FrameView, s: RenderSettings, mode: RenderMode, w: number, h: number) {
     const gl = this.gl;
     gl.useProgram(p.program);
-    gl.uniform4f(p.loc("uView0"), view.rows[0], view.rows[1], view.rows[2], view.rows[3]);
-    gl.uniform4f(p.loc("uView1"), view.rows[4], view.rows[5], view.rows[6], view.rows[7]);
-    gl.uniform4f(p.loc("uView2"), view.rows[8], view.rows[9], view.rows[10], view.rows[11]);
-    gl.uniform4f(p.loc("uViewport"), view.eta, w, h, view.near);
-    gl.uniform4f(p.loc("uKernel"), s.kernelScale, s.cutoff, s.zt, mode === "ewa-noprefilter" ? 0 : s.lowpassVariance);
-    gl.uniform4f(p.loc("uResolve"), s.background[0], s.background[1], s.background[2], s.edgeTau);
+    gl.uniform4f(p.loc("frame.view0"), view.rows[0], view.rows[1], view.rows[2], view.rows[3]);
+    gl.uniform4f(p.loc("frame.view1"), view.rows[4], view.rows[5], view.rows[6], view.rows[7]);
+    gl.uniform4f(p.loc("frame.view2"), view.rows[8], view.rows[9], view.rows[10], view.rows[11]);
+    gl.uniform4f(p.loc("frame.viewport"), view.eta, w, h, view.near);
+    gl.uniform4f(p.loc("frame.kernel"), s.kernelScale, s.cutoff, s.zt, mode === "ewa-noprefilter" ? 0 : s.lowpassVariance);
+    gl.uniform4f(p.loc("frame.resolve"), s.background[0], s.background[1], s.background[2], s.edgeTau);
     const modes: Record<RenderMode, number> = { points: S.kModePoints, circles: S.kModeCircles,
       "ewa-noprefilter": S.kModeEwaNoPrefilter, "ewa-surfel": S.kModeEwaSurfel, "ewa-pixel": S.kModeEwaPixel };
-    gl.uniform1ui(p.loc("uMode"), modes[mode]);
-    gl.uniform1ui(p.loc("uShading"), s.shading === "unlit" ? S.kShadingUnlit : s.shading === "lambert" ? S.kShadingLambert : S.kShadingPhong);
+    gl.uniform1ui(p.loc("frame.mode"), modes[mode]);
+    gl.uniform1ui(p.loc("frame.shading"), s.shading === "unlit" ? S.kShadingUnlit : s.shading === "lambert" ? S.kShadingLambert : S.kShadingPhong);
     const edgeAA = s.edgeAA && this.floatBlend;  // coverage sums past 1 need float targets
-    gl.uniform1ui(p.loc("uFlags"), (s.backfaceCull ? S.kFlagBackfaceCull : 0) | (edgeAA ? S.kFlagEdgeAA : 0));
-    gl.uniform1f(p.loc("uMaxFilterPixels"), kMaxFilterPixels);
-    gl.uniform1f(p.loc("uCircleScale"), s.kernelScale);
-    gl.uniform1i(p.loc("uClipControl"), this.clipControl ? 1 : 0);
-    gl.uniform1i(p.loc("uSurfels"), 2);
-    gl.uniform1f(p.loc("uOpacity"), Math.min(Math.max(s.opacity, 0), 1));
+    const translucent = this.translucentFrame(s, mode);
+    gl.uniform1ui(p.loc("frame.flags"), (s.backfaceCull ? S.kFlagBackfaceCull : 0) | (edgeAA ? S.kFlagEdgeAA : 0) |
+                                        (translucent ? S.kFlagTranslucent : 0));
+    gl.uniform1f(p.loc("frame.maxFilterPixels"), kMaxFilterPixels);
+    gl.uniform1f(p.loc("frame.circleScale"), s.kernelScale);
+    gl.uniform1f(p.loc("frame.opacity"), Math.min(Math.max(s.opacity, 0), 1));
+    gl.uniform1ui(p.loc("frame.layers"), Math.min(Math.max(Math.round(s.layers), 1), kMaxLayers));
+    gl.uniform1i(p.loc("scClipControl"), this.clipControl ? 1 : 0);
+    gl.uniform1i(p.loc("scSurfels"), 2);
   }
 
   // Draws the nodes into the canvas (its drawing-buffer size).
@@ -303,10 +307,10 @@ export class SplatRenderer {
     this.setFrame(r, view, settings, mode, w, h);
     gl.activeTexture(gl.TEXTURE0);
     gl.bindTexture(gl.TEXTURE_2D, t.color);
-    gl.uniform1i(r.loc("uColorWeight"), 0);
+    gl.uniform1i(r.loc("colorWeight"), 0);
     gl.activeTexture(gl.TEXTURE1);
     gl.bindTexture(gl.TEXTURE_2D, t.normal);
-    gl.uniform1i(r.loc("uNormalWeight"), 1);
+    gl.uniform1i(r.loc("normalWeight"), 1);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     gl.bindVertexArray(null);
   }
@@ -348,7 +352,7 @@ export class SplatRenderer {
       gl.disable(gl.BLEND);
       const vis = k === 0 ? p.visibility : p.peel;
       this.setFrame(vis, view, s, mode, w, h);
-      if (k > 0) bindTexture(3, previous, vis, "uPreviousDepth");
+      if (k > 0) bindTexture(3, previous, vis, "previousDepth");
       drawAll(gl.TRIANGLES, 6);
 
       gl.bindFramebuffer(gl.FRAMEBUFFER, t.fbLayer);
@@ -360,8 +364,8 @@ export class SplatRenderer {
       gl.blendEquation(gl.FUNC_ADD);
       gl.blendFunc(gl.ONE, gl.ONE);
       this.setFrame(p.layer, view, s, mode, w, h);
-      gl.uniform1ui(p.layer.loc("uLayer"), k);
-      bindTexture(3, previous, p.layer, "uPreviousDepth");
+      gl.uniform1ui(p.layer.loc("frame.layer"), k);
+      bindTexture(3, previous, p.layer, "previousDepth");
       drawAll(gl.TRIANGLES, 6);
       gl.disable(gl.DEPTH_TEST);
       gl.depthMask(true);
@@ -370,9 +374,9 @@ export class SplatRenderer {
       if (k === 0) gl.clearBufferfv(gl.COLOR, 0, [0, 0, 0, 0]);
       gl.blendFuncSeparate(gl.ONE_MINUS_DST_ALPHA, gl.ONE, gl.ONE_MINUS_DST_ALPHA, gl.ONE);  // under: dst += (1 - dst.a) src
       this.setFrame(p.resolveLayer, view, s, mode, w, h);
-      bindTexture(0, t.color, p.resolveLayer, "uColorWeight");
-      bindTexture(1, t.normal, p.resolveLayer, "uNormalWeight");
-      bindTexture(4, t.alpha!, p.resolveLayer, "uAlphaWeight");
+      bindTexture(0, t.color, p.resolveLayer, "colorWeight");
+      bindTexture(1, t.normal, p.resolveLayer, "normalWeight");
+      bindTexture(4, t.alpha!, p.resolveLayer, "alphaWeight");
       fullscreen();
       gl.disable(gl.BLEND);
       // Unbind the sampled depth before a later pass draws into it.
@@ -382,7 +386,7 @@ export class SplatRenderer {
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, w, h);
     this.setFrame(p.composite, view, s, mode, w, h);
-    bindTexture(0, t.composite!, p.composite, "uComposite");
+    bindTexture(0, t.composite!, p.composite, "composite");
     fullscreen();
     gl.bindVertexArray(null);
   }
