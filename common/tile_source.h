@@ -1,11 +1,6 @@
-// Where a tile set's bytes come from: a local folder, or an http(s) folder URL
-// (the project's server at http://HOST:PORT/sets/NAME, or any static host,
-// object store or CDN that honours Range). The project's only HTTP client
-// code, used by the viewer's streamer and by TilesetReader (surfcast-build
-// --info, surfcast-view without --lod): libcurl (TLS verified against the
-// system store, HTTP/2 where the host offers it, proxies from the
-// environment), following redirects to http(s) only, never from https to
-// http, and with the user's headers to the set's own origin only.
+// Where a tile set's bytes come from: a local folder here, or an http(s)
+// folder URL through net/http_tile_source.h (libcurl), which the clients and
+// surfcast-build link and surfcast-serve does not: common/ has no HTTP.
 #pragma once
 
 #include <cstdint>
@@ -44,7 +39,8 @@ public:
 // reader hold before the JSON parser rejects it.
 inline constexpr uint64_t kMaxTilesetJsonBytes = 16u << 20;
 
-// How an http(s) source talks to its host.
+// How an http(s) source talks to its host (net/http_tile_source.h); here so
+// that readers' options can carry it without linking HTTP.
 struct HttpOptions {
     int timeoutSeconds = 20;           // a response that stalls this long fails
     std::vector<std::string> headers;  // "Name: value", sent with every request (never logged)
@@ -56,12 +52,9 @@ struct HttpOptions {
     bool redirectCredentials = false;
 };
 
-// "http://..." and "https://..." open an HTTP source (all requests run on one
-// libcurl multi handle driven by one I/O thread: one multiplexed connection
-// over HTTP/2, up to 6 keep-alive connections over HTTP/1.1; a query string,
-// such as a shared access signature, is kept on every request and left out of
-// messages); anything else is a local folder.
-Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http = {});
+// A local folder's files, read with pread from any thread.
+std::unique_ptr<TileSource> openFolderSource(const std::string& folder);
+// "http://..." and "https://..." (net/http_tile_source.h opens them).
 bool isUrl(const std::string& location);
 
 }  // namespace surfcast

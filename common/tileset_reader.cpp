@@ -11,11 +11,9 @@
 
 namespace surfcast {
 
-Result<TilesetReader> TilesetReader::open(const std::string& location, const HttpOptions& http) {
+Result<TilesetReader> TilesetReader::open(std::unique_ptr<TileSource> source) {
     TilesetReader r;
-    auto source = openTileSource(location, http);
-    if (!source) return source.status();
-    r.source_ = std::move(*source);
+    r.source_ = std::move(source);
     const std::string where = r.source_->describe();
     auto json = r.source_->file("tileset.json", kMaxTilesetJsonBytes);
     if (!json) return json.status();
@@ -27,17 +25,22 @@ Result<TilesetReader> TilesetReader::open(const std::string& location, const Htt
     auto nodes = readHierarchyOf(r.info_, *hierarchy, where + "/hierarchy.bin");
     if (!nodes) return nodes.status();
     r.nodes_ = std::move(*nodes);
+    return r;
+}
+
+Result<TilesetReader> TilesetReader::open(const std::string& folder) {
+    if (isUrl(folder)) return Status::error(folder + ": a URL, which this program does not read (it has no HTTP client)");
+    auto r = open(openFolderSource(folder));
+    if (!r) return r;
     // A folder's blocks.bin must be the size tileset.json says (a URL's
     // ranges are checked as they arrive).
-    if (!isUrl(location)) {
-        std::error_code error;
-        const std::string blocksPath = where + "/blocks.bin";
-        const uint64_t size = std::filesystem::file_size(blocksPath, error);
-        if (error) return Status::error(blocksPath + ": " + error.message());
-        if (size != r.info_.blocksBytes)
-            return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
-                                 std::to_string(r.info_.blocksBytes));
-    }
+    std::error_code error;
+    const std::string blocksPath = folder + "/blocks.bin";
+    const uint64_t size = std::filesystem::file_size(blocksPath, error);
+    if (error) return Status::error(blocksPath + ": " + error.message());
+    if (size != r->info().blocksBytes)
+        return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
+                             std::to_string(r->info().blocksBytes));
     return r;
 }
 
@@ -89,23 +92,21 @@ Vec3d TilesetReader::position(const NodeRecord& node, const BlockData& block, si
     return surfelPosition(info_, node, block, i);
 }
 
-Result<std::string> verifyTileset(const std::string& location, const HttpOptions& http) {
-    auto reader = TilesetReader::open(location, http);
-    if (!reader) return reader.status();
+Result<std::string> verifyTileset(const TilesetReader& reader) {
     std::map<int, std::pair<uint64_t, uint64_t>> perLevel;  // level -> nodes, surfels
     uint64_t surfels = 0;
-    for (const NodeRecord& n : reader->nodes()) {
-        auto block = reader->readBlock(n);
+    for (const NodeRecord& n : reader.nodes()) {
+        auto block = reader.readBlock(n);
         if (!block) return block.status();
         perLevel[n.key.level].first++;
         perLevel[n.key.level].second += n.surfelCount;
         surfels += n.surfelCount;
     }
-    const TilesetInfo& info = reader->info();
-    if (surfels != info.surfels || reader->nodes().size() != info.nodes)
-        return Status::error(reader->describe() + ": node or surfel totals differ from tileset.json");
+    const TilesetInfo& info = reader.info();
+    if (surfels != info.surfels || reader.nodes().size() != info.nodes)
+        return Status::error(reader.describe() + ": node or surfel totals differ from tileset.json");
     std::ostringstream out;
-    out << reader->describe() << ": " << info.inputPoints << " input points, " << info.surfels << " surfels in " << info.nodes
+    out << reader.describe() << ": " << info.inputPoints << " input points, " << info.surfels << " surfels in " << info.nodes
         << " nodes, " << info.levels << " levels\n";
     out << "  root min (" << info.rootMin.x << ", " << info.rootMin.y << ", " << info.rootMin.z << "), edge "
         << info.rootEdge << "\n  attributes:";

@@ -1,7 +1,7 @@
-// Read a tile set from a local folder or an http(s) URL (tile_source.h):
-// tileset.json and hierarchy.bin whole, and blocks on demand. Used by
-// `surfcast-build --info`, `surfcast-view` without `--lod`, the weight
-// capture and the tests.
+// Read a tile set from any TileSource (a local folder, or an http(s) URL
+// through net/http_tile_source.h's openTileset): tileset.json and
+// hierarchy.bin whole, and blocks on demand. Used by `surfcast-build --info`,
+// `surfcast-view` without `--lod`, the server, the weight capture and the tests.
 #pragma once
 
 #include <memory>
@@ -16,7 +16,9 @@ namespace surfcast {
 
 class TilesetReader {
 public:
-    static Result<TilesetReader> open(const std::string& location, const HttpOptions& http = {});
+    static Result<TilesetReader> open(std::unique_ptr<TileSource> source);
+    // A local folder, whose blocks.bin must also be the size tileset.json says.
+    static Result<TilesetReader> open(const std::string& folder);
 
     const TilesetInfo& info() const { return info_; }
     const std::vector<NodeRecord>& nodes() const { return nodes_; }
@@ -42,8 +44,8 @@ private:
 BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& node);
 Vec3d surfelPosition(const TilesetInfo& info, const NodeRecord& node, const BlockData& block, size_t i);
 
-// Verify a tile set (a folder or a URL): every CRC, every block decodes with
-// the declared attributes and count. Returns a summary text on success.
-Result<std::string> verifyTileset(const std::string& location, const HttpOptions& http = {});
+// Verify a tile set: every CRC, every block decodes with the declared
+// attributes and count. Returns a summary text on success.
+Result<std::string> verifyTileset(const TilesetReader& reader);
 
 }  // namespace surfcast

@@ -1,5 +1,5 @@
 // libFuzzer target: whatever an HTTP host answers, as the streaming client's
-// tile source reads it (common/tile_source.cpp): tileset.json,
+// tile source reads it (net/http_tile_source.cpp): tileset.json,
 // hierarchy.bin, a block range and a batch of two nodes. A loopback listener
 // answers every request with the input's bytes, as raw HTTP, and closes.
 #include <netinet/in.h>
@@ -13,7 +13,7 @@
 #include <string>
 #include <thread>
 
-#include "tile_source.h"
+#include "http_tile_source.h"
 
 using namespace surfcast;
 

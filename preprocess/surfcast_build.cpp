@@ -17,6 +17,7 @@
 
 #include "block_codec.h"
 #include "octree_builder.h"
+#include "http_tile_source.h"
 #include "tileset_reader.h"
 
 extern char** environ;
@@ -275,7 +276,8 @@ int main(int argc, char** argv) {
     }
 
     if (!info.empty()) {
-        auto summary = surfcast::verifyTileset(info, http);
+        auto reader = surfcast::openTileset(info, http);
+        auto summary = reader ? surfcast::verifyTileset(*reader) : surfcast::Result<std::string>(reader.status());
         if (!summary) {
             std::fprintf(stderr, "surfcast-build: %s\n", summary.status().message().c_str());
             return 1;

@@ -108,7 +108,7 @@ TEST(LazPcd, TileSetsBuildAndReadBack) {
         ASSERT_TRUE(set.ok()) << set.status().message();
         EXPECT_EQ(set->info().inputPoints, e.points);
         EXPECT_EQ(set->info().colorBits != 0, e.colors);
-        auto verified = verifyTileset(dir.file("set"));
+        auto verified = verifyTileset(*set);
         EXPECT_TRUE(verified.ok()) << verified.status().message();
     }
 }

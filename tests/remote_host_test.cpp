@@ -1,4 +1,4 @@
-// Remote hosts (common/tile_source): nginx serving a set as static
+// Remote hosts (net/http_tile_source): nginx serving a set as static
 // files to the headless viewer and the window, over plain HTTP and over TLS with HTTP/2 and HTTP/1.1 (certificates
 // from the test's own CA); bearer tokens, headers, signed query strings,
 // redirects and their loops; a certificate that does not verify; lazily
@@ -333,7 +333,7 @@ TEST(Stream, OverHttpsFromNginxWithHttp2AndHttp11) {
     EXPECT_NE(loop.output.find("redirects (a loop?)"), std::string::npos) << loop.output;
 }
 
-// Redirects (common/tile_source.h): an https set is never sent on to plain
+// Redirects (net/http_tile_source.h): an https set is never sent on to plain
 // http nor to a scheme but http(s), and the user's credentials (--header,
 // --token-file) go to the set's own origin only, unless
 // --redirect-credentials. nginx on three loopback origins: A (https) wants

@@ -92,6 +92,15 @@ TEST(ServeCli, UsageErrors) {
     EXPECT_NE(missing.output.find("/definitely/not/here"), std::string::npos);
 }
 
+// The server links no HTTP client (DESIGN: common/ has no HTTP; libcurl is
+// net/'s, for the clients and surfcast-build --info URL only).
+TEST(ServeCli, LinksNoHttpClient) {
+    auto needed = test::run({"/usr/bin/readelf", "-d", test::binary("surfcast-serve")});  // binutils: the compiler's
+    ASSERT_EQ(needed.exitCode, 0) << needed.output;
+    EXPECT_NE(needed.output.find("libmicrohttpd"), std::string::npos) << needed.output;
+    EXPECT_EQ(needed.output.find("libcurl"), std::string::npos) << needed.output;
+}
+
 TEST(ServeCli, ServesLogsAndStopsGracefully) {
     test::TempDir dir;
     std::filesystem::create_directories(dir.file("sets"));

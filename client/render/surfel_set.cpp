@@ -6,6 +6,7 @@
 
 #include "block_codec.h"
 #include "crc32.h"
+#include "http_tile_source.h"
 #include "octree_key.h"
 #include "render_settings.h"
 #include "tileset_reader.h"
@@ -187,7 +188,7 @@ Status checkChoice(const std::string& where, const TilesetInfo& info, const Leve
 
 Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choice, const Coloring& coloring,
                                 const HttpOptions& http, size_t gpuBudget, TilesetInfo* infoOut) {
-    auto reader = TilesetReader::open(dir, http);
+    auto reader = openTileset(dir, http);
     if (!reader) return reader.status();
     const TilesetInfo& info = reader->info();
     if (infoOut) *infoOut = info;

@@ -7,6 +7,7 @@
 
 #include "block_codec.h"
 #include "crc32.h"
+#include "http_tile_source.h"
 #include "tileset_reader.h"
 
 namespace surfcast {

@@ -1,0 +1,594 @@
+#include "http_tile_source.h"
+
+#include <curl/curl.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cctype>
+#include <cerrno>
+#include <condition_variable>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <unordered_map>
+#include <utility>
+
+#include "sigpipe.h"
+
+namespace surfcast {
+namespace {
+
+// The body of an error response is read and dropped up to this much.
+constexpr uint64_t kMaxErrorPageBytes = 1 << 20;
+// A server that does not accept within this fails the request.
+constexpr int kConnectTimeoutSeconds = 5;
+// HTTP/1.1 connections to the host at once, as browsers allow; more
+// concurrent requests queue for one (HTTP/2 multiplexes them over one).
+constexpr int kMaxHostConnections = 6;
+// A bearer token longer than this is not one (a wrong file).
+constexpr size_t kMaxTokenBytes = 16 << 10;
+// A Surfcast-Batch count above this is not taken (the browser's bound too).
+constexpr unsigned long kMaxBatchNodesOffered = 1'000'000;
+
+// A URL's scheme, host and port (the default one where none is given),
+// lower case; all empty when libcurl cannot parse the URL.
+struct Origin {
+    std::string scheme, host, port;
+    bool operator==(const Origin&) const = default;
+};
+
+Origin originOf(const std::string& url) {
+    Origin o;
+    CURLU* u = curl_url();
+    if (!u) return o;
+    if (curl_url_set(u, CURLUPART_URL, url.c_str(), 0) == CURLUE_OK) {
+        const std::pair<CURLUPart, std::string*> parts[] = {
+            {CURLUPART_SCHEME, &o.scheme}, {CURLUPART_HOST, &o.host}, {CURLUPART_PORT, &o.port}};
+        for (auto [part, out] : parts) {
+            char* value = nullptr;
+            if (curl_url_get(u, part, &value, CURLU_DEFAULT_PORT) == CURLUE_OK && value) {
+                *out = value;
+                for (char& c : *out) c = char(std::tolower(static_cast<unsigned char>(c)));
+            }
+            curl_free(value);
+        }
+    }
+    curl_url_cleanup(u);
+    return o;
+}
+
+// Requests from any number of threads run on one libcurl multi handle,
+// driven by one I/O thread. Over HTTP/2 they share one connection
+// (multiplexed: CURLOPT_PIPEWAIT makes a transfer wait for the first
+// connection rather than open its own); over HTTP/1.1 each concurrent request
+// takes a keep-alive connection of the multi's pool, at most
+// kMaxHostConnections, the rest queued. A calling thread prepares easy handles
+// (from a pool), hands them over together and waits for all of them: the
+// ranges of a batch of nodes are in flight at once.
+class HttpSource : public TileSource {
+public:
+    // base: scheme://host[:port]/path without a trailing slash; query: "" or "?...".
+    HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers, CURLM* multi)
+        : base_(std::move(base)), query_(std::move(query)), origin_(originOf(base_)), options_(std::move(options)),
+          headers_(headers), multi_(multi), io_([this] { ioLoop(); }) {}
+    ~HttpSource() override {
+        {
+            std::lock_guard lock(ioMutex_);
+            stopping_ = true;
+        }
+        curl_multi_wakeup(multi_);
+        io_.join();
+        curl_multi_cleanup(multi_);
+        for (CURL* h : idle_) curl_easy_cleanup(h);
+        curl_slist_free_all(headers_);
+    }
+    Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
+        auto r = std::move(run({{name, "", nullptr, maxBytes, 200}})[0]);
+        if (!r) return r.status();
+        if (name == "tileset.json") batchNodes_ = r->batchNodes;
+        return std::move(r->body);
+    }
+    Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
+        auto r = ranges(name, {{offset, size}});
+        if (!r) return r.status();
+        return std::move((*r)[0]);
+    }
+    std::string describe() const override { return base_; }
+    void cancel() override {
+        {
+            std::lock_guard lock(ioMutex_);
+            cancelled_ = true;
+        }
+        curl_multi_wakeup(multi_);
+    }
+
+    // The server's POST {set}/batch where tileset.json's answer offered it
+    // (Surfcast-Batch: up to N keys a request), else the ranges, all in
+    // flight at once.
+    Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes) override {
+        const size_t most = batchNodes_;
+        if (nodes.size() < 2 || most < 2) {
+            std::vector<std::pair<uint64_t, uint64_t>> spans;
+            for (const NodeRecord& n : nodes) spans.push_back({n.blockOffset, n.blockSize});
+            return ranges("blocks.bin", spans);
+        }
+        std::vector<std::vector<uint8_t>> out;
+        for (size_t at = 0; at < nodes.size(); at += most) {
+            auto part = batch(std::vector<NodeRecord>(nodes.begin() + long(at), nodes.begin() + long(std::min(nodes.size(), at + most))));
+            if (!part) return part.status();
+            for (auto& b : *part) out.push_back(std::move(b));
+        }
+        return out;
+    }
+
+private:
+    // One POST {set}/batch of `nodes`: their blobs in order.
+    Result<std::vector<std::vector<uint8_t>>> batch(const std::vector<NodeRecord>& nodes) {
+        std::string body;
+        uint64_t expected = 0;  // what the answer holds: a length and a blob per node
+        for (const NodeRecord& n : nodes) {
+            body += n.key.name() + ",";
+            expected += 4 + uint64_t(n.blockSize);
+        }
+        auto r = std::move(run({{"batch", "", &body, expected, 0}})[0]);
+        if (!r) return r.status();
+        const std::string url = base_ + "/batch";
+        if (r->status != 200) return httpError(url, r->status);
+        // For each key in order: u32 little-endian length, then the blob.
+        std::vector<std::vector<uint8_t>> out;
+        const uint8_t* p = r->body.data();
+        size_t at = 0, size = r->body.size();
+        for (size_t i = 0; i < nodes.size(); ++i) {
+            if (size - at < 4) return Status::transient(url + ": response ends before node " + nodes[i].key.name());
+            uint32_t length = uint32_t(p[at]) | uint32_t(p[at + 1]) << 8 | uint32_t(p[at + 2]) << 16 | uint32_t(p[at + 3]) << 24;
+            at += 4;
+            if (size - at < length) return Status::transient(url + ": response ends inside node " + nodes[i].key.name());
+            out.emplace_back(p + at, p + at + length);
+            at += length;
+        }
+        return out;
+    }
+
+    // A handle handed to the I/O thread, and how its transfer ended.
+    struct Transfer {
+        CURL* handle = nullptr;
+        CURLcode code = CURLE_OK;
+        bool done = false;
+        bool redirected = false;  // pointed at a redirect's target, to run again
+        bool withoutCredentials = false;  // a redirect left the user's headers behind
+        bool moved = false;               // answered at a redirect's target
+    };
+
+    // One GET of `name` (of byte range `range`, if not empty), or POST of
+    // `post` to it. `wanted`: the status whose body is kept (any other is an
+    // error), 0 for any.
+    struct Request {
+        std::string name, range;
+        const std::string* post;
+        uint64_t maxBytes;
+        long wanted;
+    };
+    // One request's answer: the status, the body, kept up to a bound, and
+    // its Surfcast-Batch header (0 where absent, not a count up to
+    // kMaxBatchNodesOffered, or answered after a redirect).
+    struct Response {
+        long status = 0;
+        std::vector<uint8_t> body;
+        size_t batchNodes = 0;
+    };
+
+    // Byte ranges (offset, size) of one file, all requested at once; all or nothing.
+    Result<std::vector<std::vector<uint8_t>>> ranges(const std::string& name,
+                                                     const std::vector<std::pair<uint64_t, uint64_t>>& spans) {
+        std::vector<Request> requests;
+        std::vector<size_t> asked;  // indices into spans: empty ranges are not asked for
+        for (size_t i = 0; i < spans.size(); ++i) {
+            const auto [offset, size] = spans[i];
+            if (size == 0) continue;
+            requests.push_back({name, std::to_string(offset) + "-" + std::to_string(offset + size - 1), nullptr, size, 206});
+            asked.push_back(i);
+        }
+        std::vector<std::vector<uint8_t>> out(spans.size());
+        auto answers = run(requests);
+        for (size_t k = 0; k < asked.size(); ++k) {
+            if (!answers[k]) return answers[k].status();
+            const auto [offset, size] = spans[asked[k]];
+            if (answers[k]->body.size() != size)  // cut short: a connection that closed early
+                return Status::transient(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
+                                         std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
+            out[asked[k]] = std::move(answers[k]->body);
+        }
+        return out;
+    }
+
+    // What the write callback keeps: the body of a `wanted` answer up to
+    // maxBytes (longer cancels the request), and of any other answer (an
+    // error page) nothing, up to kMaxErrorPageBytes.
+    struct Sink {
+        CURL* handle;
+        long wanted;  // 0: any status is kept (the batch decides afterwards)
+        uint64_t maxBytes, dropped = 0;
+        bool tooLong = false;
+        std::vector<uint8_t>* body;
+    };
+    static size_t write(char* data, size_t, size_t length, void* user) {
+        Sink& s = *static_cast<Sink*>(user);
+        long status = 0;
+        curl_easy_getinfo(s.handle, CURLINFO_RESPONSE_CODE, &status);
+        const bool keep = s.wanted ? status == s.wanted : status == 200;
+        if (!keep) return (s.dropped += length) <= kMaxErrorPageBytes ? length : 0;
+        if (length > s.maxBytes - s.body->size()) {
+            s.tooLong = true;
+            return 0;
+        }
+        s.body->insert(s.body->end(), data, data + length);
+        return length;
+    }
+
+    // An easy handle with the source's fixed options, from the pool.
+    CURL* acquire() {
+        {
+            std::lock_guard lock(mutex_);
+            if (!idle_.empty()) {
+                CURL* h = idle_.back();
+                idle_.pop_back();
+                return h;
+            }
+        }
+        CURL* h = curl_easy_init();
+        if (!h) return nullptr;
+        curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
+        curl_easy_setopt(h, CURLOPT_PIPEWAIT, 1L);
+        curl_easy_setopt(h, CURLOPT_PROTOCOLS_STR, "http,https");  // redirects are followed by run()
+        curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, long(kConnectTimeoutSeconds));
+        // Stalled: under one byte per second for the whole timeout.
+        curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
+        curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, long(options_.timeoutSeconds));
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
+        curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, &HttpSource::write);
+        if (!options_.caFile.empty()) {  // instead of the system's store, folder included
+            curl_easy_setopt(h, CURLOPT_CAINFO, options_.caFile.c_str());
+            curl_easy_setopt(h, CURLOPT_CAPATH, nullptr);
+        }
+        if (options_.insecure) {
+            curl_easy_setopt(h, CURLOPT_SSL_VERIFYPEER, 0L);
+            curl_easy_setopt(h, CURLOPT_SSL_VERIFYHOST, 0L);
+        }
+        return h;
+    }
+    void release(CURL* h) {
+        std::lock_guard lock(mutex_);
+        idle_.push_back(h);
+    }
+
+    // Runs the requests at once on the I/O thread, following redirects
+    // (redirect() says which); an answer or an error each.
+    std::vector<Result<Response>> run(const std::vector<Request>& requests) {
+        const size_t n = requests.size();
+        std::vector<Response> responses(n);
+        std::vector<Sink> sinks(n);
+        std::vector<Transfer> transfers(n);
+        std::vector<std::array<char, CURL_ERROR_SIZE>> errors(n);
+        std::vector<std::optional<Status>> refused(n);  // a redirect not followed, and why
+        std::vector<Transfer*> round;
+        for (size_t i = 0; i < n; ++i) {
+            const Request& q = requests[i];
+            CURL* h = acquire();
+            transfers[i].handle = h;
+            if (!h) continue;
+            sinks[i] = {h, q.wanted, q.maxBytes, 0, false, &responses[i].body};
+            errors[i][0] = 0;
+            curl_easy_setopt(h, CURLOPT_URL, (base_ + "/" + q.name + query_).c_str());
+            curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
+            curl_easy_setopt(h, CURLOPT_WRITEDATA, &sinks[i]);
+            curl_easy_setopt(h, CURLOPT_ERRORBUFFER, errors[i].data());
+            curl_easy_setopt(h, CURLOPT_RANGE, q.range.empty() ? nullptr : q.range.c_str());
+            // Whole files may come compressed (whatever libcurl decodes); a
+            // range is of the file's own bytes, so it is asked for without encoding.
+            curl_easy_setopt(h, CURLOPT_ACCEPT_ENCODING, q.range.empty() ? "" : nullptr);
+            if (q.post) {
+                curl_easy_setopt(h, CURLOPT_POSTFIELDS, q.post->c_str());
+                curl_easy_setopt(h, CURLOPT_POSTFIELDSIZE, long(q.post->size()));
+            } else {
+                curl_easy_setopt(h, CURLOPT_HTTPGET, 1L);
+            }
+            round.push_back(&transfers[i]);
+        }
+        for (int hops = 0; !round.empty(); ++hops) {
+            perform(round);
+            const std::vector<Transfer*> performed = std::exchange(round, {});
+            for (Transfer* t : performed) {
+                const size_t i = size_t(t - transfers.data());
+                // A POST is never redirected; a redirect's body past
+                // kMaxErrorPageBytes stopped the transfer, not the redirect.
+                if (requests[i].post || (t->code != CURLE_OK && t->code != CURLE_WRITE_ERROR)) continue;
+                Status why = redirect(*t, hops);
+                if (!why.ok()) {
+                    refused[i] = std::move(why);
+                } else if (t->redirected) {
+                    sinks[i].dropped = 0;
+                    t->moved = true;
+                    round.push_back(t);
+                }
+            }
+        }
+        std::vector<Result<Response>> out;
+        for (size_t i = 0; i < n; ++i) {
+            CURL* h = transfers[i].handle;
+            const std::string shown = base_ + "/" + requests[i].name;  // messages never show the query (it may hold a token)
+            if (!h) {
+                out.push_back(Status::error(shown + ": cannot start a libcurl transfer"));
+                continue;
+            }
+            if (refused[i])
+                out.push_back(Status::error(shown + ": " + refused[i]->message()));
+            else
+                out.push_back(answer(h, shown, transfers[i], errors[i].data(), sinks[i], requests[i], std::move(responses[i])));
+            curl_easy_setopt(h, CURLOPT_ERRORBUFFER, nullptr);
+            release(h);
+        }
+        return out;
+    }
+
+    // Hands the transfers to the I/O thread and waits until all are done.
+    void perform(const std::vector<Transfer*>& transfers) {
+        {
+            std::lock_guard lock(ioMutex_);
+            for (Transfer* t : transfers) {
+                t->done = t->redirected = false;
+                t->code = CURLE_OK;
+                submitted_.push_back(t);
+            }
+        }
+        curl_multi_wakeup(multi_);
+        std::unique_lock lock(ioMutex_);
+        ioDone_.wait(lock, [&] { return std::all_of(transfers.begin(), transfers.end(), [](const Transfer* t) { return t->done; }); });
+    }
+
+    // After a transfer: if the host redirected it and the redirect is to be
+    // followed, points the handle at the new URL (Transfer::redirected) and
+    // returns success; an error says why a redirect is refused. Followed: to
+    // http or https only, never from https to http, at most kMaxRedirects
+    // hops; the user's headers (--header, --token-file) go to the set's own
+    // origin only, unless HttpOptions::redirectCredentials.
+    Status redirect(Transfer& t, int hops) {
+        CURL* h = t.handle;
+        long status = 0;
+        char* location = nullptr;
+        char* from = nullptr;
+        curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
+        curl_easy_getinfo(h, CURLINFO_REDIRECT_URL, &location);
+        curl_easy_getinfo(h, CURLINFO_EFFECTIVE_URL, &from);
+        const bool redirect = status == 301 || status == 302 || status == 303 || status == 307 || status == 308;
+        if (!redirect || !location || !from) return {};  // answered as it is
+        const std::string target = location, shown = target.substr(0, target.find('?'));
+        if (hops >= kMaxRedirects) return Status::error("more than " + std::to_string(kMaxRedirects) + " redirects (a loop?)");
+        const Origin to = originOf(target), at = originOf(from);
+        if (to.scheme != "http" && to.scheme != "https")
+            return Status::error("redirected to " + shown + ", which is not followed: only http and https are");
+        if (at.scheme == "https" && to.scheme == "http")
+            return Status::error("redirected to " + shown + ", which is not followed: https never gives way to plain http");
+        curl_easy_setopt(h, CURLOPT_URL, target.c_str());
+        const bool credentials = to == origin_ || options_.redirectCredentials;
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, credentials ? headers_ : nullptr);
+        t.withoutCredentials |= !credentials && headers_;
+        t.redirected = true;
+        return {};
+    }
+
+    // What a finished transfer means for its request.
+    Result<Response> answer(CURL* h, const std::string& shown, const Transfer& t, const char* error, const Sink& sink,
+                            const Request& q, Response r) const {
+        const CURLcode code = t.code;
+        if (sink.tooLong)
+            return Status::error(shown + ": response longer than the " + std::to_string(q.maxBytes) + " bytes expected");
+        curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &r.status);
+        // The write callback stops an unwanted answer past kMaxErrorPageBytes:
+        // its status says what went wrong, not the stopped transfer.
+        const bool unwanted = q.wanted && r.status != q.wanted;
+        if (code != CURLE_OK && !(code == CURLE_WRITE_ERROR && unwanted)) {
+            const std::string message = shown + ": " + transferError(code, error);
+            return permanentTransferError(code) ? Status::error(message) : Status::transient(message);
+        }
+        if (unwanted) {
+            if (r.status == 401 || r.status == 403)
+                return Status::error(shown + ": HTTP " + std::to_string(r.status) + ": the host refuses access " +
+                                     (t.withoutCredentials ? "(a redirect led to another origin, which was not sent the "
+                                                             "credentials: --redirect-credentials sends them)"
+                                                           : "(send credentials with --header or --token-file)"));
+            if (q.wanted == 206 && r.status == 200)
+                return Status::error(shown + ": the host ignores Range requests (it answered 200 with the whole file); "
+                                     "serve the set from one that honours Range (nginx, an object store or CDN, surfcast-serve)");
+            return httpError(shown, r.status);
+        }
+        // A login page answers 200 in place of the file asked for.
+        char* type = nullptr;
+        curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
+        if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
+            return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
+        // Batches go to the set's own URL (a POST is not redirected): one
+        // offered at a redirect's target is not taken.
+        curl_header* offered = nullptr;
+        if (!t.moved && curl_easy_header(h, "Surfcast-Batch", 0, CURLH_HEADER, -1, &offered) == CURLHE_OK &&
+            std::isdigit(static_cast<unsigned char>(offered->value[0]))) {
+            char* end = nullptr;
+            const unsigned long n = std::strtoul(offered->value, &end, 10);
+            if (*end == '\0' && n <= kMaxBatchNodesOffered) r.batchNodes = size_t(n);
+        }
+        return r;
+    }
+
+    // An HTTP status that is not the answer wanted: transient where asking
+    // again may succeed (408, 429, 5xx), else permanent.
+    static Status httpError(const std::string& shown, long status) {
+        const std::string message = shown + ": HTTP " + std::to_string(status);
+        return status == 408 || status == 429 || status >= 500 ? Status::transient(message) : Status::error(message);
+    }
+
+    // Transfer errors that asking again cannot clear: the URL, the protocol,
+    // the host's certificate. Everything else (refused or reset connections,
+    // timeouts, name lookups) may pass, as when a server restarts.
+    static bool permanentTransferError(CURLcode code) {
+        switch (code) {
+        case CURLE_UNSUPPORTED_PROTOCOL:
+        case CURLE_URL_MALFORMAT:
+        case CURLE_PEER_FAILED_VERIFICATION:
+        case CURLE_SSL_CACERT_BADFILE:
+        case CURLE_SSL_CERTPROBLEM: return true;
+        default: return false;
+        }
+    }
+
+    std::string transferError(CURLcode code, const char* detail) const {
+        const std::string why = *detail ? detail : curl_easy_strerror(code);
+        switch (code) {
+        case CURLE_PEER_FAILED_VERIFICATION:
+        case CURLE_SSL_CACERT_BADFILE:
+        case CURLE_SSL_CERTPROBLEM:
+        case CURLE_SSL_CONNECT_ERROR: {
+            return "TLS with the host failed (" + why + ")" + (options_.caFile.empty() ? "" : "; --ca-file " + options_.caFile);
+        }
+        case CURLE_OPERATION_TIMEDOUT: return "no answer for " + std::to_string(options_.timeoutSeconds) + " s (" + why + ")";
+        case CURLE_ABORTED_BY_CALLBACK: return "cancelled: the reader is closing";
+        default: return why;
+        }
+    }
+
+    void ioLoop() {
+        SigpipeBlock noSigpipe;  // for the thread's life: sigpipe.h says why
+        std::unordered_map<CURL*, Transfer*> running;
+        while (true) {
+            {
+                std::lock_guard lock(ioMutex_);
+                if (stopping_) break;
+                if (cancelled_) {  // every transfer ends now, those waiting to start too
+                    for (auto& [h, t] : running) {
+                        curl_multi_remove_handle(multi_, h);
+                        t->code = CURLE_ABORTED_BY_CALLBACK;
+                        t->done = true;
+                    }
+                    running.clear();
+                    for (Transfer* t : submitted_) {
+                        t->code = CURLE_ABORTED_BY_CALLBACK;
+                        t->done = true;
+                    }
+                    submitted_.clear();
+                }
+                for (Transfer* t : submitted_) {
+                    if (curl_multi_add_handle(multi_, t->handle) == CURLM_OK) {
+                        running[t->handle] = t;
+                    } else {
+                        t->code = CURLE_FAILED_INIT;
+                        t->done = true;
+                    }
+                }
+                submitted_.clear();
+            }
+            ioDone_.notify_all();  // any that failed to start
+            int active = 0;
+            curl_multi_perform(multi_, &active);
+            int left = 0;
+            bool finished = false;
+            while (CURLMsg* m = curl_multi_info_read(multi_, &left)) {
+                if (m->msg != CURLMSG_DONE) continue;
+                CURL* h = m->easy_handle;
+                const CURLcode result = m->data.result;
+                curl_multi_remove_handle(multi_, h);
+                auto it = running.find(h);
+                if (it == running.end()) continue;
+                std::lock_guard lock(ioMutex_);
+                it->second->code = result;
+                it->second->done = true;
+                running.erase(it);
+                finished = true;
+            }
+            if (finished) ioDone_.notify_all();
+            curl_multi_poll(multi_, nullptr, 0, 1000, nullptr);  // until a socket is ready or a wakeup
+        }
+    }
+
+
+    static constexpr int kMaxRedirects = 8;
+    std::string base_, query_;
+    Origin origin_;  // the set's: where the user's headers go
+    HttpOptions options_;
+    curl_slist* headers_;
+    std::atomic<size_t> batchNodes_{0};  // tileset.json's Surfcast-Batch: 0 where it offers none
+    std::mutex mutex_;
+    std::vector<CURL*> idle_;  // easy handles not in use
+    CURLM* multi_;
+    std::mutex ioMutex_;
+    std::condition_variable ioDone_;
+    std::vector<Transfer*> submitted_;  // waiting for the I/O thread to start them
+    bool stopping_ = false;
+    bool cancelled_ = false;  // cancel(): no transfer runs from now on
+    std::thread io_;  // last: starts when everything above is ready
+};
+
+}  // namespace
+
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http) {
+    if (!isUrl(location)) return openFolderSource(location);
+    static const CURLcode init = curl_global_init(CURL_GLOBAL_DEFAULT);  // once, before any thread uses libcurl
+    if (init != CURLE_OK) return Status::error(std::string("libcurl: ") + curl_easy_strerror(init));
+    const size_t scheme = location.find("://") + 3;
+    const size_t q = location.find('?');
+    std::string base = location.substr(0, q), query = q == std::string::npos ? "" : location.substr(q);
+    while (!base.empty() && base.back() == '/') base.pop_back();
+    if (base.size() <= scheme || base.find_first_of(" \t\r\n") != std::string::npos)
+        return Status::error(base + ": not an http(s)://HOST[:PORT]/PATH URL");
+    // Headers: the user's, then the token's; each must be one "Name: value" line.
+    std::vector<std::string> lines = http.headers;
+    if (!http.tokenFile.empty()) {
+        std::FILE* f = std::fopen(http.tokenFile.c_str(), "rb");
+        if (!f) return Status::error(http.tokenFile + ": " + std::strerror(errno));
+        std::string token;
+        char buf[4096];
+        for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0 && token.size() < kMaxTokenBytes;) token.append(buf, n);
+        std::fclose(f);
+        while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+        if (token.empty() || token.size() >= kMaxTokenBytes || token.find_first_of("\r\n") != std::string::npos)
+            return Status::error(http.tokenFile + ": not a token (one line, under " + std::to_string(kMaxTokenBytes) + " bytes)");
+        lines.push_back("Authorization: Bearer " + token);
+    }
+    curl_slist* headers = nullptr;
+    for (const std::string& line : lines) {
+        const size_t colon = line.find(':');
+        if (colon == 0 || colon == std::string::npos || line.find_first_of("\r\n") != std::string::npos) {
+            curl_slist_free_all(headers);
+            return Status::error("--header wants 'Name: value' on one line; got '" + line.substr(0, line.find(':')) + ":...'");
+        }
+        curl_slist* more = curl_slist_append(headers, line.c_str());
+        if (!more) {
+            curl_slist_free_all(headers);
+            return Status::error("libcurl: out of memory");
+        }
+        headers = more;
+    }
+    if (http.insecure)
+        std::fprintf(stderr, "warning: --insecure: TLS certificates are NOT verified; anyone on the way to %s can read and change what is fetched\n",
+                     base.substr(0, base.find('/', scheme)).c_str());
+    CURLM* multi = curl_multi_init();
+    if (!multi) {
+        curl_slist_free_all(headers);
+        return Status::error("libcurl: cannot start a multi handle");
+    }
+    curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(kMaxHostConnections));
+    // Keep that many alive between requests (libcurl's default cache holds
+    // 4 per easy handle in the multi at the time, and closed the rest).
+    curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, long(kMaxHostConnections));
+    return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers, multi));
+}
+
+Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http) {
+    if (!isUrl(location)) return TilesetReader::open(location);
+    auto source = openTileSource(location, http);
+    if (!source) return source.status();
+    return TilesetReader::open(std::move(*source));
+}
+
+}  // namespace surfcast

@@ -1,0 +1,29 @@
+// The project's only HTTP client code: a tile set read from an http(s) folder
+// URL (the project's server at http://HOST:PORT/sets/NAME, or any static host,
+// object store or CDN that honours Range), for the viewer's streamer, the
+// readers of surfcast-build --info and surfcast-view without --lod. libcurl:
+// TLS verified against the system store, HTTP/2 where the host offers it,
+// proxies from the environment, redirects followed to http(s) only, never from
+// https to http, and the user's headers sent to the set's own origin only.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "status.h"
+#include "tile_source.h"
+#include "tileset_reader.h"
+
+namespace surfcast {
+
+// An http(s) URL opens an HTTP source (all requests run on one libcurl multi
+// handle driven by one I/O thread: one multiplexed connection over HTTP/2, up
+// to 6 keep-alive connections over HTTP/1.1; a query string, such as a shared
+// access signature, is kept on every request and left out of messages);
+// anything else is a local folder (openFolderSource).
+Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http = {});
+
+// A reader of the set at a folder or an http(s) URL.
+Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http = {});
+
+}  // namespace surfcast
