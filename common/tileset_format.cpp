@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
@@ -295,9 +296,9 @@ std::string writeTilesetJson(const TilesetInfo& info) {
 namespace {
 // tileset.json's fields, each read with its path ("hierarchy.bytes",
 // "attributes[2].scale") in the error, which tests/conformance/tileset_json.json
-// asks of both readers. Integers are JSON integers within the field's range:
-// nlohmann's get<int>() casts a float or an out-of-range number unchecked
-// (undefined for 1e70: fuzz_tileset).
+// asks of both readers. Integers are read through integer(): nlohmann's
+// get<int>() casts a fraction or an out-of-range number unchecked (undefined
+// for 1e70: fuzz_tileset).
 struct FieldError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
@@ -321,11 +322,19 @@ const nlohmann::json& object(const nlohmann::json& o, const std::string& parent,
     if (!v.is_object()) fieldError(joined(parent, key), "not an object");
     return v;
 }
+// JSON has one kind of number: 2.0 and 1e2 are the integers 2 and 100 (as in
+// JavaScript, whose reader agrees).
 template <class T>
 T integer(const nlohmann::json& o, const std::string& parent, const std::string& key) {
     const nlohmann::json& v = member(o, parent, key);
     if (v.is_number_unsigned() && std::in_range<T>(v.get<uint64_t>())) return T(v.get<uint64_t>());
     if (v.is_number_integer() && !v.is_number_unsigned() && std::in_range<T>(v.get<int64_t>())) return T(v.get<int64_t>());
+    if (v.is_number_float()) {
+        const double d = v.get<double>();
+        // Both bounds are exact in a double (2^63 and 2^64 for the 64-bit types).
+        const double below = double(std::numeric_limits<T>::min()), beyond = 2.0 * (double(std::numeric_limits<T>::max() / 2) + 1);
+        if (std::isfinite(d) && d == std::floor(d) && d >= below && d < beyond) return T(d);
+    }
     fieldError(joined(parent, key), shown(v) + " is not an integer in its range");
 }
 double number(const nlohmann::json& v, const std::string& path) {
@@ -383,6 +392,7 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         for (size_t i = 0; i < attributes.size(); ++i) {
             const nlohmann::json& a = attributes[i];
             const std::string at = "attributes[" + std::to_string(i) + "]";
+            if (!a.is_object()) fieldError(at, "not an object");
             AttributeInfo added{text(a, at, "name"), text(a, at, "type"), integer<int>(a, at, "components"),
                                 integer<int>(a, at, "quantization_bits")};
             if (a.contains("kind")) added.kind = text(a, at, "kind");
@@ -417,8 +427,9 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
             if (js.contains("classification")) {
                 const nlohmann::json& counts = object(object(js, "statistics", "classification"), "statistics.classification", "counts");
                 for (const auto& [key, count] : counts.items()) {
-                    // Decimal digits only (strtol would take " 7", "+7" and "-0").
-                    const bool digits = !key.empty() && key.size() <= 3 &&
+                    // A class as written by std::to_string: digits without leading
+                    // zeros (strtol would take " 7", "+7", "07" and "-0").
+                    const bool digits = !key.empty() && key.size() <= 3 && (key == "0" || key[0] != '0') &&
                                         std::all_of(key.begin(), key.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
                     if (!digits || std::stoi(key) > 255)
                         fieldError("statistics.classification.counts", "'" + key + "' is not a class (0-255)");

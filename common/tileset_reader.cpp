@@ -29,7 +29,7 @@ Result<TilesetReader> TilesetReader::open(std::unique_ptr<TileSource> source) {
 }
 
 Result<TilesetReader> TilesetReader::open(const std::string& folder) {
-    if (isUrl(folder)) return Status::error(folder + ": a URL, which this program does not read (it has no HTTP client)");
+    if (isUrl(folder)) return Status::error(folder + ": a URL, where a local folder is wanted");
     auto r = open(openFolderSource(folder));
     if (!r) return r;
     // A folder's blocks.bin must be the size tileset.json says (a URL's

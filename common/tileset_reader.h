@@ -1,7 +1,7 @@
 // Read a tile set from any TileSource (a local folder, or an http(s) URL
 // through net/http_tile_source.h's openTileset): tileset.json and
 // hierarchy.bin whole, and blocks on demand. Used by `surfcast-build --info`,
-// `surfcast-view` without `--lod`, the server, the weight capture and the tests.
+// `surfcast-view` without `--lod`, the weight capture, the bench tools and the tests.
 #pragma once
 
 #include <memory>

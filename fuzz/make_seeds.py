@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
-"""Writes small seed inputs for the fuzz targets from ../shared/data and from
-tile sets built by surfcast-build (nothing here is copied into the repository).
+"""Writes small seed inputs for the fuzz targets from ../shared/data, from
+tile sets built by surfcast-build (nothing here is copied into the repository)
+and from the format's conformance cases (tests/conformance: every tileset.json
+and block case, good and bad, for fuzz_tileset and fuzz_block).
 
 Usage: make_seeds.py DATA_DIR SETS_DIR OUT_DIR
   DATA_DIR  ../shared/data (PROVENANCE.md lists the scans)
@@ -246,8 +248,43 @@ def set_seeds(sets, tileset_dst, block_dst):
         del pages
 
 
+def conformance_seeds(tileset_dst, block_dst):
+    here = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "conformance")
+    corpus = json.load(open(os.path.join(here, "tileset_json.json")))
+
+    def walk(doc, pointer):
+        path = [p.replace("~1", "/").replace("~0", "~") for p in pointer.split("/")[1:]]
+        for p in path[:-1]:
+            doc = doc[int(p)] if isinstance(doc, list) else doc[p]
+        return doc, (int(path[-1]) if isinstance(doc, list) else path[-1])
+
+    for i, case in enumerate(corpus["cases"]):
+        if "text" in case:
+            text = case["text"]
+        else:
+            doc = json.loads(json.dumps(corpus["good"]))
+            for pointer, value in case.get("set", {}).items():
+                parent, key = walk(doc, pointer)
+                parent[key] = value
+            for pointer in case.get("remove", []):
+                parent, key = walk(doc, pointer)
+                del parent[key]
+            text = json.dumps(doc, indent=2)
+        # fuzz_tileset's input: tileset.json, a NUL, then hierarchy.bin (none here).
+        out(os.path.join(tileset_dst, "conformance-%02d" % i), text.encode() + b"\0")
+    blocks = json.load(open(os.path.join(here, "blocks.json")))
+    for i, case in enumerate(blocks["cases"]):
+        e = dict(blocks["expect"], **case.get("expect", {}))
+        f = (1 if e["color_bits"] == 8 else 2 if e["color_bits"] == 16 else 0) | (4 if e["normals"] else 0) | \
+            (8 if e["weights"] else 0) | (16 if e["radii"] else 0) | (32 if e["edge_weights"] else 0)
+        if e["points"] < 65536:  # the target takes the record's count as two bytes
+            out(os.path.join(block_dst, "conformance-%02d" % i), bytes([f]) + struct.pack("<H", e["points"]) +
+                bytes.fromhex(case["block"]))
+
+
 def main():
     data, sets, dst = sys.argv[1:4]
+    conformance_seeds(os.path.join(dst, "tileset"), os.path.join(dst, "block"))
     ply_seeds(data, os.path.join(dst, "read_ply"))
     las_seeds(data, os.path.join(dst, "read_las"), os.path.join(dst, "read_laz"))
     pcd_seeds(data, os.path.join(dst, "read_pcd"))

@@ -35,7 +35,7 @@ constexpr size_t kConnectionMemory = 32 * 1024;
 // Connections one client address may hold: one client cannot take them all.
 constexpr unsigned kPerAddressConnections = 256;
 constexpr unsigned kMaxConnections = 4096;
-// How long stop() waits for requests in flight before closing connections.
+// How long run(), once stopped, waits for requests in flight before closing connections.
 constexpr auto kDrainTime = std::chrono::seconds(5);
 
 std::string hex8(uint32_t v) {
@@ -390,7 +390,9 @@ struct HttpServer::Impl {
         return ok;
     }
 
-    // MHD callbacks.
+    // MHD callbacks. The URI callback makes MHD report the request's completion
+    // whatever ends it (an answer, an error of MHD's own, a timeout, the client
+    // leaving, the daemon stopping), so every count taken here is given back.
     static void* onUri(void* cls, const char*, MHD_Connection*) {
         static_cast<Impl*>(cls)->inFlight.fetch_add(1);
         return new RequestState;

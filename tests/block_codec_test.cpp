@@ -226,8 +226,7 @@ TEST(BlockCodec, LidarAttributesRoundTripAndUnknownOnesAreSkipped) {
 // web/test/format.test.mjs runs through the browser's decoder too: both decode
 // and reject the same blocks.
 TEST(FormatConformance, BlockCases) {
-    const nlohmann::json corpus =
-        nlohmann::json::parse(test::readFile(SURFCAST_TEST_TOOLS "/../conformance/blocks.json"));
+    const nlohmann::json corpus = test::conformanceCases("blocks.json");
     for (const auto& c : corpus["cases"]) {
         SCOPED_TRACE(c["name"].get<std::string>());
         nlohmann::json e = corpus["expect"];
@@ -239,9 +238,7 @@ TEST(FormatConformance, BlockCases) {
         expect.weights = e["weights"].get<bool>();
         expect.radii = e["radii"].get<bool>();
         expect.edgeWeights = e["edge_weights"].get<bool>();
-        const std::string hex = c["block"].get<std::string>();
-        std::vector<uint8_t> bytes(hex.size() / 2);
-        for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(std::stoul(hex.substr(2 * i, 2), nullptr, 16));
+        const std::vector<uint8_t> bytes = test::fromHex(c["block"].get<std::string>());
         auto block = decodeBlock(bytes.data(), bytes.size(), expect);
         if (c.contains("error")) {
             ASSERT_FALSE(block.ok());

@@ -251,7 +251,7 @@ TEST_F(Lod, ConesCullTheFarSideOfASphere) {
 // lod_order.json, which derives its answer): nodes of equal priority are
 // refined smaller key first, so that a budget cuts the same nodes in both.
 TEST(LodOrder, EqualPrioritiesRefineSmallerKeyFirstAsInTheBrowser) {
-    const nlohmann::json c = nlohmann::json::parse(test::readFile(SURFCAST_TEST_TOOLS "/../conformance/lod_order.json"));
+    const nlohmann::json c = test::conformanceCases("lod_order.json");
     TilesetInfo info;
     info.rootMin = {c["root_min"][0].get<double>(), c["root_min"][1].get<double>(), c["root_min"][2].get<double>()};
     info.rootEdge = c["root_edge"].get<double>();

@@ -125,7 +125,9 @@ TEST(ServeCli, ServesLogsAndStopsGracefully) {
         ASSERT_GE(inFlight, 0);
         const std::string head = "GET /sets/s/tileset.json HTTP/1.1\r\nHost: x\r\n";
         ASSERT_EQ(::send(inFlight, head.data(), head.size(), MSG_NOSIGNAL), ssize_t(head.size()));
-        std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the server has read the request line
+        // The server reads what arrives at once (libmicrohttpd's threads poll
+        // their sockets); a second leaves a loaded machine room to do so.
+        std::this_thread::sleep_for(std::chrono::seconds(1));
         const auto signalled = std::chrono::steady_clock::now();
         ::kill(c.pid, sig);
         EXPECT_TRUE(c.waitFor("finishing requests in flight")) << c.log;

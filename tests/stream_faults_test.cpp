@@ -7,8 +7,6 @@
 
 #include <gtest/gtest.h>
 #include <httplib.h>
-#include <arpa/inet.h>
-#include <netinet/in.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -17,33 +15,22 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
-#include <thread>
 #include <filesystem>
-#include <functional>
-#include <memory>
-#include <nlohmann/json.hpp>
-#include <set>
-#include <sstream>
+#include <thread>
 
-#include "context.h"
 #include "crc32.h"
 #include "sigpipe.h"
 #include "stream_support.h"
 #include "streamer.h"
-#include "surfcast_client.h"
 #include "test_support.h"
 
 namespace surfcast {
 namespace {
 
 using test::binary;
-using test::expectStreamsLikeLocal;
-using test::lastLine;
 using test::run;
 using test::TempDir;
-
 using test::startServer;
-
 
 TEST(Stream, UnreachableServerIsAClearError) {
     TempDir dir;

@@ -80,6 +80,16 @@ std::string readFile(const std::string& path) {
     return ss.str();
 }
 
+nlohmann::json conformanceCases(const std::string& name) {
+    return nlohmann::json::parse(readFile(std::string(SURFCAST_TEST_TOOLS "/../conformance/") + name));
+}
+
+std::vector<uint8_t> fromHex(const std::string& hex) {
+    std::vector<uint8_t> bytes(hex.size() / 2);
+    for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(std::stoul(hex.substr(2 * i, 2), nullptr, 16));
+    return bytes;
+}
+
 bool Child::waitFor(const std::string& needle) {
     auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     char buf[1024];

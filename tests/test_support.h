@@ -74,6 +74,10 @@ RunResult buildScene(const std::string& out, int points, const std::vector<std::
 // The JSON lines (those starting with '{') of a program's output, in order.
 std::vector<nlohmann::json> jsonLines(const std::string& output);
 std::string readFile(const std::string& path);
+// A case file of tests/conformance/, which the browser's tests read too.
+nlohmann::json conformanceCases(const std::string& name);
+// Bytes written as hex (the conformance files' binary cases).
+std::vector<uint8_t> fromHex(const std::string& hex);
 
 }  // namespace surfcast::test
 

@@ -521,10 +521,6 @@ TEST(TilesetFormat, PagesRejectBadPositionBitsAndSpacing) {
 // The format's conformance corpus, which web/test/format.test.mjs runs through
 // the browser's reader too: both accept and reject the same cases.
 namespace {
-nlohmann::json conformance(const char* name) {
-    return nlohmann::json::parse(test::readFile(std::string(SURFCAST_TEST_TOOLS "/../conformance/") + name));
-}
-
 // A case's tileset.json text: `good` with the case's changes (the corpus's "about" says which).
 std::string tilesetText(const nlohmann::json& good, const nlohmann::json& c) {
     if (c.contains("text")) return c["text"].get<std::string>();
@@ -539,16 +535,10 @@ std::string tilesetText(const nlohmann::json& good, const nlohmann::json& c) {
     }
     return doc.dump(2);
 }
-
-std::vector<uint8_t> fromHex(const std::string& hex) {
-    std::vector<uint8_t> bytes(hex.size() / 2);
-    for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(std::stoul(hex.substr(2 * i, 2), nullptr, 16));
-    return bytes;
-}
 }  // namespace
 
 TEST(FormatConformance, TilesetJsonCases) {
-    const nlohmann::json corpus = conformance("tileset_json.json");
+    const nlohmann::json corpus = test::conformanceCases("tileset_json.json");
     for (const auto& c : corpus["cases"]) {
         SCOPED_TRACE(c["name"].get<std::string>());
         auto info = readTilesetJson(tilesetText(corpus["good"], c), "tileset.json");
@@ -586,11 +576,11 @@ TEST(FormatConformance, TilesetJsonCases) {
 // The hierarchy read as a streaming client reads it: the header and page
 // table, then page 0 from the root, then each page its proxy record reaches.
 TEST(FormatConformance, HierarchyCases) {
-    const nlohmann::json corpus = conformance("hierarchy.json");
+    const nlohmann::json corpus = test::conformanceCases("hierarchy.json");
     const uint64_t blocksBytes = corpus["blocks_bytes"].get<uint64_t>();
     for (const auto& c : corpus["cases"]) {
         SCOPED_TRACE(c["name"].get<std::string>());
-        const std::vector<uint8_t> bytes = fromHex(c["hierarchy"].get<std::string>());
+        const std::vector<uint8_t> bytes = test::fromHex(c["hierarchy"].get<std::string>());
         std::vector<std::string> keys;
         Status status;
         auto index = readHierarchyIndex(bytes, bytes.size(), "h.bin");

@@ -3,8 +3,8 @@
 // the two APIs are blocks under SC_GLSL_ES in those sources (splat_common.glsl
 // names them); what this generator does is only what GLSL ES 3.00's syntax
 // requires:
-// - includes inlined, #version 300 es, default precisions, SC_GLSL_ES and the
-//   variant's defines first;
+// - includes inlined, comments dropped (the sources keep them), #version 300
+//   es, default precisions, SC_GLSL_ES and the variant's defines first;
 // - specialization constants become constants of the variant's values;
 // - varyings lose their locations, which GLSL ES does not take, and are named
 //   by location (sc_vN) on both sides, as Vulkan matches them;
@@ -18,10 +18,19 @@ import { fileURLToPath } from "node:url";
 
 export const shaderDir = join(dirname(fileURLToPath(import.meta.url)), "..", "client", "shaders");
 
-function inlineIncludes(file, seen = new Set()) {
-  if (seen.has(file)) throw new Error(`${file}: included twice`);
-  seen.add(file);
-  return readFileSync(join(shaderDir, file), "utf8").replace(/^#include "([^"]+)"$/gm, (_, name) => inlineIncludes(name, seen));
+function inlineIncludes(file, including = []) {
+  if (including.includes(file)) throw new Error(`${[...including, file].join(" includes ")}: a cycle`);
+  return readFileSync(join(shaderDir, file), "utf8")
+    .replace(/^#include "([^"]+)"[ \t]*(\/\/.*)?$/gm, (_, name) => inlineIncludes(name, [...including, file]));
+}
+
+// A specialization constant's value written as GLSL of its type (GLSL ES
+// converts no int to float: 1 must be 1.0 for a float).
+function literal(type, value) {
+  if (type === "float") return Number.isInteger(value) ? `${value}.0` : String(value);
+  if (type === "bool") return value ? "true" : "false";
+  if (!Number.isInteger(value)) throw new Error(`${value} is not an ${type}`);
+  return type === "uint" ? `${value}u` : String(value);
 }
 
 // The GLSL ES 3.00 text of `file` (a stage of client/shaders) for one variant:
@@ -38,7 +47,7 @@ export function glslEs(file, { constants = {}, defines = [] } = {}) {
   const unused = new Set(Object.keys(constants));
   text = text.replace(/layout\(constant_id = \d+\) const (\w+) (\w+) = ([^;]+);/g, (_, type, name, value) => {
     unused.delete(name);
-    return `const ${type} ${name} = ${name in constants ? String(constants[name]) : value};`;
+    return `const ${type} ${name} = ${name in constants ? literal(type, constants[name]) : value};`;
   });
   if (unused.size) throw new Error(`${file}: no specialization constant ${[...unused].join(", ")}`);
   // Varyings: a vertex shader's outputs, a fragment shader's inputs.

@@ -1,5 +1,6 @@
 #version 450
-// Instanced-quad expansion: one instance per surfel, 4 strip vertices each.
+// Quad expansion: Vulkan draws one instance per surfel, 4 strip vertices each;
+// the browser's GLSL ES two triangles per surfel (surfel_input.glsl).
 // kPass 0: visibility (pushed back), 1: accumulation, 2: circles.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"

@@ -2,9 +2,9 @@
 // Vulkan: one instance per surfel (a per-instance vertex binding of GpuSurfel),
 // gl_VertexIndex its triangle strip's corner. GLSL ES (the browser): surfels
 // are pulled from an RGBA32UI texture, two texels each, 1024 to a row, by
-// gl_VertexID, SC_SURFEL_VERTICES vertices each (six: two triangles, as
-// WebGL2 has no instanced strips of attributes that SwiftShader draws fast;
-// web/src/renderer.ts). Call loadSurfel() first in main.
+// gl_VertexID, SC_SURFEL_VERTICES vertices each (six: two triangles; instanced
+// attributes cost SwiftShader 16 times as much: docs/WEB.md, "Differences
+// from the Vulkan client"). Call loadSurfel() first in main.
 #ifdef SC_GLSL_ES
 uniform highp usampler2D scSurfels;
 vec4 inPositionRadius;

@@ -85,9 +85,9 @@ def chain(depth):
 def main():
     good = hierarchy(good_pages(), 5)
     cases = [
-        ("good: two pages, five nodes", good, None),
-        ("good: version 1 header", hierarchy(good_pages(), 5, version=1), None),
-        ("good: a chain down to level 20, the deepest", chain(20), None),
+        ("good: two pages, five nodes", good, GOOD_KEYS),
+        ("good: version 1 header", hierarchy(good_pages(), 5, version=1), GOOD_KEYS),
+        ("good: a chain down to level 20, the deepest", chain(20), [f"{level}-0-0-0" for level in range(21)]),
         ("shorter than the header", good[:20], "shorter than the 32-byte header"),
         ("bad magic", b"SCHX" + good[4:], "bad magic"),
         ("version 3", hierarchy(good_pages(), 5, version=3), "unsupported version 3"),
@@ -127,13 +127,9 @@ def main():
         "blocks_bytes": BLOCKS,
         "cases": [],
     }
-    for name, data, error in cases:
+    for name, data, outcome in cases:
         case = {"name": name, "hierarchy": data.hex()}
-        if error is None:
-            keys = GOOD_KEYS if "five" in name or "version 1" in name else [f"{l}-0-0-0" for l in range(21)]
-            case["nodes"] = keys
-        else:
-            case["error"] = error
+        case.update({"nodes": outcome} if isinstance(outcome, list) else {"error": outcome})
         out["cases"].append(case)
     path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "hierarchy.json")
     with open(path, "w") as f:

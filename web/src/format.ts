@@ -63,14 +63,17 @@ function fail(what: string, why: string): never {
 
 // tileset.json's fields, each read with its path ("hierarchy.bytes",
 // "attributes[2].scale") in the error, as common/tileset_format.cpp does: both
-// run tests/conformance/tileset_json.json. Integers are JSON integers within
-// the field's range (u64 fields: within 2^53, what a double holds exactly).
+// run tests/conformance/tileset_json.json. Integers are whole numbers within
+// the field's range (2.0 is 2, as in C++), u64 fields up to 2^53, what a
+// double holds exactly (C++ takes them to 2^64: 8 PB of blocks and beyond).
 type Json = Record<string, unknown>;
 const joined = (parent: string, key: string) => (parent ? `${parent}.${key}` : key);
-// A value quoted in an error: at most about 60 characters of it.
+// A value quoted in an error: at most about 60 characters of it, cut between characters.
 function shown(v: unknown): string {
   const s = JSON.stringify(v) ?? String(v);
-  return s.length <= 64 ? s : `${s.slice(0, 60)}...`;
+  if (s.length <= 64) return s;
+  const high = s.charCodeAt(59) >= 0xd800 && s.charCodeAt(59) < 0xdc00;  // a surrogate pair's first half
+  return `${s.slice(0, high ? 59 : 60)}...`;
 }
 function member(o: Json, parent: string, key: string): unknown {
   if (!Object.hasOwn(o, key)) throw new FormatError(`${joined(parent, key)}: missing`);
@@ -148,7 +151,9 @@ function readFields(j: Json): TilesetInfo {
   const list = member(j, "", "attributes");
   if (!Array.isArray(list)) throw new FormatError("attributes: not an array");
   const attributes = list.map((a: unknown, i): AttributeInfo => {
-    const at = `attributes[${i}]`, o = isObject(a) ? a : {};
+    const at = `attributes[${i}]`;
+    if (!isObject(a)) throw new FormatError(`${at}: not an object`);
+    const o = a;
     const added = {
       name: text(o, at, "name"),
       type: text(o, at, "type"),
@@ -184,7 +189,8 @@ function readFields(j: Json): TilesetInfo {
       const at = "statistics.classification.counts";
       const counts = object(object(js, "statistics", "classification"), "statistics.classification", "counts");
       for (const key of Object.keys(counts)) {
-        if (!/^\d+$/.test(key) || Number(key) > 255) throw new FormatError(`${at}: '${key}' is not a class (0-255)`);
+        // A class as C++ writes it: digits without leading zeros.
+        if (!/^(0|[1-9]\d{0,2})$/.test(key) || Number(key) > 255) throw new FormatError(`${at}: '${key}' is not a class (0-255)`);
         statistics.classCounts.set(Number(key), integer(counts, at, key, 0, kU64));
       }
     }

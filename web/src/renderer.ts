@@ -5,7 +5,7 @@
 // a resolve normalizes per pixel, shades and antialiases edges (Zwicker 2001
 // §7). Points and circles draw opaque, nearest wins. Each node is one texture
 // of 32-byte surfels (the GpuSurfel layout) that the vertex shader reads by
-// gl_VertexID (shaders.ts says why not instancing). Translucent frames peel
+// gl_VertexID (docs/WEB.md, "Differences from the Vulkan client", says why not instancing). Translucent frames peel
 // layers (Zwicker 2001 §6), as the Vulkan client does.
 //
 // Float blending (EXT_float_blend) is what per-pixel normalization needs.
@@ -234,13 +234,10 @@ export class SplatRenderer {
     gl.uniform1ui(p.loc("frame.mode"), modes[mode]);
     gl.uniform1ui(p.loc("frame.shading"), s.shading === "unlit" ? S.kShadingUnlit : s.shading === "lambert" ? S.kShadingLambert : S.kShadingPhong);
     const edgeAA = s.edgeAA && this.floatBlend;  // coverage sums past 1 need float targets
-    const translucent = this.translucentFrame(s, mode);
-    gl.uniform1ui(p.loc("frame.flags"), (s.backfaceCull ? S.kFlagBackfaceCull : 0) | (edgeAA ? S.kFlagEdgeAA : 0) |
-                                        (translucent ? S.kFlagTranslucent : 0));
+    gl.uniform1ui(p.loc("frame.flags"), (s.backfaceCull ? S.kFlagBackfaceCull : 0) | (edgeAA ? S.kFlagEdgeAA : 0));
     gl.uniform1f(p.loc("frame.maxFilterPixels"), kMaxFilterPixels);
     gl.uniform1f(p.loc("frame.circleScale"), s.kernelScale);
     gl.uniform1f(p.loc("frame.opacity"), Math.min(Math.max(s.opacity, 0), 1));
-    gl.uniform1ui(p.loc("frame.layers"), Math.min(Math.max(Math.round(s.layers), 1), kMaxLayers));
     gl.uniform1i(p.loc("scClipControl"), this.clipControl ? 1 : 0);
     gl.uniform1i(p.loc("scSurfels"), 2);
   }
