@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
         nrm[i] = view->rotate(m->vertices.normals[i]);
     }
     std::vector<MipTexture> mips;
-    for (const Texture& t : m->textures) mips.emplace_back(t.rgb.empty() ? Texture{"", 1, 1, {128, 128, 128}} : t);
+    for (const auto& t : m->textures) mips.emplace_back(t);
     std::vector<float> depth(size_t(SW) * SH, INFINITY);
     std::vector<Vec3f> normal(size_t(SW) * SH);
     std::vector<Vec3f> color(colors ? size_t(SW) * SH : 0);
@@ -125,7 +125,7 @@ int main(int argc, char** argv) {
                                                  (wa * uv[1] + wb * uv[3] + wc * uv[5]) / sum};
                 };
                 const auto here = uvAt(px, py), right = uvAt(px + 1, py), below = uvAt(px, py + 1);
-                const Texture& level0 = mips[size_t(texture)].levels[0];
+                const Texture& level0 = mips[size_t(texture)].level(0);
                 auto texels = [&](const std::array<double, 2>& o) {
                     return std::hypot((o[0] - here[0]) * level0.width, (o[1] - here[1]) * level0.height);
                 };

@@ -46,7 +46,7 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
             if (!in) return in.status();
             auto header = parsePlyHeader(*in);
             if (!header) return header.status();
-            if (plyHasFaces(*header)) return openMeshReader(path, options.mesh);
+            if (plyHasFaces(*header)) return openMeshReader(path, options.mesh, options.meshes.get());
         }
         return openPlyReader(path, options.scalars);
     }
@@ -54,7 +54,7 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
         return openPcdReader(path, options.scalars, options.readAlpha);
     if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF")
         return openLasReader(path, options.threads, options.scalars);
-    if (isMeshExtension(path)) return openMeshReader(path, options.mesh);
+    if (isMeshExtension(path)) return openMeshReader(path, options.mesh, options.meshes.get());
     if (isTextExtension(ext)) return openTextReader(path, options.columns);
     return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
 }

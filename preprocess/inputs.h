@@ -25,6 +25,7 @@ struct InputOptions {
     SceneOptions scene;
     std::string columns;         // text layout; empty: detect
     MeshSampling mesh;
+    std::shared_ptr<MeshStore> meshes;  // where every pass finds the meshes (null: each reads them anew)
     bool verticesOnly = false;   // treat a mesh file as its vertices
     int threads = 1;             // decoder threads (LAZ chunks)
     ScalarSelection scalars;     // scalar fields readers decode (none by default)

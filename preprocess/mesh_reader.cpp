@@ -19,8 +19,6 @@
 
 namespace surfcast {
 
-namespace {
-
 struct MeshTraits : public OpenMesh::DefaultTraits {
     using Point = OpenMesh::Vec3d;
     using Normal = OpenMesh::Vec3d;
@@ -31,20 +29,12 @@ struct MeshTraits : public OpenMesh::DefaultTraits {
 };
 using TriMesh = OpenMesh::TriMesh_ArrayKernelT<MeshTraits>;
 
-// Once per message, though each pass of the build opens a mesh again.
-void warnOnce(const std::string& message) {
-    static std::mutex mutex;
-    static std::set<std::string> warned;
-    std::lock_guard lock(mutex);
-    if (warned.insert(message).second) std::fprintf(stderr, "warning: %s\n", message.c_str());
-}
-
 struct LoadedMesh {
     TriMesh mesh;
     bool hasColors = false;
-    // Diffuse textures by OpenMesh's face texture index (0: none; an empty
-    // texture: one that could not be loaded, with --allow-missing-textures).
-    std::vector<Texture> textures;
+    // Diffuse textures by OpenMesh's face texture index (0: none; null: none,
+    // or one that could not be loaded, with --allow-missing-textures).
+    std::vector<std::shared_ptr<const Texture>> textures;
     bool textured = false;    // some face has a loaded texture
     // The materials name diffuse maps, and gave faces their Kd: the colour of
     // faces whose texture could not be loaded and which have no vertex colours.
@@ -54,6 +44,17 @@ struct LoadedMesh {
     // inward and are flipped, so surfels face out of the object.
     double normalSign = 1;
 };
+
+namespace {
+
+// Once per message, though each pass of the build opens a mesh again.
+void warnOnce(const std::string& message) {
+    static std::mutex mutex;
+    static std::set<std::string> warned;
+    std::lock_guard lock(mutex);
+    if (warned.insert(message).second) std::fprintf(stderr, "warning: %s\n", message.c_str());
+}
+
 
 
 // OpenMesh's OBJ reader asserts (aborting the process) on a face none of
@@ -166,13 +167,13 @@ Status loadObjTextures(const std::string& path, const std::vector<std::string>& 
             warnOnce(why + "; its faces take vertex colours, else the material's Kd");
             continue;
         }
-        loaded.textures[size_t(index)] = std::move(*texture);
+        loaded.textures[size_t(index)] = std::make_shared<const Texture>(std::move(*texture));
         loaded.textured = true;
     }
     if (!loaded.textured) return {};
     for (auto f : mesh.faces()) {
         const int t = mesh.texture_index(f);
-        if (t <= 0 || size_t(t) >= loaded.textures.size() || loaded.textures[size_t(t)].rgb.empty()) continue;
+        if (t <= 0 || size_t(t) >= loaded.textures.size() || !loaded.textures[size_t(t)]) continue;
         for (auto h : mesh.fh_range(f)) {
             const auto uv = mesh.texcoord2D(h);
             if (!std::isfinite(uv[0]) || !std::isfinite(uv[1]))
@@ -204,7 +205,8 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
         for (const Vec3d& v : gltf->positions) handles.push_back(mesh.add_vertex({v.x, v.y, v.z}));
         // Texture index t + 1 is scene texture t (0: none), as OpenMesh numbers an OBJ's.
         loaded->textures.resize(gltf->textures.size() + 1);
-        for (size_t t = 0; t < gltf->textures.size(); ++t) loaded->textures[t + 1] = std::move(gltf->textures[t]);
+        for (size_t t = 0; t < gltf->textures.size(); ++t)
+            loaded->textures[t + 1] = std::make_shared<const Texture>(std::move(gltf->textures[t]));
         loaded->textured = !gltf->textures.empty();
         loaded->faceColors = true;
         for (size_t i = 0; i < gltf->triangles.size(); ++i) {
@@ -257,7 +259,7 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
                     warnOnce(why + "; its faces take vertex colours");
                     continue;
                 }
-                loaded->textures[t + 1] = std::move(*texture);
+                loaded->textures[t + 1] = std::make_shared<const Texture>(std::move(*texture));
                 loaded->textured = true;
             }
         }
@@ -335,7 +337,7 @@ Result<std::unique_ptr<LoadedMesh>> loadMesh(const std::string& path, const Load
 
 class MeshReader final : public PointReader {
 public:
-    MeshReader(std::unique_ptr<LoadedMesh> mesh, const std::string& path, const MeshSampling& sampling)
+    MeshReader(std::shared_ptr<const LoadedMesh> mesh, const std::string& path, const MeshSampling& sampling)
         : mesh_(std::move(mesh)), rng_(sampling.seed), spacing_(sampling.spacing) {
         const TriMesh& m = mesh_->mesh;
         if (!(spacing_ > 0)) {
@@ -442,8 +444,8 @@ private:
     const Texture* texture(TriMesh::FaceHandle f) const {
         if (!mesh_->textured || !f.is_valid()) return nullptr;
         const int t = mesh_->mesh.texture_index(f);
-        if (t <= 0 || size_t(t) >= mesh_->textures.size() || mesh_->textures[size_t(t)].rgb.empty()) return nullptr;
-        return &mesh_->textures[size_t(t)];
+        if (t <= 0 || size_t(t) >= mesh_->textures.size()) return nullptr;
+        return mesh_->textures[size_t(t)].get();
     }
 
     InputPoint makePoint(const OpenMesh::Vec3d& p, const OpenMesh::Vec3d& normal, const Corners& at, double a, double b,
@@ -472,7 +474,7 @@ private:
         return q;
     }
 
-    std::unique_ptr<LoadedMesh> mesh_;
+    std::shared_ptr<const LoadedMesh> mesh_;
     SplitMix64 rng_;
     double spacing_;
     InputDescription desc_;
@@ -488,8 +490,100 @@ bool isMeshExtension(const std::string& path) {
     return ext == ".obj" || ext == ".off" || ext == ".stl" || isGltfExtension(path);
 }
 
-Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling) {
-    auto mesh = loadMesh(path, {true, sampling.allowMissingTextures, sampling.allowOutsidePaths});
+namespace {
+// OpenMesh's items and properties.
+uint64_t topologyBytes(const LoadedMesh& loaded) {
+    const TriMesh& m = loaded.mesh;
+    uint64_t sum = sizeof loaded + m.n_vertices() * sizeof(OpenMesh::ArrayItems::Vertex) +
+                   m.n_edges() * sizeof(OpenMesh::ArrayItems::Edge) + m.n_faces() * sizeof(OpenMesh::ArrayItems::Face);
+    auto properties = [&](auto begin, auto end) {
+        for (auto p = begin; p != end; ++p)
+            if (*p) sum += (*p)->size_of();
+    };
+    properties(m.vprops_begin(), m.vprops_end());
+    properties(m.hprops_begin(), m.hprops_end());
+    properties(m.eprops_begin(), m.eprops_end());
+    properties(m.fprops_begin(), m.fprops_end());
+    return sum;
+}
+
+// Its textures that nothing else holds (`sharedToo`: all of them).
+uint64_t textureBytes(const LoadedMesh& loaded, bool sharedToo) {
+    uint64_t sum = 0;
+    for (const auto& t : loaded.textures)
+        if (t && (sharedToo || t.use_count() == 1)) sum += t->bytes();
+    return sum;
+}
+}  // namespace
+
+uint64_t meshBytes(const LoadedMesh& loaded) { return topologyBytes(loaded) + textureBytes(loaded, true); }
+
+Result<std::shared_ptr<const LoadedMesh>> MeshStore::load(const std::string& path, const MeshSampling& options) {
+    std::lock_guard lock(mutex_);
+    ++clock_;
+    if (auto it = held_.find(path); it != held_.end()) {
+        it->second.lastUsed = clock_;
+        return it->second.mesh;
+    }
+    // Read under the lock: a mesh other threads want meanwhile is read once.
+    auto loaded = loadMesh(path, {true, options.allowMissingTextures, options.allowOutsidePaths});
+    if (!loaded) return loaded.status();
+    std::shared_ptr<const LoadedMesh> mesh = std::move(*loaded);
+    const uint64_t size = meshBytes(*mesh);
+    // While it is read, a texture is also in stb_image's buffer, which is
+    // then copied into it: the largest once more on top.
+    uint64_t largestTexture = 0;
+    for (const auto& t : mesh->textures)
+        if (t) largestTexture = std::max(largestTexture, t->bytes());
+    largest_ = std::max(largest_, size + largestTexture);
+    ++reads_;
+    held_[path] = {mesh, clock_};
+    trim();
+    return mesh;
+}
+
+uint64_t MeshStore::heldBytes() const {
+    uint64_t sum = 0;
+    for (const auto& [path, h] : held_) sum += topologyBytes(*h.mesh) + textureBytes(*h.mesh, false);
+    return sum;
+}
+
+void MeshStore::trim() {
+    while (!held_.empty() && heldBytes() > capacity_) {
+        auto oldest = std::min_element(held_.begin(), held_.end(),
+                                       [](const auto& a, const auto& b) { return a.second.lastUsed < b.second.lastUsed; });
+        held_.erase(oldest);
+    }
+}
+
+void MeshStore::setCapacity(uint64_t capacity) {
+    std::lock_guard lock(mutex_);
+    capacity_ = capacity;
+    trim();
+}
+
+uint64_t MeshStore::bytes() const {
+    std::lock_guard lock(mutex_);
+    return heldBytes();
+}
+
+uint64_t MeshStore::largestBytes() const {
+    std::lock_guard lock(mutex_);
+    return largest_;
+}
+
+uint64_t MeshStore::reads() const {
+    std::lock_guard lock(mutex_);
+    return reads_;
+}
+
+Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling, MeshStore* store) {
+    Result<std::shared_ptr<const LoadedMesh>> mesh = Status::error("");
+    if (store) mesh = store->load(path, sampling);
+    else if (auto loaded = loadMesh(path, {true, sampling.allowMissingTextures, sampling.allowOutsidePaths}); loaded)
+        mesh = std::shared_ptr<const LoadedMesh>(std::move(*loaded));
+    else
+        mesh = loaded.status();
     if (!mesh) return mesh.status();
     return std::unique_ptr<PointReader>(new MeshReader(std::move(*mesh), path, sampling));
 }
@@ -514,17 +608,22 @@ Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
     return vertexNormals(**mesh);
 }
 
-Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, const MeshSampling& options) {
-    auto mesh = loadMesh(path, {textures, options.allowMissingTextures, options.allowOutsidePaths});
+Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, const MeshSampling& options, MeshStore* store) {
+    Result<std::shared_ptr<const LoadedMesh>> mesh = Status::error("");
+    if (store) mesh = store->load(path, options);
+    else if (auto loaded = loadMesh(path, {textures, options.allowMissingTextures, options.allowOutsidePaths}); loaded)
+        mesh = std::shared_ptr<const LoadedMesh>(std::move(*loaded));
+    else
+        mesh = loaded.status();
     if (!mesh) return mesh.status();
-    LoadedMesh& loaded = **mesh;
+    const LoadedMesh& loaded = **mesh;
     const TriMesh& m = loaded.mesh;
     MeshTriangles out{vertexNormals(loaded), {}, {}, {}, {}, {}};
     for (auto f : m.faces()) {
         for (auto h : m.fh_range(f)) out.triangles.push_back(uint32_t(m.to_vertex_handle(h).idx()));
         if (!textures) continue;
         const int t = loaded.textured ? m.texture_index(f) : 0;
-        const bool hasTexture = t > 0 && size_t(t) < loaded.textures.size() && !loaded.textures[size_t(t)].rgb.empty();
+        const bool hasTexture = t > 0 && size_t(t) < loaded.textures.size() && loaded.textures[size_t(t)];
         out.triangleTexture.push_back(hasTexture ? t - 1 : -1);
         std::array<float, 6> uv{};
         Vec3f color{0.5f, 0.5f, 0.5f};
@@ -544,8 +643,8 @@ Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, 
         out.triangleColor.push_back(color);
     }
     if (textures) {
-        // Texture index t + 1 is out.textures[t].
-        for (size_t t = 1; t < loaded.textures.size(); ++t) out.textures.push_back(std::move(loaded.textures[t]));
+        // Texture index t + 1 is out.textures[t], shared, not copied.
+        out.textures.assign(loaded.textures.begin() + 1, loaded.textures.end());
     }
     return out;
 }

@@ -78,6 +78,10 @@ void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
     points.swap(sorted);
 }
 
+// Surfels of one least-squares solve at most (--texture-filter optimal): a
+// larger node is solved in runs of this many, each with its halo.
+constexpr uint32_t kFitGroupSurfels = 8192;
+
 // Bits of the stored intensity (chooseAttributes).
 constexpr int kIntensityBits = 12;
 // Most bits of a stored scalar field (Draco's integer attributes are 32-bit).
@@ -126,7 +130,14 @@ private:
     // known; `halo`: the level's surfels beyond these nodes (other chunks).
     void filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<const Surfel> halo, int threads);
     Status emit(BuiltNode& node, const ScalarTable& scalars);
-    uint64_t bytesPerChunkPoint() const { return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size(); }
+    uint64_t bytesPerChunkPoint() const {
+        return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size() + (fitting() ? kFitBytesPerChunkPoint : 0);
+    }
+    // Some textured mesh's colours are fitted by least squares (--texture-filter optimal).
+    bool fitting() const {
+        return opt_.textureFilter == BuildOptions::TextureFilter::Optimal &&
+               std::any_of(textureFields_.begin(), textureFields_.end(), [](const auto& f) { return f != nullptr; });
+    }
     ScalarTable emptyTable() const {
         ScalarTable t;
         for (const ScalarQuantization& q : stored_) t.categorical.push_back(q.categorical);
@@ -169,6 +180,7 @@ private:
     // Per orientation rule: the texture of the textured mesh that alone has it
     // (--texture-filter ewa or optimal), else null.
     std::vector<std::shared_ptr<const TextureField>> textureFields_;
+    uint64_t textureBytes_ = 0;  // what textureFields_ hold (TextureField::bytes), through the whole build
     std::string chunkDir_;
     ChunkLayout layout_;
     std::unique_ptr<TilesetWriter> writer_;
@@ -363,16 +375,18 @@ Status Builder::chooseOrientationRules() {
         if (std::find(sources.begin(), sources.end(), name) == sources.end()) sources.push_back(name);
     }
     for (size_t i = 0; i < sources.size(); ++i) summary_.normalSource += (i ? "+" : "") + sources[i];
-    // The textured meshes, read once more whole for their textures.
+    // The textured meshes' fields, from the meshes the scan read (whose
+    // textures they share).
     textureFields_.assign(normals_.rules.size(), nullptr);
     for (size_t i = 0; i < stats_.sources.size(); ++i) {
         const InputDescription& d = stats_.sources[i].description;
         if (!d.textured) continue;
         summary_.textureFilter = textureFilterName(opt_.textureFilter);
         if (opt_.textureFilter == BuildOptions::TextureFilter::Nearest) continue;
-        auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh);
+        auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh, opt_.inputs.meshes.get());
         if (!mesh) return mesh.status();
         textureFields_[sourceIds_[i]] = std::make_shared<const TextureField>(*mesh, rootMin_);
+        textureBytes_ += textureFields_[sourceIds_[i]]->bytes();
     }
     return {};
 }
@@ -380,11 +394,27 @@ Status Builder::chooseOrientationRules() {
 Status Builder::planAndDistribute() {
     // The chunk size depends on the budget alone, never on the thread count,
     // so the same inputs and options give the same chunks and the same bytes.
-    const uint64_t minBytes = kBaselineBytes + kChunksAtOnce * bytesPerChunkPoint() * opt_.capacity * kMinChunkLeaves;
-    if (opt_.memoryBytes < minBytes)
-        return Status::error("--memory " + std::to_string(opt_.memoryBytes >> 20) + " MiB is too small: at least " +
-                             std::to_string(minBytes >> 20) + " MiB are needed with capacity " + std::to_string(opt_.capacity));
-    uint64_t maxChunkPoints = (opt_.memoryBytes - kBaselineBytes) / (kChunksAtOnce * bytesPerChunkPoint());
+    // Memory outside the chunks (docs/ARCHITECTURE.md, "Memory"): the
+    // texture fields, held through the build; while the inputs are read
+    // again, the meshes the store keeps and the largest mesh, read anew
+    // where the store dropped it; while chunks are built, the solves of the
+    // optimal texture filter.
+    MeshStore& meshes = *opt_.inputs.meshes;
+    const uint64_t largestMesh = meshes.largestBytes();
+    const uint64_t fitBytes = fitting() ? kChunksAtOnce * kFitSolvesPerChunk * kFitBytesPerSolve : 0;
+    const uint64_t minChunks = kChunksAtOnce * bytesPerChunkPoint() * opt_.capacity * kMinChunkLeaves;
+    const uint64_t minBytes = kBaselineBytes + textureBytes_ + std::max(largestMesh, fitBytes + minChunks);
+    if (opt_.memoryBytes < minBytes) {
+        auto mib = [](uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; };
+        std::string why = "--memory " + std::to_string(opt_.memoryBytes >> 20) + " MiB is too small: at least " + mib(minBytes) +
+                          " are needed with capacity " + std::to_string(opt_.capacity);
+        if (textureBytes_ > 0) why += "; the textured meshes' textures, mip levels and triangles take " + mib(textureBytes_);
+        if (largestMesh > 0) why += "; the largest mesh takes " + mib(largestMesh) + " while it is read";
+        if (fitBytes > 0) why += "; the optimal texture filter's solves take " + mib(fitBytes);
+        return Status::error(why);
+    }
+    meshes.setCapacity(opt_.memoryBytes - kBaselineBytes - textureBytes_ - largestMesh);
+    uint64_t maxChunkPoints = (opt_.memoryBytes - kBaselineBytes - textureBytes_ - fitBytes) / (kChunksAtOnce * bytesPerChunkPoint());
 
     if (stats_.points <= maxChunkPoints) {
         layout_ = ChunkLayout::single(rootEdge_, opt_.grid);
@@ -409,6 +439,9 @@ Status Builder::planAndDistribute() {
         return chunkWriter.add(batch, scalars);
     }));
     SC_TRY(chunkWriter.finish());
+    meshes.setCapacity(0);  // the fields keep the textures; nothing reads the meshes again
+    summary_.meshReads = meshes.reads();
+    summary_.textureBytes = textureBytes_;
     phaseDone("distribute");
     if (seen != stats_.points)
         return Status::error("the inputs changed while being read: " + std::to_string(stats_.points) + " points, then " +
@@ -678,7 +711,7 @@ void Builder::filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<c
     FitParams params;
     params.cutoff = opt_.cutoff;
     params.zt = kDefaultZt;
-    params.threads = threads;
+    params.threads = std::min(threads, kFitSolvesPerChunk);
     for (size_t f = 0; f < textureFields_.size(); ++f) {
         const TextureField* field = textureFields_[f].get();
         if (!field) continue;
@@ -696,7 +729,10 @@ void Builder::filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<c
                     fit.push_back(toFit(node->surfels[i], sigmaOf(*node, i)));
                     from.push_back({node, i});
                 }
-            if (fit.size() > begin) groups.push_back({begin, uint32_t(fit.size())});
+            // Runs of a node's surfels (which lie in grid or Morton order) of
+            // at most kFitGroupSurfels each, so that a solve's memory is bounded.
+            const uint32_t n = uint32_t(fit.size()) - begin, parts = (n + kFitGroupSurfels - 1) / kFitGroupSurfels;
+            for (uint32_t k = 0; k < parts; ++k) groups.push_back({begin + uint32_t(uint64_t(n) * k / parts), begin + uint32_t(uint64_t(n) * (k + 1) / parts)});
         }
         if (groups.empty()) continue;
         for (const Surfel& s : halo)
@@ -795,6 +831,9 @@ Status Builder::emit(BuiltNode& node, const ScalarTable& scalars) {
 
 Result<BuildSummary> Builder::run() {
     auto start = std::chrono::steady_clock::now();
+    // Meshes are read once: the scan keeps them for the passes after it,
+    // within half the budget until planAndDistribute knows what else it holds.
+    if (!opt_.inputs.meshes) opt_.inputs.meshes = std::make_shared<MeshStore>((opt_.memoryBytes - std::min(opt_.memoryBytes, kBaselineBytes)) / 2);
     SC_TRY(scan());
     auto writer = TilesetWriter::create(opt_.output);
     if (!writer) return writer.status();
@@ -879,7 +918,9 @@ std::string BuildSummary::text() const {
     for (size_t l = 0; l < surfelsPerLevel.size(); ++l)
         out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";
     out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none")
-        << (textureFilter.empty() ? "" : " (textures: " + textureFilter + ")")
+        << (textureFilter.empty() ? ""
+                                  : " (textures: " + textureFilter + ", " + std::to_string((textureBytes + (1 << 20) - 1) >> 20) +
+                                        " MiB held; meshes read: " + std::to_string(meshReads) + ")")
         << (textureFit.groups == 0 ? ""
                                    : "; least squares: " + std::to_string(textureFit.groups) + " solves, " +
                                          std::to_string(textureFit.unknowns) + " unknowns, " + std::to_string(textureFit.samples) +

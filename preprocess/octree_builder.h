@@ -65,6 +65,8 @@ struct BuildSummary {
     std::vector<std::string> attributes;  // LiDAR attributes, opacity and scalar fields stored
     std::string textureFilter;            // textureFilterName() where a textured mesh was read, else empty
     FitReport textureFit;                 // the optimal filter's solves
+    uint64_t textureBytes = 0;            // the texture fields held through the build (TextureField::bytes)
+    uint64_t meshReads = 0;               // meshes read from their files (each once, unless the budget dropped one)
 
     std::string text() const;
 };
@@ -89,6 +91,17 @@ inline constexpr uint64_t kBaselineBytes = 48ull << 20;
 // Chunks built at the same time, each with its share of the budget. Fixed, not
 // the thread count: the chunk layout, and so the output, must not depend on it.
 inline constexpr uint64_t kChunksAtOnce = 2;
+// Working memory of one least-squares solve of --texture-filter optimal (a
+// run of at most 8192 surfels and its halo: matrices, triplets, CG vectors):
+// 22.6 MB at most on the dragon, with slack (bench/BENCHMARKS.md, "Memory
+// outside the chunks").
+inline constexpr uint64_t kFitBytesPerSolve = 32ull << 20;
+// Solves a chunk runs at once, whatever the thread count: their memory is a
+// fixed part of the budget, and the chunk layout does not depend on threads.
+inline constexpr int kFitSolvesPerChunk = 2;
+// And per chunk point while optimal textures are fitted: the level's fit
+// copies (position, normal, sigma, colour), its grid and back-references.
+inline constexpr uint64_t kFitBytesPerChunkPoint = 112;
 // A chunk holds at least this many full leaves (capacity points each), so
 // that its subtree has levels to resample: the smallest budget follows from it.
 inline constexpr uint64_t kMinChunkLeaves = 4;

@@ -35,10 +35,10 @@ Vec3f Texture::sample(double u, double v) const {
     return out;
 }
 
-MipTexture::MipTexture(const Texture& texture) {
-    levels.push_back(texture);
-    while (levels.back().width > 1 || levels.back().height > 1) {
-        const Texture& a = levels.back();
+MipTexture::MipTexture(std::shared_ptr<const Texture> texture)
+    : base_(texture ? std::move(texture) : std::make_shared<const Texture>(Texture{"", 1, 1, {128, 128, 128}})) {
+    while (level(levels() - 1).width > 1 || level(levels() - 1).height > 1) {
+        const Texture& a = level(levels() - 1);
         Texture b;
         b.path = a.path;
         b.width = std::max(1, a.width / 2);
@@ -55,15 +55,21 @@ MipTexture::MipTexture(const Texture& texture) {
                         }
                     b.rgb[3 * (size_t(y) * size_t(b.width) + size_t(x)) + size_t(c)] = uint8_t((sum + 2) / 4);
                 }
-        levels.push_back(std::move(b));
+        coarser_.push_back(std::move(b));
     }
 }
 
+uint64_t MipTexture::coarserBytes() const {
+    uint64_t sum = 0;
+    for (const Texture& t : coarser_) sum += t.bytes();
+    return sum;
+}
+
 Vec3f MipTexture::sample(double u, double v, double texelsPerSample) const {
-    const double lod = std::clamp(std::log2(std::max(texelsPerSample, 1e-9)), 0.0, double(levels.size() - 1));
-    const size_t l0 = size_t(lod), l1 = std::min(l0 + 1, levels.size() - 1);
+    const double lod = std::clamp(std::log2(std::max(texelsPerSample, 1e-9)), 0.0, double(levels() - 1));
+    const size_t l0 = size_t(lod), l1 = std::min(l0 + 1, levels() - 1);
     const float f = float(lod - double(l0));
-    return levels[l0].sample(u, v) * (1 - f) + levels[l1].sample(u, v) * f;
+    return level(l0).sample(u, v) * (1 - f) + level(l1).sample(u, v) * f;
 }
 
 Result<Texture> decodeTexture(std::span<const uint8_t> bytes, const std::string& name) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -28,17 +29,28 @@ struct Texture {
     // top) is centred at u = (i + 0.5) / width, v = 1 - (j + 0.5) / height.
     // Channels in [0, 1]. Non-finite coordinates sample (0, 0).
     Vec3f sample(double u, double v) const;
+
+    uint64_t bytes() const { return rgb.capacity() + path.capacity() + sizeof *this; }
 };
 
-// A texture's mip pyramid: level 0 the texture, each next level its 2 x 2
-// texels averaged (a box filter; the last row or column repeated at odd
-// sizes), down to 1 x 1.
-struct MipTexture {
-    std::vector<Texture> levels;
-    explicit MipTexture(const Texture& texture);
+// A texture's mip pyramid: level 0 the texture (shared with the mesh that
+// holds it, not copied; null: one mid-grey texel, for a texture that could
+// not be loaded), each next level its 2 x 2 texels averaged (a box
+// filter; the last row or column repeated at odd sizes), down to 1 x 1.
+class MipTexture {
+public:
+    explicit MipTexture(std::shared_ptr<const Texture> texture);
+    size_t levels() const { return coarser_.size() + 1; }
+    const Texture& level(size_t i) const { return i == 0 ? *base_ : coarser_[i - 1]; }
     // Trilinear: the bilinear reconstructions of the two levels around
     // log2(texelsPerSample) (level-0 texels per sample spacing), blended.
     Vec3f sample(double u, double v, double texelsPerSample) const;
+    // Of the levels above 0 (level 0 belongs to its owners: Texture::bytes).
+    uint64_t coarserBytes() const;
+
+private:
+    std::shared_ptr<const Texture> base_;
+    std::vector<Texture> coarser_;
 };
 
 // Decodes a JPEG, PNG, BMP, TGA, ... into RGB. Errors name the file and say

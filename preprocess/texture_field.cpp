@@ -27,7 +27,7 @@ constexpr double kMaxFootprintTexels = 1 << 16;
 }  // namespace
 
 TextureField::TextureField(const MeshTriangles& mesh, const Vec3d& origin) {
-    for (const Texture& t : mesh.textures) mips_.emplace_back(t.rgb.empty() ? Texture{"", 1, 1, {128, 128, 128}} : t);
+    for (const auto& t : mesh.textures) mips_.emplace_back(t);
     const auto& pos = mesh.vertices.positions;
     Box3d bounds;
     for (size_t i = 0; i + 2 < mesh.triangles.size(); i += 3) {
@@ -50,7 +50,7 @@ TextureField::TextureField(const MeshTriangles& mesh, const Vec3d& origin) {
         if (f < mesh.cornerUvs.size()) t.uv = mesh.cornerUvs[f];
         if (f < mesh.triangleColor.size()) t.color = mesh.triangleColor[f];
         if (t.texture >= 0) {
-            const Texture& level0 = mips_[size_t(t.texture)].levels[0];
+            const Texture& level0 = mips_[size_t(t.texture)].level(0);
             const double du1 = t.uv[2] - t.uv[0], dv1 = t.uv[3] - t.uv[1], du2 = t.uv[4] - t.uv[0], dv2 = t.uv[5] - t.uv[1];
             const double uvArea = 0.5 * std::fabs(du1 * dv2 - dv1 * du2);
             t.texelsPerUnit = std::sqrt(uvArea * level0.width * level0.height / t.area);
@@ -78,6 +78,12 @@ TextureField::TextureField(const MeshTriangles& mesh, const Vec3d& origin) {
     tris_.swap(sorted);
     nodes_.reserve(2 * tris_.size() / kLeafTriangles + 2);
     build(0, uint32_t(tris_.size()));
+}
+
+uint64_t TextureField::bytes() const {
+    uint64_t sum = tris_.capacity() * sizeof(Tri) + nodes_.capacity() * sizeof(Node);
+    for (const MipTexture& m : mips_) sum += m.level(0).bytes() + m.coarserBytes();
+    return sum;
 }
 
 int32_t TextureField::build(uint32_t begin, uint32_t end) {
@@ -160,7 +166,8 @@ bool TextureField::filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* o
             // Texture coordinates so stretched that the footprint holds
             // more texels than kMaxFootprintTexels even at the chosen level:
             // the texture repeats many times under it, and its mean stands in.
-            const Texture& top = mips_[size_t(t.texture)].levels.back();
+            const MipTexture& mip = mips_[size_t(t.texture)];
+            const Texture& top = mip.level(mip.levels() - 1);
             color = Vec3f{top.rgb[0] / 255.f, top.rgb[1] / 255.f, top.rgb[2] / 255.f};
         }
         // A plain colour: the Gaussian's integral over the triangle, on a
@@ -206,8 +213,8 @@ bool TextureField::textured(const Tri& t, const Vec3d& p, double sigma, Add&& ad
     // texel² along each axis), which the Gaussian gives up to keep sigma².
     const MipTexture& mip = mips_[size_t(t.texture)];
     const double perUnit = t.texelsPerUnit;  // level-0 texels per world unit
-    const size_t l = std::min(mip.levels.size() - 1, size_t(std::floor(std::log2(std::max(1.0, 0.5 * sigma * perUnit)))));
-    const Texture& level = mip.levels[l];
+    const size_t l = std::min(mip.levels() - 1, size_t(std::floor(std::log2(std::max(1.0, 0.5 * sigma * perUnit)))));
+    const Texture& level = mip.level(l);
     const double m = std::exp2(double(l));
     const double var = std::max(sigma * sigma - (m * m - 1) / 12 / (perUnit * perUnit), sigma * sigma / 2);
     const double inv2s2 = 1 / (2 * var), reach2 = kReach * kReach * sigma * sigma;

@@ -83,6 +83,9 @@ public:
     bool filter(const Vec3d& p, const Vec3f& n, double sigma, Vec3f* out) const;
 
     size_t triangles() const { return tris_.size(); }
+    // Bytes it holds: triangles, their hierarchy and every texture level
+    // (level 0 too, though the mesh shares it while the build holds that).
+    uint64_t bytes() const;
 
     // Solves eq. 10-11 for each group [begin, end) of `surfels` on its own:
     // the unknowns are every surfel whose kernel reaches a quadrature sample

@@ -524,6 +524,50 @@ Rgb readPng(const std::string& path) {
 }
 }  // namespace
 
+// Issue 31, finding 9: the texture fields (decoded texels, mip levels,
+// triangles) were outside --memory, and each pass read the mesh again. An
+// 8192 x 8192 texture is 192 MiB of texels and 64 MiB of mip levels above
+// them (each a quarter of the one below: 192 x (1/4 + 1/16 + ...) = 64), so
+// the field holds 256 MiB whatever the chunks: under --memory 256M the build
+// stops at once with an error that names them. Under 640M it fits (the
+// minimum: the 48 MiB baseline, the field's 256 MiB and the mesh while it is
+// read, twice its 192 MiB texture while decoding: about 690 MiB, so 768M):
+// peak RSS within the budget (+10 %, as out_of_core_test) and the mesh read
+// once. Before the fix the first build succeeded with a peak RSS of 885 MiB
+// (measured on an 8192² PPM of the same size).
+TEST(TexturedMesh, LargeTexturesCountAgainstTheMemoryBudget) {
+    test::TempDir dir;
+    {
+        std::vector<uint8_t> rgb(size_t(8192) * 8192 * 3);
+        for (size_t j = 0; j < 8192; ++j)
+            for (size_t i = 0; i < 8192; ++i) {
+                uint8_t* p = &rgb[3 * (j * 8192 + i)];
+                p[0] = uint8_t(i / 32), p[1] = uint8_t(j / 32), p[2] = uint8_t((i / 512 + j / 512) % 2 * 255);
+            }
+        ASSERT_TRUE(stbi_write_jpg(dir.file("big.jpg").c_str(), 8192, 8192, 3, rgb.data(), 90));
+    }
+    test::writeFile(dir.file("m.mtl"), "newmtl big\nmap_Kd big.jpg\n");
+    test::writeFile(dir.file("quad.obj"), quadObj("m.mtl", "big"));
+    auto build = [&](const std::string& memory) {
+        return test::run({test::binary("surfcast-build"), dir.file("quad.obj"), "--mesh-spacing", "0.005", "--texture-filter", "ewa",
+                          "--threads", "2", "--memory", memory, "-o", dir.file("set-" + memory)});
+    };
+    auto tight = build("256M");
+    EXPECT_NE(tight.exitCode, 0) << tight.output;
+    EXPECT_NE(tight.output.find("--memory 256 MiB is too small"), std::string::npos) << tight.output;
+    const size_t at = tight.output.find("the textured meshes' textures, mip levels and triangles take ");
+    ASSERT_NE(at, std::string::npos) << tight.output;
+    const int held = std::atoi(tight.output.c_str() + at + std::strlen("the textured meshes' textures, mip levels and triangles take "));
+    EXPECT_GE(held, 256) << tight.output;  // 256 MiB of texels, and the two triangles' few bytes
+    EXPECT_LE(held, 257) << tight.output;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("set-256M"))) << "a half-written set";
+
+    auto fits = build("768M");
+    ASSERT_EQ(fits.exitCode, 0) << fits.output;
+    EXPECT_NE(fits.output.find("meshes read: 1)"), std::string::npos) << fits.output;
+    if (test::kRssMeaningful) EXPECT_LE(double(fits.peakRss), 1.10 * double(768 << 20)) << "peak RSS " << (fits.peakRss >> 20) << " MiB";
+}
+
 // The shared textured dragon, built with its 2048² texture and rendered by the
 // streaming client's renderer, against the mesh itself rendered with its
 // texture by surfcast-mesh-reference (16 samples per pixel, trilinear mip
@@ -608,7 +652,7 @@ MeshTriangles texturedRectangle(const std::function<Vec3f(int, int)>& texel) {
             const Vec3f c = texel(i, j);
             for (int k = 0; k < 3; ++k) t.rgb.push_back(uint8_t(c[k]));
         }
-    m.textures.push_back(t);
+    m.textures.push_back(std::make_shared<const Texture>(t));
     m.triangleTexture = {0, 0};
     m.cornerUvs = {{0, 0, 1, 0, 1, 1}, {0, 0, 1, 1, 0, 1}};
     m.triangleColor.assign(2, Vec3f{});
@@ -678,7 +722,7 @@ TEST(TextureField, EwaCoefficientsAreTheGaussianWeightedTexelAverage) {
             ASSERT_TRUE(field.filter({x, y, 0}, {0, 0, 1}, sigma, &c));
             EXPECT_NEAR(c[0] * 255, expected * 255, sigma <= 2 ? 0.01 : 2.5) << "sigma " << sigma << " x " << x;
             worstEwa = std::max(worstEwa, std::fabs(c[0] - expected) * 255);
-            worstNearest = std::max(worstNearest, std::fabs(rect.textures[0].sample(x / 256, y / 64)[0] - expected) * 255);
+            worstNearest = std::max(worstNearest, std::fabs(rect.textures[0]->sample(x / 256, y / 64)[0] - expected) * 255);
         }
     std::printf("worst difference from the texel average: ewa %.2f/255, nearest %.2f/255\n", worstEwa, worstNearest);
     EXPECT_GT(worstNearest, 50) << "the step blurred by the kernel is what nearest sampling misses";
@@ -773,7 +817,7 @@ double reconstructionError(const MeshTriangles& rect, const std::vector<FitSurfe
                     }
                 }
             if (!(den > 0)) continue;  // a hole, which the renderer leaves too
-            const double truth = rect.textures[0].sample(x / 256, y / 64)[0];
+            const double truth = rect.textures[0]->sample(x / 256, y / 64)[0];
             sum2 += std::pow(num / den - truth, 2);
             ++n;
         }
@@ -810,7 +854,7 @@ TEST(TextureField, OptimalCoefficientsBeatEwaAndNearestInL2) {
     for (double x = 1; x < 256; x += 2)
         for (double y = 1; y < 64; y += 2) {
             FitSurfel s{{x + jitter(), y + jitter(), 0}, {0, 0, 1}, 1.5, {}};
-            s.color = rect.textures[0].sample(s.position.x / 256, s.position.y / 64);
+            s.color = rect.textures[0]->sample(s.position.x / 256, s.position.y / 64);
             nearest.push_back(s);
             ASSERT_TRUE(field.filter(s.position, s.normal, s.sigma, &s.color));
             ewa.push_back(s);
