@@ -320,6 +320,32 @@ TEST(Stream, ColoringChangesWithoutFetchingAgain) {
     EXPECT_TRUE(back.rgba == inColour.rgba) << "switching back did not give the first image";
     EXPECT_FALSE(recoloured.rgba == inColour.rgba);
 
+    // Issue 31, finding 9: the kept blocks counted against no budget. With a
+    // block cache of a third of what the view's blocks take, the cache stays
+    // within it, and the recolour fetches the blocks that went (at most the
+    // resident nodes', no more bytes than the view fetched) and converges to the same image.
+    {
+        ClientOptions options;
+        options.coloring = rgb;
+        options.blockCache = before.stream.keptBytes / 3;
+        auto client = SurfcastClient::open(**ctx, dir.file("autzen"), options);
+        ASSERT_TRUE(client) << client.status().message();
+        ClientFrame first, recolouredFrame;
+        convergeClient(**client, *camera, &first);
+        EXPECT_LE(first.stream.keptBytes, options.blockCache);
+        EXPECT_EQ(first.stream.bytesDownloaded, before.stream.bytesDownloaded);
+        ASSERT_TRUE((*client)->setColoring(classes));
+        convergeClient(**client, *camera, &recolouredFrame);
+        EXPECT_TRUE(clientImage(**client).rgba == opened.rgba) << "recoloured through refetches differs";
+        EXPECT_GT(recolouredFrame.stream.refetched, 0u);
+        EXPECT_LE(recolouredFrame.stream.refetched, first.stream.resident);
+        EXPECT_GT(recolouredFrame.stream.bytesDownloaded, first.stream.bytesDownloaded);
+        EXPECT_LE(recolouredFrame.stream.bytesDownloaded - first.stream.bytesDownloaded, first.stream.bytesDownloaded);
+        EXPECT_LE(recolouredFrame.stream.keptBytes, options.blockCache);
+        std::printf("block cache %zu bytes: %zu blocks fetched again to recolour\n", options.blockCache,
+                    recolouredFrame.stream.refetched);
+    }
+
     // A mode the set lacks is an error, and changes nothing.
     auto scene = test::buildScene(dir.file("scene"), 20000);
     ASSERT_EQ(scene.exitCode, 0) << scene.output;

@@ -565,7 +565,9 @@ TEST(TexturedMesh, LargeTexturesCountAgainstTheMemoryBudget) {
     auto fits = build("768M");
     ASSERT_EQ(fits.exitCode, 0) << fits.output;
     EXPECT_NE(fits.output.find("meshes read: 1)"), std::string::npos) << fits.output;
-    if (test::kRssMeaningful) EXPECT_LE(double(fits.peakRss), 1.10 * double(768 << 20)) << "peak RSS " << (fits.peakRss >> 20) << " MiB";
+    if (test::kRssMeaningful) {
+        EXPECT_LE(double(fits.peakRss), 1.10 * double(768 << 20)) << "peak RSS " << (fits.peakRss >> 20) << " MiB";
+    }
 }
 
 // The shared textured dragon, built with its 2048² texture and rendered by the

@@ -76,6 +76,10 @@ reference.
                         that need more stay coarser, evenly
   --gpu-budget MIB      GPU memory for surfels; with --lod, least recently used nodes
                         evicted beyond it (default 1024, or a quarter of the device's)
+  --block-cache MIB     with --lod: host memory for the compressed blocks of resident
+                        nodes, kept so that changing the colouring fetches nothing
+                        (default 512); beyond it the least recently used go, and a
+                        recolour fetches those again
   --connections N       with --lod: concurrent block requests (default 6)
   --save-redraws        with --lod, headless: also write every redraw before
                         convergence, as OUT_rNNN.png (progressive streaming studies)
@@ -318,6 +322,10 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             float mib = 0;
             if (!positive(&mib, "--gpu-budget")) return false;
             o->client.gpuBudget = size_t(double(mib) * (1 << 20));
+        } else if (a == "--block-cache") {
+            float mib = 0;
+            if (!positive(&mib, "--block-cache")) return false;
+            o->client.blockCache = size_t(double(mib) * (1 << 20));
         } else if (a == "--save-redraws") {
             o->saveRedraws = true;
         } else if (a == "--header") {

@@ -148,6 +148,18 @@ StreamUpdate StreamingSet::update(const Camera& camera, int width, int height, c
             std::unordered_set<uint32_t> gone(u.evicted.begin(), u.evicted.end());
             std::erase_if(u.arrived, [&](const ArrivedNode& a) { return gone.count(a.index) != 0; });
         }
+        // Kept blocks beyond their budget: the least recently used resident
+        // nodes' go first (a recolour fetches them again).
+        if (keptBytes_ > options_.keptBudget) {
+            std::vector<std::pair<uint64_t, uint32_t>> lru;
+            for (const auto& [node, r] : resident_)
+                if (kept_.count(node)) lru.push_back({r.lastUsed, node});
+            std::sort(lru.begin(), lru.end());
+            for (const auto& [used, node] : lru) {
+                if (keptBytes_ <= options_.keptBudget) break;
+                unkeep(node);
+            }
+        }
         wantedPages_.clear();
         for (const auto& [node, priority] : u.lod.missingPages) {
             auto requested = pages_.find(nodes()[node].childPage);
@@ -182,8 +194,10 @@ void StreamingSet::setColoring(const Coloring& coloring) {
         options_.coloring = coloring;
         ++coloringVersion_;
         // Recolour jobs still queued are superseded by the ones queued here;
-        // those being decoded are dropped when they finish (decodeLoop).
+        // those being fetched or decoded are dropped when they finish.
         recolors_ -= size_t(std::erase_if(fetched_, [](const Fetched& f) { return f.recolor; }));
+        recolors_ -= refetch_.size();
+        refetch_.clear();
         // Decoded but not yet handed over: a recolour is queued again below;
         // a fetched node is decoded again, as if just fetched.
         for (const ArrivedNode& a : arrived_) {
@@ -195,10 +209,58 @@ void StreamingSet::setColoring(const Coloring& coloring) {
             fetched_.push_back({a.index, kept_.at(a.index)});
         }
         arrived_.clear();
-        for (const auto& [node, r] : resident_) fetched_.push_back({node, kept_.at(node), true});
+        for (const auto& [node, r] : resident_) {
+            auto kept = kept_.find(node);
+            if (kept != kept_.end()) fetched_.push_back({node, kept->second, true});
+            else refetch_.push_back(node);
+        }
         recolors_ += resident_.size();
     }
     wakeDecode_.notify_all();
+    wakeFetch_.notify_all();
+}
+
+bool StreamingSet::refetchForRecolor(std::unique_lock<std::mutex>& lock) {
+    if (refetch_.empty() || refetchFailed_.second > now()) return false;
+    std::vector<NodeRecord> batch;
+    std::vector<uint32_t> indices;
+    size_t batchBytes = 0;
+    while (!refetch_.empty() && batch.size() < kMaxBatchNodes && batchBytes < options_.batchBytes) {
+        const uint32_t node = refetch_.back();
+        refetch_.pop_back();
+        if (!resident_.count(node)) {  // evicted meanwhile: nothing to recolour
+            --recolors_;
+            continue;
+        }
+        batch.push_back(nodes()[node]);
+        indices.push_back(node);
+        batchBytes += batch.back().blockSize;
+    }
+    if (batch.empty()) return true;
+    const uint64_t version = coloringVersion_;
+    ++stats_.requestsInFlight;
+    lock.unlock();
+    auto blobs = source_->blobs(batch);
+    lock.lock();
+    --stats_.requestsInFlight;
+    ++stats_.requests;
+    if (version != coloringVersion_) {  // a later setColoring queued its own
+        recolors_ -= indices.size();
+        return true;
+    }
+    if (!blobs) {
+        refetch_.insert(refetch_.end(), indices.begin(), indices.end());
+        failed(&refetchFailed_, source_->describe() + ": blocks to recolour", blobs.status());
+        return true;
+    }
+    refetchFailed_ = {0, 0};
+    for (size_t i = 0; i < indices.size(); ++i) {
+        stats_.bytesDownloaded += (*blobs)[i].size();
+        ++stats_.refetched;
+        fetched_.push_back({indices[i], std::make_shared<const std::vector<uint8_t>>(std::move((*blobs)[i])), true});
+    }
+    wakeDecode_.notify_all();
+    return true;
 }
 
 void StreamingSet::keep(uint32_t node, Block bytes) {
@@ -245,6 +307,8 @@ void StreamingSet::stop(const std::string& message) {
     stats_.lastError = message;
     wanted_.clear();
     wantedPages_.clear();
+    recolors_ -= refetch_.size();  // the old colours stay drawn
+    refetch_.clear();
 }
 
 void StreamingSet::addPages() {
@@ -300,6 +364,8 @@ void StreamingSet::checkForRebuild(std::unique_lock<std::mutex>& lock) {
         stats_.lastError = source_->describe() + ": the tile set changed since it was opened (rebuilt); open it again";
         wanted_.clear();
         wantedPages_.clear();
+        recolors_ -= refetch_.size();
+        refetch_.clear();
     }
 }
 
@@ -307,7 +373,7 @@ void StreamingSet::fetchLoop() {
     std::unique_lock lock(mutex_);
     while (true) {
         wakeFetch_.wait_for(lock, std::chrono::duration<double>(0.05),
-                            [&] { return stopping_ || !wanted_.empty() || !wantedPages_.empty(); });
+                            [&] { return stopping_ || !wanted_.empty() || !wantedPages_.empty() || !refetch_.empty(); });
         if (stopping_) return;
         if (checkDue_ && !checking_ && !stats_.setChanged && (permanentAt_ > lastCheck_ || now() - lastCheck_ > 2.0))
             checkForRebuild(lock);
@@ -322,6 +388,7 @@ void StreamingSet::fetchLoop() {
         }
         if (stats_.setChanged || stats_.gaveUp) continue;
         if (fetchPage(lock)) continue;  // pages first: they gate the nodes below them
+        if (refetchForRecolor(lock)) continue;
         // The highest-priority wanted nodes that are neither pending nor
         // backing off, as many as one batch takes and the budget admits
         // (every node fits it alone: checkFitsBudget).
@@ -404,9 +471,10 @@ void StreamingSet::decodeLoop() {
             // evicted meanwhile: dropped. A kept block decoded before, so a
             // failure here is not the block's; it is reported, not retried.
             if (!block && !stats_.gaveUp && !stats_.setChanged) stats_.lastError = block.status().message();
-            if (block && version == coloringVersion_ && resident_.count(job.node))
+            if (block && version == coloringVersion_ && resident_.count(job.node)) {
                 arrived_.push_back({job.node, std::move(surfels)});  // counted in recolors_ until handed over
-            else
+                keep(job.node, job.bytes);  // a refetched block is kept again, within the budget at the next update
+            } else
                 --recolors_;
             continue;
         }

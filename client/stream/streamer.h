@@ -24,9 +24,11 @@
 // stops and stats() says so, rather than failing on blocks that can never
 // match the hierarchy.
 //
-// Each resident node keeps its compressed block (about a third of its 32-byte
-// surfels), so setColoring() re-decodes what is resident without fetching:
-// the recoloured nodes arrive again like fetched ones, replacing the old.
+// Resident nodes keep their compressed blocks (about a third of their 32-byte
+// surfels) in host memory up to keptBudget, so setColoring() re-decodes what
+// is resident without fetching: the recoloured nodes arrive again like
+// fetched ones, replacing the old. Beyond the budget the least recently used
+// resident nodes' blocks go, and a recolour fetches those again.
 #pragma once
 
 #include <condition_variable>
@@ -51,6 +53,11 @@ struct StreamOptions {
     // page holding one stops the stream (StreamStats::gaveUp), naming it.
     size_t memoryBudget = size_t(1) << 30;
     size_t granule = 1;        // surfels: residency is counted in whole granules (the GPU pool's page)
+    // Bytes of compressed blocks kept in host memory for recolouring (every
+    // resident node's, for a full default budget: a set's blocks take about a
+    // third of its surfels' 32 bytes each). Nodes that arrived since the last
+    // update() keep theirs until it.
+    size_t keptBudget = size_t(512) << 20;
     size_t batchBytes = 512 << 10;  // a batched request asks for up to this much (and 32 nodes)
     HttpOptions http;          // timeout (a stalled response fails and is retried), headers, token, CA
     // Tries of one node or page through transient faults before the stream
@@ -67,7 +74,8 @@ struct StreamStats {
     size_t pages = 0;              // hierarchy pages fetched, page 0 included
     size_t requests = 0, requestsInFlight = 0, nodesFetched = 0, inFlight = 0, queued = 0, resident = 0, failures = 0, evictions = 0;
     size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
-    size_t keptBytes = 0;      // compressed blocks kept for recolouring (resident and arrived nodes)
+    size_t keptBytes = 0;      // compressed blocks kept for recolouring (at most keptBudget after an update)
+    size_t refetched = 0;      // blocks fetched again to recolour nodes whose kept blocks had gone
     size_t recoloring = 0;     // resident nodes still to be re-decoded for the latest setColoring
     double fetchMs = 0, decodeMs = 0;  // of the last request and the last block
     std::string lastError;
@@ -144,6 +152,9 @@ private:
     using Block = std::shared_ptr<const std::vector<uint8_t>>;
     void keep(uint32_t node, Block bytes);  // with mutex_ held
     void unkeep(uint32_t node);             // with mutex_ held
+    // Fetches blocks of resident nodes a recolour needs again, if any are
+    // due; with mutex_ held (released while fetching).
+    bool refetchForRecolor(std::unique_lock<std::mutex>& lock);
 
     std::unique_ptr<TileSource> source_;
     std::vector<uint8_t> tilesetJson_;  // as opened
@@ -171,8 +182,10 @@ private:
     std::unordered_map<uint32_t, int> pending_;        // node -> 1 while fetched or decoded
     std::deque<Fetched> fetched_;                       // waiting for a decoder
     std::vector<ArrivedNode> arrived_;                  // decoded, not yet handed over
-    std::unordered_map<uint32_t, Block> kept_;          // blocks of resident and arrived nodes
+    std::unordered_map<uint32_t, Block> kept_;          // blocks of resident and arrived nodes, within keptBudget
     size_t keptBytes_ = 0;
+    std::vector<uint32_t> refetch_;                     // resident nodes to recolour whose blocks went
+    std::pair<int, double> refetchFailed_{0, 0};        // attempts, retry time (s) of the last failed refetch
     uint64_t coloringVersion_ = 0;                      // setColoring calls so far
     size_t recolors_ = 0;                               // recolour jobs not yet handed over or dropped
     std::unordered_map<uint32_t, std::pair<int, double>> failed_;  // node -> attempts, retry time (s)

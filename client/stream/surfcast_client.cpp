@@ -28,6 +28,7 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     stream.decoders = options.decoders;
     stream.memoryBudget = options.gpuBudget ? options.gpuBudget : defaultGpuBudget(ctx);
     stream.granule = SurfelPool::kPageSurfels;
+    if (options.blockCache) stream.keptBudget = options.blockCache;
     stream.coloring = options.coloring;
     auto opened = StreamingSet::open(location, stream);
     if (!opened) return opened.status();

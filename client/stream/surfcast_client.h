@@ -23,6 +23,9 @@ struct ClientOptions {
     int decoders = 0;            // decode threads; 0: one per core
     size_t gpuBudget = 0;        // bytes of GPU memory for surfels; 0: 1 GiB or a quarter of the
                                  // device-local heap, whichever is smaller
+    // Host memory for the compressed blocks kept so that setColoring() needs
+    // no fetching (StreamOptions::keptBudget); 0: the stream's default.
+    size_t blockCache = 0;
     RendererOptions renderer;
     // Colour by an attribute, hide classes: applied as blocks are decoded;
     // setColoring() changes it without fetching again (docs/CLIENT.md).
