@@ -47,7 +47,8 @@ struct LoadedMesh {
 
 namespace {
 
-// Once per message, though each pass of the build opens a mesh again.
+// Once per message, though a mesh may be read again (MeshStore drops one
+// that the budget cannot keep).
 void warnOnce(const std::string& message) {
     static std::mutex mutex;
     static std::set<std::string> warned;

@@ -529,10 +529,10 @@ Rgb readPng(const std::string& path) {
 // 8192 x 8192 texture is 192 MiB of texels and 64 MiB of mip levels above
 // them (each a quarter of the one below: 192 x (1/4 + 1/16 + ...) = 64), so
 // the field holds 256 MiB whatever the chunks: under --memory 256M the build
-// stops at once with an error that names them. Under 640M it fits (the
-// minimum: the 48 MiB baseline, the field's 256 MiB and the mesh while it is
-// read, twice its 192 MiB texture while decoding: about 690 MiB, so 768M):
-// peak RSS within the budget (+10 %, as out_of_core_test) and the mesh read
+// stops at once with an error that names them. Under 768M it fits (the
+// minimum is the 48 MiB baseline, the field's 256 MiB and the mesh while it
+// is read, its 192 MiB texture twice while decoding: about 690 MiB): peak
+// RSS within the budget (+10 %, as out_of_core_test) and the mesh read
 // once. Before the fix the first build succeeded with a peak RSS of 885 MiB
 // (measured on an 8192² PPM of the same size).
 TEST(TexturedMesh, LargeTexturesCountAgainstTheMemoryBudget) {
