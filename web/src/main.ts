@@ -28,8 +28,10 @@ interface State {
   mode: string;
   firstImageMs: number | null;
   convergedMs: number | null;
+  resident: number; // nodes resident on the GPU (drawn or kept for later views)
   residentBytes: number; // the resident nodes' surfels, 32 bytes each in whole granules (lod_selection.ts)
-  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring
+  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within ?block-cache)
+  refetched: number; // blocks fetched again for a recolouring (their kept copies had gone)
   evictions: number;
   frames: number;
   frameMs: number; // the last frame's time on the GPU, from its draw to its fence
@@ -37,8 +39,8 @@ interface State {
 }
 
 const state: State = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
-                       firstImageMs: null, convergedMs: null, residentBytes: 0, keptBytes: 0, evictions: 0, frames: 0, frameMs: 0,
-                       camera: "" };
+                       firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0,
+                       evictions: 0, frames: 0, frameMs: 0, camera: "" };
 (window as unknown as { surfcast: State }).surfcast = state;
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -98,7 +100,8 @@ async function main() {
       if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
       colorBy = by as ColorBy;
       return coloringFor(info, origin, colorBy, hidden);
-    }, { ...kDefaultStreamOptions, memoryBudget: number("gpu-budget", 512, 16) * 2 ** 20 });
+    }, { ...kDefaultStreamOptions, memoryBudget: number("gpu-budget", 512, 16) * 2 ** 20,
+         keptBudget: number("block-cache", 256, 0) * 2 ** 20 });
   } catch (e) {
     showError(`cannot open ${setUrl}: ${(e as Error).message}`);
     return;
@@ -274,8 +277,8 @@ async function main() {
     const st = streamer.stats;
     const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
     if (st.gaveUp) showError(st.lastError);
-    Object.assign(state, { bytes: st.bytes, requests: st.requests, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
-                           evictions: st.evictions });
+    Object.assign(state, { bytes: st.bytes, requests: st.requests, resident: st.resident, residentBytes: st.residentBytes,
+                           keptBytes: st.keptBytes, refetched: st.refetched, evictions: st.evictions });
     $("progress").textContent = `${gpu.length} nodes, ${splats.toLocaleString()} splats, ` +
       `${(st.bytes / 1e6).toFixed(1)} MB in ${st.requests} requests` + (converged ? ", converged" : `, ${st.inFlight} in flight`);
     return { gpu, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };

@@ -10,8 +10,10 @@
 // block that fails its CRC or decoding, a page that fails its checks) are
 // not. Either way the stream then stops, naming the node and why. Residency
 // has a byte budget: beyond it the least recently used nodes that the view
-// does not use are evicted. A resident node keeps its compressed block, so
-// that recolor() decodes it again without fetching it.
+// does not use are evicted. Resident nodes keep their compressed blocks up to
+// keptBudget bytes, so that recolor() decodes them again without fetching;
+// beyond it the least recently used nodes' blocks go, and a recolour fetches
+// those again (as the C++ stream does).
 
 import type { Camera } from "./camera.js";
 import type { ColoringSpec, DecodeJob, DecodeResult } from "./block_decode.js";
@@ -25,6 +27,7 @@ export interface StreamOptions {
   connections: number;
   decoders: number;
   memoryBudget: number; // bytes of resident surfels, 32 each in whole granules (residentBytes)
+  keptBudget: number; // bytes of compressed blocks kept for recolouring
   maxTries: number;
   batchNodes: number;
   batchBytes: number;
@@ -34,6 +37,7 @@ export const kDefaultStreamOptions: StreamOptions = {
   connections: 6,
   decoders: Math.max(1, Math.min(4, (globalThis.navigator?.hardwareConcurrency ?? 2))),
   memoryBudget: 512 * 2 ** 20,
+  keptBudget: 256 * 2 ** 20, // every resident node's, for a full memoryBudget (blocks take about a third of it)
   maxTries: 8,
   batchNodes: 32,
   batchBytes: 512 << 10,
@@ -43,7 +47,7 @@ export interface Resident<T> {
   gpu: T;
   count: number; // surfels drawn (after class filters)
   lastUsed: number;
-  block: Uint8Array; // compressed, as fetched: recolor() decodes it again
+  block: Uint8Array | null; // compressed, as fetched: recolor() decodes it again (null: gone, beyond keptBudget)
 }
 
 // What the GPU side does with arriving and evicted nodes.
@@ -104,7 +108,8 @@ export interface StreamStats {
   inFlight: number;
   resident: number;
   residentBytes: number;
-  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (in no budget)
+  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within keptBudget)
+  refetched: number; // blocks fetched again to recolour nodes whose kept blocks had gone
   evictions: number;
   failures: number;
   lastError: string;
@@ -129,7 +134,8 @@ export class Streamer<T> {
   private extra: string[];
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
-                                  residentBytes: 0, keptBytes: 0, evictions: 0, failures: 0, lastError: "", gaveUp: false };
+                                  residentBytes: 0, keptBytes: 0, refetched: 0, evictions: 0, failures: 0, lastError: "",
+                                  gaveUp: false };
   onChange: () => void = () => {};
 
   private constructor(readonly source: TileSource, info: TilesetInfo, origin: Vec3, index: HierarchyIndex,
@@ -211,8 +217,17 @@ export class Streamer<T> {
     }
     this.stats.resident = this.resident.size;
     this.stats.residentBytes = bytes;
-    this.stats.keptBytes = 0;
-    for (const r of this.resident.values()) this.stats.keptBytes += r.block.byteLength;
+    let kept = 0;
+    for (const r of this.resident.values()) kept += r.block?.byteLength ?? 0;
+    if (kept > this.options.keptBudget) {
+      const old = [...this.resident.values()].filter((r) => r.block).sort((a, b) => a.lastUsed - b.lastUsed);
+      for (const r of old) {
+        if (kept <= this.options.keptBudget) break;
+        kept -= r.block!.byteLength;
+        r.block = null;
+      }
+    }
+    this.stats.keptBytes = kept;
   }
 
   private fetchPage(node: number) {
@@ -339,13 +354,34 @@ export class Streamer<T> {
   // Every resident node decoded again from its kept block with another
   // colouring, nothing fetched; each is drawn with its old surfels until its
   // new ones arrive, and the stream counts them in flight until then.
+  // Blocks that went (keptBudget) are fetched again first, in batches.
   recolor(coloring: ColoringSpec) {
     this.coloring = coloring;
     ++this.generation;
+    const refetch: number[] = [];
     for (const [i, r] of this.resident) {
       if (this.recoloring.has(i)) continue;  // decoded again when it finishes
       this.recoloring.add(i);
-      this.decodeNode(i, r.block, true).catch((e) => this.recolorFailed(i, (e as Error).message));
+      if (r.block) this.decodeNode(i, r.block, true).catch((e) => this.recolorFailed(i, (e as Error).message));
+      else refetch.push(i);
+    }
+    for (let at = 0; at < refetch.length;) {
+      const group: number[] = [];
+      let bytes = 0;
+      const most = Math.max(1, Math.min(this.options.batchNodes, this.source.batchNodes));
+      while (at < refetch.length && group.length < most && (group.length === 0 || bytes < this.options.batchBytes)) {
+        group.push(refetch[at++]);
+        bytes += this.selector.nodes[group[group.length - 1]].blockSize;
+      }
+      const records = group.map((i) => this.selector.nodes[i]);
+      const attempt = () => group.length > 1 ? this.source.blobs(records)
+        : this.source.range("blocks.bin", records[0].blockOffset, records[0].blockSize).then((b) => [b]);
+      withRetries(this.options.maxTries, attempt, () => this.stats.gaveUp)
+        .then((blobs) => {
+          this.stats.refetched += group.length;
+          return Promise.all(group.map((i, k) => this.decodeNode(i, blobs[k], true)));
+        })
+        .catch((e) => group.forEach((i) => this.recoloring.has(i) && this.recolorFailed(i, (e as Error).message)));
     }
     this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
     this.onChange();
