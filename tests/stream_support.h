@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -43,13 +44,21 @@ inline nlohmann::json expectStreamsLikeLocal(const std::string& url, const std::
     args.insert(args.end(), options.begin(), options.end());
     auto remote = run(args);
     EXPECT_EQ(remote.exitCode, 0) << remote.output;
-    auto folder = run({binary("surfcast-view"), "--headless", local, camera, "--lod", "1", "--size", "200x150", "--out",
-                       dir.file("local.png")});
-    EXPECT_EQ(folder.exitCode, 0) << folder.output;
+    // The folder's image, rendered once per program for each view of each set
+    // (the same bytes: its tileset.json and hierarchy.bin, which holds the
+    // blocks' CRCs), as tests stream one set from several hosts.
+    static std::map<std::vector<std::string>, std::string> localImages;
+    const std::vector<std::string> key = {local, camera, readFile(local + "/tileset.json"), readFile(local + "/hierarchy.bin")};
+    if (!localImages.count(key)) {
+        auto folder = run({binary("surfcast-view"), "--headless", local, camera, "--lod", "1", "--size", "200x150", "--out",
+                           dir.file("local.png")});
+        EXPECT_EQ(folder.exitCode, 0) << folder.output;
+        if (folder.exitCode == 0) localImages[key] = readFile(dir.file("local.png"));
+    }
     auto last = lastLine(remote.output);
     EXPECT_TRUE(last.is_object() && last["converged"].get<bool>()) << remote.output;
     EXPECT_TRUE(last.is_object() && last["failures"].get<int>() == 0) << remote.output;
-    EXPECT_TRUE(test::readFile(dir.file("remote.png")) == test::readFile(dir.file("local.png")))
+    EXPECT_TRUE(localImages.count(key) && readFile(dir.file("remote.png")) == localImages[key])
         << url << " " << camera << ": the converged streamed image differs from the local one";
     return last;
 }

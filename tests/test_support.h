@@ -68,7 +68,10 @@ int exitCode(int pid);  // waits for it
 void writeFile(const std::string& path, const std::string& bytes);
 
 // surfcast-build's built-in scene at `points` points into `out`, with any
-// further options (e.g. {"--capacity", "3000"}).
+// further options (e.g. {"--capacity", "3000"}). Built once per test program
+// for each points and options, then copied (with the first build's result)
+// where `out` does not exist yet: many tests stream the same scene, and the
+// build gives the same bytes every time (octree_test checks it).
 RunResult buildScene(const std::string& out, int points, const std::vector<std::string>& options = {});
 
 // The JSON lines (those starting with '{') of a program's output, in order.
