@@ -100,7 +100,7 @@ async function main() {
       if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
       colorBy = by as ColorBy;
       return coloringFor(info, origin, colorBy, hidden);
-    }, { ...kDefaultStreamOptions, memoryBudget: number("gpu-budget", 512, 16) * 2 ** 20,
+    }, { ...kDefaultStreamOptions, memoryBudget: number("gpu-budget", 512, 1) * 2 ** 20,
          keptBudget: number("block-cache", 256, 0) * 2 ** 20 });
   } catch (e) {
     showError(`cannot open ${setUrl}: ${(e as Error).message}`);

@@ -192,7 +192,10 @@ describe("browser viewer", { skip }, () => {
   before(async () => {
     work = mkdtempSync(join(tmpdir(), "surfcast-browser-"));
     const sets = join(work, "sets");
-    execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--page-depth", "2", "-o", join(sets, "scene")]);
+    // 400,000 points: the close-up draws 206,869 splats, several times what
+    // the budget tests below allow.
+    execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "400000", "--page-depth", "2", "-o",
+                                        join(sets, "scene")]);
     // Translucent: every surfel at opacity 0.5 (a smaller scene: each of the
     // three layers costs two passes over the splats).
     for (const [name, opacity] of [["translucent", "0.5"], ["opaque", "1"]])
@@ -366,26 +369,26 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("a GPU budget: the view stays within it and least recently used nodes go", async () => {
-    // 16 MiB holds 524,288 surfels: less than the close-up's 535,029 and
+    // 6 MiB holds 196,608 surfels: less than the close-up's 206,869 and
     // the nodes refined through to reach them.
-    const budget = 16 * 2 ** 20;
+    const budget = 6 * 2 ** 20;
     const page = await browser.newPage();
     await page.setViewport(size);
     const problems = [];
     page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
     page.on("pageerror", (e) => problems.push(e.message));
-    await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}&gpu-budget=16`);
+    await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}&gpu-budget=6`);
     const converged = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(converged, { timeout: 60000 });
     const first = await page.evaluate(() => ({ ...window.surfcast }));
     assert.deepEqual(first.errors, []);
     assert.ok(first.converged && first.residentBytes <= budget, `resident ${first.residentBytes}`);
-    assert.ok(first.splats < 535029, `the budget keeps the view coarser: ${first.splats} splats`);
+    assert.ok(first.splats < 206869, `the budget keeps the view coarser: ${first.splats} splats`);
     // The Vulkan client under the same budget draws the same nodes: one
     // order of refinement, one cost per node (whole 1024-surfel granules).
-    const ref = reference(`${serveUrl}/sets/scene`, ["--gpu-budget", "16"]);
-    assert.equal(first.nodes, ref.json.nodes, "as many nodes as surfcast-view --gpu-budget 16");
-    assert.equal(first.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --gpu-budget 16");
+    const ref = reference(`${serveUrl}/sets/scene`, ["--gpu-budget", "6"]);
+    assert.equal(first.nodes, ref.json.nodes, "as many nodes as surfcast-view --gpu-budget 6");
+    assert.equal(first.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --gpu-budget 6");
     // Turn to look elsewhere: the new view's nodes evict the old ones.
     await page.mouse.move(320, 240);
     await page.mouse.down();
@@ -403,14 +406,14 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("a splat budget: the same nodes as surfcast-view under it", async () => {
-    // 150,000 splats: a quarter of the close-up; the budget stops refinement
+    // 50,000 splats: a quarter of the close-up; the budget stops refinement
     // part way down, where the order nodes are refined in decides which.
-    const { state, problems } = await view(`${serveUrl}/?set=/sets/scene&camera=${camera}&splats=150000`);
+    const { state, problems } = await view(`${serveUrl}/?set=/sets/scene&camera=${camera}&splats=50000`);
     assert.deepEqual(problems, []);
     assert.equal(state.converged, true);
-    const ref = reference(`${serveUrl}/sets/scene`, ["--splat-budget", "150000"]);
+    const ref = reference(`${serveUrl}/sets/scene`, ["--splat-budget", "50000"]);
     assert.equal(state.nodes, ref.json.nodes);
-    assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --splat-budget 150000");
+    assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --splat-budget 50000");
     assert.equal(state.splats, ref.json.splats);
   });
 
