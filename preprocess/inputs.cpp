@@ -29,10 +29,13 @@ bool isTextExtension(const std::string& ext) {
     return std::find(std::begin(kTextExtensions), std::end(kTextExtensions), ext) != std::end(kTextExtensions);
 }
 
-Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const InputOptions& options) {
+enum class InputKind { Points, Mesh };
+
+// How openOne reads `path`: by extension and magic bytes, a PLY by whether
+// its header declares faces.
+Result<InputKind> inputKind(const std::string& path, const InputOptions& options) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) return Status::error(path + ": no such file");
-    std::string ext = lowerExtension(path);
     char magic[4] = {};
     {
         auto in = ByteStream::open(path);
@@ -40,21 +43,35 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
         if (in->fileSize() == 0) return Status::error(path + ": empty file");
         in->readBytes(magic, std::min<uint64_t>(4, in->fileSize()));
     }
-    if (ext == ".ply" || std::string(magic, 3) == "ply") {
-        if (!options.verticesOnly) {
-            auto in = ByteStream::open(path);
-            if (!in) return in.status();
-            auto header = parsePlyHeader(*in);
-            if (!header) return header.status();
-            if (plyHasFaces(*header)) return openMeshReader(path, options.mesh, options.meshes.get());
-        }
-        return openPlyReader(path, options.scalars);
+    if (lowerExtension(path) == ".ply" || std::string(magic, 3) == "ply") {
+        if (options.verticesOnly) return InputKind::Points;
+        auto in = ByteStream::open(path);
+        if (!in) return in.status();
+        auto header = parsePlyHeader(*in);
+        if (!header) return header.status();
+        return plyHasFaces(*header) ? InputKind::Mesh : InputKind::Points;
     }
+    const std::string m(magic, 4);
+    if (m == "# .P" || m == "VERS" || m == "LASF") return InputKind::Points;
+    return isMeshExtension(path) ? InputKind::Mesh : InputKind::Points;
+}
+
+Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const InputOptions& options) {
+    auto kind = inputKind(path, options);
+    if (!kind) return kind.status();
+    if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
+    std::string ext = lowerExtension(path);
+    char magic[4] = {};
+    {
+        auto in = ByteStream::open(path);
+        if (!in) return in.status();
+        in->readBytes(magic, std::min<uint64_t>(4, in->fileSize()));
+    }
+    if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars);
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
         return openPcdReader(path, options.scalars, options.readAlpha);
     if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF")
         return openLasReader(path, options.threads, options.scalars);
-    if (isMeshExtension(path)) return openMeshReader(path, options.mesh, options.meshes.get());
     if (isTextExtension(ext)) return openTextReader(path, options.columns);
     return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
 }
@@ -140,8 +157,9 @@ private:
 // the visitor, which gets them in order: a point file whose declared points
 // fit a quarter of kPrefetchBytes is decoded whole (small files, whose decoding
 // cannot be split over threads, decode side by side and alongside the
-// visitor's work); a larger one is handed over open and unread. At most
-// kPrefetchFiles files and kPrefetchBytes of points are ahead.
+// visitor's work); a larger one is handed over open and unread; a mesh is
+// opened by the visitor. At most kPrefetchFiles files and kPrefetchBytes of
+// points are ahead.
 class ReadAhead {
 public:
     explicit ReadAhead(const InputOptions& options) : options_(options) {
@@ -161,12 +179,17 @@ public:
     Result<std::unique_ptr<PointReader>> next() {
         std::unique_lock lock(mutex_);
         changed_.wait(lock, [&] { return ready_.count(nextToVisit_) != 0; });
-        auto node = ready_.extract(nextToVisit_++);
+        const size_t index = nextToVisit_++;
+        auto node = ready_.extract(index);
         Item& item = node.mapped();
         bytes_ -= item.bytes;
         --ahead_;
         changed_.notify_all();
         if (!item.status.ok()) return item.status;
+        if (item.deferred) {
+            lock.unlock();
+            return openOne(options_.paths[index], options_);
+        }
         return std::move(item.reader);
     }
 
@@ -175,10 +198,18 @@ private:
         std::unique_ptr<PointReader> reader;
         Status status;
         size_t bytes = 0;
+        bool deferred = false;  // opened by the visitor (a mesh)
     };
 
     Item load(const std::string& path) {
         Item item;
+        // A mesh is read whole (and kept by the MeshStore): left to the
+        // visitor, so that the meshes in memory beside the store's are the
+        // one being visited alone, as the build's budget counts them.
+        if (auto kind = inputKind(path, options_); kind && *kind == InputKind::Mesh) {
+            item.deferred = true;
+            return item;
+        }
         auto r = openOne(path, options_);
         if (!r) {
             item.status = r.status();

@@ -531,12 +531,16 @@ Result<std::shared_ptr<const LoadedMesh>> MeshStore::load(const std::string& pat
     if (!loaded) return loaded.status();
     std::shared_ptr<const LoadedMesh> mesh = std::move(*loaded);
     const uint64_t size = meshBytes(*mesh);
-    // While it is read, a texture is also in stb_image's buffer, which is
-    // then copied into it: the largest once more on top.
-    uint64_t largestTexture = 0;
-    for (const auto& t : mesh->textures)
-        if (t) largestTexture = std::max(largestTexture, t->bytes());
-    largest_ = std::max(largest_, size + largestTexture);
+    // While a texture is read, its file's bytes and stb_image's buffer
+    // (then copied into it) are held too: the largest of those on top.
+    uint64_t decoding = 0;
+    for (const auto& t : mesh->textures) {
+        if (!t) continue;
+        std::error_code ec;
+        const uint64_t file = std::filesystem::file_size(t->path, ec);
+        decoding = std::max(decoding, t->bytes() + (ec ? 0 : file));
+    }
+    largest_ = std::max(largest_, size + decoding);
     ++reads_;
     held_[path] = {mesh, clock_};
     trim();
@@ -645,7 +649,7 @@ Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, 
     }
     if (textures) {
         // Texture index t + 1 is out.textures[t], shared, not copied.
-        out.textures.assign(loaded.textures.begin() + 1, loaded.textures.end());
+        if (loaded.textures.size() > 1) out.textures.assign(loaded.textures.begin() + 1, loaded.textures.end());
     }
     return out;
 }

@@ -919,8 +919,9 @@ std::string BuildSummary::text() const {
         out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";
     out << "normals: " << normalSource << "; colour: " << (colorBits ? std::to_string(colorBits) + "-bit" : "none")
         << (textureFilter.empty() ? ""
-                                  : " (textures: " + textureFilter + ", " + std::to_string((textureBytes + (1 << 20) - 1) >> 20) +
-                                        " MiB held; meshes read: " + std::to_string(meshReads) + ")")
+                                  : " (textures: " + textureFilter +
+                                        (textureBytes ? ", " + std::to_string((textureBytes + (1 << 20) - 1) >> 20) + " MiB held" : "") +
+                                        "; meshes read: " + std::to_string(meshReads) + ")")
         << (textureFit.groups == 0 ? ""
                                    : "; least squares: " + std::to_string(textureFit.groups) + " solves, " +
                                          std::to_string(textureFit.unknowns) + " unknowns, " + std::to_string(textureFit.samples) +

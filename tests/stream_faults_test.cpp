@@ -3,7 +3,8 @@
 // over the GPU budget and a rebuilt set stop the stream at once, naming what
 // failed; over-long responses are cut off; closing does not wait for a stalled
 // host; an unreachable server is a clear error, not a hang; a write to a
-// closed socket does not kill the client (SIGPIPE).
+// closed socket does not kill the client (SIGPIPE); blocks fetched again to
+// recolour fail like any fetch.
 
 #include <gtest/gtest.h>
 #include <httplib.h>
@@ -318,6 +319,63 @@ TEST(Stream, RefusalsFailAtOnceAndServerFaultsAreRetried) {
         EXPECT_NE(st.lastError.find(transient ? ": gave up after 3 tries" : ": failed, not retried"), std::string::npos)
             << st.lastError;
     }
+}
+
+// Blocks fetched again to recolour (their kept copies gone: a block cache
+// of one byte) fail like any fetch: a block that fails its CRC stops the
+// stream naming the node (it was once dropped quietly, leaving the old
+// colours and a converged view). A recolouring after the stream stopped
+// re-decodes what is kept and converges (it once queued fetches that the
+// stopped stream never made: the fetch threads spun and no update converged).
+TEST(Stream, BlocksFetchedAgainToRecolourFailLikeAnyFetch) {
+    TempDir dir;
+    auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    httplib::Server host;
+    std::atomic<bool> corrupt{false};
+    host.Get(R"(/(tileset\.json|hierarchy\.bin|blocks\.bin))", [&](const httplib::Request& req, httplib::Response& res) {
+        const std::string name = req.matches[1];
+        std::string bytes = test::readFile(dir.file("scene/" + name));
+        if (name == "blocks.bin" && corrupt)
+            for (char& c : bytes) c = char(~c);
+        // httplib answers Range requests from the whole content.
+        res.set_content(bytes, "application/octet-stream");
+    });
+    const int port = host.bind_to_any_port("127.0.0.1");
+    std::thread serving([&] { host.listen_after_bind(); });
+    struct Stop {
+        httplib::Server& host;
+        std::thread& thread;
+        ~Stop() {
+            host.stop();
+            if (thread.joinable()) thread.join();
+        }
+    } stop{host, serving};
+    for (int i = 0; i < 500 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    ASSERT_TRUE(host.is_running());
+    StreamOptions options = connections(2);
+    options.keptBudget = 1;
+    auto set = StreamingSet::open("http://127.0.0.1:" + std::to_string(port), options);
+    ASSERT_TRUE(set) << set.status().message();
+    auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
+    ASSERT_TRUE(camera);
+    std::vector<uint32_t> drawn;
+    ASSERT_TRUE(streamUntilConverged(**set, *camera, &drawn, 20));
+    EXPECT_EQ((*set)->stats().keptBytes, 0u);
+
+    corrupt = true;
+    Coloring elevation;
+    elevation.by = ColorBy::Elevation;
+    (*set)->setColoring(elevation);
+    const StreamStats st = streamUntilGaveUp(**set, 10);
+    EXPECT_NE(st.lastError.find("CRC mismatch"), std::string::npos) << st.lastError;
+    EXPECT_GT(st.refetched, 0u);
+
+    Coloring rgb;
+    rgb.by = ColorBy::Rgb;
+    (*set)->setColoring(rgb);
+    EXPECT_TRUE(streamUntilConverged(**set, *camera, &drawn, 3)) << "a recolouring after the stream stopped never converged";
+    EXPECT_TRUE((*set)->stats().gaveUp);
 }
 
 // Hierarchy pages are fetched as traversal reaches them and checked as they

@@ -209,12 +209,23 @@ void StreamingSet::setColoring(const Coloring& coloring) {
             fetched_.push_back({a.index, kept_.at(a.index)});
         }
         arrived_.clear();
+        // Blocks that went are fetched again, most recently used last (the
+        // fetch loop takes from the back), unless the stream has stopped:
+        // then those nodes keep their colours.
+        const bool stopped = stats_.gaveUp || stats_.setChanged;
+        std::vector<std::pair<uint64_t, uint32_t>> missing;
         for (const auto& [node, r] : resident_) {
             auto kept = kept_.find(node);
-            if (kept != kept_.end()) fetched_.push_back({node, kept->second, true});
-            else refetch_.push_back(node);
+            if (kept != kept_.end()) {
+                fetched_.push_back({node, kept->second, true});
+                ++recolors_;
+            } else if (!stopped) {
+                missing.push_back({r.lastUsed, node});
+            }
         }
-        recolors_ += resident_.size();
+        std::sort(missing.begin(), missing.end());
+        for (const auto& [used, node] : missing) refetch_.push_back(node);
+        recolors_ += missing.size();
     }
     wakeDecode_.notify_all();
     wakeFetch_.notify_all();
@@ -249,15 +260,17 @@ bool StreamingSet::refetchForRecolor(std::unique_lock<std::mutex>& lock) {
         return true;
     }
     if (!blobs) {
-        refetch_.insert(refetch_.end(), indices.begin(), indices.end());
         failed(&refetchFailed_, source_->describe() + ": blocks to recolour", blobs.status());
+        // Tried again after the backoff, unless that stopped the stream.
+        if (stats_.gaveUp || stats_.setChanged) recolors_ -= indices.size();
+        else refetch_.insert(refetch_.end(), indices.begin(), indices.end());
         return true;
     }
     refetchFailed_ = {0, 0};
     for (size_t i = 0; i < indices.size(); ++i) {
         stats_.bytesDownloaded += (*blobs)[i].size();
         ++stats_.refetched;
-        fetched_.push_back({indices[i], std::make_shared<const std::vector<uint8_t>>(std::move((*blobs)[i])), true});
+        fetched_.push_back({indices[i], std::make_shared<const std::vector<uint8_t>>(std::move((*blobs)[i])), true, true});
     }
     wakeDecode_.notify_all();
     return true;
@@ -413,6 +426,7 @@ void StreamingSet::fetchLoop() {
             indices.push_back(candidate);
             batchBytes += batch.back().blockSize;
         }
+        if (!refetch_.empty()) wait = std::min(wait, refetchFailed_.second - t);  // its backoff
         if (batch.empty()) {
             wakeFetch_.wait_for(lock, std::chrono::duration<double>(std::max(wait, 0.01)));
             continue;
@@ -470,8 +484,19 @@ void StreamingSet::decodeLoop() {
             // Superseded by a later setColoring (which queued its own), or
             // evicted meanwhile: dropped. A kept block decoded before, so a
             // failure here is not the block's; it is reported, not retried.
+            // A block fetched again that fails is a failure like any fetch's:
+            // the node waits to be fetched again (a permanent failure stops
+            // the stream first), still counted, so no update converges on
+            // its old colours meanwhile.
+            const bool current = version == coloringVersion_ && resident_.count(job.node);
+            if (!block && job.refetched && current) {
+                failed(&refetchFailed_, source_->describe() + ": node " + record.key.name(), block.status());
+                if (stats_.gaveUp || stats_.setChanged) --recolors_;
+                else refetch_.push_back(job.node);
+                continue;
+            }
             if (!block && !stats_.gaveUp && !stats_.setChanged) stats_.lastError = block.status().message();
-            if (block && version == coloringVersion_ && resident_.count(job.node)) {
+            if (block && current) {
                 arrived_.push_back({job.node, std::move(surfels)});  // counted in recolors_ until handed over
                 keep(job.node, job.bytes);  // a refetched block is kept again, within the budget at the next update
             } else

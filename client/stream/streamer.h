@@ -170,7 +170,8 @@ private:
     struct Fetched {
         uint32_t node;
         Block bytes;
-        bool recolor = false;  // a resident node's kept block, to decode with the new coloring
+        bool recolor = false;    // a resident node's block, to decode with the new coloring
+        bool refetched = false;  // fetched again for that (its kept copy had gone)
     };
 
     mutable std::mutex mutex_;

@@ -23,12 +23,12 @@ struct ClientOptions {
     int decoders = 0;            // decode threads; 0: one per core
     size_t gpuBudget = 0;        // bytes of GPU memory for surfels; 0: 1 GiB or a quarter of the
                                  // device-local heap, whichever is smaller
-    // Host memory for the compressed blocks kept so that setColoring() needs
-    // no fetching (StreamOptions::keptBudget); 0: the stream's default.
+    // Host memory for the compressed blocks kept so that setColoring()
+    // fetches nothing (StreamOptions::keptBudget); 0: the stream's default.
     size_t blockCache = 0;
     RendererOptions renderer;
     // Colour by an attribute, hide classes: applied as blocks are decoded;
-    // setColoring() changes it without fetching again (docs/CLIENT.md).
+    // setColoring() changes it from the kept blocks (docs/CLIENT.md).
     Coloring coloring;
 };
 
@@ -58,7 +58,8 @@ public:
 
     // Colour by another attribute, or hide other classes: an error (nothing
     // changes) when the set lacks the attribute. The resident nodes are
-    // decoded again from the blocks the stream kept, without fetching; they
+    // decoded again from the blocks the stream kept (those beyond the block
+    // cache fetched again); they
     // replace the old surfels over the next updates, which report converged
     // only once all have.
     Status setColoring(const Coloring& coloring);

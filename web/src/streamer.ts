@@ -131,6 +131,7 @@ export class Streamer<T> {
   private clock = 0;
   private generation = 0; // of the colouring: what was decoded with an older one is decoded again
   private recoloring = new Set<number>(); // resident nodes being decoded again with a new colouring
+  private refetchQueue: number[] = []; // of those, the ones whose blocks are to be fetched again
   private extra: string[];
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
@@ -191,6 +192,7 @@ export class Streamer<T> {
     if (!this.stats.gaveUp) {
       for (const [node] of lod.missingPages.sort((a, b) => b[1] - a[1])) this.fetchPage(node);
       const wanted = lod.missing.filter(([i]) => !this.inFlight.has(i)).sort((a, b) => b[1] - a[1]).map(([i]) => i);
+      this.pumpRefetches();  // recolourings first: those nodes are on screen
       this.fetchNodes(wanted);
     }
     this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
@@ -352,39 +354,70 @@ export class Streamer<T> {
   }
 
   // Every resident node decoded again from its kept block with another
-  // colouring, nothing fetched; each is drawn with its old surfels until its
-  // new ones arrive, and the stream counts them in flight until then.
-  // Blocks that went (keptBudget) are fetched again first, in batches.
+  // colouring; each is drawn with its old surfels until its new ones arrive,
+  // and the stream counts them in flight until then.
+  // Blocks that went (keptBudget) are fetched again, most recently used
+  // first, in batches within the connection limit (pumpRefetches).
   recolor(coloring: ColoringSpec) {
     this.coloring = coloring;
     ++this.generation;
-    const refetch: number[] = [];
+    const missing: [number, number][] = [];
     for (const [i, r] of this.resident) {
       if (this.recoloring.has(i)) continue;  // decoded again when it finishes
-      this.recoloring.add(i);
-      if (r.block) this.decodeNode(i, r.block, true).catch((e) => this.recolorFailed(i, (e as Error).message));
-      else refetch.push(i);
+      if (r.block) {
+        this.recoloring.add(i);
+        this.decodeNode(i, r.block, true).catch((e) => this.recolorFailed(i, (e as Error).message));
+      } else if (!this.stats.gaveUp) {
+        this.recoloring.add(i);
+        missing.push([r.lastUsed, i]);
+      }
     }
-    for (let at = 0; at < refetch.length;) {
+    this.refetchQueue.push(...missing.sort((a, b) => b[0] - a[0]).map(([, i]) => i));
+    this.pumpRefetches();
+    this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
+    this.onChange();
+  }
+
+  // Starts batches of refetchQueue while connections are free. A batch that
+  // fails (after retries, or at once where permanent) stops the stream, as a
+  // node's fetch does.
+  private pumpRefetches() {
+    while (this.refetchQueue.length > 0 && this.requestsInFlight < this.options.connections && !this.stats.gaveUp) {
       const group: number[] = [];
       let bytes = 0;
       const most = Math.max(1, Math.min(this.options.batchNodes, this.source.batchNodes));
-      while (at < refetch.length && group.length < most && (group.length === 0 || bytes < this.options.batchBytes)) {
-        group.push(refetch[at++]);
-        bytes += this.selector.nodes[group[group.length - 1]].blockSize;
+      while (this.refetchQueue.length > 0 && group.length < most && (group.length === 0 || bytes < this.options.batchBytes)) {
+        const i = this.refetchQueue.shift()!;
+        if (!this.resident.has(i)) {  // evicted meanwhile: nothing to recolour
+          this.recoloring.delete(i);
+          continue;
+        }
+        group.push(i);
+        bytes += this.selector.nodes[i].blockSize;
       }
+      if (group.length === 0) continue;
       const records = group.map((i) => this.selector.nodes[i]);
       const attempt = () => group.length > 1 ? this.source.blobs(records)
         : this.source.range("blocks.bin", records[0].blockOffset, records[0].blockSize).then((b) => [b]);
+      ++this.requestsInFlight;
       withRetries(this.options.maxTries, attempt, () => this.stats.gaveUp)
         .then((blobs) => {
           this.stats.refetched += group.length;
-          return Promise.all(group.map((i, k) => this.decodeNode(i, blobs[k], true)));
+          group.forEach((i, k) => this.decodeNode(i, blobs[k], true).catch((e) => this.recolorFailed(i, (e as Error).message)));
+        }, (e) => {
+          group.forEach((i) => this.recoloring.delete(i));
+          this.fail(`recolouring: nodes ${records.map((r) => r.key).join(", ")}: ${(e as Error).message}`);
         })
-        .catch((e) => group.forEach((i) => this.recoloring.has(i) && this.recolorFailed(i, (e as Error).message)));
+        .finally(() => {
+          --this.requestsInFlight;
+          this.pumpRefetches();
+          this.onChange();
+        });
     }
-    this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
-    this.onChange();
+    if (this.stats.gaveUp) {  // the stream stopped: those nodes keep their colours
+      for (const i of this.refetchQueue) this.recoloring.delete(i);
+      this.refetchQueue = [];
+    }
   }
 
   // A recolouring that failed (bytes that decoded before, or the upload): the
@@ -393,7 +426,8 @@ export class Streamer<T> {
   private recolorFailed(i: number, message: string) {
     this.recoloring.delete(i);
     ++this.stats.failures;
-    this.stats.lastError = `node ${this.selector.nodes[i].key}: recolouring: ${message}`;
+    // After the stream stopped, lastError says why.
+    if (!this.stats.gaveUp) this.stats.lastError = `node ${this.selector.nodes[i].key}: recolouring: ${message}`;
     this.onChange();
   }
 
