@@ -218,7 +218,7 @@ private:
         const InputDescription& d = (*r)->description();
         const size_t pointBytes = sizeof(InputPoint) + d.scalars.size() * sizeof(double);
         const uint64_t declared = d.declaredPoints * pointBytes;
-        if (d.declaredPoints == 0 || d.format == "mesh" || declared > kPrefetchBytes / 4) {
+        if (d.declaredPoints == 0 || declared > kPrefetchBytes / 4) {
             item.reader = std::move(*r);
             item.bytes = kPrefetchBytes / 4;  // an open decoder and its buffers
             return item;

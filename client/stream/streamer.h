@@ -122,9 +122,10 @@ public:
     StreamUpdate update(const Camera& camera, int width, int height, const LodParams& params);
     StreamStats stats() const;
     // Colour and filter by `coloring` from now on: nodes decoded later use
-    // it, and every resident node is re-decoded from its kept block (nothing
-    // is fetched) and arrives again in a later update. Until then the old
-    // surfels are drawn, and update() reports converged = false.
+    // it, and every resident node is re-decoded from its kept block (those
+    // beyond keptBudget fetched again) and arrives again in a later update.
+    // Until then the old surfels are drawn, and update() reports converged =
+    // false.
     void setColoring(const Coloring& coloring);
     // Bytes a node occupies when resident (whole granules of 32-byte surfels).
     size_t residentCost(uint32_t index) const;

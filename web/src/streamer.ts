@@ -177,6 +177,7 @@ export class Streamer<T> {
     if (this.stats.gaveUp) return;
     this.stats.gaveUp = true;
     this.stats.lastError = message;
+    this.dropRefetches();
     this.onChange();
   }
 
@@ -294,7 +295,7 @@ export class Streamer<T> {
   // Decodes node i's block with the current colouring (again, if the
   // colouring changes meanwhile) and makes it resident, or, for a resident
   // node being recoloured, replaces its surfels on the GPU.
-  private async decodeNode(i: number, blob: Uint8Array, recolor = false) {
+  private async decodeNode(i: number, blob: Uint8Array, recolor = false, refetched = false) {
     const generation = this.generation;
     const n = this.selector.nodes[i];
     const min = nodeMin(this.info, n);
@@ -309,12 +310,15 @@ export class Streamer<T> {
     });
     if (result.error || !result.surfels) {
       if (!recolor) this.noteFailure(i, new Error(result.error ?? "decoding failed"));
-      else this.recolorFailed(i, result.error ?? "decoding failed");
+      else if (refetched) {  // a block fetched again fails like any fetch: the stream stops
+        this.recoloring.delete(i);
+        this.fail(`node ${n.key}: ${result.error ?? "decoding failed"}`);
+      } else this.recolorFailed(i, result.error ?? "decoding failed");
       return;
     }
     const old = this.resident.get(i);
     if (!this.stats.gaveUp && generation !== this.generation && (!recolor || old)) {
-      await this.decodeNode(i, block, recolor);  // recoloured meanwhile: its surfels would show the old colouring
+      await this.decodeNode(i, block, recolor, refetched);  // recoloured meanwhile: its surfels would show the old colouring
       return;
     }
     // A recolouring owns only its place in `recoloring`: the node may be
@@ -403,7 +407,7 @@ export class Streamer<T> {
       withRetries(this.options.maxTries, attempt, () => this.stats.gaveUp)
         .then((blobs) => {
           this.stats.refetched += group.length;
-          group.forEach((i, k) => this.decodeNode(i, blobs[k], true).catch((e) => this.recolorFailed(i, (e as Error).message)));
+          group.forEach((i, k) => this.decodeNode(i, blobs[k], true, true).catch((e) => this.recolorFailed(i, (e as Error).message)));
         }, (e) => {
           group.forEach((i) => this.recoloring.delete(i));
           this.fail(`recolouring: nodes ${records.map((r) => r.key).join(", ")}: ${(e as Error).message}`);
@@ -414,10 +418,13 @@ export class Streamer<T> {
           this.onChange();
         });
     }
-    if (this.stats.gaveUp) {  // the stream stopped: those nodes keep their colours
-      for (const i of this.refetchQueue) this.recoloring.delete(i);
-      this.refetchQueue = [];
-    }
+    if (this.stats.gaveUp) this.dropRefetches();
+  }
+
+  // The stream stopped: the nodes waiting for their blocks keep their colours.
+  private dropRefetches() {
+    for (const i of this.refetchQueue) this.recoloring.delete(i);
+    this.refetchQueue = [];
   }
 
   // A recolouring that failed (bytes that decoded before, or the upload): the
