@@ -582,13 +582,19 @@ uint64_t MeshStore::reads() const {
     return reads_;
 }
 
+namespace {
+// The mesh at `path` from `store`, or read here without one.
+Result<std::shared_ptr<const LoadedMesh>> sharedMesh(const std::string& path, bool textures, const MeshSampling& options,
+                                                     MeshStore* store) {
+    if (store) return store->load(path, options);
+    auto loaded = loadMesh(path, {textures, options.allowMissingTextures, options.allowOutsidePaths});
+    if (!loaded) return loaded.status();
+    return std::shared_ptr<const LoadedMesh>(std::move(*loaded));
+}
+}  // namespace
+
 Result<std::unique_ptr<PointReader>> openMeshReader(const std::string& path, const MeshSampling& sampling, MeshStore* store) {
-    Result<std::shared_ptr<const LoadedMesh>> mesh = Status::error("");
-    if (store) mesh = store->load(path, sampling);
-    else if (auto loaded = loadMesh(path, {true, sampling.allowMissingTextures, sampling.allowOutsidePaths}); loaded)
-        mesh = std::shared_ptr<const LoadedMesh>(std::move(*loaded));
-    else
-        mesh = loaded.status();
+    auto mesh = sharedMesh(path, true, sampling, store);
     if (!mesh) return mesh.status();
     return std::unique_ptr<PointReader>(new MeshReader(std::move(*mesh), path, sampling));
 }
@@ -614,12 +620,7 @@ Result<MeshVertexNormals> readMeshVertexNormals(const std::string& path) {
 }
 
 Result<MeshTriangles> readMeshTriangles(const std::string& path, bool textures, const MeshSampling& options, MeshStore* store) {
-    Result<std::shared_ptr<const LoadedMesh>> mesh = Status::error("");
-    if (store) mesh = store->load(path, options);
-    else if (auto loaded = loadMesh(path, {textures, options.allowMissingTextures, options.allowOutsidePaths}); loaded)
-        mesh = std::shared_ptr<const LoadedMesh>(std::move(*loaded));
-    else
-        mesh = loaded.status();
+    auto mesh = sharedMesh(path, textures, options, store);
     if (!mesh) return mesh.status();
     const LoadedMesh& loaded = **mesh;
     const TriMesh& m = loaded.mesh;

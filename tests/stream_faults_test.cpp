@@ -44,6 +44,22 @@ TEST(Stream, UnreachableServerIsAClearError) {
     EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30));
 }
 
+// Serves `host` on a free loopback port from a thread of its own, waiting up
+// to 10 s for it to listen; stopped and joined however the test leaves.
+struct Serving {
+    explicit Serving(httplib::Server& server) : host(server), port(server.bind_to_any_port("127.0.0.1")) {
+        thread = std::thread([this] { host.listen_after_bind(); });
+        for (int i = 0; i < 1000 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    ~Serving() {
+        host.stop();
+        if (thread.joinable()) thread.join();
+    }
+    httplib::Server& host;
+    const int port;
+    std::thread thread;
+};
+
 StreamOptions connections(int n) {
     StreamOptions o;
     o.connections = n;
@@ -76,7 +92,9 @@ StreamStats streamUntilStopped(StreamingSet& stream, double seconds, const char*
     auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
     while (std::chrono::steady_clock::now() < deadline && !stopped()) {
         const bool converged = stream.update(*view, 200, 150, {}).converged;
-        if (!stopped()) EXPECT_FALSE(converged);  // (a stream that has stopped may report what it holds as converged)
+        if (!stopped()) {  // (a stream that has stopped may report what it holds as converged)
+            EXPECT_FALSE(converged);
+        }
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     return stream.stats();
@@ -163,18 +181,9 @@ TEST(Stream, SurvivesTheServerRestartingAndFlakyResponses) {
     host.Get(R"(/flaky/(tileset\.json|hierarchy\.bin))", [&](const httplib::Request& req, httplib::Response& res) {
         res.set_content(test::readFile(dir.file("sets/scene/" + std::string(req.matches[1]))), "application/octet-stream");
     });
-    int port = host.bind_to_any_port("127.0.0.1");
-    std::thread serving([&] { host.listen_after_bind(); });
-    struct Stop {  // stops and joins the host however the test leaves
-        httplib::Server& host;
-        std::thread& thread;
-        ~Stop() {
-            host.stop();
-            if (thread.joinable()) thread.join();
-        }
-    } stop{host, serving};
-    for (int i = 0; i < 1000 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const Serving serving(host);
     ASSERT_TRUE(host.is_running());
+    const int port = serving.port;
     StreamOptions one = connections(1);  // one at a time: the faults hit in order
     one.http.timeoutSeconds = 1;
     auto flaky = StreamingSet::open("http://127.0.0.1:" + std::to_string(port) + "/flaky", one);
@@ -293,18 +302,9 @@ TEST(Stream, RefusalsFailAtOnceAndServerFaultsAreRetried) {
         }
         res.set_content(test::readFile(dir.file("scene/" + name)), "application/octet-stream");
     });
-    const int port = host.bind_to_any_port("127.0.0.1");
-    std::thread serving([&] { host.listen_after_bind(); });
-    struct Stop {
-        httplib::Server& host;
-        std::thread& thread;
-        ~Stop() {
-            host.stop();
-            if (thread.joinable()) thread.join();
-        }
-    } stop{host, serving};
-    for (int i = 0; i < 500 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const Serving serving(host);
     ASSERT_TRUE(host.is_running());
+    const int port = serving.port;
     for (int status : {403, 404, 410, 503, 429, 408}) {
         SCOPED_TRACE(status);
         StreamOptions options = connections(1);
@@ -342,18 +342,9 @@ TEST(Stream, BlocksFetchedAgainToRecolourFailLikeAnyFetch) {
         // httplib answers Range requests from the whole content.
         res.set_content(bytes, "application/octet-stream");
     });
-    const int port = host.bind_to_any_port("127.0.0.1");
-    std::thread serving([&] { host.listen_after_bind(); });
-    struct Stop {
-        httplib::Server& host;
-        std::thread& thread;
-        ~Stop() {
-            host.stop();
-            if (thread.joinable()) thread.join();
-        }
-    } stop{host, serving};
-    for (int i = 0; i < 500 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const Serving serving(host);
     ASSERT_TRUE(host.is_running());
+    const int port = serving.port;
     StreamOptions options = connections(2);
     options.keptBudget = 1;
     auto set = StreamingSet::open("http://127.0.0.1:" + std::to_string(port), options);
@@ -482,18 +473,9 @@ TEST(Stream, ResponsesLongerThanAskedForAreCutOff) {
         }
         res.set_content(content, "application/octet-stream");
     });
-    const int port = host.bind_to_any_port("127.0.0.1");
-    std::thread serving([&] { host.listen_after_bind(); });
-    struct Stop {
-        httplib::Server& host;
-        std::thread& thread;
-        ~Stop() {
-            host.stop();
-            if (thread.joinable()) thread.join();
-        }
-    } stop{host, serving};
-    for (int i = 0; i < 500 && !host.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const Serving serving(host);
     ASSERT_TRUE(host.is_running());
+    const int port = serving.port;
     const std::string origin = "http://127.0.0.1:" + std::to_string(port);
 
     auto big = StreamingSet::open(origin + "/bigjson");
