@@ -97,6 +97,7 @@ struct BuiltNode {
     std::vector<Surfel> surfels;
     uint8_t childMask = 0;
     bool inputPoints = false;
+    double cell = 0;  // the cell of the grid a resampled node was sampled on (Builder::nodeGrid); 0 for leaves
     LevelNode level;
 };
 
@@ -149,7 +150,9 @@ private:
         double e = edge(k.level);
         return {k.x * e, k.y * e, k.z * e};
     }
-    SampleGrid nodeGrid(const NodeKey& k) const { return {nodeMinRel(k), edge(k.level) / opt_.grid, uint32_t(opt_.grid)}; }
+    SampleGrid nodeGrid(const NodeKey& k, std::span<const Surfel> below) const;
+    std::vector<Surfel> resampleHalo(const std::vector<Surfel>& halo, const Chunk& chunk, double margin, int level,
+                                     std::span<BuiltNode* const> members) const;
     LevelParams levelParams(int level, int threads) const {
         LevelParams p;
         p.spacingK = opt_.spacingK;
@@ -502,10 +505,79 @@ BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, c
             node->childMask |= uint8_t(1u << c);
             gathered.insert(gathered.end(), child->surfels.begin(), child->surfels.end());
         }
-        node->surfels = resample(gathered, nodeGrid(key), true, &scalars);
+        const SampleGrid grid = nodeGrid(key, gathered);
+        node->cell = grid.cellSize;
+        node->surfels = resample(gathered, grid, true, &scalars);
     }
     nodes.push_back(std::move(node));
     return nodes.back().get();
+}
+
+SampleGrid Builder::nodeGrid(const NodeKey& k, std::span<const Surfel> below) const {
+    const double e = edge(k.level), base = e / opt_.grid;
+    const size_t target = std::max<size_t>(1, below.size() / kLevelReduction);
+    auto grid = [&](int j) {
+        const double cell = base * std::pow(kGridCoarsening, j);
+        return SampleGrid{nodeMinRel(k), cell, uint32_t(std::clamp(std::ceil(e / cell - 1e-9), 1.0, double(opt_.grid)))};
+    };
+    auto fits = [&](int j) { return grid(j).cells == 1 || occupiedCells(below, grid(j)) <= target; };
+    const size_t fine = occupiedCells(below, grid(0));
+    if (fine <= target) return grid(0);
+    // A surface's cells shrink by kGridCoarsening² a step: start where that
+    // lands, then go coarser until the target holds, or finer while it does.
+    const double perStep = 2 * std::log2(kGridCoarsening);
+    int j = std::max(1, int(std::ceil(std::log2(double(fine) / double(target)) / perStep)));
+    if (fits(j)) {
+        while (j > 1 && fits(j - 1)) --j;
+    } else {
+        do ++j;
+        while (!fits(j));
+    }
+    return grid(j);
+}
+
+std::vector<Surfel> Builder::resampleHalo(const std::vector<Surfel>& halo, const Chunk& chunk, double margin, int level,
+                                          std::span<BuiltNode* const> members) const {
+    // Each halo point stands in for a neighbouring chunk's surfels near the
+    // level's node its position, clamped into the chunk, falls in: it is
+    // resampled on that node's cell (the level's G³ cell where that node is a
+    // leaf or absent).
+    const double e = edge(level), base = e / opt_.grid;
+    std::map<NodeKey, double> cellOf;
+    for (const BuiltNode* n : members)
+        if (n->cell > 0) cellOf[n->key] = n->cell;
+    const Vec3d chunkLo = nodeMinRel(chunk.key);
+    const double chunkEdge = edge(chunk.key.level);
+    std::map<double, std::vector<Surfel>> byCell;
+    for (const Surfel& s : halo) {
+        double cell = base;
+        if (!cellOf.empty()) {
+            NodeKey k{uint8_t(level), 0, 0, 0};
+            uint32_t* axes[3] = {&k.x, &k.y, &k.z};
+            for (int a = 0; a < 3; ++a) {
+                const double inside = std::clamp(s.position[a] - chunkLo[a], 0.0, chunkEdge * (1 - 1e-12));
+                *axes[a] = uint32_t(std::floor((chunkLo[a] + inside) / e));
+            }
+            if (auto it = cellOf.find(k); it != cellOf.end()) cell = it->second;
+        }
+        byCell[cell].push_back(s);
+    }
+    std::vector<Surfel> out;
+    const Vec3d lo = chunkLo - Vec3d{margin, margin, margin};
+    for (auto& [cell, points] : byCell) {
+        SampleGrid g;
+        for (int a = 0; a < 3; ++a) g.origin[a] = std::floor(lo[a] / cell) * cell;  // aligned with the level's cells
+        g.cellSize = cell;
+        const double cells = std::ceil((chunkEdge + 2 * margin) / cell) + 2;
+        if (cells >= kMaxGridCells) {
+            out.insert(out.end(), points.begin(), points.end());  // finer than any grid can address: the points themselves
+            continue;
+        }
+        g.cells = uint32_t(cells);
+        std::vector<Surfel> sampled = resample(points, g, false);
+        out.insert(out.end(), sampled.begin(), sampled.end());
+    }
+    return out;
 }
 
 Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
@@ -556,18 +628,7 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
         std::vector<Surfel> haloLevel;
         {
             ScopedTimer t(stepNs_[kStepAttributes]);
-            double cell = edge(level) / opt_.grid;
-            Vec3d lo = nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
-            SampleGrid g;
-            for (int a = 0; a < 3; ++a) g.origin[a] = std::floor(lo[a] / cell) * cell;  // aligned with the level's cells
-            g.cellSize = cell;
-            double cells = std::ceil((edge(chunk.key.level) + 2 * margin) / cell) + 2;
-            if (cells < kMaxGridCells) {
-                g.cells = uint32_t(cells);
-                haloLevel = resample(*halo, g, false);
-            } else {
-                haloLevel = *halo;  // finer than any resampling grid can address: the points themselves
-            }
+            haloLevel = resampleHalo(*halo, chunk, margin, level, built);
             computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
         }
         filterLevelTextures(built, haloLevel, innerThreads);
@@ -657,7 +718,9 @@ Status Builder::buildUpperLevels() {
         below.clear();
         std::vector<LevelNode*> members;
         for (auto& [key, node] : current) {
-            node->surfels = resample(gathered[key], nodeGrid(key), true, &upperScalars_);
+            const SampleGrid grid = nodeGrid(key, gathered[key]);
+            node->cell = grid.cellSize;
+            node->surfels = resample(gathered[key], grid, true, &upperScalars_);
             node->level.surfels = node->surfels;
             members.push_back(&node->level);
         }
@@ -745,7 +808,7 @@ void Builder::filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<c
 }
 
 int Builder::positionBits(const BuiltNode& node) const {
-    double e = edge(node.key.level), cell = e / opt_.grid;
+    double e = edge(node.key.level), cell = node.inputPoints ? e / opt_.grid : node.cell;
     double step = !node.inputPoints ? cell / opt_.positionFraction
                   : leafStep_ > 0   ? leafStep_
                                     : cell / kUnknownPrecisionFraction;

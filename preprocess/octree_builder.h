@@ -102,6 +102,15 @@ inline constexpr int kFitSolvesPerChunk = 2;
 // And per chunk point while optimal textures are fitted: the level's fit
 // copies (position, normal, sigma, colour), its grid and back-references.
 inline constexpr uint64_t kFitBytesPerChunkPoint = 112;
+// A resampled node holds at most 1/kLevelReduction of the surfels below it
+// (one at least): where its G³ grid keeps more, the grid's cell grows by
+// kGridCoarsening at a time until they fit (Builder::nodeGrid). A quarter is
+// what a surface keeps when its spacing doubles, so a set holds at most 4/3
+// surfels per input point (DESIGN.md decision 3), plus 4/3 per node above
+// fewer than four. The rule and its step were chosen by measurement:
+// bench/BENCHMARKS.md, "Surfels per input point".
+inline constexpr size_t kLevelReduction = 4;
+inline constexpr double kGridCoarsening = 1.189207115002721;  // 2^(1/4): a surface's cells halve every two steps
 // A chunk holds at least this many full leaves (capacity points each), so
 // that its subtree has levels to resample: the smallest budget follows from it.
 inline constexpr uint64_t kMinChunkLeaves = 4;

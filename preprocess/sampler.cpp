@@ -43,15 +43,25 @@ uint32_t majority(std::span<const Surfel> points, const std::vector<std::pair<ui
     return best->first;
 }
 
+uint64_t cellKey(const Vec3d& p, const SampleGrid& grid) {
+    return packCell(cellCoord(p.x, grid, 0), cellCoord(p.y, grid, 1), cellCoord(p.z, grid, 2));
+}
+
 }  // namespace
+
+size_t occupiedCells(std::span<const Surfel> points, const SampleGrid& grid) {
+    std::vector<uint64_t> keys(points.size());
+    for (size_t i = 0; i < points.size(); ++i) keys[i] = cellKey(points[i].position, grid);
+    std::sort(keys.begin(), keys.end());
+    return size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
 
 std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& grid, bool withAttributes, ScalarTable* table) {
     assert(grid.cells >= 1 && grid.cells <= kMaxGridCells);
     const size_t n = points.size();
     std::vector<std::pair<uint64_t, uint32_t>> order(n);
     for (size_t i = 0; i < n; ++i) {
-        const Vec3d& p = points[i].position;
-        order[i] = {packCell(cellCoord(p.x, grid, 0), cellCoord(p.y, grid, 1), cellCoord(p.z, grid, 2)), uint32_t(i)};
+        order[i] = {cellKey(points[i].position, grid), uint32_t(i)};
     }
     std::sort(order.begin(), order.end());
 

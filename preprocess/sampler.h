@@ -55,4 +55,7 @@ struct ScalarTable {
 std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& grid, bool withAttributes = true,
                              ScalarTable* table = nullptr);
 
+// How many surfels resample(points, grid) returns: the grid's occupied cells.
+size_t occupiedCells(std::span<const Surfel> points, const SampleGrid& grid);
+
 }  // namespace surfcast

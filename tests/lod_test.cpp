@@ -170,10 +170,13 @@ TEST_F(Lod, BudgetsBindEvenlyAndMonotonically) {
     EXPECT_EQ(nodes[rootOnly[0].index].key.level, 0);
 
     // The memory budget bounds every node the view relies on (drawn, refined
-    // through, waited for), counted in whole granules.
+    // through, waited for), counted in whole granules: half of what the view
+    // uses without one.
     LodParams memory;
     memory.granule = 1024;
-    memory.memoryBudget = 4 << 20;
+    size_t unlimited = 0;
+    for (uint32_t i : free.used) unlimited += (nodes[i].surfelCount + 1023) / 1024 * 1024 * 32;
+    memory.memoryBudget = unlimited / 2;
     LodStats st;
     lod.select(*camera, 640, 480, memory, all, &st);
     size_t bytes = 0;

@@ -38,6 +38,13 @@ TEST(Sampler, OneSurfelPerOccupiedCell) {
         EXPECT_EQ(s.normal, (Vec3f{0, 0, 1}));
     }
     EXPECT_EQ(total, 1024);
+    // Counted without resampling: 64 cells of size 1, 16 of size 2 (the grid
+    // origin on the points' corner), 9 of size 3 (8 / 3 rounds up), and the
+    // points beyond a 2-cell grid clamped into its border cells.
+    EXPECT_EQ(occupiedCells(pts, g), 64u);
+    EXPECT_EQ(occupiedCells(pts, SampleGrid{{0, 0, 0}, 2.0, 4}), 16u);
+    EXPECT_EQ(occupiedCells(pts, SampleGrid{{0, 0, 0}, 3.0, 3}), 9u);
+    EXPECT_EQ(occupiedCells(pts, SampleGrid{{0, 0, 0}, 1.0, 2}), 4u);
 }
 
 TEST(Sampler, PrefilterBlursAStepEdgeSymmetrically) {

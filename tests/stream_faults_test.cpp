@@ -67,13 +67,15 @@ StreamOptions connections(int n) {
 }
 
 // Update until converged (or the deadline); returns whether it converged.
-bool streamUntilConverged(StreamingSet& stream, const Camera& camera, std::vector<uint32_t>* drawn, double seconds) {
+// The nodes drawn are named by key: indices follow the order in which
+// hierarchy pages arrived, which differs between streams with other pasts.
+bool streamUntilConverged(StreamingSet& stream, const Camera& camera, std::vector<NodeKey>* drawn, double seconds) {
     auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
     while (std::chrono::steady_clock::now() < deadline) {
         StreamUpdate u = stream.update(camera, 200, 150, {});
         if (u.converged) {
             drawn->clear();
-            for (const auto& s : u.draw) drawn->push_back(s.index);
+            for (const auto& s : u.draw) drawn->push_back(stream.nodes()[s.index].key);
             std::sort(drawn->begin(), drawn->end());
             return true;
         }
@@ -117,7 +119,7 @@ TEST(Stream, SurvivesTheServerRestartingAndFlakyResponses) {
     // What a healthy stream converges to, from the folder.
     auto local = StreamingSet::open(dir.file("sets/scene"));
     ASSERT_TRUE(local) << local.status().message();
-    std::vector<uint32_t> expectFirst, expectSecond;
+    std::vector<NodeKey> expectFirst, expectSecond;
     ASSERT_TRUE(streamUntilConverged(**local, *first, &expectFirst, 30));
     ASSERT_TRUE(streamUntilConverged(**local, *second, &expectSecond, 30));
 
@@ -127,7 +129,7 @@ TEST(Stream, SurvivesTheServerRestartingAndFlakyResponses) {
     ASSERT_FALSE(origin.empty()) << server.log;
     auto remote = StreamingSet::open(origin + "/sets/scene", connections(4));
     ASSERT_TRUE(remote) << remote.status().message();
-    std::vector<uint32_t> drawn;
+    std::vector<NodeKey> drawn;
     ASSERT_TRUE(streamUntilConverged(**remote, *first, &drawn, 30));
     EXPECT_EQ(drawn, expectFirst);
     ::kill(server.pid, SIGTERM);
@@ -273,7 +275,7 @@ TEST(Stream, ACorruptBlockStopsTheStreamAtOnce) {
     EXPECT_FALSE(st.setChanged);
     // Fetching stopped.
     auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
-    std::vector<uint32_t> drawn;
+    std::vector<NodeKey> drawn;
     EXPECT_FALSE(streamUntilConverged(**set, *camera, &drawn, 0.5));
     EXPECT_EQ((*set)->stats().failures, 1u);
 
@@ -351,7 +353,7 @@ TEST(Stream, BlocksFetchedAgainToRecolourFailLikeAnyFetch) {
     ASSERT_TRUE(set) << set.status().message();
     auto camera = parseCamera("3,-6,2,0,0,0.5,0,0,1,50");
     ASSERT_TRUE(camera);
-    std::vector<uint32_t> drawn;
+    std::vector<NodeKey> drawn;
     ASSERT_TRUE(streamUntilConverged(**set, *camera, &drawn, 20));
     EXPECT_EQ((*set)->stats().keptBytes, 0u);
 
@@ -567,7 +569,7 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
     auto remote = StreamingSet::open(origin + "/sets/scene", connections(2));
     ASSERT_TRUE(remote) << remote.status().message();
     auto first = parseCamera("3,-6,2,0,0,0.5,0,0,1,50"), second = parseCamera("0,0,1,5,5,0.5,0,0,1,70");
-    std::vector<uint32_t> drawn;
+    std::vector<NodeKey> drawn;
     ASSERT_TRUE(streamUntilConverged(**remote, *first, &drawn, 30));
     EXPECT_FALSE((*remote)->stats().setChanged);
     build(90000);
