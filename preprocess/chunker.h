@@ -21,8 +21,10 @@ namespace surfcast {
 // Counting grid: 128³ cells (8 MiB of counters) resolves chunks down to 1/128
 // of the root edge.
 inline constexpr int kCountLevel = 7;
-// Halo width in units of the chunk root's sampling cell (edge / G): the spacing
-// and weight neighbourhoods reach about 3 cells at the chunk's coarsest level.
+// Halo width in units of the chunk root's G³ cell (edge / G): the spacing and
+// weight neighbourhoods reach about 3 cells at the chunk's coarsest level. A
+// chunk root sampled on a coarser grid (kGridCoarsening) has fewer of its own
+// cells in it: 2.4 after three steps, still past the 8th neighbour's 1.5-2.
 inline constexpr double kHaloCells = 4.0;
 
 struct Chunk {

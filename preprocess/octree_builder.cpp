@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cassert>
 #include <cstdio>
 #include <cmath>
 #include <filesystem>
@@ -153,14 +154,21 @@ private:
     SampleGrid nodeGrid(const NodeKey& k, std::span<const Surfel> below) const;
     std::vector<Surfel> resampleHalo(const std::vector<Surfel>& halo, const Chunk& chunk, double margin, int level,
                                      std::span<BuiltNode* const> members) const;
-    LevelParams levelParams(int level, int threads) const {
+    // The largest cell any of `nodes` was sampled on: the fallback h of a node
+    // with no neighbours at all.
+    double largestCell(int level, std::span<BuiltNode* const> nodes) const {
+        double cell = edge(level) / opt_.grid;
+        for (const BuiltNode* n : nodes) cell = std::max(cell, n->cell);
+        return cell;
+    }
+    LevelParams levelParams(double fallbackSpacing, int threads) const {
         LevelParams p;
         p.spacingK = opt_.spacingK;
         p.fetchK = opt_.fetchK;
         p.cutoff = opt_.cutoff;
         p.kernelScale = opt_.kernelScale;
         p.radii = opt_.radii;
-        p.fallbackSpacing = edge(level) / opt_.grid;
+        p.fallbackSpacing = fallbackSpacing;
         p.weights = opt_.weights;
         p.threads = threads;
         return p;
@@ -514,24 +522,16 @@ BuiltNode* Builder::buildSubtree(std::vector<Surfel>& pts, size_t b, size_t e, c
 }
 
 SampleGrid Builder::nodeGrid(const NodeKey& k, std::span<const Surfel> below) const {
-    const double e = edge(k.level), base = e / opt_.grid;
     const size_t target = std::max<size_t>(1, below.size() / kLevelReduction);
+    // Step j has floor(G / kGridCoarsening^j) cells per axis (one at least), so
+    // its cells tile the node and line up with those of the level's other
+    // nodes on the same step.
     auto grid = [&](int j) {
-        const double cell = base * std::pow(kGridCoarsening, j);
-        return SampleGrid{nodeMinRel(k), cell, uint32_t(std::clamp(std::ceil(e / cell - 1e-9), 1.0, double(opt_.grid)))};
+        const uint32_t cells = uint32_t(std::max(1.0, std::floor(opt_.grid * std::pow(kGridCoarsening, -j) + 1e-9)));
+        return SampleGrid{nodeMinRel(k), edge(k.level) / cells, cells};
     };
-    auto fits = [&](int j) { return grid(j).cells == 1 || occupiedCells(below, grid(j)) <= target; };
-    const size_t fine = occupiedCells(below, grid(0));
-    if (fine <= target) return grid(0);
-    // A surface's cells shrink by kGridCoarsening² a step: start where that
-    // lands, then go coarser until the target holds, or finer while it does.
-    const double perStep = 2 * std::log2(kGridCoarsening);
-    int j = std::max(1, int(std::ceil(std::log2(double(fine) / double(target)) / perStep)));
-    if (fits(j)) {
-        while (j > 1 && fits(j - 1)) --j;
-    } else {
-        do ++j;
-        while (!fits(j));
+    int j = 0;
+    for (SampleGrid g = grid(0); g.cells > 1 && occupiedCells(below, g) > target; g = grid(++j)) {
     }
     return grid(j);
 }
@@ -539,42 +539,43 @@ SampleGrid Builder::nodeGrid(const NodeKey& k, std::span<const Surfel> below) co
 std::vector<Surfel> Builder::resampleHalo(const std::vector<Surfel>& halo, const Chunk& chunk, double margin, int level,
                                           std::span<BuiltNode* const> members) const {
     // Each halo point stands in for a neighbouring chunk's surfels near the
-    // level's node its position, clamped into the chunk, falls in: it is
+    // level's node that holds the point clamped into the chunk, and is
     // resampled on that node's cell (the level's G³ cell where that node is a
     // leaf or absent).
     const double e = edge(level), base = e / opt_.grid;
+    const Vec3d chunkLo = nodeMinRel(chunk.key);
+    const double chunkEdge = edge(chunk.key.level);
+    auto sample = [&](std::span<const Surfel> points, double cell) {
+        SampleGrid g;
+        for (int a = 0; a < 3; ++a) g.origin[a] = std::floor((chunkLo[a] - margin) / cell) * cell;  // aligned with the level's cells
+        g.cellSize = cell;
+        const double cells = std::ceil((chunkEdge + 2 * margin) / cell) + 2;
+        if (cells >= kMaxGridCells)
+            return std::vector<Surfel>(points.begin(), points.end());  // finer than any grid can address: the points themselves
+        g.cells = uint32_t(cells);
+        return resample(points, g, false);
+    };
     std::map<NodeKey, double> cellOf;
     for (const BuiltNode* n : members)
         if (n->cell > 0) cellOf[n->key] = n->cell;
-    const Vec3d chunkLo = nodeMinRel(chunk.key);
-    const double chunkEdge = edge(chunk.key.level);
+    if (cellOf.empty()) return sample(halo, base);
+
+    const int below = level - chunk.key.level;
+    const uint32_t span = 1u << below;  // the level's nodes per axis of the chunk
     std::map<double, std::vector<Surfel>> byCell;
     for (const Surfel& s : halo) {
-        double cell = base;
-        if (!cellOf.empty()) {
-            NodeKey k{uint8_t(level), 0, 0, 0};
-            uint32_t* axes[3] = {&k.x, &k.y, &k.z};
-            for (int a = 0; a < 3; ++a) {
-                const double inside = std::clamp(s.position[a] - chunkLo[a], 0.0, chunkEdge * (1 - 1e-12));
-                *axes[a] = uint32_t(std::floor((chunkLo[a] + inside) / e));
-            }
-            if (auto it = cellOf.find(k); it != cellOf.end()) cell = it->second;
-        }
-        byCell[cell].push_back(s);
+        NodeKey k{uint8_t(level), 0, 0, 0};
+        uint32_t* axes[3] = {&k.x, &k.y, &k.z};
+        const uint32_t first[3] = {chunk.key.x, chunk.key.y, chunk.key.z};
+        for (int a = 0; a < 3; ++a)
+            *axes[a] = (first[a] << below) +
+                       uint32_t(std::clamp(std::floor((s.position[a] - chunkLo[a]) / e), 0.0, double(span - 1)));
+        const auto it = cellOf.find(k);
+        byCell[it == cellOf.end() ? base : it->second].push_back(s);
     }
     std::vector<Surfel> out;
-    const Vec3d lo = chunkLo - Vec3d{margin, margin, margin};
     for (auto& [cell, points] : byCell) {
-        SampleGrid g;
-        for (int a = 0; a < 3; ++a) g.origin[a] = std::floor(lo[a] / cell) * cell;  // aligned with the level's cells
-        g.cellSize = cell;
-        const double cells = std::ceil((chunkEdge + 2 * margin) / cell) + 2;
-        if (cells >= kMaxGridCells) {
-            out.insert(out.end(), points.begin(), points.end());  // finer than any grid can address: the points themselves
-            continue;
-        }
-        g.cells = uint32_t(cells);
-        std::vector<Surfel> sampled = resample(points, g, false);
+        std::vector<Surfel> sampled = sample(points, cell);
         out.insert(out.end(), sampled.begin(), sampled.end());
     }
     return out;
@@ -629,7 +630,7 @@ Status Builder::buildChunk(const Chunk& chunk, int innerThreads) {
         {
             ScopedTimer t(stepNs_[kStepAttributes]);
             haloLevel = resampleHalo(*halo, chunk, margin, level, built);
-            computeLevelAttributes(members, haloLevel, levelParams(level, innerThreads));
+            computeLevelAttributes(members, haloLevel, levelParams(largestCell(level, built), innerThreads));
         }
         filterLevelTextures(built, haloLevel, innerThreads);
     }
@@ -728,9 +729,9 @@ Status Builder::buildUpperLevels() {
         std::vector<Surfel> neighbours;  // chunk roots on this level
         for (auto& [key, node] : retained_)
             if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
-        computeLevelAttributes(members, neighbours, levelParams(level, threads_));
         std::vector<BuiltNode*> built;
         for (auto& [key, node] : current) built.push_back(node.get());
+        computeLevelAttributes(members, neighbours, levelParams(largestCell(level, built), threads_));
         filterLevelTextures(built, neighbours, threads_);
         for (auto& [key, node] : current) SC_TRY(emit(*node, upperScalars_));
         below = std::move(current);
@@ -808,6 +809,7 @@ void Builder::filterLevelTextures(std::span<BuiltNode* const> nodes, std::span<c
 }
 
 int Builder::positionBits(const BuiltNode& node) const {
+    assert(node.inputPoints || node.cell > 0);
     double e = edge(node.key.level), cell = node.inputPoints ? e / opt_.grid : node.cell;
     double step = !node.inputPoints ? cell / opt_.positionFraction
                   : leafStep_ > 0   ? leafStep_

@@ -1,6 +1,7 @@
 // The tile-set build: inputs → chunks on disk → a subtree per chunk → the
 // levels above the chunks → tile set. Follows DESIGN.md decisions 2-4: every
-// level is a complete resampling on its node's G³ grid (sampler.h), leaves hold
+// level is a complete resampling on its node's grid (G³, or coarser where that
+// keeps more than a quarter of the surfels below: kLevelReduction), leaves hold
 // the input points, a node splits above `capacity` surfels, and each node gets
 // h, a visibility cone and analytic normalization weights.
 #pragma once
@@ -20,7 +21,7 @@ namespace surfcast {
 struct BuildOptions {
     InputOptions inputs;
     std::string output;
-    int grid = 128;                     // G: cells per axis of a node's grid
+    int grid = 128;                     // G: cells per axis of a node's finest sampling grid
     uint32_t pageDepth = kDefaultPageDepth;  // levels per hierarchy page (docs/FORMAT.md)
     uint32_t capacity = 20000;          // surfels above which a node splits
     uint64_t memoryBytes = 2ull << 30;  // peak RSS budget
@@ -83,7 +84,7 @@ const char* textureFilterName(BuildOptions::TextureFilter filter);
 // 64-byte ones with opacity); the chunk size follows from the budget with it.
 inline constexpr uint64_t kBytesPerChunkPoint = 400;
 // And per stored scalar field: its value for the point and for the resampled
-// surfels above it (about 0.4 per point), and the chunk file's buffer.
+// surfels above it (at most 1/3 per point: kLevelReduction), and the chunk file's buffer.
 inline constexpr uint64_t kBytesPerChunkScalar = 12;
 // Memory the build needs whatever the chunk size: code, libraries, counting
 // grid (16 MiB), file buffers, upper levels.
@@ -103,12 +104,13 @@ inline constexpr int kFitSolvesPerChunk = 2;
 // copies (position, normal, sigma, colour), its grid and back-references.
 inline constexpr uint64_t kFitBytesPerChunkPoint = 112;
 // A resampled node holds at most 1/kLevelReduction of the surfels below it
-// (one at least): where its G³ grid keeps more, the grid's cell grows by
-// kGridCoarsening at a time until they fit (Builder::nodeGrid). A quarter is
-// what a surface keeps when its spacing doubles, so a set holds at most 4/3
-// surfels per input point (DESIGN.md decision 3), plus 4/3 per node above
-// fewer than four. The rule and its step were chosen by measurement:
-// bench/BENCHMARKS.md, "Surfels per input point".
+// (one at least): where its G³ grid keeps more, it is sampled on the grid of
+// floor(G / kGridCoarsening^j) cells per axis for the smallest j that keeps
+// few enough (Builder::nodeGrid). A quarter is what a surface keeps when its
+// spacing doubles; summed over the tree, a set holds at most 4/3 surfels per
+// input point plus 4/3 per node above fewer than four (DESIGN.md decision 3
+// asks for at least a half, about 4/3 per point on surfaces). The rule and its
+// step were chosen by measurement: bench/BENCHMARKS.md, "Surfels per input point".
 inline constexpr size_t kLevelReduction = 4;
 inline constexpr double kGridCoarsening = 1.189207115002721;  // 2^(1/4): a surface's cells halve every two steps
 // A chunk holds at least this many full leaves (capacity points each), so

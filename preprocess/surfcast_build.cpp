@@ -43,7 +43,7 @@ the text file LIST, one per line.
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how
                           to reach it, as in surfcast-view
-  --grid G                cells per axis of a node's sampling grid (default 128)
+  --grid G                cells per axis of a node's finest sampling grid (default 128)
   --page-depth D          levels per hierarchy page, which a viewer fetches as it
                           reaches them (default 5)
   --capacity N            surfels above which a node splits (default 20000, at most 4194304)

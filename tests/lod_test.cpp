@@ -175,7 +175,7 @@ TEST_F(Lod, BudgetsBindEvenlyAndMonotonically) {
     LodParams memory;
     memory.granule = 1024;
     size_t unlimited = 0;
-    for (uint32_t i : free.used) unlimited += (nodes[i].surfelCount + 1023) / 1024 * 1024 * 32;
+    for (uint32_t i : free.used) unlimited += residentBytes(nodes[i].surfelCount, memory.granule);
     memory.memoryBudget = unlimited / 2;
     LodStats st;
     lod.select(*camera, 640, 480, memory, all, &st);

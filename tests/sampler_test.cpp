@@ -45,6 +45,7 @@ TEST(Sampler, OneSurfelPerOccupiedCell) {
     EXPECT_EQ(occupiedCells(pts, SampleGrid{{0, 0, 0}, 2.0, 4}), 16u);
     EXPECT_EQ(occupiedCells(pts, SampleGrid{{0, 0, 0}, 3.0, 3}), 9u);
     EXPECT_EQ(occupiedCells(pts, SampleGrid{{0, 0, 0}, 1.0, 2}), 4u);
+    EXPECT_EQ(resample(pts, SampleGrid{{0, 0, 0}, 3.0, 3}).size(), 9u);
 }
 
 TEST(Sampler, PrefilterBlursAStepEdgeSymmetrically) {
