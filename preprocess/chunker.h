@@ -24,7 +24,8 @@ inline constexpr int kCountLevel = 7;
 // Halo width in units of the chunk root's G³ cell (edge / G): the spacing and
 // weight neighbourhoods reach about 3 cells at the chunk's coarsest level. A
 // chunk root sampled on a coarser grid (kGridCoarsening) has fewer of its own
-// cells in it: 2.4 after three steps, still past the 8th neighbour's 1.5-2.
+// cells in it: 2.0 after four steps, still the 8th neighbour's 1.5-2, and
+// fewer than that beyond (nothing bounds the steps).
 inline constexpr double kHaloCells = 4.0;
 
 struct Chunk {

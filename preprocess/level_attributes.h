@@ -55,7 +55,7 @@ struct LevelParams {
     double cutoff = 1.0;       // c of the renderer's kernel cutoff y'y <= 2c
     double kernelScale = 1.0;  // k of the renderer's kernel V^r = (k r)^2 I
     bool radii = true;         // per-surfel radii where a node's sampling is irregular
-    double fallbackSpacing = 0;  // h of a node with no neighbours at all: the level's cell size
+    double fallbackSpacing = 0;  // h of a node with no neighbours at all: the level's largest sampling cell
     bool weights = true;
     int threads = 1;
 };

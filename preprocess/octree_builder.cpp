@@ -541,7 +541,7 @@ std::vector<Surfel> Builder::resampleHalo(const std::vector<Surfel>& halo, const
     // Each halo point stands in for a neighbouring chunk's surfels near the
     // level's node that holds the point clamped into the chunk, and is
     // resampled on that node's cell (the level's G³ cell where that node is a
-    // leaf or absent).
+    // leaf, absent or not coarsened).
     const double e = edge(level), base = e / opt_.grid;
     const Vec3d chunkLo = nodeMinRel(chunk.key);
     const double chunkEdge = edge(chunk.key.level);
@@ -557,7 +557,7 @@ std::vector<Surfel> Builder::resampleHalo(const std::vector<Surfel>& halo, const
     };
     std::map<NodeKey, double> cellOf;
     for (const BuiltNode* n : members)
-        if (n->cell > 0) cellOf[n->key] = n->cell;
+        if (n->cell > 0 && n->cell != base) cellOf[n->key] = n->cell;
     if (cellOf.empty()) return sample(halo, base);
 
     const int below = level - chunk.key.level;

@@ -84,7 +84,7 @@ const char* textureFilterName(BuildOptions::TextureFilter filter);
 // 64-byte ones with opacity); the chunk size follows from the budget with it.
 inline constexpr uint64_t kBytesPerChunkPoint = 400;
 // And per stored scalar field: its value for the point and for the resampled
-// surfels above it (at most 1/3 per point: kLevelReduction), and the chunk file's buffer.
+// surfels above it (about 1/3 per point at most: kLevelReduction), and the chunk file's buffer.
 inline constexpr uint64_t kBytesPerChunkScalar = 12;
 // Memory the build needs whatever the chunk size: code, libraries, counting
 // grid (16 MiB), file buffers, upper levels.
