@@ -51,6 +51,17 @@ BuildOptions quietOptions(const std::string& out) {
     return o;
 }
 
+// The built-in scene at 300,000 points under a budget that splits it into
+// several chunks: halos, chunk roots and the levels above them.
+BuildOptions sceneAcrossChunks(const std::string& out) {
+    BuildOptions o = quietOptions(out);
+    o.inputs.defaultScene = true;
+    o.inputs.scene.targetPoints = 300000;
+    o.capacity = 5000;
+    o.memoryBytes = kBaselineBytes + 2 * kBytesPerChunkPoint * 60000;
+    return o;
+}
+
 // Every input point has a leaf surfel within half a quantization step per axis.
 void expectInputsInLeaves(const TilesetReader& set, const std::vector<Decoded>& nodes, const InputOptions& inputs) {
     std::vector<Vec3f> leafPoints;
@@ -195,11 +206,7 @@ TEST(Octree, GeoreferencedLasKeepsCentimetres) {
 TEST(Octree, DefaultSceneAcrossChunks) {
     // A budget that forces several chunks: halos, chunk roots and upper levels.
     test::TempDir dir;
-    BuildOptions o = quietOptions(dir.file("scene"));
-    o.inputs.defaultScene = true;
-    o.inputs.scene.targetPoints = 300000;
-    o.capacity = 5000;
-    o.memoryBytes = kBaselineBytes + 2 * kBytesPerChunkPoint * 60000;
+    BuildOptions o = sceneAcrossChunks(dir.file("scene"));
     o.threads = 2;
     auto summary = buildTileset(o);
     ASSERT_TRUE(summary.ok()) << summary.status().message();
@@ -273,15 +280,8 @@ TEST(Octree, EachNodeHoldsAtMostAQuarterOfTheSurfelsBelowIt) {
     for (const std::string scan : {"scene", "Megaplot.laz", "fragment.pcd"}) {
         if (scan != "scene") REQUIRE_DATA();
         test::TempDir dir;
-        BuildOptions o = quietOptions(dir.file("set"));
-        if (scan == "scene") {
-            o.inputs.defaultScene = true;
-            o.inputs.scene.targetPoints = 300000;
-            o.capacity = 5000;
-            o.memoryBytes = kBaselineBytes + 2 * kBytesPerChunkPoint * 60000;
-        } else {
-            o.inputs.paths = {test::dataFile(scan)};
-        }
+        BuildOptions o = scan == "scene" ? sceneAcrossChunks(dir.file("set")) : quietOptions(dir.file("set"));
+        if (scan != "scene") o.inputs.paths = {test::dataFile(scan)};
         auto summary = buildTileset(o);
         ASSERT_TRUE(summary.ok()) << scan << ": " << summary.status().message();
         if (scan == "scene") {
