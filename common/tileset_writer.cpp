@@ -45,7 +45,7 @@ Status writeFileSynced(const fs::path& path, const void* data, size_t size) {
 }
 
 // Removes the hidden folders that writers into `out` left when they were
-// killed (".NAME.partial-PID", ".NAME.partial-PID-chunks" and
+// killed (".NAME.partial-PID", ".NAME.partial-PID-work" and
 // ".NAME.old-PID" of a process that no longer runs). An old set that the non-exchanging fallback had moved aside
 // goes back into place if nothing took its place.
 void removeLeftovers(const fs::path& out) {
@@ -59,7 +59,7 @@ void removeLeftovers(const fs::path& out) {
             char* end = nullptr;
             const long pid = std::strtol(file.c_str() + prefix.size(), &end, 10);
             // ".NAME.partial-PID" and what the process keeps beside it (the
-            // build's ".NAME.partial-PID-chunks").
+            // build's ".NAME.partial-PID-work").
             if ((*end != '\0' && *end != '-') || pid <= 0 || pid == ::getpid()) continue;
             if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // still running (or not ours to judge)
             stale.push_back({entry.path(), kind[1] == 'o' && *end == '\0'});
@@ -107,11 +107,28 @@ Status TilesetWriter::addNode(NodeRecord record, const std::vector<uint8_t>& blo
     std::lock_guard lock(mutex_);
     if (std::fwrite(blob.data(), 1, blob.size(), blocks_) != blob.size())
         return Status::error(partial_ + "/" + kUnorderedBlocks + ": write failed (disk full?)");
-    record.blockOffset = blocksBytes_;
+    record.blockOffset = ownBytes_;
     record.blockSize = uint32_t(blob.size());
     record.blockCrc = crc;
+    ownBytes_ += blob.size();
     blocksBytes_ += blob.size();
     records_.push_back(record);
+    sources_.push_back(kOwnBlocks);
+    return {};
+}
+
+Status TilesetWriter::addPlacedNodes(const std::string& blocks, uint64_t bytes, const std::vector<NodeRecord>& records) {
+    std::error_code ec;
+    const uintmax_t size = fs::file_size(blocks, ec);
+    if (ec || size != bytes)
+        return Status::error(blocks + ": " + (ec ? "cannot read (" + ec.message() + ")" : "holds " + std::to_string(size) + " bytes, not " + std::to_string(bytes)));
+    std::lock_guard lock(mutex_);
+    placed_.push_back(blocks);
+    for (const NodeRecord& r : records) {
+        records_.push_back(r);
+        sources_.push_back(uint32_t(placed_.size() - 1));
+        blocksBytes_ += r.blockSize;
+    }
     return {};
 }
 
@@ -123,17 +140,52 @@ Status TilesetWriter::finish(TilesetInfo& info) {
     const fs::path ordered = fs::path(partial_) / "blocks.bin";
     std::FILE* out = std::fopen(ordered.c_str(), "wb");
     if (!out) return Status::error(ordered.string() + ": cannot create (" + std::strerror(errno) + ")");
+    // Placed blobs are read from their files, a few open at a time.
+    std::map<uint32_t, int> open;
+    auto closeAll = [&] {
+        for (auto [source, fd] : open) ::close(fd);
+        open.clear();
+    };
     std::vector<uint8_t> blob;
     uint64_t offset = 0;
     bool ok = true;
+    Status failed;
     for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
-        NodeRecord& r = records_[index.at(key)];
+        const size_t i = index.at(key);
+        NodeRecord& r = records_[i];
         blob.resize(r.blockSize);
-        ok = ::pread(::fileno(blocks_), blob.data(), blob.size(), off_t(r.blockOffset)) == ssize_t(blob.size()) &&
-             std::fwrite(blob.data(), 1, blob.size(), out) == blob.size();
+        int fd = ::fileno(blocks_);
+        if (sources_[i] != kOwnBlocks) {
+            auto it = open.find(sources_[i]);
+            if (it == open.end()) {
+                if (open.size() >= 64) closeAll();
+                const int opened = ::open(placed_[sources_[i]].c_str(), O_RDONLY | O_CLOEXEC);
+                if (opened < 0) {
+                    failed = Status::error(placed_[sources_[i]] + ": cannot open (" + std::strerror(errno) + ")");
+                    break;
+                }
+                it = open.emplace(sources_[i], opened).first;
+            }
+            fd = it->second;
+        }
+        if (::pread(fd, blob.data(), blob.size(), off_t(r.blockOffset)) != ssize_t(blob.size())) {
+            ok = false;
+            break;
+        }
+        if (sources_[i] != kOwnBlocks && crc32(blob.data(), blob.size()) != r.blockCrc) {
+            failed = Status::error(placed_[sources_[i]] + ": the block of node " + key.name() + " at byte " +
+                                   std::to_string(r.blockOffset) + " fails its CRC (corrupt)");
+            break;
+        }
+        ok = std::fwrite(blob.data(), 1, blob.size(), out) == blob.size();
         if (!ok) break;
         r.blockOffset = offset;
         offset += r.blockSize;
+    }
+    closeAll();
+    if (!failed.ok()) {
+        std::fclose(out);
+        return failed;
     }
     ok = ok && std::fflush(out) == 0 && ::fsync(::fileno(out)) == 0;
     ok = std::fclose(out) == 0 && ok;

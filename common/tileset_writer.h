@@ -11,8 +11,8 @@
 // bad_input_test checks this at 20 random moments.
 //
 // Blocks are laid out in hierarchy order (hierarchyOrder), whatever order the
-// nodes arrive in: the same nodes give the same bytes, and siblings sit
-// together in blocks.bin.
+// nodes arrive in or the files their blobs come from: the same nodes give the
+// same bytes, and siblings sit together in blocks.bin.
 #pragma once
 
 #include <cstdio>
@@ -34,6 +34,10 @@ public:
     // Thread-safe: appends a node's blob to a temporary file and keeps the
     // record with its size and CRC.
     Status addNode(NodeRecord record, const std::vector<uint8_t>& blob);
+    // Thread-safe: nodes whose blobs already lie in the file `blocks` (of
+    // `bytes` bytes, checked here), at their records' offsets, sizes and
+    // CRCs; finish() copies them, checking each CRC. The file stays until then.
+    Status addPlacedNodes(const std::string& blocks, uint64_t bytes, const std::vector<NodeRecord>& records);
 
     // blocks.bin in hierarchy order (the records' offsets filled in), then
     // hierarchy.bin, then tileset.json, then the exchange. `info` gets the
@@ -47,8 +51,12 @@ private:
     TilesetWriter() = default;
     std::string output_, partial_;
     std::FILE* blocks_ = nullptr;   // the blobs in arrival order (blocks.unordered)
-    uint64_t blocksBytes_ = 0;
+    uint64_t blocksBytes_ = 0;      // every node's blob
+    uint64_t ownBytes_ = 0;         // those in blocks_
     std::vector<NodeRecord> records_;
+    std::vector<uint32_t> sources_;      // per record: its blob's file in placed_, or kOwnBlocks
+    std::vector<std::string> placed_;    // files of addPlacedNodes
+    static constexpr uint32_t kOwnBlocks = ~0u;
     std::mutex mutex_;
     bool finished_ = false;
 };

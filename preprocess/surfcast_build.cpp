@@ -17,6 +17,7 @@
 
 #include "block_codec.h"
 #include "octree_builder.h"
+#include "stages.h"
 #include "http_tile_source.h"
 #include "tileset_reader.h"
 
@@ -27,6 +28,9 @@ namespace {
 const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
        surfcast-build --info SET            (SET: a folder or an http(s) URL)
+       surfcast-build plan --work W [options] INPUT... -o OUT
+       surfcast-build distribute|merge --work W
+       surfcast-build chunk --work W I...    (a build in stages: see below)
 
 Builds a level-of-detail tile set (tileset.json, hierarchy.bin, blocks.bin)
 from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
@@ -92,6 +96,14 @@ the text file LIST, one per line.
   --vertices-only         read a mesh file's vertices as points, no sampling
   -q, --quiet             no progress output
   -h, --help              this text
+
+A build in stages runs as four commands, each its own process, on any machines
+that see the inputs and the work folder W; the set is the same bytes as one
+surfcast-build. plan takes the inputs and options and writes W/plan.bin and
+W/plan.json (the chunk count and each chunk's points); distribute, chunk and
+merge read them, and take only --work, --threads and -q. chunk builds the
+chunks named (0 to the count less one), in any order and any grouping; merge
+writes the set at plan's -o, then removes the chunk and node files from W.
 )";
 
 bool parseSize(const std::string& s, uint64_t* out) {
@@ -142,20 +154,40 @@ int usageError(const std::string& message) {
     return 2;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// The command line, parsed. A stage of a staged build reads the plan's
+// command line (plan.bin) and then its own.
+struct Args {
     surfcast::BuildOptions opt;
     bool captureWeights = false;
     std::string info;
     surfcast::HttpOptions http;  // how --info reaches a URL
-    for (int i = 1; i < argc; ++i) {
-        std::string a = argv[i];
-        auto value = [&](std::string* out) {
+    std::string work;            // --work: a staged build's work folder
+    std::vector<size_t> chunks;  // the chunk stage's chunks
+    std::vector<std::string> kept;  // the arguments but inputs and -o, which the plan stores as given
+};
+
+// Parses `args` into `out`; returns -1, or the exit status (after --help, or a
+// usage error). `stage`: the subcommand ("" for a whole build): a later stage
+// takes only --threads, -q, --work and chunk indices.
+int parseArgs(const std::vector<std::string>& args, const std::string& stage, Args* out) {
+    surfcast::BuildOptions& opt = out->opt;
+    surfcast::HttpOptions& http = out->http;
+    std::string& info = out->info;
+    bool& captureWeights = out->captureWeights;
+    const bool later = !stage.empty() && stage != "plan";
+    const size_t argc = args.size();
+    for (size_t i = 0; i < argc; ++i) {
+        const size_t first = i;
+        std::string a = args[i];
+        auto value = [&](std::string* o) {
             if (i + 1 >= argc) return false;
-            *out = argv[++i];
+            *o = args[++i];
             return true;
         };
+        if (later && a != "--threads" && a != "-q" && a != "--quiet" && a != "--work" && a != "-h" && a != "--help" &&
+            !(stage == "chunk" && !a.empty() && a[0] != '-'))
+            return usageError(stage + " takes --work DIR, --threads N and -q" + (stage == "chunk" ? std::string(" and chunk numbers") : "") +
+                              "; the other options come from the plan (not " + a + ")");
         auto number = [&](double* out, double lo, double hi) {
             std::string v;
             return value(&v) && parseNumber(v, out) && *out >= lo && *out <= hi;
@@ -167,6 +199,10 @@ int main(int argc, char** argv) {
             return 0;
         } else if (a == "-o" || a == "--output") {
             if (!value(&opt.output)) return usageError(a + " needs a folder");
+            continue;
+        } else if (a == "--work" && !stage.empty()) {
+            if (!value(&out->work)) return usageError("--work needs a folder");
+            continue;
         } else if (a == "--info") {
             if (!value(&info)) return usageError("--info needs a tile set folder or URL");
         } else if (a == "--header") {
@@ -270,11 +306,170 @@ int main(int argc, char** argv) {
             opt.progress = false;
         } else if (!a.empty() && a[0] == '-') {
             return usageError("unknown option " + a);
+        } else if (stage == "chunk") {
+            if (!parseNumber(a, &d) || d < 0 || d > 1e9 || d != std::floor(d))
+                return usageError("chunk wants chunk numbers (0, 1, ...), not " + a);
+            out->chunks.push_back(size_t(d));
+            continue;
         } else {
             opt.inputs.paths.push_back(a);
+            continue;
+        }
+        for (size_t k = first; k <= i; ++k) out->kept.push_back(args[k]);
+    }
+    return -1;
+}
+
+
+int fail(const surfcast::Status& status) {
+    std::fprintf(stderr, "surfcast-build: %s\n", status.message().c_str());
+    return 1;
+}
+
+// Prints what a build wrote and runs the weight capture where asked.
+int finishBuild(const Args& a, const surfcast::BuildSummary& summary) {
+    std::printf("wrote %s\n%s", a.opt.output.c_str(), summary.text().c_str());
+    if (a.captureWeights) {
+        std::fflush(stdout);
+        int status = runWeightCapture(a.opt.output, !a.opt.progress);
+        if (status != 0) {
+            std::fprintf(stderr, "surfcast-build: weight capture (surfcast-weights) %s; the set keeps its analytic weights\n",
+                         status < 0 ? "could not be started" : ("failed with status " + std::to_string(status)).c_str());
+            return 1;
         }
     }
+    return 0;
+}
 
+// The inputs, expanded (folders, @LIST) and absolute, so that every stage's
+// process reads the same files wherever it runs.
+surfcast::Result<std::vector<std::string>> absoluteInputs(const std::vector<std::string>& given) {
+    auto paths = surfcast::expandInputPaths(given);
+    if (!paths) return paths.status();
+    for (std::string& p : *paths) p = std::filesystem::absolute(p).lexically_normal().string();
+    return paths;
+}
+
+// plan.json: what a driver schedules by (docs/ARCHITECTURE.md, "Stages").
+surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast::BuildPlan& plan, const surfcast::BuildContext& c) {
+    surfcast::ChunkLayout layout = plan.layout(c);
+    std::vector<uint64_t> points(layout.chunks().size(), 0);
+    if (points.size() == 1) points[0] = c.stats().points;
+    const double cell = c.rootEdge() / (1 << surfcast::kCountLevel);
+    for (auto [index, n] : plan.counts) {
+        const uint32_t side = 1u << surfcast::kCountLevel;
+        const surfcast::Vec3d centre{(index / side / side + 0.5) * cell, (index / side % side + 0.5) * cell, (index % side + 0.5) * cell};
+        points[size_t(layout.chunkOf(centre))] += n;
+    }
+    std::ostringstream json;
+    json << "{\n  \"format\": \"surfcast-plan\",\n  \"points\": " << c.stats().points << ",\n  \"chunks\": " << points.size()
+         << ",\n  \"chunk_points\": [";
+    for (size_t i = 0; i < points.size(); ++i) json << (i ? ", " : "") << points[i];
+    json << "]\n}\n";
+    const std::string path = work.dir + "/plan.json", partial = path + ".partial";
+    std::FILE* f = std::fopen(partial.c_str(), "wb");
+    if (!f) return surfcast::Status::error(partial + ": cannot create");
+    const std::string text = json.str();
+    bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+    ok = std::fclose(f) == 0 && ok;
+    std::error_code ec;
+    if (ok) std::filesystem::rename(partial, path, ec);
+    return ok && !ec ? surfcast::Status{} : surfcast::Status::error(path + ": could not be written");
+}
+
+// One stage of a staged build (stages.h): plan takes the inputs and options of
+// a whole build and stores them; the later stages read them from the plan.
+int runStage(const std::string& stage, const std::vector<std::string>& own) {
+    Args a;
+    if (int status = parseArgs(own, stage, &a); status >= 0) return status;
+    if (a.work.empty()) return usageError(stage + " needs --work DIR, a folder every stage's process sees");
+    const surfcast::WorkFolder work{a.work};
+    surfcast::BuildSummary summary;
+    std::shared_ptr<const surfcast::BuildContext> context;
+    if (stage == "plan") {
+        if (a.opt.output.empty()) return usageError("no output folder (-o OUT)");
+        if (a.opt.inputs.paths.empty() && !a.opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
+        auto paths = absoluteInputs(a.opt.inputs.paths);
+        if (!paths) return fail(paths.status());
+        a.opt.inputs.paths = *paths;
+        a.opt.output = std::filesystem::absolute(a.opt.output).lexically_normal().string();
+        std::error_code ec;
+        std::filesystem::create_directories(work.dir, ec);
+        if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
+        surfcast::Progress progress(a.opt.progress);
+        auto plan = surfcast::planStage(a.opt, progress, &context, &summary);
+        if (!plan) return fail(plan.status());
+        std::vector<std::string> stored = a.kept;
+        stored.insert(stored.end(), {"-o", a.opt.output});
+        stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
+        if (auto st = surfcast::writePlan(work.plan(), *plan, stored); !st.ok()) return fail(st);
+        if (auto st = writePlanJson(work, *plan, *context); !st.ok()) return fail(st);
+        std::printf("planned %zu chunks for %llu points in %s\n", plan->layout(*context).chunks().size(),
+                    (unsigned long long)context->stats().points, work.dir.c_str());
+        return 0;
+    }
+
+    std::vector<std::string> stored;
+    auto plan = surfcast::readPlan(work.plan(), &stored);
+    if (!plan) return fail(plan.status());
+    Args planned;
+    if (parseArgs(stored, "plan", &planned) >= 0) return fail(surfcast::Status::error(work.plan() + ": its command line does not parse"));
+    if (a.opt.threads > 0) planned.opt.threads = a.opt.threads;
+    if (!a.opt.progress) planned.opt.progress = false;
+    auto derived = surfcast::BuildContext::derive(planned.opt, plan->stats, false);
+    if (!derived) return fail(derived.status());
+    const surfcast::BuildContext& c = **derived;
+    surfcast::ChunkLayout layout = plan->layout(c);
+    surfcast::Progress progress(planned.opt.progress);
+    if (stage == "distribute") {
+        if (auto st = surfcast::distributeStage(c, layout, work, progress, &summary); !st.ok()) return fail(st);
+        std::printf("distributed %llu points into %zu chunks\n", (unsigned long long)c.stats().points, layout.chunks().size());
+        return 0;
+    }
+    if (stage == "chunk") {
+        if (a.chunks.empty()) return usageError("chunk needs the numbers of the chunks to build (0 to " + std::to_string(layout.chunks().size() - 1) + ")");
+        for (size_t i : a.chunks)
+            if (i >= layout.chunks().size())
+                return usageError("chunk " + std::to_string(i) + ": the plan has chunks 0 to " + std::to_string(layout.chunks().size() - 1));
+        if (auto st = surfcast::readDistribution(work, layout); !st.ok()) return fail(st);
+        uint64_t points = 0;
+        for (size_t i : a.chunks) points += layout.chunks()[i].points;
+        progress.begin("build", points);
+        for (size_t i : a.chunks) {
+            if (auto st = surfcast::chunkStage(c, layout, i, work, c.threads(), false); !st.ok()) return fail(st);
+            progress.advance(layout.chunks()[i].points);
+        }
+        progress.end();
+        return 0;
+    }
+    // merge
+    c.describe(&summary);
+    summary.chunks = layout.chunks().size();
+    auto writer = surfcast::TilesetWriter::create(planned.opt.output);
+    if (!writer) return fail(writer.status());
+    if (auto st = surfcast::mergeStage(c, layout, work, **writer, progress, &summary); !st.ok()) return fail(st);
+    summary.inputPoints = c.stats().points;
+    summary.skippedPoints = c.stats().skipped;
+    summary.peakRss = surfcast::peakRssBytes();
+    // The set is in place: the chunk and node files go (plan.bin and
+    // plan.json stay, a record of the build).
+    std::error_code ec;
+    std::filesystem::remove_all(work.chunks(), ec);
+    std::filesystem::remove_all(work.dir + "/nodes", ec);
+    return finishBuild(planned, summary);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::vector<std::string> args(argv + 1, argv + argc);
+    if (!args.empty() && (args[0] == "plan" || args[0] == "distribute" || args[0] == "chunk" || args[0] == "merge"))
+        return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
+    Args a;
+    if (int status = parseArgs(args, "", &a); status >= 0) return status;
+    const surfcast::BuildOptions& opt = a.opt;
+    const surfcast::HttpOptions& http = a.http;
+    const std::string& info = a.info;
     if (!info.empty()) {
         auto reader = surfcast::openTileset(info, http);
         auto summary = reader ? surfcast::verifyTileset(*reader) : surfcast::Result<std::string>(reader.status());
@@ -292,22 +487,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "surfcast-build: %s\n", paths.status().message().c_str());
         return 1;
     }
-    opt.inputs.paths = std::move(*paths);
+    a.opt.inputs.paths = std::move(*paths);
 
-    auto summary = surfcast::buildTileset(opt);
-    if (!summary) {
-        std::fprintf(stderr, "surfcast-build: %s\n", summary.status().message().c_str());
-        return 1;
-    }
-    std::printf("wrote %s\n%s", opt.output.c_str(), summary->text().c_str());
-    if (captureWeights) {
-        std::fflush(stdout);
-        int status = runWeightCapture(opt.output, !opt.progress);
-        if (status != 0) {
-            std::fprintf(stderr, "surfcast-build: weight capture (surfcast-weights) %s; the set keeps its analytic weights\n",
-                         status < 0 ? "could not be started" : ("failed with status " + std::to_string(status)).c_str());
-            return 1;
-        }
-    }
-    return 0;
+    auto summary = surfcast::buildTileset(a.opt);
+    if (!summary) return fail(summary.status());
+    return finishBuild(a, *summary);
 }

@@ -20,7 +20,7 @@ packages=(
 # machines here have 20 from a configured source), else Debian's (18).
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
-# A Rust toolchain for the LAZ decoder (preprocess/laz_ffi): any cargo on PATH,
+# A Rust toolchain for the LAZ decoder (preprocess/readers/laz_ffi): any cargo on PATH,
 # else Debian's.
 command -v cargo >/dev/null 2>&1 || packages+=(cargo)
 build=1

@@ -200,10 +200,11 @@ TEST(BadInput, KilledBuildLeavesNoTileset) {
         execl(bin.c_str(), bin.c_str(), "--default-scene", "--scene-points", "300000", "-o", out.c_str(), nullptr);
         _exit(127);
     }
-    // Killed while it writes blocks (the first has reached the partial
-    // folder's block file), however fast or slow the machine: event-driven,
-    // with a generous bound for sanitizer builds.
-    const std::string blocks = dir.file(".out.partial-" + std::to_string(pid) + "/blocks.unordered");
+    // Killed while it writes blocks (the first has reached the chunk's block
+    // file in the work folder beside the partial one: one chunk here),
+    // however fast or slow the machine: event-driven, with a generous bound
+    // for sanitizer builds.
+    const std::string blocks = dir.file(".out.partial-" + std::to_string(pid) + "-work/nodes/0.blocks");
     std::error_code ec;
     for (int i = 0; i < 12000 && !(fs::exists(blocks, ec) && fs::file_size(blocks, ec) > 0); ++i)
         std::this_thread::sleep_for(std::chrono::milliseconds(5));

@@ -1,5 +1,6 @@
 // The tile-set build: inputs → chunks on disk → a subtree per chunk → the
-// levels above the chunks → tile set. Follows DESIGN.md decisions 2-4: every
+// levels above the chunks → tile set, as the stages of stages.h, here in one
+// process. Follows DESIGN.md decisions 2-4: every
 // level is a complete resampling on its node's grid (G³, or coarser where that
 // keeps more than a quarter of the surfels below: kLevelReduction), leaves hold
 // the input points, a node splits above `capacity` surfels, and each node gets
@@ -72,6 +73,7 @@ struct BuildSummary {
     std::string text() const;
 };
 
+// The whole build in this process (stages.h, one after another).
 Result<BuildSummary> buildTileset(const BuildOptions& options);
 
 // "nearest", "ewa" or "optimal": the --texture-filter and tileset.json spelling.
@@ -106,7 +108,7 @@ inline constexpr uint64_t kFitBytesPerChunkPoint = 112;
 // A resampled node holds at most 1/kLevelReduction of the surfels below it
 // (one at least): where its G³ grid keeps more, it is sampled on the grid of
 // floor(G / kGridCoarsening^j) cells per axis for the smallest j that keeps
-// few enough (Builder::nodeGrid). A quarter is what a surface keeps when its
+// few enough (BuildContext::nodeGrid). A quarter is what a surface keeps when its
 // spacing doubles; summed over the tree, a set holds at most 4/3 surfels per
 // input point plus 4/3 per node above fewer than four (DESIGN.md decision 3
 // asks for at least a half, about 4/3 per point on surfaces). The rule and its

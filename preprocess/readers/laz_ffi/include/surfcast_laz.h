@@ -1,4 +1,4 @@
-/* C ABI of the surfcast_laz Rust static library (preprocess/laz_ffi).
+/* C ABI of the surfcast_laz Rust static library (preprocess/readers/laz_ffi).
  * Decompresses the point records of a LAZ file; the LAS header and VLRs are
  * parsed by the caller (las_reader.cpp). Errors come back as text in `err`. */
 #ifndef SURFCAST_LAZ_H

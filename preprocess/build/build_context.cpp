@@ -1,0 +1,351 @@
+#include "build_context.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <set>
+#include <thread>
+#include <tuple>
+
+#include "block_codec.h"
+
+namespace surfcast {
+
+namespace {
+
+// Leaves of inputs whose precision is unknown (doubles, text) are quantized to
+// this fraction of the leaf's cell size.
+constexpr double kUnknownPrecisionFraction = 256;
+// Float32 coordinates: 24 significant bits.
+constexpr double kFloat32Epsilon = 0x1.0p-24;
+// A default scan origin farther from the data than this many data extents is ignored.
+constexpr double kFarOrigin = 10;
+// Data whose height is under this fraction of its width is terrain: normals up.
+constexpr double kFlatRatio = 0.25;
+// Most bits of a stored scalar field (Draco's integer attributes are 32-bit).
+constexpr int kMaxScalarBits = 32;
+// Bits of a stored floating-point scalar field (ScalarField::resolution 0).
+constexpr int kFloatScalarBits = 24;
+
+double distanceToBox(const Vec3d& p, const Box3d& b) {
+    Vec3d d;
+    for (int a = 0; a < 3; ++a) d[a] = std::max({b.min[a] - p[a], 0.0, p[a] - b.max[a]});
+    return length(d);
+}
+
+}  // namespace
+
+BuildOptions normalizeOptions(BuildOptions o) {
+    if (o.threads <= 0) o.threads = int(std::max(1u, std::thread::hardware_concurrency()));
+    o.inputs.threads = o.threads;
+    // Scalar fields are decoded only when asked for by name.
+    if (o.attributes)
+        for (const std::string& name : *o.attributes)
+            if (lidarIndex(name) < 0 && !o.inputs.scalars.wants(name)) o.inputs.scalars.names.push_back(name);
+    // Meshes are read once: the scan keeps them for the passes after it,
+    // within half the budget until the plan knows what else it holds.
+    if (!o.inputs.meshes) o.inputs.meshes = std::make_shared<MeshStore>((o.memoryBytes - std::min(o.memoryBytes, kBaselineBytes)) / 2);
+    return o;
+}
+
+Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOptions& options, InputStats stats, bool report) {
+    std::shared_ptr<BuildContext> c(new BuildContext);
+    c->report_ = report;
+    c->opt_ = normalizeOptions(options);
+    c->threads_ = c->opt_.threads;
+    c->stats_ = std::move(stats);
+    if (c->stats_.points == 0)
+        return Status::error("the inputs hold no valid points (" + std::to_string(c->stats_.skipped) + " skipped as NaN/Inf)");
+    c->chooseRootBox();
+    SC_TRY(c->chooseOrientationRules());
+    SC_TRY(c->chooseAttributes());
+    return std::shared_ptr<const BuildContext>(std::move(c));
+}
+
+ScalarTable BuildContext::emptyTable() const {
+    ScalarTable t;
+    for (const ScalarQuantization& q : stored_) t.categorical.push_back(q.categorical);
+    return t;
+}
+
+uint16_t BuildContext::storedIntensity(uint16_t intensity) const {
+    // Clamped: an input without intensity (beside ones with it) reads as 0,
+    // below the range of those that carry it.
+    return uint16_t(std::clamp(std::lround(double(intensity - intensityOffset_) / intensityStep_), 0l, long(1 << kIntensityBits) - 1));
+}
+
+bool BuildContext::anyTexture() const {
+    return std::any_of(textureFields_.begin(), textureFields_.end(), [](const auto& f) { return f != nullptr; });
+}
+
+bool BuildContext::fitting() const { return opt_.textureFilter == BuildOptions::TextureFilter::Optimal && anyTexture(); }
+
+uint64_t BuildContext::bytesPerChunkPoint() const {
+    return kBytesPerChunkPoint + kBytesPerChunkScalar * stored_.size() + (fitting() ? kFitBytesPerChunkPoint : 0);
+}
+
+int BuildContext::positionBits(const NodeKey& key, double cell) const {
+    const double e = edge(key.level);
+    const double step = cell > 0      ? cell / opt_.positionFraction
+                        : leafStep_ > 0 ? leafStep_
+                                        : e / opt_.grid / kUnknownPrecisionFraction;
+    const int bits = int(std::ceil(std::log2(e / step) - 1e-9));
+    return std::clamp(bits, 1, kMaxPositionBits);
+}
+
+LevelParams BuildContext::levelParams(double fallbackSpacing, int threads) const {
+    LevelParams p;
+    p.spacingK = opt_.spacingK;
+    p.fetchK = opt_.fetchK;
+    p.cutoff = opt_.cutoff;
+    p.kernelScale = opt_.kernelScale;
+    p.radii = opt_.radii;
+    p.fallbackSpacing = fallbackSpacing;
+    p.weights = opt_.weights;
+    p.threads = threads;
+    return p;
+}
+
+TilesetInfo BuildContext::tilesetInfo() const {
+    TilesetInfo info;
+    info.generator = "surfcast-build 0.1.0";
+    info.inputPoints = stats_.points;
+    info.grid = opt_.grid;
+    info.pageDepth = opt_.pageDepth;
+    info.rootMin = rootMin_;
+    info.rootEdge = rootEdge_;
+    info.bounds = stats_.bounds;
+    info.colorBits = stats_.colorBits;
+    info.attributes.push_back({"position", "uint32", 3, 0});
+    info.attributes.push_back({"normal", "float32", 3, opt_.normalBits});
+    if (stats_.colorBits) info.attributes.push_back({"color", stats_.colorBits == 8 ? "uint8" : "uint16", 3, 0});
+    if (opt_.weights) info.attributes.push_back({"weight", "float32", 1, BlockCodecOptions{}.weightBits});
+    info.attributes.push_back({"radius", "float32", 1, BlockCodecOptions{}.radiusBits});  // only in nodes flagged kFlagHasRadius
+    const char* const types[kLidarCount] = {"uint16", "uint8", "uint8", "uint8"};
+    for (int i = 0; i < kLidarCount; ++i)
+        if (store_[i])
+            info.attributes.push_back({kLidarAttributes[i], types[i], 1, 0, i == kLidarIntensity ? "continuous" : "categorical",
+                                       i == kLidarIntensity ? double(intensityStep_) : 1.0,
+                                       i == kLidarIntensity ? double(intensityOffset_) : 0.0});
+    if (storeOpacity_) info.attributes.push_back({kOpacityAttribute, "uint8", 1, 0, "continuous", 1.0 / 255, 0.0});
+    for (const ScalarQuantization& q : stored_)
+        info.attributes.push_back({q.name, scalarType(q.bits), 1, 0, q.categorical ? "categorical" : "continuous", q.step, q.offset});
+    info.statistics = statistics();
+    info.normalSource = normalSource_;
+    info.weights = opt_.weights ? "analytic" : "none";
+    info.textureFilter = textureFilter_;
+    info.kernelScale = opt_.kernelScale;
+    return info;
+}
+
+void BuildContext::describe(BuildSummary* summary) const {
+    summary->colorBits = stats_.colorBits;
+    summary->normalSource = normalSource_;
+    summary->textureFilter = textureFilter_;
+    summary->attributes = attributeNames_;
+    summary->textureBytes = textureBytes_;
+}
+
+TilesetStatistics BuildContext::statistics() const {
+    TilesetStatistics st;
+    st.elevationMin = stats_.bounds.min.z;
+    st.elevationMax = stats_.bounds.max.z;
+    const AttributeStats& a = stats_.attributes;
+    if (store_[kLidarIntensity]) {
+        st.intensity = true;
+        // The value below which a fraction p of the points lie (the lowest such).
+        auto percentile = [&](double p) {
+            const uint64_t rank = uint64_t(std::ceil(p * double(a.intensityPoints)));
+            uint64_t seen = 0;
+            for (size_t v = 0; v < a.intensityHistogram.size(); ++v)
+                if ((seen += a.intensityHistogram[v]) >= std::max<uint64_t>(rank, 1)) return double(v);
+            return 65535.0;
+        };
+        st.intensityMin = percentile(0);
+        st.intensityMax = percentile(1);
+        st.intensityP2 = percentile(0.02);
+        st.intensityP98 = percentile(0.98);
+    }
+    if (store_[kLidarClassification])
+        for (int c = 0; c < 256; ++c)
+            if (a.classCounts[size_t(c)]) st.classCounts.push_back({c, a.classCounts[size_t(c)]});
+    return st;
+}
+
+// Which LiDAR attributes the set stores (BuildOptions::attributes), and how
+// the intensity is quantized.
+Status BuildContext::chooseAttributes() {
+    const AttributeStats& a = stats_.attributes;
+    auto distinct = [](const std::vector<uint64_t>& histogram, auto key) {
+        std::set<int> values;
+        for (size_t v = 0; v < histogram.size(); ++v)
+            if (histogram[v]) values.insert(key(int(v)));
+        return values.size();
+    };
+    auto self = [](int v) { return v; };
+    const bool carried[kLidarCount] = {a.intensityPoints > 0, a.classifiedPoints > 0, a.returnPoints > 0, a.returnPoints > 0};
+    // The return number and the number of returns go together (one means
+    // little without the other): both are stored where either varies.
+    const size_t values[kLidarCount] = {distinct(a.intensityHistogram, self), distinct(a.classCounts, self),
+                                        distinct(a.returnsHistogram, self), distinct(a.returnsHistogram, self)};
+    for (int i = 0; i < kLidarCount; ++i) store_[i] = carried[i] && (opt_.attributes || values[i] > 1);
+    if (opt_.attributes) {
+        for (const std::string& name : *opt_.attributes) {
+            int i = lidarIndex(name);
+            if (i >= 0 && !carried[i] && report_) std::fprintf(stderr, "warning: --attributes %s: no input carries it; not stored\n", name.c_str());
+            auto isField = [&](const ScalarStats& f) { return f.field.name == name; };
+            if (i < 0 && std::none_of(stats_.scalars.begin(), stats_.scalars.end(), isField))
+                return Status::error("--attributes: no input has an attribute '" + name +
+                                     "' (LAS/LAZ: intensity, classification, return_number, number_of_returns, scan_angle, "
+                                     "user_data, point_source_id, gps_time, nir and the Extra Bytes dimensions; PLY and PCD: "
+                                     "their property names)");
+        }
+        for (int i = 0; i < kLidarCount; ++i)
+            store_[i] = store_[i] && std::find(opt_.attributes->begin(), opt_.attributes->end(), kLidarAttributes[i]) !=
+                                         opt_.attributes->end();
+    }
+    // One of the return pair asked for brings the other.
+    store_[kLidarReturnNumber] = store_[kLidarNumberOfReturns] = store_[kLidarReturnNumber] || store_[kLidarNumberOfReturns];
+    for (int i = 0; i < kLidarCount; ++i)
+        if (store_[i]) attributeNames_.push_back(kLidarAttributes[i]);
+    // Opacity only where some point is translucent: an opaque set carries none.
+    storeOpacity_ = a.translucentPoints > 0;
+    if (storeOpacity_) attributeNames_.push_back(kOpacityAttribute);
+    // Scalar fields (selected by name or with "all": every one found that
+    // varies is stored): exact at the file's own resolution where it has one
+    // and the range fits 32 bits; floating ones in the power-of-two step that
+    // splits the set's range into at most 2^24 (float32's precision).
+    for (const ScalarStats& f : stats_.scalars) {
+        // A constant field carries no information per point; stored, it still
+        // costs Draco's kd-tree coder: seven constant fields beside the usual
+        // attributes doubled the bytes of a scan (bench/BENCHMARKS.md).
+        if (!(f.max > f.min)) {
+            if (report_)
+                std::fprintf(stderr, "warning: --attributes %s: %s across the set; not stored\n", f.field.name.c_str(),
+                         f.points ? ("constant (" + std::to_string(f.min) + ")").c_str() : "no valid value");
+            continue;
+        }
+        ScalarQuantization q;
+        q.name = f.field.name;
+        q.categorical = f.field.categorical;
+        const double lo = f.min, range = f.max - f.min;
+        const double maxSteps = std::ldexp(1.0, kMaxScalarBits) - 1;
+        const double floatSteps = std::ldexp(1.0, kFloatScalarBits) - 1;
+        q.offset = lo;
+        q.step = f.field.resolution > 0 ? f.field.resolution : std::exp2(std::ceil(std::log2(range / floatSteps)));
+        while (range / q.step > maxSteps) q.step *= 2;
+        q.bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
+        stored_.push_back(q);
+        attributeNames_.push_back(q.name);
+    }
+    // Intensity as (value - min) / step with the smallest power-of-two step
+    // that fits the set's range in kIntensityBits: exact for ranges up to 4096
+    // values (Megaplot, autzen, lone-star); a 16-bit range keeps 1/4096 of it,
+    // finer than any display maps it (docs/FORMAT.md).
+    if (store_[kLidarIntensity]) {
+        const TilesetStatistics st = statistics();
+        intensityOffset_ = int(st.intensityMin);
+        intensityStep_ = 1;
+        while ((st.intensityMax - st.intensityMin) / intensityStep_ >= double(1 << kIntensityBits)) intensityStep_ *= 2;
+    }
+    return {};
+}
+
+// The cubic root box around the points' bounds, and the leaves' quantization step.
+void BuildContext::chooseRootBox() {
+    // A hair larger than the bounds, so the maximum lies inside.
+    const Box3d& b = stats_.bounds;
+    double extent = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
+    double magnitude = std::max({std::fabs(b.min.x), std::fabs(b.min.y), std::fabs(b.min.z), std::fabs(b.max.x),
+                                 std::fabs(b.max.y), std::fabs(b.max.z), 1.0});
+    // Identical points have no extent: give them a box a million times their
+    // coordinates' resolution.
+    rootEdge_ = std::max(extent * (1 + 1e-6), magnitude * 1e-9);
+    Vec3d centre = (b.min + b.max) * 0.5;
+    rootMin_ = centre - Vec3d{rootEdge_, rootEdge_, rootEdge_} * 0.5;
+
+    bool unknown = false;
+    double step = HUGE_VAL;
+    for (const SourceStats& s : stats_.sources) {
+        const InputDescription& d = s.description;
+        double mag = std::max({std::fabs(s.bounds.min.x), std::fabs(s.bounds.min.y), std::fabs(s.bounds.min.z),
+                               std::fabs(s.bounds.max.x), std::fabs(s.bounds.max.y), std::fabs(s.bounds.max.z)});
+        if (d.precision > 0) step = std::min(step, d.precision);
+        else if (d.float32Coordinates) step = std::min(step, mag * kFloat32Epsilon);
+        else unknown = true;
+    }
+    leafStep_ = unknown || !(step > 0) || !std::isfinite(step) ? 0 : step;
+}
+
+// The normal-orientation policy of each input (normals.h), deduplicated: inputs
+// that orient alike share a rule, so Surfel::source stays 16-bit however many
+// inputs there are.
+Status BuildContext::chooseOrientationRules() {
+    const Box3d& b = stats_.bounds;
+    normals_.centre = (b.min + b.max) * 0.5 - rootMin_;
+    normals_.k = opt_.normalK;
+    normals_.rules.clear();
+    sourceIds_.clear();
+    std::map<std::tuple<bool, double, double, double, bool, long>, uint16_t> ruleIds;
+    std::vector<std::string> sources;
+    for (const SourceStats& s : stats_.sources) {
+        const InputDescription& d = s.description;
+        OrientationRule rule;
+        const Box3d& sb = s.bounds;
+        double sourceExtent = std::max({sb.max.x - sb.min.x, sb.max.y - sb.min.y, sb.max.z - sb.min.z});
+        // A default scan origin (PCD's 0,0,0) far from the data is no origin.
+        bool originUsable = d.scanOrigin && !(d.scanOriginIsDefault && distanceToBox(*d.scanOrigin, sb) > kFarOrigin * sourceExtent);
+        if (originUsable) rule.scanOrigin = *d.scanOrigin - rootMin_;
+        // Airborne LiDAR, and any data much flatter than wide (terrain), face up.
+        bool flat = sb.max.z - sb.min.z < kFlatRatio * std::max(sb.max.x - sb.min.x, sb.max.y - sb.min.y);
+        rule.up = d.airborne || (!originUsable && flat);
+        Vec3d o = rule.scanOrigin.value_or(Vec3d{});
+        // A textured mesh has a rule of its own: its surfels find their texture by it.
+        const bool ownRule = d.textured && opt_.textureFilter != BuildOptions::TextureFilter::Nearest;
+        auto [it, added] = ruleIds.try_emplace({rule.scanOrigin.has_value(), o.x, o.y, o.z, rule.up,
+                                                ownRule ? long(&s - stats_.sources.data()) : -1L},
+                                               uint16_t(normals_.rules.size()));
+        if (added) {
+            if (normals_.rules.size() > 0xFFFF)
+                return Status::error(d.path + ": more than 65,536 distinct scan origins among the inputs");
+            normals_.rules.push_back(rule);
+        }
+        sourceIds_.push_back(it->second);
+        std::string name = d.hasNormals ? "input" : orientationName(rule);
+        if (std::find(sources.begin(), sources.end(), name) == sources.end()) sources.push_back(name);
+    }
+    for (size_t i = 0; i < sources.size(); ++i) normalSource_ += (i ? "+" : "") + sources[i];
+    // The textured meshes' fields, from the meshes the scan read (whose
+    // textures they share).
+    textureFields_.assign(normals_.rules.size(), nullptr);
+    for (size_t i = 0; i < stats_.sources.size(); ++i) {
+        const InputDescription& d = stats_.sources[i].description;
+        if (!d.textured) continue;
+        textureFilter_ = textureFilterName(opt_.textureFilter);
+        if (opt_.textureFilter == BuildOptions::TextureFilter::Nearest) continue;
+        auto mesh = readMeshTriangles(d.path, true, opt_.inputs.mesh, opt_.inputs.meshes.get());
+        if (!mesh) return mesh.status();
+        textureFields_[sourceIds_[i]] = std::make_shared<const TextureField>(*mesh, rootMin_);
+        textureBytes_ += textureFields_[sourceIds_[i]]->bytes();
+    }
+    return {};
+}
+
+SampleGrid BuildContext::nodeGrid(const NodeKey& k, std::span<const Surfel> below) const {
+    const size_t target = std::max<size_t>(1, below.size() / kLevelReduction);
+    // Step j has floor(G / kGridCoarsening^j) cells per axis (one at least), so
+    // its cells tile the node and line up with those of the level's other
+    // nodes on the same step.
+    auto grid = [&](int j) {
+        const uint32_t cells = uint32_t(std::max(1.0, std::floor(opt_.grid * std::pow(kGridCoarsening, -j) + 1e-9)));
+        return SampleGrid{nodeMinRel(k), edge(k.level) / cells, cells};
+    };
+    int j = 0;
+    for (SampleGrid g = grid(0); g.cells > 1 && occupiedCells(below, g) > target; g = grid(++j)) {
+    }
+    return grid(j);
+}
+
+}  // namespace surfcast

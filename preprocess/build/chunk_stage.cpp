@@ -1,0 +1,270 @@
+// The chunk stage (stages.h): one chunk's subtree, from its point and halo
+// files to its blocks, records and root in the work folder.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+
+#include "built_node.h"
+#include "crc32.h"
+#include "stages.h"
+#include "work_files.h"
+
+namespace fs = std::filesystem;
+
+namespace surfcast {
+
+namespace {
+
+// Sorts points along a Morton curve over the cube [lo, lo + edge)³ (points
+// outside are clamped to it). It made FLANN's normals queries 1.4x faster on a
+// real scan; with the grid search (which sorts its own copy) it measured
+// neither faster nor slower, and it is kept for the normals' writes and the
+// subtree partition, which then walk memory in runs.
+void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
+    const double scale = double((1 << 21) - 1) / edge;
+    std::vector<std::pair<uint64_t, uint32_t>> keys(points.size());
+    for (size_t i = 0; i < points.size(); ++i) {
+        uint32_t c[3];
+        for (int a = 0; a < 3; ++a) c[a] = uint32_t(std::clamp((points[i].position[a] - lo[a]) * scale, 0.0, double((1 << 21) - 1)));
+        keys[i] = {mortonCode(c[0], c[1], c[2]), uint32_t(i)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<Surfel> sorted(points.size());
+    for (size_t i = 0; i < keys.size(); ++i) sorted[i] = points[keys[i].second];
+    points.swap(sorted);
+}
+
+BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
+                        std::vector<std::unique_ptr<BuiltNode>>& nodes, ScalarTable& scalars) {
+    auto node = std::make_unique<BuiltNode>();
+    node->key = key;
+    auto first = pts.begin() + long(b), last = pts.begin() + long(e);
+    bool identical = std::all_of(first, last, [&](const Surfel& s) { return s.position == first->position; });
+    if (e - b <= ctx.options().capacity || key.level >= kMaxLevel || identical) {
+        // Leaf: the input points themselves, exact duplicates merged.
+        node->inputPoints = true;
+        node->surfels.assign(first, last);
+        auto& v = node->surfels;
+        // Of exact duplicates, the one kept has the lowest class, then intensity,
+        // returns, colour and scalar fields in order (docs/FORMAT.md): the same
+        // whatever the input order.
+        const size_t fields = scalars.fields();
+        std::sort(v.begin(), v.end(), [&](const Surfel& a, const Surfel& c) {
+            const auto ka = std::tie(a.position.x, a.position.y, a.position.z, a.classification, a.intensity, a.returns,
+                                     a.color[0], a.color[1], a.color[2]);
+            const auto kc = std::tie(c.position.x, c.position.y, c.position.z, c.classification, c.intensity, c.returns,
+                                     c.color[0], c.color[1], c.color[2]);
+            if (ka != kc || fields == 0) return ka < kc;
+            return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
+                                                scalars.row(c.row) + fields);
+        });
+        size_t out = 0;
+        for (size_t i = 0; i < v.size(); ++i) {
+            if (out > 0 && v[out - 1].position == v[i].position) v[out - 1].count += v[i].count;
+            else v[out++] = v[i];
+        }
+        v.resize(out);
+    } else {
+        // Partition the range into the 8 children (child index bits: x, y, z).
+        Vec3d mid = ctx.nodeMinRel(key) + Vec3d{1, 1, 1} * (ctx.edge(key.level) * 0.5);
+        size_t bounds[9];
+        bounds[0] = b;
+        bounds[8] = e;
+        auto split = [&](size_t lo, size_t hi, int axis) {
+            return size_t(std::partition(pts.begin() + long(lo), pts.begin() + long(hi),
+                                         [&](const Surfel& s) { return s.position[axis] < mid[axis]; }) -
+                          pts.begin());
+        };
+        bounds[4] = split(b, e, 0);
+        bounds[2] = split(bounds[0], bounds[4], 1);
+        bounds[6] = split(bounds[4], bounds[8], 1);
+        for (int i = 0; i < 8; i += 2) bounds[i + 1] = split(bounds[i], bounds[i + 2], 2);
+        std::vector<Surfel> gathered;
+        for (int i = 0; i < 8; ++i) {
+            if (bounds[i] == bounds[i + 1]) continue;
+            BuiltNode* child = buildSubtree(ctx, pts, bounds[i], bounds[i + 1], key.child(i), nodes, scalars);
+            node->childMask |= uint8_t(1u << i);
+            gathered.insert(gathered.end(), child->surfels.begin(), child->surfels.end());
+        }
+        const SampleGrid grid = ctx.nodeGrid(key, gathered);
+        node->cell = grid.cellSize;
+        node->surfels = resample(gathered, grid, true, &scalars);
+    }
+    nodes.push_back(std::move(node));
+    return nodes.back().get();
+}
+
+std::vector<Surfel> resampleHalo(const BuildContext& ctx, const std::vector<Surfel>& halo, const Chunk& chunk, double margin, int level,
+                                 std::span<BuiltNode* const> members) {
+    // Each halo point stands in for a neighbouring chunk's surfels near the
+    // level's node that holds the point clamped into the chunk, and is
+    // resampled on that node's cell (the level's G³ cell where that node is a
+    // leaf, absent or not coarsened).
+    const double e = ctx.edge(level), base = e / ctx.options().grid;
+    const Vec3d chunkLo = ctx.nodeMinRel(chunk.key);
+    const double chunkEdge = ctx.edge(chunk.key.level);
+    auto sample = [&](std::span<const Surfel> points, double cell) {
+        SampleGrid g;
+        for (int a = 0; a < 3; ++a) g.origin[a] = std::floor((chunkLo[a] - margin) / cell) * cell;  // aligned with the level's cells
+        g.cellSize = cell;
+        const double cells = std::ceil((chunkEdge + 2 * margin) / cell) + 2;
+        if (cells >= kMaxGridCells)
+            return std::vector<Surfel>(points.begin(), points.end());  // finer than any grid can address: the points themselves
+        g.cells = uint32_t(cells);
+        return resample(points, g, false);
+    };
+    std::map<NodeKey, double> cellOf;
+    for (const BuiltNode* n : members)
+        if (n->cell > 0 && n->cell != base) cellOf[n->key] = n->cell;
+    if (cellOf.empty()) return sample(halo, base);
+
+    const int below = level - chunk.key.level;
+    const uint32_t span = 1u << below;  // the level's nodes per axis of the chunk
+    std::map<double, std::vector<Surfel>> byCell;
+    for (const Surfel& s : halo) {
+        NodeKey k{uint8_t(level), 0, 0, 0};
+        uint32_t* axes[3] = {&k.x, &k.y, &k.z};
+        const uint32_t first[3] = {chunk.key.x, chunk.key.y, chunk.key.z};
+        for (int a = 0; a < 3; ++a)
+            *axes[a] = (first[a] << below) +
+                       uint32_t(std::clamp(std::floor((s.position[a] - chunkLo[a]) / e), 0.0, double(span - 1)));
+        const auto it = cellOf.find(k);
+        byCell[it == cellOf.end() ? base : it->second].push_back(s);
+    }
+    std::vector<Surfel> out;
+    for (auto& [cell, points] : byCell) {
+        std::vector<Surfel> sampled = sample(points, cell);
+        out.insert(out.end(), sampled.begin(), sampled.end());
+    }
+    return out;
+}
+
+// A chunk's blocks file, appended to as its nodes are encoded.
+class BlockFile {
+public:
+    explicit BlockFile(std::string path) : path_(std::move(path)), file_(std::fopen(path_.c_str(), "wb")) {}
+    ~BlockFile() {
+        if (file_) std::fclose(file_);
+    }
+    Status add(EncodedNode node, std::vector<NodeRecord>* records) {
+        if (!file_) return Status::error(path_ + ": cannot create (" + std::strerror(errno) + ")");
+        if (std::fwrite(node.blob.data(), 1, node.blob.size(), file_) != node.blob.size())
+            return Status::error(path_ + ": write failed (disk full?)");
+        node.record.blockOffset = bytes_;
+        node.record.blockSize = uint32_t(node.blob.size());
+        node.record.blockCrc = crc32(node.blob.data(), node.blob.size());
+        bytes_ += node.blob.size();
+        records->push_back(node.record);
+        return {};
+    }
+    Status close() {
+        const bool ok = file_ && std::fclose(file_) == 0;
+        file_ = nullptr;
+        return ok ? Status{} : Status::error(path_ + ": write failed (disk full?)");
+    }
+    uint64_t bytes() const { return bytes_; }
+
+private:
+    std::string path_;
+    std::FILE* file_;
+    uint64_t bytes_ = 0;
+};
+
+}  // namespace
+
+Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t index, const WorkFolder& work, int threads,
+                  bool removeInputs) {
+    const Chunk& chunk = layout.chunks().at(index);
+    StepTimes steps = {};
+    FitReport fits;
+    auto pts = readChunkFile(chunk.file, chunk.points);
+    if (!pts) return pts.status();
+    auto halo = readChunkFile(chunk.haloFile, chunk.haloPoints);
+    if (!halo) return halo.status();
+    ScalarTable scalars = context.emptyTable();
+    if (!context.scalars().empty()) {
+        auto values = readChunkScalars(chunk.scalarFile, chunk.points * context.scalars().size());
+        if (!values) return values.status();
+        scalars.values = std::move(*values);
+    }
+    for (size_t i = 0; i < pts->size(); ++i) (*pts)[i].row = uint32_t(i);
+    std::error_code ec;
+    if (removeInputs) {
+        fs::remove(chunk.file, ec);
+        fs::remove(chunk.haloFile, ec);
+        fs::remove(chunk.scalarFile, ec);
+    }
+    // A chunk built again (a staged build's retried task) is not done until
+    // its new records are in place.
+    fs::remove(work.nodes(index), ec);
+    fs::create_directories(fs::path(work.nodes(index)).parent_path(), ec);
+    BlockFile blocks(work.blocks(index));
+    std::vector<NodeRecord> records;
+    std::unique_ptr<BuiltNode> retained;  // the chunk root, for the levels above (none for the root chunk)
+
+    if (!pts->empty()) {
+        const double margin = layout.margin(int(index));
+        NormalContext normals = context.normals();
+        normals.threads = threads;
+        {
+            ScopedTimer t(steps[kStepNormals]);
+            const Vec3d lo = context.nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
+            sortMorton(*pts, lo, context.edge(chunk.key.level) + 2 * margin);
+            sortMorton(*halo, lo, context.edge(chunk.key.level) + 2 * margin);
+            estimateNormals(*pts, *halo, normals);
+        }
+        std::vector<std::unique_ptr<BuiltNode>> nodes;
+        BuiltNode* root = nullptr;
+        {
+            ScopedTimer t(steps[kStepOctree]);
+            root = buildSubtree(context, *pts, 0, pts->size(), chunk.key, nodes, scalars);
+            std::vector<Surfel>().swap(*pts);
+        }
+
+        // Per level: h, radii and weights, with the halo resampled on the level's grid.
+        std::map<int, std::vector<BuiltNode*>> levels;
+        for (auto& n : nodes) {
+            n->level.surfels = n->surfels;
+            levels[n->key.level].push_back(n.get());
+        }
+        for (auto& [level, built] : levels) {
+            std::vector<LevelNode*> members;
+            for (BuiltNode* n : built) members.push_back(&n->level);
+            std::vector<Surfel> haloLevel;
+            {
+                ScopedTimer t(steps[kStepAttributes]);
+                haloLevel = resampleHalo(context, *halo, chunk, margin, level, built);
+                computeLevelAttributes(members, haloLevel, context.levelParams(largestCell(context, level, built), threads));
+            }
+            fits.add(filterLevelTextures(context, built, haloLevel, threads, steps));
+        }
+        for (auto& n : nodes) {
+            auto encoded = encodeNode(context, *n, scalars, steps);
+            if (!encoded) return encoded.status();
+            SC_TRY(blocks.add(std::move(*encoded), &records));
+            if (n.get() == root && !(chunk.key == NodeKey{})) retained = std::move(n);
+        }
+    }
+    SC_TRY(blocks.close());
+
+    ChunkOutput out;
+    out.records = std::move(records);
+    out.blocksBytes = blocks.bytes();
+    for (int i = 0; i < kStepCount; ++i) out.stepNs[i] = steps[i];
+    out.fits = fits;
+    if (retained) {
+        // Rows renumbered in surfel order, each with its scalar values.
+        out.root = std::move(retained);
+        out.rootScalars = context.emptyTable();
+        for (size_t i = 0; i < out.root->surfels.size(); ++i) {
+            Surfel& s = out.root->surfels[i];
+            out.rootScalars.append(scalars.row(s.row));
+            s.row = uint32_t(i);
+        }
+    }
+    return writeChunkOutput(work.nodes(index), out);
+}
+
+}  // namespace surfcast

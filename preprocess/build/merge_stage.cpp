@@ -1,0 +1,115 @@
+// The merge stage (stages.h): the chunks' outputs into the writer, the levels
+// above the chunk roots, and the tile set.
+#include <map>
+
+#include "built_node.h"
+#include "stages.h"
+#include "work_files.h"
+
+namespace surfcast {
+
+Status mergeStage(const BuildContext& context, const ChunkLayout& layout, const WorkFolder& work, TilesetWriter& writer,
+                  Progress& progress, BuildSummary* summary) {
+    StepTimes steps = {};
+    auto count = [&](const NodeRecord& r) {
+        const size_t level = r.key.level;
+        if (summary->nodesPerLevel.size() <= level) {
+            summary->nodesPerLevel.resize(level + 1);
+            summary->surfelsPerLevel.resize(level + 1);
+        }
+        summary->nodesPerLevel[level]++;
+        summary->surfelsPerLevel[level] += r.surfelCount;
+        summary->surfels += r.surfelCount;
+    };
+
+    // The chunks' nodes, and their roots for the levels above.
+    std::map<NodeKey, std::unique_ptr<BuiltNode>> retained;
+    ScalarTable upperScalars = context.emptyTable();  // rows of retained and the levels above them
+    for (size_t i = 0; i < layout.chunks().size(); ++i) {
+        auto out = readChunkOutput(work.nodes(i), context.emptyTable());
+        if (!out) return out.status();
+        SC_TRY(writer.addPlacedNodes(work.blocks(i), out->blocksBytes, out->records));
+        for (const NodeRecord& r : out->records) count(r);
+        for (int s = 0; s < kStepCount; ++s) steps[s] += out->stepNs[s];
+        summary->textureFit.add(out->fits);
+        if (out->root) {
+            if (!(out->root->key == layout.chunks()[i].key))
+                return Status::error(work.nodes(i) + ": its root is not chunk " + std::to_string(i) + "'s node");
+            for (Surfel& s : out->root->surfels) s.row = upperScalars.append(out->rootScalars.row(s.row));
+            retained[out->root->key] = std::move(out->root);
+        }
+    }
+
+    // Level by level up from the deepest chunk root: each node resampled from
+    // its children (chunk roots and upper nodes of the level below).
+    if (!retained.empty()) {
+        int deepest = 0;
+        for (auto& [key, node] : retained) deepest = std::max(deepest, int(key.level));
+        progress.begin("upper", uint64_t(deepest), "levels");
+        std::map<NodeKey, std::unique_ptr<BuiltNode>> below;  // nodes of level L+1 still needed
+        for (int level = deepest - 1; level >= 0; --level) {
+            for (auto it = retained.begin(); it != retained.end();) {
+                if (it->first.level == level + 1) {
+                    below[it->first] = std::move(it->second);
+                    it = retained.erase(it);
+                } else {
+                    ++it;
+                }
+            }
+            std::map<NodeKey, std::unique_ptr<BuiltNode>> current;
+            std::map<NodeKey, std::vector<Surfel>> gathered;
+            for (auto& [key, child] : below) {
+                NodeKey parent = key.parent();
+                auto& p = current[parent];
+                if (!p) {
+                    p = std::make_unique<BuiltNode>();
+                    p->key = parent;
+                }
+                p->childMask |= uint8_t(1u << key.childIndex());
+                auto& g = gathered[parent];
+                g.insert(g.end(), child->surfels.begin(), child->surfels.end());
+            }
+            below.clear();
+            std::vector<LevelNode*> members;
+            for (auto& [key, node] : current) {
+                const SampleGrid grid = context.nodeGrid(key, gathered[key]);
+                node->cell = grid.cellSize;
+                node->surfels = resample(gathered[key], grid, true, &upperScalars);
+                node->level.surfels = node->surfels;
+                members.push_back(&node->level);
+            }
+            gathered.clear();
+            std::vector<Surfel> neighbours;  // chunk roots on this level
+            for (auto& [key, node] : retained)
+                if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
+            std::vector<BuiltNode*> built;
+            for (auto& [key, node] : current) built.push_back(node.get());
+            computeLevelAttributes(members, neighbours, context.levelParams(largestCell(context, level, built), context.threads()));
+            summary->textureFit.add(filterLevelTextures(context, built, neighbours, context.threads(), steps));
+            for (auto& [key, node] : current) {
+                auto encoded = encodeNode(context, *node, upperScalars, steps);
+                if (!encoded) return encoded.status();
+                count(encoded->record);
+                SC_TRY(writer.addNode(encoded->record, encoded->blob));
+            }
+            below = std::move(current);
+            progress.advance(1);
+        }
+        summary->phaseSeconds.push_back({"upper", progress.end()});
+    }
+
+    progress.begin("write", 0);
+    TilesetInfo info = context.tilesetInfo();
+    info.surfels = summary->surfels;
+    info.levels = int(summary->nodesPerLevel.size());
+    SC_TRY(writer.finish(info));
+    summary->phaseSeconds.push_back({"write", progress.end()});
+    summary->nodes = info.nodes;
+    summary->levels = info.levels;
+    summary->hierarchyBytes = info.hierarchyBytes;
+    summary->blocksBytes = info.blocksBytes;
+    for (int s = 0; s < kStepCount; ++s) summary->stepSeconds.push_back({kStepNames[s], double(steps[s]) * 1e-9});
+    return {};
+}
+
+}  // namespace surfcast

@@ -1,0 +1,99 @@
+// A build in one process: the stages of stages.h one after another, the chunks
+// kChunksAtOnce at a time, with the work folder beside the partial output.
+#include "octree_builder.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+
+#include "stages.h"
+
+namespace fs = std::filesystem;
+
+namespace surfcast {
+
+namespace {
+
+// Builds every chunk of `layout`, largest first (the long poles start early),
+// at most kChunksAtOnce at a time (the budget is split that many ways); more
+// threads work inside each chunk.
+Status buildChunks(const BuildContext& context, const ChunkLayout& layout, const WorkFolder& work, Progress& progress) {
+    const std::vector<Chunk>& chunks = layout.chunks();
+    std::vector<size_t> order(chunks.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return chunks[a].points > chunks[b].points; });
+    const int threads = context.threads();
+    const int workers = int(std::min({size_t(threads), size_t(kChunksAtOnce), order.size()}));
+    const int inner = std::max(1, threads / workers);
+    std::atomic<size_t> next{0};
+    std::mutex errorMutex;
+    Status firstError;
+    auto work1 = [&] {
+        while (true) {
+            const size_t i = next++;
+            if (i >= order.size()) return;
+            {
+                std::lock_guard lock(errorMutex);
+                if (!firstError.ok()) return;
+            }
+            Status st = chunkStage(context, layout, order[i], work, inner, true);
+            progress.advance(chunks[order[i]].points);
+            if (!st.ok()) {
+                std::lock_guard lock(errorMutex);
+                if (firstError.ok()) firstError = st;
+            }
+        }
+    };
+    std::vector<std::thread> pool;
+    for (int w = 1; w < workers; ++w) pool.emplace_back(work1);
+    work1();
+    for (auto& t : pool) t.join();
+    return firstError;
+}
+
+}  // namespace
+
+Result<BuildSummary> buildTileset(const BuildOptions& options) {
+    const auto start = std::chrono::steady_clock::now();
+    Progress progress(options.progress);
+    BuildSummary summary;
+    std::shared_ptr<const BuildContext> context;
+    auto plan = planStage(options, progress, &context, &summary);
+    if (!plan) return plan.status();
+    const BuildContext& c = *context;
+    c.describe(&summary);
+
+    auto writer = TilesetWriter::create(options.output);
+    if (!writer) return writer.status();
+    const fs::path partial((*writer)->partialDir());
+    const WorkFolder work{(partial.parent_path() / (partial.filename().string() + "-work")).string()};
+    std::error_code ec;
+    fs::create_directories(work.dir, ec);
+    if (ec) return Status::error(work.dir + ": cannot create the temporary work folder (" + ec.message() + ")");
+    struct RemoveDir {
+        std::string path;
+        ~RemoveDir() {
+            std::error_code e;
+            fs::remove_all(path, e);
+        }
+    } workGuard{work.dir};
+
+    ChunkLayout layout = plan->layout(c);
+    SC_TRY(distributeStage(c, layout, work, progress, &summary));
+    summary.chunks = layout.chunks().size();
+    progress.begin("build", c.stats().points);
+    SC_TRY(buildChunks(c, layout, work, progress));
+    summary.phaseSeconds.push_back({"build", progress.end()});
+    SC_TRY(mergeStage(c, layout, work, **writer, progress, &summary));
+
+    summary.inputPoints = c.stats().points;
+    summary.skippedPoints = c.stats().skipped;
+    summary.totalSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary.peakRss = peakRssBytes();
+    return summary;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,148 @@
+// The staged build (preprocess/build/stages.h): surfcast-build plan,
+// distribute, chunk and merge, each its own process, write the same bytes as
+// one surfcast-build, and refuse work files that are missing or corrupt.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+
+#include "test_support.h"
+
+using namespace surfcast;
+
+namespace {
+
+std::vector<std::string> concat(std::vector<std::string> a, const std::vector<std::string>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+}
+
+// Runs one stage; its output on failure.
+void stage(const std::vector<std::string>& args) {
+    auto r = test::run(concat({test::binary("surfcast-build")}, args));
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+}
+
+// The chunk count plan.json announces.
+size_t plannedChunks(const std::string& work) {
+    const std::string json = test::readFile(work + "/plan.json");
+    const size_t at = json.find("\"chunks\": ");
+    if (at == std::string::npos) return 0;
+    return size_t(std::stoul(json.substr(at + 10)));
+}
+
+void expectSameSet(const std::string& a, const std::string& b) {
+    for (const char* file : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(test::readFile(a + "/" + file) == test::readFile(b + "/" + file)) << file << " differs between " << a << " and " << b;
+}
+
+// The staged build of `options` in `dir`, chunks built last to first (an
+// order no single process uses), the first of them twice, as a retried task
+// would; then compared with one process's build.
+void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<std::string>& options) {
+    const std::string work = dir.file("work");
+    auto whole = test::run(concat(concat({test::binary("surfcast-build"), "-q"}, options), {"-o", dir.file("whole")}));
+    ASSERT_EQ(whole.exitCode, 0) << whole.output;
+    ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q"}, options), {"-o", dir.file("staged")})));
+    const size_t chunks = plannedChunks(work);
+    ASSERT_GE(chunks, 4u) << "the budget should force several chunks";
+    // The chunks reported are the chunks built.
+    EXPECT_NE(whole.output.find(" " + std::to_string(chunks) + " chunks"), std::string::npos) << whole.output;
+    ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q"}));
+    for (size_t i = chunks; i-- > 0;) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(chunks - 1)}));
+    ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
+    expectSameSet(dir.file("staged"), dir.file("whole"));
+}
+
+void flipByte(const std::string& path, uint64_t at) {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(std::streamoff(at));
+    char c = 0;
+    f.get(c);
+    f.seekp(std::streamoff(at));
+    f.put(char(c ^ 0x20));
+}
+
+}  // namespace
+
+TEST(Stages, DefaultSceneAcrossChunksSameBytesAsOneProcess) {
+    test::TempDir dir;
+    expectStagedSameAsOneProcess(dir, {"--default-scene", "--scene-points", "300000", "--memory", "160M", "--capacity", "4000"});
+}
+
+// A LAZ scan with its scalar fields (gps_time, scan_angle): the chunk roots
+// carry their rows to the merge.
+TEST(Stages, ScalarFieldsSameBytesAsOneProcess) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    expectStagedSameAsOneProcess(dir, {test::dataFile("Megaplot.laz"), "--attributes", "all", "--memory", "64M", "--capacity", "1000"});
+}
+
+// A textured mesh fitted by least squares: every stage's process rebuilds
+// the texture field from the mesh, and the fits' reports travel with the chunks.
+TEST(Stages, TexturedMeshSameBytesAsOneProcess) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    expectStagedSameAsOneProcess(dir, {test::dataFile("fg_spkMgDragon/fg_spkMgDragon.obj"), "--mesh-max-surfels", "100000",
+                                       "--memory", "230M", "--capacity", "2000"});
+}
+
+TEST(Stages, MissingOrCorruptWorkFilesFailWithTheirNames) {
+    test::TempDir dir;
+    const std::string work = dir.file("work"), out = dir.file("set");
+    const std::string build = test::binary("surfcast-build");
+    // An old set at the output, which no failed merge may touch.
+    auto old = test::buildScene(out, 20000);
+    ASSERT_EQ(old.exitCode, 0) << old.output;
+    const std::string oldBlocks = test::readFile(out + "/blocks.bin");
+
+    // Usage: no work folder; build options on a later stage; a chunk the plan lacks.
+    EXPECT_EQ(test::run({build, "distribute"}).exitCode, 2);
+    auto merged = test::run({build, "merge", "--work", work});
+    EXPECT_EQ(merged.exitCode, 1);
+    EXPECT_NE(merged.output.find(work + "/plan.bin"), std::string::npos) << merged.output;
+    ASSERT_NO_FATAL_FAILURE(stage({"plan", "--work", work, "-q", "--default-scene", "--scene-points", "200000", "--memory", "160M",
+                                   "--capacity", "4000", "-o", out}));
+    const size_t chunks = plannedChunks(work);
+    ASSERT_GE(chunks, 2u);
+    auto option = test::run({build, "chunk", "--work", work, "--grid", "64", "0"});
+    EXPECT_EQ(option.exitCode, 2);
+    EXPECT_NE(option.output.find("not --grid"), std::string::npos) << option.output;
+    auto range = test::run({build, "chunk", "--work", work, std::to_string(chunks)});
+    EXPECT_EQ(range.exitCode, 2) << range.output;
+
+    // A chunk before its points are distributed, the merge before a chunk is built.
+    auto early = test::run({build, "chunk", "--work", work, "0"});
+    EXPECT_EQ(early.exitCode, 1);
+    EXPECT_NE(early.output.find("distribution.bin"), std::string::npos) << early.output;
+    ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q"}));
+    for (size_t i = 1; i < chunks; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    auto missing = test::run({build, "merge", "--work", work, "-q"});
+    EXPECT_EQ(missing.exitCode, 1);
+    EXPECT_NE(missing.output.find("nodes/0.nodes"), std::string::npos) << missing.output;
+    ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", "0"}));
+
+    // A flipped byte in a chunk's blocks: the merge names the file and the node.
+    const std::string blocks = work + "/nodes/0.blocks";
+    flipByte(blocks, std::filesystem::file_size(blocks) / 2);
+    auto corrupt = test::run({build, "merge", "--work", work, "-q"});
+    EXPECT_EQ(corrupt.exitCode, 1);
+    EXPECT_NE(corrupt.output.find(blocks + ": the block of node"), std::string::npos) << corrupt.output;
+    EXPECT_NE(corrupt.output.find("fails its CRC"), std::string::npos) << corrupt.output;
+    // A truncated record file (a copy cut short): its checksum fails.
+    const std::string nodes = work + "/nodes/1.nodes";
+    std::filesystem::resize_file(nodes, std::filesystem::file_size(nodes) - 7);
+    auto truncated = test::run({build, "merge", "--work", work, "-q"});
+    EXPECT_EQ(truncated.exitCode, 1);
+    EXPECT_NE(truncated.output.find(nodes + ": checksum mismatch"), std::string::npos) << truncated.output;
+    EXPECT_TRUE(test::readFile(out + "/blocks.bin") == oldBlocks) << "a failed merge changed the old set";
+
+    // Built again, both chunks merge into the new set.
+    ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", "0", "1"}));
+    ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
+    auto info = test::run({build, "--info", out});
+    EXPECT_EQ(info.exitCode, 0) << info.output;
+    EXPECT_NE(info.output.find("checksums verified"), std::string::npos) << info.output;
+}
