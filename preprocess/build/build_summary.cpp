@@ -41,8 +41,8 @@ std::string BuildSummary::text() const {
         << (inputPoints ? double(blocksBytes + hierarchyBytes) / double(inputPoints) : 0) << " per input point)\n";
     out << "time:";
     for (auto& [phase, s] : phaseSeconds) out << " " << phase << " " << s << " s,";
-    out << " total " << totalSeconds << " s (" << (totalSeconds > 0 ? double(inputPoints) / totalSeconds / 1e6 : 0)
-        << " M points/s)\n";
+    if (totalSeconds > 0) out << " total " << totalSeconds << " s (" << double(inputPoints) / totalSeconds / 1e6 << " M points/s)";
+    out << "\n";
     out << "build steps (thread-seconds):";
     for (auto& [step, s] : stepSeconds) out << " " << step << " " << s << ",";
     out << "\n";

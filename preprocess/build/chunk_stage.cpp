@@ -1,10 +1,13 @@
 // The chunk stage (stages.h): one chunk's subtree, from its point and halo
 // files to its blocks, records and root in the work folder.
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <unistd.h>
 
 #include "built_node.h"
 #include "crc32.h"
@@ -141,15 +144,22 @@ std::vector<Surfel> resampleHalo(const BuildContext& ctx, const std::vector<Surf
     return out;
 }
 
-// A chunk's blocks file, appended to as its nodes are encoded.
+// A chunk's blocks file, appended to as its nodes are encoded beside its
+// path and renamed into place when closed: two processes building the same
+// chunk (a task retried while the first still runs) each write their own, and
+// either's is the same bytes.
 class BlockFile {
 public:
-    explicit BlockFile(std::string path) : path_(std::move(path)), file_(std::fopen(path_.c_str(), "wb")) {}
+    explicit BlockFile(std::string path)
+        : path_(std::move(path)), partial_(path_ + ".partial-" + std::to_string(::getpid())),
+          file_(std::fopen(partial_.c_str(), "wb")) {}
     ~BlockFile() {
         if (file_) std::fclose(file_);
+        std::error_code ec;
+        fs::remove(partial_, ec);
     }
     Status add(EncodedNode node, std::vector<NodeRecord>* records) {
-        if (!file_) return Status::error(path_ + ": cannot create (" + std::strerror(errno) + ")");
+        if (!file_) return Status::error(partial_ + ": cannot create (" + std::strerror(errno) + ")");
         if (std::fwrite(node.blob.data(), 1, node.blob.size(), file_) != node.blob.size())
             return Status::error(path_ + ": write failed (disk full?)");
         node.record.blockOffset = bytes_;
@@ -160,14 +170,16 @@ public:
         return {};
     }
     Status close() {
-        const bool ok = file_ && std::fclose(file_) == 0;
+        bool ok = file_ && std::fclose(file_) == 0;
         file_ = nullptr;
-        return ok ? Status{} : Status::error(path_ + ": write failed (disk full?)");
+        std::error_code ec;
+        if (ok) fs::rename(partial_, path_, ec);
+        return ok && !ec ? Status{} : Status::error(path_ + ": write failed (disk full?)");
     }
     uint64_t bytes() const { return bytes_; }
 
 private:
-    std::string path_;
+    std::string path_, partial_;
     std::FILE* file_;
     uint64_t bytes_ = 0;
 };

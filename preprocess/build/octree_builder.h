@@ -60,7 +60,7 @@ struct BuildSummary {
     uint64_t hierarchyBytes = 0, blocksBytes = 0;
     std::vector<std::pair<std::string, double>> phaseSeconds;
     std::vector<std::pair<std::string, double>> stepSeconds;  // inside build/upper, summed over threads
-    double totalSeconds = 0;
+    double totalSeconds = 0;  // the whole build; 0 where it ran in stages (the merge's summary lists its own phases)
     uint64_t peakRss = 0;
     std::string normalSource;
     int colorBits = 0;

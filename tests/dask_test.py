@@ -1,0 +1,230 @@
+#!/usr/bin/env python3
+"""scripts/surfcast-dask on a real Dask cluster on loopback: a scheduler and
+two worker processes started as a cluster starts them (`dask scheduler`,
+`dask worker`), against surfcast-build in one process.
+
+Run by ctest (dask_test) with SURFCAST_BUILD (the build folder),
+SURFCAST_DATA_DIR and SURFCAST_TEST_PYTHON (the test venv, for
+tests/tools/split_laz.py). Only the standard library: the cluster's programs
+come from the driver's own environment, which `surfcast-dask --help` makes.
+"""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+
+REPO = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+BUILD = os.environ.get("SURFCAST_BUILD", os.path.join(REPO, "build"))
+SURFCAST_BUILD = os.path.join(BUILD, "bin", "surfcast-build")
+DRIVER = os.path.join(REPO, "scripts", "surfcast-dask")
+DATA = os.environ.get("SURFCAST_DATA_DIR", os.path.join(REPO, "..", "shared", "data"))
+TEST_PYTHON = os.environ.get("SURFCAST_TEST_PYTHON", os.path.join(REPO, "build", "test-venv", "bin", "python"))
+VENV = os.environ.get("SURFCAST_DASK_VENV", os.path.join(REPO, "build", "dask-venv"))
+
+# A budget that cuts the built-in scene into several chunks (stages_test's),
+# and a larger scene whose chunk tasks last long enough to be killed.
+SCENE = ["--default-scene", "--scene-points", "300000", "--memory", "160M", "--capacity", "4000"]
+LONGER = ["--default-scene", "--scene-points", "1000000", "--memory", "160M", "--capacity", "4000"]
+
+
+def require_data(test):
+    if not os.path.isdir(DATA):
+        if os.environ.get("CI"):
+            test.fail(f"no shared data at {DATA}")
+        test.skipTest(f"no shared data at {DATA}")
+
+
+def read(path):
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def same_set(a, b):
+    return all(read(os.path.join(a, f)) == read(os.path.join(b, f)) for f in ("tileset.json", "hierarchy.bin", "blocks.bin"))
+
+
+def one_process(options, out):
+    r = subprocess.run([SURFCAST_BUILD, "-q"] + options + ["-o", out], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+def parent_of(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[1])
+
+
+def stage_processes(stage):
+    """PIDs of surfcast-build processes running `stage`."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+        except OSError:
+            continue
+        if len(argv) > 1 and argv[0].endswith(b"surfcast-build") and argv[1] == stage.encode():
+            pids.append(int(entry))
+    return pids
+
+
+def wait_for(condition, seconds, what):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        found = condition()
+        if found:
+            return found
+        time.sleep(0.02)
+    raise AssertionError(f"{what}: not within {seconds} s")
+
+
+class Cluster:
+    """A scheduler and two single-threaded worker processes, each under a nanny."""
+
+    def __init__(self, tmp):
+        dask = os.path.join(VENV, "bin", "dask")
+        self.file = os.path.join(tmp, "scheduler.json")
+        quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        self.procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                        "--scheduler-file", self.file], **quiet)]
+        wait_for(lambda: os.path.exists(self.file), 60, "the scheduler's file")
+        with open(self.file) as f:
+            self.address = json.load(f)["address"]
+        for _ in range(2):
+            self.procs.append(subprocess.Popen([dask, "worker", self.address, "--nthreads", "1", "--no-dashboard",
+                                                "--local-directory", tmp], **quiet))
+        wait_for(lambda: self.workers() == 2, 60, "two workers")
+
+    def workers(self):
+        python = os.path.join(VENV, "bin", "python")
+        r = subprocess.run([python, "-c", "import sys; from distributed import Client; "
+                            "c = Client(sys.argv[1], timeout=10); print(len(c.scheduler_info()['workers'])); c.close()",
+                            self.address], capture_output=True, text=True)
+        return int(r.stdout.strip() or 0)
+
+    def close(self):
+        for p in self.procs:
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        for p in self.procs:
+            try:
+                p.wait(20)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+
+
+class DaskBuild(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        # The driver's pinned environment (made on first use).
+        r = subprocess.run([DRIVER, "--help"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        cls.tmp = tempfile.mkdtemp(prefix="surfcast-dask-test-")
+        cls.cluster = Cluster(cls.tmp)
+        # lone-star.laz in over 1,000 small LAZ files, as an octree writer leaves it.
+        cls.tiles = os.path.join(cls.tmp, "tiles")
+        if os.path.isdir(DATA):
+            split = subprocess.run([TEST_PYTHON, os.path.join(REPO, "tests", "tools", "split_laz.py"),
+                                    os.path.join(DATA, "lone-star.laz"), cls.tiles, "--cells", "32x32x8",
+                                    "--min-files", "1000"], capture_output=True, text=True)
+            assert split.returncode == 0, split.stderr
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.cluster.close()
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(dir=self.tmp)
+
+    def path(self, name):
+        return os.path.join(self.dir, name)
+
+    def driver(self, options, out, *extra):
+        return [DRIVER, "--scheduler", self.cluster.address, "-q", *extra] + options + ["-o", out]
+
+    def test_same_bytes_as_one_process_and_within_budget(self):
+        require_data(self)
+        # The built-in scene across chunks, and lone-star.laz in over 1,000 LAZ files.
+        for name, options, budget in (("scene", SCENE, 160 << 20),
+                                      ("tiles", [self.tiles, "--memory", "128M", "--capacity", "4000"], 128 << 20)):
+            one_process(options, self.path(name + "-one"))
+            report = self.path(name + ".json")
+            r = subprocess.run(self.driver(options, self.path(name + "-dask"), "--report", report), capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertTrue(same_set(self.path(name + "-one"), self.path(name + "-dask")), name)
+            with open(report) as f:
+                tasks = json.load(f)["tasks"]
+            chunks = [t for t in tasks if t["stage"] == "chunk"]
+            self.assertGreaterEqual(len(chunks), 4, name)
+            # Each stage's process within its budget + 10 % (out_of_core_test's bound).
+            for t in tasks:
+                self.assertLessEqual(t["rss"], budget * 1.1, f"{name}: {t}")
+            self.assertFalse(os.path.exists(os.path.join(self.dir, "." + name + "-dask.dask-work")), "work folder left")
+
+    def test_worker_killed_mid_chunk(self):
+        out, work = self.path("set"), self.path("work")
+        one_process(LONGER, self.path("one"))
+        driver = subprocess.Popen(self.driver(LONGER, out, "--work", work), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                  text=True)
+        # SIGKILL the worker process (not its nanny) that runs the first chunk
+        # task seen, while the task's surfcast-build is building it.
+        chunk = wait_for(lambda: stage_processes("chunk"), 120, "a chunk task")[0]
+        worker = parent_of(chunk)
+        self.assertIn(b"python", read(f"/proc/{worker}/cmdline"), "a chunk task's parent should be a worker process")
+        os.kill(worker, signal.SIGKILL)
+        stdout, stderr = driver.communicate(timeout=300)
+        self.assertEqual(driver.returncode, 0, stderr)
+        self.assertTrue(same_set(out, self.path("one")))
+        wait_for(lambda: self.cluster.workers() == 2, 60, "the nanny's new worker")
+
+    def test_driver_killed_and_started_again_resumes(self):
+        out, work = self.path("set"), self.path("work")
+        one_process(LONGER, self.path("one"))
+        nodes = os.path.join(work, "nodes")
+        driver = subprocess.Popen(self.driver(LONGER, out, "--work", work, "--keep-work"), stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL)
+        wait_for(lambda: os.path.isdir(nodes) and [n for n in os.listdir(nodes) if n.endswith(".nodes")], 120, "a finished chunk")
+        driver.kill()
+        driver.wait()
+        # The tasks the driver had submitted may still finish; then wait for quiet.
+        wait_for(lambda: not stage_processes("chunk"), 120, "the last chunk task")
+        self.assertFalse(os.path.exists(out), "a set appeared before the merge")
+        done = sorted(n for n in os.listdir(nodes) if n.endswith(".nodes"))
+        # One finished chunk's record file cut short (a partial output): never used.
+        cut = os.path.join(nodes, done[0])
+        os.truncate(cut, os.path.getsize(cut) - 9)
+        r = subprocess.run([DRIVER, "--scheduler", self.cluster.address, "--work", work, "--keep-work"] + LONGER + ["-o", out],
+                           capture_output=True, text=True)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn(f"resuming: plan done, {len(done) - 1} of ", r.stderr)
+        self.assertTrue(same_set(out, self.path("one")))
+
+    def test_bad_file_among_many_names_it_and_keeps_the_old_set(self):
+        require_data(self)
+        out = self.path("set")
+        one_process(SCENE, out)
+        old = read(os.path.join(out, "blocks.bin"))
+        shutil.copytree(self.tiles, self.path("in"))
+        files = sorted(os.listdir(self.path("in")))
+        bad = files[len(files) // 2]
+        laz = read(self.path("in/" + bad))
+        with open(self.path("in/" + bad), "wb") as f:
+            f.write(laz[:len(laz) * 7 // 10])  # cut at 70 %: its chunk table lies past its end
+        r = subprocess.run(self.driver([self.path("in")], out), capture_output=True, text=True)
+        self.assertNotEqual(r.returncode, 0)
+        self.assertIn(bad + ": LAZ: the chunk table offset", r.stderr)
+        self.assertIn("file of", r.stderr)
+        self.assertEqual(read(os.path.join(out, "blocks.bin")), old)
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
