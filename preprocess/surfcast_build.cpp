@@ -28,9 +28,11 @@ namespace {
 const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
        surfcast-build --info SET            (SET: a folder or an http(s) URL)
-       surfcast-build plan --work W [options] INPUT... -o OUT
-       surfcast-build distribute|merge --work W
-       surfcast-build chunk --work W I...    (a build in stages: see below)
+       surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
+       surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
+       surfcast-build distribute --work W [--part P]
+       surfcast-build chunk --work W I...
+       surfcast-build merge --work W        (a build in stages: see below)
 
 Builds a level-of-detail tile set (tileset.json, hierarchy.bin, blocks.bin)
 from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
@@ -97,13 +99,17 @@ the text file LIST, one per line.
   -q, --quiet             no progress output
   -h, --help              this text
 
-A build in stages runs as four commands, each its own process, on any machines
-that see the inputs and the work folder W; the set is the same bytes as one
-surfcast-build. plan takes the inputs and options and writes W/plan.bin and
-W/plan.json (the chunk count and each chunk's points); distribute, chunk and
-merge read them, and take only --work, --threads and -q. chunk builds the
-chunks named (0 to the count less one), in any order and any grouping; merge
-writes the set at plan's -o, then removes the chunk and node files from W.
+A build in stages runs as separate commands, each its own process, on any
+machines that see the inputs and the work folder W; the set is the same bytes
+as one surfcast-build. plan takes the inputs and options and writes W/plan.bin
+and W/plan.json (the chunk count and each chunk's points); distribute, chunk
+and merge read them, and take only --work, --threads and -q (distribute also
+--part). chunk builds the chunks named (0 to the count less one), in any order
+and any grouping; merge writes the set at plan's -o, then removes the parts'
+and chunks' files from W. plan scans and counts the inputs itself, or, with
+--parts N, reduces what scan and count wrote for parts 0/N to N-1/N (runs of
+consecutive inputs of about equal bytes; count runs once every scan is done);
+distribute --part P then reads part P alone.
 )";
 
 bool parseSize(const std::string& s, uint64_t* out) {
@@ -163,6 +169,8 @@ struct Args {
     surfcast::HttpOptions http;  // how --info reaches a URL
     std::string work;            // --work: a staged build's work folder
     std::vector<size_t> chunks;  // the chunk stage's chunks
+    size_t part = 0, parts = 0;  // --part P/N (scan, count; P alone for distribute) and --parts N (plan)
+    bool partGiven = false;
     std::vector<std::string> kept;  // the arguments but inputs and -o, which the plan stores as given
 };
 
@@ -174,7 +182,7 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
     surfcast::HttpOptions& http = out->http;
     std::string& info = out->info;
     bool& captureWeights = out->captureWeights;
-    const bool later = !stage.empty() && stage != "plan";
+    const bool later = stage == "distribute" || stage == "chunk" || stage == "merge";
     const size_t argc = args.size();
     for (size_t i = 0; i < argc; ++i) {
         const size_t first = i;
@@ -185,6 +193,7 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             return true;
         };
         if (later && a != "--threads" && a != "-q" && a != "--quiet" && a != "--work" && a != "-h" && a != "--help" &&
+            !(stage == "distribute" && a == "--part") &&
             !(stage == "chunk" && !a.empty() && a[0] != '-'))
             return usageError(stage + " takes --work DIR, --threads N and -q" + (stage == "chunk" ? std::string(" and chunk numbers") : "") +
                               "; the other options come from the plan (not " + a + ")");
@@ -202,6 +211,24 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             continue;
         } else if (a == "--work" && !stage.empty()) {
             if (!value(&out->work)) return usageError("--work needs a folder");
+            continue;
+        } else if (a == "--part" && (stage == "scan" || stage == "count" || stage == "distribute")) {
+            // P/N for scan and count; P, of the plan's parts, for distribute.
+            const bool fraction = stage != "distribute";
+            if (!value(&v)) return usageError("--part needs " + std::string(fraction ? "P/N" : "a part number"));
+            const size_t slash = v.find('/');
+            double p = -1, n = 1e6;
+            bool ok = fraction ? slash != std::string::npos && parseNumber(v.substr(0, slash), &p) && parseNumber(v.substr(slash + 1), &n)
+                               : slash == std::string::npos && parseNumber(v, &p);
+            ok = ok && p >= 0 && p == std::floor(p) && n >= 1 && n <= 1e6 && n == std::floor(n) && p < n;
+            if (!ok) return usageError(fraction ? "--part needs P/N, part P of N parts (0 <= P < N)" : "--part needs a part number (0, 1, ...)");
+            out->part = size_t(p);
+            out->parts = fraction ? size_t(n) : 0;
+            out->partGiven = true;
+            continue;
+        } else if (a == "--parts" && stage == "plan") {
+            if (!number(&d, 1, 1e6) || d != std::floor(d)) return usageError("--parts needs the count of scan and count parts");
+            out->parts = size_t(d);
             continue;
         } else if (a == "--info") {
             if (!value(&info)) return usageError("--info needs a tile set folder or URL");
@@ -377,8 +404,37 @@ surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast:
     return ok && !ec ? surfcast::Status{} : surfcast::Status::error(path + ": could not be written");
 }
 
-// One stage of a staged build (stages.h): plan takes the inputs and options of
-// a whole build and stores them; the later stages read them from the plan.
+// The scans of `parts` parts (scan --part P/N), reduced: the statistics of
+// every input and each part's inputs and sources.
+surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart>>> reducedScans(const surfcast::WorkFolder& work,
+                                                                                                const surfcast::InputOptions& inputs,
+                                                                                                size_t parts) {
+    std::vector<surfcast::InputStats> stats;
+    std::vector<surfcast::InputPart> ranges;
+    size_t sources = 0;
+    for (size_t p = 0; p < parts; ++p) {
+        surfcast::InputPart part;
+        auto scanned = surfcast::readScan(work.scan(p), &part);
+        if (!scanned) return scanned.status();
+        const size_t expectedFirst = p == 0 ? 0 : ranges.back().last;
+        if (part.first != expectedFirst || part.last < part.first || part.sources != scanned->sources.size())
+            return surfcast::Status::error(work.scan(p) + ": its inputs do not follow part " + std::to_string(p) +
+                                           " - 1's (scanned with other inputs or parts?)");
+        part.firstSource = sources;
+        sources += part.sources;
+        ranges.push_back(part);
+        stats.push_back(std::move(*scanned));
+    }
+    const size_t inputCount = inputs.paths.size() + (inputs.defaultScene ? 1 : 0);
+    if (ranges.empty() || ranges.back().last != inputCount)
+        return surfcast::Status::error(work.dir + "/scan: the parts cover " + std::to_string(ranges.empty() ? 0 : ranges.back().last) +
+                                       " of the " + std::to_string(inputCount) + " inputs");
+    return std::make_pair(surfcast::mergeInputStats(std::move(stats)), std::move(ranges));
+}
+
+// One stage of a staged build (stages.h): scan, count and plan take the inputs
+// and options of a whole build, and plan stores them; the later stages read
+// them from the plan.
 int runStage(const std::string& stage, const std::vector<std::string>& own) {
     Args a;
     if (int status = parseArgs(own, stage, &a); status >= 0) return status;
@@ -386,25 +442,75 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     const surfcast::WorkFolder work{a.work};
     surfcast::BuildSummary summary;
     std::shared_ptr<const surfcast::BuildContext> context;
-    if (stage == "plan") {
+    if (stage == "scan" || stage == "count" || stage == "plan") {
         if (a.opt.output.empty()) return usageError("no output folder (-o OUT)");
         if (a.opt.inputs.paths.empty() && !a.opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
+        if (stage != "plan" && !a.partGiven) return usageError(stage + " needs --part P/N");
         auto paths = absoluteInputs(a.opt.inputs.paths);
         if (!paths) return fail(paths.status());
         a.opt.inputs.paths = *paths;
         a.opt.output = std::filesystem::absolute(a.opt.output).lexically_normal().string();
         std::error_code ec;
-        std::filesystem::create_directories(work.dir, ec);
+        std::filesystem::create_directories(work.dir + "/" + (stage == "plan" ? "" : stage), ec);
         if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
-        surfcast::Progress progress(a.opt.progress);
-        auto plan = surfcast::planStage(a.opt, progress, &context, &summary);
-        if (!plan) return fail(plan.status());
+        const surfcast::BuildOptions opt = surfcast::normalizeOptions(a.opt);
+        surfcast::Progress progress(opt.progress);
+        if (stage == "scan") {
+            surfcast::InputPart part = surfcast::inputPart(opt.inputs, a.part, a.parts);
+            progress.begin("scan", 0);
+            auto stats = surfcast::scanStage(opt, part, progress);
+            if (!stats) return fail(stats.status());
+            progress.end();
+            part.sources = stats->sources.size();
+            if (auto st = surfcast::writeScan(work.scan(a.part), *stats, part); !st.ok()) return fail(st);
+            std::printf("scanned part %zu of %zu: inputs %zu to %zu, %llu points\n", a.part, a.parts, part.first, part.last,
+                        (unsigned long long)stats->points);
+            return 0;
+        }
+        surfcast::BuildPlan plan;
+        if (stage == "plan" && a.parts == 0) {
+            auto planned = surfcast::planStage(opt, progress, &context, &summary);
+            if (!planned) return fail(planned.status());
+            plan = std::move(*planned);
+        } else {
+            auto scans = reducedScans(work, opt.inputs, a.parts);
+            if (!scans) return fail(scans.status());
+            auto derived = surfcast::BuildContext::derive(opt, std::move(scans->first), stage == "plan");
+            if (!derived) return fail(derived.status());
+            context = *derived;
+            auto most = surfcast::chunkPoints(*context);
+            if (!most) return fail(most.status());
+            if (stage == "count") {
+                std::vector<std::pair<uint32_t, uint32_t>> counts;  // none where one chunk takes every point
+                if (*most > 0) {
+                    progress.begin("count", 0);
+                    auto counted = surfcast::countStage(*context, scans->second.at(a.part), progress);
+                    if (!counted) return fail(counted.status());
+                    progress.end();
+                    counts = std::move(*counted);
+                }
+                if (auto st = surfcast::writeCount(work.count(a.part), counts); !st.ok()) return fail(st);
+                return 0;
+            }
+            plan.stats = context->stats();
+            plan.parts = std::move(scans->second);
+            plan.maxChunkPoints = *most;
+            if (*most > 0) {
+                std::vector<std::vector<std::pair<uint32_t, uint32_t>>> counts;
+                for (size_t p = 0; p < a.parts; ++p) {
+                    auto counted = surfcast::readCount(work.count(p));
+                    if (!counted) return fail(counted.status());
+                    counts.push_back(std::move(*counted));
+                }
+                plan.counts = surfcast::addCounts(counts);
+            }
+        }
         std::vector<std::string> stored = a.kept;
         stored.insert(stored.end(), {"-o", a.opt.output});
         stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
-        if (auto st = surfcast::writePlan(work.plan(), *plan, stored); !st.ok()) return fail(st);
-        if (auto st = writePlanJson(work, *plan, *context); !st.ok()) return fail(st);
-        std::printf("planned %zu chunks for %llu points in %s\n", plan->layout(*context).chunks().size(),
+        if (auto st = surfcast::writePlan(work.plan(), plan, stored); !st.ok()) return fail(st);
+        if (auto st = writePlanJson(work, plan, *context); !st.ok()) return fail(st);
+        std::printf("planned %zu chunks for %llu points in %s\n", plan.layout(*context).chunks().size(),
                     (unsigned long long)context->stats().points, work.dir.c_str());
         return 0;
     }
@@ -422,8 +528,12 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     surfcast::ChunkLayout layout = plan->layout(c);
     surfcast::Progress progress(planned.opt.progress);
     if (stage == "distribute") {
-        if (auto st = surfcast::distributeStage(c, layout, work, progress, &summary); !st.ok()) return fail(st);
-        std::printf("distributed %llu points into %zu chunks\n", (unsigned long long)c.stats().points, layout.chunks().size());
+        if (a.partGiven && a.part >= plan->parts.size())
+            return usageError("--part " + std::to_string(a.part) + ": the plan has parts 0 to " + std::to_string(plan->parts.size() - 1));
+        for (size_t p = a.partGiven ? a.part : 0; p < (a.partGiven ? a.part + 1 : plan->parts.size()); ++p)
+            if (auto st = surfcast::distributeStage(c, *plan, layout, p, work, progress, &summary); !st.ok()) return fail(st);
+        std::printf("distributed %s into %zu chunks\n", a.partGiven ? ("part " + std::to_string(a.part)).c_str() : "every part",
+                    layout.chunks().size());
         return 0;
     }
     if (stage == "chunk") {
@@ -431,7 +541,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         for (size_t i : a.chunks)
             if (i >= layout.chunks().size())
                 return usageError("chunk " + std::to_string(i) + ": the plan has chunks 0 to " + std::to_string(layout.chunks().size() - 1));
-        if (auto st = surfcast::readDistribution(work, layout); !st.ok()) return fail(st);
+        if (auto st = surfcast::readDistribution(work, plan->parts.size(), layout); !st.ok()) return fail(st);
         uint64_t points = 0;
         for (size_t i : a.chunks) points += layout.chunks()[i].points;
         progress.begin("build", points);
@@ -451,11 +561,10 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;
     summary.peakRss = surfcast::peakRssBytes();
-    // The set is in place: the chunk and node files go (plan.bin and
+    // The set is in place: the parts' and chunks' files go (plan.bin and
     // plan.json stay, a record of the build).
     std::error_code ec;
-    std::filesystem::remove_all(work.chunks(), ec);
-    std::filesystem::remove_all(work.dir + "/nodes", ec);
+    for (const char* folder : {"scan", "count", "chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
     return finishBuild(planned, summary);
 }
 
@@ -463,7 +572,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
 
 int main(int argc, char** argv) {
     std::vector<std::string> args(argv + 1, argv + argc);
-    if (!args.empty() && (args[0] == "plan" || args[0] == "distribute" || args[0] == "chunk" || args[0] == "merge"))
+    if (!args.empty() && (args[0] == "scan" || args[0] == "count" || args[0] == "plan" || args[0] == "distribute" || args[0] == "chunk" || args[0] == "merge"))
         return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;

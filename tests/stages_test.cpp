@@ -37,19 +37,24 @@ void expectSameSet(const std::string& a, const std::string& b) {
         EXPECT_TRUE(test::readFile(a + "/" + file) == test::readFile(b + "/" + file)) << file << " differs between " << a << " and " << b;
 }
 
-// The staged build of `options` in `dir`, chunks built last to first (an
-// order no single process uses), the first of them twice, as a retried task
-// would; then compared with one process's build.
-void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<std::string>& options) {
+// The staged build of `options` in `dir`: the inputs scanned, counted and
+// distributed in three parts (the distribution last part first), the chunks
+// built last to first (an order no single process uses), the first of them
+// twice, as a retried task would; then compared with one process's build.
+void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<std::string>& options, size_t minChunks = 4) {
     const std::string work = dir.file("work");
     auto whole = test::run(concat(concat({test::binary("surfcast-build"), "-q"}, options), {"-o", dir.file("whole")}));
     ASSERT_EQ(whole.exitCode, 0) << whole.output;
-    ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q"}, options), {"-o", dir.file("staged")})));
+    const std::vector<std::string> output = {"-o", dir.file("staged")};
+    for (const char* stageName : {"scan", "count"})
+        for (int part = 0; part < 3; ++part)
+            ASSERT_NO_FATAL_FAILURE(stage(concat(concat({stageName, "--work", work, "-q", "--part", std::to_string(part) + "/3"}, options), output)));
+    ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q", "--parts", "3"}, options), output)));
     const size_t chunks = plannedChunks(work);
-    ASSERT_GE(chunks, 4u) << "the budget should force several chunks";
+    ASSERT_GE(chunks, minChunks) << "the budget should force several chunks";
     // The chunks reported are the chunks built.
     EXPECT_NE(whole.output.find(" " + std::to_string(chunks) + " chunks"), std::string::npos) << whole.output;
-    ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q"}));
+    for (int part = 2; part >= 0; --part) ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(part)}));
     for (size_t i = chunks; i-- > 0;) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
     ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(chunks - 1)}));
     ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
@@ -70,6 +75,17 @@ void flipByte(const std::string& path, uint64_t at) {
 TEST(Stages, DefaultSceneAcrossChunksSameBytesAsOneProcess) {
     test::TempDir dir;
     expectStagedSameAsOneProcess(dir, {"--default-scene", "--scene-points", "300000", "--memory", "160M", "--capacity", "4000"});
+}
+
+// Inputs of three formats in three parts: the scene (several scanners, so a
+// part's sources are not its inputs), a LAZ scan and a PCD scan. They lie far
+// apart, each within one cell of the counting grid: a chunk each.
+TEST(Stages, InputsInPartsSameBytesAsOneProcess) {
+    REQUIRE_DATA();
+    test::TempDir dir;
+    expectStagedSameAsOneProcess(dir, {"--default-scene", "--scene-points", "200000", test::dataFile("Megaplot.laz"),
+                                       test::dataFile("fragment.pcd"), "--memory", "100M", "--capacity", "4000"},
+                                 3);
 }
 
 // A LAZ scan with its scalar fields (gps_time, scan_angle): the chunk roots
@@ -113,10 +129,20 @@ TEST(Stages, MissingOrCorruptWorkFilesFailWithTheirNames) {
     auto range = test::run({build, "chunk", "--work", work, std::to_string(chunks)});
     EXPECT_EQ(range.exitCode, 2) << range.output;
 
+    // Parts: a count before every scan; a plan of more parts than were scanned.
+    const std::vector<std::string> scene = {"--default-scene", "--scene-points", "200000", "--memory", "160M", "--capacity", "4000", "-o", out};
+    const std::string parted = dir.file("parted");
+    ASSERT_NO_FATAL_FAILURE(stage(concat({"scan", "--work", parted, "-q", "--part", "0/2"}, scene)));
+    auto unscanned = test::run(concat({build, "count", "--work", parted, "--part", "0/2"}, scene));
+    EXPECT_EQ(unscanned.exitCode, 1);
+    EXPECT_NE(unscanned.output.find(parted + "/scan/1.bin"), std::string::npos) << unscanned.output;
+    auto badPart = test::run(concat({build, "scan", "--work", parted, "--part", "2/2"}, scene));
+    EXPECT_EQ(badPart.exitCode, 2) << badPart.output;
+
     // A chunk before its points are distributed, the merge before a chunk is built.
     auto early = test::run({build, "chunk", "--work", work, "0"});
     EXPECT_EQ(early.exitCode, 1);
-    EXPECT_NE(early.output.find("distribution.bin"), std::string::npos) << early.output;
+    EXPECT_NE(early.output.find("/chunks/0/distribution.bin"), std::string::npos) << early.output;
     ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q"}));
     for (size_t i = 1; i < chunks; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
     auto missing = test::run({build, "merge", "--work", work, "-q"});

@@ -191,23 +191,26 @@ Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t
     const Chunk& chunk = layout.chunks().at(index);
     StepTimes steps = {};
     FitReport fits;
-    auto pts = readChunkFile(chunk.file, chunk.points);
-    if (!pts) return pts.status();
-    auto halo = readChunkFile(chunk.haloFile, chunk.haloPoints);
-    if (!halo) return halo.status();
+    // Every part's points in part order: the inputs' order.
+    std::vector<Surfel> points, halo;
+    points.reserve(chunk.points);
+    halo.reserve(chunk.haloPoints);
     ScalarTable scalars = context.emptyTable();
-    if (!context.scalars().empty()) {
-        auto values = readChunkScalars(chunk.scalarFile, chunk.points * context.scalars().size());
-        if (!values) return values.status();
-        scalars.values = std::move(*values);
+    scalars.values.reserve(chunk.points * context.scalars().size());
+    for (const ChunkPiece& piece : chunk.pieces) {
+        SC_TRY(appendChunkFile(piece.file, piece.points, &points));
+        SC_TRY(appendChunkFile(piece.haloFile, piece.haloPoints, &halo));
+        if (!context.scalars().empty())
+            SC_TRY(appendChunkScalars(piece.scalarFile, piece.points * context.scalars().size(), &scalars.values));
     }
-    for (size_t i = 0; i < pts->size(); ++i) (*pts)[i].row = uint32_t(i);
+    for (size_t i = 0; i < points.size(); ++i) points[i].row = uint32_t(i);
     std::error_code ec;
-    if (removeInputs) {
-        fs::remove(chunk.file, ec);
-        fs::remove(chunk.haloFile, ec);
-        fs::remove(chunk.scalarFile, ec);
-    }
+    if (removeInputs)
+        for (const ChunkPiece& piece : chunk.pieces) {
+            fs::remove(piece.file, ec);
+            fs::remove(piece.haloFile, ec);
+            fs::remove(piece.scalarFile, ec);
+        }
     // A chunk built again (a staged build's retried task) is not done until
     // its new records are in place.
     fs::remove(work.nodes(index), ec);
@@ -216,23 +219,23 @@ Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t
     std::vector<NodeRecord> records;
     std::unique_ptr<BuiltNode> retained;  // the chunk root, for the levels above (none for the root chunk)
 
-    if (!pts->empty()) {
+    if (!points.empty()) {
         const double margin = layout.margin(int(index));
         NormalContext normals = context.normals();
         normals.threads = threads;
         {
             ScopedTimer t(steps[kStepNormals]);
             const Vec3d lo = context.nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
-            sortMorton(*pts, lo, context.edge(chunk.key.level) + 2 * margin);
-            sortMorton(*halo, lo, context.edge(chunk.key.level) + 2 * margin);
-            estimateNormals(*pts, *halo, normals);
+            sortMorton(points, lo, context.edge(chunk.key.level) + 2 * margin);
+            sortMorton(halo, lo, context.edge(chunk.key.level) + 2 * margin);
+            estimateNormals(points, halo, normals);
         }
         std::vector<std::unique_ptr<BuiltNode>> nodes;
         BuiltNode* root = nullptr;
         {
             ScopedTimer t(steps[kStepOctree]);
-            root = buildSubtree(context, *pts, 0, pts->size(), chunk.key, nodes, scalars);
-            std::vector<Surfel>().swap(*pts);
+            root = buildSubtree(context, points, 0, points.size(), chunk.key, nodes, scalars);
+            std::vector<Surfel>().swap(points);
         }
 
         // Per level: h, radii and weights, with the halo resampled on the level's grid.
@@ -247,7 +250,7 @@ Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t
             std::vector<Surfel> haloLevel;
             {
                 ScopedTimer t(steps[kStepAttributes]);
-                haloLevel = resampleHalo(context, *halo, chunk, margin, level, built);
+                haloLevel = resampleHalo(context, halo, chunk, margin, level, built);
                 computeLevelAttributes(members, haloLevel, context.levelParams(largestCell(context, level, built), threads));
             }
             fits.add(filterLevelTextures(context, built, haloLevel, threads, steps));

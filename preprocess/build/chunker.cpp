@@ -133,11 +133,16 @@ ChunkWriter::ChunkWriter(ChunkLayout& layout, std::string dir, size_t scalarsPer
     buffers_.resize(2 * n);
     scalarBuffers_.resize(n);
     files_.assign(3 * n, nullptr);
-    for (size_t i = 0; i < n; ++i) {
-        layout_.chunks()[i].file = dir_ + "/chunk-" + std::to_string(i) + ".bin";
-        layout_.chunks()[i].haloFile = dir_ + "/chunk-" + std::to_string(i) + ".halo";
-        layout_.chunks()[i].scalarFile = dir_ + "/chunk-" + std::to_string(i) + ".scalars";
-    }
+    for (size_t i = 0; i < n; ++i) layout_.chunks()[i].written = files(dir_, i);
+}
+
+ChunkPiece ChunkWriter::files(const std::string& dir, size_t chunk) {
+    ChunkPiece p;
+    const std::string base = dir + "/chunk-" + std::to_string(chunk);
+    p.file = base + ".bin";
+    p.haloFile = base + ".halo";
+    p.scalarFile = base + ".scalars";
+    return p;
 }
 
 ChunkWriter::~ChunkWriter() {
@@ -159,7 +164,7 @@ Status ChunkWriter::flush(size_t slot) {
     auto& buf = buffers_[slot];
     if (buf.empty()) return {};
     const size_t chunk = slot / 2;
-    const Chunk& c = layout_.chunks()[chunk];
+    const ChunkPiece& c = layout_.chunks()[chunk].written;
     const bool halo = slot % 2;
     SC_TRY(write(3 * chunk + (halo ? 1 : 0), halo ? c.haloFile : c.file, buf.data(), sizeof(Surfel), buf.size()));
     buf.clear();
@@ -175,7 +180,7 @@ Status ChunkWriter::append(int chunk, bool halo, const Surfel& s, const uint32_t
     size_t slot = size_t(chunk) * 2 + (halo ? 1 : 0);
     buffers_[slot].push_back(s);
     if (!halo) scalarBuffers_[size_t(chunk)].insert(scalarBuffers_[size_t(chunk)].end(), scalars, scalars + scalarsPerPoint_);
-    Chunk& c = layout_.chunks()[chunk];
+    ChunkPiece& c = layout_.chunks()[chunk].written;
     (halo ? c.haloPoints : c.points)++;
     if (buffers_[slot].size() >= kBufferedPoints) return flush(slot);
     return {};
@@ -205,26 +210,28 @@ Status ChunkWriter::finish() {
 }
 
 namespace {
+// Appends the `expected` records of the file at `path` to `out`.
 template <typename T>
-Result<std::vector<T>> readRecords(const std::string& path, uint64_t expected, const char* what) {
-    std::vector<T> records(expected);
-    if (expected == 0) return records;
+Status appendRecords(const std::string& path, uint64_t expected, const char* what, std::vector<T>* out) {
+    if (expected == 0) return {};
+    const size_t at = out->size();
+    out->resize(at + expected);
     std::FILE* f = std::fopen(path.c_str(), "rb");
     if (!f) return Status::error(path + ": cannot open chunk file");
-    size_t got = std::fread(records.data(), sizeof(T), records.size(), f);
+    size_t got = std::fread(out->data() + at, sizeof(T), expected, f);
     std::fclose(f);
     if (got != expected)
         return Status::error(path + ": chunk file holds " + std::to_string(got) + " of " + std::to_string(expected) + " " + what);
-    return records;
+    return {};
 }
 }  // namespace
 
-Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected) {
-    return readRecords<Surfel>(path, expected, "points");
+Status appendChunkFile(const std::string& path, uint64_t expected, std::vector<Surfel>* out) {
+    return appendRecords(path, expected, "points", out);
 }
 
-Result<std::vector<uint32_t>> readChunkScalars(const std::string& path, uint64_t expected) {
-    return readRecords<uint32_t>(path, expected, "scalar values");
+Status appendChunkScalars(const std::string& path, uint64_t expected, std::vector<uint32_t>* out) {
+    return appendRecords(path, expected, "scalar values", out);
 }
 
 }  // namespace surfcast

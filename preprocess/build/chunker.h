@@ -28,12 +28,20 @@ inline constexpr int kCountLevel = 7;
 // fewer than that beyond (nothing bounds the steps).
 inline constexpr double kHaloCells = 4.0;
 
-struct Chunk {
-    NodeKey key;
+// One writer's files of a chunk (a ChunkWriter's: one part of the inputs).
+struct ChunkPiece {
     uint64_t points = 0;
     uint64_t haloPoints = 0;
-    std::string file{}, haloFile{};  // ({}: Chunk{key} leaves them empty, no -Wmissing-field-initializers)
+    std::string file{}, haloFile{};  // ({}: ChunkPiece{} leaves them empty, no -Wmissing-field-initializers)
     std::string scalarFile{};  // the points' stored scalar fields (ChunkWriter's scalarsPerPoint each), in file's order
+};
+
+struct Chunk {
+    NodeKey key;
+    uint64_t points = 0;      // in all pieces
+    uint64_t haloPoints = 0;
+    ChunkPiece written{};     // what this process's ChunkWriter wrote
+    std::vector<ChunkPiece> pieces{};  // every part's, in part order (readDistribution)
 };
 
 class ChunkLayout {
@@ -60,12 +68,15 @@ private:
     std::vector<uint8_t> interior_;   // per cell: no other chunk's margin reaches it
 };
 
-// Writes points (and halos) to per-chunk files under `dir`, and each own
+// Writes points (and halos) to per-chunk files under `dir` (each chunk's
+// `written` names them and counts what went in), and each own
 // point's quantized scalar fields (scalarsPerPoint of them) to the chunk's
 // scalar file (halo points need none: they are never stored).
 class ChunkWriter {
 public:
     ChunkWriter(ChunkLayout& layout, std::string dir, size_t scalarsPerPoint = 0);
+    // The files a writer into `dir` names for `chunk` (no counts).
+    static ChunkPiece files(const std::string& dir, size_t chunk);
     ~ChunkWriter();
     // scalars: scalarsPerPoint per point.
     Status add(std::span<const Surfel> points, std::span<const uint32_t> scalars = {});
@@ -85,9 +96,10 @@ private:
     std::vector<int> halo_;
 };
 
-// Reads a chunk's point or halo file written by ChunkWriter.
-Result<std::vector<Surfel>> readChunkFile(const std::string& path, uint64_t expected);
-// Reads a chunk's scalar file: `expected` values.
-Result<std::vector<uint32_t>> readChunkScalars(const std::string& path, uint64_t expected);
+// Appends a chunk's point or halo file written by ChunkWriter (`expected`
+// points) to `out`.
+Status appendChunkFile(const std::string& path, uint64_t expected, std::vector<Surfel>* out);
+// Appends a chunk's scalar file: `expected` values.
+Status appendChunkScalars(const std::string& path, uint64_t expected, std::vector<uint32_t>* out);
 
 }  // namespace surfcast

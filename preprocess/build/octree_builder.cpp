@@ -82,7 +82,8 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     } workGuard{work.dir};
 
     ChunkLayout layout = plan->layout(c);
-    SC_TRY(distributeStage(c, layout, work, progress, &summary));
+    SC_TRY(distributeStage(c, *plan, layout, 0, work, progress, &summary));
+    SC_TRY(readDistribution(work, plan->parts.size(), layout));
     summary.chunks = layout.chunks().size();
     progress.begin("build", c.stats().points);
     SC_TRY(buildChunks(c, layout, work, progress));

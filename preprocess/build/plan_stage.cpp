@@ -1,6 +1,8 @@
-// The plan stage (stages.h): the scan, the memory budget's chunk size, the
-// count, and plan.bin.
+// The plan's stages (stages.h): the scan and the count, by parts of the
+// inputs, the memory budget's chunk size, and plan.bin.
 #include <algorithm>
+#include <filesystem>
+#include <map>
 
 #include "stages.h"
 #include "work_files.h"
@@ -10,18 +12,20 @@ namespace surfcast {
 namespace {
 
 constexpr char kPlanMagic[9] = "SCPLAN01";
+constexpr char kScanMagic[9] = "SCSCAN01";
+constexpr char kCountMagic[9] = "SCCOUNT1";
 
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
 
-// The most points a chunk may hold, given the budget (docs/ARCHITECTURE.md,
-// "Memory"): what is left once the texture fields, and the optimal texture
-// filter's solves, are paid for, split between the chunks built at once.
-// The chunk size depends on the budget alone, never on the thread count, so
-// the same inputs and options give the same chunks and the same bytes.
-Result<uint64_t> maxChunkPoints(const BuildContext& c) {
+}  // namespace
+
+// What is left of the budget once the texture fields, and the optimal texture
+// filter's solves, are paid for, split between the chunks built at once. The
+// chunk size depends on the budget alone, never on the thread count, so the
+// same inputs and options give the same chunks and the same bytes.
+Result<uint64_t> chunkPoints(const BuildContext& c) {
     const BuildOptions& opt = c.options();
-    MeshStore& meshes = *opt.inputs.meshes;
-    const uint64_t largestMesh = meshes.largestBytes();
+    const uint64_t largestMesh = c.stats().largestMeshBytes;
     const uint64_t fitBytes = c.fitting() ? kChunksAtOnce * kFitSolvesPerChunk * kFitBytesPerSolve : 0;
     const uint64_t minChunks = kChunksAtOnce * c.bytesPerChunkPoint() * opt.capacity * kMinChunkLeaves;
     const uint64_t minBytes = kBaselineBytes + c.textureBytes() + std::max(largestMesh, fitBytes + minChunks);
@@ -33,8 +37,11 @@ Result<uint64_t> maxChunkPoints(const BuildContext& c) {
         if (fitBytes > 0) why += "; the optimal texture filter's solves take " + mib(fitBytes);
         return Status::error(why);
     }
-    return (opt.memoryBytes - kBaselineBytes - c.textureBytes() - fitBytes) / (kChunksAtOnce * c.bytesPerChunkPoint());
+    const uint64_t most = (opt.memoryBytes - kBaselineBytes - c.textureBytes() - fitBytes) / (kChunksAtOnce * c.bytesPerChunkPoint());
+    return c.stats().points <= most ? 0 : most;
 }
+
+namespace {
 
 void putBox(ByteWriter& w, const Box3d& b) {
     for (int a = 0; a < 3; ++a) w.put(b.min[a]);
@@ -74,55 +81,8 @@ bool getHistogram(ByteReader& r, std::vector<uint64_t>& h) {
     return r.ok();
 }
 
-}  // namespace
 
-ChunkLayout BuildPlan::layout(const BuildContext& context) const {
-    const int grid = context.options().grid;
-    if (maxChunkPoints == 0) return ChunkLayout::single(context.rootEdge(), grid);
-    std::vector<uint32_t> grid3(size_t(1) << (3 * kCountLevel), 0);
-    for (auto [cell, n] : counts) grid3[cell] = n;
-    return ChunkLayout::fromCounts(grid3, maxChunkPoints, context.rootEdge(), grid);
-}
-
-Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
-                            BuildSummary* summary) {
-    const BuildOptions opt = normalizeOptions(options);
-    progress.begin("scan", 0);
-    auto stats = scanInputs(opt.inputs, [&](uint64_t n) { progress.advance(n); });
-    if (!stats) return stats.status();
-    summary->phaseSeconds.push_back({"scan", progress.end()});
-    auto derived = BuildContext::derive(opt, std::move(*stats));
-    if (!derived) return derived.status();
-    const BuildContext& c = **derived;
-    *context = *derived;
-
-    BuildPlan plan;
-    plan.stats = c.stats();
-    auto maxPoints = maxChunkPoints(c);
-    if (!maxPoints) return maxPoints.status();
-    MeshStore& meshes = *opt.inputs.meshes;
-    meshes.setCapacity(opt.memoryBytes - kBaselineBytes - c.textureBytes() - meshes.largestBytes());
-    if (c.stats().points > *maxPoints) {
-        plan.maxChunkPoints = *maxPoints;
-        progress.begin("count", c.stats().points);
-        std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
-        SC_TRY(forEachBatch(opt.inputs, c.stats(), c.rootMin(), c.sourceIds(), {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
-            for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, c.rootEdge())]++;
-            progress.advance(batch.size());
-            return Status{};
-        }));
-        summary->phaseSeconds.push_back({"count", progress.end()});
-        for (size_t i = 0; i < counts.size(); ++i)
-            if (counts[i]) plan.counts.push_back({uint32_t(i), counts[i]});
-    }
-    return plan;
-}
-
-Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const std::string> args) {
-    ByteWriter w;
-    w.put(uint64_t(args.size()));
-    for (const std::string& a : args) w.putString(a);
-    const InputStats& s = plan.stats;
+void putStats(ByteWriter& w, const InputStats& s) {
     w.put(uint64_t(s.sources.size()));
     for (const SourceStats& src : s.sources) {
         const InputDescription& d = src.description;
@@ -165,21 +125,10 @@ Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const
         w.put(f.min);
         w.put(f.max);
     }
-    w.put(plan.maxChunkPoints);
-    w.put(uint64_t(plan.counts.size()));
-    for (auto [cell, n] : plan.counts) w.put(cell), w.put(n);
-    return writeWorkFile(path, kPlanMagic, w);
+    w.put(s.largestMeshBytes);
 }
 
-Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args) {
-    auto bytes = readWorkFile(path, kPlanMagic);
-    if (!bytes) return bytes.status();
-    ByteReader r(*bytes);
-    const Status corrupt = Status::error(path + ": malformed plan");
-    args->resize(r.getCount(4));
-    for (std::string& arg : *args) arg = r.getString();
-    BuildPlan plan;
-    InputStats& s = plan.stats;
+bool getStats(ByteReader& r, InputStats& s) {
     s.sources.resize(r.getCount(64));
     for (SourceStats& src : s.sources) {
         InputDescription& d = src.description;
@@ -215,7 +164,7 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
     a.returnPoints = r.get<uint64_t>();
     a.translucentPoints = r.get<uint64_t>();
     if (!getHistogram(r, a.intensityHistogram) || !getHistogram(r, a.classCounts) || !getHistogram(r, a.returnsHistogram))
-        return corrupt;
+        return false;
     s.scalars.resize(r.getCount(37));
     for (ScalarStats& f : s.scalars) {
         f.field = getField(r);
@@ -223,14 +172,210 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
         f.min = r.get<double>();
         f.max = r.get<double>();
     }
-    plan.maxChunkPoints = r.get<uint64_t>();
-    plan.counts.resize(r.getCount(8));
-    for (auto& [cell, n] : plan.counts) {
+    s.largestMeshBytes = r.get<uint64_t>();
+    return r.ok();
+}
+
+void putPart(ByteWriter& w, const InputPart& p) {
+    for (size_t v : {p.first, p.last, p.firstSource, p.sources}) w.put(uint64_t(v));
+}
+InputPart getPart(ByteReader& r) {
+    InputPart p;
+    for (size_t* v : {&p.first, &p.last, &p.firstSource, &p.sources}) *v = size_t(r.get<uint64_t>());
+    return p;
+}
+
+void putCounts(ByteWriter& w, const std::vector<std::pair<uint32_t, uint32_t>>& counts) {
+    w.put(uint64_t(counts.size()));
+    for (auto [cell, n] : counts) w.put(cell), w.put(n);
+}
+bool getCounts(ByteReader& r, std::vector<std::pair<uint32_t, uint32_t>>& counts) {
+    counts.resize(r.getCount(8));
+    uint32_t previous = 0;
+    for (size_t i = 0; i < counts.size(); ++i) {
+        auto& [cell, n] = counts[i];
         cell = r.get<uint32_t>();
         n = r.get<uint32_t>();
-        if (cell >= (1u << (3 * kCountLevel))) return corrupt;
+        if (cell >= (1u << (3 * kCountLevel)) || (i > 0 && cell <= previous)) return false;
+        previous = cell;
     }
-    if (!r.ok() || r.left() != 0) return corrupt;
+    return r.ok();
+}
+
+}  // namespace
+
+ChunkLayout BuildPlan::layout(const BuildContext& context) const {
+    const int grid = context.options().grid;
+    if (maxChunkPoints == 0) return ChunkLayout::single(context.rootEdge(), grid);
+    std::vector<uint32_t> grid3(size_t(1) << (3 * kCountLevel), 0);
+    for (auto [cell, n] : counts) grid3[cell] = n;
+    return ChunkLayout::fromCounts(grid3, maxChunkPoints, context.rootEdge(), grid);
+}
+
+InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
+    std::vector<double> weight;
+    if (inputs.defaultScene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
+    for (const std::string& path : inputs.paths) {
+        std::error_code ec;
+        const uintmax_t bytes = std::filesystem::file_size(path, ec);
+        weight.push_back(ec ? 1.0 : double(bytes) + 1);  // unreadable: its reader names the error
+    }
+    double total = 0;
+    for (double w : weight) total += w;
+    // Input i goes to the part its weight's midpoint falls in: the parts
+    // before `part` own the first `first` inputs, those up to it `last`.
+    InputPart p;
+    double before = 0;
+    for (size_t i = 0; i < weight.size(); ++i) {
+        const size_t owner = std::min(parts - 1, size_t((before + weight[i] / 2) / total * double(parts)));
+        before += weight[i];
+        p.first += owner < part;
+        p.last += owner <= part;
+    }
+    return p;
+}
+
+InputOptions partInputs(const InputOptions& inputs, const InputPart& part) {
+    InputOptions o = inputs;
+    const size_t scene = inputs.defaultScene ? 1 : 0;
+    o.defaultScene = inputs.defaultScene && part.first == 0 && part.last > 0;
+    o.paths.assign(inputs.paths.begin() + long(std::max(part.first, scene) - scene),
+                   inputs.paths.begin() + long(std::max(part.last, scene) - scene));
+    return o;
+}
+
+Result<InputStats> scanStage(const BuildOptions& options, const InputPart& part, Progress& progress) {
+    const BuildOptions opt = normalizeOptions(options);
+    const InputOptions inputs = partInputs(opt.inputs, part);
+    InputStats stats;
+    if (inputs.defaultScene || !inputs.paths.empty()) {
+        auto scanned = scanInputs(inputs, [&](uint64_t n) { progress.advance(n); });
+        if (!scanned) return scanned.status();
+        stats = std::move(*scanned);
+    }
+    stats.largestMeshBytes = opt.inputs.meshes->largestBytes();
+    return stats;
+}
+
+Status writeScan(const std::string& path, const InputStats& stats, const InputPart& part) {
+    ByteWriter w;
+    putPart(w, part);
+    putStats(w, stats);
+    return writeWorkFile(path, kScanMagic, w);
+}
+
+Result<InputStats> readScan(const std::string& path, InputPart* part) {
+    auto bytes = readWorkFile(path, kScanMagic);
+    if (!bytes) return bytes.status();
+    ByteReader r(*bytes);
+    *part = getPart(r);
+    InputStats stats;
+    if (!getStats(r, stats) || r.left() != 0) return Status::error(path + ": malformed scan");
+    return stats;
+}
+
+Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& c, const InputPart& part, Progress& progress) {
+    const InputOptions inputs = partInputs(c.options().inputs, part);
+    std::vector<std::pair<uint32_t, uint32_t>> occupied;
+    if (!inputs.defaultScene && inputs.paths.empty()) return occupied;
+    InputStats stats;  // the part's sources, as forEachBatch indexes them
+    stats.sources.assign(c.stats().sources.begin() + long(part.firstSource),
+                         c.stats().sources.begin() + long(part.firstSource + part.sources));
+    std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
+    SC_TRY(forEachBatch(inputs, stats, c.rootMin(), c.sourceIds().subspan(part.firstSource, part.sources), {},
+                        [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, c.rootEdge())]++;
+        progress.advance(batch.size());
+        return Status{};
+    }));
+    for (size_t i = 0; i < counts.size(); ++i)
+        if (counts[i]) occupied.push_back({uint32_t(i), counts[i]});
+    return occupied;
+}
+
+Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts) {
+    ByteWriter w;
+    putCounts(w, counts);
+    return writeWorkFile(path, kCountMagic, w);
+}
+
+Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path) {
+    auto bytes = readWorkFile(path, kCountMagic);
+    if (!bytes) return bytes.status();
+    ByteReader r(*bytes);
+    std::vector<std::pair<uint32_t, uint32_t>> counts;
+    if (!getCounts(r, counts) || r.left() != 0) return Status::error(path + ": malformed counts");
+    return counts;
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vector<std::pair<uint32_t, uint32_t>>>& parts) {
+    std::map<uint32_t, uint64_t> sum;
+    for (const auto& part : parts)
+        for (auto [cell, n] : part) sum[cell] += n;
+    std::vector<std::pair<uint32_t, uint32_t>> out;
+    for (auto [cell, n] : sum) out.push_back({cell, uint32_t(std::min<uint64_t>(n, UINT32_MAX))});
+    return out;
+}
+
+Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
+                            BuildSummary* summary) {
+    const BuildOptions opt = normalizeOptions(options);
+    const InputPart all = inputPart(opt.inputs, 0, 1);
+    progress.begin("scan", 0);
+    auto stats = scanStage(opt, all, progress);
+    if (!stats) return stats.status();
+    summary->phaseSeconds.push_back({"scan", progress.end()});
+    auto derived = BuildContext::derive(opt, std::move(*stats));
+    if (!derived) return derived.status();
+    const BuildContext& c = **derived;
+    *context = *derived;
+
+    BuildPlan plan;
+    plan.stats = c.stats();
+    plan.parts = {all};
+    plan.parts[0].sources = c.stats().sources.size();
+    auto most = chunkPoints(c);
+    if (!most) return most.status();
+    MeshStore& meshes = *opt.inputs.meshes;
+    meshes.setCapacity(opt.memoryBytes - kBaselineBytes - c.textureBytes() - c.stats().largestMeshBytes);
+    plan.maxChunkPoints = *most;
+    if (plan.maxChunkPoints > 0) {
+        progress.begin("count", c.stats().points);
+        auto counts = countStage(c, plan.parts[0], progress);
+        if (!counts) return counts.status();
+        summary->phaseSeconds.push_back({"count", progress.end()});
+        plan.counts = std::move(*counts);
+    }
+    return plan;
+}
+
+Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const std::string> args) {
+    ByteWriter w;
+    w.put(uint64_t(args.size()));
+    for (const std::string& a : args) w.putString(a);
+    putStats(w, plan.stats);
+    w.put(uint64_t(plan.parts.size()));
+    for (const InputPart& p : plan.parts) putPart(w, p);
+    w.put(plan.maxChunkPoints);
+    putCounts(w, plan.counts);
+    return writeWorkFile(path, kPlanMagic, w);
+}
+
+Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args) {
+    auto bytes = readWorkFile(path, kPlanMagic);
+    if (!bytes) return bytes.status();
+    ByteReader r(*bytes);
+    const Status corrupt = Status::error(path + ": malformed plan");
+    args->resize(r.getCount(4));
+    for (std::string& arg : *args) arg = r.getString();
+    BuildPlan plan;
+    if (!getStats(r, plan.stats)) return corrupt;
+    plan.parts.resize(r.getCount(32));
+    for (InputPart& p : plan.parts) p = getPart(r);
+    plan.maxChunkPoints = r.get<uint64_t>();
+    if (!getCounts(r, plan.counts) || !r.ok() || r.left() != 0 || plan.parts.empty()) return corrupt;
+    for (const InputPart& p : plan.parts)
+        if (p.firstSource + p.sources > plan.stats.sources.size()) return corrupt;
     return plan;
 }
 

@@ -1,20 +1,24 @@
-// The build as four stages with files between them in a work folder, so that
-// each can run as its own process on any machine that sees the inputs and the
+// The build as stages with files between them in a work folder, so that each
+// can run as its own process on any machine that sees the inputs and the
 // folder (docs/ARCHITECTURE.md, "Stages"):
 //
-//   plan        scan the inputs (bounds, counts, attributes), count points on
-//               the counting grid and cut the chunk layout      → plan.bin
-//   distribute  every point to its chunk's file, and to the halos of the
-//               chunks whose margin holds it                    → chunks/
+//   scan P/N    part P of the inputs: bounds, counts, attributes → scan/P.bin
+//   count P/N   part P's points on the counting grid             → count/P.bin
+//   plan        the parts reduced, the chunk layout cut           → plan.bin
+//   distribute P  part P's points to its chunk files, and to the halos of
+//               the chunks whose margin holds them                → chunks/P/
 //   chunk I     chunk I's subtree: normals, the octree, h, cones, weights,
-//               textures, Draco blocks                          → nodes/I.*
-//   merge       the levels above the chunks, then the tile set  → the output
+//               textures, Draco blocks                            → nodes/I.*
+//   merge       the levels above the chunks, then the tile set    → the output
 //
-// buildTileset (octree_builder.h) runs the same stages in one process, so a
-// build staged across processes writes the same bytes. The work folder's
-// files are internal: each names its format and version, and a stage checks
-// what it reads (sizes, counts, a CRC over each chunk's output) and names the
-// file where it fails.
+// Parts are runs of consecutive inputs of about equal bytes (inputPart), so
+// the scan, count and distribute passes run in parallel over inputs; a chunk
+// reads the parts' files in part order, which is input order. buildTileset
+// (octree_builder.h) runs the same stages in one process with one part, so a
+// build staged across processes writes the same bytes whatever its parts. The
+// work folder's files are internal: each names its format and version, and a
+// stage checks what it reads (sizes, counts, a CRC over each file) and names
+// the file where it fails.
 #pragma once
 
 #include <memory>
@@ -33,16 +37,33 @@ namespace surfcast {
 struct WorkFolder {
     std::string dir;
 
+    std::string scan(size_t part) const { return dir + "/scan/" + std::to_string(part) + ".bin"; }
+    std::string count(size_t part) const { return dir + "/count/" + std::to_string(part) + ".bin"; }
     std::string plan() const { return dir + "/plan.bin"; }
-    std::string chunks() const { return dir + "/chunks"; }          // the distribute stage's output
-    std::string distribution() const { return dir + "/chunks/distribution.bin"; }
+    std::string chunks() const { return dir + "/chunks"; }  // the distribute stage's output, a folder per part
+    std::string chunks(size_t part) const { return chunks() + "/" + std::to_string(part); }
+    std::string distribution(size_t part) const { return chunks(part) + "/distribution.bin"; }
     std::string nodes(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".nodes"; }
     std::string blocks(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".blocks"; }
 };
 
-// What the plan stage learns: with the options, all that the later stages need.
+// A run of consecutive inputs: [first, last) of the built-in scene (index 0,
+// where given) and the paths in order; `sources` their readers (the scene has
+// several), from `firstSource` on in InputStats::sources.
+struct InputPart {
+    size_t first = 0, last = 0;
+    size_t firstSource = 0, sources = 0;
+};
+// Part `part` of `parts` (no more parts than inputs; empty parts are allowed):
+// consecutive inputs of about equal bytes (file sizes; the scene at 32 bytes a point).
+InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts);
+// The options reading only `part`'s inputs.
+InputOptions partInputs(const InputOptions& inputs, const InputPart& part);
+
+// What the plan learns: with the options, all that the later stages need.
 struct BuildPlan {
     InputStats stats;
+    std::vector<InputPart> parts;
     uint64_t maxChunkPoints = 0;  // 0: every point in one chunk
     // Counting-grid cells (ChunkLayout::cellIndex) that hold points, by index.
     std::vector<std::pair<uint32_t, uint32_t>> counts;
@@ -50,8 +71,24 @@ struct BuildPlan {
     ChunkLayout layout(const BuildContext& context) const;
 };
 
-// Plan: the scan and the count. `context` receives the decisions derived
-// from the scan; `summary` the phases' times.
+// Scan: part `part` of `parts` of the inputs (`progress` gets its points).
+Result<InputStats> scanStage(const BuildOptions& options, const InputPart& part, Progress& progress);
+Status writeScan(const std::string& path, const InputStats& stats, const InputPart& part);
+Result<InputStats> readScan(const std::string& path, InputPart* part);
+
+// The most points a chunk may hold (0: one chunk takes every point), from the
+// budget and what the scan found (docs/ARCHITECTURE.md, "Memory").
+Result<uint64_t> chunkPoints(const BuildContext& context);
+
+// Count: part `part`'s points on the counting grid, occupied cells by index.
+Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& context, const InputPart& part, Progress& progress);
+Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts);
+Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path);
+// Sums sparse counts (each sorted by cell) into one, sorted by cell.
+std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vector<std::pair<uint32_t, uint32_t>>>& parts);
+
+// Plan in one process: scan and count every input as one part. `context`
+// receives the decisions derived from the scan; `summary` the phases' times.
 Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
                             BuildSummary* summary);
 // plan.bin: the plan and `args`, the command line that made it (the staged
@@ -59,19 +96,20 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
 Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const std::string> args);
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args);
 
-// Distribute: writes the chunk files and distribution.bin (each chunk's point
-// and halo counts), and fills them into `layout`.
-Status distributeStage(const BuildContext& context, ChunkLayout& layout, const WorkFolder& work, Progress& progress,
-                       BuildSummary* summary);
-// The chunk files' names and counts, from distribution.bin.
-Status readDistribution(const WorkFolder& work, ChunkLayout& layout);
+// Distribute: writes part `part`'s points to its chunk files and
+// distribution.bin (each chunk's point and halo counts from this part).
+Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t part,
+                       const WorkFolder& work, Progress& progress, BuildSummary* summary);
+// Each chunk's files of every part, with their counts, from distribution.bin.
+Status readDistribution(const WorkFolder& work, size_t parts, ChunkLayout& layout);
 
-// Chunk: builds chunk `index` of `layout` on `threads` threads and writes its
-// nodes' blocks and records, and its root (the merge's input), to
-// work.blocks(index) and work.nodes(index); the .nodes file, written last and
-// renamed into place, marks the chunk done. `removeInputs`: delete the
-// chunk's files once read (a build in one process; a staged build keeps them,
-// so that a chunk task can run again).
+// Chunk: builds chunk `index` of `layout` (its pieces from readDistribution)
+// on `threads` threads and writes its nodes' blocks and records, and its root
+// (the merge's input), to work.blocks(index) and work.nodes(index); each is
+// written beside its path and renamed into place, the .nodes file last, which
+// marks the chunk done. `removeInputs`: delete the chunk's files once read (a
+// build in one process; a staged build keeps them, so that a chunk task can
+// run again).
 Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t index, const WorkFolder& work, int threads,
                   bool removeInputs);
 

@@ -375,6 +375,40 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
     return stats;
 }
 
+InputStats mergeInputStats(std::vector<InputStats> parts) {
+    InputStats all;
+    for (InputStats& part : parts) {
+        for (SourceStats& s : part.sources) all.sources.push_back(std::move(s));
+        all.points += part.points;
+        all.skipped += part.skipped;
+        all.bounds.extend(part.bounds);
+        all.anyColors = all.anyColors || part.anyColors;
+        all.colorBits = std::max(all.colorBits, part.colorBits);
+        all.largestMeshBytes = std::max(all.largestMeshBytes, part.largestMeshBytes);
+        AttributeStats& a = all.attributes;
+        const AttributeStats& b = part.attributes;
+        a.intensityPoints += b.intensityPoints;
+        a.classifiedPoints += b.classifiedPoints;
+        a.returnPoints += b.returnPoints;
+        a.translucentPoints += b.translucentPoints;
+        for (size_t v = 0; v < a.intensityHistogram.size(); ++v) a.intensityHistogram[v] += b.intensityHistogram[v];
+        for (size_t v = 0; v < a.classCounts.size(); ++v) a.classCounts[v] += b.classCounts[v];
+        for (size_t v = 0; v < a.returnsHistogram.size(); ++v) a.returnsHistogram[v] += b.returnsHistogram[v];
+        // Fields in the order the inputs first offer them; the first one's kind and resolution hold.
+        for (const ScalarStats& f : part.scalars) {
+            auto it = std::find_if(all.scalars.begin(), all.scalars.end(), [&](const ScalarStats& t) { return t.field.name == f.field.name; });
+            if (it == all.scalars.end()) {
+                all.scalars.push_back(f);
+                continue;
+            }
+            it->points += f.points;
+            it->min = std::min(it->min, f.min);
+            it->max = std::max(it->max, f.max);
+        }
+    }
+    return all;
+}
+
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
                     std::span<const uint16_t> sourceIds, std::span<const ScalarQuantization> stored,
                     const BatchConsumer& consume) {

@@ -96,10 +96,14 @@ struct InputStats {
     int colorBits = 0;          // 0 (no colour), 8 or 16: what the tile set stores
     AttributeStats attributes;
     std::vector<ScalarStats> scalars;  // in the order the inputs first offer them
+    uint64_t largestMeshBytes = 0;     // the most one read of a mesh took (MeshStore::largestBytes), for the budget
 };
 
 // Pass 1. `progress` receives point counts as they are read.
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
+// The statistics of consecutive runs of inputs (scanInputs of each), in
+// order: the same as scanInputs of all of them at once.
+InputStats mergeInputStats(std::vector<InputStats> parts);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
 // 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input]), in

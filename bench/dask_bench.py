@@ -1,0 +1,103 @@
+#!/usr/bin/env python3
+"""The Dask build (scripts/surfcast-dask) against surfcast-build in one
+process, side by side on the same inputs: wall time per stage with one worker
+process and with two, the work folder's bytes (the shuffle), each task's peak
+RSS, and whether the sets are the same bytes. Prints markdown for
+bench/BENCHMARKS.md ("A build across processes").
+
+usage: bench/dask_bench.py INPUT... [--memory 2G] [--workers 1,2] [--label NAME]
+       bench/dask_bench.py --default-scene --scene-points 300000000 --workers 2
+"""
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+BUILD = os.path.join(REPO, "build", "bin", "surfcast-build")
+DRIVER = os.path.join(REPO, "scripts", "surfcast-dask")
+
+
+def cpu():
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def same(a, b):
+    def read(p):
+        with open(p, "rb") as f:
+            return f.read()
+    return all(read(os.path.join(a, n)) == read(os.path.join(b, n)) for n in ("tileset.json", "hierarchy.bin", "blocks.bin"))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("inputs", nargs="*")
+    ap.add_argument("--default-scene", action="store_true")
+    ap.add_argument("--scene-points", default="1500000")
+    ap.add_argument("--memory", default="2G")
+    ap.add_argument("--workers", default="1,2", help="worker counts of the Dask runs")
+    ap.add_argument("--no-single", action="store_true", help="skip the one-process build")
+    ap.add_argument("--label", default="")
+    ap.add_argument("--work", default=None, help="scratch folder (default: a temporary one)")
+    args = ap.parse_args()
+    inputs = list(args.inputs) + (["--default-scene", "--scene-points", args.scene_points] if args.default_scene else [])
+    options = inputs + ["--memory", args.memory]
+    scratch = tempfile.mkdtemp(prefix="surfcast-dask-bench-", dir=args.work)
+    try:
+        print(f"- machine: {cpu()}, {os.cpu_count()} cores; {args.label or ' '.join(inputs)}, `--memory {args.memory}`\n")
+        rows = []
+        single = None
+        if not args.no_single:
+            out = os.path.join(scratch, "single")
+            start = time.monotonic()
+            r = subprocess.run([BUILD, "-q"] + options + ["--threads", "2", "-o", out], capture_output=True, text=True)
+            if r.returncode:
+                sys.exit(r.stderr)
+            single = time.monotonic() - start
+            rows.append(("surfcast-build, 2 threads", single, None, "", r.stdout))
+        for n in [int(w) for w in args.workers.split(",") if w]:
+            out, report = os.path.join(scratch, f"dask{n}"), os.path.join(scratch, f"dask{n}.json")
+            start = time.monotonic()
+            r = subprocess.run([DRIVER, "--local", str(n), "-q", "--report", report, "--work", os.path.join(scratch, f"w{n}")] +
+                               options + ["-o", out], capture_output=True, text=True)
+            if r.returncode:
+                sys.exit(r.stderr)
+            wall = time.monotonic() - start
+            with open(report) as f:
+                rep = json.load(f)
+            identical = "same bytes" if args.no_single else ("same bytes" if same(out, os.path.join(scratch, "single")) else "DIFFERENT")
+            rows.append((f"surfcast-dask, {n} worker{'s' * (n > 1)} x 1 thread", wall, rep, identical, r.stdout))
+            shutil.rmtree(out, ignore_errors=True)
+
+        stages = ["scan", "count", "plan", "distribute", "chunk", "merge"]
+        print("| build | wall s | " + " | ".join(stages) + " | work folder MB (chunks + nodes) | peak RSS of a task MiB | sets |")
+        print("|---|---:|" + "---:|" * len(stages) + "---:|---:|---|")
+        for name, wall, rep, identical, _ in rows:
+            if rep is None:
+                print(f"| {name} | {wall:.1f} | " + " | ".join("" for _ in stages) + " | | | reference |")
+                continue
+            cells = [f"{rep['stages'][s]['seconds']:.2f}" if s in rep["stages"] else "" for s in stages]
+            wb = rep["work_bytes"]
+            rss = max(t["rss"] for t in rep["tasks"]) / 2**20
+            print(f"| {name} | {wall:.1f} | " + " | ".join(cells) +
+                  f" | {wb['chunks'] / 1e6:.0f} + {wb['nodes'] / 1e6:.0f} | {rss:.0f} | {identical} |")
+        for name, wall, rep, _, _ in rows:
+            if rep:
+                print(f"\n{name}: {rep['parts']} parts, {sum(1 for t in rep['tasks'] if t['stage'] == 'chunk')} chunk tasks; "
+                      f"speed-up against one process {single / wall:.2f}x" if single else "")
+        print(f"\n- command: `bench/dask_bench.py {' '.join(sys.argv[1:])}`")
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
