@@ -74,7 +74,7 @@ def main():
             wall = time.monotonic() - start
             with open(report) as f:
                 rep = json.load(f)
-            identical = "same bytes" if args.no_single else ("same bytes" if same(out, os.path.join(scratch, "single")) else "DIFFERENT")
+            identical = "not compared" if args.no_single else ("same bytes" if same(out, os.path.join(scratch, "single")) else "DIFFERENT")
             rows.append((f"surfcast-dask, {n} worker{'s' * (n > 1)} x 1 thread", wall, rep, identical, r.stdout))
             shutil.rmtree(out, ignore_errors=True)
 
@@ -92,8 +92,8 @@ def main():
                   f" | {wb['chunks'] / 1e6:.0f} + {wb['nodes'] / 1e6:.0f} | {rss:.0f} | {identical} |")
         for name, wall, rep, _, _ in rows:
             if rep:
-                print(f"\n{name}: {rep['parts']} parts, {sum(1 for t in rep['tasks'] if t['stage'] == 'chunk')} chunk tasks; "
-                      f"speed-up against one process {single / wall:.2f}x" if single else "")
+                speed = f"; speed-up against one process {single / wall:.2f}x" if single else ""
+                print(f"\n{name}: {rep['parts']} parts, {sum(1 for t in rep['tasks'] if t['stage'] == 'chunk')} chunk tasks{speed}")
         print(f"\n- command: `bench/dask_bench.py {' '.join(sys.argv[1:])}`")
     finally:
         shutil.rmtree(scratch, ignore_errors=True)

@@ -133,7 +133,8 @@ Status TilesetWriter::addPlacedNodes(const std::string& blocks, uint64_t bytes, 
 }
 
 Status TilesetWriter::finish(TilesetInfo& info) {
-    // blocks.bin: the blobs copied from the arrival-ordered file in hierarchy order.
+    // blocks.bin: the blobs copied in hierarchy order from where they arrived
+    // (addNode's file, or addPlacedNodes' files).
     if (std::fflush(blocks_) != 0) return Status::error(partial_ + "/" + kUnorderedBlocks + ": write failed (disk full?)");
     std::map<NodeKey, size_t> index;
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
@@ -169,7 +170,8 @@ Status TilesetWriter::finish(TilesetInfo& info) {
             fd = it->second;
         }
         if (::pread(fd, blob.data(), blob.size(), off_t(r.blockOffset)) != ssize_t(blob.size())) {
-            ok = false;
+            const std::string from = sources_[i] == kOwnBlocks ? partial_ + "/" + kUnorderedBlocks : placed_[sources_[i]];
+            failed = Status::error(from + ": cannot read the block of node " + key.name() + " at byte " + std::to_string(r.blockOffset));
             break;
         }
         if (sources_[i] != kOwnBlocks && crc32(blob.data(), blob.size()) != r.blockCrc) {

@@ -50,7 +50,7 @@ public:
 private:
     TilesetWriter() = default;
     std::string output_, partial_;
-    std::FILE* blocks_ = nullptr;   // the blobs in arrival order (blocks.unordered)
+    std::FILE* blocks_ = nullptr;   // addNode's blobs in arrival order (blocks.unordered)
     uint64_t blocksBytes_ = 0;      // every node's blob
     uint64_t ownBytes_ = 0;         // those in blocks_
     std::vector<NodeRecord> records_;

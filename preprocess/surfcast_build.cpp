@@ -16,8 +16,10 @@
 #include <vector>
 
 #include "block_codec.h"
+#include "crc32.h"
 #include "octree_builder.h"
 #include "stages.h"
+#include "work_files.h"
 #include "http_tile_source.h"
 #include "tileset_reader.h"
 
@@ -381,7 +383,7 @@ surfcast::Result<std::vector<std::string>> absoluteInputs(const std::vector<std:
 surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast::BuildPlan& plan, const surfcast::BuildContext& c) {
     surfcast::ChunkLayout layout = plan.layout(c);
     std::vector<uint64_t> points(layout.chunks().size(), 0);
-    if (points.size() == 1) points[0] = c.stats().points;
+    if (plan.counts.empty()) points[0] = c.stats().points;  // one chunk, not counted
     const double cell = c.rootEdge() / (1 << surfcast::kCountLevel);
     for (auto [index, n] : plan.counts) {
         const uint32_t side = 1u << surfcast::kCountLevel;
@@ -393,7 +395,7 @@ surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast:
          << ",\n  \"chunk_points\": [";
     for (size_t i = 0; i < points.size(); ++i) json << (i ? ", " : "") << points[i];
     json << "]\n}\n";
-    const std::string path = work.dir + "/plan.json", partial = path + ".partial";
+    const std::string path = work.dir + "/plan.json", partial = surfcast::partialName(path);
     std::FILE* f = std::fopen(partial.c_str(), "wb");
     if (!f) return surfcast::Status::error(partial + ": cannot create");
     const std::string text = json.str();
@@ -404,17 +406,25 @@ surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast:
     return ok && !ec ? surfcast::Status{} : surfcast::Status::error(path + ": could not be written");
 }
 
+// What the budget leaves the meshes' store while the inputs are read again
+// (as plan_stage.cpp sets it in one process; docs/ARCHITECTURE.md, "Memory").
+uint64_t meshCapacity(const surfcast::BuildContext& c) {
+    const surfcast::BuildOptions& o = c.options();
+    const uint64_t held = surfcast::kBaselineBytes + c.textureBytes() + c.stats().largestMeshBytes;
+    return o.memoryBytes > held ? o.memoryBytes - held : 0;
+}
+
 // The scans of `parts` parts (scan --part P/N), reduced: the statistics of
 // every input and each part's inputs and sources.
 surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart>>> reducedScans(const surfcast::WorkFolder& work,
                                                                                                 const surfcast::InputOptions& inputs,
-                                                                                                size_t parts) {
+                                                                                                size_t parts, uint32_t job) {
     std::vector<surfcast::InputStats> stats;
     std::vector<surfcast::InputPart> ranges;
     size_t sources = 0;
     for (size_t p = 0; p < parts; ++p) {
         surfcast::InputPart part;
-        auto scanned = surfcast::readScan(work.scan(p), &part);
+        auto scanned = surfcast::readScan(work.scan(p), &part, job);
         if (!scanned) return scanned.status();
         const size_t expectedFirst = p == 0 ? 0 : ranges.back().last;
         if (part.first != expectedFirst || part.last < part.first || part.sources != scanned->sources.size())
@@ -455,6 +465,17 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
         const surfcast::BuildOptions opt = surfcast::normalizeOptions(a.opt);
         surfcast::Progress progress(opt.progress);
+        // The command line the plan stores, and the job it names: the scans
+        // and counts of one job reduce together, never another's.
+        std::vector<std::string> stored = a.kept;
+        stored.insert(stored.end(), {"-o", a.opt.output});
+        stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
+        std::string joined;  // but -q and --threads N, which change no byte
+        for (size_t i = 0; i < stored.size(); ++i) {
+            if (stored[i] == "--threads") ++i;
+            else if (stored[i] != "-q" && stored[i] != "--quiet") joined += stored[i] + '\0';
+        }
+        const uint32_t job = surfcast::crc32(joined.data(), joined.size());
         if (stage == "scan") {
             surfcast::InputPart part = surfcast::inputPart(opt.inputs, a.part, a.parts);
             progress.begin("scan", 0);
@@ -462,7 +483,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
             if (!stats) return fail(stats.status());
             progress.end();
             part.sources = stats->sources.size();
-            if (auto st = surfcast::writeScan(work.scan(a.part), *stats, part); !st.ok()) return fail(st);
+            if (auto st = surfcast::writeScan(work.scan(a.part), *stats, part, job); !st.ok()) return fail(st);
             std::printf("scanned part %zu of %zu: inputs %zu to %zu, %llu points\n", a.part, a.parts, part.first, part.last,
                         (unsigned long long)stats->points);
             return 0;
@@ -473,11 +494,12 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
             if (!planned) return fail(planned.status());
             plan = std::move(*planned);
         } else {
-            auto scans = reducedScans(work, opt.inputs, a.parts);
+            auto scans = reducedScans(work, opt.inputs, a.parts, job);
             if (!scans) return fail(scans.status());
             auto derived = surfcast::BuildContext::derive(opt, std::move(scans->first), stage == "plan");
             if (!derived) return fail(derived.status());
             context = *derived;
+            context->options().inputs.meshes->setCapacity(meshCapacity(*context));
             auto most = surfcast::chunkPoints(*context);
             if (!most) return fail(most.status());
             if (stage == "count") {
@@ -489,7 +511,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
                     progress.end();
                     counts = std::move(*counted);
                 }
-                if (auto st = surfcast::writeCount(work.count(a.part), counts); !st.ok()) return fail(st);
+                if (auto st = surfcast::writeCount(work.count(a.part), counts, job); !st.ok()) return fail(st);
                 return 0;
             }
             plan.stats = context->stats();
@@ -498,16 +520,16 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
             if (*most > 0) {
                 std::vector<std::vector<std::pair<uint32_t, uint32_t>>> counts;
                 for (size_t p = 0; p < a.parts; ++p) {
-                    auto counted = surfcast::readCount(work.count(p));
+                    auto counted = surfcast::readCount(work.count(p), job);
                     if (!counted) return fail(counted.status());
                     counts.push_back(std::move(*counted));
                 }
                 plan.counts = surfcast::addCounts(counts);
             }
         }
-        std::vector<std::string> stored = a.kept;
-        stored.insert(stored.end(), {"-o", a.opt.output});
-        stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
+        // A new plan: what earlier plans distributed and built goes (their
+        // files name their plan, and the later stages would refuse them).
+        for (const char* folder : {"chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
         if (auto st = surfcast::writePlan(work.plan(), plan, stored); !st.ok()) return fail(st);
         if (auto st = writePlanJson(work, plan, *context); !st.ok()) return fail(st);
         std::printf("planned %zu chunks for %llu points in %s\n", plan.layout(*context).chunks().size(),
@@ -522,9 +544,15 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     if (parseArgs(stored, "plan", &planned) >= 0) return fail(surfcast::Status::error(work.plan() + ": its command line does not parse"));
     if (a.opt.threads > 0) planned.opt.threads = a.opt.threads;
     if (!a.opt.progress) planned.opt.progress = false;
+    const size_t inputCount = planned.opt.inputs.paths.size() + (planned.opt.inputs.defaultScene ? 1 : 0);
+    if (plan->parts.back().last != inputCount)
+        return fail(surfcast::Status::error(work.plan() + ": its parts do not cover its " + std::to_string(inputCount) + " inputs"));
     auto derived = surfcast::BuildContext::derive(planned.opt, plan->stats, false);
     if (!derived) return fail(derived.status());
     const surfcast::BuildContext& c = **derived;
+    // The meshes' store: within what the budget leaves while distribute reads
+    // them (as in one process); nothing after it reads a mesh.
+    c.options().inputs.meshes->setCapacity(stage == "distribute" ? meshCapacity(c) : 0);
     surfcast::ChunkLayout layout = plan->layout(c);
     surfcast::Progress progress(planned.opt.progress);
     if (stage == "distribute") {
@@ -541,12 +569,12 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         for (size_t i : a.chunks)
             if (i >= layout.chunks().size())
                 return usageError("chunk " + std::to_string(i) + ": the plan has chunks 0 to " + std::to_string(layout.chunks().size() - 1));
-        if (auto st = surfcast::readDistribution(work, plan->parts.size(), layout); !st.ok()) return fail(st);
+        if (auto st = surfcast::readDistribution(work, *plan, layout); !st.ok()) return fail(st);
         uint64_t points = 0;
         for (size_t i : a.chunks) points += layout.chunks()[i].points;
         progress.begin("build", points);
         for (size_t i : a.chunks) {
-            if (auto st = surfcast::chunkStage(c, layout, i, work, c.threads(), false); !st.ok()) return fail(st);
+            if (auto st = surfcast::chunkStage(c, *plan, layout, i, work, c.threads(), false); !st.ok()) return fail(st);
             progress.advance(layout.chunks()[i].points);
         }
         progress.end();
@@ -557,7 +585,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     summary.chunks = layout.chunks().size();
     auto writer = surfcast::TilesetWriter::create(planned.opt.output);
     if (!writer) return fail(writer.status());
-    if (auto st = surfcast::mergeStage(c, layout, work, **writer, progress, &summary); !st.ok()) return fail(st);
+    if (auto st = surfcast::mergeStage(c, *plan, layout, work, **writer, progress, &summary); !st.ok()) return fail(st);
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;
     summary.peakRss = surfcast::peakRssBytes();

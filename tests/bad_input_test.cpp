@@ -201,14 +201,18 @@ TEST(BadInput, KilledBuildLeavesNoTileset) {
         _exit(127);
     }
     // Killed while it writes blocks (the first has reached the chunk's block
-    // file in the work folder beside the partial one: one chunk here),
-    // however fast or slow the machine: event-driven, with a generous bound
-    // for sanitizer builds.
-    const std::string blocks = dir.file(".out.partial-" + std::to_string(pid) + "-work/nodes/0.blocks");
-    std::error_code ec;
-    for (int i = 0; i < 12000 && !(fs::exists(blocks, ec) && fs::file_size(blocks, ec) > 0); ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    const bool writing = fs::exists(blocks, ec) && fs::file_size(blocks, ec) > 0;
+    // file, written as nodes/0.blocks.partial-HOST-PID in the work folder
+    // beside the partial one: one chunk here), however fast or slow the
+    // machine: event-driven, with a generous bound for sanitizer builds.
+    const std::string nodes = dir.file(".out.partial-" + std::to_string(pid) + "-work/nodes");
+    auto writingBlocks = [&] {
+        std::error_code ec;
+        for (const auto& e : fs::directory_iterator(nodes, ec))
+            if (e.path().filename().string().rfind("0.blocks.partial-", 0) == 0 && fs::file_size(e.path(), ec) > 0 && !ec) return true;
+        return false;
+    };
+    for (int i = 0; i < 12000 && !writingBlocks(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const bool writing = writingBlocks();
     kill(pid, SIGKILL);
     int status = 0;
     waitpid(pid, &status, 0);

@@ -58,8 +58,9 @@ def parent_of(pid):
         return int(f.read().rsplit(")", 1)[1].split()[1])
 
 
-def stage_processes(stage):
-    """PIDs of surfcast-build processes running `stage`."""
+def stage_processes(stage, work):
+    """PIDs of surfcast-build processes running `stage` on the work folder `work`
+    (not those of other tests running beside this one)."""
     pids = []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
@@ -69,7 +70,7 @@ def stage_processes(stage):
                 argv = f.read().split(b"\0")
         except OSError:
             continue
-        if len(argv) > 1 and argv[0].endswith(b"surfcast-build") and argv[1] == stage.encode():
+        if len(argv) > 1 and argv[0].endswith(b"surfcast-build") and argv[1] == stage.encode() and work.encode() in argv:
             pids.append(int(entry))
     return pids
 
@@ -177,7 +178,7 @@ class DaskBuild(unittest.TestCase):
                                   text=True)
         # SIGKILL the worker process (not its nanny) that runs the first chunk
         # task seen, while the task's surfcast-build is building it.
-        chunk = wait_for(lambda: stage_processes("chunk"), 120, "a chunk task")[0]
+        chunk = wait_for(lambda: stage_processes("chunk", work), 120, "a chunk task")[0]
         worker = parent_of(chunk)
         self.assertIn(b"python", read(f"/proc/{worker}/cmdline"), "a chunk task's parent should be a worker process")
         os.kill(worker, signal.SIGKILL)
@@ -195,8 +196,12 @@ class DaskBuild(unittest.TestCase):
         wait_for(lambda: os.path.isdir(nodes) and [n for n in os.listdir(nodes) if n.endswith(".nodes")], 120, "a finished chunk")
         driver.kill()
         driver.wait()
-        # The tasks the driver had submitted may still finish; then wait for quiet.
-        wait_for(lambda: not stage_processes("chunk"), 120, "the last chunk task")
+        # The tasks the driver had submitted may still finish (the scheduler
+        # drops the queued ones once it sees the client gone); wait until
+        # none has run for a while.
+        for _ in range(3):
+            wait_for(lambda: not stage_processes("chunk", work), 120, "the last chunk task")
+            time.sleep(1)
         self.assertFalse(os.path.exists(out), "a set appeared before the merge")
         done = sorted(n for n in os.listdir(nodes) if n.endswith(".nodes"))
         # One finished chunk's record file cut short (a partial output): never used.

@@ -10,6 +10,7 @@
 #include "test_support.h"
 
 using namespace surfcast;
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -138,6 +139,13 @@ TEST(Stages, MissingOrCorruptWorkFilesFailWithTheirNames) {
     EXPECT_NE(unscanned.output.find(parted + "/scan/1.bin"), std::string::npos) << unscanned.output;
     auto badPart = test::run(concat({build, "scan", "--work", parted, "--part", "2/2"}, scene));
     EXPECT_EQ(badPart.exitCode, 2) << badPart.output;
+    // A part scanned with other options is another build's: never reduced with this one's.
+    std::vector<std::string> other = scene;
+    other[2] = "210000";
+    ASSERT_NO_FATAL_FAILURE(stage(concat({"scan", "--work", parted, "-q", "--part", "1/2"}, other)));
+    auto mixed = test::run(concat({build, "count", "--work", parted, "--part", "0/2"}, scene));
+    EXPECT_EQ(mixed.exitCode, 1);
+    EXPECT_NE(mixed.output.find(parted + "/scan/1.bin: scanned for another build"), std::string::npos) << mixed.output;
 
     // A chunk before its points are distributed, the merge before a chunk is built.
     auto early = test::run({build, "chunk", "--work", work, "0"});
@@ -165,8 +173,25 @@ TEST(Stages, MissingOrCorruptWorkFilesFailWithTheirNames) {
     EXPECT_NE(truncated.output.find(nodes + ": checksum mismatch"), std::string::npos) << truncated.output;
     EXPECT_TRUE(test::readFile(out + "/blocks.bin") == oldBlocks) << "a failed merge changed the old set";
 
-    // Built again, both chunks merge into the new set.
+    // A chunk built for an earlier plan (its files copied back after a new
+    // plan of the same layout): the merge refuses it.
     ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", "0", "1"}));
+    const std::string saved = dir.file("saved");
+    fs::create_directories(saved);
+    for (const char* name : {"1.nodes", "1.blocks"}) fs::copy_file(work + "/nodes/" + name, saved + "/" + name);
+    ASSERT_NO_FATAL_FAILURE(stage({"plan", "--work", work, "-q", "--default-scene", "--scene-points", "200000", "--memory", "160M",
+                                   "--capacity", "4000", "--normal-bits", "9", "-o", out}));
+    EXPECT_FALSE(fs::exists(work + "/nodes")) << "a new plan should clear the chunks built to the old one";
+    ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q"}));
+    for (size_t i = 0; i < chunks; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    for (const char* name : {"1.nodes", "1.blocks"}) fs::copy_file(saved + "/" + name, work + "/nodes/" + name, fs::copy_options::overwrite_existing);
+    auto stale = test::run({build, "merge", "--work", work, "-q"});
+    EXPECT_EQ(stale.exitCode, 1);
+    EXPECT_NE(stale.output.find(work + "/nodes/1.nodes: built for another plan"), std::string::npos) << stale.output;
+    EXPECT_TRUE(test::readFile(out + "/blocks.bin") == oldBlocks) << "a failed merge changed the old set";
+
+    // Built again, every chunk merges into the new set.
+    ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", "1"}));
     ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
     auto info = test::run({build, "--info", out});
     EXPECT_EQ(info.exitCode, 0) << info.output;

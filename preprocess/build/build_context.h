@@ -3,7 +3,7 @@
 // root box, the leaves' precision, the normals' orientation rules, which
 // attributes are stored and how). Any process that holds the same options and
 // statistics derives the same context, so the stages can run in different
-// processes (build_plan.h) and still write the same bytes.
+// processes (stages.h) and still write the same bytes.
 #pragma once
 
 #include <atomic>

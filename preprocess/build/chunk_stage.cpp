@@ -151,7 +151,7 @@ std::vector<Surfel> resampleHalo(const BuildContext& ctx, const std::vector<Surf
 class BlockFile {
 public:
     explicit BlockFile(std::string path)
-        : path_(std::move(path)), partial_(path_ + ".partial-" + std::to_string(::getpid())),
+        : path_(std::move(path)), partial_(partialName(path_)),
           file_(std::fopen(partial_.c_str(), "wb")) {}
     ~BlockFile() {
         if (file_) std::fclose(file_);
@@ -170,7 +170,8 @@ public:
         return {};
     }
     Status close() {
-        bool ok = file_ && std::fclose(file_) == 0;
+        bool ok = file_ && std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
+        ok = file_ && std::fclose(file_) == 0 && ok;
         file_ = nullptr;
         std::error_code ec;
         if (ok) fs::rename(partial_, path_, ec);
@@ -186,18 +187,17 @@ private:
 
 }  // namespace
 
-Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t index, const WorkFolder& work, int threads,
-                  bool removeInputs) {
+Status chunkStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t index, const WorkFolder& work,
+                  int threads, bool removeInputs) {
     const Chunk& chunk = layout.chunks().at(index);
     StepTimes steps = {};
     FitReport fits;
-    // Every part's points in part order: the inputs' order.
+    // Every part's points in part order: the inputs' order. (Each file's
+    // size is checked against its count before anything is allocated.)
     std::vector<Surfel> points, halo;
-    points.reserve(chunk.points);
-    halo.reserve(chunk.haloPoints);
     ScalarTable scalars = context.emptyTable();
-    scalars.values.reserve(chunk.points * context.scalars().size());
     for (const ChunkPiece& piece : chunk.pieces) {
+        if (piece.points > UINT32_MAX) return Status::error(piece.file + ": more points than a chunk can hold");
         SC_TRY(appendChunkFile(piece.file, piece.points, &points));
         SC_TRY(appendChunkFile(piece.haloFile, piece.haloPoints, &halo));
         if (!context.scalars().empty())
@@ -265,6 +265,7 @@ Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t
     SC_TRY(blocks.close());
 
     ChunkOutput out;
+    out.plan = plan.id;
     out.records = std::move(records);
     out.blocksBytes = blocks.bytes();
     for (int i = 0; i < kStepCount; ++i) out.stepNs[i] = steps[i];

@@ -1,5 +1,7 @@
 #include "chunker.h"
 
+#include <filesystem>
+
 #include <algorithm>
 #include <cassert>
 #include <cerrno>
@@ -210,10 +212,17 @@ Status ChunkWriter::finish() {
 }
 
 namespace {
-// Appends the `expected` records of the file at `path` to `out`.
+// Appends the `expected` records of the file at `path` to `out`: the file
+// must hold exactly those, checked before anything is allocated.
 template <typename T>
 Status appendRecords(const std::string& path, uint64_t expected, const char* what, std::vector<T>* out) {
     if (expected == 0) return {};
+    std::error_code ec;
+    const uintmax_t bytes = std::filesystem::file_size(path, ec);
+    if (ec) return Status::error(path + ": cannot read chunk file (" + ec.message() + ")");
+    if (expected > bytes / sizeof(T) || bytes != expected * sizeof(T))
+        return Status::error(path + ": chunk file holds " + std::to_string(bytes) + " bytes, not " + std::to_string(expected) + " " +
+                             what + " (truncated, or written by another plan)");
     const size_t at = out->size();
     out->resize(at + expected);
     std::FILE* f = std::fopen(path.c_str(), "rb");

@@ -16,10 +16,21 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
                        const WorkFolder& work, Progress& progress, BuildSummary* summary) {
     const BuildOptions& opt = context.options();
     const InputPart& inputs = plan.parts.at(part);
+    // Written into a folder of this process's own and renamed into place
+    // whole: a task run twice at once, or killed, never mixes its files with
+    // another's.
+    const std::string folder = partialName(work.chunks(part));
     std::error_code ec;
-    std::filesystem::remove_all(work.chunks(part), ec);
-    std::filesystem::create_directories(work.chunks(part), ec);
-    if (ec) return Status::error(work.chunks(part) + ": cannot create (" + ec.message() + ")");
+    std::filesystem::remove_all(folder, ec);
+    std::filesystem::create_directories(folder, ec);
+    if (ec) return Status::error(folder + ": cannot create (" + ec.message() + ")");
+    struct RemoveDir {
+        std::string path;
+        ~RemoveDir() {
+            std::error_code e;
+            std::filesystem::remove_all(path, e);
+        }
+    } guard{folder};
     ChunkLayout layout = planned;
     InputStats stats;  // the part's sources, as forEachBatch indexes them
     stats.sources.assign(context.stats().sources.begin() + long(inputs.firstSource),
@@ -28,7 +39,7 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
     for (const SourceStats& s : stats.sources) expected += s.points;
     MeshStore& meshes = *opt.inputs.meshes;
     progress.begin("distribute", expected);
-    ChunkWriter chunkWriter(layout, work.chunks(part), context.scalars().size());
+    ChunkWriter chunkWriter(layout, folder, context.scalars().size());
     uint64_t seen = 0;
     const InputOptions partOptions = partInputs(opt.inputs, inputs);
     if (partOptions.defaultScene || !partOptions.paths.empty())
@@ -40,26 +51,33 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
         }));
     SC_TRY(chunkWriter.finish());
     meshes.setCapacity(0);  // the fields keep the textures; nothing reads the meshes again
-    summary->meshReads += meshes.reads();
+    summary->meshReads = meshes.reads();  // the store's, since the scan: the build's in one process
     summary->phaseSeconds.push_back({"distribute", progress.end()});
     if (seen != expected)
         return Status::error("the inputs changed while being read: " + std::to_string(expected) + " points, then " + std::to_string(seen));
     ByteWriter w;
+    w.put(plan.id);
     w.put(uint64_t(layout.chunks().size()));
     for (const Chunk& c : layout.chunks()) w.put(c.written.points), w.put(c.written.haloPoints);
-    return writeWorkFile(work.distribution(part), kDistributionMagic, w);
+    SC_TRY(writeWorkFile(folder + "/distribution.bin", kDistributionMagic, w));
+    std::filesystem::remove_all(work.chunks(part), ec);
+    std::filesystem::rename(folder, work.chunks(part), ec);
+    if (ec) return Status::error(work.chunks(part) + ": cannot move the part's chunk files into place (" + ec.message() + ")");
+    return {};
 }
 
-Status readDistribution(const WorkFolder& work, size_t parts, ChunkLayout& layout) {
+Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout) {
     for (Chunk& c : layout.chunks()) {
         c.points = c.haloPoints = 0;
         c.pieces.clear();
     }
-    for (size_t part = 0; part < parts; ++part) {
+    for (size_t part = 0; part < plan.parts.size(); ++part) {
         auto bytes = readWorkFile(work.distribution(part), kDistributionMagic);
         if (!bytes) return bytes.status();
         ByteReader r(*bytes);
-        if (r.getCount(16) != layout.chunks().size() || !r.ok())
+        if (r.get<uint32_t>() != plan.id)
+            return Status::error(work.distribution(part) + ": written for another plan (distribute this part again)");
+        if (r.getCount(16) != layout.chunks().size() || r.left() != 16 * layout.chunks().size())
             return Status::error(work.distribution(part) + ": does not match the plan's " + std::to_string(layout.chunks().size()) +
                                  " chunks");
         for (size_t i = 0; i < layout.chunks().size(); ++i) {

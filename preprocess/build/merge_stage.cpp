@@ -1,6 +1,7 @@
 // The merge stage (stages.h): the chunks' outputs into the writer, the levels
 // above the chunk roots, and the tile set.
 #include <map>
+#include <set>
 
 #include "built_node.h"
 #include "stages.h"
@@ -8,8 +9,8 @@
 
 namespace surfcast {
 
-Status mergeStage(const BuildContext& context, const ChunkLayout& layout, const WorkFolder& work, TilesetWriter& writer,
-                  Progress& progress, BuildSummary* summary) {
+Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                  TilesetWriter& writer, Progress& progress, BuildSummary* summary) {
     StepTimes steps = {};
     auto count = [&](const NodeRecord& r) {
         const size_t level = r.key.level;
@@ -25,9 +26,20 @@ Status mergeStage(const BuildContext& context, const ChunkLayout& layout, const 
     // The chunks' nodes, and their roots for the levels above.
     std::map<NodeKey, std::unique_ptr<BuiltNode>> retained;
     ScalarTable upperScalars = context.emptyTable();  // rows of retained and the levels above them
+    std::set<NodeKey> seen;
     for (size_t i = 0; i < layout.chunks().size(); ++i) {
         auto out = readChunkOutput(work.nodes(i), context.emptyTable());
         if (!out) return out.status();
+        if (out->plan != plan.id) return Status::error(work.nodes(i) + ": built for another plan (build chunk " + std::to_string(i) + " again)");
+        // Every node lies in its chunk, once.
+        const NodeKey& chunkKey = layout.chunks()[i].key;
+        for (const NodeRecord& r : out->records) {
+            const int below = int(r.key.level) - int(chunkKey.level);
+            const bool inside = below >= 0 && below <= kMaxLevel && (r.key.x >> below) == chunkKey.x &&
+                                (r.key.y >> below) == chunkKey.y && (r.key.z >> below) == chunkKey.z;
+            if (!inside || !seen.insert(r.key).second)
+                return Status::error(work.nodes(i) + ": node " + r.key.name() + " is not chunk " + std::to_string(i) + "'s, or repeats");
+        }
         SC_TRY(writer.addPlacedNodes(work.blocks(i), out->blocksBytes, out->records));
         for (const NodeRecord& r : out->records) count(r);
         for (int s = 0; s < kStepCount; ++s) steps[s] += out->stepNs[s];

@@ -20,7 +20,8 @@ namespace {
 // Builds every chunk of `layout`, largest first (the long poles start early),
 // at most kChunksAtOnce at a time (the budget is split that many ways); more
 // threads work inside each chunk.
-Status buildChunks(const BuildContext& context, const ChunkLayout& layout, const WorkFolder& work, Progress& progress) {
+Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                   Progress& progress) {
     const std::vector<Chunk>& chunks = layout.chunks();
     std::vector<size_t> order(chunks.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -39,7 +40,7 @@ Status buildChunks(const BuildContext& context, const ChunkLayout& layout, const
                 std::lock_guard lock(errorMutex);
                 if (!firstError.ok()) return;
             }
-            Status st = chunkStage(context, layout, order[i], work, inner, true);
+            Status st = chunkStage(context, plan, layout, order[i], work, inner, true);
             progress.advance(chunks[order[i]].points);
             if (!st.ok()) {
                 std::lock_guard lock(errorMutex);
@@ -83,12 +84,12 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
 
     ChunkLayout layout = plan->layout(c);
     SC_TRY(distributeStage(c, *plan, layout, 0, work, progress, &summary));
-    SC_TRY(readDistribution(work, plan->parts.size(), layout));
+    SC_TRY(readDistribution(work, *plan, layout));
     summary.chunks = layout.chunks().size();
     progress.begin("build", c.stats().points);
-    SC_TRY(buildChunks(c, layout, work, progress));
+    SC_TRY(buildChunks(c, *plan, layout, work, progress));
     summary.phaseSeconds.push_back({"build", progress.end()});
-    SC_TRY(mergeStage(c, layout, work, **writer, progress, &summary));
+    SC_TRY(mergeStage(c, *plan, layout, work, **writer, progress, &summary));
 
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;

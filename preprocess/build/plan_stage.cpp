@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <map>
 
+#include "crc32.h"
 #include "stages.h"
 #include "work_files.h"
 
@@ -257,17 +258,19 @@ Result<InputStats> scanStage(const BuildOptions& options, const InputPart& part,
     return stats;
 }
 
-Status writeScan(const std::string& path, const InputStats& stats, const InputPart& part) {
+Status writeScan(const std::string& path, const InputStats& stats, const InputPart& part, uint32_t job) {
     ByteWriter w;
+    w.put(job);
     putPart(w, part);
     putStats(w, stats);
     return writeWorkFile(path, kScanMagic, w);
 }
 
-Result<InputStats> readScan(const std::string& path, InputPart* part) {
+Result<InputStats> readScan(const std::string& path, InputPart* part, uint32_t job) {
     auto bytes = readWorkFile(path, kScanMagic);
     if (!bytes) return bytes.status();
     ByteReader r(*bytes);
+    if (r.get<uint32_t>() != job) return Status::error(path + ": scanned for another build (other inputs or options)");
     *part = getPart(r);
     InputStats stats;
     if (!getStats(r, stats) || r.left() != 0) return Status::error(path + ": malformed scan");
@@ -293,16 +296,18 @@ Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext
     return occupied;
 }
 
-Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts) {
+Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts, uint32_t job) {
     ByteWriter w;
+    w.put(job);
     putCounts(w, counts);
     return writeWorkFile(path, kCountMagic, w);
 }
 
-Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path) {
+Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path, uint32_t job) {
     auto bytes = readWorkFile(path, kCountMagic);
     if (!bytes) return bytes.status();
     ByteReader r(*bytes);
+    if (r.get<uint32_t>() != job) return Status::error(path + ": counted for another build (other inputs or options)");
     std::vector<std::pair<uint32_t, uint32_t>> counts;
     if (!getCounts(r, counts) || r.left() != 0) return Status::error(path + ": malformed counts");
     return counts;
@@ -349,7 +354,7 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
     return plan;
 }
 
-Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const std::string> args) {
+Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args) {
     ByteWriter w;
     w.put(uint64_t(args.size()));
     for (const std::string& a : args) w.putString(a);
@@ -358,6 +363,7 @@ Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const
     for (const InputPart& p : plan.parts) putPart(w, p);
     w.put(plan.maxChunkPoints);
     putCounts(w, plan.counts);
+    plan.id = crc32(w.bytes().data(), w.bytes().size());
     return writeWorkFile(path, kPlanMagic, w);
 }
 
@@ -366,16 +372,24 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
     if (!bytes) return bytes.status();
     ByteReader r(*bytes);
     const Status corrupt = Status::error(path + ": malformed plan");
+    BuildPlan plan;
+    plan.id = crc32(bytes->data(), bytes->size());
     args->resize(r.getCount(4));
     for (std::string& arg : *args) arg = r.getString();
-    BuildPlan plan;
     if (!getStats(r, plan.stats)) return corrupt;
     plan.parts.resize(r.getCount(32));
     for (InputPart& p : plan.parts) p = getPart(r);
     plan.maxChunkPoints = r.get<uint64_t>();
     if (!getCounts(r, plan.counts) || !r.ok() || r.left() != 0 || plan.parts.empty()) return corrupt;
-    for (const InputPart& p : plan.parts)
-        if (p.firstSource + p.sources > plan.stats.sources.size()) return corrupt;
+    // Parts tile the inputs and the sources in order.
+    size_t input = 0, source = 0;
+    for (const InputPart& p : plan.parts) {
+        if (p.first != input || p.last < p.first || p.firstSource != source || p.sources > plan.stats.sources.size() - source)
+            return corrupt;
+        input = p.last;
+        source += p.sources;
+    }
+    if (source != plan.stats.sources.size()) return corrupt;
     return plan;
 }
 

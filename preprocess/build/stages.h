@@ -62,6 +62,10 @@ InputOptions partInputs(const InputOptions& inputs, const InputPart& part);
 
 // What the plan learns: with the options, all that the later stages need.
 struct BuildPlan {
+    // Which plan this is: the CRC of plan.bin's payload (0 in one process).
+    // The distribute and chunk stages stamp their files with it, and the
+    // stages after them refuse files of another plan.
+    uint32_t id = 0;
     InputStats stats;
     std::vector<InputPart> parts;
     uint64_t maxChunkPoints = 0;  // 0: every point in one chunk
@@ -73,8 +77,10 @@ struct BuildPlan {
 
 // Scan: part `part` of `parts` of the inputs (`progress` gets its points).
 Result<InputStats> scanStage(const BuildOptions& options, const InputPart& part, Progress& progress);
-Status writeScan(const std::string& path, const InputStats& stats, const InputPart& part);
-Result<InputStats> readScan(const std::string& path, InputPart* part);
+// `job` identifies the build the part belongs to (a hash of its command line):
+// reading a part of another job fails, naming the file.
+Status writeScan(const std::string& path, const InputStats& stats, const InputPart& part, uint32_t job);
+Result<InputStats> readScan(const std::string& path, InputPart* part, uint32_t job);
 
 // The most points a chunk may hold (0: one chunk takes every point), from the
 // budget and what the scan found (docs/ARCHITECTURE.md, "Memory").
@@ -82,8 +88,8 @@ Result<uint64_t> chunkPoints(const BuildContext& context);
 
 // Count: part `part`'s points on the counting grid, occupied cells by index.
 Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& context, const InputPart& part, Progress& progress);
-Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts);
-Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path);
+Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts, uint32_t job);
+Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path, uint32_t job);
 // Sums sparse counts (each sorted by cell) into one, sorted by cell.
 std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vector<std::pair<uint32_t, uint32_t>>>& parts);
 
@@ -92,8 +98,8 @@ std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vect
 Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
                             BuildSummary* summary);
 // plan.bin: the plan and `args`, the command line that made it (the staged
-// CLI's later stages read their options from it).
-Status writePlan(const std::string& path, const BuildPlan& plan, std::span<const std::string> args);
+// CLI's later stages read their options from it). Sets plan.id.
+Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args);
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args);
 
 // Distribute: writes part `part`'s points to its chunk files and
@@ -101,7 +107,7 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
 Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t part,
                        const WorkFolder& work, Progress& progress, BuildSummary* summary);
 // Each chunk's files of every part, with their counts, from distribution.bin.
-Status readDistribution(const WorkFolder& work, size_t parts, ChunkLayout& layout);
+Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout);
 
 // Chunk: builds chunk `index` of `layout` (its pieces from readDistribution)
 // on `threads` threads and writes its nodes' blocks and records, and its root
@@ -110,13 +116,13 @@ Status readDistribution(const WorkFolder& work, size_t parts, ChunkLayout& layou
 // marks the chunk done. `removeInputs`: delete the chunk's files once read (a
 // build in one process; a staged build keeps them, so that a chunk task can
 // run again).
-Status chunkStage(const BuildContext& context, const ChunkLayout& layout, size_t index, const WorkFolder& work, int threads,
-                  bool removeInputs);
+Status chunkStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t index, const WorkFolder& work,
+                  int threads, bool removeInputs);
 
 // Merge: reads every chunk's output (checking each block's CRC as it copies
 // it), builds the levels above the chunks and finishes `writer`. Fills the
 // summary's counts, steps, texture fit and phases "upper" and "write".
-Status mergeStage(const BuildContext& context, const ChunkLayout& layout, const WorkFolder& work, TilesetWriter& writer,
-                  Progress& progress, BuildSummary* summary);
+Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                  TilesetWriter& writer, Progress& progress, BuildSummary* summary);
 
 }  // namespace surfcast

@@ -10,12 +10,18 @@
 
 namespace surfcast {
 
+std::string partialName(const std::string& path) {
+    char host[256] = {};
+    if (::gethostname(host, sizeof host - 1) != 0) host[0] = '\0';
+    return path + ".partial-" + host + "-" + std::to_string(::getpid());
+}
+
 Status writeWorkFile(const std::string& path, const char (&magic)[9], ByteWriter& payload) {
     std::vector<uint8_t>& bytes = payload.bytes();
     bytes.insert(bytes.begin(), magic, magic + 8);
     const uint32_t crc = crc32(bytes.data(), bytes.size());
     payload.put(crc);
-    const std::string partial = path + ".partial-" + std::to_string(::getpid());
+    const std::string partial = partialName(path);
     std::FILE* f = std::fopen(partial.c_str(), "wb");
     if (!f) return Status::error(partial + ": cannot create (" + std::strerror(errno) + ")");
     bool ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size() && std::fflush(f) == 0 && ::fsync(::fileno(f)) == 0;
@@ -57,6 +63,7 @@ constexpr char kChunkMagic[9] = "SCNODES1";
 
 Status writeChunkOutput(const std::string& path, const ChunkOutput& out) {
     ByteWriter w;
+    w.put(out.plan);
     w.put(uint64_t(out.records.size()));
     for (const NodeRecord& r : out.records) {
         uint8_t bytes[kRecordSize];
@@ -78,8 +85,6 @@ Status writeChunkOutput(const std::string& path, const ChunkOutput& out) {
         w.put(root.key.x);
         w.put(root.key.y);
         w.put(root.key.z);
-        w.put(root.childMask);
-        w.put(root.cell);
         w.put(uint64_t(root.surfels.size()));
         for (const Surfel& s : root.surfels) w.putBytes(&s, sizeof s);
         w.put(uint64_t(out.rootScalars.values.size()));
@@ -94,6 +99,7 @@ Result<ChunkOutput> readChunkOutput(const std::string& path, const ScalarTable& 
     ByteReader r(*bytes);
     const Status corrupt = Status::error(path + ": malformed chunk output");
     ChunkOutput out;
+    out.plan = r.get<uint32_t>();
     out.records.resize(r.getCount(kRecordSize));
     for (NodeRecord& rec : out.records) {
         uint8_t b[kRecordSize];
@@ -115,8 +121,6 @@ Result<ChunkOutput> readChunkOutput(const std::string& path, const ScalarTable& 
         root.key.x = r.get<uint32_t>();
         root.key.y = r.get<uint32_t>();
         root.key.z = r.get<uint32_t>();
-        root.childMask = r.get<uint8_t>();
-        root.cell = r.get<double>();
         root.surfels.resize(r.getCount(sizeof(Surfel)));
         for (Surfel& s : root.surfels) r.getBytes(&s, sizeof s);
         out.rootScalars = empty;
@@ -125,7 +129,7 @@ Result<ChunkOutput> readChunkOutput(const std::string& path, const ScalarTable& 
         if (out.rootScalars.values.size() != root.surfels.size() * empty.fields()) return corrupt;
         for (size_t i = 0; i < root.surfels.size(); ++i)
             if (root.surfels[i].row != i) return corrupt;
-        if (root.key.level > kMaxLevel || !(root.cell >= 0) || !std::isfinite(root.cell)) return corrupt;
+        if (root.key.level > kMaxLevel) return corrupt;
     }
     for (const NodeRecord& rec : out.records)
         if (rec.blockOffset > out.blocksBytes || rec.blockSize > out.blocksBytes - rec.blockOffset) return corrupt;

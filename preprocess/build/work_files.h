@@ -76,6 +76,10 @@ private:
     bool ok_ = true;
 };
 
+// A name beside `path` for writing it before the rename into place, unique
+// to this host and process (the work folder may be shared by many machines).
+std::string partialName(const std::string& path);
+
 // A work file: `magic` (8 bytes), the payload, then the CRC-32 of both.
 // Written beside the path and renamed into place, so a reader sees it whole
 // or not at all.
@@ -83,11 +87,12 @@ Status writeWorkFile(const std::string& path, const char (&magic)[9], ByteWriter
 // The payload of a work file, once its magic and CRC are checked.
 Result<std::vector<uint8_t>> readWorkFile(const std::string& path, const char (&magic)[9]);
 
-// A chunk's output beside its blocks file: its nodes' records (offsets into
-// the blocks file), where its time went, its texture fits, and its root with
-// the root's scalar rows (none for the chunk at the root: the merge has
-// nothing to build above it).
+// A chunk's output beside its blocks file: the plan it was built to, its
+// nodes' records (offsets into the blocks file), where its time went, its
+// texture fits, and its root's key and surfels with their scalar rows (none
+// for the chunk at the root: the merge has nothing to build above it).
 struct ChunkOutput {
+    uint32_t plan = 0;  // BuildPlan::id of the plan the chunk was built to
     std::vector<NodeRecord> records;
     uint64_t blocksBytes = 0;
     uint64_t stepNs[kStepCount] = {};
