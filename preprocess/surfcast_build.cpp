@@ -428,8 +428,8 @@ surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart
         if (!scanned) return scanned.status();
         const size_t expectedFirst = p == 0 ? 0 : ranges.back().last;
         if (part.first != expectedFirst || part.last < part.first || part.sources != scanned->sources.size())
-            return surfcast::Status::error(work.scan(p) + ": its inputs do not follow part " + std::to_string(p) +
-                                           " - 1's (scanned with other inputs or parts?)");
+            return surfcast::Status::error(work.scan(p) + ": its inputs do not follow on from the previous part's" +
+                                           " (scanned with another number of parts?)");
         part.firstSource = sources;
         sources += part.sources;
         ranges.push_back(part);
