@@ -465,16 +465,19 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
         const surfcast::BuildOptions opt = surfcast::normalizeOptions(a.opt);
         surfcast::Progress progress(opt.progress);
-        // The command line the plan stores, and the job it names: the scans
-        // and counts of one job reduce together, never another's.
-        std::vector<std::string> stored = a.kept;
+        // The command line the plan stores (but -q and --threads N, which
+        // change no byte and which each stage gives its own), and the job it
+        // names: the scans and counts of one job reduce together, never
+        // another's.
+        std::vector<std::string> stored;
+        for (size_t i = 0; i < a.kept.size(); ++i) {
+            if (a.kept[i] == "--threads") ++i;
+            else if (a.kept[i] != "-q" && a.kept[i] != "--quiet") stored.push_back(a.kept[i]);
+        }
         stored.insert(stored.end(), {"-o", a.opt.output});
         stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
-        std::string joined;  // but -q and --threads N, which change no byte
-        for (size_t i = 0; i < stored.size(); ++i) {
-            if (stored[i] == "--threads") ++i;
-            else if (stored[i] != "-q" && stored[i] != "--quiet") joined += stored[i] + '\0';
-        }
+        std::string joined;
+        for (const std::string& arg : stored) joined += arg + '\0';
         const uint32_t job = surfcast::crc32(joined.data(), joined.size());
         if (stage == "scan") {
             surfcast::InputPart part = surfcast::inputPart(opt.inputs, a.part, a.parts);
@@ -542,8 +545,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     if (!plan) return fail(plan.status());
     Args planned;
     if (parseArgs(stored, "plan", &planned) >= 0) return fail(surfcast::Status::error(work.plan() + ": its command line does not parse"));
-    if (a.opt.threads > 0) planned.opt.threads = a.opt.threads;
-    if (!a.opt.progress) planned.opt.progress = false;
+    planned.opt.threads = a.opt.threads;
+    planned.opt.progress = a.opt.progress;
     const size_t inputCount = planned.opt.inputs.paths.size() + (planned.opt.inputs.defaultScene ? 1 : 0);
     if (plan->parts.back().last != inputCount)
         return fail(surfcast::Status::error(work.plan() + ": its parts do not cover its " + std::to_string(inputCount) + " inputs"));

@@ -197,13 +197,16 @@ class DaskBuild(unittest.TestCase):
         driver.kill()
         driver.wait()
         # The tasks the driver had submitted may still finish (the scheduler
-        # drops the queued ones once it sees the client gone); wait until
-        # none has run for a while.
-        for _ in range(3):
-            wait_for(lambda: not stage_processes("chunk", work), 120, "the last chunk task")
-            time.sleep(1)
+        # drops the queued ones once it sees the client gone); wait until the
+        # finished chunks stay the same for three seconds.
+        def finished():
+            return sorted(n for n in os.listdir(nodes) if n.endswith(".nodes"))
+        done, steady = finished(), time.monotonic()
+        while time.monotonic() - steady < 3 or stage_processes("chunk", work):
+            time.sleep(0.2)
+            if finished() != done:
+                done, steady = finished(), time.monotonic()
         self.assertFalse(os.path.exists(out), "a set appeared before the merge")
-        done = sorted(n for n in os.listdir(nodes) if n.endswith(".nodes"))
         # One finished chunk's record file cut short (a partial output): never used.
         cut = os.path.join(nodes, done[0])
         os.truncate(cut, os.path.getsize(cut) - 9)

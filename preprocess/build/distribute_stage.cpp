@@ -1,6 +1,11 @@
 // The distribute stage (stages.h): one part's points to its chunk files and
 // the halos that hold them, and its distribution.bin, which the chunk stage
 // reads the files' counts from.
+#include <fcntl.h>
+#include <stdio.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 
 #include "stages.h"
@@ -9,7 +14,7 @@
 namespace surfcast {
 
 namespace {
-constexpr char kDistributionMagic[9] = "SCDIST01";
+constexpr char kDistributionMagic[9] = "SCDIST02";
 }  // namespace
 
 Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& planned, size_t part,
@@ -60,9 +65,14 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
     w.put(uint64_t(layout.chunks().size()));
     for (const Chunk& c : layout.chunks()) w.put(c.written.points), w.put(c.written.haloPoints);
     SC_TRY(writeWorkFile(folder + "/distribution.bin", kDistributionMagic, w));
-    std::filesystem::remove_all(work.chunks(part), ec);
-    std::filesystem::rename(folder, work.chunks(part), ec);
-    if (ec) return Status::error(work.chunks(part) + ": cannot move the part's chunk files into place (" + ec.message() + ")");
+    // Into place in one step: exchanged with an earlier run's folder (whose
+    // files then go with `folder`), or renamed where there is none. A chunk
+    // stage reading the part meanwhile sees one folder or the other, whole.
+    const std::string target = work.chunks(part);
+    if (::renameat2(AT_FDCWD, folder.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) != 0 &&
+        ::rename(folder.c_str(), target.c_str()) != 0 &&
+        ::renameat2(AT_FDCWD, folder.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) != 0)
+        return Status::error(target + ": cannot move the part's chunk files into place (" + std::strerror(errno) + ")");
     return {};
 }
 

@@ -12,9 +12,9 @@ namespace surfcast {
 
 namespace {
 
-constexpr char kPlanMagic[9] = "SCPLAN01";
-constexpr char kScanMagic[9] = "SCSCAN01";
-constexpr char kCountMagic[9] = "SCCOUNT1";
+constexpr char kPlanMagic[9] = "SCPLAN02";
+constexpr char kScanMagic[9] = "SCSCAN02";
+constexpr char kCountMagic[9] = "SCCOUNT2";
 
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
 
@@ -270,7 +270,11 @@ Result<InputStats> readScan(const std::string& path, InputPart* part, uint32_t j
     auto bytes = readWorkFile(path, kScanMagic);
     if (!bytes) return bytes.status();
     ByteReader r(*bytes);
-    if (r.get<uint32_t>() != job) return Status::error(path + ": scanned for another build (other inputs or options)");
+    if (r.get<uint32_t>() != job) {
+        std::error_code ec;
+        std::filesystem::remove(path, ec);  // so that the part is scanned again, not refused for good
+        return Status::error(path + ": scanned for another build (other inputs or options); removed, scan the part again");
+    }
     *part = getPart(r);
     InputStats stats;
     if (!getStats(r, stats) || r.left() != 0) return Status::error(path + ": malformed scan");
@@ -307,7 +311,11 @@ Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& 
     auto bytes = readWorkFile(path, kCountMagic);
     if (!bytes) return bytes.status();
     ByteReader r(*bytes);
-    if (r.get<uint32_t>() != job) return Status::error(path + ": counted for another build (other inputs or options)");
+    if (r.get<uint32_t>() != job) {
+        std::error_code ec;
+        std::filesystem::remove(path, ec);
+        return Status::error(path + ": counted for another build (other inputs or options); removed, count the part again");
+    }
     std::vector<std::pair<uint32_t, uint32_t>> counts;
     if (!getCounts(r, counts) || r.left() != 0) return Status::error(path + ": malformed counts");
     return counts;

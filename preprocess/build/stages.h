@@ -16,9 +16,10 @@
 // reads the parts' files in part order, which is input order. buildTileset
 // (octree_builder.h) runs the same stages in one process with one part, so a
 // build staged across processes writes the same bytes whatever its parts. The
-// work folder's files are internal: each names its format and version, and a
-// stage checks what it reads (sizes, counts, a CRC over each file) and names
-// the file where it fails.
+// work folder's files are internal: each names its format and version (a new
+// layout takes a new magic), the job or plan that made it, and a stage checks
+// what it reads (sizes, counts, a CRC over each file, the job or plan) and
+// names the file where it fails.
 #pragma once
 
 #include <memory>

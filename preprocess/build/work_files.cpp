@@ -58,7 +58,7 @@ Result<std::vector<uint8_t>> readWorkFile(const std::string& path, const char (&
 namespace surfcast {
 
 namespace {
-constexpr char kChunkMagic[9] = "SCNODES1";
+constexpr char kChunkMagic[9] = "SCNODES2";
 }
 
 Status writeChunkOutput(const std::string& path, const ChunkOutput& out) {
