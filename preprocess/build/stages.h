@@ -55,8 +55,8 @@ struct InputPart {
     size_t first = 0, last = 0;
     size_t firstSource = 0, sources = 0;
 };
-// Part `part` of `parts` (no more parts than inputs; empty parts are allowed):
-// consecutive inputs of about equal bytes (file sizes; the scene at 32 bytes a point).
+// Part `part` of `parts`: consecutive inputs of about equal bytes (file sizes;
+// the scene at 32 bytes a point). Parts may outnumber the inputs: some are then empty.
 InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts);
 // The options reading only `part`'s inputs.
 InputOptions partInputs(const InputOptions& inputs, const InputPart& part);
