@@ -394,7 +394,14 @@ surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast:
     json << "{\n  \"format\": \"surfcast-plan\",\n  \"points\": " << c.stats().points << ",\n  \"chunks\": " << points.size()
          << ",\n  \"chunk_points\": [";
     for (size_t i = 0; i < points.size(); ++i) json << (i ? ", " : "") << points[i];
-    json << "]\n}\n";
+    // Each part from input `first`'s record `begin` to input `last`'s record `end` (0: up to input `last`).
+    json << "],\n  \"parts\": [";
+    for (size_t i = 0; i < plan.parts.size(); ++i) {
+        const surfcast::InputPart& p = plan.parts[i];
+        json << (i ? ",\n    " : "\n    ") << "{\"first\": " << p.first << ", \"begin\": " << p.begin << ", \"last\": " << p.last
+             << ", \"end\": " << p.end << ", \"points\": " << p.points << "}";
+    }
+    json << "\n  ]\n}\n";
     const std::string path = work.dir + "/plan.json", partial = surfcast::partialName(path);
     std::FILE* f = std::fopen(partial.c_str(), "wb");
     if (!f) return surfcast::Status::error(partial + ": cannot create");
@@ -421,25 +428,28 @@ surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart
                                                                                                 size_t parts, uint32_t job) {
     std::vector<surfcast::InputStats> stats;
     std::vector<surfcast::InputPart> ranges;
+    std::vector<bool> continues;
     size_t sources = 0;
     for (size_t p = 0; p < parts; ++p) {
         surfcast::InputPart part;
         auto scanned = surfcast::readScan(work.scan(p), &part, job);
         if (!scanned) return scanned.status();
-        const size_t expectedFirst = p == 0 ? 0 : ranges.back().last;
-        if (part.first != expectedFirst || part.last < part.first || part.sources != scanned->sources.size())
+        const bool follows = p == 0 ? part.first == 0 && part.begin == 0 : part.first == ranges.back().last && part.begin == ranges.back().end;
+        if (!follows || part.sources != scanned->sources.size() || (part.continuesSource() && sources == 0))
             return surfcast::Status::error(work.scan(p) + ": its inputs do not follow on from the previous part's" +
                                            " (scanned with another number of parts?)");
-        part.firstSource = sources;
-        sources += part.sources;
+        // A part that starts within a file shares its source with the part before.
+        part.firstSource = part.continuesSource() ? sources - 1 : sources;
+        sources = part.firstSource + part.sources;
+        continues.push_back(part.continuesSource());
         ranges.push_back(part);
         stats.push_back(std::move(*scanned));
     }
     const size_t inputCount = inputs.paths.size() + (inputs.defaultScene ? 1 : 0);
-    if (ranges.empty() || ranges.back().last != inputCount)
+    if (ranges.empty() || ranges.back().last != inputCount || ranges.back().end != 0)
         return surfcast::Status::error(work.dir + "/scan: the parts cover " + std::to_string(ranges.empty() ? 0 : ranges.back().last) +
                                        " of the " + std::to_string(inputCount) + " inputs");
-    return std::make_pair(surfcast::mergeInputStats(std::move(stats)), std::move(ranges));
+    return std::make_pair(surfcast::mergeInputStats(std::move(stats), continues), std::move(ranges));
 }
 
 // One stage of a staged build (stages.h): scan, count and plan take the inputs
@@ -486,8 +496,10 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
             if (!stats) return fail(stats.status());
             progress.end();
             part.sources = stats->sources.size();
+            part.points = stats->points;
             if (auto st = surfcast::writeScan(work.scan(a.part), *stats, part, job); !st.ok()) return fail(st);
-            std::printf("scanned part %zu of %zu: inputs %zu to %zu, %llu points\n", a.part, a.parts, part.first, part.last,
+            std::printf("scanned part %zu of %zu: from input %zu record %llu to input %zu record %llu, %llu points\n", a.part, a.parts,
+                        part.first, (unsigned long long)part.begin, part.last, (unsigned long long)part.end,
                         (unsigned long long)stats->points);
             return 0;
         }

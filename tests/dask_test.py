@@ -154,16 +154,23 @@ class DaskBuild(unittest.TestCase):
 
     def test_same_bytes_as_one_process_and_within_budget(self):
         require_data(self)
-        # The built-in scene across chunks, and lone-star.laz in over 1,000 LAZ files.
-        for name, options, budget in (("scene", SCENE, 160 << 20),
-                                      ("tiles", [self.tiles, "--memory", "128M", "--capacity", "4000"], 128 << 20)):
+        # The built-in scene across chunks, lone-star.laz in over 1,000 LAZ
+        # files, and one COPC file cut into three parts at its LAZ chunks.
+        copc = [os.path.join(DATA, "lion_takanawa.copc.laz"), "--memory", "128M", "--capacity", "2000"]
+        for name, options, budget, parts, cuts in (("scene", SCENE, 160 << 20, None, 0),
+                                                   ("tiles", [self.tiles, "--memory", "128M", "--capacity", "4000"], 128 << 20, None, 0),
+                                                   ("copc", copc, 128 << 20, 3, 2)):
             one_process(options, self.path(name + "-one"))
             report = self.path(name + ".json")
-            r = subprocess.run(self.driver(options, self.path(name + "-dask"), "--report", report), capture_output=True, text=True)
+            extra = ["--report", report] + (["--parts", str(parts)] if parts else [])
+            r = subprocess.run(self.driver(options, self.path(name + "-dask"), *extra), capture_output=True, text=True)
             self.assertEqual(r.returncode, 0, r.stderr)
             self.assertTrue(same_set(self.path(name + "-one"), self.path(name + "-dask")), name)
             with open(report) as f:
-                tasks = json.load(f)["tasks"]
+                record = json.load(f)
+            tasks = record["tasks"]
+            # Parts that start within a file: the COPC file's two cuts.
+            self.assertEqual(sum(p["begin"] > 0 for p in record["input_parts"]), cuts, name)
             chunks = [t for t in tasks if t["stage"] == "chunk"]
             self.assertGreaterEqual(len(chunks), 4, name)
             # Each stage's process within its budget + 10 % (out_of_core_test's bound).

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "inputs.h"
 #include "las_reader.h"
 #include "lzf_stream.h"
 #include "pcd_reader.h"
@@ -66,7 +67,150 @@ Scan scan(PointReader& r) {
     return s;
 }
 
+std::vector<InputPoint> readPoints(PointReader& r) {
+    std::vector<InputPoint> all, batch(7777);
+    while (true) {
+        auto n = r.read(batch.data(), batch.size());
+        EXPECT_TRUE(n.ok()) << n.status().message();
+        if (!n.ok() || *n == 0) break;
+        all.insert(all.end(), batch.begin(), batch.begin() + long(*n));
+    }
+    return all;
+}
+
+bool samePoint(const InputPoint& a, const InputPoint& b) {
+    return a.position == b.position && std::memcmp(a.color, b.color, sizeof a.color) == 0 && a.intensity == b.intensity &&
+           a.classification == b.classification && a.returns == b.returns;
+}
+
+// A LAS 1.2 file of format 2 (RGB): `count` points, point i with colour
+// channels color(i).
+std::string lasWithColors(uint32_t count, uint16_t (*color)(uint32_t)) {
+    constexpr size_t kHeader = 227, kRecord = 26;
+    std::string f(kHeader + count * kRecord, '\0');
+    auto put = [&](size_t at, auto v) { std::memcpy(f.data() + at, &v, sizeof v); };
+    std::memcpy(f.data(), "LASF", 4);
+    f[24] = 1;
+    f[25] = 2;
+    put(94, uint16_t(kHeader));
+    put(96, uint32_t(kHeader));
+    f[104] = 2;
+    put(105, uint16_t(kRecord));
+    put(107, count);
+    for (int a = 0; a < 3; ++a) put(131 + 8 * a, 0.01);
+    for (uint32_t i = 0; i < count; ++i) {
+        const size_t r = kHeader + i * kRecord;
+        put(r, int32_t(i % 1000));
+        put(r + 4, int32_t(i / 1000));
+        put(r + 8, int32_t(i % 7));
+        for (int c = 0; c < 3; ++c) put(r + 20 + 2 * c, color(i));
+    }
+    return f;
+}
+
 }  // namespace
+
+// A LAS, a LAZ and a COPC file (variable chunks) read as runs between its
+// cuts, each run's reader opened on its own: in order, the same points as
+// one read of the whole file. Runs that a LAZ file cannot start or end at are
+// refused, naming the records.
+TEST(LazPcd, RunsBetweenCutsReadTheWholeFile) {
+    REQUIRE_DATA();
+    for (const char* f : {"autzen_trim.las", "lone-star.laz", "lion_takanawa.copc.laz"}) {
+        SCOPED_TRACE(f);
+        const std::string path = test::dataFile(f);
+        auto cuts = lasCuts(path);
+        ASSERT_TRUE(cuts.ok()) << cuts.status().message();
+        ASSERT_GE(cuts->size(), 2u);
+        EXPECT_EQ(cuts->front().record, 0u);
+        for (size_t k = 1; k < cuts->size(); ++k) {
+            EXPECT_GT((*cuts)[k].record, (*cuts)[k - 1].record);
+            EXPECT_GT((*cuts)[k].byte, (*cuts)[k - 1].byte);
+        }
+        EXPECT_LT(cuts->back().byte, fs::file_size(path));
+        auto whole = openLasReader(path, 2);
+        ASSERT_TRUE(whole.ok());
+        const std::vector<InputPoint> all = readPoints(**whole);
+        // Runs from cut 0 to 1, 1 to 3, 3 to the end (or 1 to the end).
+        std::vector<uint64_t> bounds = {0, (*cuts)[1].record};
+        if (cuts->size() > 3) bounds.push_back((*cuts)[3].record);
+        bounds.push_back(0);
+        std::vector<InputPoint> runs;
+        for (size_t i = 0; i + 1 < bounds.size(); ++i) {
+            auto r = openLasReader(path, 2, {}, {bounds[i], bounds[i + 1]});
+            ASSERT_TRUE(r.ok()) << r.status().message();
+            const uint64_t end = bounds[i + 1] ? bounds[i + 1] : all.size();
+            EXPECT_EQ((*r)->description().declaredPoints, end - bounds[i]);
+            const std::vector<InputPoint> run = readPoints(**r);
+            EXPECT_EQ(run.size(), end - bounds[i]);
+            runs.insert(runs.end(), run.begin(), run.end());
+        }
+        ASSERT_EQ(runs.size(), all.size());
+        for (size_t i = 0; i < all.size(); ++i) ASSERT_TRUE(samePoint(runs[i], all[i])) << "point " << i;
+        auto past = openLasReader(path, 1, {}, {0, all.size() + 1});
+        ASSERT_FALSE(past.ok());
+        EXPECT_NE(past.status().message().find("declares " + std::to_string(all.size())), std::string::npos) << past.status().message();
+        if (std::string(f).ends_with(".laz")) {
+            auto inside = openLasReader(path, 1, {}, {(*cuts)[1].record + 1, 0});
+            ASSERT_FALSE(inside.ok());
+            EXPECT_NE(inside.status().message().find("not a run of whole chunks"), std::string::npos) << inside.status().message();
+        }
+    }
+}
+
+// A file scanned in two runs and merged as one source: its colour depth is
+// judged over the whole file, as one scan judges it. Colours under 256 in a
+// 16-bit field are 8-bit values (scaled by 257) only if no point of the file
+// is over 255.
+TEST(LazPcd, ColoursOfAFileScannedInRunsAreJudgedWhole) {
+    test::TempDir dir;
+    const uint32_t count = 3 * uint32_t(kLasCutRecords);
+    struct Case {
+        const char* name;
+        uint16_t (*color)(uint32_t);
+        double scale;  // what the whole file's values call for
+        int bits;
+    };
+    const Case cases[] = {
+        // 1..255, then 8-bit codes c·257 or 1000..1006: 16-bit values, stored as they are.
+        {"small then codes", [](uint32_t i) { return uint16_t(i < kLasCutRecords ? i % 256 : (i % 256) * 257); }, 1, 16},
+        {"large then small", [](uint32_t i) { return uint16_t(i < kLasCutRecords ? 1000 + i % 7 : i % 256); }, 1, 16},
+        // Nothing over 255: 8-bit values in the 16-bit field.
+        {"all small", [](uint32_t i) { return uint16_t(i % 256); }, 257, 8},
+        // 0 and c·257: 8-bit codes already scaled, so 8 bits stored and no scale.
+        {"zero then 8-bit codes", [](uint32_t i) { return uint16_t(i < kLasCutRecords ? 0 : (i % 256) * 257); }, 1, 8},
+    };
+    for (const auto& [name, color, scale, bits] : cases) {
+        SCOPED_TRACE(name);
+        const std::string path = dir.file("c.las");
+        test::writeFile(path, lasWithColors(count, color));
+        InputOptions options;
+        options.paths = {path};
+        auto whole = scanInputs(options, [](uint64_t) {});
+        ASSERT_TRUE(whole.ok()) << whole.status().message();
+        std::vector<InputStats> parts;
+        for (auto [begin, end] : {std::pair<uint64_t, uint64_t>{0, kLasCutRecords}, {kLasCutRecords, 0}}) {
+            options.firstBegin = begin;
+            options.lastEnd = end;
+            auto part = scanInputs(options, [](uint64_t) {});
+            ASSERT_TRUE(part.ok()) << part.status().message();
+            parts.push_back(std::move(*part));
+        }
+        const InputStats merged = mergeInputStats(std::move(parts), {false, true});
+        ASSERT_EQ(merged.sources.size(), 1u);
+        const SourceStats &a = merged.sources[0], &b = whole->sources[0];
+        EXPECT_EQ(a.points, count);
+        EXPECT_EQ(a.description.declaredPoints, count);
+        EXPECT_EQ(a.colorMax, b.colorMax);
+        EXPECT_EQ(a.colors8Bit, b.colors8Bit);
+        EXPECT_EQ(a.colorScale, b.colorScale);
+        EXPECT_EQ(merged.colorBits, whole->colorBits);
+        EXPECT_EQ(merged.bounds.min, whole->bounds.min);
+        EXPECT_EQ(merged.bounds.max, whole->bounds.max);
+        EXPECT_EQ(a.colorScale, scale);
+        EXPECT_EQ(merged.colorBits, bits);
+    }
+}
 
 TEST(LazPcd, SharedFilesMatchProvenance) {
     REQUIRE_DATA();

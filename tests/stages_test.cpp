@@ -33,6 +33,15 @@ size_t plannedChunks(const std::string& work) {
     return size_t(std::stoul(json.substr(at + 10)));
 }
 
+// The parts plan.json lists that start within a file (a cut LAS or LAZ file).
+size_t partsStartingWithinAFile(const std::string& work) {
+    const std::string json = test::readFile(work + "/plan.json");
+    size_t n = 0;
+    for (size_t at = json.find("\"begin\": "); at != std::string::npos; at = json.find("\"begin\": ", at + 1))
+        n += std::stoull(json.substr(at + 9)) > 0;  // past "begin": and the space
+    return n;
+}
+
 void expectSameSet(const std::string& a, const std::string& b) {
     for (const char* file : {"tileset.json", "hierarchy.bin", "blocks.bin"})
         EXPECT_TRUE(test::readFile(a + "/" + file) == test::readFile(b + "/" + file)) << file << " differs between " << a << " and " << b;
@@ -42,7 +51,9 @@ void expectSameSet(const std::string& a, const std::string& b) {
 // distributed in three parts (the distribution last part first), the chunks
 // built last to first (an order no single process uses), the first of them
 // twice, as a retried task would; then compared with one process's build.
-void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<std::string>& options, size_t minChunks = 4) {
+// `cuts`: the parts that should start within a file.
+void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<std::string>& options, size_t minChunks = 4,
+                                  size_t cuts = 0) {
     const std::string work = dir.file("work");
     auto whole = test::run(concat(concat({test::binary("surfcast-build"), "-q"}, options), {"-o", dir.file("whole")}));
     ASSERT_EQ(whole.exitCode, 0) << whole.output;
@@ -53,6 +64,7 @@ void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<st
     ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q", "--parts", "3"}, options), output)));
     const size_t chunks = plannedChunks(work);
     ASSERT_GE(chunks, minChunks) << "the budget should force several chunks";
+    EXPECT_EQ(partsStartingWithinAFile(work), cuts) << test::readFile(work + "/plan.json");
     // The chunks reported are the chunks built.
     EXPECT_NE(whole.output.find(" " + std::to_string(chunks) + " chunks"), std::string::npos) << whole.output;
     for (int part = 2; part >= 0; --part) ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(part)}));
@@ -89,12 +101,26 @@ TEST(Stages, InputsInPartsSameBytesAsOneProcess) {
                                  3);
 }
 
-// A LAZ scan with its scalar fields (gps_time, scan_angle): the chunk roots
-// carry their rows to the merge.
+// One COPC file (variable LAZ chunks) cut into three parts at its chunks,
+// and a LAS file cut at 65,536 records (its one cut; the third part is
+// empty): each part reads its run of records on its own.
+TEST(Stages, FilesCutIntoPartsSameBytesAsOneProcess) {
+    REQUIRE_DATA();
+    {
+        test::TempDir dir;
+        expectStagedSameAsOneProcess(dir, {test::dataFile("lion_takanawa.copc.laz"), "--memory", "128M", "--capacity", "2000"}, 4, 2);
+    }
+    test::TempDir dir;
+    expectStagedSameAsOneProcess(dir, {test::dataFile("autzen_trim.las"), "--memory", "64M", "--capacity", "1000"}, 2, 1);
+}
+
+// A LAZ scan with its scalar fields (gps_time, scan_angle), cut into parts:
+// the chunk roots carry their rows to the merge.
 TEST(Stages, ScalarFieldsSameBytesAsOneProcess) {
     REQUIRE_DATA();
     test::TempDir dir;
-    expectStagedSameAsOneProcess(dir, {test::dataFile("Megaplot.laz"), "--attributes", "all", "--memory", "64M", "--capacity", "1000"});
+    expectStagedSameAsOneProcess(dir, {test::dataFile("Megaplot.laz"), "--attributes", "all", "--memory", "64M", "--capacity", "1000"},
+                                 4, 1);  // its two LAZ chunks, one part each
 }
 
 // A textured mesh fitted by least squares: every stage's process rebuilds

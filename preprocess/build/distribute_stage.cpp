@@ -40,8 +40,7 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
     InputStats stats;  // the part's sources, as forEachBatch indexes them
     stats.sources.assign(context.stats().sources.begin() + long(inputs.firstSource),
                          context.stats().sources.begin() + long(inputs.firstSource + inputs.sources));
-    uint64_t expected = 0;
-    for (const SourceStats& s : stats.sources) expected += s.points;
+    const uint64_t expected = inputs.points;
     MeshStore& meshes = *opt.inputs.meshes;
     progress.begin("distribute", expected);
     ChunkWriter chunkWriter(layout, folder, context.scalars().size());

@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <filesystem>
 #include <map>
+#include <tuple>
 
 #include "crc32.h"
+#include "las_reader.h"
 #include "stages.h"
 #include "work_files.h"
 
@@ -12,8 +14,8 @@ namespace surfcast {
 
 namespace {
 
-constexpr char kPlanMagic[9] = "SCPLAN02";
-constexpr char kScanMagic[9] = "SCSCAN02";
+constexpr char kPlanMagic[9] = "SCPLAN03";
+constexpr char kScanMagic[9] = "SCSCAN03";
 constexpr char kCountMagic[9] = "SCCOUNT2";
 
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
@@ -178,11 +180,18 @@ bool getStats(ByteReader& r, InputStats& s) {
 }
 
 void putPart(ByteWriter& w, const InputPart& p) {
-    for (size_t v : {p.first, p.last, p.firstSource, p.sources}) w.put(uint64_t(v));
+    for (uint64_t v : {uint64_t(p.first), uint64_t(p.last), p.begin, p.end, uint64_t(p.firstSource), uint64_t(p.sources), p.points})
+        w.put(v);
 }
 InputPart getPart(ByteReader& r) {
     InputPart p;
-    for (size_t* v : {&p.first, &p.last, &p.firstSource, &p.sources}) *v = size_t(r.get<uint64_t>());
+    p.first = size_t(r.get<uint64_t>());
+    p.last = size_t(r.get<uint64_t>());
+    p.begin = r.get<uint64_t>();
+    p.end = r.get<uint64_t>();
+    p.firstSource = size_t(r.get<uint64_t>());
+    p.sources = size_t(r.get<uint64_t>());
+    p.points = r.get<uint64_t>();
     return p;
 }
 
@@ -214,8 +223,9 @@ ChunkLayout BuildPlan::layout(const BuildContext& context) const {
 }
 
 InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
+    const size_t scene = inputs.defaultScene ? 1 : 0;
     std::vector<double> weight;
-    if (inputs.defaultScene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
+    if (scene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
     for (const std::string& path : inputs.paths) {
         std::error_code ec;
         const uintmax_t bytes = std::filesystem::file_size(path, ec);
@@ -223,25 +233,38 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
     }
     double total = 0;
     for (double w : weight) total += w;
-    // Input i goes to the part its weight's midpoint falls in: the parts
-    // before `part` own the first `first` inputs, those up to it `last`.
-    InputPart p;
+    auto owner = [&](double at) { return std::min(parts - 1, size_t(at / total * double(parts))); };
+    // The part runs from the first record owned by `part` or a later part to
+    // the first owned by a later part. Owners never decrease along the inputs.
+    const size_t n = weight.size();
+    std::pair<size_t, uint64_t> start{n, 0}, stop{n, 0};
+    auto visit = [&](size_t input, uint64_t record, size_t by) {
+        if (start.first == n && by >= part) start = {input, record};
+        if (stop.first == n && by > part) stop = {input, record};
+    };
     double before = 0;
-    for (size_t i = 0; i < weight.size(); ++i) {
-        const size_t owner = std::min(parts - 1, size_t((before + weight[i] / 2) / total * double(parts)));
-        before += weight[i];
-        p.first += owner < part;
-        p.last += owner <= part;
+    for (size_t i = 0; i < n && stop.first == n; before += weight[i++]) {
+        std::vector<RecordCut> cuts;
+        // Only a file that a part boundary falls within is opened for its cuts.
+        if (i >= scene && owner(before) != owner(before + weight[i]))
+            if (auto found = lasCuts(inputs.paths[i - scene])) cuts = std::move(*found);
+        if (cuts.empty()) visit(i, 0, owner(before + weight[i] / 2));
+        for (const RecordCut& c : cuts) visit(i, c.record, owner(before + double(c.byte)));
     }
+    InputPart p;
+    std::tie(p.first, p.begin) = start;
+    std::tie(p.last, p.end) = stop;
     return p;
 }
 
 InputOptions partInputs(const InputOptions& inputs, const InputPart& part) {
     InputOptions o = inputs;
     const size_t scene = inputs.defaultScene ? 1 : 0;
-    o.defaultScene = inputs.defaultScene && part.first == 0 && part.last > 0;
+    o.defaultScene = inputs.defaultScene && part.first == 0 && part.readEnd() > 0;
     o.paths.assign(inputs.paths.begin() + long(std::max(part.first, scene) - scene),
-                   inputs.paths.begin() + long(std::max(part.last, scene) - scene));
+                   inputs.paths.begin() + long(std::max(part.readEnd(), scene) - scene));
+    o.firstBegin = part.first >= scene ? part.begin : 0;
+    o.lastEnd = part.end;
     return o;
 }
 
@@ -347,6 +370,7 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
     plan.stats = c.stats();
     plan.parts = {all};
     plan.parts[0].sources = c.stats().sources.size();
+    plan.parts[0].points = c.stats().points;
     auto most = chunkPoints(c);
     if (!most) return most.status();
     MeshStore& meshes = *opt.inputs.meshes;
@@ -389,15 +413,17 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
     for (InputPart& p : plan.parts) p = getPart(r);
     plan.maxChunkPoints = r.get<uint64_t>();
     if (!getCounts(r, plan.counts) || !r.ok() || r.left() != 0 || plan.parts.empty()) return corrupt;
-    // Parts tile the inputs and the sources in order.
-    size_t input = 0, source = 0;
-    for (const InputPart& p : plan.parts) {
-        if (p.first != input || p.last < p.first || p.firstSource != source || p.sources > plan.stats.sources.size() - source)
-            return corrupt;
-        input = p.last;
-        source += p.sources;
+    // Parts tile the inputs' records and the sources in order.
+    size_t source = 0;
+    for (size_t i = 0; i < plan.parts.size(); ++i) {
+        const InputPart& p = plan.parts[i];
+        const bool follows = i == 0 ? p.first == 0 && p.begin == 0 : p.first == plan.parts[i - 1].last && p.begin == plan.parts[i - 1].end;
+        if (p.continuesSource() && source == 0) return corrupt;
+        const size_t expected = p.continuesSource() ? source - 1 : source;
+        if (!follows || p.firstSource != expected || p.sources > plan.stats.sources.size() - expected) return corrupt;
+        source = expected + p.sources;
     }
-    if (source != plan.stats.sources.size()) return corrupt;
+    if (source != plan.stats.sources.size() || plan.parts.back().end != 0) return corrupt;
     return plan;
 }
 

@@ -48,15 +48,30 @@ struct WorkFolder {
     std::string blocks(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".blocks"; }
 };
 
-// A run of consecutive inputs: [first, last) of the built-in scene (index 0,
-// where given) and the paths in order; `sources` their readers (the scene has
-// several), from `firstSource` on in InputStats::sources.
+// A run of consecutive inputs' records, from record `begin` of input `first`
+// up to record `end` of input `last`, not included (`end` 0: up to input
+// `last`, which it does not read). Inputs are the built-in scene (index 0,
+// where given), then the paths in order. A LAS or LAZ file with a part
+// boundary inside it is read in two, at one of its cuts (las_reader.h);
+// every other input, the scene included, is read whole by one part.
+// `sources`: the part's readers (the scene has several), from `firstSource`
+// on in InputStats::sources, where a part that starts within a file (begin
+// > 0) shares that file's one source with the part before; `points`: the
+// points it reads.
 struct InputPart {
     size_t first = 0, last = 0;
+    uint64_t begin = 0, end = 0;
     size_t firstSource = 0, sources = 0;
+    uint64_t points = 0;
+
+    bool empty() const { return first == last && begin == end; }
+    size_t readEnd() const { return empty() ? first : last + (end > 0); }  // one past the last input it reads
+    bool continuesSource() const { return begin > 0 && sources > 0; }
 };
-// Part `part` of `parts`: consecutive inputs of about equal bytes (file sizes;
-// the scene at 32 bytes a point). Parts may outnumber the inputs: some are then empty.
+// Part `part` of `parts`: runs of about equal bytes (file sizes; the scene
+// at 32 bytes a point), so that a file's records belong to the part their
+// byte position falls in (the whole of an uncut input to the part of its
+// middle byte). Parts may outnumber the inputs: some are then empty.
 InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts);
 // The options reading only `part`'s inputs.
 InputOptions partInputs(const InputOptions& inputs, const InputPart& part);

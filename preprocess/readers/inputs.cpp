@@ -56,10 +56,13 @@ Result<InputKind> inputKind(const std::string& path, const InputOptions& options
     return isMeshExtension(path) ? InputKind::Mesh : InputKind::Points;
 }
 
-Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const InputOptions& options) {
+// Input `index` of options.paths, read whole or in the part options give.
+Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& options) {
+    const std::string& path = options.paths[index];
+    const RecordRange range{index == 0 ? options.firstBegin : 0, index + 1 == options.paths.size() ? options.lastEnd : 0};
     auto kind = inputKind(path, options);
     if (!kind) return kind.status();
-    if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
+    const bool whole = range.begin == 0 && range.end == 0;
     std::string ext = lowerExtension(path);
     char magic[4] = {};
     {
@@ -67,11 +70,15 @@ Result<std::unique_ptr<PointReader>> openOne(const std::string& path, const Inpu
         if (!in) return in.status();
         in->readBytes(magic, std::min<uint64_t>(4, in->fileSize()));
     }
+    const bool las = ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF";
+    if (!whole && (*kind == InputKind::Mesh || !las))
+        return Status::error(path + ": only LAS and LAZ files are read in parts (records " + std::to_string(range.begin) + " to " +
+                             (range.end ? std::to_string(range.end) : "the end") + " asked for)");
+    if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
     if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars);
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
         return openPcdReader(path, options.scalars, options.readAlpha);
-    if (ext == ".las" || ext == ".laz" || std::string(magic, 4) == "LASF")
-        return openLasReader(path, options.threads, options.scalars);
+    if (las) return openLasReader(path, options.threads, options.scalars, range);
     if (isTextExtension(ext)) return openTextReader(path, options.columns);
     return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
 }
@@ -188,7 +195,7 @@ public:
         if (!item.status.ok()) return item.status;
         if (item.deferred) {
             lock.unlock();
-            return openOne(options_.paths[index], options_);
+            return openOne(index, options_);
         }
         return std::move(item.reader);
     }
@@ -201,7 +208,8 @@ private:
         bool deferred = false;  // opened by the visitor (a mesh)
     };
 
-    Item load(const std::string& path) {
+    Item load(size_t index) {
+        const std::string& path = options_.paths[index];
         Item item;
         // A mesh is read whole (and kept by the MeshStore): left to the
         // visitor, so that the meshes in memory beside the store's are the
@@ -210,7 +218,7 @@ private:
             item.deferred = true;
             return item;
         }
-        auto r = openOne(path, options_);
+        auto r = openOne(index, options_);
         if (!r) {
             item.status = r.status();
             return item;
@@ -243,7 +251,7 @@ private:
             return item;
         }
         if (*more) {  // more points than declared: the visitor reads it again and names the mismatch
-            auto again = openOne(path, options_);
+            auto again = openOne(index, options_);
             if (!again) item.status = again.status();
             else item.reader = std::move(*again);
             item.bytes = kPrefetchBytes / 4;
@@ -267,7 +275,7 @@ private:
                 i = nextToLoad_++;
                 ++ahead_;
             }
-            Item item = load(options_.paths[i]);
+            Item item = load(i);
             {
                 std::lock_guard lock(mutex_);
                 bytes_ += item.bytes;
@@ -375,15 +383,36 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
     return stats;
 }
 
-InputStats mergeInputStats(std::vector<InputStats> parts) {
+InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool>& continues) {
     InputStats all;
-    for (InputStats& part : parts) {
-        for (SourceStats& s : part.sources) all.sources.push_back(std::move(s));
+    for (size_t p = 0; p < parts.size(); ++p) {
+        InputStats& part = parts[p];
+        auto source = part.sources.begin();
+        if (p < continues.size() && continues[p] && source != part.sources.end() && !all.sources.empty()) {
+            // One file read in two parts: one source, as one scan would find it.
+            SourceStats& a = all.sources.back();
+            const SourceStats& b = *source++;
+            // scanInputs took a 16-bit channel whose values all fit 8 bits
+            // for 8-bit values (colorScale 257, colors8Bit set); the values
+            // under it were 8-bit codes only if they were all 0.
+            auto codes8Bit = [](const SourceStats& s) { return s.colorScale == 257 ? s.colorMax == 0 : s.colors8Bit; };
+            a.colors8Bit = codes8Bit(a) && codes8Bit(b);
+            a.colorMax = std::max(a.colorMax, b.colorMax);
+            a.colorScale = 1;
+            if (a.description.colorBits == 16 && a.colorMax <= 255) {
+                a.colorScale = 257;
+                a.colors8Bit = true;
+            }
+            a.description.declaredPoints += b.description.declaredPoints;
+            a.points += b.points;
+            a.skipped += b.skipped;
+            a.bounds.extend(b.bounds);
+        }
+        for (; source != part.sources.end(); ++source) all.sources.push_back(std::move(*source));
         all.points += part.points;
         all.skipped += part.skipped;
         all.bounds.extend(part.bounds);
         all.anyColors = all.anyColors || part.anyColors;
-        all.colorBits = std::max(all.colorBits, part.colorBits);
         all.largestMeshBytes = std::max(all.largestMeshBytes, part.largestMeshBytes);
         AttributeStats& a = all.attributes;
         const AttributeStats& b = part.attributes;
@@ -406,6 +435,8 @@ InputStats mergeInputStats(std::vector<InputStats> parts) {
             it->max = std::max(it->max, f.max);
         }
     }
+    for (const SourceStats& s : all.sources)  // after the joins: a cut file's colours are judged whole
+        if (s.description.hasColors) all.colorBits = std::max(all.colorBits, s.colors8Bit ? 8 : 16);
     return all;
 }
 

@@ -21,6 +21,10 @@ inline constexpr size_t kPrefetchBytes = 16u << 20;
 
 struct InputOptions {
     std::vector<std::string> paths;
+    // Reads the first path from record `firstBegin` and the last one up to
+    // record `lastEnd` (0: to its end): a part of a LAS/LAZ file cut by
+    // inputPart (stages.h), at its cuts (las_reader.h). Other formats are read whole.
+    uint64_t firstBegin = 0, lastEnd = 0;
     bool defaultScene = false;   // add the built-in scene
     SceneOptions scene;
     std::string columns;         // text layout; empty: detect
@@ -102,8 +106,10 @@ struct InputStats {
 // Pass 1. `progress` receives point counts as they are read.
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
 // The statistics of consecutive runs of inputs (scanInputs of each), in
-// order: the same as scanInputs of all of them at once.
-InputStats mergeInputStats(std::vector<InputStats> parts);
+// order: the same as scanInputs of all of them at once. continues[p]: part p
+// starts within the input that part p - 1 ended in (a file cut in two), whose
+// two sources become one.
+InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool>& continues);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
 // 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input]), in

@@ -129,10 +129,11 @@ private:
 
 class LasReader final : public PointReader {
 public:
-    LasReader(std::unique_ptr<RecordSource> source, InputDescription desc, uint64_t count, size_t recordLength,
+    // Reads records [begin, end) of `source`, which starts at `begin`.
+    LasReader(std::unique_ptr<RecordSource> source, InputDescription desc, uint64_t begin, uint64_t end, size_t recordLength,
               int format, const double scale[3], const double offset[3], std::vector<ScalarLayout> scalars)
-        : source_(std::move(source)), desc_(std::move(desc)), count_(count), recordLength_(recordLength),
-          rgbOffset_(kFormats[format].rgbOffset), extended_(format >= 6), scalars_(std::move(scalars)) {
+        : source_(std::move(source)), desc_(std::move(desc)), count_(end), recordLength_(recordLength),
+          rgbOffset_(kFormats[format].rgbOffset), extended_(format >= 6), scalars_(std::move(scalars)), index_(begin) {
         for (int i = 0; i < 3; ++i) { scale_[i] = scale[i]; offset_[i] = offset[i]; }
     }
 
@@ -187,12 +188,12 @@ public:
 private:
     std::unique_ptr<RecordSource> source_;
     InputDescription desc_;
-    uint64_t count_;
+    uint64_t count_;  // the end of the records read
     size_t recordLength_, rgbOffset_;
     bool extended_;  // point formats 6-10
     double scale_[3], offset_[3];
     std::vector<ScalarLayout> scalars_;  // per desc_.scalars
-    uint64_t index_ = 0;           // records fetched from the source
+    uint64_t index_;               // the next record to fetch from the source
     size_t buffered_ = 0, next_ = 0;
     std::vector<uint8_t> buffer_;
 };
@@ -301,58 +302,105 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
 
 }  // namespace
 
-Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads, const ScalarSelection& scalars) {
-    auto in = ByteStream::open(path);
-    if (!in) return in.status();
+namespace {
+
+// What the reader takes from the public header and the VLRs.
+struct LasHeader {
+    uint32_t dataOffset = 0;
+    int format = 0;
+    bool compressed = false;
+    size_t recordLength = 0;
+    uint64_t count = 0;
+    double scale[3] = {}, offset[3] = {};
+    Vlrs vlrs;
+};
+
+// Reads and checks `in`'s header and VLRs.
+Result<LasHeader> readLasHeader(ByteStream& in) {
+    const std::string& path = in.path();
     uint8_t h[kLas14HeaderSize] = {};
-    if (!in->readBytes(h, kLegacyHeaderSize)) return Status::error(path + ": shorter than a LAS header (227 bytes)");
+    if (!in.readBytes(h, kLegacyHeaderSize)) return Status::error(path + ": shorter than a LAS header (227 bytes)");
     if (std::memcmp(h, "LASF", 4) != 0) return Status::error(path + ": not a LAS file (no 'LASF' at byte 0)");
     int major = h[24], minor = h[25];
     if (major != 1 || minor > 4) return Status::error(path + ": byte 24: unsupported LAS version " + std::to_string(major) + "." + std::to_string(minor));
+    LasHeader l;
     size_t headerSize = le::get<uint16_t>(h + 94);
-    uint32_t dataOffset = le::get<uint32_t>(h + 96);
+    l.dataOffset = le::get<uint32_t>(h + 96);
     uint32_t vlrCount = le::get<uint32_t>(h + 100);
     uint8_t formatId = h[104];
-    size_t recordLength = le::get<uint16_t>(h + 105);
-    uint64_t count = le::get<uint32_t>(h + 107);
-    bool compressed = (formatId & kCompressedBits) != 0;
-    int format = formatId & 0x3F;
-    if (format > 10) return Status::error(path + ": byte 104: unknown point data format " + std::to_string(format));
-    if (recordLength < kFormats[format].minLength)
-        return Status::error(path + ": byte 105: record length " + std::to_string(recordLength) + " is shorter than format " +
-                             std::to_string(format) + " needs (" + std::to_string(kFormats[format].minLength) + ")");
+    l.recordLength = le::get<uint16_t>(h + 105);
+    l.count = le::get<uint32_t>(h + 107);
+    l.compressed = (formatId & kCompressedBits) != 0;
+    l.format = formatId & 0x3F;
+    if (l.format > 10) return Status::error(path + ": byte 104: unknown point data format " + std::to_string(l.format));
+    if (l.recordLength < kFormats[l.format].minLength)
+        return Status::error(path + ": byte 105: record length " + std::to_string(l.recordLength) + " is shorter than format " +
+                             std::to_string(l.format) + " needs (" + std::to_string(kFormats[l.format].minLength) + ")");
     if (minor >= 4 && headerSize >= kLas14HeaderSize) {
-        if (!in->readBytes(h + kLegacyHeaderSize, kLas14HeaderSize - kLegacyHeaderSize))
+        if (!in.readBytes(h + kLegacyHeaderSize, kLas14HeaderSize - kLegacyHeaderSize))
             return Status::error(path + ": LAS 1.4 header truncated");
         uint64_t count64 = le::get<uint64_t>(h + 247);
-        if (count64 != 0) count = count64;
+        if (count64 != 0) l.count = count64;
     }
-    double scale[3], offset[3];
     for (int a = 0; a < 3; ++a) {
-        scale[a] = le::get<double>(h + 131 + 8 * a);
-        offset[a] = le::get<double>(h + 155 + 8 * a);
-        if (!(scale[a] > 0) || !std::isfinite(scale[a]) || !std::isfinite(offset[a]))
+        l.scale[a] = le::get<double>(h + 131 + 8 * a);
+        l.offset[a] = le::get<double>(h + 155 + 8 * a);
+        if (!(l.scale[a] > 0) || !std::isfinite(l.scale[a]) || !std::isfinite(l.offset[a]))
             return Status::error(path + ": byte " + std::to_string(131 + 8 * a) + ": invalid scale or offset");
     }
-    if (dataOffset < headerSize || dataOffset > in->fileSize())
-        return Status::error(path + ": byte 96: point data offset " + std::to_string(dataOffset) + " out of range");
+    if (l.dataOffset < headerSize || l.dataOffset > in.fileSize())
+        return Status::error(path + ": byte 96: point data offset " + std::to_string(l.dataOffset) + " out of range");
+    auto vlrs = readVlrs(in, headerSize, vlrCount, l.dataOffset);
+    if (!vlrs) return vlrs.status();
+    l.vlrs = std::move(*vlrs);
+    if (l.compressed && !l.vlrs.laszip)
+        return Status::error(path + ": compressed point format but no LASzip VLR (user 'laszip encoded', record 22204)");
+    return l;
+}
+
+// The LAZ decompressor of `l`'s records [begin, end).
+Result<ScLazReader*> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads) {
+    const std::vector<uint8_t>& vlr = *l.vlrs.laszip;
+    char err[512] = {};
+    ScLazReader* laz = sc_laz_open(path.c_str(), l.dataOffset, vlr.data(), vlr.size(), l.count, begin, end, threads, err, sizeof err);
+    if (!laz) return Status::error(path + ": LAZ: " + err);
+    if (sc_laz_point_size(laz) != l.recordLength) {
+        const uint64_t size = sc_laz_point_size(laz);
+        sc_laz_close(laz);
+        return Status::error(path + ": LASzip VLR describes " + std::to_string(size) + "-byte records, the header " +
+                             std::to_string(l.recordLength));
+    }
+    return laz;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads, const ScalarSelection& scalars,
+                                                   RecordRange range) {
+    auto in = ByteStream::open(path);
+    if (!in) return in.status();
+    auto header = readLasHeader(*in);
+    if (!header) return header.status();
+    const LasHeader& l = *header;
+    const uint64_t end = range.end ? range.end : l.count;
+    if (end > l.count || range.begin > end)
+        return Status::error(path + ": points [" + std::to_string(range.begin) + ", " + std::to_string(end) + ") asked for, the header declares " +
+                             std::to_string(l.count));
 
     InputDescription desc;
     desc.path = path;
-    desc.format = compressed ? "laz" : "las";
-    desc.declaredPoints = count;
-    desc.hasColors = kFormats[format].rgbOffset != 0;
+    desc.format = l.compressed ? "laz" : "las";
+    desc.declaredPoints = end - range.begin;
+    desc.hasColors = kFormats[l.format].rgbOffset != 0;
     desc.hasIntensity = true;
     desc.hasClassification = true;
     desc.hasReturns = true;
     desc.colorBits = 16;
-    desc.precision = std::min({scale[0], scale[1], scale[2]});
+    desc.precision = std::min({l.scale[0], l.scale[1], l.scale[2]});
     desc.airborne = true;
 
-    auto vlrs = readVlrs(*in, headerSize, vlrCount, dataOffset);
-    if (!vlrs) return vlrs.status();
     std::vector<std::pair<ScalarField, ScalarLayout>> fields;
-    SC_TRY(scalarFields(path, format, recordLength, *vlrs, &fields));
+    SC_TRY(scalarFields(path, l.format, l.recordLength, l.vlrs, &fields));
     std::vector<ScalarLayout> layouts;
     for (auto& [field, layout] : fields)
         if (scalars.wants(field.name)) {
@@ -361,29 +409,41 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
         }
 
     std::unique_ptr<RecordSource> source;
-    if (compressed) {
-        if (!vlrs->laszip)
-            return Status::error(path + ": compressed point format but no LASzip VLR (user 'laszip encoded', record 22204)");
-        const std::vector<uint8_t>& vlr = *vlrs->laszip;
-        char err[512] = {};
-        ScLazReader* laz = sc_laz_open(path.c_str(), dataOffset, vlr.data(), vlr.size(), count, threads, err, sizeof err);
-        if (!laz) return Status::error(path + ": LAZ: " + err);
-        if (sc_laz_point_size(laz) != recordLength) {
-            sc_laz_close(laz);
-            return Status::error(path + ": LASzip VLR describes " + std::to_string(sc_laz_point_size(laz)) +
-                                 "-byte records, the header " + std::to_string(recordLength));
-        }
-        source = std::make_unique<LazRecords>(laz, path, threads, recordLength);
+    if (l.compressed) {
+        auto laz = openLaz(path, l, range.begin, end, threads);
+        if (!laz) return laz.status();
+        source = std::make_unique<LazRecords>(*laz, path, threads, l.recordLength);
     } else {
-        uint64_t available = (in->fileSize() - dataOffset) / recordLength;
-        if (available < count)
-            return Status::error(path + ": header declares " + std::to_string(count) + " points, the file holds " +
+        uint64_t available = (in->fileSize() - l.dataOffset) / l.recordLength;
+        if (available < l.count)
+            return Status::error(path + ": header declares " + std::to_string(l.count) + " points, the file holds " +
                                  std::to_string(available) + " (truncated at byte " + std::to_string(in->fileSize()) + ")");
-        if (!in->seek(dataOffset)) return Status::error(path + ": cannot seek to the point data");
-        source = std::make_unique<RawRecords>(std::move(*in), recordLength, count);
+        if (!in->seek(l.dataOffset + range.begin * l.recordLength)) return Status::error(path + ": cannot seek to the point data");
+        source = std::make_unique<RawRecords>(std::move(*in), l.recordLength, l.count);
     }
-    return std::unique_ptr<PointReader>(
-        new LasReader(std::move(source), desc, count, recordLength, format, scale, offset, std::move(layouts)));
+    return std::unique_ptr<PointReader>(new LasReader(std::move(source), desc, range.begin, end, l.recordLength, l.format, l.scale,
+                                                      l.offset, std::move(layouts)));
+}
+
+Result<std::vector<RecordCut>> lasCuts(const std::string& path) {
+    auto in = ByteStream::open(path);
+    if (!in) return in.status();
+    auto l = readLasHeader(*in);
+    if (!l) return l.status();
+    std::vector<RecordCut> cuts;
+    if (!l->compressed) {
+        for (uint64_t r = 0; r < l->count; r += kLasCutRecords) cuts.push_back({r, l->dataOffset + r * l->recordLength});
+        return cuts;
+    }
+    auto laz = openLaz(path, *l, 0, l->count, 1);
+    if (!laz) return laz.status();
+    for (uint64_t k = 0, n = sc_laz_chunk_count(*laz); k < n; ++k) {
+        RecordCut c;
+        sc_laz_chunk_start(*laz, k, &c.record, &c.byte);
+        cuts.push_back(c);
+    }
+    sc_laz_close(*laz);
+    return cuts;
 }
 
 }  // namespace surfcast

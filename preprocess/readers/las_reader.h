@@ -6,6 +6,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "input_point.h"
 
@@ -16,7 +17,23 @@ namespace surfcast {
 // and each documented extra-byte dimension of the Extra Bytes VLR (user
 // "LASF_Spec", record 4) under its own name, scaled and offset as the VLR
 // says; the reader decodes those `scalars` selects.
+// `range`: the records read, [begin, end) (end 0: to the last); a LAZ file's
+// must start and end at cuts (lasCuts).
+struct RecordRange {
+    uint64_t begin = 0, end = 0;
+};
 Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads = 1,
-                                                   const ScalarSelection& scalars = {});
+                                                   const ScalarSelection& scalars = {}, RecordRange range = {});
+
+// Where a LAS or LAZ file may be cut into runs of records that are read on
+// their own (a part of a build staged across processes, stages.h): the first
+// record after each cut and that record's first byte in the file, in order,
+// from record 0. A LAS file is cut every kLasCutRecords records, a LAZ file
+// at its chunks.
+struct RecordCut {
+    uint64_t record = 0, byte = 0;
+};
+inline constexpr uint64_t kLasCutRecords = 1 << 16;
+Result<std::vector<RecordCut>> lasCuts(const std::string& path);
 
 }  // namespace surfcast

@@ -13,17 +13,24 @@ extern "C" {
 
 typedef struct ScLazReader ScLazReader;
 
-/* Opens `path` for decompression. `data_offset`: byte offset of the point data
- * (header field "offset to point data"); `vlr`: the payload of the LASzip VLR
- * (user "laszip encoded", record 22204); `point_count`: points the header
- * declares, checked against the chunk table; `threads` > 1 decompresses chunks
- * in parallel (rayon). Returns NULL on error. */
+/* Opens `path` for decompression of its points [first, end). `data_offset`:
+ * byte offset of the point data (header field "offset to point data"); `vlr`:
+ * the payload of the LASzip VLR (user "laszip encoded", record 22204);
+ * `point_count`: points the header declares, checked against the chunk table.
+ * [0, point_count) reads the whole file; any other range must start and end
+ * at chunk starts (sc_laz_chunk_start) or the file's end. `threads` > 1
+ * decompresses chunks in parallel (rayon). Returns NULL on error. */
 ScLazReader* sc_laz_open(const char* path, uint64_t data_offset, const uint8_t* vlr, size_t vlr_len, uint64_t point_count,
-                         int threads, char* err, size_t err_len);
+                         uint64_t first, uint64_t end, int threads, char* err, size_t err_len);
 
 /* Bytes per decompressed point record, and points per chunk (0: variable). */
 uint64_t sc_laz_point_size(const ScLazReader* reader);
 uint64_t sc_laz_chunk_size(const ScLazReader* reader);
+
+/* The file's chunks, and where chunk `chunk` starts: its first point and its
+ * first byte in the file. Returns 0, or -1 where there is no such chunk. */
+uint64_t sc_laz_chunk_count(const ScLazReader* reader);
+int sc_laz_chunk_start(const ScLazReader* reader, uint64_t chunk, uint64_t* first_point, uint64_t* first_byte);
 
 /* Decompresses the next `points` records into `out` (points * point_size
  * bytes). Returns 0, or -1 with a message in `err`. */

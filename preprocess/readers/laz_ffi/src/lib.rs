@@ -9,12 +9,71 @@ use std::os::raw::{c_char, c_int};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 
-use laz::laszip::ChunkTable;
-use laz::{LasZipDecompressor, LazItemType, LazVlr, ParLasZipDecompressor};
+use laz::laszip::{ChunkTable, ChunkTableEntry};
+use laz::{par_decompress, LasZipDecompressor, LazItemType, LazVlr, ParLasZipDecompressor};
 
 enum Decompressor {
     Sequential(LasZipDecompressor<'static, BufReader<File>>),
     Parallel(ParLasZipDecompressor<BufReader<File>>, Arc<rayon::ThreadPool>),
+    Range(ChunkRange),
+}
+
+// A run of whole chunks decoded on their own (a part of a file split across
+// processes), a batch of chunks at a time. The crate's own seek assumes that
+// every chunk holds chunk_size points (point % count), which variable chunks
+// (COPC) break, so the range reads the chunks' bytes itself.
+struct ChunkRange {
+    file: File,
+    vlr: LazVlr,
+    chunks: Vec<ChunkTableEntry>, // the range's chunks, with their true point counts
+    offsets: Vec<u64>,            // each one's first byte in the file
+    next: usize,                  // the next chunk to decode
+    decoded: Vec<u8>,             // decoded points not yet handed out, from `taken` on
+    taken: usize,
+    pool: Arc<rayon::ThreadPool>,
+}
+
+// The most decoded bytes one chunk of a range may hold: a batch is whole
+// chunks, so this bounds what a crafted chunk table can make a range allocate.
+const RANGE_CHUNK_BYTES: u64 = 256 << 20;
+// Decoded bytes per batch of a range, as the C++ reader's batches (las_reader.cpp).
+const RANGE_BATCH_BYTES: u64 = 32 << 20;
+
+impl ChunkRange {
+    fn read(&mut self, mut out: &mut [u8]) -> Result<(), String> {
+        while !out.is_empty() {
+            if self.taken == self.decoded.len() {
+                self.decode_batch()?;
+            }
+            let n = out.len().min(self.decoded.len() - self.taken);
+            out[..n].copy_from_slice(&self.decoded[self.taken..self.taken + n]);
+            self.taken += n;
+            out = &mut out[n..];
+        }
+        Ok(())
+    }
+
+    fn decode_batch(&mut self) -> Result<(), String> {
+        let first = self.next;
+        if first == self.chunks.len() {
+            return Err("more points asked for than the range holds".to_string());
+        }
+        let point_size = self.vlr.items_size();
+        let (mut points, mut bytes) = (0u64, 0u64);
+        while self.next < self.chunks.len() && (self.next == first || (points + self.chunks[self.next].point_count) * point_size <= RANGE_BATCH_BYTES) {
+            points += self.chunks[self.next].point_count;
+            bytes += self.chunks[self.next].byte_count;
+            self.next += 1;
+        }
+        let mut compressed = vec![0u8; usize::try_from(bytes).map_err(|_| "chunk too large".to_string())?];
+        self.file.seek(SeekFrom::Start(self.offsets[first])).and_then(|_| self.file.read_exact(&mut compressed))
+            .map_err(|e| format!("chunk {}: cannot read its {} bytes at byte {}: {}", first, bytes, self.offsets[first], e))?;
+        self.decoded.clear();
+        self.decoded.resize((points * point_size) as usize, 0);
+        self.taken = 0;
+        let (vlr, table, decoded) = (&self.vlr, &self.chunks[first..self.next], &mut self.decoded);
+        self.pool.install(|| par_decompress(&compressed, decoded, vlr, table)).map_err(|e| format!("chunks {}-{}: {}", first, self.next - 1, e))
+    }
 }
 
 // One decode pool for every reader: a build that reads thousands of files, or
@@ -45,6 +104,9 @@ pub struct ScLazReader {
     decompressor: Decompressor,
     point_size: u64,
     chunk_size: u64,
+    // Where each chunk starts: its first point, and its first byte in the
+    // file (empty for point-wise compression, which has no chunks).
+    starts: Vec<(u64, u64)>,
 }
 
 fn write_err(err: *mut c_char, err_len: usize, message: &str) {
@@ -132,7 +194,7 @@ fn check_layer_sizes(path: &str, data_offset: u64, vlr: &LazVlr, table: &ChunkTa
     Ok(())
 }
 
-fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usize) -> Result<ScLazReader, String> {
+fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, end: u64, threads: usize) -> Result<ScLazReader, String> {
     let vlr = LazVlr::from_buffer(vlr).map_err(|e| format!("LASzip VLR: {}", e))?;
     let point_size = vlr.items_size();
     let chunk_size = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
@@ -145,25 +207,38 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usi
     // The chunk table (at the end of the file) says how many points there are:
     // a truncated file or a wrong header count fails here, before any work.
     check_chunk_count(path, data_offset, point_count, chunk_size)?;
-    let chunks = match ChunkTable::read_from(open_at_data()?, &vlr) {
-        Ok(table) => {
-            check_layer_sizes(path, data_offset, &vlr, &table)?;
-            let chunks = table.len() as u64;
-            if chunk_size == 0 {
-                let total: u64 = table.as_ref().iter().map(|e| e.point_count).sum();
-                if total != point_count {
-                    return Err(format!("header declares {} points, the chunk table holds {}", point_count, total));
-                }
-            } else if point_count > chunks * chunk_size || (chunks > 0 && point_count <= (chunks - 1) * chunk_size) {
-                return Err(format!(
-                    "header declares {} points, the chunk table has {} chunks of {} points",
-                    point_count, chunks, chunk_size
-                ));
-            }
-            chunks
-        }
+    let table = match ChunkTable::read_from(open_at_data()?, &vlr) {
+        Ok(table) => table,
         Err(e) => return Err(format!("cannot read the chunk table (truncated file?): {}", e)),
     };
+    check_layer_sizes(path, data_offset, &vlr, &table)?;
+    let mut table = table.as_ref().to_vec();
+    let chunks = table.len() as u64;
+    if chunk_size == 0 {
+        let total = table.iter().try_fold(0u64, |t, e| t.checked_add(e.point_count));
+        if total != Some(point_count) {
+            return Err(format!("header declares {} points, the chunk table holds {}", point_count,
+                               total.map_or("more than 2^64".to_string(), |t| t.to_string())));
+        }
+    } else if point_count > chunks * chunk_size || (chunks > 0 && point_count <= (chunks - 1) * chunk_size) {
+        return Err(format!(
+            "header declares {} points, the chunk table has {} chunks of {} points",
+            point_count, chunks, chunk_size
+        ));
+    } else if let Some(last) = table.last_mut() {
+        last.point_count = point_count - (chunks - 1) * chunk_size;  // the table gives every fixed chunk chunk_size
+    }
+    let mut starts = Vec::with_capacity(table.len());
+    let (mut at_point, mut at_byte) = (0u64, data_offset + 8);  // past the chunk table's offset
+    for e in &table {
+        starts.push((at_point, at_byte));
+        at_point += e.point_count;
+        at_byte = at_byte.saturating_add(e.byte_count);
+    }
+
+    if first != 0 || end != point_count {
+        return open_range(path, vlr, &table, &starts, first, end, point_size, chunk_size, threads);
+    }
 
     // Chunks are the unit of parallel decoding: a file of one chunk (small
     // tiles, thousands per scan) decodes on the caller's thread.
@@ -175,7 +250,39 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, threads: usi
         let d = LasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
         Decompressor::Sequential(d)
     };
-    Ok(ScLazReader { decompressor, point_size, chunk_size })
+    Ok(ScLazReader { decompressor, point_size, chunk_size, starts })
+}
+
+// A reader of the points [first, end), both chunk starts (or `end` the point count).
+#[allow(clippy::too_many_arguments)]
+fn open_range(path: &str, vlr: LazVlr, table: &[ChunkTableEntry], starts: &[(u64, u64)], first: u64, end: u64, point_size: u64,
+              chunk_size: u64, threads: usize) -> Result<ScLazReader, String> {
+    let chunk_at = |point: u64| {
+        if point == starts.last().map_or(0, |s| s.0) + table.last().map_or(0, |e| e.point_count) {
+            Some(starts.len())  // the end of the file
+        } else {
+            starts.binary_search_by_key(&point, |s| s.0).ok()
+        }
+    };
+    let (a, b) = match (chunk_at(first), chunk_at(end)) {
+        (Some(a), Some(b)) if a < b => (a, b),
+        _ => return Err(format!("points {}-{} are not a run of whole chunks", first, end.wrapping_sub(1))),
+    };
+    let chunks = table[a..b].to_vec();
+    if let Some((k, e)) = chunks.iter().enumerate().find(|(_, e)| e.point_count.saturating_mul(point_size) > RANGE_CHUNK_BYTES) {
+        return Err(format!("chunk {} claims {} points, over {} MiB decoded", a + k, e.point_count, RANGE_CHUNK_BYTES >> 20));
+    }
+    let range = ChunkRange {
+        file: File::open(path).map_err(|e| format!("cannot open: {}", e))?,
+        vlr,
+        chunks,
+        offsets: starts[a..b].iter().map(|s| s.1).collect(),
+        next: 0,
+        decoded: Vec::new(),
+        taken: 0,
+        pool: shared_pool(threads)?,
+    };
+    Ok(ScLazReader { decompressor: Decompressor::Range(range), point_size, chunk_size, starts: starts.to_vec() })
 }
 
 #[no_mangle]
@@ -185,6 +292,8 @@ pub extern "C" fn sc_laz_open(
     vlr: *const u8,
     vlr_len: usize,
     point_count: u64,
+    first: u64,
+    end: u64,
     threads: c_int,
     err: *mut c_char,
     err_len: usize,
@@ -197,7 +306,7 @@ pub extern "C" fn sc_laz_open(
     let path = unsafe { CStr::from_ptr(path) }.to_string_lossy().into_owned();
     let vlr = unsafe { std::slice::from_raw_parts(vlr, vlr_len) };
     let threads = threads.max(1) as usize;
-    match catch_unwind(|| open(&path, data_offset, vlr, point_count, threads)) {
+    match catch_unwind(|| open(&path, data_offset, vlr, point_count, first, end, threads)) {
         Ok(Ok(reader)) => Box::into_raw(Box::new(reader)),
         Ok(Err(message)) => {
             write_err(err, err_len, &message);
@@ -223,6 +332,27 @@ pub extern "C" fn sc_laz_chunk_size(reader: *const ScLazReader) -> u64 {
 }
 
 #[no_mangle]
+pub extern "C" fn sc_laz_chunk_count(reader: *const ScLazReader) -> u64 {
+    // SAFETY: reader comes from sc_laz_open.
+    unsafe { reader.as_ref() }.map_or(0, |r| r.starts.len() as u64)
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_chunk_start(reader: *const ScLazReader, chunk: u64, first_point: *mut u64, first_byte: *mut u64) -> c_int {
+    // SAFETY: reader comes from sc_laz_open; the outputs are writable.
+    match unsafe { reader.as_ref() }.and_then(|r| r.starts.get(chunk as usize)) {
+        Some(&(point, byte)) if !first_point.is_null() && !first_byte.is_null() => {
+            unsafe {
+                *first_point = point;
+                *first_byte = byte;
+            }
+            0
+        }
+        _ => -1,
+    }
+}
+
+#[no_mangle]
 pub extern "C" fn sc_laz_read(reader: *mut ScLazReader, out: *mut u8, points: u64, err: *mut c_char, err_len: usize) -> c_int {
     // SAFETY: reader comes from sc_laz_open; out has points * point_size bytes.
     let reader = match unsafe { reader.as_mut() } {
@@ -237,6 +367,7 @@ pub extern "C" fn sc_laz_read(reader: *mut ScLazReader, out: *mut u8, points: u6
     let result = catch_unwind(AssertUnwindSafe(|| match &mut reader.decompressor {
         Decompressor::Sequential(d) => d.decompress_many(out).map_err(|e| format!("{}", e)),
         Decompressor::Parallel(d, pool) => pool.install(|| d.decompress_many(out)).map_err(|e| format!("{}", e)),
+        Decompressor::Range(r) => r.read(out),
     }));
     match result {
         Ok(Ok(())) => 0,
