@@ -122,6 +122,8 @@ struct HttpServer::Impl {
     std::mutex mutex;
     std::condition_variable stopped;
     bool stopRequested = false;
+    // Set with stopRequested: new connections are closed as they are accepted.
+    std::atomic<bool> refusing{false};
     // Requests whose line has arrived and whose completion MHD has not yet
     // reported: what run() drains (idle keep-alive connections are not waited for).
     std::atomic<int> inFlight{0};
@@ -393,6 +395,14 @@ struct HttpServer::Impl {
     // MHD callbacks. The URI callback makes MHD report the request's completion
     // whatever ends it (an answer, an error of MHD's own, a timeout, the client
     // leaving, the daemon stopping), so every count taken here is given back.
+    // Not MHD_quiesce_daemon: with a pool of epoll threads, libmicrohttpd
+    // 0.9.75-0.9.77 removes the listening socket from each thread's epoll set
+    // while the thread may be removing it too, and aborts when it loses that
+    // race ("Failed to remove listen FD from epoll set", bench/RELIABILITY.md).
+    static MHD_Result onAccept(void* cls, const sockaddr*, socklen_t) {
+        return static_cast<Impl*>(cls)->refusing.load() ? MHD_NO : MHD_YES;
+    }
+
     static void* onUri(void* cls, const char*, MHD_Connection*) {
         static_cast<Impl*>(cls)->inFlight.fetch_add(1);
         return new RequestState;
@@ -467,7 +477,7 @@ Status HttpServer::bind() {
         {MHD_OPTION_HTTPS_MEM_CERT, 0, const_cast<char*>(c.tlsCertificate.c_str())},
         {MHD_OPTION_END, 0, nullptr}};
     impl_->daemon = MHD_start_daemon(
-        flags, 0, nullptr, nullptr, &Impl::onRequest, impl_.get(),                                   //
+        flags, 0, &Impl::onAccept, impl_.get(), &Impl::onRequest, impl_.get(),                       //
         MHD_OPTION_EXTERNAL_LOGGER, &Impl::onLog, impl_.get(),  /* first: it logs what the others say */  //
         MHD_OPTION_ARRAY, tlsOptions,                                                                  //
         MHD_OPTION_SOCK_ADDR, reinterpret_cast<sockaddr*>(&addr),                                      //
@@ -493,10 +503,9 @@ void HttpServer::run() {
     std::unique_lock lock(impl_->mutex);
     impl_->stopped.wait(lock, [&] { return impl_->stopRequested; });
     if (!impl_->daemon) return;
-    // Stop accepting, let requests in flight finish (up to kDrainTime), then
-    // close every connection, idle keep-alive ones included.
-    MHD_socket listener = MHD_quiesce_daemon(impl_->daemon);
-    if (listener != MHD_INVALID_SOCKET) ::close(listener);
+    // New connections are closed on accept (onAccept, since stop()); let
+    // requests in flight finish (up to kDrainTime), then close every
+    // connection, idle keep-alive ones included, and the listening socket.
     auto deadline = Clock::now() + kDrainTime;
     while (Clock::now() < deadline && impl_->inFlight.load() > 0) {
         lock.unlock();
@@ -509,6 +518,7 @@ void HttpServer::run() {
 
 void HttpServer::stop() {
     std::lock_guard lock(impl_->mutex);
+    impl_->refusing = true;
     impl_->stopRequested = true;
     impl_->stopped.notify_all();
 }
