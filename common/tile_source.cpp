@@ -80,6 +80,12 @@ public:
         }
         return out;
     }
+    Result<uint64_t> size(const std::string& name) override {
+        struct stat st{};
+        const std::string path = dir_ + "/" + name;
+        if (::stat(path.c_str(), &st) != 0) return Status::error(path + ": " + std::strerror(errno));
+        return uint64_t(st.st_size);
+    }
     std::string describe() const override { return dir_; }
 
 private:

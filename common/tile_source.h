@@ -23,6 +23,8 @@ public:
     // page of "hierarchy.bin"); never more is kept. Thread-safe.
     virtual Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) = 0;
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) { return range("blocks.bin", offset, size); }
+    // A file's size in bytes (an input read by ranges: preprocess/readers/input_file.h).
+    virtual Result<uint64_t> size(const std::string& name) = 0;
     // Several nodes' blobs, in order: POST {set}/batch requests of up to N
     // keys where tileset.json's answer (file(), read first) offered
     // Surfcast-Batch: N without a redirect (surfcast-serve), else one range

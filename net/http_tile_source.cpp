@@ -97,6 +97,13 @@ public:
         if (!r) return r.status();
         return std::move((*r)[0]);
     }
+    // A one-byte range: its Content-Range answer names the file's length.
+    Result<uint64_t> size(const std::string& name) override {
+        auto r = std::move(run({{name, "0-0", nullptr, 1, 206}})[0]);
+        if (!r) return r.status();
+        if (!r->total) return Status::error(base_ + "/" + name + ": the host's answer to a range request names no file length");
+        return *r->total;
+    }
     std::string describe() const override { return base_; }
     void cancel() override {
         {
@@ -179,6 +186,7 @@ private:
         long status = 0;
         std::vector<uint8_t> body;
         size_t batchNodes = 0;
+        std::optional<uint64_t> total;  // a range's answer: the file's length, where Content-Range names it
     };
 
     // Byte ranges (offset, size) of one file, all requested at once; all or nothing.
@@ -410,6 +418,17 @@ private:
         curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
         if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
+        // "Content-Range: bytes FIRST-LAST/LENGTH" (LENGTH "*" where unknown).
+        curl_header* range = nullptr;
+        if (q.wanted == 206 && curl_easy_header(h, "Content-Range", 0, CURLH_HEADER, -1, &range) == CURLHE_OK) {
+            const char* slash = std::strchr(range->value, '/');
+            char* end = nullptr;
+            if (slash && std::isdigit(static_cast<unsigned char>(slash[1]))) {
+                errno = 0;
+                const unsigned long long n = std::strtoull(slash + 1, &end, 10);
+                if (errno == 0 && *end == '\0') r.total = uint64_t(n);
+            }
+        }
         // Batches go to the set's own URL (a POST is not redirected): one
         // offered at a redirect's target is not taken.
         curl_header* offered = nullptr;

@@ -21,6 +21,7 @@
 #include "stages.h"
 #include "work_files.h"
 #include "http_tile_source.h"
+#include "input_file.h"
 #include "tileset_reader.h"
 
 extern char** environ;
@@ -41,7 +42,8 @@ from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
 triangle strips), LAS 1.0-1.4, text columns (.xyz .txt .pts .csv), and meshes
 in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set. A
 folder stands for every readable file under it; @LIST for the paths listed in
-the text file LIST, one per line.
+the text file LIST, one per line. A point file may be an http(s) URL, read by
+ranges from any host that honours Range (meshes are read from local files).
 
   -o, --output DIR        tile set folder to write (replaced atomically)
   --default-scene         add the built-in scanned scene (about 1.5 M points)
@@ -50,7 +52,7 @@ the text file LIST, one per line.
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how
-                          to reach it, as in surfcast-view
+                          to reach it, as in surfcast-view (and inputs at URLs)
   --grid G                cells per axis of a node's finest sampling grid (default 128)
   --page-depth D          levels per hierarchy page, which a viewer fetches as it
                           reaches them (default 5)
@@ -168,7 +170,7 @@ struct Args {
     surfcast::BuildOptions opt;
     bool captureWeights = false;
     std::string info;
-    surfcast::HttpOptions http;  // how --info reaches a URL
+    surfcast::HttpOptions http;  // how --info's set and inputs at URLs are reached
     std::string work;            // --work: a staged build's work folder
     std::vector<size_t> chunks;  // the chunk stage's chunks
     size_t part = 0, parts = 0;  // --part P/N (scan, count; P alone for distribute) and --parts N (plan)
@@ -346,6 +348,7 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
         }
         for (size_t k = first; k <= i; ++k) out->kept.push_back(args[k]);
     }
+    surfcast::setInputHttpOptions(http);  // inputs at URLs are reached as --info's set is
     return -1;
 }
 
@@ -375,7 +378,8 @@ int finishBuild(const Args& a, const surfcast::BuildSummary& summary) {
 surfcast::Result<std::vector<std::string>> absoluteInputs(const std::vector<std::string>& given) {
     auto paths = surfcast::expandInputPaths(given);
     if (!paths) return paths.status();
-    for (std::string& p : *paths) p = std::filesystem::absolute(p).lexically_normal().string();
+    for (std::string& p : *paths)
+        if (!surfcast::isUrl(p)) p = std::filesystem::absolute(p).lexically_normal().string();
     return paths;
 }
 

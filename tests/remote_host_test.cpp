@@ -471,5 +471,80 @@ TEST(Stream, SurfcastServeOverHttpsWithAToken) {
     EXPECT_NE(alone.output.find("--tls-cert and --tls-key go together"), std::string::npos) << alone.output;
 }
 
+// Inputs at URLs (preprocess/readers/input_file.h): nginx serving the shared
+// scans as static files. A build of a COPC file, a PCD file and a LAS file by
+// URL writes the same bytes as the build of the same files by path; so does
+// a build staged in three parts, each reading its run of the COPC file's
+// chunks by ranges. A missing file, a URL with a query string and a mesh by
+// URL each fail with the URL and why.
+TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
+    REQUIRE_DATA();
+    TempDir dir;
+    const std::string data = std::filesystem::path(test::dataFile("lion_takanawa.copc.laz")).parent_path().string();
+    auto nginx = startNginx(dir.file("nginx"), 1, [&](const std::vector<int>& ports) {
+        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; location /scans/ { alias " + data + "/; } }\n";
+    });
+    ASSERT_FALSE(nginx->ports.empty());
+    const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/scans/";
+    const std::vector<std::string> files = {"lion_takanawa.copc.laz", "fragment.pcd", "autzen_trim.las"};
+    const std::vector<std::string> options = {"-q", "--memory", "128M", "--capacity", "4000"};
+    auto build = [&](const std::string& prefix, const std::string& out, std::vector<std::string> args) {
+        args.insert(args.begin(), binary("surfcast-build"));
+        for (const std::string& f : files) args.push_back(prefix + f);
+        args.insert(args.end(), {"-o", out});
+        return run(args);
+    };
+    auto local = build(data + "/", dir.file("local"), options);
+    ASSERT_EQ(local.exitCode, 0) << local.output;
+    auto remote = build(url, dir.file("remote"), options);
+    ASSERT_EQ(remote.exitCode, 0) << remote.output;
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(test::readFile(dir.file("local/") + f) == test::readFile(dir.file("remote/") + f)) << f;
+
+    // Staged, the COPC file alone in three parts: scan, count, plan, distribute by URL.
+    const std::string work = dir.file("work"), copc = url + files[0];
+    auto one = run({binary("surfcast-build"), "-q", "--memory", "128M", "--capacity", "2000", data + "/" + files[0], "-o", dir.file("one")});
+    ASSERT_EQ(one.exitCode, 0) << one.output;
+    auto stage = [&](std::vector<std::string> args) {
+        args.insert(args.begin(), binary("surfcast-build"));
+        auto r = run(args);
+        EXPECT_EQ(r.exitCode, 0) << r.output;
+        return r.exitCode == 0;
+    };
+    const std::vector<std::string> given = {"-q", "--memory", "128M", "--capacity", "2000", copc, "-o", dir.file("staged")};
+    for (const char* name : {"scan", "count"})
+        for (int p = 0; p < 3; ++p) {
+            std::vector<std::string> args = {name, "--work", work, "--part", std::to_string(p) + "/3"};
+            args.insert(args.end(), given.begin(), given.end());
+            ASSERT_TRUE(stage(args));
+        }
+    std::vector<std::string> plan = {"plan", "--work", work, "--parts", "3"};
+    plan.insert(plan.end(), given.begin(), given.end());
+    ASSERT_TRUE(stage(plan));
+    EXPECT_NE(test::readFile(work + "/plan.json").find("\"first\": 0, \"begin\": 0, \"last\": 0, \"end\": "), std::string::npos)
+        << "the first part should end within the file: " << test::readFile(work + "/plan.json");
+    for (int p = 0; p < 3; ++p) ASSERT_TRUE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(p)}));
+    const std::string json = test::readFile(work + "/plan.json");
+    const size_t chunks = std::stoul(json.substr(json.find("\"chunks\": ") + 10));
+    for (size_t i = 0; i < chunks; ++i) ASSERT_TRUE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    ASSERT_TRUE(stage({"merge", "--work", work, "-q"}));
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(test::readFile(dir.file("one/") + f) == test::readFile(dir.file("staged/") + f)) << f;
+
+    // Clear errors, and no set written.
+    const std::pair<std::string, std::string> bad[] = {
+        {url + "missing.laz", url + "missing.laz: HTTP 404"},
+        {url + "lone-star.laz?sig=secret", "a query string is not taken"},
+        {url + "fg_spkMgDragon/fg_spkMgDragon.obj", "meshes are read from local files only"},
+    };
+    for (const auto& [input, message] : bad) {
+        auto r = run({binary("surfcast-build"), "-q", input, "-o", dir.file("bad")});
+        EXPECT_EQ(r.exitCode, 1) << input << ": " << r.output;
+        EXPECT_NE(r.output.find(message), std::string::npos) << input << ": " << r.output;
+        EXPECT_EQ(r.output.find("secret"), std::string::npos) << "the query string shows: " << r.output;
+        EXPECT_FALSE(std::filesystem::exists(dir.file("bad")));
+    }
+}
+
 }  // namespace
 }  // namespace surfcast

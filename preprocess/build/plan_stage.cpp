@@ -6,6 +6,7 @@
 #include <tuple>
 
 #include "crc32.h"
+#include "input_file.h"
 #include "las_reader.h"
 #include "stages.h"
 #include "work_files.h"
@@ -227,9 +228,8 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
     std::vector<double> weight;
     if (scene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
     for (const std::string& path : inputs.paths) {
-        std::error_code ec;
-        const uintmax_t bytes = std::filesystem::file_size(path, ec);
-        weight.push_back(ec ? 1.0 : double(bytes) + 1);  // unreadable: its reader names the error
+        auto bytes = inputFileSize(path);  // a URL's asks its host
+        weight.push_back(bytes ? double(*bytes) + 1 : 1.0);  // unreadable: its reader names the error
     }
     double total = 0;
     for (double w : weight) total += w;

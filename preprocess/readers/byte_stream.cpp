@@ -16,23 +16,22 @@ std::string lowerExtension(const std::string& path) {
 }
 
 namespace {
-constexpr uint64_t kBufferSize = 1 << 20;  // 1 MiB: large sequential reads, bounded memory
+constexpr uint64_t kBufferSize = 1 << 20;        // 1 MiB: large sequential reads, bounded memory
+constexpr uint64_t kRemoteBufferSize = 4 << 20;  // a URL's: one request a buffer
 }
 
 Result<ByteStream> ByteStream::open(const std::string& path) {
     ByteStream s;
     s.path_ = path;
-    s.file_ = std::fopen(path.c_str(), "rb");
-    if (!s.file_) return Status::error(path + ": cannot open (" + std::strerror(errno) + ")");
-    if (std::fseek(s.file_, 0, SEEK_END) == 0) {
-        long size = std::ftell(s.file_);
-        s.fileSize_ = size > 0 ? uint64_t(size) : 0;
-        std::fseek(s.file_, 0, SEEK_SET);
-    }
+    auto file = InputFile::open(path);
+    if (!file) return file.status();
+    s.file_ = std::move(*file);
+    s.fileSize_ = s.file_->size();
     // No bigger than the file: a build of thousands of small files opens each
     // several times, and a zero-filled 1 MiB per open cost more than decoding
     // them (BENCHMARKS.md, "Small files: a buffer per open").
-    s.buffer_.resize(size_t(s.fileSize_ > 0 ? std::min(s.fileSize_, kBufferSize) : kBufferSize));
+    const uint64_t most = isUrl(path) ? kRemoteBufferSize : kBufferSize;
+    s.buffer_.resize(size_t(s.fileSize_ > 0 ? std::min(s.fileSize_, most) : most));
     return s;
 }
 
@@ -47,17 +46,24 @@ ByteStream& ByteStream::operator=(ByteStream&& o) noexcept {
     std::swap(offset_, o.offset_);
     std::swap(line_, o.line_);
     std::swap(fileSize_, o.fileSize_);
+    std::swap(failed_, o.failed_);
+    std::swap(error_, o.error_);
     return *this;
 }
 
-ByteStream::~ByteStream() {
-    if (file_) std::fclose(file_);
-}
+ByteStream::~ByteStream() = default;
 
 bool ByteStream::fill() {
     if (begin_ < end_) return true;
-    begin_ = 0;
-    end_ = std::fread(buffer_.data(), 1, buffer_.size(), file_);
+    begin_ = end_ = 0;
+    if (failed_) return false;
+    auto n = file_->read(offset_, buffer_.data(), buffer_.size());
+    if (!n) {
+        failed_ = true;
+        error_ = n.status().message();
+        return false;
+    }
+    end_ = *n;
     return end_ > 0;
 }
 
@@ -76,7 +82,7 @@ bool ByteStream::readBytes(void* dst, size_t n) {
 }
 
 bool ByteStream::seek(uint64_t absolute) {
-    if (absolute > fileSize_ || std::fseek(file_, long(absolute), SEEK_SET) != 0) return false;
+    if (absolute > fileSize_) return false;
     begin_ = end_ = 0;
     offset_ = absolute;
     return true;

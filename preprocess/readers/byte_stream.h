@@ -1,13 +1,15 @@
-// Buffered sequential reading of an input file, with the byte offset and line
-// number every error message needs. Readers share it instead of each owning a FILE*.
+// Buffered sequential reading of an input file (a path or an http(s) URL:
+// input_file.h), with the byte offset and line number every error message
+// needs. Readers share it instead of each owning a FILE*.
 #pragma once
 
 #include <cstdint>
-#include <cstdio>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "input_file.h"
 #include "status.h"
 
 namespace surfcast {
@@ -34,19 +36,23 @@ public:
     // Next whitespace-separated token (spans lines); false at end of file.
     bool readToken(std::string_view* token);
 
-    // "PATH: byte N" / "PATH: line N" prefix for errors.
-    std::string at() const { return path_ + ": byte " + std::to_string(offset_); }
-    std::string atLine() const { return path_ + ": line " + std::to_string(line_); }
+    // "PATH: byte N" / "PATH: line N" prefix for errors, with what failed
+    // where a read did (an I/O or HTTP error: the reader then sees an end).
+    std::string at() const { return path_ + ": byte " + std::to_string(offset_) + failure(); }
+    std::string atLine() const { return path_ + ": line " + std::to_string(line_) + failure(); }
 
 private:
     ByteStream() = default;
     bool fill();
 
     std::string path_;
-    std::FILE* file_ = nullptr;
+    std::unique_ptr<InputFile> file_;
     std::vector<char> buffer_;
     size_t begin_ = 0, end_ = 0;
     uint64_t offset_ = 0, line_ = 1, fileSize_ = 0;
+    bool failed_ = false;  // a read failed (an I/O or HTTP error, not the end)
+    std::string error_;    // and how
+    std::string failure() const { return failed_ ? " (read failed: " + error_ + ")" : ""; }
     std::string token_;
 };
 

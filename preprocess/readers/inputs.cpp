@@ -35,7 +35,7 @@ enum class InputKind { Points, Mesh };
 // its header declares faces.
 Result<InputKind> inputKind(const std::string& path, const InputOptions& options) {
     std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec)) return Status::error(path + ": no such file");
+    if (!isUrl(path) && !std::filesystem::is_regular_file(path, ec)) return Status::error(path + ": no such file");
     char magic[4] = {};
     {
         auto in = ByteStream::open(path);
@@ -74,6 +74,8 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
     if (!whole && (*kind == InputKind::Mesh || !las))
         return Status::error(path + ": only LAS and LAZ files are read in parts (records " + std::to_string(range.begin) + " to " +
                              (range.end ? std::to_string(range.end) : "the end") + " asked for)");
+    if (*kind == InputKind::Mesh && isUrl(path))
+        return Status::error(path + ": meshes are read from local files only (point files may be URLs)");
     if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
     if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars);
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
@@ -113,7 +115,7 @@ Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>
                 size_t start = line.find_first_not_of(" \t");
                 if (start == std::string::npos || line[start] == '#') continue;
                 fs::path p(line.substr(start));
-                out.push_back((p.is_absolute() ? p : base / p).string());
+                out.push_back(isUrl(p.string()) || p.is_absolute() ? p.string() : (base / p).string());
             }
             if (in.bad()) return Status::error(list + ": read error");
         } else if (fs::is_directory(arg, ec)) {

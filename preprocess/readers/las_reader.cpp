@@ -100,17 +100,42 @@ private:
     uint64_t count_;
 };
 
+// The LAZ decoder's view of the file: reads through InputFile (a path or a
+// URL), keeping the last failure's message for the decoder's error.
+struct LazInput {
+    std::unique_ptr<InputFile> file;
+    std::string error;
+
+    static int64_t readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) {
+        auto* self = static_cast<LazInput*>(ctx);
+        auto n = self->file->read(offset, out, size_t(len));
+        if (!n) {
+            self->error = n.status().message();
+            return -1;
+        }
+        return int64_t(*n);
+    }
+    // The decoder's message, with the read failure behind it where there was one.
+    std::string explain(const char* decoder) const { return error.empty() ? std::string(decoder) : std::string(decoder) + " (" + error + ")"; }
+};
+
 class LazRecords final : public RecordSource {
 public:
-    LazRecords(ScLazReader* reader, std::string path, int threads, size_t recordLength)
-        : reader_(reader), path_(std::move(path)), threads_(threads), recordLength_(recordLength) {}
+    LazRecords(ScLazReader* reader, std::unique_ptr<LazInput> input, int threads, size_t recordLength)
+        : reader_(reader), input_(std::move(input)), threads_(threads), recordLength_(recordLength) {}
     ~LazRecords() override { sc_laz_close(reader_); }
     Status read(uint8_t* out, size_t records, uint64_t firstIndex) override {
         char err[512] = {};
         if (sc_laz_read(reader_, out, records, err, sizeof err) != 0)
-            return Status::error(path_ + ": LAZ data, points " + std::to_string(firstIndex) + "-" +
-                                 std::to_string(firstIndex + records - 1) + ": " + err);
+            return Status::error(input_->file->path() + ": LAZ data, points " + std::to_string(firstIndex) + "-" +
+                                 std::to_string(firstIndex + records - 1) + ": " + input_->explain(err));
         return {};
+    }
+    uint64_t chunkCount() const { return sc_laz_chunk_count(reader_); }
+    RecordCut chunkStart(uint64_t k) const {
+        RecordCut c;
+        sc_laz_chunk_start(reader_, k, &c.record, &c.byte);
+        return c;
     }
     // Enough chunks per call for every thread to decompress several.
     size_t preferredBatch() const override {
@@ -122,7 +147,7 @@ public:
 
 private:
     ScLazReader* reader_;
-    std::string path_;
+    std::unique_ptr<LazInput> input_;  // read by reader_: outlives it
     int threads_;
     size_t recordLength_;
 };
@@ -359,18 +384,21 @@ Result<LasHeader> readLasHeader(ByteStream& in) {
 }
 
 // The LAZ decompressor of `l`'s records [begin, end).
-Result<ScLazReader*> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads) {
+Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads) {
+    auto input = std::make_unique<LazInput>();
+    auto file = InputFile::open(path);
+    if (!file) return file.status();
+    input->file = std::move(*file);
     const std::vector<uint8_t>& vlr = *l.vlrs.laszip;
     char err[512] = {};
-    ScLazReader* laz = sc_laz_open(path.c_str(), l.dataOffset, vlr.data(), vlr.size(), l.count, begin, end, threads, err, sizeof err);
-    if (!laz) return Status::error(path + ": LAZ: " + err);
-    if (sc_laz_point_size(laz) != l.recordLength) {
-        const uint64_t size = sc_laz_point_size(laz);
-        sc_laz_close(laz);
-        return Status::error(path + ": LASzip VLR describes " + std::to_string(size) + "-byte records, the header " +
+    ScLazReader* laz = sc_laz_open(input->file->size(), &LazInput::readAt, input.get(), l.dataOffset, vlr.data(), vlr.size(), l.count,
+                                   begin, end, threads, err, sizeof err);
+    if (!laz) return Status::error(path + ": LAZ: " + input->explain(err));
+    auto records = std::make_unique<LazRecords>(laz, std::move(input), threads, l.recordLength);
+    if (sc_laz_point_size(laz) != l.recordLength)
+        return Status::error(path + ": LASzip VLR describes " + std::to_string(sc_laz_point_size(laz)) + "-byte records, the header " +
                              std::to_string(l.recordLength));
-    }
-    return laz;
+    return records;
 }
 
 }  // namespace
@@ -412,7 +440,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     if (l.compressed) {
         auto laz = openLaz(path, l, range.begin, end, threads);
         if (!laz) return laz.status();
-        source = std::make_unique<LazRecords>(*laz, path, threads, l.recordLength);
+        source = std::move(*laz);
     } else {
         uint64_t available = (in->fileSize() - l.dataOffset) / l.recordLength;
         if (available < l.count)
@@ -437,12 +465,7 @@ Result<std::vector<RecordCut>> lasCuts(const std::string& path) {
     }
     auto laz = openLaz(path, *l, 0, l->count, 1);
     if (!laz) return laz.status();
-    for (uint64_t k = 0, n = sc_laz_chunk_count(*laz); k < n; ++k) {
-        RecordCut c;
-        sc_laz_chunk_start(*laz, k, &c.record, &c.byte);
-        cuts.push_back(c);
-    }
-    sc_laz_close(*laz);
+    for (uint64_t k = 0, n = (*laz)->chunkCount(); k < n; ++k) cuts.push_back((*laz)->chunkStart(k));
     return cuts;
 }
 

@@ -1,6 +1,7 @@
 /* C ABI of the surfcast_laz Rust static library (preprocess/readers/laz_ffi).
- * Decompresses the point records of a LAZ file; the LAS header and VLRs are
- * parsed by the caller (las_reader.cpp). Errors come back as text in `err`. */
+ * Decompresses the point records of a LAZ file, whose bytes the caller reads
+ * for it (a local file or a URL); the LAS header and VLRs are parsed by the
+ * caller (las_reader.cpp). Errors come back as text in `err`. */
 #ifndef SURFCAST_LAZ_H
 #define SURFCAST_LAZ_H
 
@@ -13,15 +14,22 @@ extern "C" {
 
 typedef struct ScLazReader ScLazReader;
 
-/* Opens `path` for decompression of its points [first, end). `data_offset`:
- * byte offset of the point data (header field "offset to point data"); `vlr`:
- * the payload of the LASzip VLR (user "laszip encoded", record 22204);
- * `point_count`: points the header declares, checked against the chunk table.
- * [0, point_count) reads the whole file; any other range must start and end
- * at chunk starts (sc_laz_chunk_start) or the file's end. `threads` > 1
- * decompresses chunks in parallel (rayon). Returns NULL on error. */
-ScLazReader* sc_laz_open(const char* path, uint64_t data_offset, const uint8_t* vlr, size_t vlr_len, uint64_t point_count,
-                         uint64_t first, uint64_t end, int threads, char* err, size_t err_len);
+/* Reads up to `len` bytes at `offset` of the file into `out`: returns the
+ * bytes read (fewer only where the file ends), or -1 on an error. */
+typedef int64_t (*ScReadAt)(void* ctx, uint64_t offset, uint8_t* out, uint64_t len);
+
+/* Opens a file of `file_size` bytes, read through `read_at(ctx, ...)` from
+ * the thread that calls sc_laz_open and sc_laz_read (one at a time), for
+ * decompression of its points [first, end). `data_offset`: byte offset of the
+ * point data (header field "offset to point data"); `vlr`: the payload of the
+ * LASzip VLR (user "laszip encoded", record 22204); `point_count`: points the
+ * header declares, checked against the chunk table. [0, point_count) reads
+ * the whole file; any other range must start and end at chunk starts
+ * (sc_laz_chunk_start) or the file's end. `threads` > 1 decompresses chunks
+ * in parallel (rayon). Returns NULL on error. */
+ScLazReader* sc_laz_open(uint64_t file_size, ScReadAt read_at, void* ctx, uint64_t data_offset, const uint8_t* vlr,
+                         size_t vlr_len, uint64_t point_count, uint64_t first, uint64_t end, int threads, char* err,
+                         size_t err_len);
 
 /* Bytes per decompressed point record, and points per chunk (0: variable). */
 uint64_t sc_laz_point_size(const ScLazReader* reader);

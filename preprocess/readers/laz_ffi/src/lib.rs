@@ -2,19 +2,65 @@
 //! include/surfcast_laz.h). Panics never cross the boundary: every entry
 //! point catches them and reports an error instead.
 
-use std::ffi::CStr;
-use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
-use std::os::raw::{c_char, c_int};
+use std::os::raw::{c_char, c_int, c_void};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 
 use laz::laszip::{ChunkTable, ChunkTableEntry};
 use laz::{par_decompress, LasZipDecompressor, LazItemType, LazVlr, ParLasZipDecompressor};
 
+/// Reads up to `len` bytes at `offset` into `out`: the bytes read (fewer
+/// only where the file ends), or -1.
+pub type ScReadAt = extern "C" fn(ctx: *mut c_void, offset: u64, out: *mut u8, len: u64) -> i64;
+
+// The file, read through the caller's function (a local file or a URL: the
+// caller's input_file.h), at a position of its own.
+struct Input {
+    read_at: ScReadAt,
+    ctx: *mut c_void,
+    size: u64,
+    pos: u64,
+}
+
+// SAFETY: the caller reads one file from one thread at a time (the decoders
+// read their source only on the thread that calls sc_laz_read).
+unsafe impl Send for Input {}
+
+impl Input {
+    fn at(&self, pos: u64) -> Input {
+        Input { read_at: self.read_at, ctx: self.ctx, size: self.size, pos }
+    }
+}
+
+impl Read for Input {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = (self.read_at)(self.ctx, self.pos, buf.as_mut_ptr(), buf.len() as u64);
+        if n < 0 {
+            return Err(std::io::Error::new(std::io::ErrorKind::Other, format!("cannot read at byte {}", self.pos)));
+        }
+        self.pos += n as u64;
+        Ok(n as usize)
+    }
+}
+
+impl Seek for Input {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        // u64::checked_add_signed is newer than Debian 12's rustc.
+        let add = |base: u64, d: i64| if d >= 0 { base.checked_add(d as u64) } else { base.checked_sub(d.unsigned_abs()) };
+        let pos = match to {
+            SeekFrom::Start(n) => Some(n),
+            SeekFrom::End(d) => add(self.size, d),
+            SeekFrom::Current(d) => add(self.pos, d),
+        };
+        self.pos = pos.ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the file's start"))?;
+        Ok(self.pos)
+    }
+}
+
 enum Decompressor {
-    Sequential(LasZipDecompressor<'static, BufReader<File>>),
-    Parallel(ParLasZipDecompressor<BufReader<File>>, Arc<rayon::ThreadPool>),
+    Sequential(LasZipDecompressor<'static, BufReader<Input>>),
+    Parallel(ParLasZipDecompressor<BufReader<Input>>, Arc<rayon::ThreadPool>),
     Range(ChunkRange),
 }
 
@@ -23,7 +69,7 @@ enum Decompressor {
 // every chunk holds chunk_size points (point % count), which variable chunks
 // (COPC) break, so the range reads the chunks' bytes itself.
 struct ChunkRange {
-    file: File,
+    file: Input,
     vlr: LazVlr,
     chunks: Vec<ChunkTableEntry>, // the range's chunks, with their true point counts
     offsets: Vec<u64>,            // each one's first byte in the file
@@ -132,7 +178,7 @@ fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
     }
 }
 
-fn read_u64_at(f: &mut File, at: u64) -> Result<u64, String> {
+fn read_u64_at(f: &mut Input, at: u64) -> Result<u64, String> {
     let mut b = [0u8; 8];
     f.seek(SeekFrom::Start(at)).and_then(|_| f.read_exact(&mut b)).map_err(|e| format!("cannot read at byte {}: {}", at, e))?;
     Ok(u64::from_le_bytes(b))
@@ -143,9 +189,9 @@ fn read_u64_at(f: &mut File, at: u64) -> Result<u64, String> {
 // table's offset is the first 8 bytes of the point data (or, when those are
 // -1, the file's last 8 bytes); the table starts with a u32 version and the
 // u32 count. Every chunk holds at least one point, and one byte of the file.
-fn check_chunk_count(path: &str, data_offset: u64, point_count: u64, chunk_size: u64) -> Result<(), String> {
-    let mut f = File::open(path).map_err(|e| format!("cannot open: {}", e))?;
-    let size = f.metadata().map_err(|e| format!("cannot stat: {}", e))?.len();
+fn check_chunk_count(file: &Input, data_offset: u64, point_count: u64, chunk_size: u64) -> Result<(), String> {
+    let mut f = file.at(0);
+    let size = f.size;
     let mut table = read_u64_at(&mut f, data_offset)?;
     if table == u64::MAX && size >= 8 {
         table = read_u64_at(&mut f, size - 8)?;
@@ -166,7 +212,7 @@ fn check_chunk_count(path: &str, data_offset: u64, point_count: u64, chunk_size:
 // a u32 point count, then a u32 byte size per layer of every item; the `laz`
 // crate sizes a buffer by each before it reads it (4 GB from a 1 KB file:
 // fuzz_read_laz). The layers must fit in the chunk's bytes from the chunk table.
-fn check_layer_sizes(path: &str, data_offset: u64, vlr: &LazVlr, table: &ChunkTable) -> Result<(), String> {
+fn check_layer_sizes(file: &Input, data_offset: u64, vlr: &LazVlr, table: &ChunkTable) -> Result<(), String> {
     let mut layers = 0u64;
     for item in vlr.items() {
         layers += match item.item_type() {
@@ -177,7 +223,7 @@ fn check_layer_sizes(path: &str, data_offset: u64, vlr: &LazVlr, table: &ChunkTa
             _ => return Ok(()),  // not layered (LAS 1.0-1.3 formats): no sizes ahead of the data
         };
     }
-    let mut f = File::open(path).map_err(|e| format!("cannot open: {}", e))?;
+    let mut f = file.at(0);
     let mut at = data_offset + 8;  // past the chunk table's offset
     for (k, chunk) in table.as_ref().iter().enumerate() {
         let head = vlr.items_size() + 4;
@@ -194,24 +240,20 @@ fn check_layer_sizes(path: &str, data_offset: u64, vlr: &LazVlr, table: &ChunkTa
     Ok(())
 }
 
-fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, end: u64, threads: usize) -> Result<ScLazReader, String> {
+fn open(file: Input, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, end: u64, threads: usize) -> Result<ScLazReader, String> {
     let vlr = LazVlr::from_buffer(vlr).map_err(|e| format!("LASzip VLR: {}", e))?;
     let point_size = vlr.items_size();
     let chunk_size = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
-    let open_at_data = || -> Result<BufReader<File>, String> {
-        let mut f = BufReader::new(File::open(path).map_err(|e| format!("cannot open: {}", e))?);
-        f.seek(SeekFrom::Start(data_offset)).map_err(|e| format!("cannot seek to the point data: {}", e))?;
-        Ok(f)
-    };
+    let open_at_data = || -> Result<BufReader<Input>, String> { Ok(BufReader::with_capacity(1 << 16, file.at(data_offset))) };
 
     // The chunk table (at the end of the file) says how many points there are:
     // a truncated file or a wrong header count fails here, before any work.
-    check_chunk_count(path, data_offset, point_count, chunk_size)?;
+    check_chunk_count(&file, data_offset, point_count, chunk_size)?;
     let table = match ChunkTable::read_from(open_at_data()?, &vlr) {
         Ok(table) => table,
         Err(e) => return Err(format!("cannot read the chunk table (truncated file?): {}", e)),
     };
-    check_layer_sizes(path, data_offset, &vlr, &table)?;
+    check_layer_sizes(&file, data_offset, &vlr, &table)?;
     let mut table = table.as_ref().to_vec();
     let chunks = table.len() as u64;
     if chunk_size == 0 {
@@ -237,7 +279,7 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, 
     }
 
     if first != 0 || end != point_count {
-        return open_range(path, vlr, &table, &starts, first, end, point_size, chunk_size, threads);
+        return open_range(file, vlr, &table, &starts, first, end, point_size, chunk_size, threads);
     }
 
     // Chunks are the unit of parallel decoding: a file of one chunk (small
@@ -255,7 +297,7 @@ fn open(path: &str, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, 
 
 // A reader of the points [first, end), both chunk starts (or `end` the point count).
 #[allow(clippy::too_many_arguments)]
-fn open_range(path: &str, vlr: LazVlr, table: &[ChunkTableEntry], starts: &[(u64, u64)], first: u64, end: u64, point_size: u64,
+fn open_range(file: Input, vlr: LazVlr, table: &[ChunkTableEntry], starts: &[(u64, u64)], first: u64, end: u64, point_size: u64,
               chunk_size: u64, threads: usize) -> Result<ScLazReader, String> {
     let chunk_at = |point: u64| {
         if point == starts.last().map_or(0, |s| s.0) + table.last().map_or(0, |e| e.point_count) {
@@ -273,7 +315,7 @@ fn open_range(path: &str, vlr: LazVlr, table: &[ChunkTableEntry], starts: &[(u64
         return Err(format!("chunk {} claims {} points, over {} MiB decoded", a + k, e.point_count, RANGE_CHUNK_BYTES >> 20));
     }
     let range = ChunkRange {
-        file: File::open(path).map_err(|e| format!("cannot open: {}", e))?,
+        file,
         vlr,
         chunks,
         offsets: starts[a..b].iter().map(|s| s.1).collect(),
@@ -287,7 +329,9 @@ fn open_range(path: &str, vlr: LazVlr, table: &[ChunkTableEntry], starts: &[(u64
 
 #[no_mangle]
 pub extern "C" fn sc_laz_open(
-    path: *const c_char,
+    file_size: u64,
+    read_at: Option<ScReadAt>,
+    ctx: *mut c_void,
     data_offset: u64,
     vlr: *const u8,
     vlr_len: usize,
@@ -298,15 +342,18 @@ pub extern "C" fn sc_laz_open(
     err: *mut c_char,
     err_len: usize,
 ) -> *mut ScLazReader {
-    if path.is_null() || vlr.is_null() {
-        write_err(err, err_len, "null argument");
-        return std::ptr::null_mut();
-    }
-    // SAFETY: the caller passes a NUL-terminated path and vlr_len readable bytes.
-    let path = unsafe { CStr::from_ptr(path) }.to_string_lossy().into_owned();
+    let read_at = match read_at {
+        Some(f) if !vlr.is_null() => f,
+        _ => {
+            write_err(err, err_len, "null argument");
+            return std::ptr::null_mut();
+        }
+    };
+    let file = Input { read_at, ctx, size: file_size, pos: 0 };
+    // SAFETY: the caller passes vlr_len readable bytes.
     let vlr = unsafe { std::slice::from_raw_parts(vlr, vlr_len) };
     let threads = threads.max(1) as usize;
-    match catch_unwind(|| open(&path, data_offset, vlr, point_count, first, end, threads)) {
+    match catch_unwind(AssertUnwindSafe(|| open(file, data_offset, vlr, point_count, first, end, threads))) {
         Ok(Ok(reader)) => Box::into_raw(Box::new(reader)),
         Ok(Err(message)) => {
             write_err(err, err_len, &message);

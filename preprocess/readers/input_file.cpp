@@ -1,0 +1,152 @@
+#include "input_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <vector>
+
+#include "http_tile_source.h"
+
+namespace surfcast {
+
+namespace {
+
+// A remote file is read in blocks of this much: one request each, the last
+// one kept for the small reads around it (headers, a LAZ chunk table).
+constexpr uint64_t kRemoteBlock = 4 << 20;
+
+class LocalFile final : public InputFile {
+public:
+    LocalFile(std::string path, int fd, uint64_t size) : fd_(fd) {
+        path_ = std::move(path);
+        size_ = size;
+    }
+    ~LocalFile() override { ::close(fd_); }
+    Result<size_t> read(uint64_t offset, void* out, size_t n) override {
+        size_t done = 0;
+        while (done < n) {
+            const ssize_t got = ::pread(fd_, static_cast<char*>(out) + done, n - done, off_t(offset + done));
+            if (got < 0 && errno == EINTR) continue;
+            if (got < 0) return Status::error(path_ + ": byte " + std::to_string(offset + done) + ": " + std::strerror(errno));
+            if (got == 0) break;
+            done += size_t(got);
+        }
+        return done;
+    }
+
+private:
+    int fd_;
+};
+
+std::mutex gHttpMutex;
+HttpOptions gHttp;
+// One HTTP source per folder URL, shared by every file under it: its
+// connections are kept alive from one input to the next.
+std::map<std::string, std::shared_ptr<TileSource>> gSources;
+
+// The source of the folder holding `url` and the file's name in it.
+Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url) {
+    if (url.find('?') != std::string::npos || url.find('#') != std::string::npos)
+        return Status::error(url.substr(0, url.find_first_of("?#")) +
+                             ": an input URL with a query string is not taken (it would show in messages and the work "
+                             "folder's plan); give credentials with --header or --token-file");
+    const size_t slash = url.rfind('/');
+    if (slash == std::string::npos || slash + 1 == url.size() || slash < url.find("://") + 3)
+        return Status::error(url + ": not the URL of a file");
+    const std::string folder = url.substr(0, slash), name = url.substr(slash + 1);
+    std::lock_guard lock(gHttpMutex);
+    auto it = gSources.find(folder);
+    if (it == gSources.end()) {
+        auto source = openTileSource(folder, gHttp);
+        if (!source) return source.status();
+        it = gSources.emplace(folder, std::shared_ptr<TileSource>(std::move(*source))).first;
+    }
+    return std::make_pair(it->second, name);
+}
+
+class RemoteFile final : public InputFile {
+public:
+    RemoteFile(std::string url, std::shared_ptr<TileSource> source, std::string name, uint64_t size)
+        : source_(std::move(source)), name_(std::move(name)) {
+        path_ = std::move(url);
+        size_ = size;
+    }
+    Result<size_t> read(uint64_t offset, void* out, size_t n) override {
+        if (offset >= size_) return size_t(0);
+        n = size_t(std::min<uint64_t>(n, size_ - offset));
+        if (n >= kRemoteBlock) {  // a large read: its own request, not cached
+            auto bytes = source_->range(name_, offset, n);
+            if (!bytes) return bytes.status();
+            std::memcpy(out, bytes->data(), n);
+            return n;
+        }
+        size_t done = 0;
+        while (done < n) {
+            const uint64_t at = offset + done;
+            if (at < blockStart_ || at >= blockStart_ + block_.size()) {
+                blockStart_ = at / kRemoteBlock * kRemoteBlock;
+                auto bytes = source_->range(name_, blockStart_, std::min(kRemoteBlock, size_ - blockStart_));
+                if (!bytes) {
+                    block_.clear();
+                    return bytes.status();
+                }
+                block_ = std::move(*bytes);
+            }
+            const size_t take = size_t(std::min<uint64_t>(n - done, blockStart_ + block_.size() - at));
+            std::memcpy(static_cast<char*>(out) + done, block_.data() + (at - blockStart_), take);
+            done += take;
+        }
+        return done;
+    }
+
+private:
+    std::shared_ptr<TileSource> source_;
+    std::string name_;
+    uint64_t blockStart_ = 0;
+    std::vector<uint8_t> block_;
+};
+
+}  // namespace
+
+void setInputHttpOptions(const HttpOptions& options) {
+    std::lock_guard lock(gHttpMutex);
+    gHttp = options;
+    gSources.clear();
+}
+
+Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path) {
+    if (isUrl(path)) {
+        auto r = remote(path);
+        if (!r) return r.status();
+        auto size = r->first->size(r->second);
+        if (!size) return size.status();
+        return std::unique_ptr<InputFile>(new RemoteFile(path, std::move(r->first), std::move(r->second), *size));
+    }
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return Status::error(path + ": cannot open (" + std::strerror(errno) + ")");
+    struct stat st{};
+    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+        ::close(fd);
+        return Status::error(path + ": not a regular file");
+    }
+    return std::unique_ptr<InputFile>(new LocalFile(path, fd, uint64_t(st.st_size)));
+}
+
+Result<uint64_t> inputFileSize(const std::string& path) {
+    if (!isUrl(path)) {
+        struct stat st{};
+        if (::stat(path.c_str(), &st) != 0) return Status::error(path + ": " + std::strerror(errno));
+        return uint64_t(st.st_size);
+    }
+    auto r = remote(path);
+    if (!r) return r.status();
+    return r->first->size(r->second);
+}
+
+}  // namespace surfcast

@@ -1,0 +1,42 @@
+// An input file's bytes, read at any offset: a local file, or one at an
+// http(s) URL read by ranges through the project's HTTP client
+// (net/http_tile_source.h), so that workers that do not share a file system
+// with the scans read them from their host. ByteStream and the LAZ decoder
+// read through it.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "status.h"
+#include "tile_source.h"
+
+namespace surfcast {
+
+class InputFile {
+public:
+    // A path, or an http(s) URL without a query string (credentials go in
+    // headers: setInputHttpOptions). Fails naming the file.
+    static Result<std::unique_ptr<InputFile>> open(const std::string& path);
+    virtual ~InputFile() = default;
+
+    const std::string& path() const { return path_; }
+    uint64_t size() const { return size_; }
+    // Up to n bytes at `offset` into out (fewer only where the file ends), or
+    // an error naming the file and the offset. One thread at a time.
+    virtual Result<size_t> read(uint64_t offset, void* out, size_t n) = 0;
+
+protected:
+    std::string path_;
+    uint64_t size_ = 0;
+};
+
+// How http(s) inputs are reached (--header, --token-file, --ca-file, ...):
+// set by the command line before any input is opened.
+void setInputHttpOptions(const HttpOptions& options);
+
+// The byte size of the file at `path` (a URL asks its host), or an error.
+Result<uint64_t> inputFileSize(const std::string& path);
+
+}  // namespace surfcast
