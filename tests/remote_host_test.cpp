@@ -503,7 +503,7 @@ TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
 
     // Staged, the COPC file alone in three parts: scan, count, plan, distribute by URL.
     const std::string work = dir.file("work"), copc = url + files[0];
-    auto one = run({binary("surfcast-build"), "-q", "--memory", "128M", "--capacity", "2000", data + "/" + files[0], "-o", dir.file("one")});
+    auto one = run({binary("surfcast-build"), "-q", "--memory", "512M", "--capacity", "4000", data + "/" + files[0], "-o", dir.file("one")});
     ASSERT_EQ(one.exitCode, 0) << one.output;
     auto stage = [&](std::vector<std::string> args) {
         args.insert(args.begin(), binary("surfcast-build"));
@@ -511,7 +511,7 @@ TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
         EXPECT_EQ(r.exitCode, 0) << r.output;
         return r.exitCode == 0;
     };
-    const std::vector<std::string> given = {"-q", "--memory", "128M", "--capacity", "2000", copc, "-o", dir.file("staged")};
+    const std::vector<std::string> given = {"-q", "--memory", "512M", "--capacity", "4000", copc, "-o", dir.file("staged")};
     for (const char* name : {"scan", "count"})
         for (int p = 0; p < 3; ++p) {
             std::vector<std::string> args = {name, "--work", work, "--part", std::to_string(p) + "/3"};
