@@ -48,26 +48,27 @@ void expectSameSet(const std::string& a, const std::string& b) {
 }
 
 // The staged build of `options` in `dir`: the inputs scanned, counted and
-// distributed in three parts (the distribution last part first), the chunks
+// distributed in `parts` parts (the distribution last part first), the chunks
 // built last to first (an order no single process uses), the first of them
 // twice, as a retried task would; then compared with one process's build.
 // `cuts`: the parts that should start within a file.
 void expectStagedSameAsOneProcess(const test::TempDir& dir, const std::vector<std::string>& options, size_t minChunks = 4,
-                                  size_t cuts = 0) {
+                                  size_t cuts = 0, int parts = 3) {
     const std::string work = dir.file("work");
     auto whole = test::run(concat(concat({test::binary("surfcast-build"), "-q"}, options), {"-o", dir.file("whole")}));
     ASSERT_EQ(whole.exitCode, 0) << whole.output;
     const std::vector<std::string> output = {"-o", dir.file("staged")};
+    const std::string n = std::to_string(parts);
     for (const char* stageName : {"scan", "count"})
-        for (int part = 0; part < 3; ++part)
-            ASSERT_NO_FATAL_FAILURE(stage(concat(concat({stageName, "--work", work, "-q", "--part", std::to_string(part) + "/3"}, options), output)));
-    ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q", "--parts", "3"}, options), output)));
+        for (int part = 0; part < parts; ++part)
+            ASSERT_NO_FATAL_FAILURE(stage(concat(concat({stageName, "--work", work, "-q", "--part", std::to_string(part) + "/" + n}, options), output)));
+    ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q", "--parts", n}, options), output)));
     const size_t chunks = plannedChunks(work);
     ASSERT_GE(chunks, minChunks) << "the budget should force several chunks";
     EXPECT_EQ(partsStartingWithinAFile(work), cuts) << test::readFile(work + "/plan.json");
     // The chunks reported are the chunks built.
     EXPECT_NE(whole.output.find(" " + std::to_string(chunks) + " chunks"), std::string::npos) << whole.output;
-    for (int part = 2; part >= 0; --part) ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(part)}));
+    for (int part = parts - 1; part >= 0; --part) ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(part)}));
     for (size_t i = chunks; i-- > 0;) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
     ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(chunks - 1)}));
     ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
@@ -102,8 +103,9 @@ TEST(Stages, InputsInPartsSameBytesAsOneProcess) {
 }
 
 // One COPC file (variable LAZ chunks) cut into three parts at its chunks,
-// and a LAS file cut at 65,536 records (its one cut; the third part is
-// empty): each part reads its run of records on its own.
+// and a LAS file in four parts: its one cut, at 65,536 records, ends part 0;
+// part 1 is empty there, part 2 starts there and part 3 is empty at the end.
+// Each part reads its run of records on its own.
 TEST(Stages, FilesCutIntoPartsSameBytesAsOneProcess) {
     REQUIRE_DATA();
     {
@@ -111,7 +113,7 @@ TEST(Stages, FilesCutIntoPartsSameBytesAsOneProcess) {
         expectStagedSameAsOneProcess(dir, {test::dataFile("lion_takanawa.copc.laz"), "--memory", "128M", "--capacity", "2000"}, 4, 2);
     }
     test::TempDir dir;
-    expectStagedSameAsOneProcess(dir, {test::dataFile("autzen_trim.las"), "--memory", "64M", "--capacity", "1000"}, 2, 1);
+    expectStagedSameAsOneProcess(dir, {test::dataFile("autzen_trim.las"), "--memory", "64M", "--capacity", "1000"}, 2, 2, 4);
 }
 
 // A LAZ scan with its scalar fields (gps_time, scan_angle), cut into parts:

@@ -17,6 +17,8 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <mutex>
+#include <set>
 #include <thread>
 
 #include "crc32.h"
@@ -582,6 +584,64 @@ TEST(Stream, ARebuiltSetIsReportedNotRetriedForever) {
     EXPECT_EQ((*remote)->stats().requests, requests);
     ::kill(server.pid, SIGTERM);
     EXPECT_EQ(test::exitCode(server.pid), 0);
+}
+
+// Inputs at URLs (preprocess/readers/input_file.h) from a host that fails
+// partway through a text file. A host that answers 404 past the first 64 KiB
+// fails the build, naming the URL and the answer: the rows it did send are
+// not taken for the whole file (a failed read is not an end). A host that
+// answers each range 503 once, then serves it, is asked again: the build
+// writes the same bytes as from the local file.
+TEST(Inputs, AHostFailingMidFileFailsTheBuildOrIsAskedAgain) {
+    TempDir dir;
+    std::string rows;
+    for (int i = 0; i < 20000; ++i)  // about 400 KB
+        rows += std::to_string(i % 137) + " " + std::to_string(i / 137) + " " + std::to_string((i * 7) % 11) + " 10 20 30\n";
+    test::writeFile(dir.file("rows.xyz"), rows);
+    httplib::Server host;
+    std::atomic<int> refused{0};
+    std::mutex seenMutex;
+    std::set<std::string> seen;  // ranges answered 503 once
+    host.Get(R"(/(broken|flaky)/rows\.xyz)", [&](const httplib::Request& req, httplib::Response& res) {
+        unsigned long long from = 0, to = 0;
+        const std::string range = req.get_header_value("Range");
+        if (std::sscanf(range.c_str(), "bytes=%llu-%llu", &from, &to) != 2 || to < from || from >= rows.size()) {
+            res.status = 416;
+            return;
+        }
+        to = std::min<unsigned long long>(to, rows.size() - 1);
+        if (req.matches[1] == "broken" && to >= (64u << 10)) {
+            res.status = 404;
+            return;
+        }
+        if (req.matches[1] == "flaky") {
+            std::lock_guard lock(seenMutex);
+            if (seen.insert(range).second) {
+                ++refused;
+                res.status = 503;
+                return;
+            }
+        }
+        res.status = 206;
+        res.set_header("Content-Range", "bytes " + std::to_string(from) + "-" + std::to_string(to) + "/" + std::to_string(rows.size()));
+        res.set_content(rows.substr(from, to - from + 1), "application/octet-stream");
+    });
+    Serving serving(host);
+    ASSERT_GT(serving.port, 0);
+    const std::string url = "http://127.0.0.1:" + std::to_string(serving.port);
+    auto broken = run({binary("surfcast-build"), "-q", url + "/broken/rows.xyz", "-o", dir.file("broken")});
+    EXPECT_EQ(broken.exitCode, 1) << broken.output;
+    EXPECT_NE(broken.output.find(url + "/broken/rows.xyz"), std::string::npos) << broken.output;
+    EXPECT_NE(broken.output.find("HTTP 404"), std::string::npos) << broken.output;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("broken")));
+
+    auto local = run({binary("surfcast-build"), "-q", dir.file("rows.xyz"), "-o", dir.file("local")});
+    ASSERT_EQ(local.exitCode, 0) << local.output;
+    auto flaky = run({binary("surfcast-build"), "-q", url + "/flaky/rows.xyz", "-o", dir.file("flaky")});
+    ASSERT_EQ(flaky.exitCode, 0) << flaky.output;
+    EXPECT_GE(refused.load(), 2) << "the size and the first range were each refused once";
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(test::readFile(dir.file("local/") + f) == test::readFile(dir.file("flaky/") + f)) << f;
 }
 
 }  // namespace

@@ -225,6 +225,11 @@ ChunkLayout BuildPlan::layout(const BuildContext& context) const {
 
 InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
     const size_t scene = inputs.defaultScene ? 1 : 0;
+    InputPart p;
+    if (parts == 1) {  // every input whole: no size asked for (a URL's is a request)
+        p.last = scene + inputs.paths.size();
+        return p;
+    }
     std::vector<double> weight;
     if (scene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
     for (const std::string& path : inputs.paths) {
@@ -251,7 +256,6 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
         if (cuts.empty()) visit(i, 0, owner(before + weight[i] / 2));
         for (const RecordCut& c : cuts) visit(i, c.record, owner(before + double(c.byte)));
     }
-    InputPart p;
     std::tie(p.first, p.begin) = start;
     std::tie(p.last, p.end) = stop;
     return p;

@@ -11,9 +11,10 @@
 //               textures, Draco blocks                            → nodes/I.*
 //   merge       the levels above the chunks, then the tile set    → the output
 //
-// Parts are runs of consecutive inputs of about equal bytes (inputPart), so
-// the scan, count and distribute passes run in parallel over inputs; a chunk
-// reads the parts' files in part order, which is input order. buildTileset
+// Parts are runs of the inputs' records of about equal bytes (inputPart), so
+// the scan, count and distribute passes run in parallel over inputs, and over
+// one big LAS or LAZ file; a chunk reads the parts' files in part order, which
+// is input and record order. buildTileset
 // (octree_builder.h) runs the same stages in one process with one part, so a
 // build staged across processes writes the same bytes whatever its parts. The
 // work folder's files are internal: each names its format and version (a new
@@ -52,12 +53,12 @@ struct WorkFolder {
 // up to record `end` of input `last`, not included (`end` 0: up to input
 // `last`, which it does not read). Inputs are the built-in scene (index 0,
 // where given), then the paths in order. A LAS or LAZ file with a part
-// boundary inside it is read in two, at one of its cuts (las_reader.h);
+// boundary inside it is read in parts, cut at its cuts (las_reader.h);
 // every other input, the scene included, is read whole by one part.
 // `sources`: the part's readers (the scene has several), from `firstSource`
 // on in InputStats::sources, where a part that starts within a file (begin
-// > 0) shares that file's one source with the part before; `points`: the
-// points it reads.
+// > 0) and reads any of it shares that file's one source with the last part
+// before it that read some; `points`: the points it reads.
 struct InputPart {
     size_t first = 0, last = 0;
     uint64_t begin = 0, end = 0;

@@ -18,6 +18,7 @@ std::string lowerExtension(const std::string& path) {
 namespace {
 constexpr uint64_t kBufferSize = 1 << 20;        // 1 MiB: large sequential reads, bounded memory
 constexpr uint64_t kRemoteBufferSize = 4 << 20;  // a URL's: one request a buffer
+constexpr size_t kFirstRead = 64 << 10;
 }
 
 Result<ByteStream> ByteStream::open(const std::string& path) {
@@ -48,6 +49,7 @@ ByteStream& ByteStream::operator=(ByteStream&& o) noexcept {
     std::swap(fileSize_, o.fileSize_);
     std::swap(failed_, o.failed_);
     std::swap(error_, o.error_);
+    std::swap(fills_, o.fills_);
     return *this;
 }
 
@@ -57,7 +59,10 @@ bool ByteStream::fill() {
     if (begin_ < end_) return true;
     begin_ = end_ = 0;
     if (failed_) return false;
-    auto n = file_->read(offset_, buffer_.data(), buffer_.size());
+    // The first read is small: many opens read a header or the magic bytes
+    // only, and a URL's read is a request of that size.
+    const size_t want = fills_++ == 0 ? std::min<size_t>(buffer_.size(), kFirstRead) : buffer_.size();
+    auto n = file_->read(offset_, buffer_.data(), want);
     if (!n) {
         failed_ = true;
         error_ = n.status().message();
@@ -115,6 +120,10 @@ bool ByteStream::readLine(std::string* line) {
             break;
         }
     }
+    if (failed_) {  // not a partial line: the rest of it never came
+        line->clear();
+        return false;
+    }
     if (!line->empty() && line->back() == '\r') line->pop_back();
     return any;
 }
@@ -130,6 +139,7 @@ bool ByteStream::readToken(std::string_view* token) {
         ++begin_;
         ++offset_;
     }
+    if (failed_) token_.clear();  // not a partial token
     *token = token_;
     return !token_.empty();
 }

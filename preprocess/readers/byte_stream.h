@@ -35,6 +35,10 @@ public:
     bool readLine(std::string* line);
     // Next whitespace-separated token (spans lines); false at end of file.
     bool readToken(std::string_view* token);
+    // A read failed (an I/O or HTTP error): every read since returned false,
+    // never a partial line or token; at() and atLine() say what failed, and a
+    // reader that sees an end checks this before taking it for one.
+    bool failed() const { return failed_; }
 
     // "PATH: byte N" / "PATH: line N" prefix for errors, with what failed
     // where a read did (an I/O or HTTP error: the reader then sees an end).
@@ -52,6 +56,7 @@ private:
     uint64_t offset_ = 0, line_ = 1, fileSize_ = 0;
     bool failed_ = false;  // a read failed (an I/O or HTTP error, not the end)
     std::string error_;    // and how
+    uint64_t fills_ = 0;   // reads of the file so far
     std::string failure() const { return failed_ ? " (read failed: " + error_ + ")" : ""; }
     std::string token_;
 };

@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
+#include <thread>
 #include <cstring>
 #include <map>
 #include <mutex>
@@ -18,8 +20,10 @@ namespace surfcast {
 namespace {
 
 // A remote file is read in blocks of this much: one request each, the last
-// one kept for the small reads around it (headers, a LAZ chunk table).
+// one kept for the small reads around it (headers, a LAZ chunk table). The
+// first block is small: a file is opened for its magic bytes and header too.
 constexpr uint64_t kRemoteBlock = 4 << 20;
+constexpr uint64_t kFirstBlock = 64 << 10;
 
 class LocalFile final : public InputFile {
 public:
@@ -46,28 +50,57 @@ private:
 
 std::mutex gHttpMutex;
 HttpOptions gHttp;
-// One HTTP source per folder URL, shared by every file under it: its
-// connections are kept alive from one input to the next.
+// One HTTP source per origin, shared by every file there: its connections
+// (and its one I/O thread) serve every input from that host.
 std::map<std::string, std::shared_ptr<TileSource>> gSources;
+std::map<std::string, uint64_t> gSizes;  // by URL: a file is asked its size once
 
-// The source of the folder holding `url` and the file's name in it.
+// A transient failure (a 5xx, a reset connection) is asked again this many
+// times, after 0.5, 1 and 2 s, before it fails the read.
+constexpr int kRetries = 3;
+
+template <class F>
+auto withRetries(F request) {
+    auto r = request();
+    for (int i = 0; i < kRetries && !r && r.status().isTransient(); ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(500 << i));
+        r = request();
+    }
+    return r;
+}
+
+// The source of `url`'s origin and the file's path there.
 Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url) {
-    if (url.find('?') != std::string::npos || url.find('#') != std::string::npos)
+    const size_t scheme = url.find("://") + 3, slash = url.find('/', scheme);
+    if (url.find_first_of("?#") != std::string::npos)
         return Status::error(url.substr(0, url.find_first_of("?#")) +
                              ": an input URL with a query string is not taken (it would show in messages and the work "
                              "folder's plan); give credentials with --header or --token-file");
-    const size_t slash = url.rfind('/');
-    if (slash == std::string::npos || slash + 1 == url.size() || slash < url.find("://") + 3)
-        return Status::error(url + ": not the URL of a file");
-    const std::string folder = url.substr(0, slash), name = url.substr(slash + 1);
+    if (url.substr(scheme, slash - scheme).find('@') != std::string::npos)
+        return Status::error(url.substr(0, scheme) + url.substr(url.find('@', scheme) + 1) +
+                             ": an input URL with a user name or password is not taken; give credentials with --header or --token-file");
+    if (slash == std::string::npos || slash + 1 == url.size() || url.back() == '/') return Status::error(url + ": not the URL of a file");
+    const std::string origin = url.substr(0, slash), name = url.substr(slash + 1);
     std::lock_guard lock(gHttpMutex);
-    auto it = gSources.find(folder);
+    auto it = gSources.find(origin);
     if (it == gSources.end()) {
-        auto source = openTileSource(folder, gHttp);
+        auto source = openTileSource(origin, gHttp);
         if (!source) return source.status();
-        it = gSources.emplace(folder, std::shared_ptr<TileSource>(std::move(*source))).first;
+        it = gSources.emplace(origin, std::shared_ptr<TileSource>(std::move(*source))).first;
     }
     return std::make_pair(it->second, name);
+}
+
+Result<uint64_t> remoteSize(const std::string& url, TileSource& source, const std::string& name) {
+    {
+        std::lock_guard lock(gHttpMutex);
+        if (auto it = gSizes.find(url); it != gSizes.end()) return it->second;
+    }
+    auto size = withRetries([&] { return source.size(name); });
+    if (!size) return size.status();
+    std::lock_guard lock(gHttpMutex);
+    gSizes[url] = *size;
+    return *size;
 }
 
 class RemoteFile final : public InputFile {
@@ -81,7 +114,7 @@ public:
         if (offset >= size_) return size_t(0);
         n = size_t(std::min<uint64_t>(n, size_ - offset));
         if (n >= kRemoteBlock) {  // a large read: its own request, not cached
-            auto bytes = source_->range(name_, offset, n);
+            auto bytes = withRetries([&] { return source_->range(name_, offset, n); });
             if (!bytes) return bytes.status();
             std::memcpy(out, bytes->data(), n);
             return n;
@@ -90,8 +123,10 @@ public:
         while (done < n) {
             const uint64_t at = offset + done;
             if (at < blockStart_ || at >= blockStart_ + block_.size()) {
-                blockStart_ = at / kRemoteBlock * kRemoteBlock;
-                auto bytes = source_->range(name_, blockStart_, std::min(kRemoteBlock, size_ - blockStart_));
+                // The first read of a file (a header, magic bytes) takes a small block.
+                const uint64_t block = block_.empty() && blockStart_ == 0 ? kFirstBlock : kRemoteBlock;
+                blockStart_ = at / block * block;
+                auto bytes = withRetries([&] { return source_->range(name_, blockStart_, std::min(block, size_ - blockStart_)); });
                 if (!bytes) {
                     block_.clear();
                     return bytes.status();
@@ -118,13 +153,14 @@ void setInputHttpOptions(const HttpOptions& options) {
     std::lock_guard lock(gHttpMutex);
     gHttp = options;
     gSources.clear();
+    gSizes.clear();
 }
 
 Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path) {
     if (isUrl(path)) {
         auto r = remote(path);
         if (!r) return r.status();
-        auto size = r->first->size(r->second);
+        auto size = remoteSize(path, *r->first, r->second);
         if (!size) return size.status();
         return std::unique_ptr<InputFile>(new RemoteFile(path, std::move(r->first), std::move(r->second), *size));
     }
@@ -146,7 +182,7 @@ Result<uint64_t> inputFileSize(const std::string& path) {
     }
     auto r = remote(path);
     if (!r) return r.status();
-    return r->first->size(r->second);
+    return remoteSize(path, *r->first, r->second);
 }
 
 }  // namespace surfcast

@@ -107,8 +107,8 @@ struct InputStats {
 Result<InputStats> scanInputs(const InputOptions& options, const std::function<void(uint64_t)>& progress);
 // The statistics of consecutive runs of inputs (scanInputs of each), in
 // order: the same as scanInputs of all of them at once. continues[p]: part p
-// starts within the input that part p - 1 ended in (a file cut in two), whose
-// two sources become one.
+// starts within the input the parts before it ended in (a file cut between
+// parts), whose sources become one.
 InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool>& continues);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to

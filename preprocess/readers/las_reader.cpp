@@ -30,6 +30,8 @@ constexpr size_t kLazBatchBytes = 32 << 20;   // ...within this much decompresse
 // the header claims (a 2 KB LAZ claimed 50 M-point chunks: a 9 GB buffer,
 // fuzz_read_laz); larger chunks are decoded across several reads.
 constexpr size_t kLazMaxBatchBytes = 256 << 20;
+// lasCuts lists at most about this many cuts of a LAS file.
+constexpr uint64_t kMaxCuts = 1 << 16;
 constexpr char kLaszipUser[] = "laszip encoded";
 constexpr uint16_t kLaszipRecord = 22204;
 constexpr char kSpecUser[] = "LASF_Spec";
@@ -86,9 +88,8 @@ class RawRecords final : public RecordSource {
 public:
     RawRecords(ByteStream in, size_t recordLength, uint64_t count) : in_(std::move(in)), length_(recordLength), count_(count) {}
     Status read(uint8_t* out, size_t records, uint64_t firstIndex) override {
-        uint64_t at = in_.offset();
         if (!in_.readBytes(out, records * length_))
-            return Status::error(in_.path() + ": byte " + std::to_string(at) + ": file ends at point " +
+            return Status::error(in_.at() + ": " + (in_.failed() ? "cannot read" : "file ends at") + " point " +
                                  std::to_string(firstIndex) + " of the " + std::to_string(count_) + " the header declares");
         return {};
     }
@@ -106,14 +107,17 @@ struct LazInput {
     std::unique_ptr<InputFile> file;
     std::string error;
 
-    static int64_t readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) {
+    // Nothing may unwind into the Rust frames that call this.
+    static int64_t readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) noexcept {
         auto* self = static_cast<LazInput*>(ctx);
-        auto n = self->file->read(offset, out, size_t(len));
-        if (!n) {
+        try {
+            auto n = self->file->read(offset, out, size_t(len));
+            if (n) return int64_t(*n);
             self->error = n.status().message();
-            return -1;
+        } catch (const std::exception& e) {
+            self->error = e.what();
         }
-        return int64_t(*n);
+        return -1;
     }
     // The decoder's message, with the read failure behind it where there was one.
     std::string explain(const char* decoder) const { return error.empty() ? std::string(decoder) : std::string(decoder) + " (" + error + ")"; }
@@ -344,7 +348,7 @@ struct LasHeader {
 Result<LasHeader> readLasHeader(ByteStream& in) {
     const std::string& path = in.path();
     uint8_t h[kLas14HeaderSize] = {};
-    if (!in.readBytes(h, kLegacyHeaderSize)) return Status::error(path + ": shorter than a LAS header (227 bytes)");
+    if (!in.readBytes(h, kLegacyHeaderSize)) return Status::error(in.at() + ": shorter than a LAS header (227 bytes)");
     if (std::memcmp(h, "LASF", 4) != 0) return Status::error(path + ": not a LAS file (no 'LASF' at byte 0)");
     int major = h[24], minor = h[25];
     if (major != 1 || minor > 4) return Status::error(path + ": byte 24: unsupported LAS version " + std::to_string(major) + "." + std::to_string(minor));
@@ -380,11 +384,15 @@ Result<LasHeader> readLasHeader(ByteStream& in) {
     l.vlrs = std::move(*vlrs);
     if (l.compressed && !l.vlrs.laszip)
         return Status::error(path + ": compressed point format but no LASzip VLR (user 'laszip encoded', record 22204)");
+    if (const uint64_t available = (in.fileSize() - l.dataOffset) / l.recordLength; !l.compressed && available < l.count)
+        return Status::error(path + ": header declares " + std::to_string(l.count) + " points, the file holds " +
+                             std::to_string(available) + " (truncated at byte " + std::to_string(in.fileSize()) + ")");
     return l;
 }
 
-// The LAZ decompressor of `l`'s records [begin, end).
-Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads) {
+// The LAZ decompressor of `l`'s records [begin, end) (`tableOnly`: of none; its chunk table).
+Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads,
+                                            bool tableOnly = false) {
     auto input = std::make_unique<LazInput>();
     auto file = InputFile::open(path);
     if (!file) return file.status();
@@ -392,7 +400,7 @@ Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHe
     const std::vector<uint8_t>& vlr = *l.vlrs.laszip;
     char err[512] = {};
     ScLazReader* laz = sc_laz_open(input->file->size(), &LazInput::readAt, input.get(), l.dataOffset, vlr.data(), vlr.size(), l.count,
-                                   begin, end, threads, err, sizeof err);
+                                   begin, end, threads, tableOnly, err, sizeof err);
     if (!laz) return Status::error(path + ": LAZ: " + input->explain(err));
     auto records = std::make_unique<LazRecords>(laz, std::move(input), threads, l.recordLength);
     if (sc_laz_point_size(laz) != l.recordLength)
@@ -442,10 +450,6 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
         if (!laz) return laz.status();
         source = std::move(*laz);
     } else {
-        uint64_t available = (in->fileSize() - l.dataOffset) / l.recordLength;
-        if (available < l.count)
-            return Status::error(path + ": header declares " + std::to_string(l.count) + " points, the file holds " +
-                                 std::to_string(available) + " (truncated at byte " + std::to_string(in->fileSize()) + ")");
         if (!in->seek(l.dataOffset + range.begin * l.recordLength)) return Status::error(path + ": cannot seek to the point data");
         source = std::make_unique<RawRecords>(std::move(*in), l.recordLength, l.count);
     }
@@ -460,12 +464,18 @@ Result<std::vector<RecordCut>> lasCuts(const std::string& path) {
     if (!l) return l.status();
     std::vector<RecordCut> cuts;
     if (!l->compressed) {
-        for (uint64_t r = 0; r < l->count; r += kLasCutRecords) cuts.push_back({r, l->dataOffset + r * l->recordLength});
+        // Every kLasCutRecords records, or a multiple of it that keeps the cuts under kMaxCuts.
+        const uint64_t stride = kLasCutRecords * std::max<uint64_t>(1, l->count / (kLasCutRecords * kMaxCuts) + 1);
+        for (uint64_t r = 0; r < l->count; r += stride) cuts.push_back({r, l->dataOffset + r * l->recordLength});
         return cuts;
     }
-    auto laz = openLaz(path, *l, 0, l->count, 1);
+    auto laz = openLaz(path, *l, 0, l->count, 1, true);
     if (!laz) return laz.status();
-    for (uint64_t k = 0, n = (*laz)->chunkCount(); k < n; ++k) cuts.push_back((*laz)->chunkStart(k));
+    // Chunks of no points start where the next does: one cut each place.
+    for (uint64_t k = 0, n = (*laz)->chunkCount(); k < n; ++k) {
+        const RecordCut c = (*laz)->chunkStart(k);
+        if (c.record < l->count && (cuts.empty() || c.record > cuts.back().record)) cuts.push_back(c);
+    }
     return cuts;
 }
 

@@ -239,7 +239,7 @@ public:
             } else if (h_.data == DataKind::Binary) {
                 buffer_.resize(batch * h_.recordSize);
                 if (!in_->readBytes(buffer_.data(), buffer_.size()))
-                    return Status::error(path_ + ": byte " + std::to_string(in_->offset()) + ": DATA section ends at point " + std::to_string(index_));
+                    return Status::error(in_->at() + ": DATA section ends at point " + std::to_string(index_));
                 for (size_t i = 0; i < batch; ++i) {
                     InputPoint p;
                     for (const Field& f : h_.fields)
@@ -309,8 +309,8 @@ private:
             for (size_t k = 0; k < f.count; ++k) {
                 std::string_view tok;
                 if (!in_->readToken(&tok))
-                    return Status::error(path_ + ": line " + std::to_string(in_->line()) + ": DATA section ends at point " +
-                                         std::to_string(index_) + " of " + std::to_string(h_.points));
+                    return Status::error(in_->atLine() + ": DATA section ends at point " + std::to_string(index_) + " of " +
+                                         std::to_string(h_.points));
                 if (f.role == Role::Ignore) continue;
                 std::string s(tok);
                 char* end = nullptr;

@@ -95,6 +95,7 @@ public:
             p.normal = normalizeOrZero(normal);
             if (finite(p.position)) ++n; else ++skipped_;
         }
+        if (in_.failed()) return Status::error(in_.atLine());  // not the end: the rest of the file is missing
         return n;
     }
 

@@ -26,10 +26,11 @@ typedef int64_t (*ScReadAt)(void* ctx, uint64_t offset, uint8_t* out, uint64_t l
  * header declares, checked against the chunk table. [0, point_count) reads
  * the whole file; any other range must start and end at chunk starts
  * (sc_laz_chunk_start) or the file's end. `threads` > 1 decompresses chunks
- * in parallel (rayon). Returns NULL on error. */
+ * in parallel (rayon). `table_only`: read the chunk table only, for
+ * sc_laz_chunk_*, and no points. Returns NULL on error. */
 ScLazReader* sc_laz_open(uint64_t file_size, ScReadAt read_at, void* ctx, uint64_t data_offset, const uint8_t* vlr,
-                         size_t vlr_len, uint64_t point_count, uint64_t first, uint64_t end, int threads, char* err,
-                         size_t err_len);
+                         size_t vlr_len, uint64_t point_count, uint64_t first, uint64_t end, int threads, int table_only,
+                         char* err, size_t err_len);
 
 /* Bytes per decompressed point record, and points per chunk (0: variable). */
 uint64_t sc_laz_point_size(const ScLazReader* reader);

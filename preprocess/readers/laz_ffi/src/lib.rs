@@ -8,7 +8,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 
 use laz::laszip::{ChunkTable, ChunkTableEntry};
-use laz::{par_decompress, LasZipDecompressor, LazItemType, LazVlr, ParLasZipDecompressor};
+use laz::{par_decompress, LasZipDecompressor, LazItemType, LazVlr};
 
 /// Reads up to `len` bytes at `offset` into `out`: the bytes read (fewer
 /// only where the file ends), or -1.
@@ -23,8 +23,9 @@ struct Input {
     pos: u64,
 }
 
-// SAFETY: the caller reads one file from one thread at a time (the decoders
-// read their source only on the thread that calls sc_laz_read).
+// SAFETY: the caller's function is called on the thread that calls
+// sc_laz_open or sc_laz_read only (ChunkRange reads before it hands the pool
+// the decoding), one call at a time for a reader.
 unsafe impl Send for Input {}
 
 impl Input {
@@ -60,65 +61,98 @@ impl Seek for Input {
 
 enum Decompressor {
     Sequential(LasZipDecompressor<'static, BufReader<Input>>),
-    Parallel(ParLasZipDecompressor<BufReader<Input>>, Arc<rayon::ThreadPool>),
     Range(ChunkRange),
+    TableOnly,
 }
 
-// A run of whole chunks decoded on their own (a part of a file split across
-// processes), a batch of chunks at a time. The crate's own seek assumes that
-// every chunk holds chunk_size points (point % count), which variable chunks
-// (COPC) break, so the range reads the chunks' bytes itself.
+// A run of whole chunks (the whole file, or a part of it split across
+// processes), a batch of chunks at a time: their bytes read on the calling
+// thread, decoded in parallel on the pool. The crate's own parallel reader
+// reads its source on a pool thread, and its seek assumes that every chunk
+// holds chunk_size points (point % count), which variable chunks (COPC) break.
 struct ChunkRange {
     file: Input,
     vlr: LazVlr,
     chunks: Vec<ChunkTableEntry>, // the range's chunks, with their true point counts
     offsets: Vec<u64>,            // each one's first byte in the file
     next: usize,                  // the next chunk to decode
-    decoded: Vec<u8>,             // decoded points not yet handed out, from `taken` on
+    rest: Vec<u8>,                // a chunk's decoded points not yet handed out, from `taken` on
     taken: usize,
+    failed: Option<String>,       // a read or decode failed: every later read fails with it
     pool: Arc<rayon::ThreadPool>,
 }
 
-// The most decoded bytes one chunk of a range may hold: a batch is whole
-// chunks, so this bounds what a crafted chunk table can make a range allocate.
+// The most decoded bytes one chunk of a range may hold, and the most bytes a
+// chunk may take for them (compressed data can exceed the raw size a little):
+// what a crafted chunk table can make a reader allocate.
 const RANGE_CHUNK_BYTES: u64 = 256 << 20;
-// Decoded bytes per batch of a range, as the C++ reader's batches (las_reader.cpp).
+fn most_compressed(decoded: u64) -> u64 {
+    decoded.saturating_mul(2).saturating_add(1 << 16)
+}
+// Decoded bytes per batch, at most (the C++ reader asks for 32 MiB at a time).
 const RANGE_BATCH_BYTES: u64 = 32 << 20;
 
 impl ChunkRange {
+    // Whole chunks that fit in `out` are decoded straight into it; a chunk
+    // that `out` cuts is decoded aside and handed out over several reads.
     fn read(&mut self, mut out: &mut [u8]) -> Result<(), String> {
+        if let Some(e) = &self.failed {
+            return Err(e.clone());
+        }
+        let point_size = self.vlr.items_size() as usize;
         while !out.is_empty() {
-            if self.taken == self.decoded.len() {
-                self.decode_batch()?;
+            if self.taken < self.rest.len() {
+                let n = out.len().min(self.rest.len() - self.taken);
+                out[..n].copy_from_slice(&self.rest[self.taken..self.taken + n]);
+                self.taken += n;
+                out = &mut out[n..];
+                continue;
             }
-            let n = out.len().min(self.decoded.len() - self.taken);
-            out[..n].copy_from_slice(&self.decoded[self.taken..self.taken + n]);
-            self.taken += n;
-            out = &mut out[n..];
+            if self.next == self.chunks.len() {
+                return Err("more points asked for than the range holds".to_string());
+            }
+            let (mut count, mut bytes) = (0, 0usize);
+            for e in &self.chunks[self.next..] {
+                let size = e.point_count as usize * point_size;
+                if bytes + size > out.len() || (bytes + size) as u64 > RANGE_BATCH_BYTES {
+                    break;
+                }
+                count += 1;
+                bytes += size;
+            }
+            let result = if count > 0 {
+                let (into, after) = out.split_at_mut(bytes);
+                let r = self.decode(count, into);
+                out = after;
+                r
+            } else {
+                let mut rest = std::mem::take(&mut self.rest);
+                rest.clear();
+                rest.resize(self.chunks[self.next].point_count as usize * point_size, 0);
+                let r = self.decode(1, &mut rest);
+                self.rest = rest;
+                self.taken = 0;
+                r
+            };
+            if let Err(e) = result {
+                self.failed = Some(e.clone());
+                return Err(e);
+            }
         }
         Ok(())
     }
 
-    fn decode_batch(&mut self) -> Result<(), String> {
-        let first = self.next;
-        if first == self.chunks.len() {
-            return Err("more points asked for than the range holds".to_string());
-        }
-        let point_size = self.vlr.items_size();
-        let (mut points, mut bytes) = (0u64, 0u64);
-        while self.next < self.chunks.len() && (self.next == first || (points + self.chunks[self.next].point_count) * point_size <= RANGE_BATCH_BYTES) {
-            points += self.chunks[self.next].point_count;
-            bytes += self.chunks[self.next].byte_count;
-            self.next += 1;
-        }
-        let mut compressed = vec![0u8; usize::try_from(bytes).map_err(|_| "chunk too large".to_string())?];
+    // Chunks next..next + count into `into`: their bytes read here, decoded on the pool.
+    fn decode(&mut self, count: usize, into: &mut [u8]) -> Result<(), String> {
+        let (first, last) = (self.next, self.next + count);
+        let bytes: u64 = self.chunks[first..last].iter().map(|e| e.byte_count).sum();
+        let mut compressed = vec![0u8; bytes as usize];
         self.file.seek(SeekFrom::Start(self.offsets[first])).and_then(|_| self.file.read_exact(&mut compressed))
             .map_err(|e| format!("chunk {}: cannot read its {} bytes at byte {}: {}", first, bytes, self.offsets[first], e))?;
-        self.decoded.clear();
-        self.decoded.resize((points * point_size) as usize, 0);
-        self.taken = 0;
-        let (vlr, table, decoded) = (&self.vlr, &self.chunks[first..self.next], &mut self.decoded);
-        self.pool.install(|| par_decompress(&compressed, decoded, vlr, table)).map_err(|e| format!("chunks {}-{}: {}", first, self.next - 1, e))
+        let (vlr, table) = (&self.vlr, &self.chunks[first..last]);
+        self.pool.install(|| par_decompress(&compressed, into, vlr, table)).map_err(|e| format!("chunks {}-{}: {}", first, last - 1, e))?;
+        self.next = last;
+        Ok(())
     }
 }
 
@@ -189,7 +223,8 @@ fn read_u64_at(f: &mut Input, at: u64) -> Result<u64, String> {
 // table's offset is the first 8 bytes of the point data (or, when those are
 // -1, the file's last 8 bytes); the table starts with a u32 version and the
 // u32 count. Every chunk holds at least one point, and one byte of the file.
-fn check_chunk_count(file: &Input, data_offset: u64, point_count: u64, chunk_size: u64) -> Result<(), String> {
+// Returns the chunk table's offset.
+fn check_chunk_count(file: &Input, data_offset: u64, point_count: u64, chunk_size: u64) -> Result<u64, String> {
     let mut f = file.at(0);
     let size = f.size;
     let mut table = read_u64_at(&mut f, data_offset)?;
@@ -205,14 +240,14 @@ fn check_chunk_count(file: &Input, data_offset: u64, point_count: u64, chunk_siz
         return Err(format!("the chunk table claims {} chunks; {} points in a file of {} bytes allow at most {}",
                            count, point_count, size, most));
     }
-    Ok(())
+    Ok(table)
 }
 
 // Layered chunks (LAS 1.4 point formats 6-10) start with the first point raw,
 // a u32 point count, then a u32 byte size per layer of every item; the `laz`
 // crate sizes a buffer by each before it reads it (4 GB from a 1 KB file:
 // fuzz_read_laz). The layers must fit in the chunk's bytes from the chunk table.
-fn check_layer_sizes(file: &Input, data_offset: u64, vlr: &LazVlr, table: &ChunkTable) -> Result<(), String> {
+fn check_layer_sizes(file: &Input, vlr: &LazVlr, chunks: &[ChunkTableEntry], offsets: &[u64], first_index: usize) -> Result<(), String> {
     let mut layers = 0u64;
     for item in vlr.items() {
         layers += match item.item_type() {
@@ -224,8 +259,8 @@ fn check_layer_sizes(file: &Input, data_offset: u64, vlr: &LazVlr, table: &Chunk
         };
     }
     let mut f = file.at(0);
-    let mut at = data_offset + 8;  // past the chunk table's offset
-    for (k, chunk) in table.as_ref().iter().enumerate() {
+    for (k, (chunk, &at)) in chunks.iter().zip(offsets).enumerate() {
+        let k = first_index + k;
         let head = vlr.items_size() + 4;
         let mut sizes = vec![0u8; usize::try_from(4 * layers).map_err(|_| "too many layers".to_string())?];
         f.seek(SeekFrom::Start(at + head)).and_then(|_| f.read_exact(&mut sizes))
@@ -235,12 +270,14 @@ fn check_layer_sizes(file: &Input, data_offset: u64, vlr: &LazVlr, table: &Chunk
             return Err(format!("chunk {}: its layers claim {} bytes, the chunk table gives the chunk {}", k,
                                head + 4 * layers + total, chunk.byte_count));
         }
-        at += chunk.byte_count;
     }
     Ok(())
 }
 
-fn open(file: Input, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, end: u64, threads: usize) -> Result<ScLazReader, String> {
+// `table_only`: the chunk table (sc_laz_chunk_*), no points.
+#[allow(clippy::too_many_arguments)]
+fn open(file: Input, data_offset: u64, vlr: &[u8], point_count: u64, first: u64, end: u64, threads: usize, table_only: bool)
+        -> Result<ScLazReader, String> {
     let vlr = LazVlr::from_buffer(vlr).map_err(|e| format!("LASzip VLR: {}", e))?;
     let point_size = vlr.items_size();
     let chunk_size = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
@@ -248,12 +285,11 @@ fn open(file: Input, data_offset: u64, vlr: &[u8], point_count: u64, first: u64,
 
     // The chunk table (at the end of the file) says how many points there are:
     // a truncated file or a wrong header count fails here, before any work.
-    check_chunk_count(&file, data_offset, point_count, chunk_size)?;
+    let table_offset = check_chunk_count(&file, data_offset, point_count, chunk_size)?;
     let table = match ChunkTable::read_from(open_at_data()?, &vlr) {
         Ok(table) => table,
         Err(e) => return Err(format!("cannot read the chunk table (truncated file?): {}", e)),
     };
-    check_layer_sizes(&file, data_offset, &vlr, &table)?;
     let mut table = table.as_ref().to_vec();
     let chunks = table.len() as u64;
     if chunk_size == 0 {
@@ -270,29 +306,38 @@ fn open(file: Input, data_offset: u64, vlr: &[u8], point_count: u64, first: u64,
     } else if let Some(last) = table.last_mut() {
         last.point_count = point_count - (chunks - 1) * chunk_size;  // the table gives every fixed chunk chunk_size
     }
+    // Every chunk lies between the point data's start and the table, in
+    // bytes its points could need: what a reader allocates is bounded by them.
     let mut starts = Vec::with_capacity(table.len());
     let (mut at_point, mut at_byte) = (0u64, data_offset + 8);  // past the chunk table's offset
-    for e in &table {
+    for (k, e) in table.iter().enumerate() {
+        if e.byte_count > most_compressed(e.point_count.saturating_mul(point_size)) || e.byte_count > table_offset - at_byte {
+            return Err(format!("chunk {} claims {} bytes for {} points at byte {}, the chunk table starting at byte {}", k,
+                               e.byte_count, e.point_count, at_byte, table_offset));
+        }
         starts.push((at_point, at_byte));
         at_point += e.point_count;
-        at_byte = at_byte.saturating_add(e.byte_count);
+        at_byte += e.byte_count;
     }
 
+    if table_only {
+        return Ok(ScLazReader { decompressor: Decompressor::TableOnly, point_size, chunk_size, starts });
+    }
     if first != 0 || end != point_count {
         return open_range(file, vlr, &table, &starts, first, end, point_size, chunk_size, threads);
     }
 
     // Chunks are the unit of parallel decoding: a file of one chunk (small
-    // tiles, thousands per scan) decodes on the caller's thread.
-    let decompressor = if threads > 1 && chunks > 1 {
-        let pool = shared_pool(threads)?;
-        let d = ParLasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
-        Decompressor::Parallel(d, pool)
-    } else {
-        let d = LasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
-        Decompressor::Sequential(d)
-    };
-    Ok(ScLazReader { decompressor, point_size, chunk_size, starts })
+    // tiles, thousands per scan), or one whose chunks are too large to decode
+    // whole, decodes on the caller's thread as a stream.
+    let biggest = table.iter().map(|e| e.point_count).max().unwrap_or(0);
+    if threads > 1 && chunks > 1 && biggest.saturating_mul(point_size) <= RANGE_CHUNK_BYTES {
+        return open_range(file, vlr, &table, &starts, 0, point_count, point_size, chunk_size, threads);
+    }
+    let offsets: Vec<u64> = starts.iter().map(|s| s.1).collect();
+    check_layer_sizes(&file, &vlr, &table, &offsets, 0)?;
+    let d = LasZipDecompressor::new(open_at_data()?, vlr).map_err(|e| format!("{}", e))?;
+    Ok(ScLazReader { decompressor: Decompressor::Sequential(d), point_size, chunk_size, starts })
 }
 
 // A reader of the points [first, end), both chunk starts (or `end` the point count).
@@ -314,16 +359,9 @@ fn open_range(file: Input, vlr: LazVlr, table: &[ChunkTableEntry], starts: &[(u6
     if let Some((k, e)) = chunks.iter().enumerate().find(|(_, e)| e.point_count.saturating_mul(point_size) > RANGE_CHUNK_BYTES) {
         return Err(format!("chunk {} claims {} points, over {} MiB decoded", a + k, e.point_count, RANGE_CHUNK_BYTES >> 20));
     }
-    let range = ChunkRange {
-        file,
-        vlr,
-        chunks,
-        offsets: starts[a..b].iter().map(|s| s.1).collect(),
-        next: 0,
-        decoded: Vec::new(),
-        taken: 0,
-        pool: shared_pool(threads)?,
-    };
+    let offsets: Vec<u64> = starts[a..b].iter().map(|s| s.1).collect();
+    check_layer_sizes(&file, &vlr, &chunks, &offsets, a)?;
+    let range = ChunkRange { file, vlr, chunks, offsets, next: 0, rest: Vec::new(), taken: 0, failed: None, pool: shared_pool(threads)? };
     Ok(ScLazReader { decompressor: Decompressor::Range(range), point_size, chunk_size, starts: starts.to_vec() })
 }
 
@@ -339,6 +377,7 @@ pub extern "C" fn sc_laz_open(
     first: u64,
     end: u64,
     threads: c_int,
+    table_only: c_int,
     err: *mut c_char,
     err_len: usize,
 ) -> *mut ScLazReader {
@@ -353,7 +392,7 @@ pub extern "C" fn sc_laz_open(
     // SAFETY: the caller passes vlr_len readable bytes.
     let vlr = unsafe { std::slice::from_raw_parts(vlr, vlr_len) };
     let threads = threads.max(1) as usize;
-    match catch_unwind(AssertUnwindSafe(|| open(file, data_offset, vlr, point_count, first, end, threads))) {
+    match catch_unwind(AssertUnwindSafe(|| open(file, data_offset, vlr, point_count, first, end, threads, table_only != 0))) {
         Ok(Ok(reader)) => Box::into_raw(Box::new(reader)),
         Ok(Err(message)) => {
             write_err(err, err_len, &message);
@@ -413,8 +452,8 @@ pub extern "C" fn sc_laz_read(reader: *mut ScLazReader, out: *mut u8, points: u6
     let out = unsafe { std::slice::from_raw_parts_mut(out, len) };
     let result = catch_unwind(AssertUnwindSafe(|| match &mut reader.decompressor {
         Decompressor::Sequential(d) => d.decompress_many(out).map_err(|e| format!("{}", e)),
-        Decompressor::Parallel(d, pool) => pool.install(|| d.decompress_many(out)).map_err(|e| format!("{}", e)),
         Decompressor::Range(r) => r.read(out),
+        Decompressor::TableOnly => Err("opened for its chunk table only".to_string()),
     }));
     match result {
         Ok(Ok(())) => 0,
