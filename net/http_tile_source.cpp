@@ -410,7 +410,7 @@ private:
                                                            : "(send credentials with --header or --token-file)"));
             if (q.wanted == 206 && r.status == 200)
                 return Status::error(shown + ": the host ignores Range requests (it answered 200 with the whole file); "
-                                     "serve the set from one that honours Range (nginx, an object store or CDN, surfcast-serve)");
+                                     "serve it from one that honours Range (nginx, an object store or CDN, surfcast-serve)");
             return httpError(shown, r.status);
         }
         // A login page answers 200 in place of the file asked for.
@@ -418,14 +418,18 @@ private:
         curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &type);
         if (q.wanted && type && std::strncmp(type, "text/html", 9) == 0)
             return Status::error(shown + ": the host answered with an HTML page, not the tile set's file (a login page?)");
-        // "Content-Range: bytes FIRST-LAST/LENGTH" (LENGTH "*" where unknown).
+        // "Content-Range: bytes FIRST-LAST/LENGTH" (LENGTH "*" where unknown):
+        // the range asked for, or the answer is another's.
         curl_header* range = nullptr;
         if (q.wanted == 206 && curl_easy_header(h, "Content-Range", 0, CURLH_HEADER, -1, &range) == CURLHE_OK) {
-            const char* slash = std::strchr(range->value, '/');
+            const std::string value = range->value;
+            const size_t slash = value.find('/');
+            if (value.rfind("bytes " + q.range + "/", 0) != 0)
+                return Status::error(shown + ": asked for bytes " + q.range + ", the host answered " + value.substr(0, 64));
             char* end = nullptr;
-            if (slash && std::isdigit(static_cast<unsigned char>(slash[1]))) {
+            if (slash != std::string::npos && std::isdigit(static_cast<unsigned char>(value[slash + 1]))) {
                 errno = 0;
-                const unsigned long long n = std::strtoull(slash + 1, &end, 10);
+                const unsigned long long n = std::strtoull(value.c_str() + slash + 1, &end, 10);
                 if (errno == 0 && *end == '\0') r.total = uint64_t(n);
             }
         }
