@@ -472,11 +472,11 @@ TEST(Stream, SurfcastServeOverHttpsWithAToken) {
 }
 
 // Inputs at URLs (preprocess/readers/input_file.h): nginx serving the shared
-// scans as static files. A build of a COPC file, a PCD file and a LAS file by
-// URL writes the same bytes as the build of the same files by path; so does
-// a build staged in three parts, each reading its run of the COPC file's
-// chunks by ranges. A missing file, a URL with a query string and a mesh by
-// URL each fail with the URL and why.
+// scans as static files. A PCD, a COPC and a LAS file by URL, staged in four
+// parts (the COPC file cut at a chunk and the LAS file at 65,536 records, each
+// part reading its run by ranges), write the same bytes as one build of the
+// same files by path. A missing file, a URL with a query string or a user
+// name, and a mesh by URL each fail with the URL and why.
 TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
     REQUIRE_DATA();
     TempDir dir;
@@ -486,55 +486,42 @@ TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
     });
     ASSERT_FALSE(nginx->ports.empty());
     const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/scans/";
-    const std::vector<std::string> files = {"lion_takanawa.copc.laz", "fragment.pcd", "autzen_trim.las"};
+    const std::vector<std::string> files = {"fragment.pcd", "lion_takanawa.copc.laz", "autzen_trim.las"};
     const std::vector<std::string> options = {"-q", "--memory", "128M", "--capacity", "4000"};
-    auto build = [&](const std::string& prefix, const std::string& out, std::vector<std::string> args) {
-        args.insert(args.begin(), binary("surfcast-build"));
-        for (const std::string& f : files) args.push_back(prefix + f);
-        args.insert(args.end(), {"-o", out});
-        return run(args);
-    };
-    auto local = build(data + "/", dir.file("local"), options);
-    ASSERT_EQ(local.exitCode, 0) << local.output;
-    auto remote = build(url, dir.file("remote"), options);
-    ASSERT_EQ(remote.exitCode, 0) << remote.output;
-    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
-        EXPECT_TRUE(test::readFile(dir.file("local/") + f) == test::readFile(dir.file("remote/") + f)) << f;
-
-    // Staged, the COPC file alone in three parts: scan, count, plan, distribute by URL.
-    const std::string work = dir.file("work"), copc = url + files[0];
-    auto one = run({binary("surfcast-build"), "-q", "--memory", "512M", "--capacity", "4000", data + "/" + files[0], "-o", dir.file("one")});
+    std::vector<std::string> local = {binary("surfcast-build")}, remote = options;
+    local.insert(local.end(), options.begin(), options.end());
+    for (const std::string& f : files) local.push_back(data + "/" + f), remote.push_back(url + f);
+    local.insert(local.end(), {"-o", dir.file("local")});
+    remote.insert(remote.end(), {"-o", dir.file("remote")});
+    auto one = run(local);
     ASSERT_EQ(one.exitCode, 0) << one.output;
-    auto stage = [&](std::vector<std::string> args) {
+
+    const std::string work = dir.file("work");
+    auto stage = [&](std::vector<std::string> args, const std::vector<std::string>& more = {}) {
         args.insert(args.begin(), binary("surfcast-build"));
+        args.insert(args.end(), more.begin(), more.end());
         auto r = run(args);
         EXPECT_EQ(r.exitCode, 0) << r.output;
         return r.exitCode == 0;
     };
-    const std::vector<std::string> given = {"-q", "--memory", "512M", "--capacity", "4000", copc, "-o", dir.file("staged")};
     for (const char* name : {"scan", "count"})
-        for (int p = 0; p < 3; ++p) {
-            std::vector<std::string> args = {name, "--work", work, "--part", std::to_string(p) + "/3"};
-            args.insert(args.end(), given.begin(), given.end());
-            ASSERT_TRUE(stage(args));
-        }
-    std::vector<std::string> plan = {"plan", "--work", work, "--parts", "3"};
-    plan.insert(plan.end(), given.begin(), given.end());
-    ASSERT_TRUE(stage(plan));
-    EXPECT_NE(test::readFile(work + "/plan.json").find("\"first\": 0, \"begin\": 0, \"last\": 0, \"end\": "), std::string::npos)
-        << "the first part should end within the file: " << test::readFile(work + "/plan.json");
-    for (int p = 0; p < 3; ++p) ASSERT_TRUE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(p)}));
+        for (int p = 0; p < 4; ++p) ASSERT_TRUE(stage({name, "--work", work, "--part", std::to_string(p) + "/4"}, remote));
+    ASSERT_TRUE(stage({"plan", "--work", work, "--parts", "4"}, remote));
     const std::string json = test::readFile(work + "/plan.json");
+    EXPECT_NE(json.find("\"first\": 1, \"begin\": 0, \"last\": 1, \"end\": "), std::string::npos) << "a part should end within the COPC file: " << json;
+    EXPECT_NE(json.find("\"last\": 2, \"end\": 65536"), std::string::npos) << "a part should end within the LAS file: " << json;
+    for (int p = 0; p < 4; ++p) ASSERT_TRUE(stage({"distribute", "--work", work, "-q", "--part", std::to_string(p)}));
     const size_t chunks = std::stoul(json.substr(json.find("\"chunks\": ") + 10));
     for (size_t i = 0; i < chunks; ++i) ASSERT_TRUE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
     ASSERT_TRUE(stage({"merge", "--work", work, "-q"}));
     for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
-        EXPECT_TRUE(test::readFile(dir.file("one/") + f) == test::readFile(dir.file("staged/") + f)) << f;
+        EXPECT_TRUE(test::readFile(dir.file("local/") + f) == test::readFile(dir.file("remote/") + f)) << f;
 
     // Clear errors, and no set written.
     const std::pair<std::string, std::string> bad[] = {
         {url + "missing.laz", url + "missing.laz: HTTP 404"},
         {url + "lone-star.laz?sig=secret", "a query string is not taken"},
+        {"http://user:secret@" + url.substr(7) + "lone-star.laz", "a user name or password is not taken"},
         {url + "fg_spkMgDragon/fg_spkMgDragon.obj", "meshes are read from local files only"},
     };
     for (const auto& [input, message] : bad) {
