@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "mesh_reader.h"
+#include "grid_knn.h"
 #include "normals.h"
 #include "test_support.h"
 
@@ -71,4 +72,39 @@ TEST(Normals, PlaneFacesTheScanOrigin) {
     ctx.rules = {OrientationRule{std::nullopt, true}};
     estimateNormals(pts, {}, ctx);
     for (const Surfel& s : pts) EXPECT_GT(s.normal.z, 0.95f);
+}
+
+// A dense patch (40,000 points 5 mm apart on a tilted plane) beside sparse
+// points a thousand kilometres away: the grid's 21 bits per axis over that
+// cube (0.5 m cells) cannot resolve the patch, GridKnn says so, and the
+// normals come from the kd-tree instead (a single-chunk build of such scans
+// took 144 s in the grid's 27-cell blocks, 2.4 s so: BENCHMARKS.md, "Normals
+// of a dense cluster beside sparse scans"). Every patch normal is the
+// plane's, (-1, 0, 2)/sqrt(5), oriented up; the sparse points' own grid is
+// fine-grained enough.
+TEST(Normals, ADensePatchBesideFarScansTakesTheKdTree) {
+    std::vector<Surfel> pts;
+    for (int i = 0; i < 200; ++i)
+        for (int j = 0; j < 200; ++j) {
+            Surfel s;
+            s.position = {i * 0.005, j * 0.005, i * 0.0025};  // z = x / 2
+            pts.push_back(s);
+        }
+    for (int i = 0; i < 2000; ++i) {
+        Surfel s;
+        s.position = {1e6 + (i % 50) * 20.0, (i / 50) * 20.0, 0};
+        pts.push_back(s);
+    }
+    std::vector<Vec3f> frame;
+    for (const Surfel& s : pts) frame.push_back(cast<float>(s.position - pts[0].position));
+    EXPECT_TRUE(GridKnn(frame).tooCoarse());
+    std::vector<Vec3f> patch(frame.begin(), frame.begin() + 40000);
+    EXPECT_FALSE(GridKnn(patch).tooCoarse()) << "the patch alone is resolved";
+
+    NormalContext ctx;
+    ctx.rules = {OrientationRule{std::nullopt, true}};
+    ctx.threads = 2;
+    estimateNormals(pts, {}, ctx);
+    const Vec3f plane = cast<float>(normalizeOrZero(Vec3d{-1, 0, 2}));
+    for (size_t i = 0; i < 40000; ++i) ASSERT_GT(dot(pts[i].normal, plane), 0.999f) << "point " << i;
 }

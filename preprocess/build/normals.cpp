@@ -4,6 +4,7 @@
 #include <algorithm>
 
 #include "grid_knn.h"
+#include "neighbours.h"
 
 namespace surfcast {
 
@@ -23,21 +24,18 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     all.reserve(points.size() + halo.size());
     for (const Surfel& s : points) all.push_back(cast<float>(s.position - frame));
     for (const Surfel& s : halo) all.push_back(cast<float>(s.position - frame));
-    GridKnn index(all);
-    std::vector<Vec3f>().swap(all);
 
-    const size_t own = points.size();
-    index.forEach(ctx.k, ctx.threads, [&](uint32_t i) { return i < own && todo[i]; },
-                  [&](uint32_t query, const GridKnn::Neighbours& nbr) {
+    // The normal of the plane fitted to a point's neighbours, oriented by its source's rule.
+    auto fit = [&](uint32_t query, std::span<const Vec3f> positions) {
         Surfel& s = points[query];
         Vec3d normal{0, 0, 1};
-        const size_t n = nbr.positions.size();
+        const size_t n = positions.size();
         if (n >= 3) {
             // Covariance about the mean, summed in double from offsets to one
             // of the neighbours, which keep the sums small.
-            const Vec3f origin = nbr.positions[0];
+            const Vec3f origin = positions[0];
             double sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
-            for (const Vec3f& q : nbr.positions) {
+            for (const Vec3f& q : positions) {
                 const double x = double(q.x) - origin.x, y = double(q.y) - origin.y, z = double(q.z) - origin.z;
                 sx += x, sy += y, sz += z;
                 xx += x * x, xy += x * y, xz += x * z, yy += y * y, yz += y * z, zz += z * z;
@@ -61,7 +59,39 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
                                        : s.position - ctx.centre;
         if (dot(normal, toward) < 0) normal = normal * -1.0;
         s.normal = cast<float>(normal);
-    }, GridKnn::Order::any);
+    };
+
+    const size_t own = points.size();
+    GridKnn grid(all);
+    if (!grid.tooCoarse()) {
+        std::vector<Vec3f>().swap(all);
+        grid.forEach(ctx.k, ctx.threads, [&](uint32_t i) { return i < own && todo[i]; },
+                     [&](uint32_t query, const GridKnn::Neighbours& nbr) { fit(query, nbr.positions); }, GridKnn::Order::any);
+        return;
+    }
+    // A dense scan the grid cannot resolve (GridKnn::tooCoarse): FLANN's
+    // kd-tree, exact too, in batches of queries.
+    grid = GridKnn({});
+    const NeighbourIndex tree(all, ctx.threads);
+    constexpr size_t kBatch = 1 << 16;
+    std::vector<uint32_t> queries;
+    std::vector<Vec3f> at;
+    std::vector<int> indices;
+    std::vector<float> dist2;
+    for (size_t from = 0; from < own; from += kBatch) {
+        queries.clear();
+        at.clear();
+        for (size_t i = from; i < std::min(own, from + kBatch); ++i)
+            if (todo[i]) queries.push_back(uint32_t(i)), at.push_back(all[i]);
+        tree.knn(at.data(), at.size(), ctx.k, &indices, &dist2);
+        const size_t k = at.empty() ? 0 : indices.size() / at.size();
+#pragma omp parallel for num_threads(std::max(1, ctx.threads)) schedule(dynamic, 256)
+        for (size_t q = 0; q < queries.size(); ++q) {
+            std::vector<Vec3f> near(k);
+            for (size_t j = 0; j < k; ++j) near[j] = all[size_t(indices[q * k + j])];
+            fit(queries[q], near);
+        }
+    }
 }
 
 }  // namespace surfcast

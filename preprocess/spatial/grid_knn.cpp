@@ -135,6 +135,24 @@ GridKnn::GridKnn(std::span<const Vec3f> points) {
             cellBegin_.push_back(uint32_t(i));
         }
     cellBegin_.push_back(uint32_t(n));
+
+    // An overfull cell's points split at the next level, and again, by where
+    // their codes differ there (each finer cell is a contiguous run).
+    const auto split = [&](auto& self, int level, uint32_t begin, uint32_t end, uint32_t hint) -> void {
+        if (end - begin <= kKnnMaxCellPoints || level == kBits) {
+            work_.push_back({level, begin, end, hint});
+            tooCoarse_ |= end - begin > kKnnMaxCellPoints && !(sorted_[begin] == sorted_[end - 1]);
+            return;
+        }
+        const int finer = 3 * (kBits - level - 1);
+        for (uint32_t b = begin; b < end;) {
+            uint32_t e = b + 1;
+            while (e < end && codes_[e] >> finer == codes_[b] >> finer) ++e;
+            self(self, level + 1, b, e, hint);
+            b = e;
+        }
+    };
+    for (size_t c = 0; c + 1 < cellBegin_.size(); ++c) split(split, level_, cellBegin_[c], cellBegin_[c + 1], uint32_t(c));
 }
 
 uint32_t GridKnn::lowerBound(uint64_t code) const {
@@ -209,8 +227,6 @@ void GridKnn::gather(int level, const uint32_t cell[3], size_t hint, Block* bloc
 void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& wanted, const Visit& visit, Order order) const {
     assert(k > 0);
     if (codes_.empty()) return;
-    const size_t cellCount = cellBegin_.size() - 1;
-    const int shift = 3 * (kBits - level_);
     const double scale = double(1u << kBits) / edge_;
     const uint32_t maxQ = (1u << kBits) - 1;
     const double hair = edge_ * 1e-6;
@@ -235,15 +251,15 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
         };
 
 #pragma omp for schedule(dynamic, 64)
-        for (size_t c = 0; c < cellCount; ++c) {
-            const uint32_t begin = cellBegin_[c], end = cellBegin_[c + 1];
+        for (size_t c = 0; c < work_.size(); ++c) {
+            const auto [cellLevel, begin, end, hint] = work_[c];
             bool any = !wanted;
             for (uint32_t s = begin; s < end && !any; ++s) any = wanted(order_[s]);
             if (!any) continue;
             // The cell's block as candidates, a struct of arrays for the distance loop.
-            const uint64_t code = codes_[begin] >> shift;
+            const uint64_t code = codes_[begin] >> (3 * (kBits - cellLevel));
             const uint32_t cell[3] = {compactBits(code >> 2), compactBits(code >> 1), compactBits(code)};
-            gather(level_, cell, c, &block);
+            gather(cellLevel, cell, hint, &block);
             size_t count = 0;
             for (auto [b, e] : block.runs) count += e - b;
             cx.resize(count), cy.resize(count), cz.resize(count), cid.resize(count), d.resize(count), keys.resize(count);
@@ -327,7 +343,7 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                 if (found < 0) found = keepNearest(d.data(), cid.data(), count, k, best.data(), bestIds.data(), 0);
                 // Coarser levels until the block provably holds the k nearest.
                 const Block* holds = &block;
-                for (int level = level_ - 1; level >= 0 && !exact(*holds, p, found); --level) {
+                for (int level = cellLevel - 1; level >= 0 && !exact(*holds, p, found); --level) {
                     uint32_t coarse[3];
                     for (int a = 0; a < 3; ++a) {
                         uint32_t q = uint32_t(std::clamp((double(p[a]) - lo_[a]) * scale, 0.0, double(maxQ)));

@@ -6,8 +6,9 @@
 //
 // Points are sorted along a Morton curve of 21 bits per axis over their
 // bounding cube; the grid is the level of that curve whose occupied cells hold
-// about kKnnPointsPerCell points each. A query takes the points of the 27
-// cells around its own and keeps the k nearest; when the k-th is farther than
+// about kKnnPointsPerCell points each, overfull cells split finer
+// (kKnnMaxCellPoints). A query takes the points of the 27 cells around its
+// own and keeps the k nearest; when the k-th is farther than
 // the block's nearest face, points outside the block could be nearer, and the
 // query repeats on the next coarser level (a cell there is a contiguous range
 // of the sorted points), up to the whole cube. The result is therefore exact:
@@ -26,6 +27,12 @@ namespace surfcast {
 // Occupied cells hold about this many points (between it and 4x it for a
 // surface: levels double the cell size): measured fastest for k = 16.
 inline constexpr double kKnnPointsPerCell = 6;
+// A cell of the grid's level holding more points than this (a dense scan
+// beside sparse ones: the level suits the average) is searched cell by cell
+// at finer levels, down to cells of at most this many (or the finest level),
+// so that its queries do not each scan its whole block (BENCHMARKS.md,
+// "Normals of a dense cluster beside sparse scans").
+inline constexpr uint32_t kKnnMaxCellPoints = 256;
 
 class GridKnn {
 public:
@@ -34,6 +41,12 @@ public:
 
     size_t size() const { return order_.size(); }
     int level() const { return level_; }
+    // Whether a cell of the finest level holds more than kKnnMaxCellPoints
+    // points that are not all one position: 21 bits per axis of the cube are
+    // too coarse for them (a dense scan beside others far away), and their
+    // queries would each scan thousands of candidates; an adaptive search (a
+    // kd-tree) answers them faster.
+    bool tooCoarse() const { return tooCoarse_; }
 
     // Neighbours of one query: indices into the indexed points, their squared
     // distances and positions (as indexed), at most k (fewer only when fewer
@@ -74,6 +87,15 @@ private:
     std::vector<Vec3f> sorted_;       // positions in sorted order
     std::vector<uint64_t> cellCodes_; // per occupied cell of level_, its code at that level, sorted
     std::vector<uint32_t> cellBegin_; // per occupied cell of level_, into the sorted order; one more at the end
+    // The cells queries are answered by: those of level_, and in place of an
+    // overfull one its occupied cells of a finer level.
+    struct WorkCell {
+        int level;
+        uint32_t begin, end;  // its points in the sorted order
+        uint32_t hint;        // the index of its cell of level_ in cellCodes_
+    };
+    std::vector<WorkCell> work_;
+    bool tooCoarse_ = false;
 };
 
 }  // namespace surfcast
