@@ -108,3 +108,24 @@ TEST(Normals, ADensePatchBesideFarScansTakesTheKdTree) {
     const Vec3f plane = cast<float>(normalizeOrZero(Vec3d{-1, 0, 2}));
     for (size_t i = 0; i < 40000; ++i) ASSERT_GT(dot(pts[i].normal, plane), 0.999f) << "point " << i;
 }
+
+// The kd-tree's path (GridKnn::tooCoarse) keeps the grid's rule for stacks
+// of coincident points: a point with k or more copies has them as its k
+// nearest. 200,000 copies at the origin, one point 0.1 mm from them (in the
+// same finest cell of a 1 km cube: the cell is overfull and not one
+// position) and one 1 km away: the kd-tree alone visits every copy for each
+// copy (4·10^10 distances); so it is done at once (BadInput's million
+// coincident points, on the other path).
+TEST(Normals, CoincidentStacksOnTheKdTreePathAreAnsweredAtOnce) {
+    std::vector<Surfel> pts(200000);
+    pts.emplace_back().position = {1e-4, 0, 0};
+    pts.emplace_back().position = {1000, 0, 0};
+    std::vector<Vec3f> frame;
+    for (const Surfel& s : pts) frame.push_back(cast<float>(s.position));
+    ASSERT_TRUE(GridKnn(frame).tooCoarse());
+    NormalContext ctx;
+    ctx.rules = {OrientationRule{std::nullopt, true}};
+    ctx.threads = 2;
+    estimateNormals(pts, {}, ctx);
+    for (size_t i = 0; i < pts.size(); i += 997) EXPECT_NEAR(length(pts[i].normal), 1.0f, 1e-5f) << "point " << i;
+}

@@ -2,6 +2,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <tuple>
 
 #include "grid_knn.h"
 #include "neighbours.h"
@@ -70,8 +71,25 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
         return;
     }
     // A dense scan the grid cannot resolve (GridKnn::tooCoarse): FLANN's
-    // kd-tree, exact too, in batches of queries.
+    // kd-tree, exact too, in batches of queries. A point with k or more
+    // copies (all of them, halo included) has them as its k nearest, as in
+    // the grid; the tree would visit every copy for each of them.
     grid = GridKnn({});
+    std::vector<uint32_t> byPosition(all.size());
+    for (uint32_t i = 0; i < byPosition.size(); ++i) byPosition[i] = i;
+    std::sort(byPosition.begin(), byPosition.end(), [&](uint32_t a, uint32_t b) {
+        return std::tie(all[a].x, all[a].y, all[a].z, a) < std::tie(all[b].x, all[b].y, all[b].z, b);
+    });
+    std::vector<uint8_t> stacked(own, 0);
+    for (size_t b = 0; b < byPosition.size();) {
+        size_t e = b + 1;
+        while (e < byPosition.size() && all[byPosition[e]] == all[byPosition[b]]) ++e;
+        if (e - b >= size_t(ctx.k))
+            for (size_t j = b; j < e; ++j)
+                if (byPosition[j] < own) stacked[byPosition[j]] = 1;
+        b = e;
+    }
+    std::vector<uint32_t>().swap(byPosition);
     const NeighbourIndex tree(all, ctx.threads);
     constexpr size_t kBatch = 1 << 16;
     std::vector<uint32_t> queries;
@@ -81,8 +99,15 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     for (size_t from = 0; from < own; from += kBatch) {
         queries.clear();
         at.clear();
-        for (size_t i = from; i < std::min(own, from + kBatch); ++i)
-            if (todo[i]) queries.push_back(uint32_t(i)), at.push_back(all[i]);
+        for (size_t i = from; i < std::min(own, from + kBatch); ++i) {
+            if (!todo[i]) continue;
+            if (stacked[i]) {
+                const std::vector<Vec3f> copies(size_t(ctx.k), all[i]);
+                fit(uint32_t(i), copies);
+            } else {
+                queries.push_back(uint32_t(i)), at.push_back(all[i]);
+            }
+        }
         tree.knn(at.data(), at.size(), ctx.k, &indices, &dist2);
         const size_t k = at.empty() ? 0 : indices.size() / at.size();
 #pragma omp parallel for num_threads(std::max(1, ctx.threads)) schedule(dynamic, 256)

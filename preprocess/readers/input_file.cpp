@@ -72,13 +72,16 @@ auto withRetries(F request) {
 // The source of `url`'s origin and the file's path there.
 Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url) {
     const size_t scheme = url.find("://") + 3, slash = url.find('/', scheme);
+    // Neither the user information nor the query may show in a message.
+    const size_t at = url.substr(scheme, slash == std::string::npos ? std::string::npos : slash - scheme).rfind('@');
+    const std::string shown = at == std::string::npos ? url : url.substr(0, scheme) + url.substr(scheme + at + 1);
+    if (at != std::string::npos)
+        return Status::error(shown.substr(0, shown.find_first_of("?#")) +
+                             ": an input URL with a user name or password is not taken; give credentials with --header or --token-file");
     if (url.find_first_of("?#") != std::string::npos)
         return Status::error(url.substr(0, url.find_first_of("?#")) +
                              ": an input URL with a query string is not taken (it would show in messages and the work "
                              "folder's plan); give credentials with --header or --token-file");
-    if (url.substr(scheme, slash - scheme).find('@') != std::string::npos)
-        return Status::error(url.substr(0, scheme) + url.substr(url.find('@', scheme) + 1) +
-                             ": an input URL with a user name or password is not taken; give credentials with --header or --token-file");
     if (slash == std::string::npos || slash + 1 == url.size() || url.back() == '/') return Status::error(url + ": not the URL of a file");
     const std::string origin = url.substr(0, slash), name = url.substr(slash + 1);
     std::lock_guard lock(gHttpMutex);

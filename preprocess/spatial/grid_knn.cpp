@@ -138,8 +138,10 @@ GridKnn::GridKnn(std::span<const Vec3f> points) {
 
     // An overfull cell's points split at the next level, and again, by where
     // their codes differ there (each finer cell is a contiguous run).
+    // Not past kFinestSplit: a block of 3 cells of a level below it is no wider
+    // than forEach's rounding hair, so no query is answered there.
     const auto split = [&](auto& self, int level, uint32_t begin, uint32_t end, uint32_t hint) -> void {
-        if (end - begin <= kKnnMaxCellPoints || level == kBits) {
+        if (end - begin <= kKnnMaxCellPoints || level >= kFinestSplit) {
             work_.push_back({level, begin, end, hint});
             tooCoarse_ |= end - begin > kKnnMaxCellPoints && !(sorted_[begin] == sorted_[end - 1]);
             return;

@@ -41,9 +41,9 @@ public:
 
     size_t size() const { return order_.size(); }
     int level() const { return level_; }
-    // Whether a cell of the finest level holds more than kKnnMaxCellPoints
-    // points that are not all one position: 21 bits per axis of the cube are
-    // too coarse for them (a dense scan beside others far away), and their
+    // Whether a cell of the finest level searched (kFinestSplit) holds more
+    // than kKnnMaxCellPoints points that are not all one position: 21 bits
+    // per axis of the cube are too coarse for them (a dense scan beside others far away), and their
     // queries would each scan thousands of candidates; an adaptive search (a
     // kd-tree) answers them faster.
     bool tooCoarse() const { return tooCoarse_; }
@@ -71,6 +71,10 @@ public:
 
 private:
     static constexpr int kBits = 21;  // Morton bits per axis
+    // The finest level overfull cells split to: its cells (edge / 2^19) are
+    // about twice forEach's hair (edge * 1e-6), so a query's block can hold
+    // its neighbours provably.
+    static constexpr int kFinestSplit = kBits - 2;
 
     struct Block;
     // The block around a cell of `level`; at level_, `hint` is the cell's own

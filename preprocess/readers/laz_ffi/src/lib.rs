@@ -331,7 +331,7 @@ fn open(file: Input, data_offset: u64, vlr: &[u8], point_count: u64, first: u64,
     // tiles, thousands per scan), or one whose chunks are too large to decode
     // whole, decodes on the caller's thread as a stream.
     let biggest = table.iter().map(|e| e.point_count).max().unwrap_or(0);
-    if threads > 1 && chunks > 1 && biggest.saturating_mul(point_size) <= RANGE_CHUNK_BYTES {
+    if threads > 1 && chunks > 1 && point_count > 0 && biggest.saturating_mul(point_size) <= RANGE_CHUNK_BYTES {
         return open_range(file, vlr, &table, &starts, 0, point_count, point_size, chunk_size, threads);
     }
     let offsets: Vec<u64> = starts.iter().map(|s| s.1).collect();
