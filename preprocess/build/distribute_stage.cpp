@@ -37,22 +37,16 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
         }
     } guard{folder};
     ChunkLayout layout = planned;
-    InputStats stats;  // the part's sources, as forEachBatch indexes them
-    stats.sources.assign(context.stats().sources.begin() + long(inputs.firstSource),
-                         context.stats().sources.begin() + long(inputs.firstSource + inputs.sources));
     const uint64_t expected = inputs.points;
     MeshStore& meshes = *opt.inputs.meshes;
     progress.begin("distribute", expected);
     ChunkWriter chunkWriter(layout, folder, context.scalars().size());
     uint64_t seen = 0;
-    const InputOptions partOptions = partInputs(opt.inputs, inputs);
-    if (partOptions.defaultScene || !partOptions.paths.empty())
-        SC_TRY(forEachBatch(partOptions, stats, context.rootMin(), context.sourceIds().subspan(inputs.firstSource, inputs.sources),
-                            context.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-            seen += batch.size();
-            progress.advance(batch.size());
-            return chunkWriter.add(batch, scalars);
-        }));
+    SC_TRY(forEachPartBatch(context, inputs, context.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
+        seen += batch.size();
+        progress.advance(batch.size());
+        return chunkWriter.add(batch, scalars);
+    }));
     SC_TRY(chunkWriter.finish());
     meshes.setCapacity(0);  // the fields keep the textures; nothing reads the meshes again
     summary->meshReads = meshes.reads();  // the store's, since the scan: the build's in one process

@@ -308,16 +308,20 @@ Result<InputStats> readScan(const std::string& path, InputPart* part, uint32_t j
     return stats;
 }
 
-Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& c, const InputPart& part, Progress& progress) {
+Status forEachPartBatch(const BuildContext& c, const InputPart& part, std::span<const ScalarQuantization> stored,
+                        const BatchConsumer& consume) {
     const InputOptions inputs = partInputs(c.options().inputs, part);
-    std::vector<std::pair<uint32_t, uint32_t>> occupied;
-    if (!inputs.defaultScene && inputs.paths.empty()) return occupied;
+    if (!inputs.defaultScene && inputs.paths.empty()) return {};
     InputStats stats;  // the part's sources, as forEachBatch indexes them
     stats.sources.assign(c.stats().sources.begin() + long(part.firstSource),
                          c.stats().sources.begin() + long(part.firstSource + part.sources));
+    return forEachBatch(inputs, stats, c.rootMin(), c.sourceIds().subspan(part.firstSource, part.sources), stored, consume);
+}
+
+Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& c, const InputPart& part, Progress& progress) {
+    std::vector<std::pair<uint32_t, uint32_t>> occupied;
     std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
-    SC_TRY(forEachBatch(inputs, stats, c.rootMin(), c.sourceIds().subspan(part.firstSource, part.sources), {},
-                        [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+    SC_TRY(forEachPartBatch(c, part, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
         for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, c.rootEdge())]++;
         progress.advance(batch.size());
         return Status{};

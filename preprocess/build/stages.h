@@ -76,6 +76,10 @@ struct InputPart {
 InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts);
 // The options reading only `part`'s inputs.
 InputOptions partInputs(const InputOptions& inputs, const InputPart& part);
+// forEachBatch over `part`'s points (none for an empty part), with its
+// sources' statistics and ids, and the `stored` scalar fields.
+Status forEachPartBatch(const BuildContext& context, const InputPart& part, std::span<const ScalarQuantization> stored,
+                        const BatchConsumer& consume);
 
 // What the plan learns: with the options, all that the later stages need.
 struct BuildPlan {
