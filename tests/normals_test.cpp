@@ -77,11 +77,9 @@ TEST(Normals, PlaneFacesTheScanOrigin) {
 // A dense patch (40,000 points 5 mm apart on a tilted plane) beside sparse
 // points a thousand kilometres away: the grid's 21 bits per axis over that
 // cube (0.5 m cells) cannot resolve the patch, GridKnn says so, and the
-// normals come from the kd-tree instead (a single-chunk build of such scans
-// took 144 s in the grid's 27-cell blocks, 2.4 s so: BENCHMARKS.md, "Normals
-// of a dense cluster beside sparse scans"). Every patch normal is the
-// plane's, (-1, 0, 2)/sqrt(5), oriented up; the sparse points' own grid is
-// fine-grained enough.
+// normals come from the kd-tree instead (why: BENCHMARKS.md, "Normals of a
+// dense cluster beside sparse scans"). Every patch normal is the plane's,
+// (-1, 0, 2)/sqrt(5), oriented up.
 TEST(Normals, ADensePatchBesideFarScansTakesTheKdTree) {
     std::vector<Surfel> pts;
     for (int i = 0; i < 200; ++i)
