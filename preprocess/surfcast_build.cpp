@@ -39,8 +39,9 @@ const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (IN
 
 Builds a level-of-detail tile set (tileset.json, hierarchy.bin, blocks.bin)
 from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
-triangle strips), LAS 1.0-1.4, text columns (.xyz .txt .pts .csv), and meshes
-in OBJ/OFF/STL through OpenMesh. Several inputs merge into one tile set. A
+triangle strips), LAS 1.0-1.4 and LAZ (COPC too), E57 (every scan, posed; its
+normals face each scan's scanner), PCD, text columns (.xyz .txt .pts .csv),
+meshes in OBJ/OFF/STL through OpenMesh, and glTF. Several inputs merge into one tile set. A
 folder stands for every readable file under it; @LIST for the paths listed in
 the text file LIST, one per line. A point file may be an http(s) URL, read by
 ranges from any host that honours Range (meshes are read from local files).
@@ -76,7 +77,7 @@ ranges from any host that honours Range (meshes are read from local files).
                           intensity, classification where a field holds them). On
                           request: LAS/LAZ scan_angle, user_data, point_source_id,
                           gps_time, nir and Extra Bytes dimensions by name; PLY and
-                          PCD properties by name
+                          PCD properties by name; E57 row and column
   --opacity A             multiply every point's opacity by A in [0, 1] (all inputs);
                           the set stores opacity only where some point is translucent
                           (PLY alpha/opacity properties; see --read-alpha)

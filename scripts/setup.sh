@@ -20,9 +20,11 @@ packages=(
 # machines here have 20 from a configured source), else Debian's (18).
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
-# A Rust toolchain for the LAZ decoder (preprocess/readers/laz_ffi): any cargo on PATH,
-# else Debian's.
-command -v cargo >/dev/null 2>&1 || packages+=(cargo)
+# A Rust toolchain for the LAZ and E57 readers (preprocess/readers/laz_ffi): any
+# cargo on PATH of Rust 1.73 or newer, else Debian's rustc-web (1.85 or newer;
+# Debian 12's plain rustc is 1.63, older than the e57 crate needs).
+rust_minor=$(cargo --version 2>/dev/null | sed -n 's/^cargo 1\.\([0-9]*\).*/\1/p')
+[ "${rust_minor:-0}" -ge 73 ] || packages+=(cargo-web rustc-web)
 build=1
 for arg in "$@"; do
   case "$arg" in

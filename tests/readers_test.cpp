@@ -433,7 +433,7 @@ TEST(DefaultScene, DeterministicIrregularAndColoured) {
         for (auto& r : openDefaultScene(o)) {
             EXPECT_TRUE(r->description().hasColors);
             EXPECT_FALSE(r->description().hasNormals);
-            EXPECT_TRUE(r->description().scanOrigin.has_value());
+            EXPECT_TRUE(r->description().scanOrigins.size() == 1 && r->description().scanOrigins[0].has_value());
             auto part = readAll(*r, true);
             all.insert(all.end(), part.all.begin(), part.all.end());
         }

@@ -57,7 +57,7 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
     c->threads_ = c->opt_.threads;
     c->stats_ = std::move(stats);
     if (c->stats_.points == 0)
-        return Status::error("the inputs hold no valid points (" + std::to_string(c->stats_.skipped) + " skipped as NaN/Inf)");
+        return Status::error("the inputs hold no valid points (" + std::to_string(c->stats_.skipped) + " skipped: NaN/Inf or no return)");
     c->chooseRootBox();
     SC_TRY(c->chooseOrientationRules());
     SC_TRY(c->chooseAttributes());
@@ -281,7 +281,8 @@ void BuildContext::chooseRootBox() {
 
 // The normal-orientation policy of each input (normals.h), deduplicated: inputs
 // that orient alike share a rule, so Surfel::source stays 16-bit however many
-// inputs there are.
+// inputs there are. An input of several scans (E57) gets a rule per scan,
+// consecutive from sourceIds_[input], each toward its own scanner.
 Status BuildContext::chooseOrientationRules() {
     const Box3d& b = stats_.bounds;
     normals_.centre = (b.min + b.max) * 0.5 - rootMin_;
@@ -292,29 +293,35 @@ Status BuildContext::chooseOrientationRules() {
     std::vector<std::string> sources;
     for (const SourceStats& s : stats_.sources) {
         const InputDescription& d = s.description;
-        OrientationRule rule;
         const Box3d& sb = s.bounds;
         double sourceExtent = std::max({sb.max.x - sb.min.x, sb.max.y - sb.min.y, sb.max.z - sb.min.z});
-        // A default scan origin (PCD's 0,0,0) far from the data is no origin.
-        bool originUsable = d.scanOrigin && !(d.scanOriginIsDefault && distanceToBox(*d.scanOrigin, sb) > kFarOrigin * sourceExtent);
-        if (originUsable) rule.scanOrigin = *d.scanOrigin - rootMin_;
         // Airborne LiDAR, and any data much flatter than wide (terrain), face up.
         bool flat = sb.max.z - sb.min.z < kFlatRatio * std::max(sb.max.x - sb.min.x, sb.max.y - sb.min.y);
-        rule.up = d.airborne || (!originUsable && flat);
-        Vec3d o = rule.scanOrigin.value_or(Vec3d{});
-        // A textured mesh has a rule of its own: its surfels find their texture by it.
-        const bool ownRule = d.textured && opt_.textureFilter != BuildOptions::TextureFilter::Nearest;
-        auto [it, added] = ruleIds.try_emplace({rule.scanOrigin.has_value(), o.x, o.y, o.z, rule.up,
-                                                ownRule ? long(&s - stats_.sources.data()) : -1L},
-                                               uint16_t(normals_.rules.size()));
-        if (added) {
-            if (normals_.rules.size() > 0xFFFF)
-                return Status::error(d.path + ": more than 65,536 distinct scan origins among the inputs");
-            normals_.rules.push_back(rule);
+        const size_t scans = std::max<size_t>(1, d.scanOrigins.size());
+        for (size_t scan = 0; scan < scans; ++scan) {
+            OrientationRule rule;
+            const std::optional<Vec3d> origin = scan < d.scanOrigins.size() ? d.scanOrigins[scan] : std::nullopt;
+            // A default scan origin (PCD's 0,0,0) far from the data is no origin.
+            bool originUsable = origin && !(d.scanOriginIsDefault && distanceToBox(*origin, sb) > kFarOrigin * sourceExtent);
+            if (originUsable) rule.scanOrigin = *origin - rootMin_;
+            rule.up = d.airborne || (!originUsable && flat);
+            Vec3d o = rule.scanOrigin.value_or(Vec3d{});
+            // A textured mesh has a rule of its own: its surfels find their
+            // texture by it; so do the scans of a file of several, which
+            // find theirs by their order.
+            const bool ownRule = (d.textured && opt_.textureFilter != BuildOptions::TextureFilter::Nearest) || scans > 1;
+            auto [it, added] = ruleIds.try_emplace({rule.scanOrigin.has_value(), o.x, o.y, o.z, rule.up,
+                                                    ownRule ? long(normals_.rules.size()) : -1L},
+                                                   uint16_t(normals_.rules.size()));
+            if (added) {
+                if (normals_.rules.size() > 0xFFFF)
+                    return Status::error(d.path + ": more than 65,536 distinct scan origins among the inputs");
+                normals_.rules.push_back(rule);
+            }
+            if (scan == 0) sourceIds_.push_back(it->second);
+            std::string name = d.hasNormals ? "input" : orientationName(rule);
+            if (std::find(sources.begin(), sources.end(), name) == sources.end()) sources.push_back(name);
         }
-        sourceIds_.push_back(it->second);
-        std::string name = d.hasNormals ? "input" : orientationName(rule);
-        if (std::find(sources.begin(), sources.end(), name) == sources.end()) sources.push_back(name);
     }
     for (size_t i = 0; i < sources.size(); ++i) normalSource_ += (i ? "+" : "") + sources[i];
     // The textured meshes' fields, from the meshes the scan read (whose

@@ -15,8 +15,8 @@ namespace surfcast {
 
 namespace {
 
-constexpr char kPlanMagic[9] = "SCPLAN03";
-constexpr char kScanMagic[9] = "SCSCAN03";
+constexpr char kPlanMagic[9] = "SCPLAN04";
+constexpr char kScanMagic[9] = "SCSCAN04";
 constexpr char kCountMagic[9] = "SCCOUNT2";
 
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
@@ -94,12 +94,15 @@ void putStats(ByteWriter& w, const InputStats& s) {
         w.putString(d.format);
         w.put(d.declaredPoints);
         for (bool b : {d.hasNormals, d.hasColors, d.textured, d.hasIntensity, d.hasClassification, d.hasReturns,
-                       d.float32Coordinates, d.scanOrigin.has_value(), d.scanOriginIsDefault, d.airborne})
+                       d.float32Coordinates, d.scanOriginIsDefault, d.airborne})
             w.put(uint8_t(b));
         w.put(int32_t(d.colorBits));
         w.put(d.precision);
-        const Vec3d origin = d.scanOrigin.value_or(Vec3d{});
-        for (int a = 0; a < 3; ++a) w.put(origin[a]);
+        w.put(uint64_t(d.scanOrigins.size()));
+        for (const std::optional<Vec3d>& origin : d.scanOrigins) {
+            w.put(uint8_t(origin.has_value()));
+            for (int a = 0; a < 3; ++a) w.put(origin.value_or(Vec3d{})[a]);
+        }
         w.put(uint64_t(d.scalars.size()));
         for (const ScalarField& f : d.scalars) putField(w, f);
         w.put(src.points);
@@ -139,15 +142,18 @@ bool getStats(ByteReader& r, InputStats& s) {
         d.path = r.getString();
         d.format = r.getString();
         d.declaredPoints = r.get<uint64_t>();
-        bool hasOrigin = false;
         for (bool* b : {&d.hasNormals, &d.hasColors, &d.textured, &d.hasIntensity, &d.hasClassification, &d.hasReturns,
-                        &d.float32Coordinates, &hasOrigin, &d.scanOriginIsDefault, &d.airborne})
+                        &d.float32Coordinates, &d.scanOriginIsDefault, &d.airborne})
             *b = r.get<uint8_t>() != 0;
         d.colorBits = r.get<int32_t>();
         d.precision = r.get<double>();
-        Vec3d origin;
-        for (int a = 0; a < 3; ++a) origin[a] = r.get<double>();
-        if (hasOrigin) d.scanOrigin = origin;
+        d.scanOrigins.resize(r.getCount(25));
+        for (std::optional<Vec3d>& origin : d.scanOrigins) {
+            const bool has = r.get<uint8_t>() != 0;
+            Vec3d o;
+            for (int a = 0; a < 3; ++a) o[a] = r.get<double>();
+            if (has) origin = o;
+        }
         d.scalars.resize(r.getCount(13));
         for (ScalarField& f : d.scalars) f = getField(r);
         src.points = r.get<uint64_t>();

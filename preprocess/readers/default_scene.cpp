@@ -106,7 +106,7 @@ public:
         desc_.format = "scene";
         desc_.hasColors = true;
         desc_.colorBits = 8;
-        desc_.scanOrigin = origin_;
+        desc_.scanOrigins = {origin_};
         desc_.precision = kPositionPrecision;
     }
 

@@ -22,6 +22,7 @@ struct InputPoint {
     uint8_t classification = 0;  // ASPRS class (LAS 1.4: 0-255)
     uint8_t returns = 0;         // return number in bits 0-3, number of returns in bits 4-7
     uint8_t alpha = 255;         // opacity, 255 = opaque (PLY alpha/opacity, PCD rgba with --read-alpha)
+    uint16_t scan = 0;           // the scan of the file the point belongs to (InputDescription::scanOrigins)
 };
 
 // A named per-point scalar beyond the fixed attributes of InputPoint: LAS's
@@ -54,7 +55,9 @@ struct InputDescription {
     int colorBits = 8;               // bits of the file's colour channels (8 or 16)
     double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
     bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude
-    std::optional<Vec3d> scanOrigin; // where the scanner stood, when the format says
+    // Where the scanner stood for each scan of the file, where the format says
+    // (InputPoint::scan indexes it; empty: one scan, origin unknown).
+    std::vector<std::optional<Vec3d>> scanOrigins;
     bool scanOriginIsDefault = false; // the format's default (0,0,0), possibly meaningless
     bool airborne = false;           // aerial LiDAR: normals point up
     std::vector<ScalarField> scalars; // the scalar fields this reader decodes (its ScalarSelection's), in value order
@@ -78,6 +81,10 @@ protected:
     uint64_t skipped_ = 0;
     std::vector<double> scalarValues_;
 };
+
+// Prints "warning: MESSAGE" to stderr once per message in the process: a
+// build opens each input in several passes, and may read a mesh again.
+void warnOnce(const std::string& message);
 
 // A file name's extension in lower case, with its dot ("" when none).
 std::string lowerExtension(const std::string& path);

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "byte_stream.h"
+#include "e57_reader.h"
 #include "las_reader.h"
 #include "pcd_reader.h"
 #include "ply_reader.h"
@@ -52,7 +53,7 @@ Result<InputKind> inputKind(const std::string& path, const InputOptions& options
         return plyHasFaces(*header) ? InputKind::Mesh : InputKind::Points;
     }
     const std::string m(magic, 4);
-    if (m == "# .P" || m == "VERS" || m == "LASF") return InputKind::Points;
+    if (m == "# .P" || m == "VERS" || m == "LASF" || m == "ASTM") return InputKind::Points;
     return isMeshExtension(path) ? InputKind::Mesh : InputKind::Points;
 }
 
@@ -81,8 +82,9 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
         return openPcdReader(path, options.scalars, options.readAlpha);
     if (las) return openLasReader(path, options.threads, options.scalars, range);
+    if (ext == ".e57" || std::string(magic, 4) == "ASTM") return openE57Reader(path, options.scalars);
     if (isTextExtension(ext)) return openTextReader(path, options.columns);
-    return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
+    return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, E57, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
 }
 
 uint16_t scaled(uint16_t raw, double scale) { return uint16_t(std::min(65535.0, raw * scale)); }
@@ -90,7 +92,8 @@ uint16_t scaled(uint16_t raw, double scale) { return uint16_t(std::min(65535.0, 
 // The extensions openOne() recognizes (it also goes by magic bytes).
 bool readableExtension(const std::string& path) {
     std::string ext = lowerExtension(path);
-    return ext == ".ply" || ext == ".pcd" || ext == ".las" || ext == ".laz" || isMeshExtension(path) || isTextExtension(ext);
+    return ext == ".ply" || ext == ".pcd" || ext == ".las" || ext == ".laz" || ext == ".e57" || isMeshExtension(path) ||
+           isTextExtension(ext);
 }
 
 }  // namespace
@@ -452,6 +455,8 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
         if (r >= stats.sources.size() || r >= sourceIds.size())
             return Status::error("the inputs changed while being read: more inputs than the first pass saw");
         const SourceStats& src = stats.sources[r];
+        // A file of several scans has a rule per scan from sourceIds[r] on (BuildContext::chooseOrientationRules).
+        const size_t scans = std::max<size_t>(1, src.description.scanOrigins.size());
         // Where each stored field is among this input's, or -1.
         const std::vector<ScalarField>& own = reader.description().scalars;
         std::vector<int> from(stored.size(), -1);
@@ -467,7 +472,7 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 s = Surfel{};
                 s.position = batch[i].position - origin;
                 s.normal = batch[i].normal;
-                s.source = sourceIds[r];
+                s.source = uint16_t(sourceIds[r] + (batch[i].scan < scans ? batch[i].scan : 0));
                 for (int c = 0; c < 3; ++c)
                     s.color[c] = src.description.hasColors ? scaled(batch[i].color[c], src.colorScale) : 65535;
                 s.intensity = batch[i].intensity;

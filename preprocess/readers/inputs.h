@@ -112,7 +112,8 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
 InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool>& continues);
 
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
-// 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input]), in
+// 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input] + the
+// point's scan where its input has several), in
 // batches, with the `stored` scalar fields quantized: stored.size() per point.
 using BatchConsumer = std::function<Status(std::span<Surfel>, std::span<const uint32_t> scalars)>;
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,

@@ -47,14 +47,6 @@ struct LoadedMesh {
 
 namespace {
 
-// Once per message, though a mesh may be read again (MeshStore drops one
-// that the budget cannot keep).
-void warnOnce(const std::string& message) {
-    static std::mutex mutex;
-    static std::set<std::string> warned;
-    std::lock_guard lock(mutex);
-    if (warned.insert(message).second) std::fprintf(stderr, "warning: %s\n", message.c_str());
-}
 
 
 

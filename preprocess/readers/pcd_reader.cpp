@@ -170,7 +170,7 @@ public:
         // PCL writes VIEWPOINT 0 0 0 1 0 0 0 by default: the sensor at the origin
         // of the cloud's frame, right for depth cameras, meaningless for
         // georeferenced data (see the builder's orientation rules).
-        desc_.scanOrigin = Vec3d{h_.viewpoint[0], h_.viewpoint[1], h_.viewpoint[2]};
+        desc_.scanOrigins = {Vec3d{h_.viewpoint[0], h_.viewpoint[1], h_.viewpoint[2]}};
         desc_.scanOriginIsDefault = h_.viewpoint[0] == 0 && h_.viewpoint[1] == 0 && h_.viewpoint[2] == 0;
     }
 

@@ -10,6 +10,8 @@ use std::sync::{Arc, Mutex};
 use laz::laszip::{ChunkTable, ChunkTableEntry};
 use laz::{par_decompress, LasZipDecompressor, LazItemType, LazVlr};
 
+mod e57_ffi;
+
 /// Reads up to `len` bytes at `offset` into `out`: the bytes read (fewer
 /// only where the file ends), or -1.
 pub type ScReadAt = extern "C" fn(ctx: *mut c_void, offset: u64, out: *mut u8, len: u64) -> i64;
