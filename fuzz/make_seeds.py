@@ -7,7 +7,7 @@ and block case, good and bad, for fuzz_tileset and fuzz_block).
 Usage: make_seeds.py DATA_DIR SETS_DIR OUT_DIR
   DATA_DIR  ../shared/data (PROVENANCE.md lists the scans)
   SETS_DIR  a folder of tile sets (fuzz/run.sh builds them)
-  OUT_DIR   gets one folder per target: read_ply, read_las, read_laz, read_pcd,
+  OUT_DIR   gets one folder per target: read_ply, read_las, read_laz, read_e57, read_pcd,
             read_xyz, read_obj, read_gltf, read_glb, tileset, block (client_response, http_request
             and range seeds are committed in fuzz/seeds)
 Needs laspy with lazrs (scripts/test-venv.sh installs them into build/test-venv).
@@ -105,6 +105,20 @@ def lzf_literal(data):
         outb.append(len(chunk) - 1)
         outb += chunk
     return bytes(outb)
+
+
+def e57_seeds(data, dst):
+    """The shared E57 files under 64 KiB, as their pages' payloads: the
+    target (fuzz/read_e57.cpp) writes the checksums back."""
+    folder = os.path.join(data, "e57")
+    for name in sorted(os.listdir(folder)):
+        path = os.path.join(folder, name)
+        if not name.endswith(".e57") or os.path.getsize(path) > 65536:
+            continue
+        with open(path, "rb") as f:
+            raw = f.read()
+        payload = b"".join(raw[k:k + 1020] for k in range(0, len(raw), 1024))
+        out(os.path.join(dst, name), payload)
 
 
 def pcd_seeds(data, dst):
@@ -287,6 +301,7 @@ def main():
     conformance_seeds(os.path.join(dst, "tileset"), os.path.join(dst, "block"))
     ply_seeds(data, os.path.join(dst, "read_ply"))
     las_seeds(data, os.path.join(dst, "read_las"), os.path.join(dst, "read_laz"))
+    e57_seeds(data, os.path.join(dst, "read_e57"))
     pcd_seeds(data, os.path.join(dst, "read_pcd"))
     text_seeds(data, os.path.join(dst, "read_xyz"))
     obj_seeds(data, os.path.join(dst, "read_obj"))

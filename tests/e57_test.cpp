@@ -304,7 +304,7 @@ TEST(E57, ScansArePosedAndScaledByTheirLimits) {
 // plan: the same bytes.
 TEST(E57, NormalsFaceEachScanner) {
     test::TempDir dir;
-    const std::vector<RoomPoint> pts = room(0.05);
+    const std::vector<RoomPoint> pts = room(test::kSanitized ? 0.1 : 0.05);  // the same paths, a quarter of the points
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, roomSpec(pts), dir.file("room.e57")));
     const std::vector<std::string> options = {dir.file("room.e57"), "--memory", "96M", "--capacity", "4000"};
     auto build = test::run({test::binary("surfcast-build"), "-q", options[0], options[1], options[2], options[3], options[4], "-o",
@@ -365,6 +365,22 @@ TEST(E57, BadFilesAreClearErrors) {
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "claim 0 1000000000\n", dir.file("claims.e57")));
     // A rotation that is not a unit quaternion (it would scale the scan).
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, "scan b\npose 2 0 0 0 0 0 0\nfields cartesian\np 0 0 0\n", dir.file("scaled.e57")));
+    // A prototype without coordinates, and one with a field E57 does not define.
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "replace <cartesianX <intensity\nreplace </cartesianX> </intensity>\n",
+                                     dir.file("nocoordinates.e57")));
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "replace <cartesianX <cartesianQ\nreplace </cartesianX> </cartesianQ>\n",
+                                     dir.file("unknown.e57")));
+    // A flipped byte in a scan's data (its second page; the XML is at the
+    // end): that page's checksum fails when the scan is read.
+    {
+        std::string many = "scan c\nfields cartesian\n";
+        for (int i = 0; i < 1000; ++i) many += "p " + std::to_string(i) + " 0.5 0.25\n";
+        ASSERT_NO_FATAL_FAILURE(writeE57(dir, many, dir.file("many.e57")));
+        std::string bytes = test::readFile(dir.file("many.e57"));
+        ASSERT_GT(bytes.size(), 4096u);
+        bytes[1500] = char(bytes[1500] ^ 0x10);
+        test::writeFile(dir.file("flipped.e57"), bytes);
+    }
     // Truncated: the good file without its last page.
     {
         std::string bytes = test::readFile(dir.file("good.e57"));
@@ -379,6 +395,9 @@ TEST(E57, BadFilesAreClearErrors) {
         {test::dataFile("e57/bad-crc.e57"), "checksum"},
         {dir.file("truncated.e57"), "truncated"},
         {dir.file("claims.e57"), "scan 0 ('a')"},
+        {dir.file("nocoordinates.e57"), "scan 0 ('a'): neither cartesian nor spherical coordinates"},
+        {dir.file("unknown.e57"), "cartesianQ"},
+        {dir.file("flipped.e57"), "scan 0 ('c'): "},
         {dir.file("scaled.e57"), "scan 0 ('b'): the pose's rotation quaternion (2, 0, 0, 0) is not a unit quaternion"},
     };
     for (const Case& c : cases) {

@@ -148,8 +148,13 @@ fn open(mut file: Input) -> Result<ScE57Reader, String> {
         let spherical = has(c, RecordName::SphericalRange) && has(c, RecordName::SphericalAzimuth) &&
                         has(c, RecordName::SphericalElevation);
         if !cartesian && !spherical {
-            return Err(format!("{}: neither cartesian nor spherical coordinates among its {} fields", scan_name(&clouds, k),
-                               c.prototype.len()));
+            let fields: Vec<String> = c.prototype.iter().map(|r| match &r.name {
+                RecordName::Unknown { namespace, name } if namespace.is_empty() => name.clone(),
+                RecordName::Unknown { namespace, name } => format!("{}:{}", namespace, name),
+                known => format!("{:?}", known),
+            }).collect();
+            return Err(format!("{}: neither cartesian nor spherical coordinates among its fields ({})", scan_name(&clouds, k),
+                               fields.join(", ")));
         }
         if let Some(t) = &c.transform {
             let q = &t.rotation;

@@ -12,6 +12,8 @@
 //!                                   (radians); then the fields in that order
 //!   claim SCAN RECORDS              after the scans: the XML declares RECORDS
 //!                                   points for scan SCAN (a lying file)
+//!   replace OLD NEW                 after the scans: the XML with the first OLD
+//!                                   replaced by NEW (a malformed file)
 
 use std::io::BufRead;
 
@@ -70,6 +72,7 @@ fn main() {
     let out = std::env::args().nth(1).expect("usage: surfcast-write-e57 OUT.e57 < SPEC");
     let mut scans: Vec<Scan> = Vec::new();
     let mut claims: Vec<(usize, u64)> = Vec::new();
+    let mut replacements: Vec<(String, String)> = Vec::new();
     for (k, line) in std::io::stdin().lock().lines().enumerate() {
         let line = line.expect("cannot read the spec");
         let words: Vec<&str> = line.split('#').next().unwrap().split_whitespace().collect();
@@ -107,6 +110,10 @@ fn main() {
             "claim" => {
                 let v = numbers(rest, k + 1);
                 claims.push((v[0] as usize, v[1] as u64));
+            }
+            "replace" => {
+                assert!(rest.len() == 2, "line {}: replace wants OLD NEW", k + 1);
+                replacements.push((rest[0].to_string(), rest[1].to_string()));
             }
             _ => panic!("line {}: unknown line '{}'", k + 1, head),
         }
@@ -162,6 +169,9 @@ fn main() {
                 let start = at + xml[at..].find(key).unwrap() + key.len();
                 let end = start + xml[start..].find('"').unwrap();
                 xml.replace_range(start..end, &records.to_string());
+            }
+            for (old, new) in &replacements {
+                xml = xml.replacen(old.as_str(), new, 1);
             }
             Ok(xml)
         })
