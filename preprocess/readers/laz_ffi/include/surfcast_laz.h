@@ -1,7 +1,8 @@
 /* C ABI of the surfcast_laz Rust static library (preprocess/readers/laz_ffi).
  * Decompresses the point records of a LAZ file, whose bytes the caller reads
  * for it (a local file or a URL); the LAS header and VLRs are parsed by the
- * caller (las_reader.cpp). Errors come back as text in `err`. */
+ * caller (las_reader.cpp). Compresses records into a LAZ stream whose header
+ * the caller writes (export/laz_export.cpp). Errors come back as text in `err`. */
 #ifndef SURFCAST_LAZ_H
 #define SURFCAST_LAZ_H
 
@@ -46,6 +47,30 @@ int sc_laz_chunk_start(const ScLazReader* reader, uint64_t chunk, uint64_t* firs
 int sc_laz_read(ScLazReader* reader, uint8_t* out, uint64_t points, char* err, size_t err_len);
 
 void sc_laz_close(ScLazReader* reader);
+
+/* Writing (src/laz_writer.rs). The output is a stream that never seeks back:
+ * the chunk table's offset at the start of the point data stays -1 and the
+ * offset itself is the file's last 8 bytes, where LASzip readers look for it. */
+typedef struct ScLazWriter ScLazWriter;
+
+/* Appends `len` bytes to the output: returns 0, or -1 on an error. */
+typedef int (*ScWrite)(void* ctx, const uint8_t* data, uint64_t len);
+
+/* The LASzip VLR's payload (user "laszip encoded", record 22204) for point
+ * format `point_format` with `extra_bytes` bytes per record beyond it, into
+ * `out` (room for `cap`), its length in `len`. Returns 0, or -1. */
+int sc_laz_vlr(uint8_t point_format, uint16_t extra_bytes, uint8_t* out, size_t cap, size_t* len);
+
+/* A compressor of such records whose point data starts at byte `data_offset`
+ * of the file (the caller writes the header and VLRs before it); its bytes go
+ * to `write(ctx, ...)` in order, from the calling thread. NULL on error. */
+ScLazWriter* sc_laz_writer_open(ScWrite write, void* ctx, uint64_t data_offset, uint8_t point_format, uint16_t extra_bytes,
+                                char* err, size_t err_len);
+/* Compresses `count` records (count * the format's size bytes). 0, or -1. */
+int sc_laz_writer_write(ScLazWriter* writer, const uint8_t* records, uint64_t count, char* err, size_t err_len);
+/* Ends the last chunk, writes the chunk table and its offset. 0, or -1. */
+int sc_laz_writer_finish(ScLazWriter* writer, char* err, size_t err_len);
+void sc_laz_writer_close(ScLazWriter* writer);
 
 #ifdef __cplusplus
 }

@@ -11,6 +11,7 @@ use laz::laszip::{ChunkTable, ChunkTableEntry};
 use laz::{par_decompress, LasZipDecompressor, LazItemType, LazVlr};
 
 mod e57_ffi;
+mod laz_writer;
 
 /// Reads up to `len` bytes at `offset` into `out`: the bytes read (fewer
 /// only where the file ends), or -1.

@@ -1,0 +1,54 @@
+// A tile set's points back out as LAZ: the input points its leaves hold
+// (docs/FORMAT.md: leaves are the input points, exact duplicates merged),
+// those inside a box and of the classes asked for, with their colour,
+// intensity, classification, returns and the LAS fields the set stores as
+// scalar attributes (gps_time, scan_angle, user_data, point_source_id).
+// LAS 1.4, point format 6 (7 with colour), compressed by the `laz` crate
+// (preprocess/readers/laz_ffi), written as a stream: surfcast-export writes
+// it to a file, surfcast-serve sends it as it is produced.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tileset_reader.h"
+
+namespace surfcast {
+
+struct PointFilter {
+    std::optional<Box3d> box;  // world coordinates, bounds included; none: every point
+    std::vector<uint8_t> classes;  // ASPRS classes kept; empty: every class
+};
+
+// "xmin,ymin,zmin,xmax,ymax,zmax" and "2,6,9": errors name the text.
+Result<Box3d> parseBox(const std::string& text);
+Result<std::vector<uint8_t>> parseClasses(const std::string& text);
+
+// What an export writes, from a first pass over the leaves the filter
+// reaches (each decoded once): the points it keeps, their bounds, and the
+// LAS layout (scale, offset, point format).
+struct LazExportPlan {
+    std::vector<size_t> nodes;  // indices into set.nodes(): leaves the filter reaches, in hierarchy order
+    uint64_t points = 0;
+    Box3d bounds;
+    double scale = 0.001;  // per axis, as LAS stores it
+    Vec3d offset;
+    int pointFormat = 6;   // 6, or 7 with colour
+};
+
+// The most points the filter can keep, from the hierarchy alone (the
+// surfels of the leaves its box reaches): a cheap refusal of an export over
+// a limit before any block is decoded.
+uint64_t exportPointsAtMost(const TilesetReader& set, const PointFilter& filter);
+
+Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter);
+
+// The LAZ file's bytes, in order, to `out` (which may fail the export).
+// Decodes the plan's leaves again; fails if they no longer give its points.
+Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const LazExportPlan& plan,
+                      const std::function<Status(const uint8_t*, size_t)>& out);
+
+}  // namespace surfcast

@@ -1,0 +1,149 @@
+// surfcast-export: a tile set's points out to other tools. main() parses
+// arguments and writes the file atomically; the export is laz_export.h's.
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <string>
+
+#include "http_tile_source.h"
+#include "laz_export.h"
+
+namespace {
+
+const char* kUsage = R"(usage: surfcast-export SET --format laz [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
+
+Writes a tile set's points as another format. SET is a set's folder or its
+http(s) URL.
+
+  --format laz          LAS 1.4 compressed with LASzip (the laz crate): the input
+                        points the set's leaves hold (exact duplicates merged at
+                        build), point format 6, or 7 with colour; intensity,
+                        classification, returns, and GPS time, scan angle, user
+                        data and point source id where the set stores them
+  --bbox X0,Y0,Z0,X1,Y1,Z1
+                        only the points inside this box (world coordinates,
+                        bounds included)
+  --classes LIST        only these ASPRS classes, e.g. 2,6 (the set must store
+                        classification)
+  -o, --output FILE     the file to write (replaced atomically)
+  --header 'NAME: VALUE', --token-file F, --ca-file F, --insecure,
+  --redirect-credentials
+                        how to reach a set at a URL, as in surfcast-view
+  -q, --quiet           no progress output
+  -h, --help            this text
+)";
+
+int usageError(const std::string& message) {
+    std::fprintf(stderr, "surfcast-export: %s\n(surfcast-export --help for usage)\n", message.c_str());
+    return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    using namespace surfcast;
+    std::string set, format, output;
+    PointFilter filter;
+    HttpOptions http;
+    bool quiet = false;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        auto value = [&](std::string* out) {
+            if (i + 1 >= argc) return false;
+            *out = argv[++i];
+            return true;
+        };
+        std::string v;
+        if (a == "-h" || a == "--help") {
+            std::fputs(kUsage, stdout);
+            return 0;
+        } else if (a == "--format") {
+            if (!value(&format)) return usageError("--format wants laz");
+        } else if (a == "-o" || a == "--output") {
+            if (!value(&output)) return usageError("-o wants a file");
+        } else if (a == "--bbox") {
+            if (!value(&v)) return usageError("--bbox wants X0,Y0,Z0,X1,Y1,Z1");
+            auto box = parseBox(v);
+            if (!box) return usageError("--bbox: " + box.status().message());
+            filter.box = *box;
+        } else if (a == "--classes") {
+            if (!value(&v)) return usageError("--classes wants a list such as 2,6");
+            auto classes = parseClasses(v);
+            if (!classes) return usageError("--classes: " + classes.status().message());
+            filter.classes = *classes;
+        } else if (a == "--header") {
+            if (!value(&v) || v.find(':') == std::string::npos || v.find(':') == 0) return usageError("--header wants 'Name: value'");
+            http.headers.push_back(v);
+        } else if (a == "--token-file") {
+            if (!value(&http.tokenFile)) return usageError("--token-file wants a file");
+        } else if (a == "--ca-file") {
+            if (!value(&http.caFile)) return usageError("--ca-file wants a PEM file");
+        } else if (a == "--insecure") {
+            http.insecure = true;
+        } else if (a == "--redirect-credentials") {
+            http.redirectCredentials = true;
+        } else if (a == "-q" || a == "--quiet") {
+            quiet = true;
+        } else if (!a.empty() && a[0] == '-') {
+            return usageError("unknown option " + a);
+        } else if (set.empty()) {
+            set = a;
+        } else {
+            return usageError("one set at a time ('" + set + "' and '" + a + "' given)");
+        }
+    }
+    if (set.empty()) return usageError("no set given");
+    if (format.empty()) return usageError("--format is required (laz)");
+    if (format != "laz") return usageError("--format " + format + ": the formats are laz");
+    if (output.empty()) return usageError("-o FILE is required");
+
+    auto reader = openTileset(set, http);
+    if (!reader) {
+        std::fprintf(stderr, "surfcast-export: %s\n", reader.status().message().c_str());
+        return 1;
+    }
+    auto plan = planLazExport(*reader, filter);
+    if (!plan) {
+        std::fprintf(stderr, "surfcast-export: %s\n", plan.status().message().c_str());
+        return 1;
+    }
+    if (!quiet)
+        std::fprintf(stderr, "%llu points from %zu leaves; LAS scale %g\n", (unsigned long long)plan->points, plan->nodes.size(), plan->scale);
+
+    // Written beside the output, then renamed over it: a reader finds the old file or the whole new one.
+    const std::string partial = output + ".partial-" + std::to_string(::getpid());
+    std::FILE* f = std::fopen(partial.c_str(), "wb");
+    if (!f) {
+        std::fprintf(stderr, "surfcast-export: %s: %s\n", partial.c_str(), std::strerror(errno));
+        return 1;
+    }
+    uint64_t bytes = 0, reported = 0;
+    Status status = writeLazExport(*reader, filter, *plan, [&](const uint8_t* data, size_t n) -> Status {
+        if (std::fwrite(data, 1, n, f) != n) return Status::error(partial + ": " + std::strerror(errno));
+        bytes += n;
+        if (!quiet && bytes - reported >= (64u << 20)) {
+            std::fprintf(stderr, "  %llu MiB written\n", (unsigned long long)(bytes >> 20));
+            reported = bytes;
+        }
+        return {};
+    });
+    if (status.ok() && (std::fflush(f) != 0 || ::fsync(::fileno(f)) != 0)) status = Status::error(partial + ": " + std::strerror(errno));
+    if (std::fclose(f) != 0 && status.ok()) status = Status::error(partial + ": " + std::strerror(errno));
+    std::error_code ec;
+    if (status.ok()) {
+        std::filesystem::rename(partial, output, ec);
+        if (ec) status = Status::error(output + ": " + ec.message());
+    }
+    if (!status.ok()) {
+        std::filesystem::remove(partial, ec);
+        std::fprintf(stderr, "surfcast-export: %s\n", status.message().c_str());
+        return 1;
+    }
+    if (!quiet)
+        std::fprintf(stderr, "wrote %s: %llu points, %llu bytes (%.2f per point)\n", output.c_str(), (unsigned long long)plan->points,
+                     (unsigned long long)bytes, plan->points ? double(bytes) / double(plan->points) : 0.0);
+    return 0;
+}

@@ -1,0 +1,202 @@
+//! LAZ compression through the `laz` crate, exposed to C++ (see
+//! include/surfcast_laz.h, "Writing"). The output is a stream that never
+//! seeks back: the chunk table's offset at the start of the point data stays
+//! -1, and the offset follows the chunk table as the file's last 8 bytes,
+//! which LASzip readers look for there (so that a server can send the file
+//! as it is compressed). Panics never cross the boundary.
+
+use std::io::{Seek, SeekFrom, Write};
+use std::os::raw::{c_char, c_int, c_void};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use laz::{LasZipCompressor, LazVlr, LazVlrBuilder};
+
+use crate::{panic_message, write_err};
+
+/// Appends `len` bytes to the output: 0, or -1 on an error.
+pub type ScWrite = extern "C" fn(ctx: *mut c_void, data: *const u8, len: u64) -> c_int;
+
+// Bytes gathered before a call to the caller's function.
+const FLUSH_BYTES: usize = 1 << 20;
+
+// The output as the compressor sees it: positions are the file's, from the
+// point data's start on; the only write behind the end is the chunk table's
+// offset over its reserved -1, which is kept for the file's end instead.
+struct Stream {
+    write: ScWrite,
+    ctx: *mut c_void,
+    buffer: Vec<u8>,
+    flushed: u64, // file position of buffer[0]
+    pos: u64,
+    offset: Option<[u8; 8]>,
+}
+
+// SAFETY: used on the thread that calls the sc_laz_writer functions only.
+unsafe impl Send for Stream {}
+
+impl Stream {
+    fn end(&self) -> u64 {
+        self.flushed + self.buffer.len() as u64
+    }
+    fn flush_buffer(&mut self) -> std::io::Result<()> {
+        if !self.buffer.is_empty() {
+            if (self.write)(self.ctx, self.buffer.as_ptr(), self.buffer.len() as u64) != 0 {
+                return Err(std::io::Error::new(std::io::ErrorKind::Other, "the output refused the bytes"));
+            }
+            self.flushed += self.buffer.len() as u64;
+            self.buffer.clear();
+        }
+        Ok(())
+    }
+}
+
+impl Write for Stream {
+    fn write(&mut self, data: &[u8]) -> std::io::Result<usize> {
+        if self.pos < self.end() {
+            if data.len() == 8 && self.offset.is_none() {
+                self.offset = Some(data.try_into().unwrap());
+                self.pos += 8;
+                return Ok(8);
+            }
+            return Err(std::io::Error::new(std::io::ErrorKind::Other, "a write behind the stream's end"));
+        }
+        self.buffer.extend_from_slice(data);
+        self.pos += data.len() as u64;
+        if self.buffer.len() >= FLUSH_BYTES {
+            self.flush_buffer()?;
+        }
+        Ok(data.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Seek for Stream {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        self.pos = match to {
+            SeekFrom::Start(n) if n <= self.end() => n,
+            SeekFrom::Current(0) => self.pos,
+            SeekFrom::End(0) => self.end(),
+            _ => return Err(std::io::Error::new(std::io::ErrorKind::Other, "an unsupported seek on a stream")),
+        };
+        Ok(self.pos)
+    }
+}
+
+pub struct ScLazWriter {
+    compressor: LasZipCompressor<'static, Stream>,
+    point_size: usize,
+}
+
+fn vlr_for(point_format: u8, extra_bytes: u16) -> Result<LazVlr, String> {
+    LazVlrBuilder::default()
+        .with_point_format(point_format, extra_bytes)
+        .map(|b| b.build())
+        .map_err(|e| format!("point format {}: {}", point_format, e))
+}
+
+/// The LASzip VLR's payload for `point_format` (0-10) with `extra_bytes`
+/// bytes per record beyond the format's: written into `out` (room for `cap`),
+/// its length in `len`. Returns 0, or -1 (too small, or no such format).
+#[no_mangle]
+pub extern "C" fn sc_laz_vlr(point_format: u8, extra_bytes: u16, out: *mut u8, cap: usize, len: *mut usize) -> c_int {
+    let result = catch_unwind(|| -> Result<Vec<u8>, String> {
+        let mut bytes = Vec::new();
+        vlr_for(point_format, extra_bytes)?.write_to(&mut bytes).map_err(|e| e.to_string())?;
+        Ok(bytes)
+    });
+    match result {
+        Ok(Ok(bytes)) if bytes.len() <= cap && !out.is_null() && !len.is_null() => {
+            // SAFETY: the caller gives `cap` writable bytes at out.
+            unsafe {
+                std::ptr::copy_nonoverlapping(bytes.as_ptr(), out, bytes.len());
+                *len = bytes.len();
+            }
+            0
+        }
+        _ => -1,
+    }
+}
+
+/// A compressor of `point_format` records whose point data starts at byte
+/// `data_offset` of the file, its bytes handed to `write(ctx, ...)` in order.
+#[no_mangle]
+pub extern "C" fn sc_laz_writer_open(write: Option<ScWrite>, ctx: *mut c_void, data_offset: u64, point_format: u8,
+                                     extra_bytes: u16, err: *mut c_char, err_len: usize) -> *mut ScLazWriter {
+    let Some(write) = write else {
+        write_err(err, err_len, "null argument");
+        return std::ptr::null_mut();
+    };
+    let result = catch_unwind(AssertUnwindSafe(|| -> Result<ScLazWriter, String> {
+        let vlr = vlr_for(point_format, extra_bytes)?;
+        let point_size = vlr.items_size() as usize;
+        let stream = Stream { write, ctx, buffer: Vec::new(), flushed: data_offset, pos: data_offset, offset: None };
+        let compressor = LasZipCompressor::new(stream, vlr).map_err(|e| e.to_string())?;
+        Ok(ScLazWriter { compressor, point_size })
+    }));
+    match result {
+        Ok(Ok(w)) => Box::into_raw(Box::new(w)),
+        Ok(Err(message)) => {
+            write_err(err, err_len, &message);
+            std::ptr::null_mut()
+        }
+        Err(p) => {
+            write_err(err, err_len, &format!("LAZ compressor panicked: {}", panic_message(p)));
+            std::ptr::null_mut()
+        }
+    }
+}
+
+fn run(writer: *mut ScLazWriter, err: *mut c_char, err_len: usize,
+       f: impl FnOnce(&mut ScLazWriter) -> std::io::Result<()>) -> c_int {
+    // SAFETY: writer comes from sc_laz_writer_open.
+    let Some(w) = (unsafe { writer.as_mut() }) else {
+        write_err(err, err_len, "null writer");
+        return -1;
+    };
+    match catch_unwind(AssertUnwindSafe(|| f(w))) {
+        Ok(Ok(())) => 0,
+        Ok(Err(e)) => {
+            write_err(err, err_len, &e.to_string());
+            -1
+        }
+        Err(p) => {
+            write_err(err, err_len, &format!("LAZ compressor panicked: {}", panic_message(p)));
+            -1
+        }
+    }
+}
+
+/// Compresses `count` records of the format's size from `records`. Returns 0, or -1.
+#[no_mangle]
+pub extern "C" fn sc_laz_writer_write(writer: *mut ScLazWriter, records: *const u8, count: u64, err: *mut c_char,
+                                      err_len: usize) -> c_int {
+    run(writer, err, err_len, |w| {
+        // SAFETY: the caller gives count records at `records`.
+        let bytes = unsafe { std::slice::from_raw_parts(records, count as usize * w.point_size) };
+        w.compressor.compress_many(bytes)
+    })
+}
+
+/// Ends the last chunk and writes the chunk table and its offset: the
+/// file's last bytes. Returns 0, or -1.
+#[no_mangle]
+pub extern "C" fn sc_laz_writer_finish(writer: *mut ScLazWriter, err: *mut c_char, err_len: usize) -> c_int {
+    run(writer, err, err_len, |w| {
+        w.compressor.done()?;
+        let stream = w.compressor.get_mut();
+        let offset = stream.offset.take().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::Other, "no chunk table offset"))?;
+        stream.pos = stream.end();
+        stream.write_all(&offset)?;
+        stream.flush_buffer()
+    })
+}
+
+#[no_mangle]
+pub extern "C" fn sc_laz_writer_close(writer: *mut ScLazWriter) {
+    if !writer.is_null() {
+        // SAFETY: writer comes from sc_laz_writer_open and is closed once.
+        drop(unsafe { Box::from_raw(writer) });
+    }
+}

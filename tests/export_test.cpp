@@ -1,0 +1,156 @@
+// surfcast-export --format laz: a set's input points back out, checked
+// against the LAS file the set was built from by laspy (an independent
+// reader: tests/tools/compare_las.py) and by the build's own LAS reader.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "las_reader.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+
+namespace fs = std::filesystem;
+using namespace surfcast;
+
+namespace {
+
+// autzen_trim.las stores coordinates at 0.01 (its scale): a leaf keeps them
+// within half of that (FORMAT.md: leaves use the input's own precision), and
+// the export's LAS scale (the power of ten at or below the finest leaf step,
+// 0.001 here) adds at most half of its own. Matching exported points to the
+// original's by rounding to 0.01 then finds each one, and a box grown and
+// shrunk by the sum brackets the points the export keeps.
+constexpr double kPositionError = 0.005 + 0.0005;
+
+nlohmann::json compare(const std::string& original, const std::string& exported, const std::vector<std::string>& filter) {
+    std::vector<std::string> args = {SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/compare_las.py", original, exported, "--tolerance",
+                                     std::to_string(kPositionError)};
+    args.insert(args.end(), filter.begin(), filter.end());
+    auto r = test::run(args);
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    return r.exitCode == 0 ? nlohmann::json::parse(r.output) : nlohmann::json{};
+}
+
+uint64_t countWithOwnReader(const std::string& path) {
+    auto r = openLasReader(path);
+    EXPECT_TRUE(r.ok()) << r.status().message();
+    if (!r.ok()) return 0;
+    std::vector<InputPoint> batch(10000);
+    uint64_t n = 0;
+    while (true) {
+        auto got = (*r)->read(batch.data(), batch.size());
+        EXPECT_TRUE(got.ok()) << got.status().message();
+        if (!got.ok() || *got == 0) break;
+        n += *got;
+    }
+    return n;
+}
+
+class Export : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() {
+        if (!test::haveData() || !fs::exists(SURFCAST_TEST_PYTHON)) return;
+        dir_ = new test::TempDir;
+        auto b = test::run({test::binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "--attributes", "all", "-o",
+                            dir_->file("autzen")});
+        ASSERT_EQ(b.exitCode, 0) << b.output;
+    }
+    static void TearDownTestSuite() {
+        delete dir_;
+        dir_ = nullptr;
+    }
+    void SetUp() override {
+        REQUIRE_DATA();
+        if (!fs::exists(SURFCAST_TEST_PYTHON)) {
+            if (std::getenv("CI")) FAIL() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";
+            GTEST_SKIP() << "no test venv at " SURFCAST_TEST_PYTHON;
+        }
+        ASSERT_NE(dir_, nullptr);
+    }
+    static test::TempDir* dir_;
+};
+test::TempDir* Export::dir_ = nullptr;
+
+// Every point, with every attribute the LAS file had and the set stores.
+TEST_F(Export, WholeSetGivesBackItsInputPoints) {
+    const std::string out = dir_->file("all.laz");
+    auto e = test::run({test::binary("surfcast-export"), dir_->file("autzen"), "--format", "laz", "-o", out});
+    ASSERT_EQ(e.exitCode, 0) << e.output;
+    EXPECT_NE(e.output.find("wrote " + out + ": 110000 points"), std::string::npos) << e.output;
+    const nlohmann::json c = compare(test::dataFile("autzen_trim.las"), out, {});
+    EXPECT_EQ(c["exported"], 110000);  // PROVENANCE.md; no exact duplicates among them
+    EXPECT_EQ(c["matched"], 110000);
+    EXPECT_LE(c["largest_error"].get<double>(), kPositionError);
+    EXPECT_EQ(c["point_format"], 7);
+    for (const char* d : {"intensity", "classification", "return_number", "number_of_returns", "user_data", "red", "green", "blue"})
+        EXPECT_EQ(c["same"][d], 110000) << d;
+    // gps_time is a float the set stores quantized: within half its step.
+    auto set = TilesetReader::open(dir_->file("autzen"));
+    ASSERT_TRUE(set.ok());
+    const AttributeInfo* gps = set->info().attribute("gps_time");
+    ASSERT_NE(gps, nullptr);
+    EXPECT_LE(c["gps_time_error"].get<double>(), gps->scale / 2 + 1e-9);
+    // The chunk table's offset is at the file's end (the stream never seeks
+    // back): the build's own reader finds it there too.
+    EXPECT_EQ(countWithOwnReader(out), 110000u);
+}
+
+// A box and a class: the points of class 2 inside it, as laspy counts them
+// in the original file.
+TEST_F(Export, BoxAndClassesKeepWhatTheySay) {
+    const std::string out = dir_->file("box.laz"), box = "636500,849000,0,637000,849400,1000";
+    auto e = test::run({test::binary("surfcast-export"), "-q", dir_->file("autzen"), "--format", "laz", "--bbox", box, "--classes", "2",
+                        "-o", out});
+    ASSERT_EQ(e.exitCode, 0) << e.output;
+    const nlohmann::json c = compare(test::dataFile("autzen_trim.las"), out, {"--box", box, "--classes", "2"});
+    EXPECT_GT(c["exported"].get<int>(), 1000);
+    EXPECT_LT(c["exported"].get<int>(), 110000 / 2);
+    EXPECT_GE(c["exported"].get<int>(), c["kept_shrunk"].get<int>());
+    EXPECT_LE(c["exported"].get<int>(), c["kept_grown"].get<int>());
+    EXPECT_EQ(c["matched"], c["exported"]);
+    EXPECT_EQ(c["classes"], nlohmann::json::array({2}));
+    // A box that holds no point: a valid file of none.
+    const std::string empty = dir_->file("empty.laz");
+    auto none = test::run({test::binary("surfcast-export"), "-q", dir_->file("autzen"), "--format", "laz", "--bbox", "0,0,0,1,1,1", "-o",
+                           empty});
+    ASSERT_EQ(none.exitCode, 0) << none.output;
+    EXPECT_EQ(compare(test::dataFile("autzen_trim.las"), empty, {})["exported"], 0);
+}
+
+// Wrong arguments and sets: a clear error, a non-zero exit, no file.
+TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
+    const std::string out = dir_->file("bad.laz");
+    struct Case {
+        std::vector<std::string> args;
+        int exit;
+        std::string message;
+    };
+    const Case cases[] = {
+        {{dir_->file("autzen"), "--format", "laz", "--bbox", "1,2,3", "-o", out}, 2, "six numbers"},
+        {{dir_->file("autzen"), "--format", "laz", "--bbox", "0,0,0,1,x,1", "-o", out}, 2, "'x' is not a number"},
+        {{dir_->file("autzen"), "--format", "laz", "--bbox", "5,0,0,1,1,1", "-o", out}, 2, "minimum exceeds its maximum on axis x"},
+        {{dir_->file("autzen"), "--format", "laz", "--classes", "2,300", "-o", out}, 2, "'300' is not a class"},
+        {{dir_->file("autzen"), "--format", "ply", "-o", out}, 2, "--format ply"},
+        {{dir_->file("autzen"), "--format", "laz"}, 2, "-o FILE is required"},
+        {{dir_->file("nothing"), "--format", "laz", "-o", out}, 1, dir_->file("nothing")},
+    };
+    for (const Case& c : cases) {
+        std::vector<std::string> args = {test::binary("surfcast-export")};
+        args.insert(args.end(), c.args.begin(), c.args.end());
+        auto r = test::run(args);
+        EXPECT_EQ(r.exitCode, c.exit) << r.output;
+        EXPECT_NE(r.output.find(c.message), std::string::npos) << r.output;
+        EXPECT_FALSE(fs::exists(out));
+    }
+    // Classes asked of a set that stores no classification.
+    auto scene = test::buildScene(dir_->file("scene"), 20000);
+    ASSERT_EQ(scene.exitCode, 0) << scene.output;
+    auto r = test::run({test::binary("surfcast-export"), dir_->file("scene"), "--format", "laz", "--classes", "2", "-o", out});
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.output.find("stores no classification"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(out));
+    for (const auto& entry : fs::directory_iterator(dir_->path()))
+        EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
+}
+
+}  // namespace

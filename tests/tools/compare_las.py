@@ -1,0 +1,81 @@
+#!/usr/bin/env python3
+"""Compares an exported LAS/LAZ file with the LAS file a set was built from,
+read by laspy (an independent reader), for tests/export_test.cpp.
+
+Usage: compare_las.py ORIGINAL EXPORTED [--box X0,Y0,Z0,X1,Y1,Z1] [--classes 2,6] [--tolerance T]
+
+Each exported point is matched to the original point at the same position
+rounded to the original's scale (the set moves a point by less than half of
+it), among the original points the filter keeps with the box grown by T.
+Prints one JSON object: the exported count, the counts the filter keeps
+with the box shrunk and grown by T, how many exported points matched, the
+largest position error, the exported classes, the largest GPS time error,
+and for each other attribute how many matched points carry the original's
+value (colour compared as 16-bit, 8-bit originals scaled by 257, as LAS
+specifies).
+"""
+import argparse
+import json
+
+import laspy
+import numpy as np
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("original")
+    p.add_argument("exported")
+    p.add_argument("--box")
+    p.add_argument("--classes")
+    p.add_argument("--tolerance", type=float, default=0.0)
+    a = p.parse_args()
+    o, e = laspy.read(a.original), laspy.read(a.exported)
+    oxyz = np.column_stack([o.x, o.y, o.z])
+    exyz = np.column_stack([e.x, e.y, e.z]) if len(e.points) else np.zeros((0, 3))
+
+    def kept(grow):
+        m = np.ones(len(o.points), dtype=bool)
+        if a.box:
+            b = [float(v) for v in a.box.split(",")]
+            for axis in range(3):
+                m &= (oxyz[:, axis] >= b[axis] - grow) & (oxyz[:, axis] <= b[3 + axis] + grow)
+        if a.classes:
+            m &= np.isin(np.asarray(o.classification), [int(c) for c in a.classes.split(",")])
+        return m
+
+    scale = np.asarray(o.header.scales)
+    key = lambda xyz: [tuple(k) for k in np.round(xyz / scale).astype(np.int64)]
+    candidates = np.nonzero(kept(a.tolerance))[0]
+    index = {}
+    for i, k in zip(candidates, key(oxyz[candidates])):
+        index.setdefault(k, i)
+    match = [index.get(k, -1) for k in key(exyz)]
+    matched = np.array([m for m in match if m >= 0], dtype=np.int64)
+    found = np.array([j for j, m in enumerate(match) if m >= 0], dtype=np.int64)
+    result = {
+        "exported": int(len(e.points)),
+        "kept_shrunk": int(kept(-a.tolerance).sum()),
+        "kept_grown": int(kept(a.tolerance).sum()),
+        "matched": int(len(matched)),
+        "largest_error": float(np.abs(exyz[found] - oxyz[matched]).max()) if len(found) else 0.0,
+        "classes": sorted(int(c) for c in np.unique(np.asarray(e.classification))),
+        "point_format": int(e.header.point_format.id),
+        "same": {},
+    }
+    dims = set(o.point_format.dimension_names)
+    for d in ["intensity", "classification", "return_number", "number_of_returns", "user_data", "gps_time", "red", "green", "blue"]:
+        if d not in dims or not len(found):
+            continue
+        ov = np.asarray(getattr(o, d))[matched].astype(np.float64)
+        ev = np.asarray(getattr(e, d))[found].astype(np.float64)
+        if d in ("red", "green", "blue") and np.asarray(getattr(o, d)).max() <= 255:
+            ov = ov * 257
+        if d == "gps_time":  # a float the set quantizes: its largest error instead
+            result["gps_time_error"] = float(np.abs(ov - ev).max())
+        else:
+            result["same"][d] = int(np.sum(ov == ev))
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
