@@ -12,6 +12,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <deque>
 #include <cstring>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -20,6 +21,7 @@
 
 #include "byte_io.h"
 #include "byte_ranges.h"
+#include "laz_export.h"
 
 namespace surfcast {
 
@@ -37,12 +39,119 @@ constexpr unsigned kPerAddressConnections = 256;
 constexpr unsigned kMaxConnections = 4096;
 // How long run(), once stopped, waits for requests in flight before closing connections.
 constexpr auto kDrainTime = std::chrono::seconds(5);
+// An export's bytes produced ahead of what its client has taken, at most.
+constexpr size_t kExportQueueBytes = 4u << 20;
 
 std::string hex8(uint32_t v) {
     char b[16];
     std::snprintf(b, sizeof b, "%08x", v);
     return b;
 }
+
+// A LAZ export sent as it is produced (docs/PROTOCOL.md, "Export"): a thread
+// of its own runs the export (laz_export.h) into a queue of at most
+// kExportQueueBytes, from the first time MHD asks for bytes (so a HEAD never
+// starts it); MHD's content reader takes from the queue and suspends the
+// connection while it is empty, and the producer resumes it. Resuming happens
+// under the mutex, and cancel() takes it first: once MHD frees the response
+// no resume touches its connection.
+class ExportStream {
+public:
+    ExportStream(std::shared_ptr<const TilesetSnapshot> snapshot, TilesetReader reader, PointFilter filter, MHD_Connection* c)
+        : snapshot_(std::move(snapshot)), reader_(std::move(reader)), filter_(std::move(filter)), connection_(c) {}
+    ~ExportStream() { cancel(); }
+
+    // MHD's callbacks, whose `cls` is a std::shared_ptr<ExportStream> the response owns.
+    static ssize_t read(void* cls, uint64_t, char* buf, size_t max) {
+        return (*static_cast<std::shared_ptr<ExportStream>*>(cls))->take(buf, max);
+    }
+    // MHD is done with the response (sent, or the client left): the producer stops.
+    static void release(void* cls) {
+        auto* held = static_cast<std::shared_ptr<ExportStream>*>(cls);
+        (*held)->cancel();
+        delete held;
+    }
+    uint64_t sent() const { return sent_.load(); }
+
+private:
+    ssize_t take(char* buf, size_t max) {
+        std::lock_guard lock(mutex_);
+        if (!started_) {
+            started_ = true;
+            producer_ = std::thread([this] { produce(); });
+        }
+        if (queue_.empty()) {
+            if (finished_) {
+                if (!error_.empty()) std::fprintf(stderr, "surfcast-serve: export of %s failed: %s\n", snapshot_->name.c_str(), error_.c_str());
+                return error_.empty() ? MHD_CONTENT_READER_END_OF_STREAM : MHD_CONTENT_READER_END_WITH_ERROR;
+            }
+            suspended_ = true;
+            MHD_suspend_connection(connection_);
+            return 0;
+        }
+        std::string& front = queue_.front();
+        const size_t n = std::min(max, front.size() - taken_);
+        std::memcpy(buf, front.data() + taken_, n);
+        taken_ += n;
+        queued_ -= n;
+        if (taken_ == front.size()) {
+            queue_.pop_front();
+            taken_ = 0;
+        }
+        sent_ += n;
+        space_.notify_all();
+        return ssize_t(n);
+    }
+
+    void produce() {
+        auto push = [&](const uint8_t* data, size_t n) -> Status {
+            std::unique_lock lock(mutex_);
+            space_.wait(lock, [&] { return cancelled_ || queued_ < kExportQueueBytes; });
+            if (cancelled_) return Status::error("the client left");
+            queue_.emplace_back(reinterpret_cast<const char*>(data), n);
+            queued_ += n;
+            wake();
+            return {};
+        };
+        Status status;
+        auto plan = planLazExport(reader_, filter_);
+        if (!plan) status = plan.status();
+        else status = writeLazExport(reader_, filter_, *plan, push);
+        std::lock_guard lock(mutex_);
+        finished_ = true;
+        if (!status.ok()) error_ = status.message();
+        wake();
+    }
+
+    void wake() {  // with mutex_ held
+        if (suspended_ && !cancelled_) {
+            suspended_ = false;
+            MHD_resume_connection(connection_);
+        }
+    }
+
+    void cancel() {
+        {
+            std::lock_guard lock(mutex_);
+            cancelled_ = true;
+        }
+        space_.notify_all();
+        if (producer_.joinable()) producer_.join();
+    }
+
+    std::shared_ptr<const TilesetSnapshot> snapshot_;  // keeps the mapped files the reader reads
+    TilesetReader reader_;
+    PointFilter filter_;
+    MHD_Connection* connection_;
+    std::mutex mutex_;
+    std::condition_variable space_;
+    std::deque<std::string> queue_;
+    size_t queued_ = 0, taken_ = 0;  // bytes in the queue; of its front, those already sent
+    bool started_ = false, finished_ = false, suspended_ = false, cancelled_ = false;
+    std::string error_;
+    std::atomic<uint64_t> sent_{0};
+    std::thread producer_;
+};
 
 // State of one request, from its first byte to the completion callback.
 struct RequestState {
@@ -51,6 +160,7 @@ struct RequestState {
     int status = 0;
     uint64_t bytes = 0;
     bool bodyTooLarge = false;
+    std::shared_ptr<ExportStream> exportStream;  // an export's body, which counts its own bytes
 };
 
 // What a response body points into, released with the response.
@@ -64,6 +174,7 @@ void releaseBody(void* cls) { delete static_cast<BodyOwner*>(cls); }
 
 struct Reply {
     int status = 200;
+    ExportStream* stream = nullptr;  // a body produced as it is sent (owned by the response)
     std::vector<std::pair<std::string, std::string>> headers;
     // Body: owned text, or iovecs into the owner's snapshot and texts.
     std::unique_ptr<BodyOwner> owner = std::make_unique<BodyOwner>();
@@ -277,7 +388,43 @@ struct HttpServer::Impl {
             st.route = "batch";
             return batch(c, st, r, name);
         }
+        if (!post && rest == "export.laz" && config.exportMaxPoints > 0) {
+            st.route = "export";
+            return exportLaz(c, r, name);
+        }
         fail(r, 404, "not_found", "no such resource");
+    }
+
+    // GET /sets/NAME/export.laz?bbox=X0,Y0,Z0,X1,Y1,Z1&classes=2,6: the input
+    // points inside the box, as LAZ, sent as they are produced.
+    void exportLaz(MHD_Connection* c, Reply& r, const std::string& name) {
+        auto snap = snapshot(name, r);
+        if (!snap) return;
+        PointFilter filter;
+        if (const char* box = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "bbox")) {
+            auto b = parseBox(box);
+            if (!b) return fail(r, 400, "bad_request", b.status().message());
+            filter.box = *b;
+        }
+        if (const char* classes = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "classes")) {
+            auto list = parseClasses(classes);
+            if (!list) return fail(r, 400, "bad_request", list.status().message());
+            filter.classes = *list;
+            if (!snap->info.attribute("classification"))
+                return fail(r, 400, "bad_request", "set '" + name + "' stores no classification to choose classes by");
+        }
+        auto reader = TilesetReader::open(snapshotSource(snap));
+        if (!reader) return fail(r, 500, "internal", reader.status().message());
+        // The leaves the box reaches bound the export from the hierarchy alone:
+        // a request over the limit costs no decoding.
+        const uint64_t most = exportPointsAtMost(*reader, filter);
+        if (most > config.exportMaxPoints)
+            return fail(r, 413, "too_large", "the box reaches nodes of " + std::to_string(most) + " points, over this server's limit of " +
+                                                 std::to_string(config.exportMaxPoints) + " per export; ask for a smaller box");
+        r.stream = new ExportStream(snap, std::move(*reader), std::move(filter), c);
+        r.header("Content-Type", "application/vnd.laszip");
+        r.header("Content-Disposition", "attachment; filename=\"" + name + ".laz\"");
+        r.header("Cache-Control", "no-store");
     }
 
     // "/" and "/NAME" without further slashes: the viewer's page and assets.
@@ -372,7 +519,19 @@ struct HttpServer::Impl {
         }
         MHD_Response* res = nullptr;
         BodyOwner* owner = r.owner.release();
-        if (r.useIov) {
+        if (r.stream) {
+            delete owner;
+            owner = nullptr;
+            std::shared_ptr<ExportStream> stream(r.stream);
+            st.exportStream = stream;
+            // The response holds the stream too, until MHD frees it.
+            auto* held = new std::shared_ptr<ExportStream>(stream);
+            res = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 64 * 1024, &ExportStream::read, held, &ExportStream::release);
+            if (!res) {
+                delete held;
+                return MHD_NO;
+            }
+        } else if (r.useIov) {
             res = MHD_create_response_from_iovec(r.iov.data(), unsigned(r.iov.size()), releaseBody, owner);
             for (const auto& v : r.iov) st.bytes += v.iov_len;
         } else {
@@ -435,6 +594,7 @@ struct HttpServer::Impl {
         if (!st) return;
         self->inFlight.fetch_sub(1);
         if (st->method.empty()) return;
+        if (st->exportStream && st->method != "HEAD") st->bytes = st->exportStream->sent();
         double seconds = std::chrono::duration<double>(Clock::now() - st->start).count();
         int status = st->status ? st->status : 500;
         self->metrics.record(st->route, status, st->bytes, seconds);
@@ -466,7 +626,8 @@ Status HttpServer::bind() {
     if (::inet_pton(AF_INET, c.host.c_str(), &addr.sin_addr) != 1)
         return Status::error("cannot listen on " + c.host + ": not an IPv4 address");
     unsigned threads = c.threads > 0 ? unsigned(c.threads) : std::max(1u, std::thread::hardware_concurrency());
-    unsigned flags = MHD_USE_EPOLL_INTERNAL_THREAD | MHD_USE_ERROR_LOG | MHD_USE_TURBO | MHD_USE_ITC;
+    // Suspend and resume: an export's connection waits, off the event loop, for its bytes.
+    unsigned flags = MHD_USE_EPOLL_INTERNAL_THREAD | MHD_USE_ERROR_LOG | MHD_USE_TURBO | MHD_USE_ITC | MHD_ALLOW_SUSPEND_RESUME;
     const bool tls = !c.tlsCertificate.empty();
     if (tls && MHD_is_feature_supported(MHD_FEATURE_TLS) != MHD_YES)
         return Status::error("this libmicrohttpd was built without TLS");

@@ -27,6 +27,9 @@ struct ServerConfig {
     // HTTPS (libmicrohttpd's GnuTLS) when both are set: the PEM texts of the
     // certificate chain and of its private key.
     std::string tlsCertificate, tlsKey;
+    // GET /sets/NAME/export.laz: the most points of the leaves a request's box
+    // reaches (more is 413); 0 turns the route off (404).
+    uint64_t exportMaxPoints = 20'000'000;
     // The browser viewer, served at / and /NAME (public even with a token:
     // the page holds no data; it sends the token from its URL's fragment).
     // Empty: no viewer, / is 404.

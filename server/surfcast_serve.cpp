@@ -35,6 +35,10 @@ HTTP: the three files with Range support, single node blocks, batches of nodes,
                        the executable's folder, as the build leaves it: build/web);
                        open http://HOST:PORT/?set=/sets/NAME
   --no-web             serve no viewer
+  --export-max-points N
+                       GET /sets/NAME/export.laz?bbox=...&classes=... answers 413 where
+                       the box reaches nodes of more than N points (default 20000000;
+                       0: no export route)
   -h, --help           this text
 )";
 
@@ -98,6 +102,10 @@ int main(int argc, char** argv) {
             if (!value(&web)) return usageError("--web needs a folder");
         } else if (a == "--no-web") {
             noWeb = true;
+        } else if (a == "--export-max-points") {
+            char* end = nullptr;
+            if (!value(&v) || v.empty() || v[0] == '-' || (config.exportMaxPoints = std::strtoull(v.c_str(), &end, 10), *end))
+                return usageError("--export-max-points needs a count (0: no exports)");
         } else if (a == "--timeout") {
             if (!value(&v) || (config.timeoutSeconds = std::atoi(v.c_str())) < 1) return usageError("--timeout needs seconds >= 1");
         } else if (!a.empty() && a[0] == '-') {

@@ -150,4 +150,46 @@ std::vector<std::shared_ptr<const TilesetSnapshot>> TilesetStore::list() {
     return out;
 }
 
+namespace {
+
+class SnapshotSource final : public TileSource {
+public:
+    explicit SnapshotSource(std::shared_ptr<const TilesetSnapshot> s) : s_(std::move(s)) {}
+    Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
+        auto m = mapped(name);
+        if (!m) return m.status();
+        if ((*m)->size() > maxBytes) return Status::error(describe() + "/" + name + ": longer than the " + std::to_string(maxBytes) + " bytes expected");
+        return std::vector<uint8_t>((*m)->data(), (*m)->data() + (*m)->size());
+    }
+    Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
+        auto m = mapped(name);
+        if (!m) return m.status();
+        if (offset > (*m)->size() || size > (*m)->size() - offset)
+            return Status::error(describe() + "/" + name + ": bytes " + std::to_string(offset) + "+" + std::to_string(size) +
+                                 " outside its " + std::to_string((*m)->size()));
+        return std::vector<uint8_t>((*m)->data() + offset, (*m)->data() + offset + size);
+    }
+    Result<uint64_t> size(const std::string& name) override {
+        auto m = mapped(name);
+        if (!m) return m.status();
+        return (*m)->size();
+    }
+    std::string describe() const override { return "set '" + s_->name + "'"; }
+
+private:
+    Result<const MappedFile*> mapped(const std::string& name) const {
+        if (name == "tileset.json") return s_->json.get();
+        if (name == "hierarchy.bin") return s_->hierarchy.get();
+        if (name == "blocks.bin") return s_->blocks.get();
+        return Status::error(describe() + ": no file " + name);
+    }
+    std::shared_ptr<const TilesetSnapshot> s_;
+};
+
+}  // namespace
+
+std::unique_ptr<TileSource> snapshotSource(std::shared_ptr<const TilesetSnapshot> snapshot) {
+    return std::make_unique<SnapshotSource>(std::move(snapshot));
+}
+
 }  // namespace surfcast

@@ -18,6 +18,7 @@
 
 #include "octree_key.h"
 #include "status.h"
+#include "tile_source.h"
 #include "tileset_format.h"
 
 namespace surfcast {
@@ -47,6 +48,10 @@ struct TilesetSnapshot {
     ino_t inode = 0;
     timespec modified{};
 };
+
+// The snapshot's mapped files as a TileSource (for a TilesetReader over it:
+// the export route), holding the snapshot while it lives.
+std::unique_ptr<TileSource> snapshotSource(std::shared_ptr<const TilesetSnapshot> snapshot);
 
 class TilesetStore {
 public:

@@ -1,6 +1,7 @@
 // The server over real HTTP on loopback: every endpoint, ranges, caching,
 // traversal attempts, malformed and oversized requests, authentication,
-// concurrency, stalled clients and a set replaced during a download.
+// concurrency, stalled clients, a set replaced during a download, and the
+// LAZ export sent as it is produced.
 #include <gtest/gtest.h>
 
 #include <cerrno>
@@ -19,6 +20,7 @@
 #include "byte_io.h"
 #include "crc32.h"
 #include "http_server.h"
+#include "las_reader.h"
 #include "octree_builder.h"
 #include "test_support.h"
 #include "tileset_reader.h"
@@ -409,4 +411,95 @@ TEST_F(ServerTest, ReplacedDuringDownloadNeverMixes) {
     EXPECT_TRUE(after->body == newBlocks);
     server.stop();
     run.join();
+}
+
+// The export route gives the bytes surfcast-export writes (laz_export.h; its
+// points are checked against laspy in export_test), from the first pass to
+// the last chunk, whole set or a box.
+TEST_F(ServerTest, ExportSendsWhatSurfcastExportWrites) {
+    start();
+    auto c = client();
+    auto set = TilesetReader::open(dir_->file("sets/scene"));
+    ASSERT_TRUE(set.ok());
+    const Box3d& b = set->info().bounds;
+    const double midX = (b.min.x + b.max.x) / 2;
+    const std::string box = std::to_string(b.min.x - 1) + "," + std::to_string(b.min.y - 1) + "," + std::to_string(b.min.z - 1) + "," +
+                            std::to_string(midX) + "," + std::to_string(b.max.y + 1) + "," + std::to_string(b.max.z + 1);
+    for (const std::string& query : {std::string(), "?bbox=" + box}) {
+        SCOPED_TRACE(query);
+        auto r = c.Get("/sets/scene/export.laz" + query);
+        ASSERT_TRUE(r);
+        ASSERT_EQ(r->status, 200) << r->body;
+        EXPECT_EQ(r->get_header_value("Content-Type"), "application/vnd.laszip");
+        EXPECT_EQ(r->get_header_value("Content-Disposition"), "attachment; filename=\"scene.laz\"");
+        test::TempDir tmp;
+        test::writeFile(tmp.file("served.laz"), r->body);
+        std::vector<std::string> args = {test::binary("surfcast-export"), "-q", dir_->file("sets/scene"), "--format", "laz", "-o",
+                                         tmp.file("cli.laz")};
+        if (!query.empty()) args.insert(args.end(), {"--bbox", box});
+        auto e = test::run(args);
+        ASSERT_EQ(e.exitCode, 0) << e.output;
+        std::string cli = test::readFile(tmp.file("cli.laz")), served = r->body;
+        ASSERT_GT(served.size(), 375u);
+        cli.replace(90, 4, 4, '\0');  // the header's creation day and year
+        served.replace(90, 4, 4, '\0');
+        EXPECT_TRUE(served == cli) << "served " << served.size() << " bytes, surfcast-export wrote " << cli.size();
+        auto reader = openLasReader(tmp.file("served.laz"));
+        ASSERT_TRUE(reader.ok()) << reader.status().message();
+        std::vector<InputPoint> batch(4096);
+        uint64_t n = 0;
+        while (true) {
+            auto got = (*reader)->read(batch.data(), batch.size());
+            ASSERT_TRUE(got.ok()) << got.status().message();
+            if (*got == 0) break;
+            for (size_t i = 0; i < *got; ++i) ASSERT_LE(batch[i].position.x, query.empty() ? b.max.x + 1e-3 : midX);
+            n += *got;
+        }
+        if (query.empty()) EXPECT_EQ(n, set->info().inputPoints);
+        else EXPECT_GT(n, 0u);
+    }
+}
+
+// Limits and bad queries: 413 over the limit with the count, 400 naming what
+// is wrong, 404 with the route off; and a client that leaves mid-export
+// stops its producer without stopping the server.
+TEST_F(ServerTest, ExportLimitsBadQueriesAndClientsThatLeave) {
+    ServerConfig config;
+    config.exportMaxPoints = 1000;
+    start(config);
+    auto c = client();
+    auto over = c.Get("/sets/scene/export.laz");
+    ASSERT_TRUE(over);
+    EXPECT_EQ(over->status, 413);
+    EXPECT_NE(over->body.find("over this server's limit of 1000"), std::string::npos) << over->body;
+    auto badBox = c.Get("/sets/scene/export.laz?bbox=0,0,0,1,1");
+    EXPECT_EQ(badBox->status, 400);
+    EXPECT_NE(badBox->body.find("six numbers"), std::string::npos) << badBox->body;
+    auto noClasses = c.Get("/sets/scene/export.laz?classes=2");
+    EXPECT_EQ(noClasses->status, 400);
+    EXPECT_NE(noClasses->body.find("stores no classification"), std::string::npos) << noClasses->body;
+    EXPECT_EQ(c.Get("/sets/nothing/export.laz")->status, 404);
+    server_->stop();
+    thread_.join();
+
+    config.exportMaxPoints = 0;
+    start(config);
+    EXPECT_EQ(client().Get("/sets/scene/export.laz")->status, 404);
+    server_->stop();
+    thread_.join();
+
+    start();
+    // Clients that hang up after the first bytes, between ones that read the
+    // whole export on a connection the server then closes.
+    for (int i = 0; i < 6; ++i) {
+        const bool leave = i % 2 == 0;
+        const std::string got =
+            raw(std::string("GET /sets/scene/export.laz HTTP/1.1\r\nHost: x\r\n") + (leave ? "" : "Connection: close\r\n") + "\r\n", 3000, leave);
+        EXPECT_EQ(got.rfind("HTTP/1.1 200", 0), 0u) << got.substr(0, 200);
+        if (!leave) EXPECT_NE(got.find("\r\n0\r\n\r\n"), std::string::npos) << "the chunked body should end";
+    }
+    auto whole = client().Get("/sets/scene/export.laz");
+    ASSERT_TRUE(whole);
+    EXPECT_EQ(whole->status, 200);
+    EXPECT_GT(whole->body.size(), 375u);
 }
