@@ -306,7 +306,7 @@ TEST(E57, NormalsFaceEachScanner) {
     test::TempDir dir;
     const std::vector<RoomPoint> pts = room(test::kSanitized ? 0.1 : 0.05);  // the same paths, a quarter of the points
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, roomSpec(pts), dir.file("room.e57")));
-    const std::vector<std::string> options = {dir.file("room.e57"), "--memory", "96M", "--capacity", "4000"};
+    const std::vector<std::string> options = {dir.file("room.e57"), "--memory", "56M", "--capacity", "1000"};  // several chunks
     auto build = test::run({test::binary("surfcast-build"), "-q", options[0], options[1], options[2], options[3], options[4], "-o",
                             dir.file("set")});
     ASSERT_EQ(build.exitCode, 0) << build.output;
