@@ -199,12 +199,34 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
     // The finest step of the leaves' positions: the LAS scale is the power of
     // ten at or below it, so exporting loses less than half of it.
     double step = HUGE_VAL;
-    SC_TRY(forEachKept(set, filter, plan.nodes, false, [&](const NodeRecord& n, const BlockData&, size_t, const Vec3d& p) -> Status {
-        plan.bounds.extend(p);
-        ++plan.points;
+    for (size_t i : plan.nodes) {
+        const NodeRecord& n = set.nodes()[i];
         step = std::min(step, nodeEdge(info, n.key.level) / double((uint64_t(1) << n.positionBits) - 1));
-        return {};
-    }));
+    }
+    const bool whole = !filter.box && filter.classes.empty();
+    if (whole) {
+        // Every leaf whole, no decoding (a third of the export's time,
+        // bench/BENCHMARKS.md "LAZ export"): the records count the points, and
+        // tileset.json's bounds of the input points, grown by the coarsest
+        // leaf's half step, hold the leaves' positions.
+        double coarsest = 0;
+        for (size_t i : plan.nodes) {
+            const NodeRecord& n = set.nodes()[i];
+            plan.points += n.surfelCount;
+            coarsest = std::max(coarsest, nodeEdge(info, n.key.level) / double((uint64_t(1) << n.positionBits) - 1));
+        }
+        if (plan.points) {
+            plan.bounds = info.bounds;
+            plan.bounds.min = plan.bounds.min - Vec3d{1, 1, 1} * (coarsest / 2);
+            plan.bounds.max = plan.bounds.max + Vec3d{1, 1, 1} * (coarsest / 2);
+        }
+    } else {
+        SC_TRY(forEachKept(set, filter, plan.nodes, false, [&](const NodeRecord&, const BlockData&, size_t, const Vec3d& p) -> Status {
+            plan.bounds.extend(p);
+            ++plan.points;
+            return {};
+        }));
+    }
     if (plan.points == 0) return plan;
     plan.scale = std::pow(10.0, std::floor(std::log10(std::max(step, 1e-9))));
     for (int a = 0; a < 3; ++a) plan.offset[a] = std::floor(plan.bounds.min[a]);
@@ -215,6 +237,13 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
         return true;
     };
     while (!fits()) plan.scale *= 10;
+    // The bounds of the integers the records hold: rounding is monotonic, so
+    // the points' own bounds round to theirs; grown bounds round outward.
+    for (int a = 0; a < 3; ++a) {
+        const double lo = (plan.bounds.min[a] - plan.offset[a]) / plan.scale, hi = (plan.bounds.max[a] - plan.offset[a]) / plan.scale;
+        plan.bounds.min[a] = plan.offset[a] + (whole ? std::floor(lo) : double(std::llround(lo))) * plan.scale;
+        plan.bounds.max[a] = plan.offset[a] + (whole ? std::ceil(hi) : double(std::llround(hi))) * plan.scale;
+    }
     return plan;
 }
 

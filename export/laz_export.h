@@ -27,9 +27,11 @@ struct PointFilter {
 Result<Box3d> parseBox(const std::string& text);
 Result<std::vector<uint8_t>> parseClasses(const std::string& text);
 
-// What an export writes, from a first pass over the leaves the filter
-// reaches (each decoded once): the points it keeps, their bounds, and the
-// LAS layout (scale, offset, point format).
+// What an export writes: the points it keeps and bounds that hold them (for
+// a whole set, from the hierarchy and tileset.json's bounds grown by half the
+// coarsest leaf step; else the points' own, from a first pass that decodes
+// each leaf the filter reaches), and the LAS layout (scale, offset, point
+// format).
 struct LazExportPlan {
     std::vector<size_t> nodes;  // indices into set.nodes(): leaves the filter reaches, in hierarchy order
     uint64_t points = 0;

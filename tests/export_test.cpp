@@ -82,6 +82,12 @@ TEST_F(Export, WholeSetGivesBackItsInputPoints) {
     EXPECT_EQ(c["matched"], 110000);
     EXPECT_LE(c["largest_error"].get<double>(), kPositionError);
     EXPECT_EQ(c["point_format"], 7);
+    // The header's bounds hold every point; for a whole set they come from
+    // tileset.json grown by half the coarsest leaf step (0.005 at most here)
+    // and rounded outward to the LAS scale (0.001), while the extreme point
+    // itself may lie half a step inside the input's bound: 0.011 of slack at most.
+    EXPECT_TRUE(c["inside_header"].get<bool>());
+    EXPECT_LE(c["header_slack"].get<double>(), 0.005 + 0.005 + 0.001 + 1e-9);
     for (const char* d : {"intensity", "classification", "return_number", "number_of_returns", "user_data", "red", "green", "blue"})
         EXPECT_EQ(c["same"][d], 110000) << d;
     // gps_time is a float the set stores quantized: within half its step.
@@ -109,6 +115,9 @@ TEST_F(Export, BoxAndClassesKeepWhatTheySay) {
     EXPECT_LE(c["exported"].get<int>(), c["kept_grown"].get<int>());
     EXPECT_EQ(c["matched"], c["exported"]);
     EXPECT_EQ(c["classes"], nlohmann::json::array({2}));
+    // A filtered export's header bounds are its points' own.
+    EXPECT_TRUE(c["inside_header"].get<bool>());
+    EXPECT_LE(c["header_slack"].get<double>(), 1e-9);
     // A box that holds no point: a valid file of none.
     const std::string empty = dir_->file("empty.laz");
     auto none = test::run({test::binary("surfcast-export"), "-q", dir_->file("autzen"), "--format", "laz", "--bbox", "0,0,0,1,1,1", "-o",

@@ -60,6 +60,11 @@ def main():
         "largest_error": float(np.abs(exyz[found] - oxyz[matched]).max()) if len(found) else 0.0,
         "classes": sorted(int(c) for c in np.unique(np.asarray(e.classification))),
         "point_format": int(e.header.point_format.id),
+        # every point inside the header's bounds (both from the same scaled integers)
+        "inside_header": bool(len(exyz) == 0 or (np.all(exyz >= np.asarray(e.header.mins) - 1e-9) and
+                                                 np.all(exyz <= np.asarray(e.header.maxs) + 1e-9))),
+        "header_slack": float(max(np.max(exyz.min(axis=0) - np.asarray(e.header.mins)),
+                                  np.max(np.asarray(e.header.maxs) - exyz.max(axis=0)))) if len(exyz) else 0.0,
         "same": {},
     }
     dims = set(o.point_format.dimension_names)
