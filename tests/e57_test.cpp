@@ -354,6 +354,28 @@ TEST(E57, NormalsFaceEachScanner) {
     EXPECT_EQ(test::readFile(dir.file("staged/hierarchy.bin")), test::readFile(dir.file("set/hierarchy.bin")));
 }
 
+// Georeferenced points with an identity pose: the scanner "at the origin"
+// lies a hundred kilometres away, and is ignored (the flat patch faces up);
+// the same points in a scan posed where the scanner stood face it.
+TEST(E57, AnIdentityPoseFarFromTheDataIsNoScanner) {
+    test::TempDir dir;
+    std::string far = "scan georeferenced\npose 1 0 0 0 0 0 0\nfields cartesian\n", posed = "scan station\npose 1 0 0 0 100000 5 110\nfields cartesian\n";
+    for (int i = 0; i < 60; ++i)
+        for (int j = 0; j < 60; ++j) {
+            far += point({100000 + i * 0.1, j * 0.1, 100}) + "\n";
+            posed += point({i * 0.1, j * 0.1 - 5, -10}) + "\n";  // the same points, 10 below the scanner
+        }
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, far, dir.file("far.e57")));
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, posed, dir.file("posed.e57")));
+    for (const auto& [file, source] : {std::pair<std::string, std::string>{"far", "estimated-up"}, {"posed", "estimated-scan-origin"}}) {
+        auto b = test::run({test::binary("surfcast-build"), "-q", dir.file(file + ".e57"), "-o", dir.file(file)});
+        ASSERT_EQ(b.exitCode, 0) << b.output;
+        auto set = TilesetReader::open(dir.file(file));
+        ASSERT_TRUE(set.ok()) << set.status().message();
+        EXPECT_EQ(set->info().normalSource, source) << file;
+    }
+}
+
 // Bad files: each a clear error naming the file (and the scan where one is
 // at fault), a non-zero exit and no set written.
 TEST(E57, BadFilesAreClearErrors) {

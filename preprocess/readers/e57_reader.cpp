@@ -66,6 +66,10 @@ public:
             // file's frame already, where the scanner may be anywhere.
             if (s.has_pose || s.spherical) desc_.scanOrigins.push_back(Vec3d{s.origin[0], s.origin[1], s.origin[2]});
             else desc_.scanOrigins.push_back(std::nullopt);
+            // Cartesian points whose pose leaves the scanner at the file's
+            // origin: many writers give georeferenced data an identity pose.
+            // Such an origin counts only near the data (a default, as PCD's).
+            if (!s.spherical && s.has_pose && s.origin[0] == 0 && s.origin[1] == 0 && s.origin[2] == 0) desc_.scanOriginIsDefault = true;
         }
         if (rowColumn)
             for (const char* field : {"row", "column"})

@@ -5,8 +5,10 @@
 // without a return (the invalid-state fields) are skipped and counted.
 // Each scan's scanner position orients the normals of its points
 // (InputDescription::scanOrigins): the pose's translation, where the scan
-// has a pose or spherical coordinates (whose origin is the scanner). Images
-// in the file are not read; a warning says so.
+// has a pose or spherical coordinates (whose origin is the scanner); a
+// cartesian scan posed at the file's origin, as georeferenced files often
+// are, has a default origin (scanOriginIsDefault: ignored far from the
+// data). Images in the file are not read; a warning says so.
 #pragma once
 
 #include <memory>
