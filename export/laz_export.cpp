@@ -72,10 +72,11 @@ double scalarValue(const BlockData& b, const AttributeInfo* a, size_t i) {
 // Visits each kept point of the leaves `nodes` (decoding each once).
 using Visit = std::function<Status(const NodeRecord&, const BlockData&, size_t, const Vec3d&)>;
 Status forEachKept(const TilesetReader& set, const PointFilter& filter, const std::vector<size_t>& nodes, bool scalars,
-                   const Visit& visit) {
+                   const StopExport& stop, const Visit& visit) {
     std::vector<bool> keepClass(256, filter.classes.empty());
     for (uint8_t c : filter.classes) keepClass[c] = true;
     for (size_t index : nodes) {
+        if (stop && stop()) return Status::error("export stopped");
         const NodeRecord& n = set.nodes()[index];
         auto bytes = set.readBlockBytes(n);
         if (!bytes) return bytes.status();
@@ -137,12 +138,15 @@ std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const std::vector<uint
 struct WriteContext {
     const std::function<Status(const uint8_t*, size_t)>* out;
     Status failed;
-    static int write(void* ctx, const uint8_t* data, uint64_t len) {
+    // Nothing may unwind into the Rust frames that call this.
+    static int write(void* ctx, const uint8_t* data, uint64_t len) noexcept {
         auto* self = static_cast<WriteContext*>(ctx);
         try {
             self->failed = (*self->out)(data, size_t(len));
         } catch (const std::exception& e) {
             self->failed = Status::error(e.what());
+        } catch (...) {
+            self->failed = Status::error("the output failed");
         }
         return self->failed.ok() ? 0 : -1;
     }
@@ -189,7 +193,7 @@ uint64_t exportPointsAtMost(const TilesetReader& set, const PointFilter& filter)
     return n;
 }
 
-Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter) {
+Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter, const StopExport& stop) {
     const TilesetInfo& info = set.info();
     if (!filter.classes.empty() && !info.attribute("classification"))
         return Status::error(set.describe() + ": the set stores no classification to choose classes by");
@@ -221,7 +225,7 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
             plan.bounds.max = plan.bounds.max + Vec3d{1, 1, 1} * (coarsest / 2);
         }
     } else {
-        SC_TRY(forEachKept(set, filter, plan.nodes, false, [&](const NodeRecord&, const BlockData&, size_t, const Vec3d& p) -> Status {
+        SC_TRY(forEachKept(set, filter, plan.nodes, false, stop, [&](const NodeRecord&, const BlockData&, size_t, const Vec3d& p) -> Status {
             plan.bounds.extend(p);
             ++plan.points;
             return {};
@@ -248,7 +252,7 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
 }
 
 Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const LazExportPlan& plan,
-                      const std::function<Status(const uint8_t*, size_t)>& out) {
+                      const std::function<Status(const uint8_t*, size_t)>& out, const StopExport& stop) {
     uint8_t vlr[1024];
     size_t vlrBytes = 0;
     if (sc_laz_vlr(uint8_t(plan.pointFormat), 0, vlr, sizeof vlr, &vlrBytes) != 0)
@@ -269,7 +273,7 @@ Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const
     std::vector<uint8_t> records;
     uint64_t written = 0;
     const NodeRecord* current = nullptr;
-    Status status = forEachKept(set, filter, plan.nodes, scalars.any(), [&](const NodeRecord& n, const BlockData& b, size_t i, const Vec3d& p) -> Status {
+    Status status = forEachKept(set, filter, plan.nodes, scalars.any(), stop, [&](const NodeRecord& n, const BlockData& b, size_t i, const Vec3d& p) -> Status {
         if (current != &n && !records.empty()) {  // a block's records at a time
             if (sc_laz_writer_write(writer, records.data(), records.size() / recordBytes, err, sizeof err) != 0) return failure("write");
             records.clear();
@@ -279,7 +283,12 @@ Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const
         const size_t at = records.size();
         records.resize(at + recordBytes, 0);
         uint8_t* r = &records[at];
-        for (int a = 0; a < 3; ++a) le::put<int32_t>(r + 4 * a, int32_t(std::llround((p[a] - plan.offset[a]) / plan.scale)));
+        for (int a = 0; a < 3; ++a) {
+            const double q = std::round((p[a] - plan.offset[a]) / plan.scale);
+            if (!(q >= -2147483648.0 && q <= 2147483647.0))
+                return Status::error(set.describe() + ": node " + n.key.name() + ": a point outside the bounds the export planned");
+            le::put<int32_t>(r + 4 * a, int32_t(q));
+        }
         if (!b.intensity.empty()) le::put<uint16_t>(r + 12, b.intensity[i]);
         const uint8_t ret = b.returnNumber.empty() ? 1 : b.returnNumber[i], count = b.numberOfReturns.empty() ? 1 : b.numberOfReturns[i];
         r[14] = uint8_t((ret & 0x0F) | (count << 4));

@@ -46,11 +46,14 @@ struct LazExportPlan {
 // a limit before any block is decoded.
 uint64_t exportPointsAtMost(const TilesetReader& set, const PointFilter& filter);
 
-Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter);
+// `stop`, where given, is asked before each leaf is decoded: true ends the
+// export with an error (a server whose client left, or that is stopping).
+using StopExport = std::function<bool()>;
+Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter, const StopExport& stop = {});
 
 // The LAZ file's bytes, in order, to `out` (which may fail the export).
 // Decodes the plan's leaves again; fails if they no longer give its points.
 Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const LazExportPlan& plan,
-                      const std::function<Status(const uint8_t*, size_t)>& out);
+                      const std::function<Status(const uint8_t*, size_t)>& out, const StopExport& stop = {});
 
 }  // namespace surfcast

@@ -37,8 +37,6 @@ constexpr size_t kConnectionMemory = 32 * 1024;
 // Connections one client address may hold: one client cannot take them all.
 constexpr unsigned kPerAddressConnections = 256;
 constexpr unsigned kMaxConnections = 4096;
-// How long run(), once stopped, waits for requests in flight before closing connections.
-constexpr auto kDrainTime = std::chrono::seconds(5);
 // An export's bytes produced ahead of what its client has taken, at most.
 constexpr size_t kExportQueueBytes = 4u << 20;
 
@@ -54,12 +52,33 @@ std::string hex8(uint32_t v) {
 // starts it); MHD's content reader takes from the queue and suspends the
 // connection while it is empty, and the producer resumes it. Resuming happens
 // under the mutex, and cancel() takes it first: once MHD frees the response
-// no resume touches its connection.
+// no resume touches its connection. The producer checks for cancellation
+// before each leaf it decodes, so joining it (on MHD's thread) is prompt.
+// A stopping server aborts every stream first (abort()): libmicrohttpd must
+// not stop with a connection suspended.
 class ExportStream {
 public:
-    ExportStream(std::shared_ptr<const TilesetSnapshot> snapshot, TilesetReader reader, PointFilter filter, MHD_Connection* c)
-        : snapshot_(std::move(snapshot)), reader_(std::move(reader)), filter_(std::move(filter)), connection_(c) {}
-    ~ExportStream() { cancel(); }
+    ExportStream(std::shared_ptr<const TilesetSnapshot> snapshot, TilesetReader reader, PointFilter filter, MHD_Connection* c,
+                 std::atomic<int>& live)
+        : snapshot_(std::move(snapshot)), reader_(std::move(reader)), filter_(std::move(filter)), connection_(c), live_(live) {
+        ++live_;
+    }
+    ~ExportStream() {
+        cancel();
+        --live_;
+    }
+
+    // Ends the export at once (the server is stopping): its connection, if
+    // suspended, resumes to take the end of its response.
+    void abort() {
+        std::lock_guard lock(mutex_);
+        aborted_ = true;
+        if (suspended_ && !cancelled_) {
+            suspended_ = false;
+            MHD_resume_connection(connection_);
+        }
+        space_.notify_all();
+    }
 
     // MHD's callbacks, whose `cls` is a std::shared_ptr<ExportStream> the response owns.
     static ssize_t read(void* cls, uint64_t, char* buf, size_t max) {
@@ -76,9 +95,15 @@ public:
 private:
     ssize_t take(char* buf, size_t max) {
         std::lock_guard lock(mutex_);
+        if (aborted_) return MHD_CONTENT_READER_END_WITH_ERROR;
         if (!started_) {
             started_ = true;
-            producer_ = std::thread([this] { produce(); });
+            try {
+                producer_ = std::thread([this] { produce(); });
+            } catch (const std::exception& e) {
+                finished_ = true;
+                error_ = std::string("cannot start the export: ") + e.what();
+            }
         }
         if (queue_.empty()) {
             if (finished_) {
@@ -104,19 +129,27 @@ private:
     }
 
     void produce() {
+        const StopExport stop = [&] {
+            std::lock_guard lock(mutex_);
+            return cancelled_ || aborted_;
+        };
         auto push = [&](const uint8_t* data, size_t n) -> Status {
             std::unique_lock lock(mutex_);
-            space_.wait(lock, [&] { return cancelled_ || queued_ < kExportQueueBytes; });
-            if (cancelled_) return Status::error("the client left");
+            space_.wait(lock, [&] { return cancelled_ || aborted_ || queued_ < kExportQueueBytes; });
+            if (cancelled_ || aborted_) return Status::error("export stopped");
             queue_.emplace_back(reinterpret_cast<const char*>(data), n);
             queued_ += n;
             wake();
             return {};
         };
         Status status;
-        auto plan = planLazExport(reader_, filter_);
-        if (!plan) status = plan.status();
-        else status = writeLazExport(reader_, filter_, *plan, push);
+        try {
+            auto plan = planLazExport(reader_, filter_, stop);
+            if (!plan) status = plan.status();
+            else status = writeLazExport(reader_, filter_, *plan, push, stop);
+        } catch (const std::exception& e) {  // std::bad_alloc: the thread must not take the server down
+            status = Status::error(e.what());
+        }
         std::lock_guard lock(mutex_);
         finished_ = true;
         if (!status.ok()) error_ = status.message();
@@ -143,11 +176,12 @@ private:
     TilesetReader reader_;
     PointFilter filter_;
     MHD_Connection* connection_;
+    std::atomic<int>& live_;  // the server's count of exports in progress
     std::mutex mutex_;
     std::condition_variable space_;
     std::deque<std::string> queue_;
     size_t queued_ = 0, taken_ = 0;  // bytes in the queue; of its front, those already sent
-    bool started_ = false, finished_ = false, suspended_ = false, cancelled_ = false;
+    bool started_ = false, finished_ = false, suspended_ = false, cancelled_ = false, aborted_ = false;
     std::string error_;
     std::atomic<uint64_t> sent_{0};
     std::thread producer_;
@@ -174,7 +208,7 @@ void releaseBody(void* cls) { delete static_cast<BodyOwner*>(cls); }
 
 struct Reply {
     int status = 200;
-    ExportStream* stream = nullptr;  // a body produced as it is sent (owned by the response)
+    std::shared_ptr<ExportStream> stream;  // a body produced as it is sent
     std::vector<std::pair<std::string, std::string>> headers;
     // Body: owned text, or iovecs into the owner's snapshot and texts.
     std::unique_ptr<BodyOwner> owner = std::make_unique<BodyOwner>();
@@ -238,6 +272,18 @@ struct HttpServer::Impl {
     // Requests whose line has arrived and whose completion MHD has not yet
     // reported: what run() drains (idle keep-alive connections are not waited for).
     std::atomic<int> inFlight{0};
+    // Exports in progress: counted for the concurrency limit, and aborted
+    // before the daemon stops.
+    std::atomic<int> liveExports{0};
+    std::mutex exportsMutex;
+    std::vector<std::weak_ptr<ExportStream>> exports;
+
+    void abortExports() {
+        std::lock_guard lock(exportsMutex);
+        for (auto& weak : exports)
+            if (auto s = weak.lock()) s->abort();
+        exports.clear();
+    }
 
     Impl(TilesetStore& s, ServerConfig c) : store(s), config(std::move(c)) {}
 
@@ -421,7 +467,16 @@ struct HttpServer::Impl {
         if (most > config.exportMaxPoints)
             return fail(r, 413, "too_large", "the box reaches nodes of " + std::to_string(most) + " points, over this server's limit of " +
                                                  std::to_string(config.exportMaxPoints) + " per export; ask for a smaller box");
-        r.stream = new ExportStream(snap, std::move(*reader), std::move(filter), c);
+        if (liveExports.load() >= config.exportConcurrency) {
+            r.header("Retry-After", "5");
+            return fail(r, 503, "busy", std::to_string(config.exportConcurrency) + " exports in progress, this server's most; try again later");
+        }
+        r.stream = std::make_shared<ExportStream>(snap, std::move(*reader), std::move(filter), c, liveExports);
+        {
+            std::lock_guard lock(exportsMutex);
+            std::erase_if(exports, [](const std::weak_ptr<ExportStream>& w) { return w.expired(); });
+            exports.push_back(r.stream);
+        }
         r.header("Content-Type", "application/vnd.laszip");
         r.header("Content-Disposition", "attachment; filename=\"" + name + ".laz\"");
         r.header("Cache-Control", "no-store");
@@ -522,7 +577,7 @@ struct HttpServer::Impl {
         if (r.stream) {
             delete owner;
             owner = nullptr;
-            std::shared_ptr<ExportStream> stream(r.stream);
+            std::shared_ptr<ExportStream> stream = r.stream;
             st.exportStream = stream;
             // The response holds the stream too, until MHD frees it.
             auto* held = new std::shared_ptr<ExportStream>(stream);
@@ -615,7 +670,10 @@ struct HttpServer::Impl {
 HttpServer::HttpServer(TilesetStore& store, ServerConfig config) : impl_(new Impl(store, std::move(config))) {}
 
 HttpServer::~HttpServer() {
-    if (impl_->daemon) MHD_stop_daemon(impl_->daemon);
+    if (impl_->daemon) {
+        impl_->abortExports();
+        MHD_stop_daemon(impl_->daemon);
+    }
 }
 
 Status HttpServer::bind() {
@@ -665,14 +723,16 @@ void HttpServer::run() {
     impl_->stopped.wait(lock, [&] { return impl_->stopRequested; });
     if (!impl_->daemon) return;
     // New connections are closed on accept (onAccept, since stop()); let
-    // requests in flight finish (up to kDrainTime), then close every
-    // connection, idle keep-alive ones included, and the listening socket.
-    auto deadline = Clock::now() + kDrainTime;
+    // requests in flight finish (up to drainSeconds), then end the exports
+    // still going and close every connection, idle keep-alive ones included,
+    // and the listening socket.
+    auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(impl_->config.drainSeconds));
     while (Clock::now() < deadline && impl_->inFlight.load() > 0) {
         lock.unlock();
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
         lock.lock();
     }
+    impl_->abortExports();
     MHD_stop_daemon(impl_->daemon);
     impl_->daemon = nullptr;
 }

@@ -24,12 +24,14 @@ struct ServerConfig {
     size_t maxBatch = 256;           // nodes per batch request
     size_t maxRanges = 16;           // ranges per Range header
     int timeoutSeconds = 10;         // inactivity timeout: stalled clients and idle keep-alive connections are dropped
+    double drainSeconds = 5;         // how long run(), once stopped, lets requests in flight finish
     // HTTPS (libmicrohttpd's GnuTLS) when both are set: the PEM texts of the
     // certificate chain and of its private key.
     std::string tlsCertificate, tlsKey;
     // GET /sets/NAME/export.laz: the most points of the leaves a request's box
     // reaches (more is 413); 0 turns the route off (404).
     uint64_t exportMaxPoints = 20'000'000;
+    int exportConcurrency = 2;       // exports at once; more get 503 (each is a thread and a few MiB)
     // The browser viewer, served at / and /NAME (public even with a token:
     // the page holds no data; it sends the token from its URL's fragment).
     // Empty: no viewer, / is 404.
@@ -43,7 +45,7 @@ public:
     Status bind();       // listens; with port 0, port() tells the one chosen
     int port() const;
     void run();          // serves until stop(); call after bind()
-    void stop();         // thread-safe; run() returns after in-flight requests finish (waiting at most 5 s)
+    void stop();         // thread-safe; run() returns after in-flight requests finish (waiting at most drainSeconds)
     const Metrics& metrics() const;
 
 private:

@@ -354,6 +354,22 @@ TEST(E57, NormalsFaceEachScanner) {
     EXPECT_EQ(test::readFile(dir.file("staged/hierarchy.bin")), test::readFile(dir.file("set/hierarchy.bin")));
 }
 
+// Intensities without limits (floats, no intensityLimits) stay the raw
+// values, rounded and clamped to 16 bits, whatever their size: a value under
+// 1 is not taken for a normalized one.
+TEST(E57, IntensityWithoutLimitsIsTheRawValue) {
+    test::TempDir dir;
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, "scan raw\nfields cartesian floatintensity\np 0 0 0 0.9\np 1 0 0 1.1\np 0 1 0 5\np 1 1 0 300.4\np 2 1 0 70000\n",
+                                     dir.file("raw.e57")));
+    auto r = openE57Reader(dir.file("raw.e57"));
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    EXPECT_TRUE((*r)->description().hasIntensity);
+    auto all = readAll(**r);
+    ASSERT_EQ(all.points.size(), 5u);
+    const uint16_t expected[] = {1, 1, 5, 300, 65535};
+    for (size_t i = 0; i < 5; ++i) EXPECT_EQ(all.points[i].intensity, expected[i]) << i;
+}
+
 // Georeferenced points with an identity pose: the scanner "at the origin"
 // lies a hundred kilometres away, and is ignored (the flat patch faces up);
 // the same points in a scan posed where the scanner stood face it.
@@ -383,8 +399,10 @@ TEST(E57, BadFilesAreClearErrors) {
     test::TempDir dir;
     const std::string good = "scan a\npose 1 0 0 0 1 2 3\nfields cartesian\np 0 0 0\np 1 0 0\np 0 1 0\n";
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, good, dir.file("good.e57")));
-    // A scan that claims 10^9 points in a file of a few hundred bytes.
+    // A scan that claims 10^9 points in a file of a few hundred bytes, and
+    // one that claims 2^61 (times a point's size, the count wraps 64 bits).
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "claim 0 1000000000\n", dir.file("claims.e57")));
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "claim 0 2305843009213693952\n", dir.file("wraps.e57")));
     // A rotation that is not a unit quaternion (it would scale the scan).
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, "scan b\npose 2 0 0 0 0 0 0\nfields cartesian\np 0 0 0\n", dir.file("scaled.e57")));
     // A prototype without coordinates, and one with a field E57 does not define.
@@ -417,6 +435,7 @@ TEST(E57, BadFilesAreClearErrors) {
         {test::dataFile("e57/bad-crc.e57"), "checksum"},
         {dir.file("truncated.e57"), "truncated"},
         {dir.file("claims.e57"), "scan 0 ('a')"},
+        {dir.file("wraps.e57"), "scan 0 ('a')"},
         {dir.file("nocoordinates.e57"), "scan 0 ('a'): neither cartesian nor spherical coordinates"},
         {dir.file("unknown.e57"), "cartesianQ"},
         {dir.file("flipped.e57"), "scan 0 ('c'): "},

@@ -18,8 +18,8 @@ namespace {
 // within half of that (FORMAT.md: leaves use the input's own precision), and
 // the export's LAS scale (the power of ten at or below the finest leaf step,
 // 0.001 here) adds at most half of its own. Matching exported points to the
-// original's by rounding to 0.01 then finds each one, and a box grown and
-// shrunk by the sum brackets the points the export keeps.
+// original's within that distance finds each one, and a box grown and
+// shrunk by it brackets the points the export keeps.
 constexpr double kPositionError = 0.005 + 0.0005;
 
 nlohmann::json compare(const std::string& original, const std::string& exported, const std::vector<std::string>& filter) {
@@ -96,6 +96,9 @@ TEST_F(Export, WholeSetGivesBackItsInputPoints) {
     const AttributeInfo* gps = set->info().attribute("gps_time");
     ASSERT_NE(gps, nullptr);
     EXPECT_LE(c["gps_time_error"].get<double>(), gps->scale / 2 + 1e-9);
+    // Whole degrees in the original (format 1), 0.006-degree units in format
+    // 7: a degree is a whole number of them only to within half a unit.
+    EXPECT_LE(c["scan_angle_error"].get<double>(), 0.003 + 1e-9);
     // The chunk table's offset is at the file's end (the stream never seeks
     // back): the build's own reader finds it there too.
     EXPECT_EQ(countWithOwnReader(out), 110000u);

@@ -61,6 +61,7 @@ public:
             desc_.hasColors = desc_.hasColors || s.color;
             desc_.hasIntensity = desc_.hasIntensity || s.intensity;
             rowColumn = rowColumn || s.row_column;
+            intensityNormalized_.push_back(s.intensity_normalized != 0);
             // A scan's own frame has its scanner at the origin: the pose says
             // where that is. Cartesian points without a pose are in the
             // file's frame already, where the scanner may be anywhere.
@@ -104,8 +105,10 @@ public:
                 p.scan = uint16_t(e.scan);
                 // A scan without colour, or a point whose colour is invalid, is white.
                 for (int c = 0; c < 3; ++c) p.color[c] = std::isnan(e.color[c]) ? 65535 : unit16(e.color[c]);
-                // Normalized by the scan's limits; a scan without limits gives its raw values.
-                if (!std::isnan(e.intensity)) p.intensity = e.intensity <= 1 && e.intensity >= 0 ? unit16(e.intensity) : saturate16(e.intensity);
+                // Normalized by the scan's limits to the full 16 bits; a scan
+                // without limits keeps its raw values (rounded, clamped to 16 bits).
+                if (!std::isnan(e.intensity))
+                    p.intensity = e.scan < intensityNormalized_.size() && intensityNormalized_[e.scan] ? unit16(e.intensity) : saturate16(e.intensity);
                 out[n++] = p;
                 for (const bool row : rows_) {
                     const int64_t v = row ? e.row : e.column;
@@ -121,6 +124,7 @@ private:
     std::unique_ptr<E57Input> input_;
     InputDescription desc_;
     std::vector<bool> rows_;  // per scalar field: the row index (else the column)
+    std::vector<bool> intensityNormalized_;  // per scan
     std::vector<ScE57Point> batch_;
 };
 

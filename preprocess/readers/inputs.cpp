@@ -230,8 +230,8 @@ private:
         }
         const InputDescription& d = (*r)->description();
         const size_t pointBytes = sizeof(InputPoint) + d.scalars.size() * sizeof(double);
-        const uint64_t declared = d.declaredPoints * pointBytes;
-        if (d.declaredPoints == 0 || declared > kPrefetchBytes / 4) {
+        // (Compared as a count: a header's claim times the point size could wrap.)
+        if (d.declaredPoints == 0 || d.declaredPoints > kPrefetchBytes / 4 / pointBytes) {
             item.reader = std::move(*r);
             item.bytes = kPrefetchBytes / 4;  // an open decoder and its buffers
             return item;
@@ -472,7 +472,9 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 s = Surfel{};
                 s.position = batch[i].position - origin;
                 s.normal = batch[i].normal;
-                s.source = uint16_t(sourceIds[r] + (batch[i].scan < scans ? batch[i].scan : 0));
+                if (batch[i].scan >= scans) return Status::error(src.description.path + ": a point of scan " + std::to_string(batch[i].scan) +
+                                                                 ", which the first pass did not see (the input changed while being read)");
+                s.source = uint16_t(sourceIds[r] + batch[i].scan);
                 for (int c = 0; c < 3; ++c)
                     s.color[c] = src.description.hasColors ? scaled(batch[i].color[c], src.colorScale) : 65535;
                 s.intensity = batch[i].intensity;

@@ -4,12 +4,13 @@ read by laspy (an independent reader), for tests/export_test.cpp.
 
 Usage: compare_las.py ORIGINAL EXPORTED [--box X0,Y0,Z0,X1,Y1,Z1] [--classes 2,6] [--tolerance T]
 
-Each exported point is matched to the original point at the same position
-rounded to the original's scale (the set moves a point by less than half of
-it), among the original points the filter keeps with the box grown by T.
+Each exported point is matched to an unmatched original point within T on
+every axis, among the original points the filter keeps with the box grown
+by T.
 Prints one JSON object: the exported count, the counts the filter keeps
 with the box shrunk and grown by T, how many exported points matched, the
-largest position error, the exported classes, the largest GPS time error,
+largest position error, the exported classes, the largest GPS time and
+scan angle errors,
 and for each other attribute how many matched points carry the original's
 value (colour compared as 16-bit, 8-bit originals scaled by 257, as LAS
 specifies).
@@ -43,13 +44,28 @@ def main():
             m &= np.isin(np.asarray(o.classification), [int(c) for c in a.classes.split(",")])
         return m
 
+    # Original points by their cell of the original's scale; an exported point
+    # looks in its own cell and the 26 around it for one within the tolerance.
     scale = np.asarray(o.header.scales)
-    key = lambda xyz: [tuple(k) for k in np.round(xyz / scale).astype(np.int64)]
     candidates = np.nonzero(kept(a.tolerance))[0]
     index = {}
-    for i, k in zip(candidates, key(oxyz[candidates])):
-        index.setdefault(k, i)
-    match = [index.get(k, -1) for k in key(exyz)]
+    for i, k in zip(candidates, np.round(oxyz[candidates] / scale).astype(np.int64)):
+        index.setdefault(tuple(k), []).append(i)
+    offsets = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)]
+    taken = set()
+    match = []
+    for p, k in zip(exyz, np.round(exyz / scale).astype(np.int64)):
+        found = -1
+        for d in offsets:
+            for i in index.get((k[0] + d[0], k[1] + d[1], k[2] + d[2]), []):
+                if i not in taken and np.all(np.abs(oxyz[i] - p) <= a.tolerance):
+                    found = i
+                    break
+            if found >= 0:
+                break
+        if found >= 0:
+            taken.add(found)
+        match.append(found)
     matched = np.array([m for m in match if m >= 0], dtype=np.int64)
     found = np.array([j for j, m in enumerate(match) if m >= 0], dtype=np.int64)
     result = {
@@ -68,6 +84,8 @@ def main():
         "same": {},
     }
     dims = set(o.point_format.dimension_names)
+    if "scan_angle_rank" in dims and len(found):  # whole degrees (formats 0-5) against 0.006-degree units
+        result["scan_angle_error"] = float(np.abs(np.asarray(o.scan_angle_rank)[matched] - np.asarray(e.scan_angle)[found] * 0.006).max())
     for d in ["intensity", "classification", "return_number", "number_of_returns", "user_data", "gps_time", "red", "green", "blue"]:
         if d not in dims or not len(found):
             continue

@@ -26,12 +26,13 @@ typedef struct {
     uint8_t color;
     uint8_t intensity;
     uint8_t row_column;  /* has row and column indices */
+    uint8_t intensity_normalized;  /* its intensities come normalized by limits (else raw values) */
 } ScE57Scan;
 
 /* A point, with its scan's pose applied and spherical coordinates converted. */
 typedef struct {
     double position[3];
-    float intensity;     /* 0..1 by the scan's limits (raw where it has none); NaN: absent or invalid */
+    float intensity;     /* 0..1 by the scan's limits, raw where it has none (ScE57Scan); NaN: absent or invalid */
     float color[3];      /* 0..1 by the scan's limits; NaN: absent or invalid */
     int64_t row, column; /* -1 where the scan has none */
     uint32_t scan;       /* index of the scan the point belongs to */

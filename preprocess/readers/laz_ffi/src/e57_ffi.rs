@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use e57::{E57Reader, PointCloud, PointCloudReaderSimple, RecordDataType, RecordName};
 
-use crate::{panic_message, write_err, Input, ScReadAt};
+use crate::{panic_message, seek_to, write_err, Input, ScReadAt};
 
 /// One scan's description (include/surfcast_e57.h).
 #[repr(C)]
@@ -23,6 +23,7 @@ pub struct ScE57Scan {
     pub color: u8,
     pub intensity: u8,
     pub row_column: u8,
+    pub intensity_normalized: u8,
 }
 
 /// One point (include/surfcast_e57.h).
@@ -74,19 +75,13 @@ impl Read for Window {
 
 impl Seek for Window {
     fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
-        let add = |base: u64, d: i64| if d >= 0 { base.checked_add(d as u64) } else { base.checked_sub(d.unsigned_abs()) };
-        let pos = match to {
-            SeekFrom::Start(n) => Some(n),
-            SeekFrom::End(d) => add(self.file.size, d),
-            SeekFrom::Current(d) => add(self.pos, d),
-        };
-        self.pos = pos.ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the file's start"))?;
+        self.pos = seek_to(self.file.size, self.pos, to)?;
         Ok(self.pos)
     }
 }
 
 pub struct ScE57Reader {
-    // Declared before `file`, so dropped before the reader it borrows.
+    // Borrows *file: Drop ends it before it frees the reader.
     points: Option<PointCloudReaderSimple<'static, Window>>,
     file: *mut E57Reader<Window>,
     clouds: Vec<PointCloud>,
@@ -157,6 +152,10 @@ fn open(mut file: Input) -> Result<ScE57Reader, String> {
                                fields.join(", ")));
         }
         if let Some(t) = &c.transform {
+            let p = &t.translation;
+            if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+                return Err(format!("{}: the pose's translation ({}, {}, {}) is not finite", scan_name(&clouds, k), p.x, p.y, p.z));
+            }
             let q = &t.rotation;
             let norm = q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z;
             if !((norm - 1.0).abs() <= QUATERNION_TOLERANCE) {
@@ -196,6 +195,7 @@ impl ScE57Reader {
             color: c.has_color() as u8,
             intensity: c.has_intensity() as u8,
             row_column: c.has_row_column() as u8,
+            intensity_normalized: intensity_has_range(c) as u8,
         })
     }
 

@@ -28,6 +28,7 @@ struct Stream {
     buffer: Vec<u8>,
     flushed: u64, // file position of buffer[0]
     pos: u64,
+    start: u64,   // the point data's first byte: where the chunk table's offset goes
     offset: Option<[u8; 8]>,
 }
 
@@ -53,7 +54,7 @@ impl Stream {
 impl Write for Stream {
     fn write(&mut self, data: &[u8]) -> std::io::Result<usize> {
         if self.pos < self.end() {
-            if data.len() == 8 && self.offset.is_none() {
+            if data.len() == 8 && self.pos == self.start && self.offset.is_none() {
                 self.offset = Some(data.try_into().unwrap());
                 self.pos += 8;
                 return Ok(8);
@@ -131,7 +132,7 @@ pub extern "C" fn sc_laz_writer_open(write: Option<ScWrite>, ctx: *mut c_void, d
     let result = catch_unwind(AssertUnwindSafe(|| -> Result<ScLazWriter, String> {
         let vlr = vlr_for(point_format, extra_bytes)?;
         let point_size = vlr.items_size() as usize;
-        let stream = Stream { write, ctx, buffer: Vec::new(), flushed: data_offset, pos: data_offset, offset: None };
+        let stream = Stream { write, ctx, buffer: Vec::new(), flushed: data_offset, pos: data_offset, start: data_offset, offset: None };
         let compressor = LasZipCompressor::new(stream, vlr).map_err(|e| e.to_string())?;
         Ok(ScLazWriter { compressor, point_size })
     }));
@@ -173,8 +174,10 @@ fn run(writer: *mut ScLazWriter, err: *mut c_char, err_len: usize,
 pub extern "C" fn sc_laz_writer_write(writer: *mut ScLazWriter, records: *const u8, count: u64, err: *mut c_char,
                                       err_len: usize) -> c_int {
     run(writer, err, err_len, |w| {
+        let len = usize::try_from(count).ok().and_then(|c| c.checked_mul(w.point_size))
+            .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "too many records"))?;
         // SAFETY: the caller gives count records at `records`.
-        let bytes = unsafe { std::slice::from_raw_parts(records, count as usize * w.point_size) };
+        let bytes = unsafe { std::slice::from_raw_parts(records, len) };
         w.compressor.compress_many(bytes)
     })
 }

@@ -48,16 +48,19 @@ impl Read for Input {
     }
 }
 
+// Where a seek from `pos` in a file of `size` bytes lands.
+fn seek_to(size: u64, pos: u64, to: SeekFrom) -> std::io::Result<u64> {
+    let pos = match to {
+        SeekFrom::Start(n) => Some(n),
+        SeekFrom::End(d) => size.checked_add_signed(d),
+        SeekFrom::Current(d) => pos.checked_add_signed(d),
+    };
+    pos.ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the file's start"))
+}
+
 impl Seek for Input {
     fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
-        // u64::checked_add_signed is newer than Debian 12's rustc.
-        let add = |base: u64, d: i64| if d >= 0 { base.checked_add(d as u64) } else { base.checked_sub(d.unsigned_abs()) };
-        let pos = match to {
-            SeekFrom::Start(n) => Some(n),
-            SeekFrom::End(d) => add(self.size, d),
-            SeekFrom::Current(d) => add(self.pos, d),
-        };
-        self.pos = pos.ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the file's start"))?;
+        self.pos = seek_to(self.size, self.pos, to)?;
         Ok(self.pos)
     }
 }

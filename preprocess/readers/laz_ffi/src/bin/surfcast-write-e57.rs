@@ -5,7 +5,8 @@
 //!
 //!   scan NAME                       a new scan (Data3D entry)
 //!   pose W X Y Z TX TY TZ           its pose: rotation quaternion, translation
-//!   fields cartesian|spherical [intensity] [color] [rowcolumn] [invalid]
+//!   fields cartesian|spherical [intensity|floatintensity] [color] [rowcolumn] [invalid]
+//!                                   (floatintensity: 32-bit floats without limits)
 //!   intensity-limits MIN MAX        the integer intensity's bounds and limits (default 0 65535)
 //!   p A B C [I] [R G B] [ROW COL] [STATE]
 //!                                   a point: x y z, or range azimuth elevation
@@ -26,6 +27,7 @@ struct Scan {
     pose: Option<Transform>,
     spherical: bool,
     intensity: bool,
+    float_intensity: bool,
     color: bool,
     row_column: bool,
     invalid: bool,
@@ -51,6 +53,8 @@ fn prototype(s: &Scan) -> Vec<Record> {
     }
     if s.intensity {
         p.push(Record { name: RecordName::Intensity, data_type: integer(s.intensity_limits.0, s.intensity_limits.1) });
+    } else if s.float_intensity {
+        p.push(Record { name: RecordName::Intensity, data_type: RecordDataType::Single { min: None, max: None } });
     }
     if s.color {
         for name in [RecordName::ColorRed, RecordName::ColorGreen, RecordName::ColorBlue] {
@@ -95,6 +99,7 @@ fn main() {
                         "cartesian" => s.spherical = false,
                         "spherical" => s.spherical = true,
                         "intensity" => s.intensity = true,
+                        "floatintensity" => s.float_intensity = true,
                         "color" => s.color = true,
                         "rowcolumn" => s.row_column = true,
                         "invalid" => s.invalid = true,
@@ -149,6 +154,7 @@ fn main() {
                 .zip(&proto)
                 .map(|(&x, r)| match r.data_type {
                     RecordDataType::Double { .. } => RecordValue::Double(x),
+                    RecordDataType::Single { .. } => RecordValue::Single(x as f32),
                     _ => RecordValue::Integer(x as i64),
                 })
                 .collect();
