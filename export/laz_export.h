@@ -5,10 +5,11 @@
 // scalar attributes (gps_time, scan_angle, user_data, point_source_id).
 // LAS 1.4, point format 6 (7 with colour), compressed by the `laz` crate
 // (preprocess/readers/laz_ffi), written as a stream: surfcast-export writes
-// it to a file, surfcast-serve sends it as it is produced.
+// it to a file, surfcast-serve sends it as it is produced. Or COPC, to a file.
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <functional>
 #include <optional>
 #include <string>
@@ -30,8 +31,8 @@ Result<std::vector<uint8_t>> parseClasses(const std::string& text);
 // What an export writes: the points it keeps and bounds that hold them (for
 // a whole set, from the hierarchy and tileset.json's bounds grown by half the
 // coarsest leaf step; else the points' own, from a first pass that decodes
-// each leaf the filter reaches), and the LAS layout (scale, offset, point
-// format).
+// each leaf the filter reaches), and the LAS layout (point format; the scale
+// and offset are the set's, the same for every box).
 struct LazExportPlan {
     std::vector<size_t> nodes;  // indices into set.nodes(): leaves the filter reaches, in hierarchy order
     uint64_t points = 0;
@@ -55,5 +56,19 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
 // Decodes the plan's leaves again; fails if they no longer give its points.
 Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const LazExportPlan& plan,
                       const std::function<Status(const uint8_t*, size_t)>& out, const StopExport& stop = {});
+
+// COPC 1.0 (copc.io) into `f` (a new file, seekable: the header is written
+// last): the same points and records as writeLazExport, in an octree on the
+// set's own root cube, each node one LAZ chunk. Leaves are walked depth
+// first, decoded once; a point goes to the shallowest node above its leaf
+// whose cell (128 per axis) it falls in is still empty, else to its leaf, so
+// every node holds an even sample of what lies under it and only the nodes
+// above the current leaf wait in memory. The hierarchy is one page, an EVLR
+// after the chunk table.
+struct CopcReport {
+    uint64_t points = 0;
+    size_t nodes = 0;
+};
+Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& filter, std::FILE* f, const StopExport& stop = {});
 
 }  // namespace surfcast

@@ -13,7 +13,7 @@
 
 namespace {
 
-const char* kUsage = R"(usage: surfcast-export SET --format laz [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
+const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
 
 Writes a tile set's points as another format. SET is a set's folder or its
 http(s) URL.
@@ -23,6 +23,10 @@ http(s) URL.
                         build), point format 6, or 7 with colour; intensity,
                         classification, returns, and GPS time, scan angle, user
                         data and point source id where the set stores them
+  --format copc         the same points as a COPC 1.0 file (cloud-optimized point
+                        cloud: LAZ chunks in an octree on the set's root cube, each
+                        node an even sample of what lies under it, the hierarchy
+                        in an EVLR), which COPC readers query by box and level
   --bbox X0,Y0,Z0,X1,Y1,Z1
                         only the points inside this box (world coordinates,
                         bounds included)
@@ -61,7 +65,7 @@ int main(int argc, char** argv) {
             std::fputs(kUsage, stdout);
             return 0;
         } else if (a == "--format") {
-            if (!value(&format)) return usageError("--format wants laz");
+            if (!value(&format)) return usageError("--format wants laz or copc");
         } else if (a == "-o" || a == "--output") {
             if (!value(&output)) return usageError("-o wants a file");
         } else if (a == "--bbox") {
@@ -96,8 +100,8 @@ int main(int argc, char** argv) {
         }
     }
     if (set.empty()) return usageError("no set given");
-    if (format.empty()) return usageError("--format is required (laz)");
-    if (format != "laz") return usageError("--format " + format + ": the formats are laz");
+    if (format.empty()) return usageError("--format is required (laz or copc)");
+    if (format != "laz" && format != "copc") return usageError("--format " + format + ": the formats are laz and copc");
     if (output.empty()) return usageError("-o FILE is required");
 
     auto reader = openTileset(set, http);
@@ -105,13 +109,16 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "surfcast-export: %s\n", reader.status().message().c_str());
         return 1;
     }
-    auto plan = planLazExport(*reader, filter);
-    if (!plan) {
-        std::fprintf(stderr, "surfcast-export: %s\n", plan.status().message().c_str());
-        return 1;
+    Result<LazExportPlan> plan = LazExportPlan{};
+    if (format == "laz") {
+        plan = planLazExport(*reader, filter);
+        if (!plan) {
+            std::fprintf(stderr, "surfcast-export: %s\n", plan.status().message().c_str());
+            return 1;
+        }
+        if (!quiet)
+            std::fprintf(stderr, "%llu points from %zu leaves; LAS scale %g\n", (unsigned long long)plan->points, plan->nodes.size(), plan->scale);
     }
-    if (!quiet)
-        std::fprintf(stderr, "%llu points from %zu leaves; LAS scale %g\n", (unsigned long long)plan->points, plan->nodes.size(), plan->scale);
 
     // Written beside the output, then renamed over it: a reader finds the old file or the whole new one.
     const std::string partial = output + ".partial-" + std::to_string(::getpid());
@@ -121,15 +128,24 @@ int main(int argc, char** argv) {
         return 1;
     }
     uint64_t bytes = 0, reported = 0;
-    Status status = writeLazExport(*reader, filter, *plan, [&](const uint8_t* data, size_t n) -> Status {
-        if (std::fwrite(data, 1, n, f) != n) return Status::error(partial + ": " + std::strerror(errno));
-        bytes += n;
-        if (!quiet && bytes - reported >= (64u << 20)) {
-            std::fprintf(stderr, "  %llu MiB written\n", (unsigned long long)(bytes >> 20));
-            reported = bytes;
-        }
-        return {};
-    });
+    Status status;
+    if (format == "copc") {
+        auto copc = writeCopcExport(*reader, filter, f);
+        if (!copc) status = Status::error(partial + ": " + copc.status().message());
+        else plan->points = copc->points;
+        if (copc && !quiet) std::fprintf(stderr, "%llu points in %zu octree nodes\n", (unsigned long long)copc->points, copc->nodes);
+        if (copc && std::fseek(f, 0, SEEK_END) == 0) bytes = uint64_t(std::ftell(f));
+    } else {
+        status = writeLazExport(*reader, filter, *plan, [&](const uint8_t* data, size_t n) -> Status {
+            if (std::fwrite(data, 1, n, f) != n) return Status::error(partial + ": " + std::strerror(errno));
+            bytes += n;
+            if (!quiet && bytes - reported >= (64u << 20)) {
+                std::fprintf(stderr, "  %llu MiB written\n", (unsigned long long)(bytes >> 20));
+                reported = bytes;
+            }
+            return {};
+        });
+    }
     if (status.ok() && (std::fflush(f) != 0 || ::fsync(::fileno(f)) != 0)) status = Status::error(partial + ": " + std::strerror(errno));
     if (std::fclose(f) != 0 && status.ok()) status = Status::error(partial + ": " + std::strerror(errno));
     std::error_code ec;

@@ -1,4 +1,4 @@
-// surfcast-export --format laz: a set's input points back out, checked
+// surfcast-export --format laz and copc: a set's input points back out, checked
 // against the LAS file the set was built from by laspy (an independent
 // reader: tests/tools/compare_las.py) and by the build's own LAS reader.
 #include <gtest/gtest.h>
@@ -129,6 +129,46 @@ TEST_F(Export, BoxAndClassesKeepWhatTheySay) {
     EXPECT_EQ(compare(test::dataFile("autzen_trim.las"), empty, {})["exported"], 0);
 }
 
+// COPC: laspy's COPC reader (its own parser of the info VLR, the hierarchy
+// and the chunks) finds the points of the LAZ export, record for record; the
+// root holds one point in each cell of its 128³ grid that the points occupy
+// (counted by numpy: a point within half the LAS scale of a cell's face may
+// fall on either side, so 0.5 % may differ), the levels add up to all, and a
+// query by half the box returns the points there.
+TEST_F(Export, CopcHoldsTheSamePointsInAnOctree) {
+    const std::string laz = dir_->file("for-copc.laz"), copc = dir_->file("all.copc.laz");
+    for (const auto& [format, out] : {std::pair<std::string, std::string>{"laz", laz}, {"copc", copc}}) {
+        auto e = test::run({test::binary("surfcast-export"), "-q", dir_->file("autzen"), "--format", format, "-o", out});
+        ASSERT_EQ(e.exitCode, 0) << e.output;
+    }
+    auto r = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/check_copc.py", copc, laz});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const nlohmann::json c = nlohmann::json::parse(r.output);
+    EXPECT_EQ(c["laz"], 110000);
+    EXPECT_EQ(c["query"], 110000);
+    EXPECT_TRUE(c["same_records"].get<bool>());
+    const auto levels = c["levels"].get<std::vector<int>>();
+    ASSERT_GE(levels.size(), 3u);
+    const int cells = c["root_cells"].get<int>();
+    EXPECT_GT(cells, 1000);
+    EXPECT_LE(std::abs(levels[0] - cells), cells / 200) << levels[0] << " points at the root";
+    int sum = 0;
+    for (int n : levels) sum += n;
+    EXPECT_EQ(sum, 110000);
+    EXPECT_EQ(c["half_query"], c["half_expected"]);
+    EXPECT_GT(c["half_query"].get<int>(), 1000);
+    // A box and classes: the same points as the LAZ export of them.
+    const std::string box = "636500,849000,0,637000,849400,1000";
+    for (const auto& [format, out] : {std::pair<std::string, std::string>{"laz", laz}, {"copc", copc}}) {
+        auto e = test::run({test::binary("surfcast-export"), "-q", dir_->file("autzen"), "--format", format, "--bbox", box, "--classes", "2",
+                            "-o", out});
+        ASSERT_EQ(e.exitCode, 0) << e.output;
+    }
+    auto boxed = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/check_copc.py", copc, laz});
+    ASSERT_EQ(boxed.exitCode, 0) << boxed.output;
+    EXPECT_TRUE(nlohmann::json::parse(boxed.output)["same_records"].get<bool>()) << boxed.output;
+}
+
 // Wrong arguments and sets: a clear error, a non-zero exit, no file.
 TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
     const std::string out = dir_->file("bad.laz");
@@ -142,7 +182,7 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "laz", "--bbox", "0,0,0,1,x,1", "-o", out}, 2, "'x' is not a number"},
         {{dir_->file("autzen"), "--format", "laz", "--bbox", "5,0,0,1,1,1", "-o", out}, 2, "minimum exceeds its maximum on axis x"},
         {{dir_->file("autzen"), "--format", "laz", "--classes", "2,300", "-o", out}, 2, "'300' is not a class"},
-        {{dir_->file("autzen"), "--format", "ply", "-o", out}, 2, "--format ply"},
+        {{dir_->file("autzen"), "--format", "ply", "-o", out}, 2, "--format ply: the formats are laz and copc"},
         {{dir_->file("autzen"), "--format", "laz"}, 2, "-o FILE is required"},
         {{dir_->file("nothing"), "--format", "laz", "-o", out}, 1, dir_->file("nothing")},
     };

@@ -57,19 +57,28 @@ typedef struct ScLazWriter ScLazWriter;
 typedef int (*ScWrite)(void* ctx, const uint8_t* data, uint64_t len);
 
 /* The LASzip VLR's payload (user "laszip encoded", record 22204) for point
- * format `point_format` with `extra_bytes` bytes per record beyond it, into
- * `out` (room for `cap`), its length in `len`. Returns 0, or -1. */
-int sc_laz_vlr(uint8_t point_format, uint16_t extra_bytes, uint8_t* out, size_t cap, size_t* len);
+ * format `point_format` with `extra_bytes` bytes per record beyond it, in
+ * chunks of 50,000 points or, with `variable_chunks`, of the caller's choosing
+ * (COPC), into `out` (room for `cap`), its length in `len`. 0, or -1. */
+int sc_laz_vlr(uint8_t point_format, uint16_t extra_bytes, int variable_chunks, uint8_t* out, size_t cap, size_t* len);
 
 /* A compressor of such records whose point data starts at byte `data_offset`
  * of the file (the caller writes the header and VLRs before it); its bytes go
- * to `write(ctx, ...)` in order, from the calling thread. NULL on error. */
+ * to `write(ctx, ...)` in order, from the calling thread, starting with the
+ * chunk table's offset as -1. NULL on error. */
 ScLazWriter* sc_laz_writer_open(ScWrite write, void* ctx, uint64_t data_offset, uint8_t point_format, uint16_t extra_bytes,
-                                char* err, size_t err_len);
+                                int variable_chunks, char* err, size_t err_len);
 /* Compresses `count` records (count * the format's size bytes). 0, or -1. */
 int sc_laz_writer_write(ScLazWriter* writer, const uint8_t* records, uint64_t count, char* err, size_t err_len);
-/* Ends the last chunk, writes the chunk table and its offset. 0, or -1. */
-int sc_laz_writer_finish(ScLazWriter* writer, char* err, size_t err_len);
+/* Variable-size chunks: ends the chunk open, giving its first byte and size. 0, or -1. */
+int sc_laz_writer_end_chunk(ScLazWriter* writer, uint64_t* first_byte, uint64_t* bytes, char* err, size_t err_len);
+/* Ends the last chunk (its range in last_first and last_bytes) and writes the
+ * chunk table (its offset in `table`); outputs may be NULL. With
+ * `append_offset` the table's offset follows as the file's last 8 bytes (a
+ * stream); else the caller writes it over the point data's first 8 bytes (a
+ * file it can seek in, with EVLRs after the table: COPC). 0, or -1. */
+int sc_laz_writer_finish(ScLazWriter* writer, int append_offset, uint64_t* last_first, uint64_t* last_bytes, uint64_t* table,
+                         char* err, size_t err_len);
 void sc_laz_writer_close(ScLazWriter* writer);
 
 #ifdef __cplusplus

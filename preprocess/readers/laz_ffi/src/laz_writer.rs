@@ -88,23 +88,26 @@ impl Seek for Stream {
 pub struct ScLazWriter {
     compressor: LasZipCompressor<'static, Stream>,
     point_size: usize,
+    chunk_start: u64, // the open chunk's first byte
 }
 
-fn vlr_for(point_format: u8, extra_bytes: u16) -> Result<LazVlr, String> {
-    LazVlrBuilder::default()
+fn vlr_for(point_format: u8, extra_bytes: u16, variable_chunks: bool) -> Result<LazVlr, String> {
+    let builder = LazVlrBuilder::default()
         .with_point_format(point_format, extra_bytes)
-        .map(|b| b.build())
-        .map_err(|e| format!("point format {}: {}", point_format, e))
+        .map_err(|e| format!("point format {}: {}", point_format, e))?;
+    Ok(if variable_chunks { builder.with_variable_chunk_size() } else { builder }.build())
 }
 
 /// The LASzip VLR's payload for `point_format` (0-10) with `extra_bytes`
-/// bytes per record beyond the format's: written into `out` (room for `cap`),
-/// its length in `len`. Returns 0, or -1 (too small, or no such format).
+/// bytes per record beyond the format's, chunks of 50,000 points or of
+/// variable size: written into `out` (room for `cap`), its length in `len`.
+/// Returns 0, or -1 (too small, or no such format).
 #[no_mangle]
-pub extern "C" fn sc_laz_vlr(point_format: u8, extra_bytes: u16, out: *mut u8, cap: usize, len: *mut usize) -> c_int {
+pub extern "C" fn sc_laz_vlr(point_format: u8, extra_bytes: u16, variable_chunks: c_int, out: *mut u8, cap: usize,
+                             len: *mut usize) -> c_int {
     let result = catch_unwind(|| -> Result<Vec<u8>, String> {
         let mut bytes = Vec::new();
-        vlr_for(point_format, extra_bytes)?.write_to(&mut bytes).map_err(|e| e.to_string())?;
+        vlr_for(point_format, extra_bytes, variable_chunks != 0)?.write_to(&mut bytes).map_err(|e| e.to_string())?;
         Ok(bytes)
     });
     match result {
@@ -124,17 +127,19 @@ pub extern "C" fn sc_laz_vlr(point_format: u8, extra_bytes: u16, out: *mut u8, c
 /// `data_offset` of the file, its bytes handed to `write(ctx, ...)` in order.
 #[no_mangle]
 pub extern "C" fn sc_laz_writer_open(write: Option<ScWrite>, ctx: *mut c_void, data_offset: u64, point_format: u8,
-                                     extra_bytes: u16, err: *mut c_char, err_len: usize) -> *mut ScLazWriter {
+                                     extra_bytes: u16, variable_chunks: c_int, err: *mut c_char, err_len: usize)
+                                     -> *mut ScLazWriter {
     let Some(write) = write else {
         write_err(err, err_len, "null argument");
         return std::ptr::null_mut();
     };
     let result = catch_unwind(AssertUnwindSafe(|| -> Result<ScLazWriter, String> {
-        let vlr = vlr_for(point_format, extra_bytes)?;
+        let vlr = vlr_for(point_format, extra_bytes, variable_chunks != 0)?;
         let point_size = vlr.items_size() as usize;
         let stream = Stream { write, ctx, buffer: Vec::new(), flushed: data_offset, pos: data_offset, start: data_offset, offset: None };
-        let compressor = LasZipCompressor::new(stream, vlr).map_err(|e| e.to_string())?;
-        Ok(ScLazWriter { compressor, point_size })
+        let mut compressor = LasZipCompressor::new(stream, vlr).map_err(|e| e.to_string())?;
+        compressor.reserve_offset_to_chunk_table().map_err(|e| e.to_string())?;
+        Ok(ScLazWriter { compressor, point_size, chunk_start: data_offset + 8 })
     }));
     match result {
         Ok(Ok(w)) => Box::into_raw(Box::new(w)),
@@ -182,16 +187,57 @@ pub extern "C" fn sc_laz_writer_write(writer: *mut ScLazWriter, records: *const 
     })
 }
 
-/// Ends the last chunk and writes the chunk table and its offset: the
-/// file's last bytes. Returns 0, or -1.
+/// Ends the chunk open (variable-size chunks only: one a call) and gives
+/// its first byte and its size in the file. Returns 0, or -1.
 #[no_mangle]
-pub extern "C" fn sc_laz_writer_finish(writer: *mut ScLazWriter, err: *mut c_char, err_len: usize) -> c_int {
+pub extern "C" fn sc_laz_writer_end_chunk(writer: *mut ScLazWriter, first_byte: *mut u64, bytes: *mut u64, err: *mut c_char,
+                                          err_len: usize) -> c_int {
+    run(writer, err, err_len, |w| {
+        if !w.compressor.vlr().uses_variable_size_chunks() || first_byte.is_null() || bytes.is_null() {
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "chunks end by themselves here"));
+        }
+        w.compressor.finish_current_chunk()?;
+        let end = w.compressor.get_mut().end();
+        // SAFETY: checked non-null above; the caller gives writable u64s.
+        unsafe {
+            *first_byte = w.chunk_start;
+            *bytes = end - w.chunk_start;
+        }
+        w.chunk_start = end;
+        Ok(())
+    })
+}
+
+/// Ends the last chunk (its first byte and size in `last_first`, `last_bytes`
+/// where not null) and writes the chunk table; `table` (where not null)
+/// gets the table's offset. With `append_offset` the offset follows as the
+/// file's last 8 bytes (a stream); else the caller writes it over the
+/// point data's first 8 bytes itself (a file it can seek in). 0, or -1.
+#[no_mangle]
+pub extern "C" fn sc_laz_writer_finish(writer: *mut ScLazWriter, append_offset: c_int, last_first: *mut u64,
+                                       last_bytes: *mut u64, table: *mut u64, err: *mut c_char, err_len: usize) -> c_int {
     run(writer, err, err_len, |w| {
         w.compressor.done()?;
+        let chunk_start = w.chunk_start;
         let stream = w.compressor.get_mut();
         let offset = stream.offset.take().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::Other, "no chunk table offset"))?;
+        let table_at = u64::from_le_bytes(offset);
+        // SAFETY: the caller gives writable u64s where not null.
+        unsafe {
+            if !last_first.is_null() {
+                *last_first = chunk_start;
+            }
+            if !last_bytes.is_null() {
+                *last_bytes = table_at - chunk_start;
+            }
+            if !table.is_null() {
+                *table = table_at;
+            }
+        }
         stream.pos = stream.end();
-        stream.write_all(&offset)?;
+        if append_offset != 0 {
+            stream.write_all(&offset)?;
+        }
         stream.flush_buffer()
     })
 }
