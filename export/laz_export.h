@@ -62,9 +62,11 @@ Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const
 // set's own root cube, each node one LAZ chunk. Leaves are walked depth
 // first, decoded once; a point goes to the shallowest node above its leaf
 // whose cell (128 per axis) it falls in is still empty, else to its leaf, so
-// every node holds an even sample of what lies under it and only the nodes
-// above the current leaf wait in memory. The hierarchy is one page, an EVLR
-// after the chunk table.
+// every node above the leaves holds an even sample of what lies under it (and
+// at least one point where anything does, which readers descending only
+// through non-empty nodes need), and only the nodes above the current leaf
+// wait in memory (each a 256 KiB cell mask and its records). The hierarchy is
+// one page, an EVLR after the chunk table.
 struct CopcReport {
     uint64_t points = 0;
     size_t nodes = 0;

@@ -25,8 +25,9 @@ http(s) URL.
                         data and point source id where the set stores them
   --format copc         the same points as a COPC 1.0 file (cloud-optimized point
                         cloud: LAZ chunks in an octree on the set's root cube, each
-                        node an even sample of what lies under it, the hierarchy
-                        in an EVLR), which COPC readers query by box and level
+                        node above the leaves an even sample of what lies under
+                        it, the hierarchy in an EVLR), which COPC readers query
+                        by box and level
   --bbox X0,Y0,Z0,X1,Y1,Z1
                         only the points inside this box (world coordinates,
                         bounds included)

@@ -149,6 +149,8 @@ private:
             else status = writeLazExport(reader_, filter_, *plan, push, stop);
         } catch (const std::exception& e) {  // std::bad_alloc: the thread must not take the server down
             status = Status::error(e.what());
+        } catch (...) {
+            status = Status::error("the export failed");
         }
         std::lock_guard lock(mutex_);
         finished_ = true;
@@ -277,9 +279,11 @@ struct HttpServer::Impl {
     std::atomic<int> liveExports{0};
     std::mutex exportsMutex;
     std::vector<std::weak_ptr<ExportStream>> exports;
+    bool exportsClosed = false;  // once aborted, no export starts (a keep-alive request may still arrive)
 
     void abortExports() {
         std::lock_guard lock(exportsMutex);
+        exportsClosed = true;
         for (auto& weak : exports)
             if (auto s = weak.lock()) s->abort();
         exports.clear();
@@ -467,16 +471,17 @@ struct HttpServer::Impl {
         if (most > config.exportMaxPoints)
             return fail(r, 413, "too_large", "the box reaches nodes of " + std::to_string(most) + " points, over this server's limit of " +
                                                  std::to_string(config.exportMaxPoints) + " per export; ask for a smaller box");
+        // Counted and registered under one lock: no two requests take the
+        // last place, and none starts once the server has aborted its exports.
+        std::lock_guard lock(exportsMutex);
+        if (exportsClosed) return fail(r, 503, "busy", "the server is stopping");
         if (liveExports.load() >= config.exportConcurrency) {
             r.header("Retry-After", "5");
             return fail(r, 503, "busy", std::to_string(config.exportConcurrency) + " exports in progress, this server's most; try again later");
         }
         r.stream = std::make_shared<ExportStream>(snap, std::move(*reader), std::move(filter), c, liveExports);
-        {
-            std::lock_guard lock(exportsMutex);
-            std::erase_if(exports, [](const std::weak_ptr<ExportStream>& w) { return w.expired(); });
-            exports.push_back(r.stream);
-        }
+        std::erase_if(exports, [](const std::weak_ptr<ExportStream>& w) { return w.expired(); });
+        exports.push_back(r.stream);
         r.header("Content-Type", "application/vnd.laszip");
         r.header("Content-Disposition", "attachment; filename=\"" + name + ".laz\"");
         r.header("Cache-Control", "no-store");

@@ -403,8 +403,10 @@ TEST(E57, BadFilesAreClearErrors) {
     // one that claims 2^61 (times a point's size, the count wraps 64 bits).
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "claim 0 1000000000\n", dir.file("claims.e57")));
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "claim 0 2305843009213693952\n", dir.file("wraps.e57")));
-    // A rotation that is not a unit quaternion (it would scale the scan).
+    // A rotation that is not a unit quaternion (it would scale the scan), and
+    // a translation that is not finite (every point would be NaN).
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, "scan b\npose 2 0 0 0 0 0 0\nfields cartesian\np 0 0 0\n", dir.file("scaled.e57")));
+    ASSERT_NO_FATAL_FAILURE(writeE57(dir, "scan e\npose 1 0 0 0 inf 0 0\nfields cartesian\np 0 0 0\n", dir.file("infinite.e57")));
     // A prototype without coordinates, and one with a field E57 does not define.
     ASSERT_NO_FATAL_FAILURE(writeE57(dir, good + "replace <cartesianX <intensity\nreplace </cartesianX> </intensity>\n",
                                      dir.file("nocoordinates.e57")));
@@ -440,6 +442,7 @@ TEST(E57, BadFilesAreClearErrors) {
         {dir.file("unknown.e57"), "cartesianQ"},
         {dir.file("flipped.e57"), "scan 0 ('c'): "},
         {dir.file("scaled.e57"), "scan 0 ('b'): the pose's rotation quaternion (2, 0, 0, 0) is not a unit quaternion"},
+        {dir.file("infinite.e57"), "scan 0 ('e'): the pose's translation (inf, 0, 0) is not finite"},
     };
     for (const Case& c : cases) {
         SCOPED_TRACE(c.path);

@@ -528,6 +528,14 @@ TEST_F(ServerTest, StoppingDuringAnExportAndTooManyExports) {
     HttpServer server(**store, config);
     ASSERT_TRUE(server.bind().ok());
     std::thread thread([&] { server.run(); });
+    struct Joined {  // a failed assertion below still stops and joins the server
+        HttpServer& server;
+        std::thread& thread;
+        ~Joined() {
+            server.stop();
+            if (thread.joinable()) thread.join();
+        }
+    } joined{server, thread};
     auto set = TilesetReader::open(tmp.file("sets/big"));
     ASSERT_TRUE(set.ok());
     const Box3d& b = set->info().bounds;

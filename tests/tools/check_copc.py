@@ -8,8 +8,9 @@ Usage: check_copc.py COPC LAZ
 Prints one JSON object: the points a whole query returns, those of each
 level, the points of the LAZ file, whether both hold the same records
 (sorted by position), for a query of the half of the bounds below the
-middle x the points it returns against those of the whole query there, and
-how many cells of the root's grid the LAZ file's points occupy.
+middle x the points it returns against those of the whole query there, how
+many cells of the root's grid the LAZ file's points occupy, and what
+laspy.read finds reading the COPC file as plain LAZ.
 """
 import json
 import sys
@@ -40,11 +41,20 @@ def main():
             result["levels"].append(int(n))
         result["same_records"] = bool(len(everything) == len(laz.points) and np.array_equal(records(everything), records(laz.points)))
         mins, maxs = r.header.mins, r.header.maxs
-        mid = (mins[0] + maxs[0]) / 2
+        # A quarter of the scale past a record's grid: no point lies on it,
+        # whichever way a reader rounds the bound.
+        scale, offset = r.header.scales[0], r.header.offsets[0]
+        mid = offset + (np.floor(((mins[0] + maxs[0]) / 2 - offset) / scale) + 0.25) * scale
         half = r.query(bounds=laspy.copc.Bounds(mins=np.array([mins[0], mins[1]]), maxs=np.array([mid, maxs[1]])))
         result["half_query"] = int(len(half))
         result["half_expected"] = int(np.sum(np.asarray(everything.x) <= mid))
         result["spacing"] = float(r.copc_info.spacing)
+    # Read as plain LAZ (the chunk table and its offset, which CopcReader does not use).
+    plain = laspy.read(copc_path)
+    result["plain"] = int(len(plain.points))
+    result["plain_same_records"] = bool(len(plain.points) == len(laz.points) and
+                                        np.array_equal(records(plain.points), records(laz.points)))
+    with laspy.CopcReader.open(copc_path) as r:
         # The cells of the root's grid (spacing wide, from the cube's corner)
         # that the LAZ file's points occupy: the root holds one point in each.
         corner = np.asarray(r.copc_info.center) - r.copc_info.halfsize

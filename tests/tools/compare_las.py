@@ -4,9 +4,9 @@ read by laspy (an independent reader), for tests/export_test.cpp.
 
 Usage: compare_las.py ORIGINAL EXPORTED [--box X0,Y0,Z0,X1,Y1,Z1] [--classes 2,6] [--tolerance T]
 
-Each exported point is matched to an unmatched original point within T on
-every axis, among the original points the filter keeps with the box grown
-by T.
+Each exported point is matched to the nearest unmatched original point
+within T on every axis (T under the original's scale), among the original
+points the filter keeps with the box grown by T.
 Prints one JSON object: the exported count, the counts the filter keeps
 with the box shrunk and grown by T, how many exported points matched, the
 largest position error, the exported classes, the largest GPS time and
@@ -51,18 +51,19 @@ def main():
     index = {}
     for i, k in zip(candidates, np.round(oxyz[candidates] / scale).astype(np.int64)):
         index.setdefault(tuple(k), []).append(i)
+    # The nearest unmatched one within T; the 27 cells hold every candidate
+    # while T is under one cell.
+    assert np.all(a.tolerance < scale), "the tolerance must be under the original's scale"
     offsets = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)]
     taken = set()
     match = []
     for p, k in zip(exyz, np.round(exyz / scale).astype(np.int64)):
-        found = -1
+        found, best = -1, np.inf
         for d in offsets:
             for i in index.get((k[0] + d[0], k[1] + d[1], k[2] + d[2]), []):
-                if i not in taken and np.all(np.abs(oxyz[i] - p) <= a.tolerance):
-                    found = i
-                    break
-            if found >= 0:
-                break
+                dist = np.max(np.abs(oxyz[i] - p))
+                if i not in taken and dist <= a.tolerance and dist < best:
+                    found, best = i, dist
         if found >= 0:
             taken.add(found)
         match.append(found)

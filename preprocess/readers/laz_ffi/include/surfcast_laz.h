@@ -49,8 +49,9 @@ int sc_laz_read(ScLazReader* reader, uint8_t* out, uint64_t points, char* err, s
 void sc_laz_close(ScLazReader* reader);
 
 /* Writing (src/laz_writer.rs). The output is a stream that never seeks back:
- * the chunk table's offset at the start of the point data stays -1 and the
- * offset itself is the file's last 8 bytes, where LASzip readers look for it. */
+ * the chunk table's offset at the start of the point data stays -1, and the
+ * offset itself is the file's last 8 bytes, where LASzip readers look for it,
+ * or the caller writes it over the -1 (sc_laz_writer_finish). */
 typedef struct ScLazWriter ScLazWriter;
 
 /* Appends `len` bytes to the output: returns 0, or -1 on an error. */

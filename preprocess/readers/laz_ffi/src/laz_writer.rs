@@ -1,9 +1,10 @@
 //! LAZ compression through the `laz` crate, exposed to C++ (see
 //! include/surfcast_laz.h, "Writing"). The output is a stream that never
 //! seeks back: the chunk table's offset at the start of the point data stays
-//! -1, and the offset follows the chunk table as the file's last 8 bytes,
-//! which LASzip readers look for there (so that a server can send the file
-//! as it is compressed). Panics never cross the boundary.
+//! -1, and either the offset follows the chunk table as the file's last 8
+//! bytes, which LASzip readers look for there (so that a server can send the
+//! file as it is compressed), or the caller writes it over the -1 itself (a
+//! file with EVLRs after the table: COPC). Panics never cross the boundary.
 
 use std::io::{Seek, SeekFrom, Write};
 use std::os::raw::{c_char, c_int, c_void};
@@ -187,14 +188,18 @@ pub extern "C" fn sc_laz_writer_write(writer: *mut ScLazWriter, records: *const 
     })
 }
 
-/// Ends the chunk open (variable-size chunks only: one a call) and gives
-/// its first byte and its size in the file. Returns 0, or -1.
+/// Ends the chunk open (variable-size chunks only; the caller ends none
+/// without points) and gives its first byte and its size in the file.
+/// Returns 0, or -1.
 #[no_mangle]
 pub extern "C" fn sc_laz_writer_end_chunk(writer: *mut ScLazWriter, first_byte: *mut u64, bytes: *mut u64, err: *mut c_char,
                                           err_len: usize) -> c_int {
     run(writer, err, err_len, |w| {
-        if !w.compressor.vlr().uses_variable_size_chunks() || first_byte.is_null() || bytes.is_null() {
-            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "chunks end by themselves here"));
+        if first_byte.is_null() || bytes.is_null() {
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "null argument"));
+        }
+        if !w.compressor.vlr().uses_variable_size_chunks() {
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "fixed-size chunks end by themselves"));
         }
         w.compressor.finish_current_chunk()?;
         let end = w.compressor.get_mut().end();
