@@ -175,6 +175,15 @@ TEST_F(Export, CopcHoldsTheSamePointsInAnOctree) {
     EXPECT_GT(b["query"].get<int>(), 1000);
     EXPECT_TRUE(b["same_records"].get<bool>()) << boxed.output;
     EXPECT_TRUE(b["plain_same_records"].get<bool>()) << boxed.output;
+    // A box that holds no point: a valid COPC file of none.
+    for (const auto& [format, out] : {std::pair<std::string, std::string>{"laz", laz}, {"copc", copc}}) {
+        auto e = test::run({test::binary("surfcast-export"), "-q", dir_->file("autzen"), "--format", format, "--bbox", "0,0,0,1,1,1", "-o", out});
+        ASSERT_EQ(e.exitCode, 0) << e.output;
+    }
+    auto empty = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/check_copc.py", copc, laz});
+    ASSERT_EQ(empty.exitCode, 0) << empty.output;
+    EXPECT_EQ(nlohmann::json::parse(empty.output)["query"], 0);
+    EXPECT_EQ(nlohmann::json::parse(empty.output)["plain"], 0);
 }
 
 // Wrong arguments and sets: a clear error, a non-zero exit, no file.

@@ -15,31 +15,11 @@ constexpr size_t kE57BatchPoints = 1 << 14;
 // orientation rule (Surfel::source).
 constexpr uint64_t kMaxScans = 1 << 16;
 
-// The decoder's view of the file; keeps the last read failure for its error.
-struct E57Input {
-    std::unique_ptr<InputFile> file;
-    std::string error;
-
-    // Nothing may unwind into the Rust frames that call this.
-    static int64_t readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) noexcept {
-        auto* self = static_cast<E57Input*>(ctx);
-        try {
-            auto n = self->file->read(offset, out, size_t(len));
-            if (n) return int64_t(*n);
-            self->error = n.status().message();
-        } catch (const std::exception& e) {
-            self->error = e.what();
-        }
-        return -1;
-    }
-    std::string explain(const char* decoder) const { return error.empty() ? std::string(decoder) : std::string(decoder) + " (" + error + ")"; }
-};
-
 uint16_t unit16(float v) { return v > 0 ? (v < 1 ? uint16_t(std::lround(double(v) * 65535)) : uint16_t(65535)) : 0; }
 
 class E57PointReader final : public PointReader {
 public:
-    E57PointReader(ScE57Reader* reader, std::unique_ptr<E57Input> input) : reader_(reader), input_(std::move(input)) {}
+    E57PointReader(ScE57Reader* reader, std::unique_ptr<FfiInput> input) : reader_(reader), input_(std::move(input)) {}
     ~E57PointReader() override { sc_e57_close(reader_); }
 
     Status describe(const ScalarSelection& scalars) {
@@ -121,7 +101,7 @@ public:
 
 private:
     ScE57Reader* reader_;
-    std::unique_ptr<E57Input> input_;
+    std::unique_ptr<FfiInput> input_;
     InputDescription desc_;
     std::vector<bool> rows_;  // per scalar field: the row index (else the column)
     std::vector<bool> intensityNormalized_;  // per scan
@@ -133,10 +113,10 @@ private:
 Result<std::unique_ptr<PointReader>> openE57Reader(const std::string& path, const ScalarSelection& scalars) {
     auto file = InputFile::open(path);
     if (!file) return file.status();
-    auto input = std::make_unique<E57Input>();
+    auto input = std::make_unique<FfiInput>();
     input->file = std::move(*file);
     char err[512] = {};
-    ScE57Reader* reader = sc_e57_open(input->file->size(), &E57Input::readAt, input.get(), err, sizeof err);
+    ScE57Reader* reader = sc_e57_open(input->file->size(), &FfiInput::readAt, input.get(), err, sizeof err);
     if (!reader) return Status::error(path + ": " + input->explain(err));
     auto r = std::make_unique<E57PointReader>(reader, std::move(input));
     SC_TRY(r->describe(scalars));

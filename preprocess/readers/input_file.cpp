@@ -188,4 +188,16 @@ Result<uint64_t> inputFileSize(const std::string& path) {
     return remoteSize(path, *r->first, r->second);
 }
 
+int64_t FfiInput::readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) noexcept {
+    auto* self = static_cast<FfiInput*>(ctx);
+    try {
+        auto n = self->file->read(offset, out, size_t(len));
+        if (n) return int64_t(*n);
+        self->error = n.status().message();
+    } catch (const std::exception& e) {
+        self->error = e.what();
+    }
+    return -1;
+}
+
 }  // namespace surfcast

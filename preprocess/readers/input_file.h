@@ -32,6 +32,18 @@ protected:
     uint64_t size_ = 0;
 };
 
+// An InputFile as the Rust readers (laz_ffi: LAZ, E57) read it, through a C
+// callback (ScReadAt), keeping the last failure's message for their error.
+struct FfiInput {
+    std::unique_ptr<InputFile> file;
+    std::string error;
+
+    // Nothing may unwind into the Rust frames that call this.
+    static int64_t readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) noexcept;
+    // The decoder's message, with the read failure behind it where there was one.
+    std::string explain(const char* decoder) const { return error.empty() ? std::string(decoder) : std::string(decoder) + " (" + error + ")"; }
+};
+
 // How http(s) inputs are reached (--header, --token-file, --ca-file, ...):
 // set by the command line before any input is opened.
 void setInputHttpOptions(const HttpOptions& options);

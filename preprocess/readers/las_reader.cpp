@@ -101,31 +101,9 @@ private:
     uint64_t count_;
 };
 
-// The LAZ decoder's view of the file: reads through InputFile (a path or a
-// URL), keeping the last failure's message for the decoder's error.
-struct LazInput {
-    std::unique_ptr<InputFile> file;
-    std::string error;
-
-    // Nothing may unwind into the Rust frames that call this.
-    static int64_t readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) noexcept {
-        auto* self = static_cast<LazInput*>(ctx);
-        try {
-            auto n = self->file->read(offset, out, size_t(len));
-            if (n) return int64_t(*n);
-            self->error = n.status().message();
-        } catch (const std::exception& e) {
-            self->error = e.what();
-        }
-        return -1;
-    }
-    // The decoder's message, with the read failure behind it where there was one.
-    std::string explain(const char* decoder) const { return error.empty() ? std::string(decoder) : std::string(decoder) + " (" + error + ")"; }
-};
-
 class LazRecords final : public RecordSource {
 public:
-    LazRecords(ScLazReader* reader, std::unique_ptr<LazInput> input, int threads, size_t recordLength)
+    LazRecords(ScLazReader* reader, std::unique_ptr<FfiInput> input, int threads, size_t recordLength)
         : reader_(reader), input_(std::move(input)), threads_(threads), recordLength_(recordLength) {}
     ~LazRecords() override { sc_laz_close(reader_); }
     Status read(uint8_t* out, size_t records, uint64_t firstIndex) override {
@@ -151,7 +129,7 @@ public:
 
 private:
     ScLazReader* reader_;
-    std::unique_ptr<LazInput> input_;  // read by reader_: outlives it
+    std::unique_ptr<FfiInput> input_;  // read by reader_: outlives it
     int threads_;
     size_t recordLength_;
 };
@@ -393,13 +371,13 @@ Result<LasHeader> readLasHeader(ByteStream& in) {
 // The LAZ decompressor of `l`'s records [begin, end) (`tableOnly`: of none; its chunk table).
 Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads,
                                             bool tableOnly = false) {
-    auto input = std::make_unique<LazInput>();
+    auto input = std::make_unique<FfiInput>();
     auto file = InputFile::open(path);
     if (!file) return file.status();
     input->file = std::move(*file);
     const std::vector<uint8_t>& vlr = *l.vlrs.laszip;
     char err[512] = {};
-    ScLazReader* laz = sc_laz_open(input->file->size(), &LazInput::readAt, input.get(), l.dataOffset, vlr.data(), vlr.size(), l.count,
+    ScLazReader* laz = sc_laz_open(input->file->size(), &FfiInput::readAt, input.get(), l.dataOffset, vlr.data(), vlr.size(), l.count,
                                    begin, end, threads, tableOnly, err, sizeof err);
     if (!laz) return Status::error(path + ": LAZ: " + input->explain(err));
     auto records = std::make_unique<LazRecords>(laz, std::move(input), threads, l.recordLength);
