@@ -79,17 +79,8 @@ int main(int argc, char** argv) {
             auto classes = parseClasses(v);
             if (!classes) return usageError("--classes: " + classes.status().message());
             filter.classes = *classes;
-        } else if (a == "--header") {
-            if (!value(&v) || v.find(':') == std::string::npos || v.find(':') == 0) return usageError("--header wants 'Name: value'");
-            http.headers.push_back(v);
-        } else if (a == "--token-file") {
-            if (!value(&http.tokenFile)) return usageError("--token-file wants a file");
-        } else if (a == "--ca-file") {
-            if (!value(&http.caFile)) return usageError("--ca-file wants a PEM file");
-        } else if (a == "--insecure") {
-            http.insecure = true;
-        } else if (a == "--redirect-credentials") {
-            http.redirectCredentials = true;
+        } else if (std::string error; parseHttpOption(a, value, http, &error)) {
+            if (!error.empty()) return usageError(error);
         } else if (a == "-q" || a == "--quiet") {
             quiet = true;
         } else if (!a.empty() && a[0] == '-') {

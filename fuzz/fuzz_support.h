@@ -7,6 +7,9 @@
 #include <cstdint>
 #include <cstdlib>
 #include <string>
+#include <vector>
+
+#include "inputs.h"
 
 namespace surfcast::fuzz {
 
@@ -36,6 +39,24 @@ inline bool writeScratch(const std::string& path, const uint8_t* data, size_t si
     }
     ::close(fd);
     return done == size;
+}
+
+// Reads the input file at `path` whole through the build's own input path
+// (forEachInput: the reader chosen by extension and magic bytes, every scalar
+// field asked for), its errors dropped: what the reader targets run.
+inline void readWhole(const std::string& path, size_t meshMaxSurfels = 100000) {
+    InputOptions options;
+    options.paths = {path};
+    options.scalars.all = true;
+    options.mesh.maxSurfels = meshMaxSurfels;  // as --mesh-max-surfels: a few faces may ask for any density
+    std::vector<InputPoint> points(4096);
+    (void)forEachInput(options, [&](size_t, PointReader& reader) -> Status {
+        for (;;) {
+            auto n = reader.read(points.data(), points.size());
+            if (!n) return n.status();
+            if (*n == 0) return {};
+        }
+    });
 }
 
 }  // namespace surfcast::fuzz

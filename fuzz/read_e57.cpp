@@ -54,16 +54,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         for (int b = 0; b < 4; ++b) file[k * kPage + kPayload + size_t(b)] = uint8_t(c >> (24 - 8 * b));  // big-endian
     }
     if (!fuzz::writeScratch(scratch.path, file.data(), file.size())) return 0;
-    InputOptions options;
-    options.paths = {scratch.path};
-    options.scalars.all = true;
-    std::vector<InputPoint> points(4096);
-    (void)forEachInput(options, [&](size_t, PointReader& reader) -> Status {
-        for (;;) {
-            auto n = reader.read(points.data(), points.size());
-            if (!n) return n.status();
-            if (*n == 0) return {};
-        }
-    });
+    fuzz::readWhole(scratch.path);
     return 0;
 }

@@ -18,17 +18,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     static const fuzz::ScratchFile scratch(FUZZ_EXTENSION);
     const std::string& path = scratch.path;
     if (!fuzz::writeScratch(path, data, size)) return 0;
-    InputOptions options;
-    options.paths = {path};
-    options.scalars.all = true;
-    options.mesh.maxSurfels = 100000;  // as --mesh-max-surfels: a few faces may ask for any density
-    std::vector<InputPoint> points(4096);
-    (void)forEachInput(options, [&](size_t, PointReader& reader) -> Status {
-        for (;;) {
-            auto n = reader.read(points.data(), points.size());
-            if (!n) return n.status();
-            if (*n == 0) return {};
-        }
-    });
+    fuzz::readWhole(path);
     return 0;
 }

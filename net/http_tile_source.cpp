@@ -614,4 +614,24 @@ Result<TilesetReader> openTileset(const std::string& location, const HttpOptions
     return TilesetReader::open(std::move(*source));
 }
 
+bool parseHttpOption(const std::string& arg, const std::function<bool(std::string*)>& value, HttpOptions& http, std::string* error) {
+    error->clear();
+    std::string v;
+    if (arg == "--header") {
+        if (!value(&v) || v.find(':') == std::string::npos || v.find(':') == 0) *error = "--header wants 'Name: value'";
+        else http.headers.push_back(v);
+    } else if (arg == "--token-file") {
+        if (!value(&http.tokenFile)) *error = "--token-file wants a file";
+    } else if (arg == "--ca-file") {
+        if (!value(&http.caFile)) *error = "--ca-file wants a PEM file";
+    } else if (arg == "--insecure") {
+        http.insecure = true;
+    } else if (arg == "--redirect-credentials") {
+        http.redirectCredentials = true;
+    } else {
+        return false;
+    }
+    return true;
+}
+
 }  // namespace surfcast

@@ -7,6 +7,7 @@
 // https to http, and the user's headers sent to the set's own origin only.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -25,5 +26,12 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
 
 // A reader of the set at a folder or an http(s) URL.
 Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http = {});
+
+// The command-line options that say how to reach a URL (--header 'N: V',
+// --token-file F, --ca-file F, --insecure, --redirect-credentials), for every
+// program that takes them. Returns false where `arg` is none of them; else
+// true, with `error` set where its value is missing or malformed. `value`
+// takes the option's value from the command line (false: none left).
+bool parseHttpOption(const std::string& arg, const std::function<bool(std::string*)>& value, HttpOptions& http, std::string* error);
 
 }  // namespace surfcast

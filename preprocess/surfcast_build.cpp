@@ -237,18 +237,8 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             continue;
         } else if (a == "--info") {
             if (!value(&info)) return usageError("--info needs a tile set folder or URL");
-        } else if (a == "--header") {
-            if (!value(&v) || v.find(':') == std::string::npos || v.find(':') == 0)
-                return usageError("--header wants 'Name: value'");
-            http.headers.push_back(v);
-        } else if (a == "--token-file") {
-            if (!value(&http.tokenFile)) return usageError("--token-file wants a file");
-        } else if (a == "--ca-file") {
-            if (!value(&http.caFile)) return usageError("--ca-file wants a PEM file");
-        } else if (a == "--insecure") {
-            http.insecure = true;
-        } else if (a == "--redirect-credentials") {
-            http.redirectCredentials = true;
+        } else if (std::string error; surfcast::parseHttpOption(a, value, http, &error)) {
+            if (!error.empty()) return usageError(error);
         } else if (a == "--default-scene") {
             opt.inputs.defaultScene = true;
         } else if (a == "--scene-points") {

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "context.h"
+#include "http_tile_source.h"
 
 namespace surfcast {
 
@@ -328,20 +329,8 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             o->client.blockCache = size_t(double(mib) * (1 << 20));
         } else if (a == "--save-redraws") {
             o->saveRedraws = true;
-        } else if (a == "--header") {
-            if (!value() || v.find(':') == std::string::npos || v.find(':') == 0)
-                return (*exitCode = usageError("--header wants 'Name: value'")), false;
-            o->client.http.headers.push_back(v);
-        } else if (a == "--token-file") {
-            if (!value()) return (*exitCode = usageError("--token-file wants a file")), false;
-            o->client.http.tokenFile = v;
-        } else if (a == "--ca-file") {
-            if (!value()) return (*exitCode = usageError("--ca-file wants a PEM file")), false;
-            o->client.http.caFile = v;
-        } else if (a == "--insecure") {
-            o->client.http.insecure = true;
-        } else if (a == "--redirect-credentials") {
-            o->client.http.redirectCredentials = true;
+        } else if (std::string error; parseHttpOption(a, [&](std::string* out) { return value() && (*out = v, true); }, o->client.http, &error)) {
+            if (!error.empty()) return (*exitCode = usageError(error)), false;
         } else if (a == "--connections") {
             if (!count(&o->client.connections, "--connections")) return false;
         } else if (a == "--repeat") {
