@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 namespace surfcast {
@@ -41,6 +42,25 @@ Result<Camera> parseCamera(const std::string& text) {
     Camera c{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}, {v[6], v[7], v[8]}, v[9]};
     SC_TRY(checkCamera(c));
     return c;
+}
+
+Result<Box3d> parseBox(const std::string& text) {
+    std::vector<double> v;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+        char* end = nullptr;
+        const double x = std::strtod(item.c_str(), &end);
+        if (item.empty() || *end != '\0' || !std::isfinite(x)) return Status::error("box '" + text + "': '" + item + "' is not a number");
+        v.push_back(x);
+    }
+    if (v.size() != 6) return Status::error("box '" + text + "': six numbers wanted (xmin,ymin,zmin,xmax,ymax,zmax), " + std::to_string(v.size()) + " given");
+    Box3d b;
+    b.min = {v[0], v[1], v[2]};
+    b.max = {v[3], v[4], v[5]};
+    for (int a = 0; a < 3; ++a)
+        if (b.min[a] > b.max[a]) return Status::error("box '" + text + "': its minimum exceeds its maximum on axis " + "xyz"[a]);
+    return b;
 }
 
 Result<std::vector<Camera>> parseCameraPath(const std::string& text, const std::string& what) {
@@ -130,6 +150,7 @@ Result<ViewTransform> makeViewTransform(const Camera& camera, const Vec3d& origi
     v.eta = float(viewportScale(camera, height));
     v.width = width;
     v.height = height;
+    v.origin = origin;
     return v;
 }
 

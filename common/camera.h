@@ -28,6 +28,9 @@ struct Camera {
 
 // "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov": eye, target, up, vertical fov in degrees.
 Result<Camera> parseCamera(const std::string& text);
+// A box, "xmin,ymin,zmin,xmax,ymax,zmax" (surfcast-view's --clip, the exports'
+// --bbox and bbox=): errors name the text.
+Result<Box3d> parseBox(const std::string& text);
 // A camera path: {"frames": [{"eye": [x,y,z], "target": [..], "up": [..], "fov": deg}, ...]}
 // ("up" defaults to +z, "fov" to 45). `what` names the source in errors.
 Result<std::vector<Camera>> parseCameraPath(const std::string& json, const std::string& what);
@@ -58,6 +61,7 @@ struct ViewTransform {
     float rows[3][4];
     float eta;        // viewport scale (pixels per unit at z = 1)
     int width, height;
+    Vec3d origin;     // world position of the render origin, which the rows are relative to
 
     Vec3f apply(const Vec3f& p) const {
         return {rows[0][0] * p.x + rows[0][1] * p.y + rows[0][2] * p.z + rows[0][3],

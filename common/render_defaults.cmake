@@ -29,7 +29,7 @@ endfunction()
 
 set(h "// Generated from common/render_defaults.json by common/render_defaults.cmake: edit the JSON.\n#pragma once\n\nnamespace surfcast::defaults {\n")
 foreach(entry kernel_scale:double:kKernelScale zt:double:kZt lowpass_variance:float:kLowpassVariance
-        max_filter_pixels:float:kMaxFilterPixels edge_tau:float:kEdgeTau layers:int:kLayers max_layers:int:kMaxLayers
+        edge_tau:float:kEdgeTau layers:int:kLayers max_layers:int:kMaxLayers
         near_fraction:double:kNearFraction)
   string(REPLACE ":" ";" entry ${entry})
   list(GET entry 0 key)

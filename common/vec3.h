@@ -54,6 +54,11 @@ struct Box3d {
     void extend(const Box3d& b) {
         if (!b.empty()) { extend(b.min); extend(b.max); }
     }
+    // Closed boxes sharing at least a point.
+    bool intersects(const Box3d& b) const {
+        return min.x <= b.max.x && b.min.x <= max.x && min.y <= b.max.y && b.min.y <= max.y && min.z <= b.max.z &&
+               b.min.z <= max.z;
+    }
 };
 
 }  // namespace surfcast

@@ -24,8 +24,7 @@ struct PointFilter {
     std::vector<uint8_t> classes;  // ASPRS classes kept; empty: every class
 };
 
-// "xmin,ymin,zmin,xmax,ymax,zmax" and "2,6,9": errors name the text.
-Result<Box3d> parseBox(const std::string& text);
+// "2,6,9" (boxes: parseBox in camera.h): errors name the text.
 Result<std::vector<uint8_t>> parseClasses(const std::string& text);
 
 // What an export writes: the points it keeps and bounds that hold them (for

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <string>
 
+#include "camera.h"
 #include "http_tile_source.h"
 #include "laz_export.h"
 

@@ -21,6 +21,7 @@
 
 #include "byte_io.h"
 #include "byte_ranges.h"
+#include "camera.h"
 #include "laz_export.h"
 
 namespace surfcast {

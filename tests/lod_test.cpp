@@ -106,6 +106,37 @@ TEST_F(Lod, DrawnNodesAreFineEnoughNoFinerAndNeverOverlap) {
     }
 }
 
+// A clip box culls exactly the nodes whose box misses it: with every node
+// resident and no budget, the selection is the unclipped one less those.
+TEST_F(Lod, ClipCullsExactlyTheNodesMissingTheBox) {
+    auto reader = TilesetReader::open(dir_->file("scene"));
+    ASSERT_TRUE(reader) << reader.status().message();
+    LodSelector lod(reader->info(), reader->nodes());
+    const Box3d clip{{-2, -3, 0}, {1.5, 2, 3}};
+    size_t culledSomewhere = 0;
+    for (const char* text : kCameras) {
+        auto camera = parseCamera(text);
+        ASSERT_TRUE(camera);
+        LodParams params;
+        auto all = [](uint32_t) { return true; };
+        std::set<uint32_t> expected;
+        for (const auto& s : lod.select(*camera, 320, 240, params, all)) {
+            const Box3d b = lod.box(s.index);
+            bool misses = false;
+            for (int a = 0; a < 3; ++a) misses = misses || b.max[a] < clip.min[a] || b.min[a] > clip.max[a];
+            if (!misses) expected.insert(s.index);
+        }
+        params.clip = clip;
+        LodStats stats;
+        std::set<uint32_t> clipped;
+        for (const auto& s : lod.select(*camera, 320, 240, params, all, &stats)) clipped.insert(s.index);
+        EXPECT_EQ(clipped, expected) << text;
+        EXPECT_FALSE(clipped.empty()) << text;
+        culledSomewhere += stats.clipCulled;
+    }
+    EXPECT_GT(culledSomewhere, 0u) << "the box culled nothing: the test proves nothing";
+}
+
 TEST_F(Lod, ReplacementDrawsParentsUntilChildrenAreResident) {
     auto reader = TilesetReader::open(dir_->file("scene"));
     ASSERT_TRUE(reader);

@@ -143,6 +143,9 @@ TEST_F(ViewCli, BadArgumentsAndInputsGiveClearErrors) {
         {{"--headless", set(), "--color-by", "height"}, 2, "--color-by"},
         {{"--headless", set(), "--color-by", "classification"}, 1, "no classification"},
         {{"--headless", set(), "--hide-classes", "2,300"}, 2, "--hide-classes"},
+        {{"--headless", set(), "--clip", "0,0,0,1,1"}, 2, "six numbers"},
+        {{"--headless", set(), "--clip", "0,0,0,1,nan,1"}, 2, "'nan' is not a number"},
+        {{"--headless", set(), "--clip", "0,2,0,1,1,1"}, 2, "maximum on axis y"},
     };
     for (const auto& c : cases) {
         std::vector<std::string> args = {binary("surfcast-view")};

@@ -158,6 +158,7 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["pixels_covered"] = gpuStats.pixelsCovered;
                 line["nodes_visited"] = cf.lod.visited;
                 line["frustum_culled"] = cf.lod.frustumCulled;
+                line["clip_culled"] = cf.lod.clipCulled;
                 line["backface_culled"] = cf.lod.backfaceCulled;
                 line["wanted"] = cf.lod.missing.size();
                 line["budget_limited"] = cf.lod.budgetLimited;

@@ -53,6 +53,10 @@ reference.
                         is input or estimated-scan-origin; off for estimated-up and
                         estimated-outward, whose signs hold for ground or closed
                         objects only)
+  --clip X0,Y0,Z0,X1,Y1,Z1
+                        draw only the splats whose centre lies in this box (the set's
+                        own coordinates, bounds included), in every mode; nodes outside
+                        it are not fetched
   --background R,G,B    background colour in [0,1] (default 1,1,1)
   --color R,G,B         draw every surfel in this colour (for brightness measurements)
   --color-by A          rgb, intensity (through the set's 2-98 % range, gamma 1/2.2),
@@ -253,6 +257,11 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
         } else if (a == "--opacity") {
             if (!value() || !parseFloat(v, &o->settings.opacity) || !(o->settings.opacity >= 0 && o->settings.opacity <= 1))
                 return (*exitCode = usageError("--opacity wants a number in [0, 1]")), false;
+        } else if (a == "--clip") {
+            if (!value()) return (*exitCode = usageError("--clip wants xmin,ymin,zmin,xmax,ymax,zmax")), false;
+            auto box = parseBox(v);
+            if (!box) return (*exitCode = usageError("--clip: " + box.status().message())), false;
+            o->settings.clip = o->client.lod.clip = *box;
         } else if (a == "--layers") {
             float l = 0;
             if (!value() || !parseFloat(v, &l) || l != std::floor(l) || l < 1 || l > kMaxLayers)

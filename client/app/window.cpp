@@ -250,8 +250,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set, const TilesetInfo& set
                     break;
                 }
                 if (!view) continue;  // a degenerate orbit (zoomed to zero): skip the frame
-                auto params = makeFrameParams(*view, settings, renderer->nearPlane(*view));
-                record = [&, params](VkCommandBuffer cmd) { renderer->record(cmd, params); };
+                record = [&, v = *view](VkCommandBuffer cmd) { renderer->record(cmd, v, settings); };
                 source = renderer->output().image;
             }
             auto presented = gpu::presentFrame(**ctx, *swapchain, window, source, record);

@@ -103,7 +103,9 @@ Image renderCpuReference(const SurfelSet& set, const ViewTransform& view, const 
     // Setup: one screen-space kernel per surfel.
     std::vector<ScreenSplat> splats;
     splats.reserve(set.surfels.size());
+    const std::optional<LocalClip> clip = localClip(settings, set.origin);
     for (const auto& g : set.surfels) {
+        if (clip && !clip->contains({g.px, g.py, g.pz})) continue;
         Vec3f o = view.apply({g.px, g.py, g.pz});
         if (!finite(o) || !(o.z >= near)) continue;  // behind the near plane (or NaN)
         Vec3f n = normalizeOrZero(view.rotate(unpackNormalOct(g.normal)));

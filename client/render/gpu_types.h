@@ -12,7 +12,7 @@ static_assert(offsetof(GpuSurfel, color) == 20 && offsetof(GpuSurfel, weight) ==
 static_assert(offsetof(GpuSurfel, edge) == 28);
 static_assert(sizeof(FrameParams) == 128);
 static_assert(offsetof(FrameParams, viewport) == 48 && offsetof(FrameParams, kernel) == 64);
-static_assert(offsetof(FrameParams, resolve) == 80 && offsetof(FrameParams, mode) == 96);
-static_assert(offsetof(FrameParams, circleScale) == 108 && offsetof(FrameParams, flags) == 112);
-static_assert(offsetof(FrameParams, opacity) == 116 && offsetof(FrameParams, layers) == 124);
+static_assert(offsetof(FrameParams, clipMin) == 80 && offsetof(FrameParams, clipMax) == 96);
+static_assert(offsetof(FrameParams, background) == 112 && offsetof(FrameParams, mode) == 116);
+static_assert(offsetof(FrameParams, flags) == 120 && offsetof(FrameParams, layer) == 124);
 }  // namespace surfcast::gpu_types

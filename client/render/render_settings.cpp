@@ -46,7 +46,12 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
     p.viewport = {view.eta, float(view.width), float(view.height), nearPlane};
     float lowpass = s.mode == RenderMode::EwaNoPrefilter ? 0.f : s.lowpassVariance;
     p.kernel = {s.kernelScale, s.cutoff, s.zt, lowpass};
-    p.resolve = {s.background.x, s.background.y, s.background.z, s.edgeTau};
+    const std::optional<LocalClip> clip = localClip(s, view.origin);
+    p.clipMin = {clip ? clip->min.x : 0.f, clip ? clip->min.y : 0.f, clip ? clip->min.z : 0.f, s.edgeTau};
+    p.clipMax = {clip ? clip->max.x : 0.f, clip ? clip->max.y : 0.f, clip ? clip->max.z : 0.f,
+                 std::clamp(s.opacity, 0.f, 1.f)};
+    auto unorm8 = [](float v) { return uint32_t(std::lround(std::clamp(v, 0.f, 1.f) * 255.f)); };
+    p.background = unorm8(s.background.x) | unorm8(s.background.y) << 8 | unorm8(s.background.z) << 16;
     switch (s.mode) {
     case RenderMode::Points: p.mode = SC_MODE_POINTS; break;
     case RenderMode::Circles: p.mode = SC_MODE_CIRCLES; break;
@@ -55,16 +60,16 @@ gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSe
     case RenderMode::EwaPixel:
     case RenderMode::CpuReference: p.mode = SC_MODE_EWA_PIXEL; break;
     }
-    p.shading = s.shading == Shading::Unlit ? SC_SHADING_UNLIT
-                : s.shading == Shading::Lambert ? SC_SHADING_LAMBERT : SC_SHADING_PHONG;
-    p.maxFilterPixels = kMaxFilterPixels;
-    p.circleScale = s.kernelScale;
     p.flags = (s.backfaceCull ? SC_FLAG_BACKFACE_CULL : 0u) | (s.edgeAA ? SC_FLAG_EDGE_AA : 0u) |
-              (translucentFrame(s) ? SC_FLAG_TRANSLUCENT : 0u);
-    p.opacity = std::clamp(s.opacity, 0.f, 1.f);
+              (translucentFrame(s) ? SC_FLAG_TRANSLUCENT : 0u) | (s.shading != Shading::Unlit ? SC_FLAG_LIT : 0u) |
+              (s.shading == Shading::Phong ? SC_FLAG_SPECULAR : 0u) | (clip ? SC_FLAG_CLIP : 0u);
     p.layer = 0;
-    p.layers = uint32_t(std::clamp(s.layers, 1, kMaxLayers));
     return p;
+}
+
+std::optional<LocalClip> localClip(const RenderSettings& s, const Vec3d& origin) {
+    if (!s.clip) return std::nullopt;
+    return LocalClip{cast<float>(s.clip->min - origin), cast<float>(s.clip->max - origin)};
 }
 
 Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const Vec3f& ray) {

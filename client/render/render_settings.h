@@ -31,7 +31,7 @@ std::optional<Shading> parseShading(const std::string& name);
 // browser reads too; why each has its value is said here.
 // Clamp of the low-pass filter's object-space extent where J is near singular
 // (grazing angles): at most this many pixels' worth at the surfel's depth.
-inline constexpr float kMaxFilterPixels = defaults::kMaxFilterPixels;
+inline constexpr float kMaxFilterPixels = float(SC_MAX_FILTER_PIXELS);  // shared_types.h: the shaders read it too
 // Default low-pass filter V^h = v I (pixels^2). Zwicker 2001 uses V^h = I; a
 // supersampled pixel's box filter has variance 1/12. Measured by
 // bench/accuracy_bench.py (mean FLIP, ewa-pixel): v = 0.1 is best on the
@@ -91,12 +91,26 @@ struct RenderSettings {
     bool translucent = false;
     float opacity = 1.f;
     int layers = kDefaultLayers;
+    // A clip box in world coordinates: only splats whose centre lies inside
+    // (bounds included) are drawn, in every mode. Tested in float relative to
+    // the render origin (localClip), by the GPU and the CPU reference alike.
+    std::optional<Box3d> clip;
 };
+
+// The clip box relative to a render origin, in float, as the shaders test it.
+struct LocalClip {
+    Vec3f min, max;
+    bool contains(const Vec3f& p) const {
+        return p.x >= min.x && p.y >= min.y && p.z >= min.z && p.x <= max.x && p.y <= max.y && p.z <= max.z;
+    }
+};
+std::optional<LocalClip> localClip(const RenderSettings& settings, const Vec3d& origin);
 
 // Whether a frame with these settings is translucent (RenderSettings::translucent).
 inline bool translucentFrame(const RenderSettings& s) { return s.translucent || s.opacity < 1.f; }
 
-// Push constants for one frame; `nearPlane` in world units.
+// Push constants for one frame; `nearPlane` in world units, the clip box
+// relative to `view.origin`.
 gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& settings, float nearPlane);
 
 // Whether a set's normals point out of its surfaces, from tileset.json's

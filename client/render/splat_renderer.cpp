@@ -317,7 +317,8 @@ Status SplatRenderer::resize(uint32_t width, uint32_t height) {
     return {};
 }
 
-void SplatRenderer::record(VkCommandBuffer cmd, const FrameParams& params) {
+void SplatRenderer::record(VkCommandBuffer cmd, const ViewTransform& view, const RenderSettings& settings) {
+    const FrameParams params = makeFrameParams(view, settings, nearPlane(view));
     using namespace gpu;
     const uint32_t W = output_.width, H = output_.height;
     const VkRect2D area{{0, 0}, {W, H}};
@@ -397,7 +398,7 @@ void SplatRenderer::record(VkCommandBuffer cmd, const FrameParams& params) {
             imageBarrier(cmd, img->image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_UNDEFINED, colorLayout, shader, 0, colorOut,
                          colorWrite);
         const gpu::Image* depths[2] = {&depth_, &depth2_};
-        const uint32_t layers = std::max(1u, params.layers);
+        const uint32_t layers = uint32_t(std::clamp(settings.layers, 1, kMaxLayers));
         for (uint32_t k = 0; k < layers; ++k) {
             frame.layer = k;
             const gpu::Image& current = *depths[k % 2];
@@ -503,9 +504,8 @@ GpuFrameStats SplatRenderer::timings() const {
 
 Result<Image> SplatRenderer::render(const ViewTransform& view, const RenderSettings& settings, GpuFrameStats* stats) {
     SC_TRY(resize(uint32_t(view.width), uint32_t(view.height)));
-    FrameParams params = makeFrameParams(view, settings, nearPlane(view));
     SC_TRY(gpu::submitAndWait(ctx_, [&](VkCommandBuffer cmd) {
-        record(cmd, params);
+        record(cmd, view, settings);
         VkBufferImageCopy copy{};
         copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
         copy.imageExtent = {output_.width, output_.height, 1};
@@ -528,7 +528,6 @@ Status SplatRenderer::capture(const ViewTransform& view, const RenderSettings& s
     s.mode = RenderMode::EwaNoPrefilter;
     s.translucent = false;  // the weights are those of the nearest surface
     s.opacity = 1.f;
-    FrameParams params = makeFrameParams(view, s, nearPlane(view));
     const VkDeviceSize pixels = VkDeviceSize(view.width) * view.height;
     const VkDeviceSize colorBytes = pixels * (options_.halfFloatAccumulation ? 8 : 16);
     auto colorBuffer = gpu::createBuffer(ctx_, colorBytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
@@ -539,7 +538,7 @@ Status SplatRenderer::capture(const ViewTransform& view, const RenderSettings& s
         return depthBuffer.status();
     }
     Status status = gpu::submitAndWait(ctx_, [&](VkCommandBuffer cmd) {
-        record(cmd, params);
+        record(cmd, view, s);
         gpu::imageBarrier(cmd, colorWeight_.image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
                           VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_PIPELINE_STAGE_2_FRAGMENT_SHADER_BIT,
                           VK_ACCESS_2_SHADER_SAMPLED_READ_BIT, VK_PIPELINE_STAGE_2_TRANSFER_BIT, VK_ACCESS_2_TRANSFER_READ_BIT);

@@ -72,8 +72,8 @@ public:
     Expansion expansion() const { return options_.expansion; }
 
     // Records one frame; output() ends in TRANSFER_SRC_OPTIMAL, ready to copy
-    // or blit. The mode comes from params.mode.
-    void record(VkCommandBuffer cmd, const gpu_types::FrameParams& params);
+    // or blit.
+    void record(VkCommandBuffer cmd, const ViewTransform& view, const RenderSettings& settings);
     // Per-pass GPU times of the last recorded frame, once it has completed.
     GpuFrameStats timings() const;
     const gpu::Image& output() const { return output_; }

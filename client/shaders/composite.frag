@@ -10,5 +10,5 @@ layout(location = 0) out vec4 outColor;
 
 void main() {
     vec4 c = texelFetch(composite, ivec2(gl_FragCoord.xy), 0);
-    outColor = vec4(c.rgb + (1.0 - c.a) * frame.resolve.rgb, c.a);
+    outColor = vec4(c.rgb + (1.0 - c.a) * frameBackground(), c.a);
 }

@@ -16,7 +16,7 @@ void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
     vec4 cw = texelFetch(colorWeight, pixel, 0);
     vec4 nw = texelFetch(normalWeight, pixel, 0);
-    vec3 background = frame.resolve.rgb;
+    vec3 background = frameBackground();
     if (!(nw.a > 0.0) || !(cw.a > 0.0)) {
         outColor = vec4(background, 0.0);
         return;

@@ -24,20 +24,21 @@ struct GpuSurfel {
                      // SC_EDGE_RATIO_MAX); 0: none
 };
 
-// Per-frame parameters (push constants, 128 bytes: the guaranteed limit).
+// Per-frame parameters (push constants, 128 bytes: the guaranteed limit, so
+// scalars share the clip box's w and the shading lives in `flags`).
 struct FrameParams {
     vec4 view0, view1, view2;  // rows of the world->camera transform (camera: x right, y up, z forward)
     vec4 viewport;   // eta, width, height, near
     vec4 kernel;     // kernel scale (multiple of r), cutoff c, z_t (multiple of r), low-pass variance (px^2)
-    vec4 resolve;    // background r, g, b; edge antialiasing's tau on sum(exp(-q/2))
-    uint mode;       // kMode* below
-    uint shading;    // kShading* below
-    float maxFilterPixels;  // clamp of the low-pass extent at grazing angles (pixels)
-    float circleScale;      // circles: screen radius = circleScale * r projected
-    uint flags;             // SC_FLAG_* below
-    float opacity;          // multiplies every surfel's stored opacity (--opacity)
-    uint layer;             // translucent frames: the layer being drawn, 0 the nearest
-    uint layers;            // translucent frames: l, the fragment layers per pixel (Zwicker 2001 §6)
+    // With SC_FLAG_CLIP, splats whose centre lies outside the box
+    // [clipMin.xyz, clipMax.xyz] (render-origin coordinates, bounds included)
+    // are not drawn, in every mode.
+    vec4 clipMin;    // w: edge antialiasing's tau on sum(exp(-q/2))
+    vec4 clipMax;    // w: multiplies every surfel's stored opacity (--opacity)
+    uint background; // packUnorm4x8(r, g, b, 0)
+    uint mode;       // SC_MODE_* below
+    uint flags;      // SC_FLAG_* below
+    uint layer;      // translucent frames: the layer being drawn, 0 the nearest
 };
 
 #define SC_MODE_POINTS 0u
@@ -61,10 +62,16 @@ struct FrameParams {
 // surfaces per pixel, each normalized on its own, and composite them front to
 // back (docs/RENDERER.md, "Transparency"). Without it, opacity is ignored.
 #define SC_FLAG_TRANSLUCENT 4u
+// Shading in the resolve: unlit without SC_FLAG_LIT; Lambert with it (a
+// headlight); Phong with SC_FLAG_SPECULAR too.
+#define SC_FLAG_LIT 8u
+#define SC_FLAG_SPECULAR 16u
+// The clip box (FrameParams::clipMin, clipMax) applies.
+#define SC_FLAG_CLIP 32u
 
-#define SC_SHADING_UNLIT 0u
-#define SC_SHADING_LAMBERT 1u
-#define SC_SHADING_PHONG 2u
+// Clamp of the low-pass filter's object-space extent at grazing angles: at
+// most this many pixels' worth at the surfel's depth (render_settings.h says why).
+#define SC_MAX_FILTER_PIXELS 64.0
 
 #ifdef __cplusplus
 }  // namespace surfcast::gpu_types

@@ -54,6 +54,15 @@ vec3 decodeNormal(uint packed) {
 
 bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
 
+// The clip box (SC_FLAG_CLIP): p, relative to the render origin, lies outside it.
+bool outsideClip(vec3 p) {
+    return (frame.flags & SC_FLAG_CLIP) != 0u && (any(lessThan(p, frame.clipMin.xyz)) || any(greaterThan(p, frame.clipMax.xyz)));
+}
+// The frame's packed scalars (FrameParams says why they are packed).
+vec3 frameBackground() { return unpackUnorm4x8(frame.background).rgb; }
+float frameEdgeTau() { return frame.clipMin.w; }
+float frameOpacity() { return frame.clipMax.w; }
+
 // Per-splat backface culling: n the camera-space normal as stored, o the
 // camera-space centre (the eye at the origin).
 bool culledAsBackface(vec3 n, vec3 o) { return (frame.flags & SC_FLAG_BACKFACE_CULL) != 0u && dot(n, o) > 0.0; }
@@ -85,7 +94,7 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, uint edg
     vec3 o = toCamera(position);
     // Surfels behind the near plane (or NaN) are dropped; those straddling it
     // are clipped by the rasterizer, which is safe because o.z >= near > 0.
-    if (!finite3(o) || !(o.z >= frame.viewport.w)) return false;
+    if (!finite3(o) || !(o.z >= frame.viewport.w) || outsideClip(position)) return false;
     vec3 n = rotateToCamera(decodeNormal(normal));
     if (!finite3(n) || culledAsBackface(n, o)) return false;
     n = dot(n, o) > 0.0 ? -n : n;
@@ -106,7 +115,7 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, uint edg
     vec2 e1 = vec2(-e0.y, e0.x);
     // Grazing angles: J'J is near singular and the low-pass filter's object
     // extent explodes; clamp it to maxFilterPixels pixels at this depth.
-    float lmin = eta / (frame.maxFilterPixels * o.z);
+    float lmin = eta / (SC_MAX_FILTER_PIXELS * o.z);
     lmin *= lmin;
     float lowpass = frame.kernel.w;
     float m0 = r * r + lowpass / max(l0, lmin), m1 = r * r + lowpass / max(l1, lmin);
@@ -159,11 +168,11 @@ float edgeFactor(uint edge, vec2 uv) {
 // 0.77 with r, 0.46 with sqrt(L0 L1), 0.38 with max(L0, L1)).
 vec3 pushBack(Splat sp, vec3 p) { return p + frame.kernel.z * sp.footprint * normalize(sp.o); }
 
-// Circles: a screen-aligned square of half-size r projected (at least half a
-// pixel) at the centre's depth; y in [-1, 1]^2.
+// Circles: a screen-aligned square of half-size r times the kernel scale
+// projected (at least half a pixel) at the centre's depth; y in [-1, 1]^2.
 vec4 circleCorner(vec3 o, float radius, int corner, out vec2 y) {
     float eta = frame.viewport.x;
-    float rpx = max(eta * radius * frame.circleScale / o.z, 0.5);
+    float rpx = max(eta * radius * frame.kernel.x / o.z, 0.5);
     y = 2.0 * vec2(corner & 1, corner >> 1) - 1.0;
     vec4 clip = project(o);
     clip.xy += vec2(y.x * 2.0 * rpx / frame.viewport.y, kYSign * y.y * 2.0 * rpx / frame.viewport.z) * o.z;

@@ -30,12 +30,13 @@ void main() {
     outWeight = inWeight;
     outPackedEdge = inEdge;
 #ifdef SC_LAYERED
-    outAlpha = inColor.a * frame.opacity;
+    outAlpha = inColor.a * frameOpacity();
 #endif
     vec3 o = toCamera(inPositionRadius.xyz);
     vec3 n = rotateToCamera(decodeNormal(inNormal));
     outNormal = dot(n, o) > 0.0 ? -n : n;
-    bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o);
+    bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o) &&
+              !outsideClip(inPositionRadius.xyz);
     gl_Position = ok && kExpand == 0 ? project(o) : kCulled;
     gl_PointSize = 1.0;
 }

@@ -16,7 +16,7 @@ layout(location = 3) flat out float outAmplitude;
 layout(location = 4) out vec2 outEdgeUV;
 layout(location = 5) flat out uint outEdge;
 #ifdef SC_LAYERED  // translucent frames' variant (client/CMakeLists.txt)
-layout(location = 6) flat out float outAlpha;         // opacity: stored times frame.opacity
+layout(location = 6) flat out float outAlpha;         // opacity: stored times frameOpacity()
 #ifdef SC_GLSL_ES
 // No noperspective in GLSL ES: the depth goes as depth * w and w, both
 // perspective-correct, whose ratio is exactly the screen-linear depth.
@@ -35,14 +35,15 @@ layout(location = 7) noperspective out float outDepth; // depth (near / z) of th
 void main() {
     loadSurfel();
     outColor = inColor.rgb;
-    LAYERED(outAlpha = inColor.a * frame.opacity);
+    LAYERED(outAlpha = inColor.a * frameOpacity());
     LAYERED(SET_DEPTH(0.0, 1.0));
     outEdgeUV = vec2(0);
     outEdge = 0u;
     if (kPass == 2) {
         vec3 o = toCamera(inPositionRadius.xyz);
         vec3 n = rotateToCamera(decodeNormal(inNormal));
-        bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o);
+        bool ok = finite3(o) && o.z >= frame.viewport.w && finite3(n) && !culledAsBackface(n, o) &&
+                  !outsideClip(inPositionRadius.xyz);
         gl_Position = ok ? circleCorner(o, splatRadius(inPositionRadius.w, o.z), cornerIndex(), outY) : kCulled;
         outNormal = dot(n, o) > 0.0 ? -n : n;
         outAmplitude = 1.0;

@@ -113,6 +113,10 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
     // Whether node i is drawn (or reached by refinement) at all.
     auto culled = [&](uint32_t i, Box3d* grown) {
         Box3d b = box(i);
+        if (params.clip && !b.intersects(*params.clip)) {
+            ++st.clipCulled;
+            return true;
+        }
         double extent = kExtentFactor * nodes_[i].spacing;
         *grown = {b.min - Vec3d{extent, extent, extent}, b.max + Vec3d{extent, extent, extent}};
         if (params.frustumCulling && outsideFrustum(f, *grown)) {

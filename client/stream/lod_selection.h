@@ -19,6 +19,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <unordered_map>
 #include <vector>
 
@@ -31,6 +32,9 @@ struct LodParams {
     double targetPixels = 1.0;  // refine while the projected spacing exceeds this
     bool frustumCulling = true;
     bool backfaceCulling = true;
+    // Nodes whose box misses the clip box (world coordinates) are culled:
+    // none of their surfels would be drawn (RenderSettings::clip).
+    std::optional<Box3d> clip;
     size_t splatBudget = SIZE_MAX;  // most surfels drawn per frame (the root is drawn regardless)
     // Most bytes the nodes a view uses may occupy: those drawn, the ancestors
     // refined through and the children waited for, each at its surfel count
@@ -48,7 +52,7 @@ inline size_t residentBytes(uint32_t surfels, size_t granule) {
 }
 
 struct LodStats {
-    size_t visited = 0, frustumCulled = 0, backfaceCulled = 0;
+    size_t visited = 0, frustumCulled = 0, backfaceCulled = 0, clipCulled = 0;
     size_t waiting = 0;  // nodes drawn in place of children that are not resident yet
     size_t budgetLimited = 0;  // nodes left coarser than the target by the splat or memory budget
     size_t splats = 0;         // surfels of the selected nodes

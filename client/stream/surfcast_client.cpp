@@ -101,7 +101,7 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
 void SurfcastClient::record(VkCommandBuffer cmd, const RenderSettings& settings) {
     auto view = makeViewTransform(camera_, origin_, width_, height_);
     if (!view) return;  // update() was not called, or the camera is degenerate
-    renderer_->record(cmd, makeFrameParams(*view, settings, renderer_->nearPlane(*view)));
+    renderer_->record(cmd, *view, settings);
 }
 
 Result<Image> SurfcastClient::renderImage(const RenderSettings& settings, GpuFrameStats* stats) {

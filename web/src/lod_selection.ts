@@ -19,6 +19,9 @@ export interface LodParams {
   targetPixels: number;
   frustumCulling: boolean;
   backfaceCulling: boolean;
+  // Nodes whose box misses the clip box (world coordinates) are culled: none
+  // of their surfels would be drawn (RenderSettings.clip).
+  clip?: Box;
   splatBudget: number;
   memoryBudget: number; // bytes of the nodes a view uses, 32 per surfel in whole granules
 }
@@ -33,6 +36,7 @@ export const residentBytes = (surfels: number) => Math.ceil(surfels / kGranuleSu
 export interface LodStats {
   visited: number;
   frustumCulled: number;
+  clipCulled: number;
   backfaceCulled: number;
   waiting: number;
   budgetLimited: number;
@@ -55,6 +59,12 @@ interface Frame {
   eta: number;
   halfW: number;
   halfH: number;
+}
+
+// Closed boxes sharing at least a point.
+export function intersects(a: Box, b: Box): boolean {
+  return a.min[0] <= b.max[0] && b.min[0] <= a.max[0] && a.min[1] <= b.max[1] && b.min[1] <= a.max[1] &&
+         a.min[2] <= b.max[2] && b.min[2] <= a.max[2];
 }
 
 function corner(b: Box, i: number): Vec3 {
@@ -171,7 +181,7 @@ export class LodSelector {
 
   select(camera: Camera, width: number, height: number, params: LodParams, resident: (i: number) => boolean,
          st: LodStats): SelectedNode[] {
-    Object.assign(st, { visited: 0, frustumCulled: 0, backfaceCulled: 0, waiting: 0, budgetLimited: 0, splats: 0,
+    Object.assign(st, { visited: 0, frustumCulled: 0, clipCulled: 0, backfaceCulled: 0, waiting: 0, budgetLimited: 0, splats: 0,
                         missing: [], missingPages: [], used: [] });
     const out: SelectedNode[] = [];
     if (this.root < 0 || width <= 0 || height <= 0) return out;
@@ -183,6 +193,10 @@ export class LodSelector {
 
     const culled = (i: number): Box | null => {
       const b = this.box(i);
+      if (params.clip && !intersects(b, params.clip)) {
+        ++st.clipCulled;
+        return null;
+      }
       const x = kExtentFactor * nodes[i].spacing;
       const grown: Box = { min: [b.min[0] - x, b.min[1] - x, b.min[2] - x], max: [b.max[0] + x, b.max[1] + x, b.max[2] + x] };
       if (params.frustumCulling && outsideFrustum(f, grown)) {
@@ -283,6 +297,6 @@ export class LodSelector {
 }
 
 export function emptyStats(): LodStats {
-  return { visited: 0, frustumCulled: 0, backfaceCulled: 0, waiting: 0, budgetLimited: 0, splats: 0, missing: [],
+  return { visited: 0, frustumCulled: 0, clipCulled: 0, backfaceCulled: 0, waiting: 0, budgetLimited: 0, splats: 0, missing: [],
            missingPages: [], used: [] };
 }

@@ -1,13 +1,13 @@
 // The viewer page: reads the set, camera and settings from the URL
 // (?set=URL&camera=ex,ey,ez,tx,ty,tz,ux,uy,uz,fov&lod=PX&mode=M&splats=N&color=A&hide=C,..
-// &opacity=A&layers=L and #token=T; docs/WEB.md), streams the set and redraws as blocks arrive or the camera
-// moves. window.surfcast holds the state tests and scripts read.
+// &opacity=A&layers=L&clip=X0,Y0,Z0,X1,Y1,Z1 and #token=T; docs/WEB.md), streams the set and redraws as
+// blocks arrive or the camera moves. window.surfcast holds the state tests and scripts read.
 
 import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
 import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
 import { Controls } from "./controls.js";
 import { crc32 } from "./crc32.js";
-import { emptyStats } from "./lod_selection.js";
+import { type Box, emptyStats } from "./lod_selection.js";
 import { attribute } from "./format.js";
 import { type DrawnNode, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
          type RenderMode, type RenderSettings, RendererError, SplatRenderer } from "./renderer.js";
@@ -36,11 +36,13 @@ interface State {
   frames: number;
   frameMs: number; // the last frame's time on the GPU, from its draw to its fence
   camera: string;
+  clip: string; // the clip box as ?clip= gives it, "" for none
+  exports: number; // LAZ exports of the clip box downloaded
 }
 
 const state: State = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
                        firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0,
-                       evictions: 0, frames: 0, frameMs: 0, camera: "" };
+                       evictions: 0, frames: 0, frameMs: 0, camera: "", clip: "", exports: 0 };
 (window as unknown as { surfcast: State }).surfcast = state;
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -67,6 +69,18 @@ function number(name: string, fallback: number, min: number): number {
   if (!Number.isFinite(v) || v < min) throw new Error(`?${name}=${text}: expected a number of at least ${min}`);
   return v;
 }
+
+// "X0,Y0,Z0,X1,Y1,Z1", as surfcast-view's --clip takes it; `what` names it in errors.
+function parseBox(text: string, what: string): Box {
+  const v = text.split(",").map((s) => (s.trim() === "" ? NaN : Number(s)));
+  if (v.length !== 6 || !v.every(Number.isFinite))
+    throw new Error(`${what} ${text}: six numbers wanted (xmin,ymin,zmin,xmax,ymax,zmax)`);
+  const box: Box = { min: [v[0], v[1], v[2]], max: [v[3], v[4], v[5]] };
+  for (let a = 0; a < 3; ++a)
+    if (box.min[a] > box.max[a]) throw new Error(`${what} ${text}: its minimum exceeds its maximum on axis ${"xyz"[a]}`);
+  return box;
+}
+const formatBox = (b: Box) => [...b.min, ...b.max].join(",");
 
 function normalsOriented(source: string): boolean {
   return source !== "" && source.split("+").every((p) => p === "input" || p === "estimated-scan-origin");
@@ -123,6 +137,13 @@ async function main() {
     opacity: number("opacity", 1, 0),
     layers: number("layers", kDefaultLayers, 1),
   };
+  try {
+    const clip = params.get("clip");
+    if (clip !== null) settings.clip = parseBox(clip, "?clip=");
+  } catch (e) {
+    showError((e as Error).message);
+    return;
+  }
   if (settings.opacity > 1 || settings.layers > kMaxLayers || !Number.isInteger(settings.layers)) {
     showError(`?opacity= is in [0, 1] and ?layers= a whole number in [1, ${kMaxLayers}]`);
     return;
@@ -171,13 +192,18 @@ async function main() {
     urgent = dirty = true;
     state.converged = false;
   };
+  // Keeps the URL current, so that it can be shared.
+  const updateUrl = (name: string, value: string) => {
+    const url = new URL(location.href);
+    if (value) url.searchParams.set(name, value);
+    else url.searchParams.delete(name);
+    history.replaceState(null, "", url);
+  };
   const setCamera = (c: Camera) => {
     changed();
     camera = c;
     state.camera = formatCamera(c);
-    const url = new URL(location.href);
-    url.searchParams.set("camera", state.camera);
-    history.replaceState(null, "", url);
+    updateUrl("camera", state.camera);
   };
   setCamera(camera);
   new Controls(canvas, () => camera, setCamera);
@@ -222,6 +248,58 @@ async function main() {
     label.append(box, ` ${c}`);
     classes.append(label);
   }
+  // The clip box: numbers in the set's own coordinates; the set's bounds
+  // until one is given. Invalid numbers are marked and not applied.
+  const clipOn = $<HTMLInputElement>("clip-on");
+  const clipInputs = ["x0", "y0", "z0", "x1", "y1", "z1"].map((id) => $<HTMLInputElement>(`clip-${id}`));
+  const shownBox = settings.clip ?? { min: info.boundsMin, max: info.boundsMax };
+  clipInputs.forEach((input, i) => (input.value = String(i < 3 ? shownBox.min[i] : shownBox.max[i - 3])));
+  clipOn.checked = settings.clip !== undefined;
+  state.clip = settings.clip ? formatBox(settings.clip) : "";
+  const readClip = (): Box | undefined => {
+    try {
+      const box = parseBox(clipInputs.map((input) => input.value).join(","), "clip box");
+      clipInputs.forEach((input) => input.setCustomValidity(""));
+      return box;
+    } catch (e) {
+      clipInputs.forEach((input) => input.setCustomValidity((e as Error).message));
+      return undefined;
+    }
+  };
+  const applyClip = () => {
+    const box = readClip();
+    if (!box) return;
+    settings.clip = clipOn.checked ? box : undefined;
+    state.clip = settings.clip ? formatBox(settings.clip) : "";
+    updateUrl("clip", state.clip);
+    changed();
+  };
+  for (const input of [clipOn, ...clipInputs]) input.onchange = applyClip;
+  // The points in the box (the set's bounds when no box is on) of the
+  // classes shown, as LAZ, from surfcast-serve's export route.
+  const download = $<HTMLButtonElement>("download");
+  download.onclick = async () => {
+    const box = clipOn.checked ? readClip() : { min: info.boundsMin, max: info.boundsMax };
+    if (!box) return;
+    const shown = hidden.length ? [...info.statistics.classCounts.keys()].filter((c) => !hidden.includes(c)) : undefined;
+    download.disabled = true;
+    download.textContent = "exporting…";
+    try {
+      const blob = await source.exportLaz(box, shown);
+      const link = document.createElement("a");
+      link.download = `${new URL(setUrl).pathname.split("/").filter((s) => s).pop() ?? "points"}.laz`;
+      link.href = URL.createObjectURL(blob);
+      link.click();
+      setTimeout(() => URL.revokeObjectURL(link.href), 60000);
+      ++state.exports;
+    } catch (e) {
+      showError(`export: ${(e as Error).message}`);
+    } finally {
+      download.disabled = false;
+      download.textContent = "download points (LAZ)";
+    }
+  };
+
   $("screenshot").onclick = () => {
     const link = document.createElement("a");
     link.download = "surfcast.png";
@@ -256,7 +334,7 @@ async function main() {
     const lodTarget = Number(lodInput.value) > 0 ? Number(lodInput.value) : targetPixels;
     const budget = Number(budgetInput.value) >= 1 ? Number(budgetInput.value) : splatBudget;
     const selected = streamer.update(camera, width, height, { targetPixels: lodTarget, frustumCulling: true,
-      backfaceCulling: settings.backfaceCull, splatBudget: budget, memoryBudget: Infinity }, lod);
+      backfaceCulling: settings.backfaceCull, splatBudget: budget, memoryBudget: Infinity, clip: settings.clip }, lod);
     // Drawn in key order, as the Vulkan client draws them. Every selected
     // node is resident until the next update (eviction spares what a view uses).
     const nodes = streamer.selector.nodes;
@@ -320,7 +398,8 @@ async function main() {
                                   info.boundsMax[2] - info.boundsMin[2]);
       const eye = Math.hypot(rows[3], rows[7], rows[11]);
       const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
-      drawLast = () => renderer.render(gpu, { rows, eta, near }, settings, hasWeights);
+      const view = { rows, eta, near, origin: streamer.origin };
+      drawLast = () => renderer.render(gpu, view, settings, hasWeights);
       drawLast();
       lastDraw = performance.now();
       fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);

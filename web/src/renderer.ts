@@ -15,7 +15,7 @@
 // targets hold no negative sums: the normal is accumulated offset to [0, 1].
 
 import defaults from "../../common/render_defaults.json";
-import { kGranuleSurfels } from "./lod_selection.js";
+import { type Box, kGranuleSurfels } from "./lod_selection.js";
 import * as S from "./shaders.js";
 
 export type RenderMode = "points" | "circles" | "ewa-noprefilter" | "ewa-surfel" | "ewa-pixel";
@@ -38,6 +38,10 @@ export interface RenderSettings {
   translucent: boolean;
   opacity: number;
   layers: number;
+  // A clip box in world coordinates: only splats whose centre lies inside
+  // (bounds included) are drawn, in every mode; tested in float relative to
+  // the render origin, as the Vulkan client does.
+  clip?: Box;
 }
 
 // The defaults of client/render/render_settings.h (which says why each has
@@ -48,11 +52,11 @@ export const kMaxLayers = kDefaults.max_layers;
 export const kDefaultLowpassVariance = kDefaults.lowpass_variance;
 export const kDefaultEdgeTau = kDefaults.edge_tau;
 export const kDefaultZt = kDefaults.zt;
-export const kMaxFilterPixels = kDefaults.max_filter_pixels;
 export const kNearFraction = kDefaults.near_fraction;
 
 export interface FrameView {
   rows: Float32Array; // world (relative to the render origin) -> camera, 3 x 4 row-major
+  origin: [number, number, number]; // the render origin, world coordinates
   eta: number;
   near: number;
 }
@@ -228,16 +232,17 @@ export class SplatRenderer {
     gl.uniform4f(p.loc("frame.view2"), view.rows[8], view.rows[9], view.rows[10], view.rows[11]);
     gl.uniform4f(p.loc("frame.viewport"), view.eta, w, h, view.near);
     gl.uniform4f(p.loc("frame.kernel"), s.kernelScale, s.cutoff, s.zt, mode === "ewa-noprefilter" ? 0 : s.lowpassVariance);
-    gl.uniform4f(p.loc("frame.resolve"), s.background[0], s.background[1], s.background[2], s.edgeTau);
+    const o = view.origin, lo = s.clip?.min ?? o, hi = s.clip?.max ?? o;
+    gl.uniform4f(p.loc("frame.clipMin"), lo[0] - o[0], lo[1] - o[1], lo[2] - o[2], s.edgeTau);
+    gl.uniform4f(p.loc("frame.clipMax"), hi[0] - o[0], hi[1] - o[1], hi[2] - o[2], Math.min(Math.max(s.opacity, 0), 1));
+    const unorm8 = (v: number) => Math.round(Math.min(Math.max(v, 0), 1) * 255);
+    gl.uniform1ui(p.loc("frame.background"), unorm8(s.background[0]) | unorm8(s.background[1]) << 8 | unorm8(s.background[2]) << 16);
     const modes: Record<RenderMode, number> = { points: S.kModePoints, circles: S.kModeCircles,
       "ewa-noprefilter": S.kModeEwaNoPrefilter, "ewa-surfel": S.kModeEwaSurfel, "ewa-pixel": S.kModeEwaPixel };
     gl.uniform1ui(p.loc("frame.mode"), modes[mode]);
-    gl.uniform1ui(p.loc("frame.shading"), s.shading === "unlit" ? S.kShadingUnlit : s.shading === "lambert" ? S.kShadingLambert : S.kShadingPhong);
     const edgeAA = s.edgeAA && this.floatBlend;  // coverage sums past 1 need float targets
-    gl.uniform1ui(p.loc("frame.flags"), (s.backfaceCull ? S.kFlagBackfaceCull : 0) | (edgeAA ? S.kFlagEdgeAA : 0));
-    gl.uniform1f(p.loc("frame.maxFilterPixels"), kMaxFilterPixels);
-    gl.uniform1f(p.loc("frame.circleScale"), s.kernelScale);
-    gl.uniform1f(p.loc("frame.opacity"), Math.min(Math.max(s.opacity, 0), 1));
+    gl.uniform1ui(p.loc("frame.flags"), (s.backfaceCull ? S.kFlagBackfaceCull : 0) | (edgeAA ? S.kFlagEdgeAA : 0) |
+      (s.shading !== "unlit" ? S.kFlagLit : 0) | (s.shading === "phong" ? S.kFlagSpecular : 0) | (s.clip ? S.kFlagClip : 0));
     gl.uniform1i(p.loc("scClipControl"), this.clipControl ? 1 : 0);
     gl.uniform1i(p.loc("scSurfels"), 2);
   }

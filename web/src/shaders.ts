@@ -17,5 +17,5 @@ export const kModePoints = constant("SC_MODE_POINTS"), kModeCircles = constant("
 export const kModeEwaNoPrefilter = constant("SC_MODE_EWA_NOPREFILTER"), kModeEwaSurfel = constant("SC_MODE_EWA_SURFEL");
 export const kModeEwaPixel = constant("SC_MODE_EWA_PIXEL");
 export const kFlagBackfaceCull = constant("SC_FLAG_BACKFACE_CULL"), kFlagEdgeAA = constant("SC_FLAG_EDGE_AA");
-export const kShadingUnlit = constant("SC_SHADING_UNLIT"), kShadingLambert = constant("SC_SHADING_LAMBERT");
-export const kShadingPhong = constant("SC_SHADING_PHONG");
+export const kFlagLit = constant("SC_FLAG_LIT"), kFlagSpecular = constant("SC_FLAG_SPECULAR");
+export const kFlagClip = constant("SC_FLAG_CLIP");

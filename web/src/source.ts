@@ -10,6 +10,8 @@
 // a rebuilt set from a damaged one. Redirects are the browser's: it keeps
 // https pages from http data, and drops Authorization across origins.
 
+import type { Box } from "./lod_selection.js";
+
 export class HttpError extends Error {
   constructor(message: string, readonly transient: boolean) {
     super(message);
@@ -32,6 +34,22 @@ export class TileSource {
 
   constructor(base: string, private options: SourceOptions = {}) {
     this.base = base.replace(/\/+$/, "");
+  }
+
+  // surfcast-serve's LAZ export of the points in `box` (world coordinates,
+  // bounds included) of the `classes` given (all where undefined):
+  // docs/PROTOCOL.md, "Export". Static hosts have no such route (404).
+  async exportLaz(box: Box, classes?: number[]): Promise<Blob> {
+    const query = new URLSearchParams({ bbox: [...box.min, ...box.max].join(",") });
+    if (classes) query.set("classes", classes.join(","));
+    const url = `${this.base}/export.laz?${query}`;
+    ++this.requests;
+    const r = await fetch(url, { headers: this.headers() });  // no timeout: a large export takes a while
+    if (!r.ok) {
+      const why = r.status === 404 ? " (this host does not export points: surfcast-serve does)" : "";
+      throw new Error(`${url}: HTTP ${r.status}${why}: ${(await r.text()).trim()}`);
+    }
+    return r.blob();
   }
 
   private headers(extra: Record<string, string> = {}): Record<string, string> {

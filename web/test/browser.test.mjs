@@ -8,7 +8,7 @@
 import { after, before, describe, test } from "node:test";
 import assert from "node:assert/strict";
 import { execFileSync, spawn } from "node:child_process";
-import { copyFileSync, cpSync, existsSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { copyFileSync, cpSync, existsSync, mkdtempSync, readdirSync, readFileSync, rmSync, writeFileSync } from "node:fs";
 import { createServer } from "node:net";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
@@ -366,6 +366,62 @@ describe("browser viewer", { skip }, () => {
     const block = await view(`${serveUrl}/?set=/sets/corrupt-block&camera=${camera}`);
     assert.match(block.errorsShown, /node 0-0-0-0: block CRC mismatch(?! \(after)/);
     assert.deepEqual(block.problems, []);
+    const clip = await view(`${serveUrl}/?set=/sets/scene&clip=0,0,0,1,nan,1`);
+    assert.match(clip.errorsShown, /\?clip= 0,0,0,1,nan,1: six numbers wanted/);
+  });
+
+  test("a clip box set in the panel: the splats inside, as surfcast-view --clip draws them, and their points as LAZ", async (t) => {
+    const box = "-2,-3,0,1.5,2,3";
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    const downloads = mkdtempSync(join(work, "downloads-"));
+    await (await page.createCDPSession()).send("Browser.setDownloadBehavior", { behavior: "allow", downloadPath: downloads });
+    await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
+    const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
+    await page.waitForFunction(done, { timeout: 60000 });
+    const whole = await page.evaluate(() => ({ ...window.surfcast }));
+    // Typed into the panel's numbers, then switched on.
+    await page.evaluate((values) => {
+      ["x0", "y0", "z0", "x1", "y1", "z1"].forEach((id, i) => (document.getElementById(`clip-${id}`).value = values[i]));
+      const on = document.getElementById("clip-on");
+      on.checked = true;
+      on.dispatchEvent(new Event("change"));
+    }, box.split(","));
+    assert.equal(await page.evaluate(() => window.surfcast.converged), false);
+    await page.waitForFunction(done, { timeout: 60000 });
+    const state = await page.evaluate(() => ({ ...window.surfcast }));
+    assert.deepEqual(state.errors, []);
+    assert.equal(state.clip, box);
+    assert.equal(new URL(page.url()).searchParams.get("clip"), box, "the URL keeps the box");
+    await page.evaluate(() => document.body.classList.add("capture"));
+    const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+    await page.evaluate(() => document.body.classList.remove("capture"));
+    const { ref, d } = expectLikeReference(state, png, `${serveUrl}/sets/scene`, ["--clip", box]);
+    assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --clip");
+    assert.ok(ref.json.clip_culled > 0 && state.splats < whole.splats / 2, `${state.splats} of ${whole.splats} splats`);
+    assert.ok(covered(png) > 0.05, `the box's content covers ${covered(png)} of the image`);
+
+    // Downloaded: the bytes surfcast-export writes for the box (the LAS
+    // header's creation day and year aside, bytes 90-93).
+    await page.click("#download");
+    await page.waitForFunction("window.surfcast.exports === 1 || window.surfcast.errors.length > 0", { timeout: 60000 });
+    assert.deepEqual(await page.evaluate(() => window.surfcast.errors), []);
+    const file = join(downloads, "scene.laz");
+    await waitFor(() => existsSync(file) && readdirSync(downloads).length === 1, "the download", 20000);
+    await page.close();
+    const expected = join(work, "box.laz");
+    execFileSync(bin("surfcast-export"), [join(work, "sets", "scene"), "--format", "laz", "--bbox", box, "-o", expected]);
+    const [got, want] = [readFileSync(file), readFileSync(expected)];
+    got.fill(0, 90, 94);
+    want.fill(0, 90, 94);
+    assert.ok(got.equals(want), `the download (${got.length} bytes) is surfcast-export's (${want.length} bytes)`);
+    assert.ok(want.readBigUInt64LE(247) > 1000n, "the box holds points");
+    assert.deepEqual(problems, []);
+    t.diagnostic(`clip box: ${state.splats} splats, mean abs ${d.mean.toFixed(3)}, far ${d.far.toFixed(5)}; ` +
+                 `${want.readBigUInt64LE(247)} points downloaded`);
   });
 
   test("a GPU budget: the view stays within it and least recently used nodes go", async () => {

@@ -42,7 +42,8 @@ test("the constants shared_types.h defines reach the browser", () => {
   // The values the C++ client uses (client/shaders/shared_types.h, by hand here).
   assert.deepEqual([c.SC_MODE_POINTS, c.SC_MODE_CIRCLES, c.SC_MODE_EWA_NOPREFILTER, c.SC_MODE_EWA_SURFEL, c.SC_MODE_EWA_PIXEL],
                    [0, 1, 2, 3, 4]);
-  assert.deepEqual([c.SC_FLAG_BACKFACE_CULL, c.SC_FLAG_EDGE_AA, c.SC_FLAG_TRANSLUCENT], [1, 2, 4]);
-  assert.deepEqual([c.SC_SHADING_UNLIT, c.SC_SHADING_LAMBERT, c.SC_SHADING_PHONG], [0, 1, 2]);
+  assert.deepEqual([c.SC_FLAG_BACKFACE_CULL, c.SC_FLAG_EDGE_AA, c.SC_FLAG_TRANSLUCENT, c.SC_FLAG_LIT, c.SC_FLAG_SPECULAR,
+                    c.SC_FLAG_CLIP], [1, 2, 4, 8, 16, 32]);
   assert.equal(c.SC_EDGE_RATIO_MAX, 4);
+  assert.equal(c.SC_MAX_FILTER_PIXELS, 64);
 });
