@@ -40,6 +40,11 @@ export function classColor(c: number): RGB {
   return [ch(0), ch(4), ch(2)];
 }
 
+// ASPRS's name of class c (LAS 1.4 R15 table 17), "class c" past 18.
+export function className(c: number): string {
+  return c >= 0 && c < kClasses.length ? kClasses[c].name : `class ${c}`;
+}
+
 export function returnColor(number: number, count: number): RGB {
   if (count <= 1) return kReturns.single as RGB;
   if (number <= 1) return kReturns.first as RGB;

@@ -1,11 +1,12 @@
 // The viewer page: reads the set, camera and settings from the URL
 // (?set=URL&camera=ex,ey,ez,tx,ty,tz,ux,uy,uz,fov&lod=PX&mode=M&splats=N&color=A&hide=C,..
-// &opacity=A&layers=L&clip=X0,Y0,Z0,X1,Y1,Z1 and #token=T; docs/WEB.md), streams the set and redraws as
+// &opacity=A&layers=L&clip=X0,Y0,Z0,X1,Y1,Z1&panel=0 and #token=T; docs/WEB.md), streams the set and redraws as
 // blocks arrive or the camera moves. window.surfcast holds the state tests and scripts read.
 
 import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
 import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
 import { Controls } from "./controls.js";
+import { classLegend, rampLegend } from "./legend.js";
 import { crc32 } from "./crc32.js";
 import { type Box, emptyStats } from "./lod_selection.js";
 import { attribute } from "./format.js";
@@ -86,7 +87,23 @@ function normalsOriented(source: string): boolean {
   return source !== "" && source.split("+").every((p) => p === "input" || p === "estimated-scan-origin");
 }
 
+// The panel: hidden by ?panel=0 (embedding, screenshots), collapsible; the
+// help overlay from its "?" button or the "?" key, closed by Esc.
+function panelControls() {
+  if (params.get("panel") === "0") document.body.classList.add("nopanel");
+  const panel = $("panel"), collapse = $("collapse"), help = $("help");
+  collapse.onclick = () => collapse.setAttribute("aria-expanded", String(!panel.classList.toggle("collapsed")));
+  $("help-button").onclick = () => (help.hidden = !help.hidden);
+  $("help-close").onclick = () => (help.hidden = true);
+  window.addEventListener("keydown", (e) => {
+    if (e.target instanceof HTMLInputElement || e.target instanceof HTMLSelectElement) return;
+    if (e.key === "?") help.hidden = !help.hidden;
+    else if (e.key === "Escape") help.hidden = true;
+  });
+}
+
 async function main() {
+  panelControls();
   const setParam = params.get("set");
   if (!setParam) {
     $("intro").hidden = false;
@@ -233,21 +250,18 @@ async function main() {
   colorSelect.onchange = () => {
     colorBy = colorSelect.value as ColorBy;
     settings.shading = colorBy === "rgb" || colorBy === "intensity" ? "unlit" : "lambert";
+    rampLegend($("ramp"), colorBy, info);
+    updateUrl("color", colorBy);
     recolor();
   };
-  const classes = $("classes");
-  for (const c of [...info.statistics.classCounts.keys()].sort((a, b) => a - b)) {
-    const label = document.createElement("label");
-    const box = document.createElement("input");
-    box.type = "checkbox";
-    box.checked = !hidden.includes(c);
-    box.onchange = () => {
-      hidden = box.checked ? hidden.filter((h) => h !== c) : [...hidden, c];
-      recolor();
-    };
-    label.append(box, ` ${c}`);
-    classes.append(label);
-  }
+  const showClasses = () => classLegend($("classes"), info.statistics.classCounts, hidden, (h) => {
+    hidden = h;
+    updateUrl("hide", hidden.join(","));
+    showClasses();
+    recolor();
+  });
+  showClasses();
+  rampLegend($("ramp"), colorBy, info);
   // The clip box: numbers in the set's own coordinates; the set's bounds
   // until one is given. Invalid numbers are marked and not applied.
   const clipOn = $<HTMLInputElement>("clip-on");

@@ -188,6 +188,27 @@ function rootLayout(dir) {
   return { page0, blockOffset: Number(h.readBigUInt64LE(page0 + 16)), blockSize: h.readUInt32LE(page0 + 24) };
 }
 
+// A classified PLY (binary): ground (class 2) on a 100 x 100 grid 0.1 apart,
+// a wall (6, building) of 40 x 29 and a column (5, high vegetation) of 20 x 30.
+const kClassCounts = { 2: 10000, 5: 600, 6: 1160 };
+function writeClassifiedPly(path) {
+  const points = [];
+  for (let i = 0; i < 100; ++i) for (let j = 0; j < 100; ++j) points.push([i * 0.1, j * 0.1, 0, 2]);
+  for (let i = 0; i < 40; ++i) for (let k = 1; k < 30; ++k) points.push([2 + i * 0.1, 5.05, k * 0.1, 6]);
+  for (let i = 0; i < 20; ++i)
+    for (let k = 0; k < 30; ++k) points.push([7 + 0.3 * Math.cos(Math.PI * i / 10), 3 + 0.3 * Math.sin(Math.PI * i / 10), 0.05 + k * 0.1, 5]);
+  const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${points.length}\nproperty float x\nproperty float y\n` +
+    "property float z\nproperty uchar classification\nend_header\n";
+  const body = Buffer.alloc(points.length * 13);
+  points.forEach(([x, y, z, c], i) => {
+    body.writeFloatLE(x, 13 * i);
+    body.writeFloatLE(y, 13 * i + 4);
+    body.writeFloatLE(z, 13 * i + 8);
+    body.writeUInt8(c, 13 * i + 12);
+  });
+  writeFileSync(path, Buffer.concat([Buffer.from(header), body]));
+}
+
 describe("browser viewer", { skip }, () => {
   before(async () => {
     work = mkdtempSync(join(tmpdir(), "surfcast-browser-"));
@@ -204,6 +225,8 @@ describe("browser viewer", { skip }, () => {
     // Per-surfel weights (ewa-surfel), which the viewer draws without float blending.
     execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--weights", "analytic", "-o",
                                         join(sets, "weighted")]);
+    writeClassifiedPly(join(work, "classified.ply"));
+    execFileSync(bin("surfcast-build"), ["-q", join(work, "classified.ply"), "-o", join(sets, "classified")]);
     // Bad inputs: a block that never passes its CRC, and a damaged hierarchy page.
     for (const name of ["corrupt-block", "broken-hierarchy", "nostats"]) cpSync(join(sets, "scene"), join(sets, name), { recursive: true });
     // A set without statistics (optional in tileset.json): elevation spans the bounds.
@@ -422,6 +445,57 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(problems, []);
     t.diagnostic(`clip box: ${state.splats} splats, mean abs ${d.mean.toFixed(3)}, far ${d.far.toFixed(5)}; ` +
                  `${want.readBigUInt64LE(247)} points downloaded`);
+  });
+
+  test("legends: class names and counts, only this class as surfcast-view --classes draws it, the palette's range", async () => {
+    const classCamera = "5,-9,7,5,5,0.5,0,0,1,45";
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    await page.goto(`${serveUrl}/?set=/sets/classified&color=classification&camera=${classCamera}`);
+    const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
+    await page.waitForFunction(done, { timeout: 60000 });
+    const rows = () => page.$$eval("#classes .class", (r) => r.map((e) => ({
+      label: e.querySelector("label").textContent.trim(), count: e.querySelector(".count").textContent,
+      shown: e.querySelector("input").checked })));
+    // The counts are tileset.json's statistics: the points written above.
+    assert.deepEqual(await rows(), [
+      { label: "2 ground", count: kClassCounts[2].toLocaleString("en-US"), shown: true },
+      { label: "5 high vegetation", count: kClassCounts[5].toLocaleString("en-US"), shown: true },
+      { label: "6 building", count: kClassCounts[6].toLocaleString("en-US"), shown: true }]);
+    // "only" on the building: the others hidden, as surfcast-view --classes 6 draws it.
+    await page.evaluate(() => [...document.querySelectorAll("#classes .class")].find((e) => e.textContent.includes("building"))
+      .querySelector(".only").click());
+    assert.equal(await page.evaluate(() => window.surfcast.converged), false);
+    await page.waitForFunction(done, { timeout: 60000 });
+    assert.deepEqual((await rows()).map((r) => r.shown), [false, false, true]);
+    assert.equal(new URL(page.url()).searchParams.get("hide"), "2,5", "the URL keeps the hidden classes");
+    const state = await page.evaluate(() => ({ ...window.surfcast }));
+    await page.evaluate(() => document.body.classList.add("capture"));
+    const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+    await page.evaluate(() => document.body.classList.remove("capture"));
+    expectLikeReference(state, png, `${serveUrl}/sets/classified`, ["--camera", classCamera, "--color-by", "classification",
+                                                                    "--classes", "6"]);
+    // Elevation: viridis as a bar over the set's z range, in its units.
+    await page.select("#color", "elevation");
+    const ramp = await page.$eval("#ramp", (e) => ({ bars: e.querySelectorAll(".ramp").length, range: e.querySelector(".range").textContent }));
+    assert.equal(ramp.bars, 1);
+    assert.equal(ramp.range, "0.00elevation2.95");
+    // The help overlay: "?" opens it, Esc closes it.
+    const helpShown = () => page.$eval("#help", (e) => !e.hidden && e.getBoundingClientRect().height > 0);
+    await page.keyboard.type("?");
+    assert.equal(await helpShown(), true);
+    await page.keyboard.press("Escape");
+    assert.equal(await helpShown(), false);
+    await page.close();
+    assert.deepEqual(problems, []);
+    // ?panel=0: no panel, for embedding and screenshots.
+    const bare = await browser.newPage();
+    await bare.goto(`${serveUrl}/?set=/sets/classified&panel=0`);
+    assert.equal(await bare.$eval("#panel", (e) => getComputedStyle(e).display), "none");
+    await bare.close();
   });
 
   test("a GPU budget: the view stays within it and least recently used nodes go", async () => {
