@@ -454,8 +454,9 @@ TEST_F(ServerTest, ExportSendsWhatSurfcastExportWrites) {
             auto got = (*reader)->read(batch.data(), batch.size());
             ASSERT_TRUE(got.ok()) << got.status().message();
             if (*got == 0) break;
-            if (!query.empty())
+            if (!query.empty()) {
                 for (size_t i = 0; i < *got; ++i) ASSERT_LE(batch[i].position.x, midX + 0.0005 + 1e-9);
+            }
             n += *got;
         }
         if (query.empty()) EXPECT_EQ(n, set->info().inputPoints);
@@ -503,7 +504,9 @@ TEST_F(ServerTest, ExportLimitsBadQueriesAndClientsThatLeave) {
         const std::string got =
             raw(std::string("GET /sets/scene/export.laz HTTP/1.1\r\nHost: x\r\n") + (leave ? "" : "Connection: close\r\n") + "\r\n", 3000, leave);
         EXPECT_EQ(got.rfind("HTTP/1.1 200", 0), 0u) << got.substr(0, 200);
-        if (!leave) EXPECT_NE(got.find("\r\n0\r\n\r\n"), std::string::npos) << "the chunked body should end";
+        if (!leave) {
+            EXPECT_NE(got.find("\r\n0\r\n\r\n"), std::string::npos) << "the chunked body should end";
+        }
     }
     auto whole = client().Get("/sets/scene/export.laz");
     ASSERT_TRUE(whole);
