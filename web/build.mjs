@@ -1,5 +1,6 @@
 // Builds the viewer into one folder (default ../build/web, or argv[2]): the
-// page, its bundled module, the decode worker and draco3d's WASM decoder.
+// page, its bundled module, the component's module (surfcast.js), the decode
+// worker and draco3d's WASM decoder.
 // Nothing is fetched at run time from anywhere but the folder itself.
 import { build } from "esbuild";
 import { programs, shaderDir, sharedConstants } from "./glsl_es.mjs";
@@ -22,8 +23,12 @@ const shaders = {
 };
 const common = { bundle: true, minify: true, sourcemap: true, target: ["es2020"], logLevel: "warning", plugins: [shaders] };
 await build({ ...common, entryPoints: [join(here, "src/main.ts")], outfile: join(out, "viewer.js"), format: "esm" });
+// The component alone, for apps that embed it (docs/WEB.md, "The component").
+await build({ ...common, entryPoints: [join(here, "src/viewer.ts")], outfile: join(out, "surfcast.js"), format: "esm" });
 await build({ ...common, entryPoints: [join(here, "src/decode_worker.ts")], outfile: join(out, "decode_worker.js"), format: "iife" });
 for (const f of ["index.html", "style.css"]) copyFileSync(join(here, f), join(out, f));
+// The example app, flat beside the page (surfcast-serve serves one level).
+copyFileSync(join(here, "examples", "embed.html"), join(out, "embed.html"));
 const draco = join(here, "node_modules", "draco3d");
 copyFileSync(join(draco, "draco_decoder_nodejs.js"), join(out, "draco_decoder.js"));
 copyFileSync(join(draco, "draco_decoder.wasm"), join(out, "draco_decoder.wasm"));

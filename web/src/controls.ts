@@ -13,18 +13,25 @@ function rotate(v: Vec3, axis: Vec3, angle: number): Vec3 {
 }
 
 export class Controls {
+  private listening = new AbortController();
   constructor(private element: HTMLElement, private get: () => Camera, private set: (c: Camera) => void) {
-    element.addEventListener("contextmenu", (e) => e.preventDefault());
-    element.addEventListener("pointerdown", (e) => this.down(e));
-    element.addEventListener("pointermove", (e) => this.move(e));
-    element.addEventListener("pointerup", (e) => this.up(e));
-    element.addEventListener("pointercancel", (e) => this.up(e));
+    const signal = this.listening.signal;
+    element.addEventListener("contextmenu", (e) => e.preventDefault(), { signal });
+    element.addEventListener("pointerdown", (e) => this.down(e), { signal });
+    element.addEventListener("pointermove", (e) => this.move(e), { signal });
+    element.addEventListener("pointerup", (e) => this.up(e), { signal });
+    element.addEventListener("pointercancel", (e) => this.up(e), { signal });
     element.addEventListener("wheel", (e) => {
       e.preventDefault();
       this.zoom(Math.exp(e.deltaY * (e.deltaMode === 1 ? 0.05 : 0.001)));
-    }, { passive: false });
-    window.addEventListener("keydown", (e) => this.key(e));
+    }, { passive: false, signal });
+    window.addEventListener("keydown", (e) => this.key(e), { signal });
     element.style.touchAction = "none";
+  }
+
+  // Removes every listener.
+  dispose() {
+    this.listening.abort();
   }
 
   private pointers = new Map<number, { x: number; y: number; pan: boolean }>();

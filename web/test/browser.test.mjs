@@ -498,6 +498,46 @@ describe("browser viewer", { skip }, () => {
     await bare.close();
   });
 
+  test("the component in an app's own page (examples/embed.html): its methods and events, and surfcast-view's image", async () => {
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    await page.goto(`${serveUrl}/embed.html?set=/sets/scene&camera=${camera}`);
+    const done = "window.app && (window.app.viewer.state.converged || window.app.viewer.state.errors.length > 0)";
+    await page.waitForFunction(done, { timeout: 60000 });
+    const seen = () => page.evaluate(() => {
+      const r = document.getElementById("view").getBoundingClientRect();
+      return { x: r.x, y: r.y, width: r.width, height: r.height, state: { ...window.app.viewer.state },
+               status: document.getElementById("status").textContent };
+    });
+    const before = await seen();
+    assert.deepEqual(before.state.errors, []);
+    assert.match(before.status, /, converged$/, "the app's status line follows the component's events");
+    // The canvas between the app's header and footer, against surfcast-view
+    // at its size, coloured by elevation as the app asked.
+    const clip = { x: before.x, y: before.y, width: before.width, height: before.height };
+    const png = PNG.sync.read(await page.screenshot({ type: "png", clip }));
+    const out = join(work, "embed-ref.png");
+    const lines = execFileSync(bin("surfcast-view"), ["--headless", `${serveUrl}/sets/scene`, "--lod", "1", "--camera", camera,
+      "--size", `${clip.width}x${clip.height}`, "--color-by", "elevation", "--out", out], { encoding: "utf8" }).trim().split("\n");
+    const ref = JSON.parse(lines[lines.length - 1]);
+    assert.equal(before.state.splats, ref.splats);
+    assert.equal(before.state.nodesCrc, ref.nodes_crc);
+    const d = compare(png, PNG.sync.read(readFileSync(out)));
+    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+    // The app's own select calls setColorBy: not converged at once, then converged again.
+    await page.select("#color", "rgb");
+    assert.equal(await page.evaluate(() => window.app.viewer.state.converged), false);
+    await page.waitForFunction(done, { timeout: 60000 });
+    const after = await seen();
+    assert.equal(after.state.requests, before.state.requests, "recoloured from the kept blocks");
+    assert.match(after.status, /, converged$/);
+    await page.close();
+    assert.deepEqual(problems, []);
+  });
+
   test("a GPU budget: the view stays within it and least recently used nodes go", async () => {
     // 6 MiB holds 196,608 surfels: less than the close-up's 206,869 and
     // the nodes refined through to reach them.

@@ -1,0 +1,381 @@
+// The browser viewer as a component (docs/WEB.md, "The component"): streams
+// one tile set into a canvas and splats it, with the camera, settings,
+// colouring, class filter and clip box set through methods, and progress,
+// convergence and errors reported as events. The page (main.ts) is a thin
+// client of it, as surfcast-view is of the C++ library.
+//
+// Redraws: one frame on the GPU at a time (a fence says when it is done), as
+// soon as the GPU is free when the view changes, and while blocks stream in no
+// more often than every other frame's cost, so that a slow WebGL (SwiftShader
+// takes about a second for half a million splats) spends its time decoding,
+// not redrawing. `state.converged` turns true once the frame that needs
+// nothing more is done, and false from the moment the view changes.
+
+import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
+import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
+import { Controls } from "./controls.js";
+import { crc32 } from "./crc32.js";
+import { attribute, type TilesetInfo } from "./format.js";
+import { type Box, emptyStats } from "./lod_selection.js";
+import { type DrawnNode, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
+         type RenderMode, type RenderSettings, SplatRenderer } from "./renderer.js";
+import { TileSource } from "./source.js";
+import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
+
+export type { Box, Camera, ColorBy, RenderMode, TilesetInfo };
+// "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov", as surfcast-view --camera takes and the page's ?camera= keeps it.
+export { formatCamera, parseCamera };
+export const kRenderModes: RenderMode[] = ["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel"];
+
+export interface ViewerOptions {
+  token?: string; // sent as Authorization: Bearer with every data request
+  camera?: Camera; // default: the set framed as surfcast-view frames it
+  detail?: number; // refine while a node's projected spacing exceeds this many pixels (1)
+  splatBudget?: number; // most splats a frame draws (5,000,000)
+  gpuBudgetMiB?: number; // resident surfels' bytes, least recently used nodes evicted beyond it (512)
+  blockCacheMiB?: number; // resident nodes' compressed blocks kept for recolouring (256)
+  mode?: RenderMode; // ewa-pixel
+  colorBy?: ColorBy; // auto: rgb where the set has it, else intensity, else elevation
+  hiddenClasses?: number[];
+  clip?: Box; // draw only the splats whose centre lies in this box (world coordinates, bounds included)
+  opacity?: number; // multiplies every surfel's opacity, in [0, 1] (1)
+  layers?: number; // translucent frames: surfaces resolved per pixel (3)
+  edgeAA?: boolean; // edge antialiasing (true)
+  controls?: boolean; // orbit, pan, zoom and fly with mouse, touch and keys on the canvas (true)
+  forbidFloatBlend?: boolean; // behave as a browser without float blending (tests)
+  workerUrl?: URL; // the decode worker (default: decode_worker.js beside this module)
+}
+
+// What the viewer has done, updated every frame (the "change" event).
+export interface ViewerState {
+  converged: boolean;
+  nodes: number;
+  // CRC-32 of the drawn nodes' keys in key order, joined by commas:
+  // surfcast-view's nodes_crc where both draw the same nodes.
+  nodesCrc: number;
+  splats: number;
+  bytes: number;
+  requests: number;
+  errors: string[];
+  notices: string[];
+  mode: string; // the mode drawn (a browser without float blending may draw another)
+  firstImageMs: number | null;
+  convergedMs: number | null;
+  resident: number; // nodes resident on the GPU (drawn or kept for later views)
+  residentBytes: number; // the resident nodes' surfels, 32 bytes each in whole granules (lod_selection.ts)
+  keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within blockCacheMiB)
+  refetched: number; // blocks fetched again for a recolouring (their kept copies had gone)
+  evictions: number;
+  inFlight: number; // requests under way
+  frames: number;
+  frameMs: number; // the last frame's time on the GPU, from its draw to its fence
+  camera: string; // as ?camera= and surfcast-view --camera take it
+}
+
+// Events (CustomEvent, `detail` as said): "change" (ViewerState) after every
+// selection or frame; "converged" (ViewerState) when a converged frame is
+// done; "camera" (Camera) when the camera moves; "error" (string) when the
+// stream stops or an export fails; "notice" (string) for what the browser
+// cannot draw as asked.
+export class SurfcastViewer extends EventTarget {
+  readonly state: ViewerState = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [],
+    notices: [], mode: "", firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0,
+    evictions: 0, inFlight: 0, frames: 0, frameMs: 0, camera: "" };
+  readonly info: TilesetInfo;
+  private settings: RenderSettings;
+  private cam: Camera;
+  private colorMode: ColorBy;
+  private hidden: number[];
+  private detailPx: number;
+  private budget: number;
+  private controls?: Controls;
+  private animation = 0;
+  private disposed = false;
+  private drawLast = () => {};
+  // Redraw pacing (the header).
+  private dirty = true;
+  private urgent = true;
+  private lastDraw = -Infinity;
+  private frameCost = 0;
+  private fence: WebGLSync | null = null;
+  private fenceConverged = false;
+  private readonly start = performance.now();
+  private selection: { gpu: DrawnNode[]; splats: number; converged: boolean; nodesCrc: number } | null = null;
+  private width = 1;
+  private height = 1;
+
+  // Opens the set whose tileset.json is at `setUrl`/tileset.json. Throws an
+  // Error naming what is wrong: no WebGL2, the set unreachable or malformed,
+  // options out of range.
+  static async open(canvas: HTMLCanvasElement, setUrl: string, options: ViewerOptions = {}): Promise<SurfcastViewer> {
+    const opacity = options.opacity ?? 1, layers = options.layers ?? kDefaultLayers;
+    if (!(opacity >= 0 && opacity <= 1) || !(layers >= 1 && layers <= kMaxLayers) || !Number.isInteger(layers))
+      throw new Error(`opacity is in [0, 1] and layers a whole number in [1, ${kMaxLayers}]`);
+    if (options.mode !== undefined && !kRenderModes.includes(options.mode))
+      throw new Error(`mode ${options.mode}: expected ${kRenderModes.join(", ")}`);
+    const renderer = new SplatRenderer(canvas, { forbidFloatBlend: options.forbidFloatBlend });
+    const source = new TileSource(setUrl, { token: options.token });
+    let colorBy = options.colorBy ?? "auto";
+    const hidden = [...(options.hiddenClasses ?? [])];
+    const streamer = await Streamer.open(source, renderer, options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
+      (info, origin) => {
+        const by = resolveColorBy(colorBy, info);
+        if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
+        colorBy = by as ColorBy;
+        return coloringFor(info, origin, colorBy, hidden);
+      }, { ...kDefaultStreamOptions, memoryBudget: (options.gpuBudgetMiB ?? 512) * 2 ** 20,
+           keptBudget: (options.blockCacheMiB ?? 256) * 2 ** 20 });
+    return new SurfcastViewer(canvas, renderer, source, streamer, colorBy, hidden, options);
+  }
+
+  private constructor(readonly canvas: HTMLCanvasElement, private renderer: SplatRenderer, private source: TileSource,
+                      private streamer: Streamer<DrawnNode>, colorBy: ColorBy, hidden: number[], options: ViewerOptions) {
+    super();
+    const info = this.info = streamer.info;
+    this.colorMode = colorBy;
+    this.hidden = hidden;
+    this.detailPx = options.detail ?? 1;
+    this.budget = options.splatBudget ?? 5_000_000;
+    this.settings = {
+      mode: options.mode ?? "ewa-pixel",
+      shading: colorBy === "rgb" || colorBy === "intensity" ? "unlit" : "lambert",
+      kernelScale: info.kernelScale,
+      cutoff: 1,
+      zt: kDefaultZt,
+      lowpassVariance: kDefaultLowpassVariance,
+      edgeAA: options.edgeAA ?? true,
+      edgeTau: kDefaultEdgeTau,
+      background: [1, 1, 1],
+      backfaceCull: normalsOriented(info.normalSource),
+      translucent: attribute(info, "opacity") !== undefined,
+      opacity: options.opacity ?? 1,
+      layers: options.layers ?? kDefaultLayers,
+      clip: options.clip,
+    };
+    [this.width, this.height] = this.size();
+    this.cam = options.camera ?? frameBox(info.boundsMin, info.boundsMax, this.width / this.height);
+    this.state.camera = formatCamera(this.cam);
+    this.noteMode();
+    streamer.onChange = () => (this.dirty = true);
+    if (options.controls ?? true) this.controls = new Controls(canvas, () => this.cam, (c) => this.setCamera(c));
+    this.animation = requestAnimationFrame((t) => this.frame(t));
+  }
+
+  get camera(): Camera { return this.cam; }
+  setCamera(camera: Camera) {
+    this.cam = camera;
+    this.state.camera = formatCamera(camera);
+    this.changed();
+    this.emit("camera", camera);
+  }
+  get mode(): RenderMode { return this.settings.mode; }
+  setMode(mode: RenderMode) {
+    if (!kRenderModes.includes(mode)) throw new Error(`mode ${mode}: expected ${kRenderModes.join(", ")}`);
+    this.settings.mode = mode;
+    this.noteMode();
+    this.changed();
+  }
+  get detail(): number { return this.detailPx; }
+  setDetail(pixels: number) {
+    if (!(pixels > 0)) throw new Error(`detail ${pixels}: expected pixels > 0`);
+    this.detailPx = pixels;
+    this.changed();
+  }
+  get splatBudget(): number { return this.budget; }
+  setSplatBudget(splats: number) {
+    if (!(splats >= 1)) throw new Error(`splat budget ${splats}: expected at least 1`);
+    this.budget = splats;
+    this.changed();
+  }
+  // The colourings this set can show (rgb, intensity, elevation, classification, return).
+  get colorings(): ColorBy[] { return kColorByOrder.filter((by) => resolveColorBy(by, this.info) === by); }
+  get colorBy(): ColorBy { return this.colorMode; }
+  setColorBy(by: ColorBy) {
+    const resolved = resolveColorBy(by, this.info);
+    if (!kColorByOrder.includes(resolved as ColorBy)) throw new Error(resolved);
+    this.colorMode = resolved as ColorBy;
+    this.settings.shading = this.colorMode === "rgb" || this.colorMode === "intensity" ? "unlit" : "lambert";
+    this.recolor();
+  }
+  get hiddenClasses(): number[] { return [...this.hidden]; }
+  setHiddenClasses(classes: number[]) {
+    this.hidden = [...classes];
+    this.recolor();
+  }
+  get clip(): Box | undefined { return this.settings.clip; }
+  setClip(box: Box | undefined) {
+    if (box) for (let a = 0; a < 3; ++a)
+      if (!Number.isFinite(box.min[a]) || !Number.isFinite(box.max[a]) || box.min[a] > box.max[a])
+        throw new Error(`clip box: axis ${"xyz"[a]} from ${box.min[a]} to ${box.max[a]}`);
+    this.settings.clip = box;
+    this.changed();
+  }
+
+  // The input points in `box` (the set's bounds by default) of the classes
+  // shown, as LAZ, from surfcast-serve's export route (docs/PROTOCOL.md).
+  async exportLaz(box: Box = { min: this.info.boundsMin, max: this.info.boundsMax }): Promise<Blob> {
+    const shown = this.hidden.length ? [...this.info.statistics.classCounts.keys()].filter((c) => !this.hidden.includes(c))
+                                     : undefined;
+    try {
+      return await this.source.exportLaz(box, shown);
+    } catch (e) {
+      const message = `export: ${(e as Error).message}`;
+      this.emit("error", message);
+      throw new Error(message);
+    }
+  }
+
+  // For benchmarks: draws the current selection n times, each waited for
+  // (a one-pixel read: gl.finish does not wait in Chromium), and returns the
+  // mean milliseconds per frame.
+  timeFrames(n: number): number {
+    const gl = this.renderer.gl, pixel = new Uint8Array(4);
+    const sync = () => gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
+    this.drawLast();
+    sync();
+    const t0 = performance.now();
+    for (let i = 0; i < n; ++i) {
+      this.drawLast();
+      sync();
+    }
+    return (performance.now() - t0) / n;
+  }
+
+  // Stops drawing and streaming and lets go of the canvas's controls.
+  dispose() {
+    this.disposed = true;
+    cancelAnimationFrame(this.animation);
+    this.controls?.dispose();
+    this.streamer.onChange = () => {};
+  }
+
+  private emit(type: string, detail: unknown) {
+    this.dispatchEvent(new CustomEvent(type, { detail }));
+  }
+  private changed() {
+    this.urgent = this.dirty = true;
+    this.state.converged = false;
+  }
+  private recolor() {
+    this.changed();
+    this.streamer.recolor(coloringFor(this.info, this.streamer.origin, this.colorMode, this.hidden));
+  }
+  private notice(message: string) {
+    if (this.state.notices.includes(message)) return;
+    this.state.notices.push(message);
+    this.emit("notice", message);
+  }
+  private error(message: string) {
+    if (this.state.errors.includes(message)) return;
+    this.state.errors.push(message);
+    this.emit("error", message);
+  }
+  private noteMode() {
+    const s = this.settings, hasWeights = this.info.weights !== "none";
+    this.state.mode = this.renderer.effectiveMode(s.mode, hasWeights);
+    if ((s.translucent || s.opacity < 1) && !this.renderer.floatBlend)
+      this.notice("this browser cannot blend float targets (EXT_float_blend): transparency is drawn opaque");
+    if (this.state.mode !== s.mode)
+      this.notice(`this browser cannot blend float targets (EXT_float_blend): drawing ${this.state.mode} instead of ${s.mode}` +
+                  (hasWeights ? "" : ", as the set was built without weights (surfcast-build --weights analytic)"));
+  }
+  private size(): [number, number] {
+    const dpr = window.devicePixelRatio || 1;
+    return [Math.max(1, Math.round(this.canvas.clientWidth * dpr)), Math.max(1, Math.round(this.canvas.clientHeight * dpr))];
+  }
+
+  // A new selection, which also queues the fetches the view needs.
+  private select() {
+    const lod = emptyStats(), streamer = this.streamer;
+    const selected = streamer.update(this.cam, this.width, this.height, { targetPixels: this.detailPx, frustumCulling: true,
+      backfaceCulling: this.settings.backfaceCull, splatBudget: this.budget, memoryBudget: Infinity, clip: this.settings.clip },
+      lod);
+    // Drawn in key order, as the Vulkan client draws them. Every selected
+    // node is resident until the next update (eviction spares what a view uses).
+    const nodes = streamer.selector.nodes;
+    selected.sort((a, b) => {
+      const p = nodes[a.index], q = nodes[b.index];
+      return p.level - q.level || p.x - q.x || p.y - q.y || p.z - q.z;
+    });
+    const gpu: DrawnNode[] = [];
+    const keys: string[] = [];
+    let splats = 0;
+    for (const s of selected) {
+      const r = streamer.residentNode(s.index);
+      if (!r) continue;
+      gpu.push(r.gpu);
+      keys.push(nodes[s.index].key);
+      splats += r.count;
+    }
+    const st = streamer.stats;
+    const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
+    if (st.gaveUp) this.error(st.lastError);
+    Object.assign(this.state, { bytes: st.bytes, requests: st.requests, resident: st.resident, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
+                                refetched: st.refetched, evictions: st.evictions, inFlight: st.inFlight });
+    return { gpu, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
+  }
+
+  // Each animation frame: a new selection whenever something changed, and a
+  // draw of the latest one when the GPU is free and the pacing allows.
+  // Selecting never waits for drawing: on a slow WebGL the stream keeps going
+  // while a frame renders.
+  private frame(now: number) {
+    if (this.disposed) return;
+    const gl = this.renderer.gl, state = this.state;
+    if (this.fence && gl.getSyncParameter(this.fence, gl.SYNC_STATUS) === gl.SIGNALED) {
+      gl.deleteSync(this.fence);
+      this.fence = null;
+      this.frameCost = performance.now() - this.lastDraw;
+      state.frameMs = this.frameCost;
+      if (this.fenceConverged && !this.dirty && !this.selection) {
+        state.convergedMs ??= performance.now() - this.start;
+        state.converged = true;
+        this.emit("converged", state);
+      }
+    }
+    const [w, h] = this.size();
+    if (w !== this.width || h !== this.height) {
+      [this.width, this.height] = [w, h];
+      this.urgent = this.dirty = true;
+    }
+    if (this.dirty) {
+      this.dirty = false;
+      state.converged = false;
+      this.selection = this.select();
+      this.emit("change", state);
+    }
+    if (this.selection && !this.fence && (this.urgent || now - this.lastDraw >= 2 * this.frameCost)) {
+      this.urgent = false;
+      if (this.canvas.width !== this.width || this.canvas.height !== this.height) {
+        this.canvas.width = this.width;
+        this.canvas.height = this.height;
+      }
+      const { gpu, splats, converged, nodesCrc } = this.selection;
+      this.selection = null;
+      const info = this.info;
+      const eta = viewportScale(this.cam, this.height);
+      const rows = viewRows(this.cam, this.streamer.origin);
+      const diagonal = Math.hypot(info.boundsMax[0] - info.boundsMin[0], info.boundsMax[1] - info.boundsMin[1],
+                                  info.boundsMax[2] - info.boundsMin[2]);
+      const eye = Math.hypot(rows[3], rows[7], rows[11]);
+      const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
+      const view = { rows, eta, near, origin: this.streamer.origin };
+      const hasWeights = info.weights !== "none";
+      this.drawLast = () => this.renderer.render(gpu, view, this.settings, hasWeights);
+      this.drawLast();
+      this.lastDraw = performance.now();
+      this.fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
+      gl.flush();
+      this.fenceConverged = converged;
+      ++state.frames;
+      Object.assign(state, { nodes: gpu.length, nodesCrc, splats });
+      if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - this.start;
+      this.emit("change", state);
+    }
+    this.animation = requestAnimationFrame((t) => this.frame(t));
+  }
+}
+
+function normalsOriented(source: string): boolean {
+  return source !== "" && source.split("+").every((p) => p === "input" || p === "estimated-scan-origin");
+}
