@@ -1,5 +1,6 @@
 #include "splat_renderer.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
