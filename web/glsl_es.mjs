@@ -76,7 +76,7 @@ export function sharedConstants() {
 // (web/src/renderer.ts draws them; `unsigned8`: 8-bit targets without float
 // blending).
 export function programs() {
-  const quad = (kPass, layered = false) => glslEs("splat_quad.vert", { constants: { kPass }, defines: layered ? ["SC_LAYERED"] : [] });
+  const quad = (kPass, defines = []) => glslEs("splat_quad.vert", { constants: { kPass }, defines });
   const fullscreen = glslEs("fullscreen.vert");
   return {
     visibility: [quad(0), glslEs("splat_visibility.frag")],
@@ -86,8 +86,9 @@ export function programs() {
     points: [glslEs("splat_point.vert"), glslEs("opaque.frag")],
     resolve: [fullscreen, glslEs("resolve.frag")],
     resolve8: [fullscreen, glslEs("resolve.frag", { defines: ["SC_UNSIGNED_TARGETS"] })],
-    peel: [quad(0, true), glslEs("splat_peel.frag")],
-    layer: [quad(1, true), glslEs("splat_layer.frag")],
+    peel: [quad(0, ["SC_LAYERED"]), glslEs("splat_peel.frag")],
+    layer: [quad(1, ["SC_LAYERED"]), glslEs("splat_layer.frag")],
+    pick: [quad(1, ["SC_PICK"]), glslEs("splat_pick.frag")],
     resolveLayer: [fullscreen, glslEs("resolve_layer.frag")],
     composite: [fullscreen, glslEs("composite.frag")],
   };

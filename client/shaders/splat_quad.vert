@@ -31,6 +31,12 @@ layout(location = 7) noperspective out float outDepth; // depth (near / z) of th
 #else
 #define LAYERED(statement)
 #endif
+#ifdef SC_PICK  // the browser's picking pass (splat_pick.frag)
+layout(location = 9) flat out uint outSurfel;
+#define PICK(statement) statement
+#else
+#define PICK(statement)
+#endif
 
 void main() {
     loadSurfel();
@@ -39,6 +45,7 @@ void main() {
     LAYERED(SET_DEPTH(0.0, 1.0));
     outEdgeUV = vec2(0);
     outEdge = 0u;
+    PICK(outSurfel = surfelIndex());
     if (kPass == 2) {
         vec3 o = toCamera(inPositionRadius.xyz);
         vec3 n = rotateToCamera(decodeNormal(inNormal));

@@ -25,6 +25,8 @@ void loadSurfel() {
 // The strip corners 0 1 2 3 as two triangles.
 const int kStripCorners[6] = int[6](0, 1, 2, 2, 1, 3);
 int cornerIndex() { return kStripCorners[gl_VertexID % SC_SURFEL_VERTICES]; }
+// The surfel's index in its node's texture.
+uint surfelIndex() { return uint(gl_VertexID / SC_SURFEL_VERTICES); }
 #else
 layout(location = 0) in vec4 inPositionRadius;
 layout(location = 1) in uint inNormal;
@@ -33,4 +35,6 @@ layout(location = 3) in float inWeight;
 layout(location = 4) in uint inEdge;
 void loadSurfel() {}
 int cornerIndex() { return gl_VertexIndex; }
+// The surfel's index in the vertex buffer.
+uint surfelIndex() { return uint(gl_InstanceIndex); }
 #endif

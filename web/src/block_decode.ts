@@ -24,6 +24,19 @@ export interface DecodeJob {
   weights: boolean;
   extra: string[]; // the listed attributes after the fixed ones, in block order
   coloring: ColoringSpec;
+  // Picking: the attributes of the surfel at this index of the packed
+  // surfels (the pick-th of those the class filter keeps), not the surfels.
+  pick?: number;
+}
+
+// One surfel's attributes, as its block stores them.
+export interface PickedSurfel {
+  position: [number, number, number]; // relative to the render origin, in double
+  normal: [number, number, number];
+  radius: number; // r: the surfel's own or the node's spacing h
+  color: [number, number, number] | null; // in [0, 1]; null where the set has no colour
+  weight: number | null; // s_k; null without weights
+  raw: Record<string, number>; // every attribute after the fixed ones, as stored (value = stored * scale + offset)
 }
 
 export interface ColoringSpec {
@@ -42,6 +55,7 @@ export interface DecodeResult {
   id: number;
   surfels?: ArrayBuffer; // n * 32 bytes
   count?: number;
+  picked?: PickedSurfel | null; // for a pick job: null where the index is past the packed surfels
   error?: string;
 }
 
@@ -180,16 +194,43 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
     const edges = job.hasEdgeWeights ? read(index++, "f32", 4) : null;
     const lidar: Record<string, ArrayLike<number>> = {};
     for (const name of job.extra) {
-      const type = name === "intensity" ? "u16" : ["classification", "return_number", "number_of_returns", "opacity"].includes(name) ? "u8" : null;
+      // Picking reads every attribute (unsigned, 8 to 32 bits: Draco widens them).
+      const type = job.pick !== undefined ? "u32" : name === "intensity" ? "u16"
+        : ["classification", "return_number", "number_of_returns", "opacity"].includes(name) ? "u8" : null;
       if (type) lidar[name] = read(index, type, 1);
       ++index;
     }
+    if (job.pick !== undefined) return { id: job.id, picked: picked(job, n, positions, normals, colors, weights, radii, lidar) };
     return pack(job, n, positions, normals, colors, weights, radii, edges, lidar);
   } catch (e) {
     return { id: job.id, error: (e as Error).message };
   } finally {
     for (const o of cleanup) draco.destroy(o);
   }
+}
+
+// The attributes of the job.pick-th surfel pack() keeps.
+function picked(job: DecodeJob, n: number, positions: ArrayLike<number>, normals: ArrayLike<number>,
+                colors: ArrayLike<number> | null, weights: ArrayLike<number> | null, radii: ArrayLike<number> | null,
+                lidar: Record<string, ArrayLike<number>>): PickedSurfel | null {
+  const hidden = new Set(job.coloring.hiddenClasses), classes = lidar.classification;
+  for (let i = 0, m = 0; i < n; ++i) {
+    if (hidden.size && classes && hidden.has(classes[i])) continue;
+    if (m++ !== job.pick) continue;
+    const step = job.edge / (2 ** job.positionBits - 1), colorScale = job.colorBits ? 1 / (2 ** job.colorBits - 1) : 0;
+    const raw: Record<string, number> = {};
+    for (const name of job.extra) raw[name] = lidar[name][i];
+    return {
+      position: [job.min[0] + positions[3 * i] * step, job.min[1] + positions[3 * i + 1] * step,
+                 job.min[2] + positions[3 * i + 2] * step],
+      normal: [normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]],
+      radius: radii ? radii[i] : job.spacing,
+      color: colors ? [colors[3 * i] * colorScale, colors[3 * i + 1] * colorScale, colors[3 * i + 2] * colorScale] : null,
+      weight: weights ? weights[i] : null,
+      raw,
+    };
+  }
+  return null;
 }
 
 function pack(job: DecodeJob, n: number, positions: ArrayLike<number>, normals: ArrayLike<number>,

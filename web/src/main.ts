@@ -7,10 +7,13 @@
 // and scripts read.
 
 import { formatCamera, parseCamera } from "./camera.js";
+import { className } from "./coloring.js";
 import { classLegend, rampLegend } from "./legend.js";
+import { measure, Measurements, type Tool } from "./measure.js";
 import type { Box } from "./lod_selection.js";
 import { RendererError } from "./renderer.js";
-import { type ColorBy, kRenderModes, type RenderMode, SurfcastViewer, type ViewerOptions, type ViewerState } from "./viewer.js";
+import { type ColorBy, kRenderModes, type PickResult, type RenderMode, SurfcastViewer, type ViewerOptions,
+         type ViewerState } from "./viewer.js";
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 const params = new URLSearchParams(location.search);
@@ -20,15 +23,20 @@ const hash = new URLSearchParams(location.hash.replace(/^#/, ""));
 const pageErrors: string[] = [], pageNotices: string[] = [];
 let viewer: SurfcastViewer | undefined;
 let exports = 0;
+let picked: PickResult | null = null;
+let measurements: Measurements | undefined;
 const kNotOpen: ViewerState = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [],
   mode: "", firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, evictions: 0,
   inFlight: 0, frames: 0, frameMs: 0, camera: "" };
 // The viewer's state, with the page's errors and notices, the clip box as
-// ?clip= gives it ("" for none) and the LAZ exports downloaded.
+// ?clip= gives it ("" for none), the LAZ exports downloaded, the surfel last
+// picked (null: none, or a click where no splat was) and the measurements
+// with their values and labels.
 Object.defineProperty(window, "surfcast", { get: () => {
   const s = viewer?.state ?? kNotOpen, clip = viewer?.clip;
   return { ...s, errors: [...pageErrors, ...s.errors], notices: [...pageNotices, ...s.notices],
-           clip: clip ? formatBox(clip) : "", exports };
+           clip: clip ? formatBox(clip) : "", exports, picked,
+           measurements: (measurements?.list ?? []).map((x) => ({ ...x, ...measure(x.tool, x.points, measurements?.unit) })) };
 } });
 
 function showMessages() {
@@ -186,12 +194,79 @@ function wirePanel(v: SurfcastViewer, setUrl: string) {
       download.textContent = "download points (LAZ)";
     }
   };
+  wireInspect(v);
   $("screenshot").onclick = () => {
     const link = document.createElement("a");
     link.download = "surfcast.png";
     link.href = v.canvas.toDataURL("image/png");
     link.click();
   };
+}
+
+// A click (a press and release within 4 px, no drag) picks the surfel under
+// the cursor: its attributes go in the panel, and with a measuring tool its
+// centre is the measurement's next point. A double click or Enter ends a
+// polyline or an area.
+function wireInspect(v: SurfcastViewer) {
+  // Projected relative to the set's centre, so that georeferenced sets keep their precision.
+  const centre = [0, 1, 2].map((a) => 0.5 * (v.info.boundsMin[a] + v.info.boundsMax[a])) as [number, number, number];
+  const m = measurements = new Measurements(v.canvas, centre, params.get("units") ?? "");
+  const tool = $<HTMLSelectElement>("tool");
+  const table = $<HTMLTableElement>("picked");
+  const redraw = () => m.draw(v.camera);
+  v.addEventListener("camera", redraw);
+  window.addEventListener("resize", redraw);
+  $("clear-measurements").onclick = () => {
+    m.clear();
+    redraw();
+  };
+  const finish = () => {
+    m.finish();
+    redraw();
+  };
+  v.canvas.addEventListener("dblclick", finish);
+  window.addEventListener("keydown", (e) => e.key === "Enter" && !(e.target instanceof HTMLInputElement) && finish());
+  let down: { x: number; y: number } | null = null;
+  v.canvas.addEventListener("pointerdown", (e) => (down = e.button === 0 ? { x: e.offsetX, y: e.offsetY } : null));
+  v.canvas.addEventListener("pointerup", async (e) => {
+    if (!down || Math.hypot(e.offsetX - down.x, e.offsetY - down.y) > 4) return;
+    down = null;
+    const hit = await v.pick(e.offsetX, e.offsetY);
+    picked = hit;
+    showPicked(table, hit, v);
+    if (hit && tool.value !== "pick") {
+      m.add(tool.value as Tool, hit.position);
+      redraw();
+    }
+  });
+}
+
+// The picked surfel's attributes: position in the set's coordinates, colour,
+// class by name, returns, and every other attribute the set stores.
+function showPicked(table: HTMLTableElement, hit: PickResult | null, v: SurfcastViewer) {
+  const rows: [string, string][] = [];
+  if (!hit) rows.push(["", "no point there"]);
+  else {
+    const a = { ...hit.attributes };
+    rows.push(["x, y, z", hit.position.map((c) => c.toFixed(4)).join(", ")]);
+    if (hit.color) rows.push(["colour", hit.color.join(", ")]);
+    if ("classification" in a) rows.push(["class", `${a.classification} ${className(a.classification)}`]);
+    if ("return_number" in a) rows.push(["return", `${a.return_number} of ${a.number_of_returns ?? "?"}`]);
+    for (const name of ["classification", "return_number", "number_of_returns"]) delete a[name];
+    for (const [name, value] of Object.entries(a)) {
+      const step = v.info.attributes.find((x) => x.name === name)?.scale ?? 1;
+      rows.push([name.replaceAll("_", " "), value.toFixed(Math.max(0, Math.min(9, Math.ceil(-Math.log10(step)))))]);
+    }
+    rows.push(["radius", hit.radius.toPrecision(3)]);
+    rows.push(["node", hit.node]);
+  }
+  table.replaceChildren(...rows.map(([k, value]) => {
+    const tr = document.createElement("tr");
+    tr.insertCell().textContent = k;
+    tr.insertCell().textContent = value;
+    return tr;
+  }));
+  table.hidden = false;
 }
 
 async function main() {

@@ -119,6 +119,7 @@ export class SplatRenderer {
   readonly clipControl: boolean;
   private programs: Record<string, Program>;
   private targets: Targets | null = null;
+  private pickTarget: WebGLFramebuffer | null = null;
   private emptyVao: WebGLVertexArrayObject;
 
   // Throws RendererError naming what the browser lacks.
@@ -141,6 +142,7 @@ export class SplatRenderer {
       circles: program("circles"),
       points: program("points"),
       resolve: program(unsigned8 ? "resolve8" : "resolve"),
+      pick: program("pick"),
     };
     if (this.floatBlend) {
       this.programs.peel = program("peel");
@@ -315,6 +317,58 @@ export class SplatRenderer {
     gl.uniform1i(r.loc("normalWeight"), 1);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     gl.bindVertexArray(null);
+  }
+
+  // The splat under drawing-buffer pixel (x, y) (from the top left) of the
+  // nodes as render() draws them: the nearest by its own depth, as its
+  // node's place in `nodes` and its surfel's index in the node; null where
+  // no splat covers the pixel. Only that pixel is rasterized: the viewport
+  // moves it onto a 1x1 target, whose integer id is read back.
+  pick(nodes: DrawnNode[], view: FrameView, settings: RenderSettings, x: number, y: number): { node: number; surfel: number } | null {
+    const gl = this.gl;
+    const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+    if (!(x >= 0 && x < w && y >= 0 && y < h)) return null;
+    if (!this.pickTarget) {
+      const fb = gl.createFramebuffer()!;
+      gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+      for (const [attachment, format] of [[gl.COLOR_ATTACHMENT0, gl.RG32UI], [gl.DEPTH_ATTACHMENT, gl.DEPTH_COMPONENT32F]]) {
+        const rb = gl.createRenderbuffer()!;
+        gl.bindRenderbuffer(gl.RENDERBUFFER, rb);
+        gl.renderbufferStorage(gl.RENDERBUFFER, format, 1, 1);
+        gl.framebufferRenderbuffer(gl.FRAMEBUFFER, attachment, gl.RENDERBUFFER, rb);
+      }
+      const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
+      if (status !== gl.FRAMEBUFFER_COMPLETE) throw new RendererError(`the picking target is incomplete (0x${status.toString(16)})`);
+      this.pickTarget = fb;
+    }
+    gl.bindFramebuffer(gl.FRAMEBUFFER, this.pickTarget);
+    gl.drawBuffers([gl.COLOR_ATTACHMENT0]);
+    gl.viewport(-Math.floor(x), -(h - 1 - Math.floor(y)), w, h);
+    gl.colorMask(true, true, true, true);
+    gl.clearBufferuiv(gl.COLOR, 0, [0, 0, 0, 0]);
+    gl.clearDepth(0);  // reversed Z: 0 is infinitely far
+    gl.depthMask(true);
+    gl.clear(gl.DEPTH_BUFFER_BIT);
+    gl.enable(gl.DEPTH_TEST);
+    gl.depthFunc(gl.GREATER);
+    gl.disable(gl.BLEND);
+    gl.disable(gl.CULL_FACE);
+    const p = this.programs.pick;
+    this.setFrame(p, view, settings, settings.mode === "ewa-noprefilter" ? "ewa-noprefilter" : "ewa-pixel", w, h);
+    gl.bindVertexArray(this.emptyVao);
+    gl.activeTexture(gl.TEXTURE2);
+    nodes.forEach((n, k) => {
+      gl.uniform1ui(p.loc("scPickNode"), k);
+      gl.bindTexture(gl.TEXTURE_2D, n.texture);
+      gl.drawArrays(gl.TRIANGLES, 0, 6 * n.count);
+    });
+    const id = new Uint32Array(4);
+    gl.readPixels(0, 0, 1, 1, gl.RGBA_INTEGER, gl.UNSIGNED_INT, id);
+    gl.disable(gl.DEPTH_TEST);
+    gl.bindVertexArray(null);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.viewport(0, 0, w, h);
+    return id[0] ? { node: id[0] - 1, surfel: id[1] } : null;
   }
 
   // Depth peeling (docs/RENDERER.md, "Transparency"; splat_renderer.cpp's

@@ -16,7 +16,7 @@
 // those again (as the C++ stream does).
 
 import type { Camera } from "./camera.js";
-import type { ColoringSpec, DecodeJob, DecodeResult } from "./block_decode.js";
+import type { ColoringSpec, DecodeJob, DecodeResult, PickedSurfel } from "./block_decode.js";
 import { attribute, FormatError, indexBytes, kFixedAttributes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
          type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, readHierarchyIndex, readHierarchyPage,
          type TilesetInfo, type Vec3 } from "./format.js";
@@ -295,19 +295,26 @@ export class Streamer<T> {
   // Decodes node i's block with the current colouring (again, if the
   // colouring changes meanwhile) and makes it resident, or, for a resident
   // node being recoloured, replaces its surfels on the GPU.
-  private async decodeNode(i: number, blob: Uint8Array, recolor = false, refetched = false) {
-    const generation = this.generation;
+  // The decoding of node i's block (a copy of it, which the worker takes)
+  // with the current colouring.
+  private job(i: number, block: Uint8Array): Omit<DecodeJob, "id"> {
     const n = this.selector.nodes[i];
     const min = nodeMin(this.info, n);
-    // The worker takes a copy (transferred); the block stays here, its own
-    // bytes (not a view of a whole batch response).
-    const block = blob.byteOffset === 0 && blob.byteLength === blob.buffer.byteLength ? blob : blob.slice();
-    const result = await this.decoders.decode({
+    return {
       key: n.key, blob: block.slice().buffer, crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits,
       min: [min[0] - this.origin[0], min[1] - this.origin[1], min[2] - this.origin[2]], edge: nodeEdge(this.info, n.level),
       spacing: n.spacing, hasRadius: !!(n.flags & kFlagHasRadius), hasEdgeWeights: !!(n.flags & kFlagEdgeWeights),
       colorBits: this.info.colorBits, weights: this.info.weights !== "none", extra: this.extra, coloring: this.coloring,
-    });
+    };
+  }
+
+  private async decodeNode(i: number, blob: Uint8Array, recolor = false, refetched = false) {
+    const generation = this.generation;
+    const n = this.selector.nodes[i];
+    // The worker takes a copy (transferred); the block stays here, its own
+    // bytes (not a view of a whole batch response).
+    const block = blob.byteOffset === 0 && blob.byteLength === blob.buffer.byteLength ? blob : blob.slice();
+    const result = await this.decoders.decode(this.job(i, block));
     if (result.error || !result.surfels) {
       if (!recolor) this.noteFailure(i, new Error(result.error ?? "decoding failed"));
       else if (refetched) {  // a block fetched again fails like any fetch: the stream stops
@@ -440,6 +447,20 @@ export class Streamer<T> {
 
   residentNode(i: number) {
     return this.resident.get(i);
+  }
+
+  // The attributes of surfel k (its index in the node's packed surfels, as
+  // drawn) of resident node i, decoded again from its kept block, or fetched
+  // again where that went. Null where the node is not resident or is being
+  // recoloured (its drawn surfels then follow the old class filter).
+  async surfel(i: number, k: number): Promise<PickedSurfel | null> {
+    const r = this.resident.get(i);
+    if (!r || this.recoloring.has(i)) return null;
+    const n = this.selector.nodes[i];
+    const block = r.block ?? await this.source.range("blocks.bin", n.blockOffset, n.blockSize);
+    const result = await this.decoders.decode({ ...this.job(i, block), pick: k });
+    if (result.error) throw new Error(`node ${n.key}: ${result.error}`);
+    return result.picked ?? null;
   }
 
   close() {

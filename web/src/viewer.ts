@@ -17,7 +17,7 @@ import { Controls } from "./controls.js";
 import { crc32 } from "./crc32.js";
 import { attribute, type TilesetInfo } from "./format.js";
 import { type Box, emptyStats } from "./lod_selection.js";
-import { type DrawnNode, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
+import { type DrawnNode, type FrameView, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
          type RenderMode, type RenderSettings, SplatRenderer } from "./renderer.js";
 import { TileSource } from "./source.js";
 import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
@@ -72,6 +72,19 @@ export interface ViewerState {
   camera: string; // as ?camera= and surfcast-view --camera take it
 }
 
+// A surfel under the cursor (SurfcastViewer.pick).
+export interface PickResult {
+  node: string; // its node's key
+  position: [number, number, number]; // its centre in the set's own coordinates (double)
+  normal: [number, number, number];
+  radius: number; // r: its own, or its node's spacing h
+  color: [number, number, number] | null; // 0-255 where the set stores colour
+  // Every attribute the set stores beyond the fixed ones, by name, in its
+  // units (stored * scale + offset): intensity, classification,
+  // return_number, number_of_returns, gps_time, scan_angle, ...
+  attributes: Record<string, number>;
+}
+
 // Events (CustomEvent, `detail` as said): "change" (ViewerState) after every
 // selection or frame; "converged" (ViewerState) when a converged frame is
 // done; "camera" (Camera) when the camera moves; "error" (string) when the
@@ -100,7 +113,9 @@ export class SurfcastViewer extends EventTarget {
   private fence: WebGLSync | null = null;
   private fenceConverged = false;
   private readonly start = performance.now();
-  private selection: { gpu: DrawnNode[]; splats: number; converged: boolean; nodesCrc: number } | null = null;
+  private selection: { gpu: DrawnNode[]; indices: number[]; splats: number; converged: boolean; nodesCrc: number } | null = null;
+  // The last frame drawn: its nodes (the streamer's indices and GPU copies) and view, for picking.
+  private drawn: { gpu: DrawnNode[]; indices: number[]; view: FrameView } | null = null;
   private width = 1;
   private height = 1;
 
@@ -225,6 +240,28 @@ export class SurfcastViewer extends EventTarget {
     }
   }
 
+  // The surfel under canvas point (x, y), in CSS pixels from its top left,
+  // in the last frame drawn: the nearest splat there (an id pass on the GPU,
+  // read back), its attributes decoded again from its node's block. Null
+  // where no splat covers the point.
+  async pick(x: number, y: number): Promise<PickResult | null> {
+    const d = this.drawn;
+    if (!d) return null;
+    const scale = this.canvas.clientWidth > 0 ? this.canvas.width / this.canvas.clientWidth : 1;
+    const hit = this.renderer.pick(d.gpu, d.view, this.settings, Math.floor(x * scale), Math.floor(y * scale));
+    if (!hit) return null;
+    const i = d.indices[hit.node];
+    const s = await this.streamer.surfel(i, hit.surfel);
+    if (!s) return null;
+    const o = this.streamer.origin;
+    const attributes: Record<string, number> = {};
+    for (const a of this.info.attributes) if (a.name in s.raw) attributes[a.name] = s.raw[a.name] * a.scale + a.offset;
+    const bits = 2 ** this.info.colorBits - 1;
+    return { node: this.streamer.selector.nodes[i].key, position: [s.position[0] + o[0], s.position[1] + o[1], s.position[2] + o[2]],
+             normal: s.normal, radius: s.radius, color: s.color ? s.color.map((c) => Math.round(c * bits)) as PickResult["color"] : null,
+             attributes };
+  }
+
   // For benchmarks: draws the current selection n times, each waited for
   // (a one-pixel read: gl.finish does not wait in Chromium), and returns the
   // mean milliseconds per frame.
@@ -297,13 +334,14 @@ export class SurfcastViewer extends EventTarget {
       const p = nodes[a.index], q = nodes[b.index];
       return p.level - q.level || p.x - q.x || p.y - q.y || p.z - q.z;
     });
-    const gpu: DrawnNode[] = [];
+    const gpu: DrawnNode[] = [], indices: number[] = [];
     const keys: string[] = [];
     let splats = 0;
     for (const s of selected) {
       const r = streamer.residentNode(s.index);
       if (!r) continue;
       gpu.push(r.gpu);
+      indices.push(s.index);
       keys.push(nodes[s.index].key);
       splats += r.count;
     }
@@ -312,7 +350,7 @@ export class SurfcastViewer extends EventTarget {
     if (st.gaveUp) this.error(st.lastError);
     Object.assign(this.state, { bytes: st.bytes, requests: st.requests, resident: st.resident, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
                                 refetched: st.refetched, evictions: st.evictions, inFlight: st.inFlight });
-    return { gpu, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
+    return { gpu, indices, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
   }
 
   // Each animation frame: a new selection whenever something changed, and a
@@ -350,7 +388,7 @@ export class SurfcastViewer extends EventTarget {
         this.canvas.width = this.width;
         this.canvas.height = this.height;
       }
-      const { gpu, splats, converged, nodesCrc } = this.selection;
+      const { gpu, indices, splats, converged, nodesCrc } = this.selection;
       this.selection = null;
       const info = this.info;
       const eta = viewportScale(this.cam, this.height);
@@ -360,6 +398,7 @@ export class SurfcastViewer extends EventTarget {
       const eye = Math.hypot(rows[3], rows[7], rows[11]);
       const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
       const view = { rows, eta, near, origin: this.streamer.origin };
+      this.drawn = { gpu, indices, view };
       const hasWeights = info.weights !== "none";
       this.drawLast = () => this.renderer.render(gpu, view, this.settings, hasWeights);
       this.drawLast();

@@ -188,25 +188,43 @@ function rootLayout(dir) {
   return { page0, blockOffset: Number(h.readBigUInt64LE(page0 + 16)), blockSize: h.readUInt32LE(page0 + 24) };
 }
 
-// A classified PLY (binary): ground (class 2) on a 100 x 100 grid 0.1 apart,
-// a wall (6, building) of 40 x 29 and a column (5, high vegetation) of 20 x 30.
+// A classified, georeferenced PLY (binary, double coordinates, at
+// kOffset): ground (class 2) on a 100 x 100 grid 0.1 apart, a wall (6,
+// building) of 40 x 29 at y = 5.05, and a column (5, high vegetation) of 20 x 30.
 const kClassCounts = { 2: 10000, 5: 600, 6: 1160 };
+const kOffset = [600000, 4000000, 0];
+const at = (x, y, z) => [x + kOffset[0], y + kOffset[1], z + kOffset[2]];
+// Looking at the ground and the wall from the -y side, above.
+const kClassCamera = [...at(5, -9, 7), ...at(5, 5, 0.5), 0, 0, 1, 45].join(",");
 function writeClassifiedPly(path) {
   const points = [];
-  for (let i = 0; i < 100; ++i) for (let j = 0; j < 100; ++j) points.push([i * 0.1, j * 0.1, 0, 2]);
-  for (let i = 0; i < 40; ++i) for (let k = 1; k < 30; ++k) points.push([2 + i * 0.1, 5.05, k * 0.1, 6]);
+  for (let i = 0; i < 100; ++i) for (let j = 0; j < 100; ++j) points.push([...at(i * 0.1, j * 0.1, 0), 2]);
+  for (let i = 0; i < 40; ++i) for (let k = 1; k < 30; ++k) points.push([...at(2 + i * 0.1, 5.05, k * 0.1), 6]);
   for (let i = 0; i < 20; ++i)
-    for (let k = 0; k < 30; ++k) points.push([7 + 0.3 * Math.cos(Math.PI * i / 10), 3 + 0.3 * Math.sin(Math.PI * i / 10), 0.05 + k * 0.1, 5]);
-  const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${points.length}\nproperty float x\nproperty float y\n` +
-    "property float z\nproperty uchar classification\nend_header\n";
-  const body = Buffer.alloc(points.length * 13);
+    for (let k = 0; k < 30; ++k) points.push([...at(7 + 0.3 * Math.cos(Math.PI * i / 10), 3 + 0.3 * Math.sin(Math.PI * i / 10), 0.05 + k * 0.1), 5]);
+  const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${points.length}\nproperty double x\nproperty double y\n` +
+    "property double z\nproperty uchar classification\nend_header\n";
+  const body = Buffer.alloc(points.length * 25);
   points.forEach(([x, y, z, c], i) => {
-    body.writeFloatLE(x, 13 * i);
-    body.writeFloatLE(y, 13 * i + 4);
-    body.writeFloatLE(z, 13 * i + 8);
-    body.writeUInt8(c, 13 * i + 12);
+    body.writeDoubleLE(x, 25 * i);
+    body.writeDoubleLE(y, 25 * i + 8);
+    body.writeDoubleLE(z, 25 * i + 16);
+    body.writeUInt8(c, 25 * i + 24);
   });
   writeFileSync(path, Buffer.concat([Buffer.from(header), body]));
+}
+
+// Where world point p shows in a w x h view from `camera` (as ?camera= takes
+// it): x right, y down, in pixels; the pinhole model of common/camera.h.
+function project(camera, p, w, h) {
+  const c = camera.split(",").map(Number);
+  const [eye, target, up, fov] = [c.slice(0, 3), c.slice(3, 6), c.slice(6, 9), c[9]];
+  const sub = (a, b) => a.map((v, i) => v - b[i]), dot = (a, b) => a.reduce((s, v, i) => s + v * b[i], 0);
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const unit = (a) => a.map((v) => v / Math.hypot(...a));
+  const forward = unit(sub(target, eye)), right = unit(cross(forward, up)), upward = cross(right, forward);
+  const d = sub(p, eye), eta = h / (2 * Math.tan((fov * Math.PI) / 360));
+  return [w / 2 + (eta * dot(d, right)) / dot(d, forward), h / 2 - (eta * dot(d, upward)) / dot(d, forward)];
 }
 
 describe("browser viewer", { skip }, () => {
@@ -448,7 +466,7 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("legends: class names and counts, only this class as surfcast-view --classes draws it, the palette's range", async () => {
-    const classCamera = "5,-9,7,5,5,0.5,0,0,1,45";
+    const classCamera = kClassCamera;
     const page = await browser.newPage();
     await page.setViewport(size);
     const problems = [];
@@ -496,6 +514,70 @@ describe("browser viewer", { skip }, () => {
     await bare.goto(`${serveUrl}/?set=/sets/classified&panel=0`);
     assert.equal(await bare.$eval("#panel", (e) => getComputedStyle(e).display), "none");
     await bare.close();
+  });
+
+  test("a click picks the surfel under it (double precision, its class); distances and heights measured on picks", async () => {
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    await page.goto(`${serveUrl}/?set=/sets/classified&camera=${kClassCamera}&color=classification`);
+    const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
+    await page.waitForFunction(done, { timeout: 60000 });
+    await page.evaluate(() => document.body.classList.add("nopanel"));  // nothing over the canvas
+    const click = async (p) => {
+      const before = await page.evaluate(() => JSON.stringify(window.surfcast.picked));
+      const [x, y] = project(kClassCamera, p, size.width, size.height);
+      await page.mouse.click(x, y);
+      await page.waitForFunction((b) => JSON.stringify(window.surfcast.picked) !== b, { timeout: 20000 }, before);
+      return page.evaluate(() => window.surfcast.picked);
+    };
+    // The wall at y = 5.05 + 4,000,000: float32 steps by 0.25 there, so the
+    // position's decimals show that it is carried in double precision.
+    const wall = await click(at(4, 5.05, 1.5));
+    assert.equal(wall.attributes.classification, 6, JSON.stringify(wall));
+    assert.ok(Math.abs(wall.position[1] - at(0, 5.05, 0)[1]) < 0.01, `wall y ${wall.position[1]}`);
+    assert.ok(Math.abs(wall.position[0] - at(4, 0, 0)[0]) < 0.25 && Math.abs(wall.position[2] - 1.5) < 0.25,
+              `the surfel under the cursor: ${wall.position}`);
+    assert.match(await page.$eval("#picked", (e) => e.textContent), /class6 building/);
+    const ground = await click(at(7.5, 1, 0));
+    assert.equal(ground.attributes.classification, 2);
+    assert.ok(Math.abs(ground.position[2]) < 0.01 && Math.abs(ground.position[1] - at(0, 1, 0)[1]) < 0.25,
+              `ground ${ground.position}`);
+
+    // A distance along the ground, 5 apart, and the wall's height above it.
+    await page.evaluate(() => document.body.classList.remove("nopanel"));
+    await page.select("#tool", "distance");
+    await page.evaluate(() => document.body.classList.add("nopanel"));
+    const a = await click(at(3, 1, 0)), b = await click(at(8, 1, 0));
+    await page.evaluate(() => document.body.classList.remove("nopanel"));
+    await page.select("#tool", "height");
+    await page.evaluate(() => document.body.classList.add("nopanel"));
+    const top = await click(at(3, 5.05, 2.8)), foot = await click(at(3, 4, 0));
+    const list = await page.evaluate(() => window.surfcast.measurements);
+    assert.equal(list.length, 2);
+    const hypot = Math.hypot(...a.position.map((v, i) => v - b.position[i]));
+    assert.ok(Math.abs(list[0].value - hypot) < 1e-9 && Math.abs(hypot - 5) < 0.3, `distance ${list[0].value}`);
+    assert.ok(Math.abs(list[1].value - Math.abs(top.position[2] - foot.position[2])) < 1e-9 &&
+              Math.abs(list[1].value - 2.8) < 0.25, `height ${list[1].value}`);
+    const labels = () => page.$$eval("#measurements text", (t) => t.map((e) => ({ text: e.textContent, x: Number(e.getAttribute("x")) })));
+    const shown = await labels();
+    assert.deepEqual(shown.map((l) => l.text), [list[0].label, list[1].label]);
+    // They survive a camera move, drawn where the points now project; "clear" removes them.
+    await page.mouse.move(320, 240);
+    await page.mouse.down();
+    await page.mouse.move(380, 240, { steps: 5 });
+    await page.mouse.up();
+    const moved = await labels();
+    assert.equal(moved.length, 2);
+    assert.notEqual(moved[0].x, shown[0].x, "the labels follow the camera");
+    await page.evaluate(() => document.body.classList.remove("nopanel"));
+    await page.click("#clear-measurements");
+    assert.equal((await labels()).length, 0);
+    assert.equal((await page.evaluate(() => window.surfcast.measurements)).length, 0);
+    await page.close();
+    assert.deepEqual(problems, []);
   });
 
   test("the component in an app's own page (examples/embed.html): its methods and events, and surfcast-view's image", async () => {
