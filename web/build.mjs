@@ -1,5 +1,6 @@
 // Builds the viewer into one folder (default ../build/web, or argv[2]): the
-// page, its bundled module, the component's module (surfcast.js), the decode
+// page, its bundled module, the component's module (surfcast.js) and its
+// three.js layer (surfcast-three.js), the example apps, three.js, the decode
 // worker and draco3d's WASM decoder.
 // Nothing is fetched at run time from anywhere but the folder itself.
 import { build } from "esbuild";
@@ -23,12 +24,18 @@ const shaders = {
 };
 const common = { bundle: true, minify: true, sourcemap: true, target: ["es2020"], logLevel: "warning", plugins: [shaders] };
 await build({ ...common, entryPoints: [join(here, "src/main.ts")], outfile: join(out, "viewer.js"), format: "esm" });
-// The component alone, for apps that embed it (docs/WEB.md, "The component").
+// The component alone, for apps that embed it (docs/WEB.md, "The component"),
+// and its three.js layer, which imports "three" from the app (an import map).
 await build({ ...common, entryPoints: [join(here, "src/viewer.ts")], outfile: join(out, "surfcast.js"), format: "esm" });
+await build({ ...common, entryPoints: [join(here, "src/three_layer.ts")], outfile: join(out, "surfcast-three.js"), format: "esm",
+              external: ["three"] });
 await build({ ...common, entryPoints: [join(here, "src/decode_worker.ts")], outfile: join(out, "decode_worker.js"), format: "iife" });
 for (const f of ["index.html", "style.css"]) copyFileSync(join(here, f), join(out, f));
-// The example app, flat beside the page (surfcast-serve serves one level).
-copyFileSync(join(here, "examples", "embed.html"), join(out, "embed.html"));
+// The example apps, flat beside the page (surfcast-serve serves one level),
+// and three.js for the three.js one (npm's copy, pinned by the lockfile).
+for (const f of ["embed.html", "three.html"]) copyFileSync(join(here, "examples", f), join(out, f));
+for (const f of ["three.module.js", "three.core.js"]) copyFileSync(join(here, "node_modules", "three", "build", f), join(out, f));
+copyFileSync(join(here, "node_modules", "three", "examples", "jsm", "controls", "OrbitControls.js"), join(out, "OrbitControls.js"));
 const draco = join(here, "node_modules", "draco3d");
 copyFileSync(join(draco, "draco_decoder_nodejs.js"), join(out, "draco_decoder.js"));
 copyFileSync(join(draco, "draco_decoder.wasm"), join(out, "draco_decoder.wasm"));

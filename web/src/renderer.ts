@@ -68,6 +68,26 @@ export interface DrawnNode {
 
 const kSurfelsPerRow = kGranuleSurfels;  // the granule the selection counts memory in
 
+// EXT_clip_control, which TypeScript's DOM types lack.
+interface ClipControl {
+  readonly LOWER_LEFT_EXT: number;
+  readonly ZERO_TO_ONE_EXT: number;
+  readonly CLIP_ORIGIN_EXT: number;
+  readonly CLIP_DEPTH_MODE_EXT: number;
+  clipControlEXT(origin: number, depth: number): void;
+}
+
+// A scene render() draws the splats into (three_layer.ts): `depth` fills the
+// visibility pass's depth before the splats are drawn (the scene's surfaces
+// as this renderer's reversed-Z depth, near / z for `near`), so that they
+// hide the splats behind them; `background` draws the scene's colour into the
+// canvas, over which the resolve blends the splats by their coverage, so
+// that splats in front hide the scene. Each leaves the GL state to render().
+export interface SceneComposite {
+  depth(gl: WebGL2RenderingContext, near: number): void;
+  background(gl: WebGL2RenderingContext): void;
+}
+
 export class RendererError extends Error {}
 
 function compile(gl: WebGL2RenderingContext, type: number, source: string): WebGLShader {
@@ -122,8 +142,13 @@ export class SplatRenderer {
   private pickTarget: WebGLFramebuffer | null = null;
   private emptyVao: WebGLVertexArrayObject;
 
-  // Throws RendererError naming what the browser lacks.
-  constructor(canvas: HTMLCanvasElement, options: { forbidFloatBlend?: boolean } = {}) {
+  private clipControlExt: ClipControl | null;
+  private shared: boolean;
+
+  // Throws RendererError naming what the browser lacks. `shared`: the canvas's
+  // WebGL2 context is another renderer's too (three.js): the clip control is
+  // set for each frame and put back after it.
+  constructor(canvas: HTMLCanvasElement, options: { forbidFloatBlend?: boolean; shared?: boolean } = {}) {
     const gl = canvas.getContext("webgl2", { antialias: false, depth: false, preserveDrawingBuffer: true, alpha: false });
     if (!gl) throw new RendererError("this browser has no WebGL2, which the viewer needs");
     this.gl = gl;
@@ -131,9 +156,11 @@ export class SplatRenderer {
       console.info("surfcast: no float render targets; drawing into 8-bit targets");
     const hasFloatTargets = !!gl.getExtension("EXT_color_buffer_float");
     this.floatBlend = hasFloatTargets && !options.forbidFloatBlend && !!gl.getExtension("EXT_float_blend");
-    const clip = gl.getExtension("EXT_clip_control");
+    const clip = gl.getExtension("EXT_clip_control") as ClipControl | null;
     this.clipControl = !!clip;
-    if (clip) clip.clipControlEXT(clip.LOWER_LEFT_EXT, clip.ZERO_TO_ONE_EXT);
+    this.clipControlExt = clip;
+    this.shared = !!options.shared;
+    if (clip && !this.shared) clip.clipControlEXT(clip.LOWER_LEFT_EXT, clip.ZERO_TO_ONE_EXT);
     const unsigned8 = !this.floatBlend;  // RGBA8 accumulation targets (ensureTargets)
     const program = (name: S.ProgramName) => new Program(gl, ...S.programs[name]);
     this.programs = {
@@ -249,8 +276,29 @@ export class SplatRenderer {
     gl.uniform1i(p.loc("scSurfels"), 2);
   }
 
-  // Draws the nodes into the canvas (its drawing-buffer size).
-  render(nodes: DrawnNode[], view: FrameView, settings: RenderSettings, hasWeights: boolean) {
+  // In a shared context: depth in [0, 1] from clip z for this renderer's
+  // passes, and the other renderer's setting back after them.
+  private withClipControl<R>(draw: () => R): R {
+    const ext = this.clipControlExt;
+    if (!this.shared || !ext) return draw();
+    const gl = this.gl;
+    const origin = gl.getParameter(ext.CLIP_ORIGIN_EXT), depth = gl.getParameter(ext.CLIP_DEPTH_MODE_EXT);
+    ext.clipControlEXT(ext.LOWER_LEFT_EXT, ext.ZERO_TO_ONE_EXT);
+    try {
+      return draw();
+    } finally {
+      ext.clipControlEXT(origin, depth);
+    }
+  }
+
+  // Draws the nodes into the canvas (its drawing-buffer size), over and
+  // against a scene where `composite` is given (then opaque: translucent
+  // frames are not peeled).
+  render(nodes: DrawnNode[], view: FrameView, settings: RenderSettings, hasWeights: boolean, composite?: SceneComposite) {
+    this.withClipControl(() => this.draw(nodes, view, settings, hasWeights, composite));
+  }
+
+  private draw(nodes: DrawnNode[], view: FrameView, settings: RenderSettings, hasWeights: boolean, composite?: SceneComposite) {
     const gl = this.gl;
     const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
     const t = this.ensureTargets(w, h);
@@ -262,7 +310,13 @@ export class SplatRenderer {
     gl.clearBufferfv(gl.COLOR, 0, [0, 0, 0, 0]);
     gl.clearBufferfv(gl.COLOR, 1, [0, 0, 0, 0]);
     gl.clearDepth(0);  // reversed Z: 0 is infinitely far
+    gl.depthMask(true);
     gl.clear(gl.DEPTH_BUFFER_BIT);
+    if (composite) {
+      gl.drawBuffers([gl.NONE, gl.NONE]);
+      composite.depth(gl, view.near);
+      gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1]);
+    }
     gl.enable(gl.DEPTH_TEST);
     const drawAll = (primitive: number, verticesPerSurfel: number) => {
       gl.bindVertexArray(this.emptyVao);
@@ -272,7 +326,7 @@ export class SplatRenderer {
         gl.drawArrays(primitive, 0, verticesPerSurfel * n.count);
       }
     };
-    if (this.translucentFrame(settings, mode)) {
+    if (!composite && this.translucentFrame(settings, mode)) {
       this.renderLayers(t, drawAll, view, settings, mode, w, h);
       return;
     }
@@ -307,6 +361,15 @@ export class SplatRenderer {
     gl.bindVertexArray(this.emptyVao);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, w, h);
+    if (composite) {
+      composite.background(gl);
+      // The resolve over a black background is the splats premultiplied by their coverage.
+      gl.enable(gl.BLEND);
+      gl.blendEquation(gl.FUNC_ADD);
+      gl.blendFunc(gl.ONE, gl.ONE_MINUS_SRC_ALPHA);
+      settings = { ...settings, background: [0, 0, 0] };
+    }
+    gl.bindVertexArray(this.emptyVao);
     const r = this.programs.resolve;
     this.setFrame(r, view, settings, mode, w, h);
     gl.activeTexture(gl.TEXTURE0);
@@ -316,6 +379,7 @@ export class SplatRenderer {
     gl.bindTexture(gl.TEXTURE_2D, t.normal);
     gl.uniform1i(r.loc("normalWeight"), 1);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
+    gl.disable(gl.BLEND);
     gl.bindVertexArray(null);
   }
 
@@ -325,6 +389,10 @@ export class SplatRenderer {
   // no splat covers the pixel. Only that pixel is rasterized: the viewport
   // moves it onto a 1x1 target, whose integer id is read back.
   pick(nodes: DrawnNode[], view: FrameView, settings: RenderSettings, x: number, y: number): { node: number; surfel: number } | null {
+    return this.withClipControl(() => this.pickNow(nodes, view, settings, x, y));
+  }
+
+  private pickNow(nodes: DrawnNode[], view: FrameView, settings: RenderSettings, x: number, y: number) {
     const gl = this.gl;
     const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
     if (!(x >= 0 && x < w && y >= 0 && y < h)) return null;

@@ -17,7 +17,7 @@ import { Controls } from "./controls.js";
 import { crc32 } from "./crc32.js";
 import { attribute, type TilesetInfo } from "./format.js";
 import { type Box, emptyStats } from "./lod_selection.js";
-import { type DrawnNode, type FrameView, kDefaultEdgeTau, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
+import { type DrawnNode, type FrameView, kDefaultEdgeTau, type SceneComposite, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
          type RenderMode, type RenderSettings, SplatRenderer } from "./renderer.js";
 import { TileSource } from "./source.js";
 import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
@@ -42,6 +42,10 @@ export interface ViewerOptions {
   layers?: number; // translucent frames: surfaces resolved per pixel (3)
   edgeAA?: boolean; // edge antialiasing (true)
   controls?: boolean; // orbit, pan, zoom and fly with mouse, touch and keys on the canvas (true)
+  // Draw every animation frame (true); false: the host draws with drawNow()
+  // and sizes the canvas itself, and the canvas's WebGL2 context may be the
+  // host's own (three_layer.ts).
+  loop?: boolean;
   forbidFloatBlend?: boolean; // behave as a browser without float blending (tests)
   workerUrl?: URL; // the decode worker (default: decode_worker.js beside this module)
 }
@@ -89,7 +93,8 @@ export interface PickResult {
 // selection or frame; "converged" (ViewerState) when a converged frame is
 // done; "camera" (Camera) when the camera moves; "error" (string) when the
 // stream stops or an export fails; "notice" (string) for what the browser
-// cannot draw as asked.
+// cannot draw as asked; with loop: false, "redraw" (null) when the view
+// needs drawing again (blocks arrived, a setting changed).
 export class SurfcastViewer extends EventTarget {
   readonly state: ViewerState = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [],
     notices: [], mode: "", firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0,
@@ -103,6 +108,7 @@ export class SurfcastViewer extends EventTarget {
   private budget: number;
   private controls?: Controls;
   private animation = 0;
+  private loop: boolean;
   private disposed = false;
   private drawLast = () => {};
   // Redraw pacing (the header).
@@ -128,7 +134,7 @@ export class SurfcastViewer extends EventTarget {
       throw new Error(`opacity is in [0, 1] and layers a whole number in [1, ${kMaxLayers}]`);
     if (options.mode !== undefined && !kRenderModes.includes(options.mode))
       throw new Error(`mode ${options.mode}: expected ${kRenderModes.join(", ")}`);
-    const renderer = new SplatRenderer(canvas, { forbidFloatBlend: options.forbidFloatBlend });
+    const renderer = new SplatRenderer(canvas, { forbidFloatBlend: options.forbidFloatBlend, shared: options.loop === false });
     const source = new TileSource(setUrl, { token: options.token });
     let colorBy = options.colorBy ?? "auto";
     const hidden = [...(options.hiddenClasses ?? [])];
@@ -171,9 +177,33 @@ export class SurfcastViewer extends EventTarget {
     this.cam = options.camera ?? frameBox(info.boundsMin, info.boundsMax, this.width / this.height);
     this.state.camera = formatCamera(this.cam);
     this.noteMode();
-    streamer.onChange = () => (this.dirty = true);
+    streamer.onChange = () => {
+      this.dirty = true;
+      if (!this.loop) this.emit("redraw", null);  // the host draws again
+    };
     if (options.controls ?? true) this.controls = new Controls(canvas, () => this.cam, (c) => this.setCamera(c));
-    this.animation = requestAnimationFrame((t) => this.frame(t));
+    this.loop = options.loop ?? true;
+    if (this.loop) this.animation = requestAnimationFrame((t) => this.frame(t));
+  }
+
+  // For hosts that draw (loop: false): selects the nodes for `camera` at the
+  // drawing buffer's size, which also queues what the view still needs,
+  // and draws them at once, over and against `composite`'s scene where
+  // given. The "change" event says when arriving blocks call for another
+  // draw; the state is converged after a draw that needed nothing more.
+  drawNow(camera: Camera, composite?: SceneComposite) {
+    const gl = this.renderer.gl;
+    this.cam = camera;
+    this.state.camera = formatCamera(camera);
+    [this.width, this.height] = [gl.drawingBufferWidth, gl.drawingBufferHeight];
+    this.dirty = false;
+    const selection = this.select();
+    this.draw(selection, composite);
+    if (selection.converged && !this.state.converged) {
+      this.state.converged = true;
+      this.state.convergedMs ??= performance.now() - this.start;
+      this.emit("converged", this.state);
+    } else if (!selection.converged) this.state.converged = false;
   }
 
   get camera(): Camera { return this.cam; }
@@ -292,6 +322,7 @@ export class SurfcastViewer extends EventTarget {
   private changed() {
     this.urgent = this.dirty = true;
     this.state.converged = false;
+    if (!this.loop) this.emit("redraw", null);  // the host draws again
   }
   private recolor() {
     this.changed();
@@ -388,30 +419,35 @@ export class SurfcastViewer extends EventTarget {
         this.canvas.width = this.width;
         this.canvas.height = this.height;
       }
-      const { gpu, indices, splats, converged, nodesCrc } = this.selection;
+      const selection = this.selection;
       this.selection = null;
-      const info = this.info;
-      const eta = viewportScale(this.cam, this.height);
-      const rows = viewRows(this.cam, this.streamer.origin);
-      const diagonal = Math.hypot(info.boundsMax[0] - info.boundsMin[0], info.boundsMax[1] - info.boundsMin[1],
-                                  info.boundsMax[2] - info.boundsMin[2]);
-      const eye = Math.hypot(rows[3], rows[7], rows[11]);
-      const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
-      const view = { rows, eta, near, origin: this.streamer.origin };
-      this.drawn = { gpu, indices, view };
-      const hasWeights = info.weights !== "none";
-      this.drawLast = () => this.renderer.render(gpu, view, this.settings, hasWeights);
-      this.drawLast();
-      this.lastDraw = performance.now();
+      this.draw(selection);
       this.fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
       gl.flush();
-      this.fenceConverged = converged;
-      ++state.frames;
-      Object.assign(state, { nodes: gpu.length, nodesCrc, splats });
-      if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - this.start;
-      this.emit("change", state);
+      this.fenceConverged = selection.converged;
     }
     this.animation = requestAnimationFrame((t) => this.frame(t));
+  }
+
+  private draw(selection: NonNullable<SurfcastViewer["selection"]>, composite?: SceneComposite) {
+    const { gpu, indices, splats, nodesCrc } = selection;
+    const info = this.info, state = this.state;
+    const eta = viewportScale(this.cam, this.height);
+    const rows = viewRows(this.cam, this.streamer.origin);
+    const diagonal = Math.hypot(info.boundsMax[0] - info.boundsMin[0], info.boundsMax[1] - info.boundsMin[1],
+                                info.boundsMax[2] - info.boundsMin[2]);
+    const eye = Math.hypot(rows[3], rows[7], rows[11]);
+    const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
+    const view = { rows, eta, near, origin: this.streamer.origin };
+    this.drawn = { gpu, indices, view };
+    const hasWeights = info.weights !== "none";
+    this.drawLast = () => this.renderer.render(gpu, view, this.settings, hasWeights, composite);
+    this.drawLast();
+    this.lastDraw = performance.now();
+    ++state.frames;
+    Object.assign(state, { nodes: gpu.length, nodesCrc, splats });
+    if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - this.start;
+    this.emit("change", state);
   }
 }
 

@@ -424,14 +424,17 @@ describe("browser viewer", { skip }, () => {
     const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(done, { timeout: 60000 });
     const whole = await page.evaluate(() => ({ ...window.surfcast }));
-    // Typed into the panel's numbers, then switched on.
-    await page.evaluate((values) => {
+    // Typed into the panel's numbers, then switched on: not converged from
+    // then on (read at once: the clipped view needs nothing new, and may
+    // converge before another round trip).
+    const convergedAtOnce = await page.evaluate((values) => {
       ["x0", "y0", "z0", "x1", "y1", "z1"].forEach((id, i) => (document.getElementById(`clip-${id}`).value = values[i]));
       const on = document.getElementById("clip-on");
       on.checked = true;
       on.dispatchEvent(new Event("change"));
+      return window.surfcast.converged;
     }, box.split(","));
-    assert.equal(await page.evaluate(() => window.surfcast.converged), false);
+    assert.equal(convergedAtOnce, false);
     await page.waitForFunction(done, { timeout: 60000 });
     const state = await page.evaluate(() => ({ ...window.surfcast }));
     assert.deepEqual(state.errors, []);
@@ -484,9 +487,10 @@ describe("browser viewer", { skip }, () => {
       { label: "5 high vegetation", count: kClassCounts[5].toLocaleString("en-US"), shown: true },
       { label: "6 building", count: kClassCounts[6].toLocaleString("en-US"), shown: true }]);
     // "only" on the building: the others hidden, as surfcast-view --classes 6 draws it.
-    await page.evaluate(() => [...document.querySelectorAll("#classes .class")].find((e) => e.textContent.includes("building"))
-      .querySelector(".only").click());
-    assert.equal(await page.evaluate(() => window.surfcast.converged), false);
+    assert.equal(await page.evaluate(() => {
+      [...document.querySelectorAll("#classes .class")].find((e) => e.textContent.includes("building")).querySelector(".only").click();
+      return window.surfcast.converged;
+    }), false);
     await page.waitForFunction(done, { timeout: 60000 });
     assert.deepEqual((await rows()).map((r) => r.shown), [false, false, true]);
     assert.equal(new URL(page.url()).searchParams.get("hide"), "2,5", "the URL keeps the hidden classes");
@@ -610,14 +614,68 @@ describe("browser viewer", { skip }, () => {
     const d = compare(png, PNG.sync.read(readFileSync(out)));
     assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
     // The app's own select calls setColorBy: not converged at once, then converged again.
-    await page.select("#color", "rgb");
-    assert.equal(await page.evaluate(() => window.app.viewer.state.converged), false);
+    assert.equal(await page.evaluate(() => {
+      const select = document.getElementById("color");
+      select.value = "rgb";
+      select.dispatchEvent(new Event("change"));
+      return window.app.viewer.state.converged;
+    }), false);
     await page.waitForFunction(done, { timeout: 60000 });
     const after = await seen();
     assert.equal(after.state.requests, before.state.requests, "recoloured from the kept blocks");
     assert.match(after.status, /, converged$/);
     await page.close();
     assert.deepEqual(problems, []);
+  });
+
+  test("three.js (examples/three.html): SurfcastLayer's splats and the app's meshes hide each other", async (t) => {
+    const page = await browser.newPage();
+    await page.setViewport(size);
+    const problems = [];
+    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+    page.on("pageerror", (e) => problems.push(e.message));
+    page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+    // The app's camera is ?camera=, the same view surfcast-view's reference takes.
+    await page.goto(`${serveUrl}/three.html?set=/sets/scene&camera=${camera}`);
+    await page.waitForFunction("window.app && (window.app.layer.viewer.state.converged || window.app.layer.viewer.state.errors.length)",
+                               { timeout: 60000 });
+    await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+    const state = await page.evaluate(() => ({ ...window.app.layer.viewer.state }));
+    await page.evaluate(() => (document.getElementById("status").hidden = true));
+    assert.deepEqual(state.errors, []);
+    const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+    await page.close();
+    assert.deepEqual(problems, []);
+    const pixel = (p) => {
+      const [x, y] = project(camera, p, size.width, size.height).map(Math.round);
+      const i = 4 * (y * size.width + x);
+      return [png.data[i], png.data[i + 1], png.data[i + 2]];
+    };
+    const red = ([r, g, b]) => r > 200 && g < 60 && b < 60;
+    // The post (x 0.7-1.3, y -3.3 to -2.7, z -1.5 to 1.5) in front of the
+    // splats behind it; its lower half, below the ground, hidden by the
+    // ground's splats (that ray meets z = 0 at (1.77, -4.02), off the post).
+    for (const z of [0.3, 0.8, 1.3]) assert.ok(red(pixel([1, -3, z])), `the post at z = ${z}: ${pixel([1, -3, z])}`);
+    for (const z of [-0.6, -1.2]) assert.ok(!red(pixel([1, -3, z])), `the ground hides the post at z = ${z}: ${pixel([1, -3, z])}`);
+    // Away from the app's meshes, the splats as surfcast-view draws them.
+    const ref = reference(`${serveUrl}/sets/scene`);
+    assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view");
+    const boxes = [[[0.7, -3.3, -1.5], [1.3, -2.7, 1.5]], [[-3.8, -2.3, -0.8], [-1.2, 0.3, 2.0]]].map(([lo, hi]) => {
+      const corners = [0, 1, 2, 3, 4, 5, 6, 7].map((c) => project(camera, [c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1],
+                                                                          c & 4 ? hi[2] : lo[2]], size.width, size.height));
+      return [Math.min(...corners.map((q) => q[0])) - 8, Math.min(...corners.map((q) => q[1])) - 8,
+              Math.max(...corners.map((q) => q[0])) + 8, Math.max(...corners.map((q) => q[1])) + 8];
+    });
+    const masked = (a) => {
+      const copy = PNG.sync.read(PNG.sync.write(a));
+      for (const [x0, y0, x1, y1] of boxes)
+        for (let y = Math.max(0, Math.floor(y0)); y < Math.min(size.height, y1); ++y)
+          for (let x = Math.max(0, Math.floor(x0)); x < Math.min(size.width, x1); ++x) copy.data.fill(255, 4 * (y * size.width + x), 4 * (y * size.width + x) + 3);
+      return copy;
+    };
+    const d = compare(masked(png), masked(ref.png));
+    assert.ok(d.mean < kMeanLimit && d.far < kFarLimit, `mean abs ${d.mean}, far ${d.far}`);
+    t.diagnostic(`three.js: ${state.splats} splats, away from the meshes mean abs ${d.mean.toFixed(3)}, far ${d.far.toFixed(5)}`);
   });
 
   test("a GPU budget: the view stays within it and least recently used nodes go", async () => {
