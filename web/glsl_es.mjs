@@ -86,6 +86,8 @@ export function programs() {
     points: [glslEs("splat_point.vert"), glslEs("opaque.frag")],
     resolve: [fullscreen, glslEs("resolve.frag")],
     resolve8: [fullscreen, glslEs("resolve.frag", { defines: ["SC_UNSIGNED_TARGETS"] })],
+    resolveOver: [fullscreen, glslEs("resolve.frag", { defines: ["SC_OVER_SCENE"] })],
+    resolveOver8: [fullscreen, glslEs("resolve.frag", { defines: ["SC_UNSIGNED_TARGETS", "SC_OVER_SCENE"] })],
     peel: [quad(0, ["SC_LAYERED"]), glslEs("splat_peel.frag")],
     layer: [quad(1, ["SC_LAYERED"]), glslEs("splat_layer.frag")],
     pick: [quad(1, ["SC_PICK"]), glslEs("splat_pick.frag")],

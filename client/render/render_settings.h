@@ -27,8 +27,9 @@ std::optional<RenderMode> parseRenderMode(const std::string& name);
 const char* renderModeName(RenderMode mode);
 std::optional<Shading> parseShading(const std::string& name);
 
-// The defaults' values come from common/render_defaults.json, which the
-// browser reads too; why each has its value is said here.
+// The defaults' values come from common/render_defaults.json (the filter
+// clamp from shared_types.h), which the browser reads too; why each has its
+// value is said here.
 // Clamp of the low-pass filter's object-space extent where J is near singular
 // (grazing angles): at most this many pixels' worth at the surfel's depth.
 inline constexpr float kMaxFilterPixels = float(SC_MAX_FILTER_PIXELS);  // shared_types.h: the shaders read it too

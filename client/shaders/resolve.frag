@@ -2,7 +2,8 @@
 // Pass 3: normalization and deferred shading (twin of shadePixel in
 // client/render/render_settings.cpp and of the CPU reference's resolve).
 // Output alpha is coverage: 1 where the summed kernels show the surface, in
-// between at silhouettes with edge antialiasing.
+// between at silhouettes with edge antialiasing (SC_OVER_SCENE, ewa-surfel:
+// times the weights' sum, up to 1).
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 #include "resolve_common.glsl"
@@ -35,5 +36,9 @@ void main() {
 #else
     color = shade(color, nw.xyz);
 #endif
-    outColor = vec4(mix(background, color, coverage), coverage);
+    float alpha = coverage;
+#ifdef SC_OVER_SCENE  // the browser's three.js layer: blended premultiplied over a scene (background black)
+    if (frame.mode == SC_MODE_EWA_SURFEL) alpha *= clamp(cw.a, 0.0, 1.0);  // the weights' shortfall shows the scene
+#endif
+    outColor = vec4(mix(background, color, coverage), alpha);
 }

@@ -114,7 +114,7 @@ bool setupSplat(vec3 position, float radius, uint normal, float weight, uint edg
     e0 = dot(e0, e0) > 0.0 ? normalize(e0) : vec2(1, 0);
     vec2 e1 = vec2(-e0.y, e0.x);
     // Grazing angles: J'J is near singular and the low-pass filter's object
-    // extent explodes; clamp it to maxFilterPixels pixels at this depth.
+    // extent explodes; clamp it to SC_MAX_FILTER_PIXELS pixels at this depth.
     float lmin = eta / (SC_MAX_FILTER_PIXELS * o.z);
     lmin *= lmin;
     float lowpass = frame.kernel.w;

@@ -33,7 +33,8 @@ struct LodParams {
     bool frustumCulling = true;
     bool backfaceCulling = true;
     // Nodes whose box misses the clip box (world coordinates) are culled:
-    // none of their surfels would be drawn (RenderSettings::clip).
+    // none of their surfels would be drawn (RenderSettings::clip; up to the
+    // float rounding of a surfel on the node's face).
     std::optional<Box3d> clip;
     size_t splatBudget = SIZE_MAX;  // most surfels drawn per frame (the root is drawn regardless)
     // Most bytes the nodes a view uses may occupy: those drawn, the ancestors

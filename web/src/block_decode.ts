@@ -209,15 +209,24 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
   }
 }
 
+// Whether point i is left out by the colouring's class filter: pack() and
+// picked() both skip these, so a packed index means the same point to both.
+function hiddenBy(job: DecodeJob, lidar: Record<string, ArrayLike<number>>): (i: number) => boolean {
+  const hidden = new Set(job.coloring.hiddenClasses), classes = lidar.classification;
+  return hidden.size && classes ? (i) => hidden.has(classes[i]) : () => false;
+}
+// The node's quantization step: position = min + stored * step.
+const positionStep = (job: DecodeJob) => job.edge / (2 ** job.positionBits - 1);
+
 // The attributes of the job.pick-th surfel pack() keeps.
 function picked(job: DecodeJob, n: number, positions: ArrayLike<number>, normals: ArrayLike<number>,
                 colors: ArrayLike<number> | null, weights: ArrayLike<number> | null, radii: ArrayLike<number> | null,
                 lidar: Record<string, ArrayLike<number>>): PickedSurfel | null {
-  const hidden = new Set(job.coloring.hiddenClasses), classes = lidar.classification;
+  const hidden = hiddenBy(job, lidar);
   for (let i = 0, m = 0; i < n; ++i) {
-    if (hidden.size && classes && hidden.has(classes[i])) continue;
+    if (hidden(i)) continue;
     if (m++ !== job.pick) continue;
-    const step = job.edge / (2 ** job.positionBits - 1), colorScale = job.colorBits ? 1 / (2 ** job.colorBits - 1) : 0;
+    const step = positionStep(job), colorScale = job.colorBits ? 1 / (2 ** job.colorBits - 1) : 0;
     const raw: Record<string, number> = {};
     for (const name of job.extra) raw[name] = lidar[name][i];
     return {
@@ -238,15 +247,15 @@ function pack(job: DecodeJob, n: number, positions: ArrayLike<number>, normals: 
               edges: ArrayLike<number> | null, lidar: Record<string, ArrayLike<number>>): DecodeResult {
   const out = new ArrayBuffer(n * 32);
   const f = new Float32Array(out), u = new Uint32Array(out);
-  const step = job.edge / (2 ** job.positionBits - 1);
+  const step = positionStep(job);
   const colorScale = job.colorBits ? 1 / (2 ** job.colorBits - 1) : 0;
   const c = job.coloring;
-  const hidden = new Set(c.hiddenClasses);
+  const hidden = hiddenBy(job, lidar);
   const classes = lidar.classification;
   const zRange = c.elevationMax - c.elevationMin;
   let m = 0;
   for (let i = 0; i < n; ++i) {
-    if (hidden.size && classes && hidden.has(classes[i])) continue;
+    if (hidden(i)) continue;
     const x = job.min[0] + positions[3 * i] * step, y = job.min[1] + positions[3 * i + 1] * step,
           z = job.min[2] + positions[3 * i + 2] * step;
     let rgb: RGB = [0.8, 0.8, 0.8];

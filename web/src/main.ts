@@ -12,8 +12,8 @@ import { classLegend, rampLegend } from "./legend.js";
 import { measure, Measurements, type Tool } from "./measure.js";
 import type { Box } from "./lod_selection.js";
 import { RendererError } from "./renderer.js";
-import { type ColorBy, kRenderModes, type PickResult, type RenderMode, SurfcastViewer, type ViewerOptions,
-         type ViewerState } from "./viewer.js";
+import { type ColorBy, emptyViewerState, formatBox, kRenderModes, parseBox, type PickResult, type RenderMode, SurfcastViewer,
+         type ViewerOptions, type ViewerState } from "./viewer.js";
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 const params = new URLSearchParams(location.search);
@@ -25,9 +25,7 @@ let viewer: SurfcastViewer | undefined;
 let exports = 0;
 let picked: PickResult | null = null;
 let measurements: Measurements | undefined;
-const kNotOpen: ViewerState = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [],
-  mode: "", firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, evictions: 0,
-  inFlight: 0, frames: 0, frameMs: 0, camera: "" };
+const kNotOpen: ViewerState = emptyViewerState();
 // The viewer's state, with the page's errors and notices, the clip box as
 // ?clip= gives it ("" for none), the LAZ exports downloaded, the surfel last
 // picked (null: none, or a click where no splat was) and the measurements
@@ -60,17 +58,6 @@ function number(name: string, min: number): number | undefined {
   return v;
 }
 
-// "X0,Y0,Z0,X1,Y1,Z1", as surfcast-view's --clip takes it; `what` names it in errors.
-function parseBox(text: string, what: string): Box {
-  const v = text.split(",").map((s) => (s.trim() === "" ? NaN : Number(s)));
-  if (v.length !== 6 || !v.every(Number.isFinite))
-    throw new Error(`${what} ${text}: six numbers wanted (xmin,ymin,zmin,xmax,ymax,zmax)`);
-  const box: Box = { min: [v[0], v[1], v[2]], max: [v[3], v[4], v[5]] };
-  for (let a = 0; a < 3; ++a)
-    if (box.min[a] > box.max[a]) throw new Error(`${what} ${text}: its minimum exceeds its maximum on axis ${"xyz"[a]}`);
-  return box;
-}
-const formatBox = (b: Box) => [...b.min, ...b.max].join(",");
 
 // Keeps the URL current, so that it can be shared.
 function updateUrl(name: string, value: string) {
@@ -220,24 +207,38 @@ function wireInspect(v: SurfcastViewer) {
     m.clear();
     redraw();
   };
+  // Picks run one at a time, in click order; a pick that resolves after the
+  // measurement it was meant for ended (a double click's second click) is dropped.
+  let queue: Promise<void> = Promise.resolve();
+  let ended = 0;
   const finish = () => {
-    m.finish();
-    redraw();
+    queue = queue.then(() => {
+      ++ended;
+      m.finish();
+      redraw();
+    });
   };
   v.canvas.addEventListener("dblclick", finish);
   window.addEventListener("keydown", (e) => e.key === "Enter" && !(e.target instanceof HTMLInputElement) && finish());
   let down: { x: number; y: number } | null = null;
   v.canvas.addEventListener("pointerdown", (e) => (down = e.button === 0 ? { x: e.offsetX, y: e.offsetY } : null));
-  v.canvas.addEventListener("pointerup", async (e) => {
+  v.canvas.addEventListener("pointerup", (e) => {
     if (!down || Math.hypot(e.offsetX - down.x, e.offsetY - down.y) > 4) return;
     down = null;
-    const hit = await v.pick(e.offsetX, e.offsetY);
-    picked = hit;
-    showPicked(table, hit, v);
-    if (hit && tool.value !== "pick") {
-      m.add(tool.value as Tool, hit.position);
-      redraw();
-    }
+    const [x, y, measuring, at] = [e.offsetX, e.offsetY, tool.value as Tool | "pick", ended];
+    queue = queue.then(async () => {
+      try {
+        const hit = await v.pick(x, y);
+        picked = hit;
+        showPicked(table, hit, v);
+        if (hit && measuring !== "pick" && at === ended) {
+          m.add(measuring, hit.position);
+          redraw();
+        }
+      } catch (err) {
+        showError(`pick: ${(err as Error).message}`);
+      }
+    });
   });
 }
 
@@ -245,7 +246,7 @@ function wireInspect(v: SurfcastViewer) {
 // class by name, returns, and every other attribute the set stores.
 function showPicked(table: HTMLTableElement, hit: PickResult | null, v: SurfcastViewer) {
   const rows: [string, string][] = [];
-  if (!hit) rows.push(["", "no point there"]);
+  if (!hit) rows.push(["", "no point there (or the view is still changing)"]);
   else {
     const a = { ...hit.attributes };
     rows.push(["x, y, z", hit.position.map((c) => c.toFixed(4)).join(", ")]);

@@ -108,6 +108,8 @@ export class Measurements {
       m = { tool, points: [], done: false };
       this.list.push(m);
     }
+    const last = m.points[m.points.length - 1];
+    if (last && last.every((v, a) => v === point[a])) return m;  // the same surfel again (a double click's second click)
     m.points.push(point);
     if (m.points.length >= kToolPoints[tool]) m.done = true;
     return m;

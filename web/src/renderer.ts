@@ -98,7 +98,7 @@ function compile(gl: WebGL2RenderingContext, type: number, source: string): WebG
   return s;
 }
 
-class Program {
+export class Program {
   readonly program: WebGLProgram;
   private locations = new Map<string, WebGLUniformLocation | null>();
   constructor(private gl: WebGL2RenderingContext, vertex: string, fragment: string) {
@@ -112,6 +112,10 @@ class Program {
   loc(name: string) {
     if (!this.locations.has(name)) this.locations.set(name, this.gl.getUniformLocation(this.program, name));
     return this.locations.get(name)!;
+  }
+  dispose() {
+    for (const s of this.gl.getAttachedShaders(this.program) ?? []) this.gl.deleteShader(s);
+    this.gl.deleteProgram(this.program);
   }
 }
 
@@ -139,7 +143,7 @@ export class SplatRenderer {
   readonly clipControl: boolean;
   private programs: Record<string, Program>;
   private targets: Targets | null = null;
-  private pickTarget: WebGLFramebuffer | null = null;
+  private pickTarget: { fb: WebGLFramebuffer; buffers: WebGLRenderbuffer[] } | null = null;
   private emptyVao: WebGLVertexArrayObject;
 
   private clipControlExt: ClipControl | null;
@@ -169,6 +173,7 @@ export class SplatRenderer {
       circles: program("circles"),
       points: program("points"),
       resolve: program(unsigned8 ? "resolve8" : "resolve"),
+      resolveOver: program(unsigned8 ? "resolveOver8" : "resolveOver"),
       pick: program("pick"),
     };
     if (this.floatBlend) {
@@ -205,14 +210,31 @@ export class SplatRenderer {
     this.gl.deleteTexture(node.texture);
   }
 
+  // Frees every GL object the renderer made (the nodes' textures are the streamer's).
+  dispose() {
+    const gl = this.gl;
+    this.deleteTargets();
+    if (this.pickTarget) {
+      gl.deleteFramebuffer(this.pickTarget.fb);
+      for (const rb of this.pickTarget.buffers) gl.deleteRenderbuffer(rb);
+      this.pickTarget = null;
+    }
+    for (const p of Object.values(this.programs)) p.dispose();
+    gl.deleteVertexArray(this.emptyVao);
+  }
+
+  private deleteTargets() {
+    const gl = this.gl, t = this.targets;
+    if (!t) return;
+    for (const fb of [t.fb, t.fbDepth, t.fbLayer, t.fbComposite]) if (fb) gl.deleteFramebuffer(fb);
+    for (const x of [t.color, t.normal, t.depth, t.alpha, t.depth2, t.composite]) if (x) gl.deleteTexture(x);
+    this.targets = null;
+  }
+
   private ensureTargets(w: number, h: number): Targets {
     const gl = this.gl;
     if (this.targets && this.targets.w === w && this.targets.h === h) return this.targets;
-    if (this.targets) {
-      const t = this.targets;
-      for (const fb of [t.fb, t.fbDepth, t.fbLayer, t.fbComposite]) if (fb) gl.deleteFramebuffer(fb);
-      for (const x of [t.color, t.normal, t.depth, t.alpha, t.depth2, t.composite]) if (x) gl.deleteTexture(x);
-    }
+    this.deleteTargets();
     const texture = (internal: number) => {
       const t = gl.createTexture()!;
       gl.bindTexture(gl.TEXTURE_2D, t);
@@ -370,7 +392,7 @@ export class SplatRenderer {
       settings = { ...settings, background: [0, 0, 0] };
     }
     gl.bindVertexArray(this.emptyVao);
-    const r = this.programs.resolve;
+    const r = composite ? this.programs.resolveOver : this.programs.resolve;
     this.setFrame(r, view, settings, mode, w, h);
     gl.activeTexture(gl.TEXTURE0);
     gl.bindTexture(gl.TEXTURE_2D, t.color);
@@ -397,19 +419,20 @@ export class SplatRenderer {
     const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
     if (!(x >= 0 && x < w && y >= 0 && y < h)) return null;
     if (!this.pickTarget) {
-      const fb = gl.createFramebuffer()!;
+      const fb = gl.createFramebuffer()!, buffers: WebGLRenderbuffer[] = [];
       gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
       for (const [attachment, format] of [[gl.COLOR_ATTACHMENT0, gl.RG32UI], [gl.DEPTH_ATTACHMENT, gl.DEPTH_COMPONENT32F]]) {
         const rb = gl.createRenderbuffer()!;
         gl.bindRenderbuffer(gl.RENDERBUFFER, rb);
         gl.renderbufferStorage(gl.RENDERBUFFER, format, 1, 1);
         gl.framebufferRenderbuffer(gl.FRAMEBUFFER, attachment, gl.RENDERBUFFER, rb);
+        buffers.push(rb);
       }
+      this.pickTarget = { fb, buffers };
       const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
       if (status !== gl.FRAMEBUFFER_COMPLETE) throw new RendererError(`the picking target is incomplete (0x${status.toString(16)})`);
-      this.pickTarget = fb;
     }
-    gl.bindFramebuffer(gl.FRAMEBUFFER, this.pickTarget);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, this.pickTarget.fb);
     gl.drawBuffers([gl.COLOR_ATTACHMENT0]);
     gl.viewport(-Math.floor(x), -(h - 1 - Math.floor(y)), w, h);
     gl.colorMask(true, true, true, true);

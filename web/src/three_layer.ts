@@ -12,7 +12,8 @@
 // PerspectiveCamera with a standard depth buffer (not logarithmic or reversed).
 
 import * as THREE from "three";
-import { SurfcastViewer, type ViewerOptions } from "./viewer.js";
+import { Program } from "./renderer.js";
+import { type PickResult, SurfcastViewer, type ViewerOptions } from "./viewer.js";
 
 const kDepthImport = [`#version 300 es
 precision highp float;
@@ -32,25 +33,19 @@ void main() {
   float z = 2.0 * n * f / (f + n - (2.0 * d - 1.0) * (f - n));
   gl_FragDepth = d >= 1.0 ? 0.0 : clamp(planes.z / z, 0.0, 1.0);
 }`];
+// The scene's colour as three would show it in the canvas: the target holds
+// three's linear working colours, encoded here as sRGB where the renderer's
+// output is (its tone mapping, if any, is not applied).
 const kCopy = [kDepthImport[0], `#version 300 es
 precision highp float;
 uniform highp sampler2D sceneColor;
+uniform bool srgb;
 out vec4 color;
-void main() { color = vec4(texelFetch(sceneColor, ivec2(gl_FragCoord.xy), 0).rgb, 1.0); }`];
-
-function program(gl: WebGL2RenderingContext, [vertex, fragment]: string[]): WebGLProgram {
-  const p = gl.createProgram()!;
-  for (const [type, source] of [[gl.VERTEX_SHADER, vertex], [gl.FRAGMENT_SHADER, fragment]] as const) {
-    const s = gl.createShader(type)!;
-    gl.shaderSource(s, source);
-    gl.compileShader(s);
-    if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(`SurfcastLayer shader: ${gl.getShaderInfoLog(s)}`);
-    gl.attachShader(p, s);
-  }
-  gl.linkProgram(p);
-  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`SurfcastLayer program: ${gl.getProgramInfoLog(p)}`);
-  return p;
-}
+void main() {
+  vec3 c = clamp(texelFetch(sceneColor, ivec2(gl_FragCoord.xy), 0).rgb, 0.0, 1.0);
+  if (srgb) c = mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
+  color = vec4(c, 1.0);
+}`];
 
 export interface LayerOptions extends Omit<ViewerOptions, "controls" | "loop" | "camera"> {
   origin?: [number, number, number]; // the set's point at three's world origin (default: its centre)
@@ -60,8 +55,8 @@ export class SurfcastLayer {
   // The set's point at three's world origin.
   readonly origin: [number, number, number];
   private target: THREE.WebGLRenderTarget;
-  private depthProgram: WebGLProgram;
-  private copyProgram: WebGLProgram;
+  private depthProgram: Program;
+  private copyProgram: Program;
   private vao: WebGLVertexArrayObject;
 
   // Opens the set at `setUrl` for drawing into `renderer`'s canvas. Throws as
@@ -75,12 +70,14 @@ export class SurfcastLayer {
     const info = viewer.info;
     this.origin = options.origin ?? [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as [number, number, number];
     const size = renderer.getDrawingBufferSize(new THREE.Vector2());
-    this.target = new THREE.WebGLRenderTarget(size.x, size.y, {
+    // Float colour where the browser renders to it: three's linear colours
+    // keep their precision until kCopy encodes them.
+    const type = renderer.extensions.has("EXT_color_buffer_float") ? THREE.HalfFloatType : THREE.UnsignedByteType;
+    this.target = new THREE.WebGLRenderTarget(size.x, size.y, { type,
       depthTexture: new THREE.DepthTexture(size.x, size.y, THREE.FloatType), depthBuffer: true });
-    this.target.texture.colorSpace = THREE.SRGBColorSpace;  // as three would show it: copied to the canvas as is
     const gl = renderer.getContext() as WebGL2RenderingContext;
-    this.depthProgram = program(gl, kDepthImport);
-    this.copyProgram = program(gl, kCopy);
+    this.depthProgram = new Program(gl, ...kDepthImport as [string, string]);
+    this.copyProgram = new Program(gl, ...kCopy as [string, string]);
     this.vao = gl.createVertexArray()!;
     renderer.resetState();
   }
@@ -100,14 +97,15 @@ export class SurfcastLayer {
     const ahead = camera.getWorldDirection(new THREE.Vector3()).add(eye);
     const up = new THREE.Vector3(0, 1, 0).applyQuaternion(camera.getWorldQuaternion(new THREE.Quaternion()));
     const o = this.origin;
-    const fullscreen = (gl: WebGL2RenderingContext, p: WebGLProgram, name: string, t: WebGLTexture) => {
-      gl.useProgram(p);
+    const fullscreen = (gl: WebGL2RenderingContext, p: Program, name: string, t: WebGLTexture) => {
+      gl.useProgram(p.program);
       gl.activeTexture(gl.TEXTURE0);
       gl.bindTexture(gl.TEXTURE_2D, t);
-      gl.uniform1i(gl.getUniformLocation(p, name), 0);
+      gl.uniform1i(p.loc(name), 0);
       gl.bindVertexArray(this.vao);
       gl.drawArrays(gl.TRIANGLES, 0, 3);
     };
+    renderer.resetState();  // GL's defaults (colour mask, scissor, stencil, ...), whatever three left set
     this.viewer.drawNow({
       eye: [eye.x + o[0], eye.y + o[1], eye.z + o[2]], target: [ahead.x + o[0], ahead.y + o[1], ahead.z + o[2]],
       up: [up.x, up.y, up.z], fov: camera.getEffectiveFOV(),
@@ -117,22 +115,40 @@ export class SurfcastLayer {
         gl.depthFunc(gl.ALWAYS);
         gl.depthMask(true);
         gl.disable(gl.BLEND);
-        gl.useProgram(this.depthProgram);
-        gl.uniform3f(gl.getUniformLocation(this.depthProgram, "planes"), camera.near, camera.far, near);
+        gl.useProgram(this.depthProgram.program);
+        gl.uniform3f(this.depthProgram.loc("planes"), camera.near, camera.far, near);
         fullscreen(gl, this.depthProgram, "sceneDepth", depth);
       },
       background: (gl) => {
         gl.disable(gl.DEPTH_TEST);
         gl.disable(gl.BLEND);
         gl.colorMask(true, true, true, true);
+        gl.useProgram(this.copyProgram.program);
+        gl.uniform1i(this.copyProgram.loc("srgb"), renderer.outputColorSpace === THREE.SRGBColorSpace ? 1 : 0);
         fullscreen(gl, this.copyProgram, "sceneColor", color);
       },
     });
     renderer.resetState();
   }
 
+  // The surfel under canvas point (x, y) (CSS pixels) in the last frame
+  // drawn, as SurfcastViewer.pick, with three's GL state kept. The splats are
+  // picked alone: one behind a mesh can be picked.
+  async pick(x: number, y: number): Promise<PickResult | null> {
+    this.renderer.resetState();
+    try {
+      return await this.viewer.pick(x, y);
+    } finally {
+      this.renderer.resetState();
+    }
+  }
+
   dispose() {
     this.viewer.dispose();
     this.target.dispose();
+    const gl = this.renderer.getContext() as WebGL2RenderingContext;
+    for (const p of [this.depthProgram, this.copyProgram]) p.dispose();
+    gl.deleteVertexArray(this.vao);
+    this.renderer.resetState();
   }
 }

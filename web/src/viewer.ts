@@ -82,7 +82,7 @@ export interface PickResult {
   position: [number, number, number]; // its centre in the set's own coordinates (double)
   normal: [number, number, number];
   radius: number; // r: its own, or its node's spacing h
-  color: [number, number, number] | null; // 0-255 where the set stores colour
+  color: [number, number, number] | null; // 0-255 (16-bit colour rounded) where the set stores colour
   // Every attribute the set stores beyond the fixed ones, by name, in its
   // units (stored * scale + offset): intensity, classification,
   // return_number, number_of_returns, gps_time, scan_angle, ...
@@ -96,9 +96,7 @@ export interface PickResult {
 // cannot draw as asked; with loop: false, "redraw" (null) when the view
 // needs drawing again (blocks arrived, a setting changed).
 export class SurfcastViewer extends EventTarget {
-  readonly state: ViewerState = { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [],
-    notices: [], mode: "", firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0,
-    evictions: 0, inFlight: 0, frames: 0, frameMs: 0, camera: "" };
+  readonly state: ViewerState = emptyViewerState();
   readonly info: TilesetInfo;
   private settings: RenderSettings;
   private cam: Camera;
@@ -121,7 +119,7 @@ export class SurfcastViewer extends EventTarget {
   private readonly start = performance.now();
   private selection: { gpu: DrawnNode[]; indices: number[]; splats: number; converged: boolean; nodesCrc: number } | null = null;
   // The last frame drawn: its nodes (the streamer's indices and GPU copies) and view, for picking.
-  private drawn: { gpu: DrawnNode[]; indices: number[]; view: FrameView } | null = null;
+  private drawn: { gpu: DrawnNode[]; indices: number[]; view: FrameView; settings: RenderSettings } | null = null;
   private width = 1;
   private height = 1;
 
@@ -132,8 +130,12 @@ export class SurfcastViewer extends EventTarget {
     const opacity = options.opacity ?? 1, layers = options.layers ?? kDefaultLayers;
     if (!(opacity >= 0 && opacity <= 1) || !(layers >= 1 && layers <= kMaxLayers) || !Number.isInteger(layers))
       throw new Error(`opacity is in [0, 1] and layers a whole number in [1, ${kMaxLayers}]`);
-    if (options.mode !== undefined && !kRenderModes.includes(options.mode))
-      throw new Error(`mode ${options.mode}: expected ${kRenderModes.join(", ")}`);
+    checkMode(options.mode ?? "ewa-pixel");
+    checkDetail(options.detail ?? 1);
+    checkSplatBudget(options.splatBudget ?? 1);
+    if (options.clip) checkBox(options.clip, "clip box");
+    if (!((options.gpuBudgetMiB ?? 1) >= 1) || !((options.blockCacheMiB ?? 0) >= 0))
+      throw new Error("gpuBudgetMiB is at least 1 and blockCacheMiB at least 0");
     const renderer = new SplatRenderer(canvas, { forbidFloatBlend: options.forbidFloatBlend, shared: options.loop === false });
     const source = new TileSource(setUrl, { token: options.token });
     let colorBy = options.colorBy ?? "auto";
@@ -215,20 +217,20 @@ export class SurfcastViewer extends EventTarget {
   }
   get mode(): RenderMode { return this.settings.mode; }
   setMode(mode: RenderMode) {
-    if (!kRenderModes.includes(mode)) throw new Error(`mode ${mode}: expected ${kRenderModes.join(", ")}`);
+    checkMode(mode);
     this.settings.mode = mode;
     this.noteMode();
     this.changed();
   }
   get detail(): number { return this.detailPx; }
   setDetail(pixels: number) {
-    if (!(pixels > 0)) throw new Error(`detail ${pixels}: expected pixels > 0`);
+    checkDetail(pixels);
     this.detailPx = pixels;
     this.changed();
   }
   get splatBudget(): number { return this.budget; }
   setSplatBudget(splats: number) {
-    if (!(splats >= 1)) throw new Error(`splat budget ${splats}: expected at least 1`);
+    checkSplatBudget(splats);
     this.budget = splats;
     this.changed();
   }
@@ -249,9 +251,7 @@ export class SurfcastViewer extends EventTarget {
   }
   get clip(): Box | undefined { return this.settings.clip; }
   setClip(box: Box | undefined) {
-    if (box) for (let a = 0; a < 3; ++a)
-      if (!Number.isFinite(box.min[a]) || !Number.isFinite(box.max[a]) || box.min[a] > box.max[a])
-        throw new Error(`clip box: axis ${"xyz"[a]} from ${box.min[a]} to ${box.max[a]}`);
+    if (box) checkBox(box, "clip box");
     this.settings.clip = box;
     this.changed();
   }
@@ -262,6 +262,7 @@ export class SurfcastViewer extends EventTarget {
     const shown = this.hidden.length ? [...this.info.statistics.classCounts.keys()].filter((c) => !this.hidden.includes(c))
                                      : undefined;
     try {
+      if (shown?.length === 0) throw new Error("every class is hidden: no points to export");
       return await this.source.exportLaz(box, shown);
     } catch (e) {
       const message = `export: ${(e as Error).message}`;
@@ -271,14 +272,17 @@ export class SurfcastViewer extends EventTarget {
   }
 
   // The surfel under canvas point (x, y), in CSS pixels from its top left,
-  // in the last frame drawn: the nearest splat there (an id pass on the GPU,
-  // read back), its attributes decoded again from its node's block. Null
-  // where no splat covers the point.
+  // in the last frame drawn: the nearest splat there by its EWA footprint,
+  // whatever the mode draws (an id pass on the GPU, read back), its
+  // attributes decoded again from its node's block. Null where no splat
+  // covers the point, and while the frame drawn is out of date (a node of it
+  // evicted or recoloured since: its surfels are no longer those drawn).
   async pick(x: number, y: number): Promise<PickResult | null> {
     const d = this.drawn;
-    if (!d) return null;
-    const scale = this.canvas.clientWidth > 0 ? this.canvas.width / this.canvas.clientWidth : 1;
-    const hit = this.renderer.pick(d.gpu, d.view, this.settings, Math.floor(x * scale), Math.floor(y * scale));
+    if (!d || d.indices.some((i, k) => this.streamer.residentNode(i)?.gpu !== d.gpu[k])) return null;
+    const sx = this.canvas.clientWidth > 0 ? this.canvas.width / this.canvas.clientWidth : 1;
+    const sy = this.canvas.clientHeight > 0 ? this.canvas.height / this.canvas.clientHeight : 1;
+    const hit = this.renderer.pick(d.gpu, d.view, d.settings, Math.floor(x * sx), Math.floor(y * sy));
     if (!hit) return null;
     const i = d.indices[hit.node];
     const s = await this.streamer.surfel(i, hit.surfel);
@@ -286,9 +290,8 @@ export class SurfcastViewer extends EventTarget {
     const o = this.streamer.origin;
     const attributes: Record<string, number> = {};
     for (const a of this.info.attributes) if (a.name in s.raw) attributes[a.name] = s.raw[a.name] * a.scale + a.offset;
-    const bits = 2 ** this.info.colorBits - 1;
     return { node: this.streamer.selector.nodes[i].key, position: [s.position[0] + o[0], s.position[1] + o[1], s.position[2] + o[2]],
-             normal: s.normal, radius: s.radius, color: s.color ? s.color.map((c) => Math.round(c * bits)) as PickResult["color"] : null,
+             normal: s.normal, radius: s.radius, color: s.color ? s.color.map((c) => Math.round(c * 255)) as PickResult["color"] : null,
              attributes };
   }
 
@@ -308,12 +311,17 @@ export class SurfcastViewer extends EventTarget {
     return (performance.now() - t0) / n;
   }
 
-  // Stops drawing and streaming and lets go of the canvas's controls.
+  // Stops drawing and streaming, lets go of the canvas's controls, and frees
+  // the GPU memory and decode workers.
   dispose() {
     this.disposed = true;
     cancelAnimationFrame(this.animation);
     this.controls?.dispose();
     this.streamer.onChange = () => {};
+    this.streamer.close();
+    if (this.fence) this.renderer.gl.deleteSync(this.fence);
+    this.renderer.dispose();
+    this.drawn = this.selection = null;
   }
 
   private emit(type: string, detail: unknown) {
@@ -439,7 +447,7 @@ export class SurfcastViewer extends EventTarget {
     const eye = Math.hypot(rows[3], rows[7], rows[11]);
     const near = Math.max(diagonal, eye) * kNearFraction || kNearFraction;
     const view = { rows, eta, near, origin: this.streamer.origin };
-    this.drawn = { gpu, indices, view };
+    this.drawn = { gpu, indices, view, settings: { ...this.settings } };
     const hasWeights = info.weights !== "none";
     this.drawLast = () => this.renderer.render(gpu, view, this.settings, hasWeights, composite);
     this.drawLast();
@@ -449,6 +457,44 @@ export class SurfcastViewer extends EventTarget {
     if (gpu.length && state.firstImageMs === null) state.firstImageMs = performance.now() - this.start;
     this.emit("change", state);
   }
+}
+
+// The checks open() and the setters make.
+function checkMode(mode: RenderMode) {
+  if (!kRenderModes.includes(mode)) throw new Error(`mode ${mode}: expected ${kRenderModes.join(", ")}`);
+}
+function checkDetail(pixels: number) {
+  if (!(pixels > 0 && Number.isFinite(pixels))) throw new Error(`detail ${pixels}: expected pixels > 0`);
+}
+function checkSplatBudget(splats: number) {
+  if (!(splats >= 1)) throw new Error(`splat budget ${splats}: expected at least 1`);
+}
+function checkBox(box: Box, what: string) {
+  for (let a = 0; a < 3; ++a)
+    if (!Number.isFinite(box.min[a]) || !Number.isFinite(box.max[a]) || box.min[a] > box.max[a])
+      throw new Error(`${what}: axis ${"xyz"[a]} from ${box.min[a]} to ${box.max[a]}`);
+}
+
+// "X0,Y0,Z0,X1,Y1,Z1", as surfcast-view's --clip and the export route's bbox
+// take it; `what` names it in errors.
+export function parseBox(text: string, what: string): Box {
+  const items = text.split(",");
+  // As C++'s strtod: decimal numbers only (no 0x, 0b, blanks or empty items).
+  const v = items.map((s) => (/^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$/.test(s) ? Number(s) : NaN));
+  if (v.length !== 6 || !v.every(Number.isFinite))
+    throw new Error(`${what} ${text}: six numbers wanted (xmin,ymin,zmin,xmax,ymax,zmax)`);
+  const box: Box = { min: [v[0], v[1], v[2]], max: [v[3], v[4], v[5]] };
+  for (let a = 0; a < 3; ++a)
+    if (box.min[a] > box.max[a]) throw new Error(`${what} ${text}: its minimum exceeds its maximum on axis ${"xyz"[a]}`);
+  return box;
+}
+export const formatBox = (b: Box) => [...b.min, ...b.max].join(",");
+
+// A viewer's state before anything is drawn.
+export function emptyViewerState(): ViewerState {
+  return { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
+           firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, evictions: 0,
+           inFlight: 0, frames: 0, frameMs: 0, camera: "" };
 }
 
 function normalsOriented(source: string): boolean {

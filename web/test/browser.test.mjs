@@ -545,6 +545,10 @@ describe("browser viewer", { skip }, () => {
     assert.ok(Math.abs(wall.position[0] - at(4, 0, 0)[0]) < 0.25 && Math.abs(wall.position[2] - 1.5) < 0.25,
               `the surfel under the cursor: ${wall.position}`);
     assert.match(await page.$eval("#picked", (e) => e.textContent), /class6 building/);
+    // Above the horizon, nothing: the panel says so, and no measurement point.
+    await page.mouse.click(320, 5);
+    await page.waitForFunction(() => window.surfcast.picked === null, { timeout: 20000 });
+    assert.match(await page.$eval("#picked", (e) => e.textContent), /no point there/);
     const ground = await click(at(7.5, 1, 0));
     assert.equal(ground.attributes.classification, 2);
     assert.ok(Math.abs(ground.position[2]) < 0.01 && Math.abs(ground.position[1] - at(0, 1, 0)[1]) < 0.25,
@@ -648,15 +652,21 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(problems, []);
     const pixel = (p) => {
       const [x, y] = project(camera, p, size.width, size.height).map(Math.round);
+      assert.ok(x >= 0 && x < size.width && y >= 0 && y < size.height, `${p} projects into the view`);
       const i = 4 * (y * size.width + x);
       return [png.data[i], png.data[i + 1], png.data[i + 2]];
     };
     const red = ([r, g, b]) => r > 200 && g < 60 && b < 60;
     // The post (x 0.7-1.3, y -3.3 to -2.7, z -1.5 to 1.5) in front of the
     // splats behind it; its lower half, below the ground, hidden by the
-    // ground's splats (that ray meets z = 0 at (1.77, -4.02), off the post).
+    // ground's splats (the ray to (1, -3, -0.8) meets z = 0 at (1.56, -3.74),
+    // off the post and in front of it).
     for (const z of [0.3, 0.8, 1.3]) assert.ok(red(pixel([1, -3, z])), `the post at z = ${z}: ${pixel([1, -3, z])}`);
-    for (const z of [-0.6, -1.2]) assert.ok(!red(pixel([1, -3, z])), `the ground hides the post at z = ${z}: ${pixel([1, -3, z])}`);
+    for (const z of [-0.6, -0.8]) assert.ok(!red(pixel([1, -3, z])), `the ground hides the post at z = ${z}: ${pixel([1, -3, z])}`);
+    // The ring (0x2040ff, unlit) in three's own colours: its leftmost point,
+    // the centre of its tube, in front of the ground.
+    const ring = pixel([-3.7, -1, 0.6]);
+    assert.ok(Math.abs(ring[0] - 0x20) <= 4 && Math.abs(ring[1] - 0x40) <= 4 && ring[2] >= 250, `the ring: ${ring}`);
     // Away from the app's meshes, the splats as surfcast-view draws them.
     const ref = reference(`${serveUrl}/sets/scene`);
     assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view");
