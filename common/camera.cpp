@@ -1,5 +1,7 @@
 #include "camera.h"
 
+#include "render_defaults.h"  // kFrameMargin
+
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -114,15 +116,22 @@ Camera frameBox(const Box3d& box, double aspect, double fovYDegrees, int directi
         c.target = {0, 0, 0};
         return c;
     }
-    Vec3d centre = (box.min + box.max) * 0.5;
-    double radius = std::max(0.5 * length(box.max - box.min), 1e-9);
-    // The bounding sphere fits the narrower of the two fields of view.
-    double halfFov = 0.5 * fovYDegrees * M_PI / 180.0;
-    double halfFovX = std::atan(std::tan(halfFov) * aspect);
-    double distance = radius / std::sin(std::min(halfFov, halfFovX));
-    c.eye = centre + frameDirections()[size_t(std::clamp(direction, 0, 7))] * distance;
+    const Vec3d centre = (box.min + box.max) * 0.5;
+    const Vec3d d = frameDirections()[size_t(std::clamp(direction, 0, 7))];
     c.target = centre;
     c.up = {0, 0, 1};
+    c.eye = centre + d;
+    const CameraAxes a = cameraAxes(c);
+    // The nearest eye along d from which every corner projects within
+    // defaults::kFrameMargin of the image's half extents: a corner q (from the centre)
+    // lies at depth D - q.d, so D >= q.d + max(|q.r| / tan_x, |q.u| / tan_y).
+    const double tanY = defaults::kFrameMargin * std::tan(0.5 * fovYDegrees * M_PI / 180.0), tanX = tanY * aspect;
+    double distance = 1e-9 * std::max(1.0, length(box.max - box.min));
+    for (int i = 0; i < 8; ++i) {
+        const Vec3d q = Vec3d{i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z} - centre;
+        distance = std::max(distance, dot(q, d) + std::max(std::fabs(dot(q, a.right)) / tanX, std::fabs(dot(q, a.up)) / tanY));
+    }
+    c.eye = centre + d * distance;
     return c;
 }
 

@@ -30,7 +30,7 @@ endfunction()
 set(h "// Generated from common/render_defaults.json by common/render_defaults.cmake: edit the JSON.\n#pragma once\n\nnamespace surfcast::defaults {\n")
 foreach(entry kernel_scale:double:kKernelScale zt:double:kZt lowpass_variance:float:kLowpassVariance
         edge_tau:float:kEdgeTau layers:int:kLayers max_layers:int:kMaxLayers
-        near_fraction:double:kNearFraction)
+        near_fraction:double:kNearFraction frame_margin:double:kFrameMargin)
   string(REPLACE ":" ";" entry ${entry})
   list(GET entry 0 key)
   list(GET entry 1 type)

@@ -3,6 +3,7 @@
 // Khronos validation layer on: every test also asserts zero validation errors.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -397,22 +398,29 @@ TEST(Camera, ParsesChecksAndFrames) {
     EXPECT_FALSE(parseCameraPath(R"({"frames":[{"eye":[0,-5],"target":[0,0,0]}]})", "p"));
     EXPECT_FALSE(parseCameraPath("[", "p"));
 
-    // frameBox: every corner of the box projects inside the image.
-    Box3d box;
-    box.extend(Vec3d{1e6, 2e6, 10});
-    box.extend(Vec3d{1e6 + 30, 2e6 + 10, 25});
-    Vec3d origin = (box.min + box.max) * 0.5;
-    auto view = makeViewTransform(frameBox(box, 16.0 / 9), origin, 1600, 900);
-    ASSERT_TRUE(view);
-    for (int i = 0; i < 8; ++i) {
-        Vec3d p{i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z};
-        Vec3f o = view->apply(cast<float>(p - origin));
-        ASSERT_GT(o.z, 0);
-        double x = 800 + view->eta * o.x / o.z, y = 450 - view->eta * o.y / o.z;
-        EXPECT_GE(x, 0);
-        EXPECT_LE(x, 1600);
-        EXPECT_GE(y, 0);
-        EXPECT_LE(y, 900);
+    // frameBox: every corner of the box projects inside the image, within
+    // 90 % of its half extents, and the farthest reaches that margin in x or
+    // y: the box fills the view (from every direction, a flat box too).
+    for (const Vec3d extent : {Vec3d{30, 10, 15}, Vec3d{24, 24, 2}}) {
+        Box3d box;
+        box.extend(Vec3d{1e6, 2e6, 10});
+        box.extend(Vec3d{1e6, 2e6, 10} + extent);
+        Vec3d origin = (box.min + box.max) * 0.5;
+        for (int direction = 0; direction < 8; ++direction) {
+            auto view = makeViewTransform(frameBox(box, 16.0 / 9, 45, direction), origin, 1600, 900);
+            ASSERT_TRUE(view);
+            double reach = 0;
+            for (int i = 0; i < 8; ++i) {
+                Vec3d p{i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z};
+                Vec3f o = view->apply(cast<float>(p - origin));
+                ASSERT_GT(o.z, 0);
+                double x = view->eta * o.x / o.z / 800, y = view->eta * o.y / o.z / 450;
+                EXPECT_LE(std::fabs(x), 0.9 + 1e-4) << direction;
+                EXPECT_LE(std::fabs(y), 0.9 + 1e-4) << direction;
+                reach = std::max({reach, std::fabs(x), std::fabs(y)});
+            }
+            EXPECT_NEAR(reach, 0.9, 1e-4) << "direction " << direction;
+        }
     }
 }
 

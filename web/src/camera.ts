@@ -3,7 +3,12 @@
 // right, y up, z forward; a camera-space point o projects to
 //   x = W/2 + eta o.x / o.z,  y = H/2 - eta o.y / o.z,  eta = H / (2 tan(fov/2)).
 
+import defaults from "../../common/render_defaults.json";
 import type { Vec3 } from "./format.js";
+
+// frameBox's share of the image's half extents the box's corners may reach
+// (common/render_defaults.json, which the C++ frameBox reads too).
+const kFrameMargin = defaults.renderer.frame_margin;
 
 export interface Camera {
   eye: Vec3;
@@ -75,11 +80,17 @@ export function frameDirection(i: number): Vec3 {
 // frames a set without --camera.
 export function frameBox(min: Vec3, max: Vec3, aspect: number, fov = 45, direction = 0): Camera {
   const centre = scale(add(min, max), 0.5);
-  const radius = Math.max(0.5 * length(sub(max, min)), 1e-9);
-  const half = (0.5 * fov * Math.PI) / 180;
-  const halfX = Math.atan(Math.tan(half) * aspect);
-  const distance = radius / Math.sin(Math.min(half, halfX));
-  return { eye: add(centre, scale(frameDirection(direction), distance)), target: centre, up: [0, 0, 1], fov };
+  const d = frameDirection(direction);
+  const a = cameraAxes({ eye: add(centre, d), target: centre, up: [0, 0, 1], fov });
+  // The nearest eye along d from which every corner projects within the
+  // margin of the image's half extents (common/camera.cpp says how).
+  const tanY = kFrameMargin * Math.tan((0.5 * fov * Math.PI) / 180), tanX = tanY * aspect;
+  let distance = 1e-9 * Math.max(1, length(sub(max, min)));
+  for (let i = 0; i < 8; ++i) {
+    const q = sub([i & 1 ? max[0] : min[0], i & 2 ? max[1] : min[1], i & 4 ? max[2] : min[2]], centre);
+    distance = Math.max(distance, dot(q, d) + Math.max(Math.abs(dot(q, a.right)) / tanX, Math.abs(dot(q, a.up)) / tanY));
+  }
+  return { eye: add(centre, scale(d, distance)), target: centre, up: [0, 0, 1], fov };
 }
 
 // World -> camera rows (r, -r.(eye - origin)) relative to `origin`, for the

@@ -114,9 +114,15 @@ function wirePanel(v: SurfcastViewer, setUrl: string) {
   const modeSelect = $<HTMLSelectElement>("mode");
   modeSelect.value = v.mode;
   modeSelect.onchange = () => v.setMode(modeSelect.value as RenderMode);
-  const lodInput = $<HTMLInputElement>("lod");
-  lodInput.value = String(v.detail);
-  lodInput.onchange = () => Number(lodInput.value) > 0 && v.setDetail(Number(lodInput.value));
+  // Detail: a number, and a slider over 0.25 to 8 pixels in halvings.
+  const lodInput = $<HTMLInputElement>("lod"), lodSlider = $<HTMLInputElement>("lod-slider");
+  const showDetail = () => {
+    lodInput.value = String(v.detail);
+    lodSlider.value = String(Math.log2(v.detail));
+  };
+  showDetail();
+  lodInput.onchange = () => Number(lodInput.value) > 0 && (v.setDetail(Number(lodInput.value)), showDetail());
+  lodSlider.oninput = () => (v.setDetail(2 ** Number(lodSlider.value)), showDetail());
   const budgetInput = $<HTMLInputElement>("splats");
   budgetInput.value = String(v.splatBudget);
   budgetInput.onchange = () => Number(budgetInput.value) >= 1 && v.setSplatBudget(Number(budgetInput.value));
