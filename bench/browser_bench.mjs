@@ -3,7 +3,11 @@
 // against surfcast-serve on loopback, beside the Vulkan client
 // (surfcast-view --headless --lod 1 over the same URL, lavapipe) as the
 // reference: time to the first image and to convergence from opening the
-// page, and frames per second of the converged view (each frame waited for).
+// page, frames per second of the converged view (each frame waited for), and
+// the browser's picking: milliseconds from a click's coordinates to the
+// surfel's attributes (the id pass on the GPU, its read-back, the node's
+// block decoded again), over a 5 x 4 grid of the canvas (a miss costs the
+// id pass alone).
 // Per set: the default camera (the set framed), 1280x720, level of detail 1 px.
 //
 // Usage: node bench/browser_bench.mjs [--build build] [--points 1500000] [--set DIR]... [--rounds 2]
@@ -65,8 +69,16 @@ async function browserRun(name) {
   const s = await page.evaluate(() => window.surfcast);
   if (s.errors.length) throw new Error(`${name}: ${s.errors.join("; ")}`);
   const frameMs = await page.evaluate(() => window.surfcastTimeFrames(2));
+  const pick = await page.evaluate(async () => {
+    const view = document.getElementById("view"), w = view.clientWidth, h = view.clientHeight;
+    let hits = 0;
+    const t0 = performance.now();
+    for (let i = 0; i < 5; ++i)
+      for (let j = 0; j < 4; ++j) hits += (await window.surfcastPick((i + 0.5) * w / 5, (j + 0.5) * h / 4)) ? 1 : 0;
+    return { ms: (performance.now() - t0) / 20, hits };
+  });
   await page.close();
-  return { first: s.firstImageMs / 1000, converged: s.convergedMs / 1000, fps: 1000 / frameMs, splats: s.splats,
+  return { first: s.firstImageMs / 1000, converged: s.convergedMs / 1000, fps: 1000 / frameMs, pickMs: pick.ms, pickHits: pick.hits, splats: s.splats,
            nodes: s.nodes, mb: s.bytes / 1e6, requests: s.requests, wall: (Date.now() - t0) / 1000, camera: s.camera };
 }
 
@@ -100,10 +112,11 @@ md += `${model}, ${cpus().length} cores; headless Chromium (SwiftShader WebGL2, 
 md += `both streaming from surfcast-serve on loopback; ${width}x${height}, the set framed, level of detail 1 px. `;
 md += "`node bench/browser_bench.mjs" + (points !== 1500000 ? ` --points ${points}` : "") +
       extraSets.map((s) => ` --set ${basename(s)}`).join("") + "`.\n\n";
-md += "| set | client | first image s | converged s | frames/s (converged view) | nodes | splats |\n|---|---|---:|---:|---:|---:|---:|\n";
+md += "| set | client | first image s | converged s | frames/s (converged view) | pick ms (hits of 20) | nodes | splats |\n";
+md += "|---|---|---:|---:|---:|---:|---:|---:|\n";
 for (const { name, b, v } of rows) {
-  md += `| ${name} | browser (SwiftShader) | ${f(b.first)} | ${f(b.converged)} | ${f(b.fps, 3)} | ${b.nodes} | ${b.splats} |\n`;
-  md += `| ${name} | surfcast-view (lavapipe) | ${f(v.first)} | ${f(v.converged)} | ${f(v.fps, 2)} | ${v.nodes} | ${v.splats} |\n`;
+  md += `| ${name} | browser (SwiftShader) | ${f(b.first)} | ${f(b.converged)} | ${f(b.fps, 3)} | ${f(b.pickMs, 0)} (${b.pickHits}) | ${b.nodes} | ${b.splats} |\n`;
+  md += `| ${name} | surfcast-view (lavapipe) | ${f(v.first)} | ${f(v.converged)} | ${f(v.fps, 2)} | | ${v.nodes} | ${v.splats} |\n`;
 }
 mkdirSync(join(root, "bench/report"), { recursive: true });
 writeFileSync(join(root, "bench/report/browser.md"), md);

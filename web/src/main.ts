@@ -310,7 +310,7 @@ async function main() {
   for (const type of ["change", "converged"]) v.addEventListener(type, progress);
   wirePanel(v, setUrl);
   // For benchmarks (bench/browser_bench.mjs).
-  (window as unknown as { surfcastTimeFrames: (n: number) => number }).surfcastTimeFrames = (n) => v.timeFrames(n);
+  Object.assign(window, { surfcastTimeFrames: (n: number) => v.timeFrames(n), surfcastPick: (x: number, y: number) => v.pick(x, y) });
 }
 
 main().catch((e) => showError(`viewer: ${(e as Error).message}`));
