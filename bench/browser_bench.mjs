@@ -63,7 +63,7 @@ async function browserRun(name) {
   const page = await browser.newPage();
   await page.setViewport({ width, height });
   const t0 = Date.now();
-  await page.goto(`${base}/?set=/sets/${name}`);
+  await page.goto(`${base}/?set=/sets/${name}&panel=0`);  // the canvas the whole 1280x720, as surfcast-view's image
   await page.waitForFunction("window.surfcast && (window.surfcast.converged || window.surfcast.errors.length > 0)",
                              { timeout: 1800000, polling: 200 });
   const s = await page.evaluate(() => window.surfcast);

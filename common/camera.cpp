@@ -2,6 +2,7 @@
 
 #include "render_defaults.h"  // kFrameMargin
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -126,7 +127,9 @@ Camera frameBox(const Box3d& box, double aspect, double fovYDegrees, int directi
     // defaults::kFrameMargin of the image's half extents: a corner q (from the centre)
     // lies at depth D - q.d, so D >= q.d + max(|q.r| / tan_x, |q.u| / tan_y).
     const double tanY = defaults::kFrameMargin * std::tan(0.5 * fovYDegrees * M_PI / 180.0), tanX = tanY * aspect;
-    double distance = 1e-9 * std::max(1.0, length(box.max - box.min));
+    // At least a step a double can take at the box's coordinates: a box of
+    // one point still gets an eye apart from its target.
+    double distance = 1e-9 * std::max({1.0, length(box.max - box.min), length(centre)});
     for (int i = 0; i < 8; ++i) {
         const Vec3d q = Vec3d{i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z} - centre;
         distance = std::max(distance, dot(q, d) + std::max(std::fabs(dot(q, a.right)) / tanX, std::fabs(dot(q, a.up)) / tanY));

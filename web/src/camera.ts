@@ -85,7 +85,7 @@ export function frameBox(min: Vec3, max: Vec3, aspect: number, fov = 45, directi
   // The nearest eye along d from which every corner projects within the
   // margin of the image's half extents (common/camera.cpp says how).
   const tanY = kFrameMargin * Math.tan((0.5 * fov * Math.PI) / 180), tanX = tanY * aspect;
-  let distance = 1e-9 * Math.max(1, length(sub(max, min)));
+  let distance = 1e-9 * Math.max(1, length(sub(max, min)), length(centre));  // a box of one point too
   for (let i = 0; i < 8; ++i) {
     const q = sub([i & 1 ? max[0] : min[0], i & 2 ? max[1] : min[1], i & 4 ? max[2] : min[2]], centre);
     distance = Math.max(distance, dot(q, d) + Math.max(Math.abs(dot(q, a.right)) / tanX, Math.abs(dot(q, a.up)) / tanY));

@@ -96,8 +96,8 @@ function options(): ViewerOptions {
 // help overlay from its "?" button or the "?" key, closed by Esc.
 function panelControls() {
   if (params.get("panel") === "0") document.body.classList.add("nopanel");
-  const panel = $("panel"), collapse = $("collapse"), help = $("help");
-  collapse.onclick = () => collapse.setAttribute("aria-expanded", String(!panel.classList.toggle("collapsed")));
+  const collapse = $("collapse"), help = $("help");
+  collapse.onclick = () => collapse.setAttribute("aria-expanded", String(!document.body.classList.toggle("panel-collapsed")));
   $("help-button").onclick = () => (help.hidden = !help.hidden);
   $("help-close").onclick = () => (help.hidden = true);
   window.addEventListener("keydown", (e) => {
@@ -114,18 +114,26 @@ function wirePanel(v: SurfcastViewer, setUrl: string) {
   const modeSelect = $<HTMLSelectElement>("mode");
   modeSelect.value = v.mode;
   modeSelect.onchange = () => v.setMode(modeSelect.value as RenderMode);
-  // Detail: a number, and a slider over 0.25 to 8 pixels in halvings.
+  // Detail: a number, and a slider over 0.25 to 8 pixels in quarter octaves.
   const lodInput = $<HTMLInputElement>("lod"), lodSlider = $<HTMLInputElement>("lod-slider");
   const showDetail = () => {
     lodInput.value = String(v.detail);
     lodSlider.value = String(Math.log2(v.detail));
   };
   showDetail();
-  lodInput.onchange = () => Number(lodInput.value) > 0 && (v.setDetail(Number(lodInput.value)), showDetail());
+  lodInput.onchange = () => {
+    const px = Number(lodInput.value);
+    if (px > 0 && Number.isFinite(px)) v.setDetail(px);
+    showDetail();
+  };
   lodSlider.oninput = () => (v.setDetail(2 ** Number(lodSlider.value)), showDetail());
   const budgetInput = $<HTMLInputElement>("splats");
   budgetInput.value = String(v.splatBudget);
-  budgetInput.onchange = () => Number(budgetInput.value) >= 1 && v.setSplatBudget(Number(budgetInput.value));
+  budgetInput.onchange = () => {
+    const n = Number(budgetInput.value);
+    if (n >= 1 && Number.isFinite(n)) v.setSplatBudget(n);
+    budgetInput.value = String(v.splatBudget);
+  };
 
   const colorSelect = $<HTMLSelectElement>("color");
   for (const by of v.colorings) colorSelect.add(new Option(by, by, false, by === v.colorBy));
@@ -208,41 +216,37 @@ function wireInspect(v: SurfcastViewer) {
   const table = $<HTMLTableElement>("picked");
   const redraw = () => m.draw(v.camera);
   v.addEventListener("camera", redraw);
-  window.addEventListener("resize", redraw);
+  new ResizeObserver(redraw).observe(v.canvas);  // the window, or the panel beside the view
   $("clear-measurements").onclick = () => {
     m.clear();
     redraw();
   };
-  // Picks run one at a time, in click order; a pick that resolves after the
-  // measurement it was meant for ended (a double click's second click) is dropped.
+  // Picks and ends run one at a time, in the order they came; a step's
+  // failure is shown and the next runs.
   let queue: Promise<void> = Promise.resolve();
-  let ended = 0;
-  const finish = () => {
-    queue = queue.then(() => {
-      ++ended;
-      m.finish();
-      redraw();
-    });
+  const enqueue = (step: () => void | Promise<void>) => {
+    queue = queue.then(step).catch((err) => showError(`pick: ${(err as Error).message}`));
   };
+  const finish = () => enqueue(() => {
+    m.finish();
+    redraw();
+  });
   v.canvas.addEventListener("dblclick", finish);
   window.addEventListener("keydown", (e) => e.key === "Enter" && !(e.target instanceof HTMLInputElement) && finish());
   let down: { x: number; y: number } | null = null;
   v.canvas.addEventListener("pointerdown", (e) => (down = e.button === 0 ? { x: e.offsetX, y: e.offsetY } : null));
-  v.canvas.addEventListener("pointerup", (e) => {
-    if (!down || Math.hypot(e.offsetX - down.x, e.offsetY - down.y) > 4) return;
+  v.canvas.addEventListener("click", (e) => {
+    const moved = !down || Math.hypot(e.offsetX - down.x, e.offsetY - down.y) > 4;
     down = null;
-    const [x, y, measuring, at] = [e.offsetX, e.offsetY, tool.value as Tool | "pick", ended];
-    queue = queue.then(async () => {
-      try {
-        const hit = await v.pick(x, y);
-        picked = hit;
-        showPicked(table, hit, v);
-        if (hit && measuring !== "pick" && at === ended) {
-          m.add(measuring, hit.position);
-          redraw();
-        }
-      } catch (err) {
-        showError(`pick: ${(err as Error).message}`);
+    if (moved || e.detail >= 2) return;  // a drag, or a double click's second click (dblclick ends the measurement)
+    const [x, y, measuring] = [e.offsetX, e.offsetY, tool.value as Tool | "pick"];
+    enqueue(async () => {
+      const hit = await v.pick(x, y);
+      picked = hit;
+      showPicked(table, hit, v);
+      if (hit && measuring !== "pick") {
+        m.add(measuring, hit.position);
+        redraw();
       }
     });
   });

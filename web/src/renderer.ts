@@ -428,9 +428,14 @@ export class SplatRenderer {
         gl.framebufferRenderbuffer(gl.FRAMEBUFFER, attachment, gl.RENDERBUFFER, rb);
         buffers.push(rb);
       }
-      this.pickTarget = { fb, buffers };
       const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
-      if (status !== gl.FRAMEBUFFER_COMPLETE) throw new RendererError(`the picking target is incomplete (0x${status.toString(16)})`);
+      if (status !== gl.FRAMEBUFFER_COMPLETE) {
+        gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+        gl.deleteFramebuffer(fb);
+        for (const rb of buffers) gl.deleteRenderbuffer(rb);
+        throw new RendererError(`the picking target is incomplete (0x${status.toString(16)})`);
+      }
+      this.pickTarget = { fb, buffers };
     }
     gl.bindFramebuffer(gl.FRAMEBUFFER, this.pickTarget.fb);
     gl.drawBuffers([gl.COLOR_ATTACHMENT0]);

@@ -83,9 +83,17 @@ class DecoderPool {
         this.pending.delete(e.data.id);
         done?.(e.data);
       };
-      w.onerror = (e) => onError(`decode worker: ${e.message}`);
+      w.onerror = (e) => {
+        this.settle(`decode worker: ${e.message}`);  // its jobs will never answer
+        onError(`decode worker: ${e.message}`);
+      };
       this.workers.push(w);
     }
+  }
+  // Answers every pending job with an error.
+  private settle(error: string) {
+    for (const [id, done] of this.pending) done({ id, error });
+    this.pending.clear();
   }
   decode(job: Omit<DecodeJob, "id">): Promise<DecodeResult> {
     const id = ++this.id;
@@ -97,6 +105,7 @@ class DecoderPool {
   }
   terminate() {
     for (const w of this.workers) w.terminate();
+    this.settle("the stream was closed");
   }
 }
 

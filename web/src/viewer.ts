@@ -479,7 +479,7 @@ function checkBox(box: Box, what: string) {
 // take it; `what` names it in errors.
 export function parseBox(text: string, what: string): Box {
   const items = text.split(",");
-  // As C++'s strtod: decimal numbers only (no 0x, 0b, blanks or empty items).
+  // Decimal numbers only: stricter than C++'s strtod, which also takes hex and leading blanks.
   const v = items.map((s) => (/^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$/.test(s) ? Number(s) : NaN));
   if (v.length !== 6 || !v.every(Number.isFinite))
     throw new Error(`${what} ${text}: six numbers wanted (xmin,ymin,zmin,xmax,ymax,zmax)`);

@@ -572,13 +572,31 @@ describe("browser viewer", { skip }, () => {
     const labels = () => page.$$eval("#measurements text", (t) => t.map((e) => ({ text: e.textContent, x: Number(e.getAttribute("x")) })));
     const shown = await labels();
     assert.deepEqual(shown.map((l) => l.text), [list[0].label, list[1].label]);
+    // A polyline of three picks, the last a double click, which ends it: one
+    // measurement more, of three points, done (the double click's second
+    // click adds nothing, and starts nothing).
+    await page.evaluate(() => document.body.classList.remove("nopanel"));
+    await page.select("#tool", "polyline");
+    await page.evaluate(() => document.body.classList.add("nopanel"));
+    await click(at(2, 2, 0));
+    await click(at(5, 2, 0));
+    const [ex, ey] = project(kClassCamera, at(8, 2, 0), size.width, size.height);
+    await page.mouse.click(ex, ey, { count: 2 });
+    await page.waitForFunction(() => window.surfcast.measurements.at(-1)?.done === true, { timeout: 20000 });
+    const lines = await page.evaluate(() => window.surfcast.measurements);
+    assert.equal(lines.length, 3, JSON.stringify(lines.map((x) => x.tool)));
+    assert.equal(lines[2].tool, "polyline");
+    assert.equal(lines[2].points.length, 3);
+    assert.ok(Math.abs(lines[2].value - 6) < 0.4, `polyline ${lines[2].value}`);
+    const allLabels = await labels();
+    assert.equal(allLabels.length, 3);
     // They survive a camera move, drawn where the points now project; "clear" removes them.
     await page.mouse.move(320, 240);
     await page.mouse.down();
     await page.mouse.move(380, 240, { steps: 5 });
     await page.mouse.up();
     const moved = await labels();
-    assert.equal(moved.length, 2);
+    assert.equal(moved.length, 3);
     assert.notEqual(moved[0].x, shown[0].x, "the labels follow the camera");
     await page.evaluate(() => document.body.classList.remove("nopanel"));
     await page.click("#clear-measurements");
