@@ -123,18 +123,35 @@ Camera frameBox(const Box3d& box, double aspect, double fovYDegrees, int directi
     c.up = {0, 0, 1};
     c.eye = centre + d;
     const CameraAxes a = cameraAxes(c);
-    // The nearest eye along d from which every corner projects within
-    // defaults::kFrameMargin of the image's half extents: a corner q (from the centre)
-    // lies at depth D - q.d, so D >= q.d + max(|q.r| / tan_x, |q.u| / tan_y).
+    // The eye at D along d from a target moved across the view by (s_r, s_u)
+    // from the centre: corner p (from the centre) lies at depth z = D - p.d
+    // and across at p.r - s_r, which must stay within tan_x z (and the same
+    // in u). Some s_r fits iff a_i - tan_x z_i <= a_j + tan_x z_j for every
+    // pair (a = p.r, b = p.d), i.e. D >= (a_i - a_j) / (2 tan_x) + (b_i + b_j) / 2;
+    // the nearest D is the largest of those over both axes, and s is the
+    // middle of what fits, so the box is centred in the view.
     const double tanY = defaults::kFrameMargin * std::tan(0.5 * fovYDegrees * M_PI / 180.0), tanX = tanY * aspect;
+    std::array<Vec3d, 8> p;
+    for (int i = 0; i < 8; ++i)
+        p[size_t(i)] = Vec3d{i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z} - centre;
     // At least a step a double can take at the box's coordinates: a box of
     // one point still gets an eye apart from its target.
     double distance = 1e-9 * std::max({1.0, length(box.max - box.min), length(centre)});
-    for (int i = 0; i < 8; ++i) {
-        const Vec3d q = Vec3d{i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z} - centre;
-        distance = std::max(distance, dot(q, d) + std::max(std::fabs(dot(q, a.right)) / tanX, std::fabs(dot(q, a.up)) / tanY));
-    }
-    c.eye = centre + d * distance;
+    for (const Vec3d& pi : p)
+        for (const Vec3d& pj : p)
+            distance = std::max({distance, (dot(pi - pj, a.right) / tanX + dot(pi + pj, d)) / 2,
+                                 (dot(pi - pj, a.up) / tanY + dot(pi + pj, d)) / 2});
+    auto middle = [&](const Vec3d& axis, double tan) {
+        double lo = -HUGE_VAL, hi = HUGE_VAL;
+        for (const Vec3d& q : p) {
+            const double z = distance - dot(q, d);
+            lo = std::max(lo, dot(q, axis) - tan * z);
+            hi = std::min(hi, dot(q, axis) + tan * z);
+        }
+        return 0.5 * (lo + hi);
+    };
+    c.target = centre + a.right * middle(a.right, tanX) + a.up * middle(a.up, tanY);
+    c.eye = c.target + d * distance;
     return c;
 }
 

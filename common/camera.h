@@ -39,10 +39,11 @@ Result<std::vector<Camera>> parseCameraPath(const std::string& json, const std::
 // from the -y side and above.
 std::array<Vec3d, 8> frameDirections();
 // A camera that frames the whole box at the given aspect (width / height),
-// looking at its centre from frameDirections()[direction], up +z, from as
-// near as its corners allow: each projects within defaults::kFrameMargin of the
-// image's half extents (a margin for the splats' own size), and at least one
-// reaches it.
+// looking along -frameDirections()[direction], up +z, from as near as its
+// corners allow: each projects within defaults::kFrameMargin of the image's
+// half extents (a margin for the splats' own size), two reach it on opposite
+// sides, and the box is centred in the view (the target is its centre moved
+// across the view).
 Camera frameBox(const Box3d& box, double aspect, double fovYDegrees = 45, int direction = 0);
 
 // The camera's orthonormal axes in world space (double): x right, y up, z

@@ -82,15 +82,27 @@ export function frameBox(min: Vec3, max: Vec3, aspect: number, fov = 45, directi
   const centre = scale(add(min, max), 0.5);
   const d = frameDirection(direction);
   const a = cameraAxes({ eye: add(centre, d), target: centre, up: [0, 0, 1], fov });
-  // The nearest eye along d from which every corner projects within the
-  // margin of the image's half extents (common/camera.cpp says how).
+  // The nearest eye along d, from a target moved across the view, from which
+  // every corner projects within the margin of the image's half extents, the
+  // box centred (common/camera.cpp derives it).
   const tanY = kFrameMargin * Math.tan((0.5 * fov * Math.PI) / 180), tanX = tanY * aspect;
+  const p = [0, 1, 2, 3, 4, 5, 6, 7].map((i) => sub([i & 1 ? max[0] : min[0], i & 2 ? max[1] : min[1], i & 4 ? max[2] : min[2]], centre));
   let distance = 1e-9 * Math.max(1, length(sub(max, min)), length(centre));  // a box of one point too
-  for (let i = 0; i < 8; ++i) {
-    const q = sub([i & 1 ? max[0] : min[0], i & 2 ? max[1] : min[1], i & 4 ? max[2] : min[2]], centre);
-    distance = Math.max(distance, dot(q, d) + Math.max(Math.abs(dot(q, a.right)) / tanX, Math.abs(dot(q, a.up)) / tanY));
-  }
-  return { eye: add(centre, scale(d, distance)), target: centre, up: [0, 0, 1], fov };
+  for (const pi of p)
+    for (const pj of p)
+      distance = Math.max(distance, (dot(sub(pi, pj), a.right) / tanX + dot(add(pi, pj), d)) / 2,
+                          (dot(sub(pi, pj), a.up) / tanY + dot(add(pi, pj), d)) / 2);
+  const middle = (axis: Vec3, tan: number) => {
+    let lo = -Infinity, hi = Infinity;
+    for (const q of p) {
+      const z = distance - dot(q, d);
+      lo = Math.max(lo, dot(q, axis) - tan * z);
+      hi = Math.min(hi, dot(q, axis) + tan * z);
+    }
+    return 0.5 * (lo + hi);
+  };
+  const target = add(centre, add(scale(a.right, middle(a.right, tanX)), scale(a.up, middle(a.up, tanY))));
+  return { eye: add(target, scale(d, distance)), target, up: [0, 0, 1], fov };
 }
 
 // World -> camera rows (r, -r.(eye - origin)) relative to `origin`, for the
