@@ -47,6 +47,8 @@ std::string hex8(uint32_t v) {
     return b;
 }
 
+}  // namespace
+
 // A LAZ export sent as it is produced (docs/PROTOCOL.md, "Export"): a thread
 // of its own runs the export (laz_export.h) into a queue of at most
 // kExportQueueBytes, from the first time MHD asks for bytes (so a HEAD never
@@ -189,6 +191,8 @@ private:
     std::atomic<uint64_t> sent_{0};
     std::thread producer_;
 };
+
+namespace {
 
 // State of one request, from its first byte to the completion callback.
 struct RequestState {

@@ -19,8 +19,8 @@ const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as 
 const params = new URLSearchParams(location.search);
 const hash = new URLSearchParams(location.hash.replace(/^#/, ""));
 
-// The page's own errors (its URL, an export) and the viewer's, shown together.
-const pageErrors: string[] = [], pageNotices: string[] = [];
+// The page's own errors (its URL, a pick) and the viewer's, shown together.
+const pageErrors: string[] = [];
 let viewer: SurfcastViewer | undefined;
 let exports = 0;
 let picked: PickResult | null = null;
@@ -32,7 +32,7 @@ const kNotOpen: ViewerState = emptyViewerState();
 // with their values and labels.
 Object.defineProperty(window, "surfcast", { get: () => {
   const s = viewer?.state ?? kNotOpen, clip = viewer?.clip;
-  return { ...s, errors: [...pageErrors, ...s.errors], notices: [...pageNotices, ...s.notices],
+  return { ...s, errors: [...pageErrors, ...s.errors],
            clip: clip ? formatBox(clip) : "", exports, picked,
            measurements: (measurements?.list ?? []).map((x) => ({ ...x, ...measure(x.tool, x.points, measurements?.unit) })) };
 } });
@@ -59,6 +59,13 @@ function number(name: string, min: number): number | undefined {
 }
 
 
+// "2,7": ASPRS classes, as surfcast-view's --hide-classes takes them.
+function classList(text: string): number[] {
+  const classes = text.split(",").filter((s) => s !== "");
+  for (const c of classes) if (!/^\d{1,3}$/.test(c) || Number(c) > 255) throw new Error(`?hide=${text}: '${c}' is not a class (0 to 255)`);
+  return classes.map(Number);
+}
+
 // Keeps the URL current, so that it can be shared.
 function updateUrl(name: string, value: string) {
   const url = new URL(location.href);
@@ -83,7 +90,7 @@ function options(): ViewerOptions {
     blockCacheMiB: number("block-cache", 0),
     mode: mode as RenderMode | undefined,
     colorBy: (params.get("color") ?? "auto") as ColorBy,
-    hiddenClasses: (params.get("hide") ?? "").split(",").filter((s) => s !== "").map(Number),
+    hiddenClasses: classList(params.get("hide") ?? ""),
     clip: clip !== null ? parseBox(clip, "?clip=") : undefined,
     opacity,
     layers,

@@ -409,6 +409,8 @@ describe("browser viewer", { skip }, () => {
     assert.deepEqual(block.problems, []);
     const clip = await view(`${serveUrl}/?set=/sets/scene&clip=0,0,0,1,nan,1`);
     assert.match(clip.errorsShown, /\?clip= 0,0,0,1,nan,1: six numbers wanted/);
+    const hide = await view(`${serveUrl}/?set=/sets/scene&hide=2,abc`);
+    assert.match(hide.errorsShown, /\?hide=2,abc: 'abc' is not a class/);
   });
 
   test("a clip box set in the panel: the splats inside, as surfcast-view --clip draws them, and their points as LAZ", async (t) => {
