@@ -27,12 +27,6 @@ Box3d nodeBox(const TilesetInfo& info, const NodeKey& key) {
     return b;
 }
 
-bool overlaps(const Box3d& a, const Box3d& b) {
-    for (int i = 0; i < 3; ++i)
-        if (a.max[i] < b.min[i] || b.max[i] < a.min[i]) return false;
-    return true;
-}
-
 bool inside(const Box3d& b, const Vec3d& p) {
     for (int i = 0; i < 3; ++i)
         if (p[i] < b.min[i] || p[i] > b.max[i]) return false;
@@ -45,7 +39,7 @@ std::vector<size_t> reachedLeaves(const TilesetReader& set, const PointFilter& f
     for (size_t i = 0; i < set.nodes().size(); ++i) {
         const NodeRecord& n = set.nodes()[i];
         if (!(n.flags & kFlagInputPoints)) continue;
-        if (filter.box && !overlaps(*filter.box, nodeBox(set.info(), n.key))) continue;
+        if (filter.box && !filter.box->intersects(nodeBox(set.info(), n.key))) continue;
         out.push_back(i);
     }
     return out;
@@ -395,7 +389,7 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
     struct Open {
         NodeKey key;
         std::vector<uint64_t> taken = std::vector<uint64_t>(kCopcGrid * kCopcGrid * kCopcGrid / 64);
-        std::vector<uint8_t> records;
+        std::vector<uint8_t> records{};
     };
     std::vector<Open> path;
     const LasScalars scalars = lasScalars(info);

@@ -111,6 +111,16 @@ async function view(url, { timeout = 60000 } = {}) {
   return { state, png, problems, errorsShown };
 }
 
+// A page at the tests' size whose console errors and page errors go into `problems`.
+async function openPage() {
+  const page = await browser.newPage();
+  await page.setViewport(size);
+  const problems = [];
+  page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
+  page.on("pageerror", (e) => problems.push(e.message));
+  return { page, problems };
+}
+
 // surfcast-view's converged frame of `url` with `extra`, rendered once per
 // run for each (tests compare several pages against one view).
 const references = new Map();
@@ -292,11 +302,7 @@ describe("browser viewer", { skip }, () => {
   // and converges again: the states before and after, the fewest nodes any
   // frame drew in between, and the last frame.
   async function recolourToElevation(query) {
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}${query}`);
     const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(done, { timeout: 60000 });
@@ -415,11 +421,7 @@ describe("browser viewer", { skip }, () => {
 
   test("a clip box set in the panel: the splats inside, as surfcast-view --clip draws them, and their points as LAZ", async (t) => {
     const box = "-2,-3,0,1.5,2,3";
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     const downloads = mkdtempSync(join(work, "downloads-"));
     await (await page.createCDPSession()).send("Browser.setDownloadBehavior", { behavior: "allow", downloadPath: downloads });
     await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
@@ -472,11 +474,7 @@ describe("browser viewer", { skip }, () => {
 
   test("legends: class names and counts, only this class as surfcast-view --classes draws it, the palette's range", async () => {
     const classCamera = kClassCamera;
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     await page.goto(`${serveUrl}/?set=/sets/classified&color=classification&camera=${classCamera}`);
     const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(done, { timeout: 60000 });
@@ -523,11 +521,7 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("a click picks the surfel under it (double precision, its class); distances and heights measured on picks", async () => {
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     await page.goto(`${serveUrl}/?set=/sets/classified&camera=${kClassCamera}&color=classification`);
     const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(done, { timeout: 60000 });
@@ -609,11 +603,7 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("the component in an app's own page (examples/embed.html): its methods and events, and surfcast-view's image", async () => {
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     await page.goto(`${serveUrl}/embed.html?set=/sets/scene&camera=${camera}`);
     const done = "window.app && (window.app.viewer.state.converged || window.app.viewer.state.errors.length > 0)";
     await page.waitForFunction(done, { timeout: 60000 });
@@ -653,11 +643,7 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("three.js (examples/three.html): SurfcastLayer's splats and the app's meshes hide each other", async (t) => {
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
     // The app's camera is ?camera=, the same view surfcast-view's reference takes.
     await page.goto(`${serveUrl}/three.html?set=/sets/scene&camera=${camera}`);
@@ -712,11 +698,7 @@ describe("browser viewer", { skip }, () => {
     // 6 MiB holds 196,608 surfels: less than the close-up's 206,869 and
     // the nodes refined through to reach them.
     const budget = 6 * 2 ** 20;
-    const page = await browser.newPage();
-    await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(m.text()));
-    page.on("pageerror", (e) => problems.push(e.message));
+    const { page, problems } = await openPage();
     await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}&gpu-budget=6`);
     const converged = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(converged, { timeout: 60000 });
