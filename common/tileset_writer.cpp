@@ -1,12 +1,9 @@
 #include "tileset_writer.h"
 
 #include <fcntl.h>
-#include <signal.h>
-#include <stdio.h>
 #include <unistd.h>
 
 #include <cerrno>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +11,7 @@
 
 #include "byte_io.h"
 #include "crc32.h"
+#include "folder_publish.h"
 
 namespace fs = std::filesystem;
 
@@ -24,71 +22,15 @@ namespace {
 // The blobs as nodes arrive, before finish() lays them out in hierarchy order.
 constexpr char kUnorderedBlocks[] = "blocks.unordered";
 
-Status writeFileSynced(const fs::path& path, const void* data, size_t size) {
-    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (fd < 0) return Status::error(path.string() + ": cannot create (" + std::strerror(errno) + ")");
-    const char* p = static_cast<const char*>(data);
-    while (size > 0) {
-        ssize_t w = ::write(fd, p, size);
-        if (w < 0) {
-            if (errno == EINTR) continue;
-            ::close(fd);
-            return Status::error(path.string() + ": write failed (" + std::strerror(errno) + ")");
-        }
-        p += w;
-        size -= size_t(w);
-    }
-    bool ok = ::fsync(fd) == 0;
-    ok = ::close(fd) == 0 && ok;
-    if (!ok) return Status::error(path.string() + ": could not be flushed to disk");
-    return {};
-}
-
-// Removes the hidden folders that writers into `out` left when they were
-// killed (".NAME.partial-PID", ".NAME.partial-PID-work" and
-// ".NAME.old-PID" of a process that no longer runs). An old set that the non-exchanging fallback had moved aside
-// goes back into place if nothing took its place.
-void removeLeftovers(const fs::path& out) {
-    const std::string name = out.filename().string();
-    std::error_code ec;
-    std::vector<std::pair<fs::path, bool>> stale;  // path, is an old set
-    for (const auto& entry : fs::directory_iterator(out.parent_path(), ec))
-        for (const char* kind : {".partial-", ".old-"}) {
-            const std::string prefix = "." + name + kind, file = entry.path().filename().string();
-            if (file.rfind(prefix, 0) != 0) continue;
-            char* end = nullptr;
-            const long pid = std::strtol(file.c_str() + prefix.size(), &end, 10);
-            // ".NAME.partial-PID" and what the process keeps beside it (the
-            // build's ".NAME.partial-PID-work").
-            if ((*end != '\0' && *end != '-') || pid <= 0 || pid == ::getpid()) continue;
-            if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // still running (or not ours to judge)
-            stale.push_back({entry.path(), kind[1] == 'o' && *end == '\0'});
-        }
-    for (const auto& [path, old] : stale) {
-        if (old && !fs::exists(out, ec) && fs::exists(path / "tileset.json", ec)) {
-            fs::rename(path, out, ec);
-            if (!ec) continue;
-        }
-        fs::remove_all(path, ec);
-    }
-}
-
 }  // namespace
 
 Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& output) {
-    fs::path out = fs::absolute(output).lexically_normal();
-    if (out.filename().empty()) out = out.parent_path();
-    std::error_code ec;
-    if (fs::is_directory(out.parent_path(), ec)) removeLeftovers(out);
-    if (fs::exists(out, ec) && !(fs::is_directory(out) && (fs::is_empty(out) || fs::exists(out / "tileset.json"))))
-        return Status::error(out.string() + ": exists and is not a tile set; refusing to replace it");
-    fs::create_directories(out.parent_path(), ec);
+    auto folder = PublishedFolder::create(output, "tileset.json",
+                                          [](const std::string& out) { return fs::exists(fs::path(out) / "tileset.json"); }, "a tile set");
+    if (!folder) return folder.status();
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
-    w->output_ = out.string();
-    w->partial_ = (out.parent_path() / ("." + out.filename().string() + ".partial-" + std::to_string(::getpid()))).string();
-    fs::remove_all(w->partial_, ec);
-    if (!fs::create_directory(w->partial_, ec))
-        return Status::error(w->partial_ + ": cannot create (" + ec.message() + ")");
+    w->folder_ = std::move(*folder);
+    w->partial_ = w->folder_->path();
     w->blocks_ = std::fopen((w->partial_ + "/" + kUnorderedBlocks).c_str(), "w+b");
     if (!w->blocks_) return Status::error(w->partial_ + "/" + kUnorderedBlocks + ": cannot create");
     return w;
@@ -96,10 +38,6 @@ Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& 
 
 TilesetWriter::~TilesetWriter() {
     if (blocks_) std::fclose(blocks_);
-    if (!finished_) {
-        std::error_code ec;
-        fs::remove_all(partial_, ec);
-    }
 }
 
 Status TilesetWriter::addNode(NodeRecord record, const std::vector<uint8_t>& blob) {
@@ -203,33 +141,10 @@ Status TilesetWriter::finish(TilesetInfo& info) {
     info.hierarchyCrc = crc32(hierarchy.data(), hierarchy.size());
     info.hierarchyPages = le::get<uint32_t>(hierarchy.data() + 12);  // page count, header byte 12
     info.blocksBytes = blocksBytes_;
-    SC_TRY(writeFileSynced(fs::path(partial_) / "hierarchy.bin", hierarchy.data(), hierarchy.size()));
+    SC_TRY(writeFileSynced(partial_ + "/hierarchy.bin", hierarchy.data(), hierarchy.size()));
     std::string json = writeTilesetJson(info);
-    SC_TRY(writeFileSynced(fs::path(partial_) / "tileset.json", json.data(), json.size()));
-
-    // Exchange the folders in one step where the file system can; else move
-    // the old set (if any) aside and the new one in.
-    if (::renameat2(AT_FDCWD, partial_.c_str(), AT_FDCWD, output_.c_str(), RENAME_EXCHANGE) == 0) {
-        finished_ = true;
-        // Now the old set: it stops reading as one first, then goes.
-        fs::remove(fs::path(partial_) / "tileset.json", ec);
-        fs::remove_all(partial_, ec);
-        return {};
-    }
-    fs::path old = fs::path(partial_).parent_path() / ("." + fs::path(output_).filename().string() + ".old-" + std::to_string(::getpid()));
-    bool hadOld = fs::exists(output_, ec);
-    if (hadOld) {
-        fs::rename(output_, old, ec);
-        if (ec) return Status::error(output_ + ": cannot move the previous tile set aside (" + ec.message() + ")");
-    }
-    fs::rename(partial_, output_, ec);
-    if (ec) {
-        if (hadOld) fs::rename(old, output_, ec);
-        return Status::error(output_ + ": cannot move the new tile set into place");
-    }
-    finished_ = true;
-    if (hadOld) fs::remove_all(old, ec);
-    return {};
+    SC_TRY(writeFileSynced(partial_ + "/tileset.json", json.data(), json.size()));
+    return folder_->publish();
 }
 
 }  // namespace surfcast

@@ -1,14 +1,8 @@
-// Writes a tile set atomically: everything goes into a hidden folder beside the
-// output (".NAME.partial-PID"), tileset.json last, and the folder is renamed
-// into place at the end. An existing set at the output is exchanged with the
-// new one in one step (renameat2 RENAME_EXCHANGE), so that at no moment does
-// no set exist there; where the file system cannot exchange, the old set is
-// moved aside (".NAME.old-PID") and the new one moved in. A writer killed at
-// any moment leaves the output holding the old set or the new one, whole, or
-// (in the fallback's one gap, or a first build) no set; and hidden folders
-// beside it, which the next writer into the same output removes (an old set
-// moved aside goes back if the output is empty). The kill-anywhere test in
-// bad_input_test checks this at 20 random moments.
+// Writes a tile set atomically (folder_publish.h): everything goes into a
+// hidden folder beside the output, tileset.json last, and the folder is
+// swapped into place at the end, so a reader finds the old set or the new
+// one, whole. The kill-anywhere test in bad_input_test checks this at 20
+// random moments.
 //
 // Blocks are laid out in hierarchy order (hierarchyOrder), whatever order the
 // nodes arrive in or the files their blobs come from: the same nodes give the
@@ -21,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "folder_publish.h"
 #include "tileset_format.h"
 
 namespace surfcast {
@@ -49,7 +44,8 @@ public:
 
 private:
     TilesetWriter() = default;
-    std::string output_, partial_;
+    std::unique_ptr<PublishedFolder> folder_;
+    std::string partial_;           // folder_'s path
     std::FILE* blocks_ = nullptr;   // addNode's blobs in arrival order (blocks.unordered)
     uint64_t blocksBytes_ = 0;      // every node's blob
     uint64_t ownBytes_ = 0;         // those in blocks_
@@ -58,7 +54,6 @@ private:
     std::vector<std::string> placed_;    // files of addPlacedNodes
     static constexpr uint32_t kOwnBlocks = ~0u;
     std::mutex mutex_;
-    bool finished_ = false;
 };
 
 }  // namespace surfcast
