@@ -2,6 +2,7 @@
 // arguments and writes the file atomically; the export is laz_export.h's.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -11,10 +12,12 @@
 #include "camera.h"
 #include "http_tile_source.h"
 #include "laz_export.h"
+#include "tiles3d_export.h"
 
 namespace {
 
 const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
+       surfcast-export SET --format 3dtiles -o FOLDER
 
 Writes a tile set's points as another format. SET is a set's folder or its
 http(s) URL.
@@ -29,12 +32,18 @@ http(s) URL.
                         node above the leaves an even sample of what lies under
                         it, the hierarchy in an EVLR), which COPC readers query
                         by box and level
+  --format 3dtiles      a 3D Tiles 1.1 tileset for CesiumJS and other 3D Tiles
+                        engines: tileset.json and one glb per node (REPLACE
+                        refinement, the node's spacing as its geometric error),
+                        every surfel a glTF point with its normal, colour and
+                        LiDAR attributes (EXT_structural_metadata); the whole
+                        set, into a folder (docs/EXPORT.md)
   --bbox X0,Y0,Z0,X1,Y1,Z1
                         only the points inside this box (world coordinates,
                         bounds included)
   --classes LIST        only these ASPRS classes, e.g. 2,6 (the set must store
                         classification)
-  -o, --output FILE     the file to write (replaced atomically)
+  -o, --output FILE     the file (or 3dtiles' folder) to write, replaced atomically
   --header 'NAME: VALUE', --token-file F, --ca-file F, --insecure,
   --redirect-credentials
                         how to reach a set at a URL, as in surfcast-view
@@ -93,14 +102,36 @@ int main(int argc, char** argv) {
         }
     }
     if (set.empty()) return usageError("no set given");
-    if (format.empty()) return usageError("--format is required (laz or copc)");
-    if (format != "laz" && format != "copc") return usageError("--format " + format + ": the formats are laz and copc");
+    if (format.empty()) return usageError("--format is required (laz, copc or 3dtiles)");
+    if (format != "laz" && format != "copc" && format != "3dtiles")
+        return usageError("--format " + format + ": the formats are laz, copc and 3dtiles");
+    if (format == "3dtiles" && (filter.box || !filter.classes.empty()))
+        return usageError("--format 3dtiles exports the whole set (--bbox and --classes are for laz and copc)");
     if (output.empty()) return usageError("-o FILE is required");
 
     auto reader = openTileset(set, http);
     if (!reader) {
         std::fprintf(stderr, "surfcast-export: %s\n", reader.status().message().c_str());
         return 1;
+    }
+    if (format == "3dtiles") {
+        Tiles3dOptions options;
+        if (!quiet)
+            options.progress = [last = size_t(0)](size_t done, size_t all) mutable {
+                if (done != all && done - last < std::max<size_t>(1, all / 20)) return;
+                last = done;
+                std::fprintf(stderr, "  %zu of %zu tiles\n", done, all);
+            };
+        auto report = writeTiles3d(*reader, options, output);
+        if (!report) {
+            std::fprintf(stderr, "surfcast-export: %s\n", report.status().message().c_str());
+            return 1;
+        }
+        if (!quiet)
+            std::fprintf(stderr, "wrote %s: %zu tiles, %llu points, %llu bytes (%.2f per point)\n", output.c_str(), report->tiles,
+                         (unsigned long long)report->points, (unsigned long long)report->bytes,
+                         report->points ? double(report->bytes) / double(report->points) : 0.0);
+        return 0;
     }
     Result<LazExportPlan> plan = LazExportPlan{};
     if (format == "laz") {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "las_reader.h"
 #include "test_support.h"
@@ -199,7 +200,8 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "laz", "--bbox", "0,0,0,1,x,1", "-o", out}, 2, "'x' is not a number"},
         {{dir_->file("autzen"), "--format", "laz", "--bbox", "5,0,0,1,1,1", "-o", out}, 2, "minimum exceeds its maximum on axis x"},
         {{dir_->file("autzen"), "--format", "laz", "--classes", "2,300", "-o", out}, 2, "'300' is not a class"},
-        {{dir_->file("autzen"), "--format", "ply", "-o", out}, 2, "--format ply: the formats are laz and copc"},
+        {{dir_->file("autzen"), "--format", "ply", "-o", out}, 2, "--format ply: the formats are laz, copc and 3dtiles"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--classes", "2", "-o", out}, 2, "exports the whole set"},
         {{dir_->file("autzen"), "--format", "laz"}, 2, "-o FILE is required"},
         {{dir_->file("nothing"), "--format", "laz", "-o", out}, 1, dir_->file("nothing")},
     };
@@ -218,6 +220,46 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.output.find("stores no classification"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(out));
+    for (const auto& entry : fs::directory_iterator(dir_->path()))
+        EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
+}
+
+// --format 3dtiles (its consumers check what it writes: web/test/tiles3d.test.mjs):
+// a damaged block is an error naming its node, and the output folder is the
+// one before, never a part; nothing but a previous export is replaced.
+TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
+    const std::string good = dir_->file("autzen3d");
+    auto r = test::run({test::binary("surfcast-export"), dir_->file("autzen"), "--format", "3dtiles", "-q", "-o", good});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::string before = test::readFile(good + "/tileset.json");
+    ASSERT_NE(before.find("\"REPLACE\""), std::string::npos);
+
+    // The set with one byte flipped in the middle of one node's block.
+    const std::string damaged = dir_->file("damaged");
+    fs::copy(dir_->file("autzen"), damaged, fs::copy_options::recursive);
+    auto set = TilesetReader::open(damaged);
+    ASSERT_TRUE(set.ok()) << set.status().message();
+    const NodeRecord& victim = set->nodes().back();
+    {
+        std::fstream f(damaged + "/blocks.bin", std::ios::in | std::ios::out | std::ios::binary);
+        f.seekg(std::streamoff(victim.blockOffset + victim.blockSize / 2));
+        const char byte = char(f.get() ^ 0x5A);
+        f.seekp(std::streamoff(victim.blockOffset + victim.blockSize / 2));
+        f.put(byte);
+    }
+    for (const std::string& out : {dir_->file("damaged3d"), good}) {
+        r = test::run({test::binary("surfcast-export"), damaged, "--format", "3dtiles", "-q", "-o", out});
+        EXPECT_EQ(r.exitCode, 1) << r.output;
+        EXPECT_NE(r.output.find("node " + victim.key.name()), std::string::npos) << r.output;
+    }
+    EXPECT_FALSE(fs::exists(dir_->file("damaged3d")));
+    EXPECT_EQ(test::readFile(good + "/tileset.json"), before) << "the previous export stays whole";
+
+    // A Surfcast set (it has a tileset.json too) is not an export to replace.
+    r = test::run({test::binary("surfcast-export"), damaged, "--format", "3dtiles", "-q", "-o", dir_->file("autzen")});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("is not a 3D Tiles export"), std::string::npos) << r.output;
+    EXPECT_TRUE(TilesetReader::open(dir_->file("autzen")).ok());
     for (const auto& entry : fs::directory_iterator(dir_->path()))
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
 }

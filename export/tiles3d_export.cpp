@@ -1,0 +1,265 @@
+#include "tiles3d_export.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <unordered_map>
+
+#include <nlohmann/json.hpp>
+
+#include "byte_io.h"
+#include "folder_publish.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace surfcast {
+
+namespace {
+
+constexpr uint32_t kGlbMagic = 0x46546C67;  // "glTF"
+constexpr uint32_t kChunkJson = 0x4E4F534A, kChunkBin = 0x004E4942;
+constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedByte = 5121;
+constexpr int kArrayBuffer = 34962, kPoints = 0;
+
+double srgbToLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
+
+// The set's z-up coordinates as glTF's y-up ones (3D Tiles turns them back at load).
+Vec3d toYUp(const Vec3d& v) { return {v.x, v.z, -v.y}; }
+
+// A glb under construction: accessors over one binary buffer, one
+// buffer view each (interleaved where vertex alignment asks for it).
+class GlbBuilder {
+public:
+    // A buffer view of `bytes` (padded to 4) with the given stride; returns its index.
+    int view(const std::vector<uint8_t>& bytes, int stride) {
+        json v = {{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", bytes.size()}, {"target", kArrayBuffer}};
+        if (stride) v["byteStride"] = stride;
+        bin_.insert(bin_.end(), bytes.begin(), bytes.end());
+        bin_.resize((bin_.size() + 3) & ~size_t(3), 0);
+        views_.push_back(v);
+        return int(views_.size() - 1);
+    }
+    int accessor(int view, size_t offset, int componentType, bool normalized, const char* type, size_t count) {
+        json a = {{"bufferView", view}, {"byteOffset", offset}, {"componentType", componentType}, {"count", count}, {"type", type}};
+        if (normalized) a["normalized"] = true;
+        accessors_.push_back(a);
+        return int(accessors_.size() - 1);
+    }
+    json& lastAccessor() { return accessors_.back(); }
+
+    std::vector<uint8_t> finish(json gltf) const {
+        gltf["accessors"] = accessors_;
+        gltf["bufferViews"] = views_;
+        gltf["buffers"] = json::array({{{"byteLength", bin_.size()}}});
+        std::string text = gltf.dump();
+        text.resize((text.size() + 3) & ~size_t(3), ' ');
+        std::vector<uint8_t> out(12 + 8 + text.size() + 8 + bin_.size());
+        uint8_t* p = out.data();
+        le::put<uint32_t>(p, kGlbMagic), le::put<uint32_t>(p + 4, 2), le::put<uint32_t>(p + 8, uint32_t(out.size()));
+        le::put<uint32_t>(p + 12, uint32_t(text.size())), le::put<uint32_t>(p + 16, kChunkJson);
+        std::memcpy(p + 20, text.data(), text.size());
+        p += 20 + text.size();
+        le::put<uint32_t>(p, uint32_t(bin_.size())), le::put<uint32_t>(p + 4, kChunkBin);
+        if (!bin_.empty()) std::memcpy(p + 8, bin_.data(), bin_.size());
+        return out;
+    }
+
+private:
+    std::vector<uint8_t> bin_;
+    json views_ = json::array(), accessors_ = json::array();
+};
+
+template <typename T>
+void put(std::vector<uint8_t>& bytes, size_t at, T value) {
+    le::put<T>(bytes.data() + at, value);
+}
+
+// One node's glb: its surfels as points about `centre` (world).
+Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord& node, const BlockData& b, const Vec3d& centre,
+                                     const Vec3d& origin) {
+    const TilesetInfo& info = set.info();
+    const size_t n = b.size();
+    GlbBuilder glb;
+    json attributes;
+
+    std::vector<uint8_t> positions(12 * n);
+    Vec3d lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (size_t i = 0; i < n; ++i) {
+        const Vec3d p = toYUp(set.position(node, b, i) - centre);
+        for (int a = 0; a < 3; ++a) {
+            const float f = float(p[a]);
+            put<float>(positions, 12 * i + 4 * size_t(a), f);
+            lo[a] = std::min(lo[a], double(f));
+            hi[a] = std::max(hi[a], double(f));
+        }
+    }
+    attributes["POSITION"] = glb.accessor(glb.view(positions, 0), 0, kFloat, false, "VEC3", n);
+    glb.lastAccessor()["min"] = {lo.x, lo.y, lo.z};
+    glb.lastAccessor()["max"] = {hi.x, hi.y, hi.z};
+
+    if (b.normals.size() == 3 * n) {
+        std::vector<uint8_t> normals(12 * n);
+        for (size_t i = 0; i < n; ++i) {
+            const Vec3d v = toYUp(normalizeOrZero(Vec3d{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]}));
+            for (int a = 0; a < 3; ++a) put<float>(normals, 12 * i + 4 * size_t(a), float(v[a]));
+        }
+        attributes["NORMAL"] = glb.accessor(glb.view(normals, 0), 0, kFloat, false, "VEC3", n);
+    }
+    if (info.colorBits > 0 || !b.opacity.empty()) {
+        // Linear RGB (glTF's COLOR_0) from the set's sRGB, and the opacity.
+        const double top = info.colorBits > 0 ? double((1u << info.colorBits) - 1) : 1.0;
+        std::vector<uint8_t> colors(8 * n);
+        for (size_t i = 0; i < n; ++i) {
+            for (int c = 0; c < 3; ++c) {
+                const double srgb = info.colorBits > 0 ? b.colors[3 * i + size_t(c)] / top : 1.0;
+                put<uint16_t>(colors, 8 * i + 2 * size_t(c), uint16_t(std::lround(srgbToLinear(srgb) * 65535.0)));
+            }
+            put<uint16_t>(colors, 8 * i + 6, uint16_t(b.opacity.empty() ? 65535 : b.opacity[i] * 257));
+        }
+        attributes["COLOR_0"] = glb.accessor(glb.view(colors, 0), 0, kUnsignedShort, true, "VEC4", n);
+    }
+
+    // LiDAR attributes, each in 4-byte slots: glTF aligns every vertex
+    // attribute's elements to 4 bytes (compression would take the padding out).
+    struct Lidar {
+        const char *property, *attribute;
+        int componentType;
+        std::function<uint32_t(size_t)> value;
+    };
+    std::vector<Lidar> lidar;
+    if (!b.intensity.empty()) lidar.push_back({"intensity", "_INTENSITY", kUnsignedShort, [&](size_t i) { return b.intensity[i]; }});
+    if (!b.classification.empty())
+        lidar.push_back({"classification", "_CLASSIFICATION", kUnsignedByte, [&](size_t i) { return b.classification[i]; }});
+    if (!b.returnNumber.empty())
+        lidar.push_back({"return_number", "_RETURN_NUMBER", kUnsignedByte, [&](size_t i) { return b.returnNumber[i]; }});
+    if (!b.numberOfReturns.empty())
+        lidar.push_back({"number_of_returns", "_NUMBER_OF_RETURNS", kUnsignedByte, [&](size_t i) { return b.numberOfReturns[i]; }});
+    json gltf;
+    json primitive = {{"mode", kPoints}, {"material", 0}};
+    std::vector<std::string> used = {"KHR_materials_unlit"};
+    if (!lidar.empty()) {
+        json properties, schema;
+        for (const Lidar& l : lidar) {
+            std::vector<uint8_t> bytes(4 * n, 0);
+            for (size_t i = 0; i < n; ++i) {
+                if (l.componentType == kUnsignedShort) put<uint16_t>(bytes, 4 * i, uint16_t(l.value(i)));
+                else bytes[4 * i] = uint8_t(l.value(i));
+            }
+            attributes[l.attribute] = glb.accessor(glb.view(bytes, 4), 0, l.componentType, false, "SCALAR", n);
+            properties[l.property] = {{"attribute", l.attribute}};
+            schema[l.property] = {{"type", "SCALAR"}, {"componentType", l.componentType == kUnsignedShort ? "UINT16" : "UINT8"}};
+        }
+        gltf["extensions"]["EXT_structural_metadata"] = {
+            {"schema", {{"id", "surfcast"}, {"classes", {{"surfel", {{"properties", schema}}}}}}},
+            {"propertyAttributes", json::array({{{"class", "surfel"}, {"properties", properties}}})}};
+        primitive["extensions"]["EXT_structural_metadata"] = {{"propertyAttributes", {0}}};
+        used.push_back("EXT_structural_metadata");
+    }
+    primitive["attributes"] = attributes;
+
+    const Vec3d t = toYUp(centre - origin);
+    gltf["asset"] = {{"version", "2.0"}, {"generator", "surfcast-export 0.1.0"}};
+    gltf["extensionsUsed"] = used;
+    gltf["scene"] = 0;
+    gltf["scenes"] = json::array({{{"nodes", {0}}}});
+    gltf["nodes"] = json::array({{{"mesh", 0}, {"translation", {t.x, t.y, t.z}}, {"name", node.key.name()}}});
+    gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
+    gltf["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}}},
+                                      {"extensions", {{"KHR_materials_unlit", json::object()}}}}});
+    return glb.finish(gltf);
+}
+
+}  // namespace
+
+Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOptions& options, const std::string& output) {
+    const TilesetInfo& info = set.info();
+    const std::vector<NodeRecord>& nodes = set.nodes();
+    if (nodes.empty()) return Status::error(set.describe() + ": the set holds no nodes");
+    // Never over a Surfcast set (which has a tileset.json too): only over a previous export.
+    auto folder = PublishedFolder::create(
+        output, "tileset.json",
+        [](const std::string& out) { return fs::exists(fs::path(out) / "tileset.json") && !fs::exists(fs::path(out) / "hierarchy.bin"); },
+        "a 3D Tiles export");
+    if (!folder) return folder.status();
+
+    std::unordered_map<NodeKey, size_t, NodeKeyHash> index;
+    for (size_t i = 0; i < nodes.size(); ++i) index[nodes[i].key] = i;
+    const Vec3d origin = (info.bounds.min + info.bounds.max) * 0.5;
+
+    // Each node's box (world): its cube cut to the bounds, grown by its
+    // position step and its descendants' (children come after their parents
+    // in the hierarchy's order, so a reverse walk sees them first).
+    std::vector<Box3d> boxes(nodes.size());
+    std::vector<double> grow(nodes.size(), 0.0);
+    std::vector<size_t> byLevel(nodes.size());
+    for (size_t i = 0; i < nodes.size(); ++i) byLevel[i] = i;
+    std::stable_sort(byLevel.begin(), byLevel.end(), [&](size_t a, size_t b) { return nodes[a].key.level > nodes[b].key.level; });
+    for (size_t i : byLevel) {
+        const NodeRecord& n = nodes[i];
+        const double edge = nodeEdge(info, n.key.level);
+        grow[i] = std::max(grow[i], edge / double((uint64_t(1) << n.positionBits) - 1));
+        if (n.key.level > 0) {
+            auto parent = index.find(NodeKey{uint8_t(n.key.level - 1), n.key.x / 2, n.key.y / 2, n.key.z / 2});
+            if (parent != index.end()) grow[parent->second] = std::max(grow[parent->second], grow[i]);
+        }
+        const Vec3d lo = nodeMin(info, n.key);
+        for (int a = 0; a < 3; ++a) {
+            boxes[i].min[a] = std::max(lo[a], info.bounds.min[a]) - grow[i];
+            boxes[i].max[a] = std::min(lo[a] + edge, info.bounds.max[a]) + grow[i];
+        }
+    }
+
+    Tiles3dReport report;
+    fs::create_directories(fs::path((*folder)->path()) / "tiles");
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        const NodeRecord& n = nodes[i];
+        if (n.surfelCount > 0) {
+            auto block = set.readBlock(n);
+            if (!block) return block.status();
+            const Vec3d centre = (boxes[i].min + boxes[i].max) * 0.5;
+            auto glb = nodeGlb(set, n, *block, centre, origin);
+            if (!glb) return Status::error(set.describe() + ": node " + n.key.name() + ": " + glb.status().message());
+            SC_TRY(writeFileSynced((*folder)->path() + "/tiles/" + n.key.name() + ".glb", glb->data(), glb->size()));
+            report.points += n.surfelCount;
+            report.bytes += glb->size();
+        }
+        ++report.tiles;
+        if (options.progress) options.progress(i + 1, nodes.size());
+    }
+
+    // tileset.json: the tree, in the root's frame (the set's, less `origin`).
+    const auto tile = [&](auto& self, size_t i) -> json {
+        const NodeRecord& n = nodes[i];
+        const Vec3d c = (boxes[i].min + boxes[i].max) * 0.5 - origin, h = (boxes[i].max - boxes[i].min) * 0.5;
+        json t = {{"boundingVolume", {{"box", {c.x, c.y, c.z, h.x, 0, 0, 0, h.y, 0, 0, 0, h.z}}}},
+                  {"geometricError", n.childMask ? double(n.spacing) : 0.0}};
+        if (n.surfelCount > 0) t["content"] = {{"uri", "tiles/" + n.key.name() + ".glb"}};
+        json children = json::array();
+        for (int c = 0; c < 8; ++c)
+            if (n.childMask & (1u << c)) {
+                auto child = index.find(n.key.child(c));
+                if (child == index.end()) return json();  // readHierarchy guarantees children exist
+                children.push_back(self(self, child->second));
+            }
+        if (!children.empty()) t["children"] = children;
+        return t;
+    };
+    auto root = index.find(NodeKey{});
+    if (root == index.end()) return Status::error(set.describe() + ": the set has no root node");
+    json r = tile(tile, root->second);
+    r["refine"] = "REPLACE";
+    r["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin.x, origin.y, origin.z, 1};
+    const double rootError = nodes[root->second].childMask ? 2.0 * nodes[root->second].spacing : nodes[root->second].spacing;
+    json tileset = {{"asset", {{"version", "1.1"}, {"generator", "surfcast-export 0.1.0"}}},
+                    {"geometricError", std::max(rootError, 0.0)},
+                    {"root", r}};
+    const std::string text = tileset.dump(1);
+    SC_TRY(writeFileSynced((*folder)->path() + "/tileset.json", text.data(), text.size()));
+    report.bytes += text.size();
+    SC_TRY((*folder)->publish());
+    return report;
+}
+
+}  // namespace surfcast

@@ -1,0 +1,49 @@
+// A tile set as a 3D Tiles 1.1 tileset (docs/EXPORT.md): tileset.json and
+// one glb per node, so that CesiumJS and the other 3D Tiles engines stream
+// the same level-of-detail tree Surfcast's clients do.
+//
+// - The octree maps to REPLACE refinement, one tile per node; a tile's
+//   geometricError is its node's spacing h (the distance between its
+//   samples: the error of drawing it instead of its children), 0 at leaves.
+// - Bounding volumes are boxes: the node's cube cut to the set's bounds,
+//   grown by its position step and its descendants' (a quantized position
+//   may round past the bounds), so every child lies inside its parent.
+// - Positions keep double precision where it matters: the root's transform
+//   carries the set's centre, each glb's node its tile's centre, and the
+//   floats in the glb are offsets from that. glTF is y-up; 3D Tiles turns
+//   it z-up (the set's own up) at load.
+// - Each surfel is a glTF point with NORMAL and COLOR_0 (linear, as glTF
+//   defines it, 16 bits a channel, alpha its opacity), unlit.
+// - Classification, intensity and return numbers, where the set has them,
+//   as EXT_structural_metadata property attributes (class "surfel").
+//
+// Blocks are decoded one node at a time: memory holds one node, whatever
+// the set's size. The folder is written beside the output and swapped in
+// whole (folder_publish.h).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "tileset_reader.h"
+
+namespace surfcast {
+
+struct Tiles3dOptions {
+    // Told after each node: nodes written so far, of all.
+    std::function<void(size_t, size_t)> progress;
+};
+
+struct Tiles3dReport {
+    size_t tiles = 0;
+    uint64_t points = 0;    // surfels written, over all tiles
+    uint64_t bytes = 0;     // glb and tileset.json bytes
+};
+
+// Writes `set` as a 3D Tiles tileset into the folder `output` (replacing a
+// previous export there; refusing any other existing folder). Errors name
+// the node whose block fails.
+Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOptions& options, const std::string& output);
+
+}  // namespace surfcast
