@@ -234,7 +234,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
         const NodeRecord& n = nodes[i];
         const Vec3d c = (boxes[i].min + boxes[i].max) * 0.5 - origin, h = (boxes[i].max - boxes[i].min) * 0.5;
         json t = {{"boundingVolume", {{"box", {c.x, c.y, c.z, h.x, 0, 0, 0, h.y, 0, 0, 0, h.z}}}},
-                  {"geometricError", n.childMask ? double(n.spacing) : 0.0}};
+                  {"geometricError", double(n.spacing)}};
         if (n.surfelCount > 0) t["content"] = {{"uri", "tiles/" + n.key.name() + ".glb"}};
         json children = json::array();
         for (int c = 0; c < 8; ++c)

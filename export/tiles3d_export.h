@@ -4,7 +4,8 @@
 //
 // - The octree maps to REPLACE refinement, one tile per node; a tile's
 //   geometricError is its node's spacing h (the distance between its
-//   samples: the error of drawing it instead of its children), 0 at leaves.
+//   samples: the error of drawing it instead of its children), leaves too
+//   (their samples' error against the surface: engines size points by it).
 // - Bounding volumes are boxes: the node's cube cut to the set's bounds,
 //   grown by its position step and its descendants' (a quantized position
 //   may round past the bounds), so every child lies inside its parent.
