@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -17,7 +19,7 @@
 namespace {
 
 const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
-       surfcast-export SET --format 3dtiles -o FOLDER
+       surfcast-export SET --format 3dtiles [--as splats|points] -o FOLDER
 
 Writes a tile set's points as another format. SET is a set's folder or its
 http(s) URL.
@@ -34,10 +36,16 @@ http(s) URL.
                         by box and level
   --format 3dtiles      a 3D Tiles 1.1 tileset for CesiumJS and other 3D Tiles
                         engines: tileset.json and one glb per node (REPLACE
-                        refinement, the node's spacing as its geometric error),
-                        every surfel a glTF point with its normal, colour and
-                        LiDAR attributes (EXT_structural_metadata); the whole
-                        set, into a folder (docs/EXPORT.md)
+                        refinement, the node's spacing as its geometric error);
+                        the whole set, into a folder (docs/EXPORT.md)
+  --as splats|points    3dtiles: each surfel a flat Gaussian (default;
+                        KHR_gaussian_splatting in SPZ, as CesiumJS reads
+                        splats in 3D Tiles), or a glTF point with its LiDAR
+                        attributes, which every 3D Tiles engine draws
+  --splat-scale S       splats: standard deviation S times the set's kernel
+                        scale times the surfel's radius (default 1: Surfcast's
+                        own reconstruction kernel)
+  --splat-opacity A     splats: opacity A times the surfel's own (default 1)
   --bbox X0,Y0,Z0,X1,Y1,Z1
                         only the points inside this box (world coordinates,
                         bounds included)
@@ -64,6 +72,8 @@ int main(int argc, char** argv) {
     PointFilter filter;
     HttpOptions http;
     bool quiet = false;
+    Tiles3dOptions tiles;
+    bool tilesOption = false;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         auto value = [&](std::string* out) {
@@ -77,6 +87,18 @@ int main(int argc, char** argv) {
             return 0;
         } else if (a == "--format") {
             if (!value(&format)) return usageError("--format wants laz or copc");
+        } else if (a == "--as") {
+            if (!value(&v) || (v != "points" && v != "splats")) return usageError("--as wants points or splats");
+            tiles.as = v == "splats" ? Tiles3dOptions::As::Splats : Tiles3dOptions::As::Points;
+            tilesOption = true;
+        } else if (a == "--splat-scale" || a == "--splat-opacity") {
+            char* end = nullptr;
+            const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
+            const bool scale = a == "--splat-scale";
+            if (!(end && *end == '\0' && d > 0 && d <= (scale ? 100.0 : 1.0)))
+                return usageError(a + (scale ? " wants a number in (0, 100]" : " wants a number in (0, 1]"));
+            (scale ? tiles.gaussians.sigmaScale : tiles.gaussians.opacity) = d;
+            tilesOption = true;
         } else if (a == "-o" || a == "--output") {
             if (!value(&output)) return usageError("-o wants a file");
         } else if (a == "--bbox") {
@@ -107,6 +129,7 @@ int main(int argc, char** argv) {
         return usageError("--format " + format + ": the formats are laz, copc and 3dtiles");
     if (format == "3dtiles" && (filter.box || !filter.classes.empty()))
         return usageError("--format 3dtiles exports the whole set (--bbox and --classes are for laz and copc)");
+    if (format != "3dtiles" && tilesOption) return usageError("--as, --splat-scale and --splat-opacity are for --format 3dtiles");
     if (output.empty()) return usageError("-o FILE is required");
 
     auto reader = openTileset(set, http);
@@ -115,7 +138,7 @@ int main(int argc, char** argv) {
         return 1;
     }
     if (format == "3dtiles") {
-        Tiles3dOptions options;
+        Tiles3dOptions& options = tiles;
         if (!quiet)
             options.progress = [last = size_t(0)](size_t done, size_t all) mutable {
                 if (done != all && done - last < std::max<size_t>(1, all / 20)) return;

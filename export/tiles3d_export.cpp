@@ -47,6 +47,20 @@ public:
         accessors_.push_back(a);
         return int(accessors_.size() - 1);
     }
+    // A view of opaque bytes an extension decodes (no vertex target).
+    int blobView(const std::vector<uint8_t>& bytes) {
+        views_.push_back({{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", bytes.size()}});
+        bin_.insert(bin_.end(), bytes.begin(), bytes.end());
+        bin_.resize((bin_.size() + 3) & ~size_t(3), 0);
+        return int(views_.size() - 1);
+    }
+    // An accessor whose data an extension supplies (no buffer view).
+    int accessor(int componentType, bool normalized, const char* type, size_t count) {
+        json a = {{"componentType", componentType}, {"count", count}, {"type", type}};
+        if (normalized) a["normalized"] = true;
+        accessors_.push_back(a);
+        return int(accessors_.size() - 1);
+    }
     json& lastAccessor() { return accessors_.back(); }
 
     std::vector<uint8_t> finish(json gltf) const {
@@ -164,10 +178,68 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
     gltf["extensionsUsed"] = used;
     gltf["scene"] = 0;
     gltf["scenes"] = json::array({{{"nodes", {0}}}});
-    gltf["nodes"] = json::array({{{"mesh", 0}, {"translation", {t.x, t.y, t.z}}, {"name", node.key.name()}}});
+    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}}, {"name", node.key.name()}}});
     gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
     gltf["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}}},
                                       {"extensions", {{"KHR_materials_unlit", json::object()}}}}});
+    return glb.finish(gltf);
+}
+
+// The extensions a splat tile's glb uses and requires (the SPZ one: its
+// accessors have no data of their own).
+const std::vector<std::string> kSplatExtensions = {"KHR_gaussian_splatting", "KHR_gaussian_splatting_compression_spz_2"};
+
+// One node's glb as Gaussians about `centre` (world), in SPZ.
+Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord& node, const BlockData& b, const Vec3d& centre,
+                                      const Vec3d& origin, const GaussianOptions& options) {
+    const TilesetInfo& info = set.info();
+    const size_t n = b.size();
+    const double top = info.colorBits > 0 ? double((1u << info.colorBits) - 1) : 1.0;
+    Gaussians g;
+    Vec3d lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (size_t i = 0; i < n; ++i) {
+        const Vec3d p = toYUp(set.position(node, b, i) - centre);
+        const Vec3d normal = b.normals.size() == 3 * n ? Vec3d{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]} : Vec3d{0, 0, 1};
+        const double r = b.radii.empty() ? node.spacing : b.radii[i];
+        Vec3f color{1, 1, 1};
+        if (info.colorBits > 0)
+            for (int c = 0; c < 3; ++c) color[c] = float(b.colors[3 * i + size_t(c)] / top);
+        const double alpha = (b.opacity.empty() ? 1.0 : b.opacity[i] / 255.0) * options.opacity;
+        g.add(cast<float>(p), cast<float>(toYUp(normalizeOrZero(normal))), float(options.sigmaScale * info.kernelScale * r),
+              float(options.thickness), float(alpha), color);
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], double(g.positions.back()[a]));
+            hi[a] = std::max(hi[a], double(g.positions.back()[a]));
+        }
+    }
+    auto spz = writeSpz(g);
+    if (!spz) return spz.status();
+
+    GlbBuilder glb;
+    const int view = glb.blobView(*spz);
+    json attributes;
+    attributes["POSITION"] = glb.accessor(kFloat, false, "VEC3", n);
+    glb.lastAccessor()["min"] = {lo.x, lo.y, lo.z};
+    glb.lastAccessor()["max"] = {hi.x, hi.y, hi.z};
+    attributes["COLOR_0"] = glb.accessor(kUnsignedByte, true, "VEC4", n);
+    attributes["KHR_gaussian_splatting:SCALE"] = glb.accessor(kFloat, false, "VEC3", n);
+    attributes["KHR_gaussian_splatting:ROTATION"] = glb.accessor(kFloat, false, "VEC4", n);
+    json primitive = {{"mode", kPoints},
+                      {"attributes", attributes},
+                      {"extensions",
+                       {{"KHR_gaussian_splatting",
+                         {{"kernel", "ellipse"},
+                          {"colorSpace", "srgb_rec709_display"},
+                          {"extensions", {{"KHR_gaussian_splatting_compression_spz_2", {{"bufferView", view}}}}}}}}}};
+    const Vec3d t = toYUp(centre - origin);
+    json gltf;
+    gltf["asset"] = {{"version", "2.0"}, {"generator", "surfcast-export 0.1.0"}};
+    gltf["extensionsUsed"] = kSplatExtensions;
+    gltf["extensionsRequired"] = kSplatExtensions;
+    gltf["scene"] = 0;
+    gltf["scenes"] = json::array({{{"nodes", {0}}}});
+    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}}, {"name", node.key.name()}}});
+    gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
     return glb.finish(gltf);
 }
 
@@ -219,7 +291,8 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
             auto block = set.readBlock(n);
             if (!block) return block.status();
             const Vec3d centre = (boxes[i].min + boxes[i].max) * 0.5;
-            auto glb = nodeGlb(set, n, *block, centre, origin);
+            auto glb = options.as == Tiles3dOptions::As::Splats ? splatGlb(set, n, *block, centre, origin, options.gaussians)
+                                                                 : nodeGlb(set, n, *block, centre, origin);
             if (!glb) return Status::error(set.describe() + ": node " + n.key.name() + ": " + glb.status().message());
             SC_TRY(writeFileSynced((*folder)->path() + "/tiles/" + n.key.name() + ".glb", glb->data(), glb->size()));
             report.points += n.surfelCount;
@@ -255,6 +328,12 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     json tileset = {{"asset", {{"version", "1.1"}, {"generator", "surfcast-export 0.1.0"}}},
                     {"geometricError", std::max(rootError, 0.0)},
                     {"root", r}};
+    if (options.as == Tiles3dOptions::As::Splats) {
+        // The glTF extensions the content needs, where engines look for them.
+        tileset["extensionsUsed"] = tileset["extensionsRequired"] = {"3DTILES_content_gltf"};
+        tileset["extensions"]["3DTILES_content_gltf"] = {{"extensionsUsed", kSplatExtensions},
+                                                         {"extensionsRequired", kSplatExtensions}};
+    }
     const std::string text = tileset.dump(1);
     SC_TRY(writeFileSynced((*folder)->path() + "/tileset.json", text.data(), text.size()));
     report.bytes += text.size();

@@ -13,10 +13,15 @@
 //   carries the set's centre, each glb's node its tile's centre, and the
 //   floats in the glb are offsets from that. glTF is y-up; 3D Tiles turns
 //   it z-up (the set's own up) at load.
-// - Each surfel is a glTF point with NORMAL and COLOR_0 (linear, as glTF
-//   defines it, 16 bits a channel, alpha its opacity), unlit.
-// - Classification, intensity and return numbers, where the set has them,
+// - Points: each surfel a glTF point with NORMAL and COLOR_0 (linear, as
+//   glTF defines it, 16 bits a channel, alpha its opacity), unlit; the
+//   classification, intensity and return numbers, where the set has them,
 //   as EXT_structural_metadata property attributes (class "surfel").
+// - Splats: each surfel a flat Gaussian (gaussians.h) in
+//   KHR_gaussian_splatting, compressed by SPZ
+//   (KHR_gaussian_splatting_compression_spz_2), which CesiumJS requires of
+//   3D Tiles splats; no LiDAR attributes (CesiumJS reads every attribute of
+//   an SPZ primitive from the SPZ).
 //
 // Blocks are decoded one node at a time: memory holds one node, whatever
 // the set's size. The folder is written beside the output and swapped in
@@ -27,11 +32,14 @@
 #include <functional>
 #include <string>
 
+#include "gaussians.h"
 #include "tileset_reader.h"
 
 namespace surfcast {
 
 struct Tiles3dOptions {
+    enum class As { Points, Splats } as = As::Splats;
+    GaussianOptions gaussians;  // splats
     // Told after each node: nodes written so far, of all.
     std::function<void(size_t, size_t)> progress;
 };
