@@ -287,6 +287,19 @@ describe("3D Tiles export", { skip }, () => {
     t.diagnostic(`${compared} splats compared`);
   });
 
+  // Covered pixels of a 640 x 480 image: brighter than the background by
+  // more than antialiasing's faintest edge; Cesium's credit (bottom left)
+  // is not the set's.
+  function coverage(img) {
+    const m = new Uint8Array(640 * 480);
+    for (let y = 0; y < 480; ++y)
+      for (let x = 0; x < 640; ++x) {
+        const i = y * 640 + x;
+        m[i] = !(y >= 440 && x < 160) && img.data[4 * i] + img.data[4 * i + 1] + img.data[4 * i + 2] > 30 ? 1 : 0;
+      }
+    return m;
+  }
+
   // CesiumJS's view of an export (a folder under work/) at the test's camera,
   // from nginx on loopback; also the problems the page reported.
   async function cesium(folder, params) {
@@ -310,16 +323,22 @@ describe("3D Tiles export", { skip }, () => {
     await page.goto(`${cesiumUrl}/cesium.html?tileset=sets/${folder}/tileset.json&camera=${camera}${params}`);
     await page.waitForFunction("window.cesiumState.loaded || window.cesiumState.errors.length > 0", { timeout: 120000 });
     const state = await page.evaluate(() => window.cesiumState);
-    // Tiles load before they are drawn (splats are sorted in a worker
-    // first, and redrawn as tiles join): the view is done when four frames
-    // half a second apart agree.
-    let png, last, same = 0;
-    for (let i = 0; i < 60 && same < 3; ++i) {
-      await new Promise((r) => setTimeout(r, 500));
+    // Tiles load before they are drawn, and splats are drawn sorted first
+    // from their snapshot, then sorted again while the camera rests: 30
+    // frames after the last tile loaded (about 20 s in SwiftShader) the view
+    // has settled in every run seen. Then it is done when two screenshots,
+    // two frames apart, cover the same pixels to 0.5 % of the view (blending
+    // order moves a few edge pixels between frames).
+    const loadedAt = await page.evaluate(() => window.cesiumState.frames);
+    let png, last = -1, wait = 30;
+    for (let i = 0; i < 20; ++i) {
+      const frames = await page.evaluate(() => window.cesiumState.frames);
+      await page.waitForFunction(`window.cesiumState.frames >= ${Math.max(frames + 2, loadedAt + wait)}`, { timeout: 120000 });
+      wait = 0;
       png = PNG.sync.read(await page.screenshot({ type: "png" }));
-      const now = Buffer.from(png.data);
-      same = last && now.equals(last) ? same + 1 : 0;
-      last = now;
+      const covered = coverage(png).reduce((a, b) => a + b, 0);
+      if (covered > 0 && Math.abs(covered - last) <= 0.005 * 640 * 480) break;
+      last = covered;
     }
     await page.close();
     return { state, png, problems };
@@ -341,20 +360,9 @@ describe("3D Tiles export", { skip }, () => {
   // colours of both over the pixels off either's silhouette.
   function compare(png) {
     const want = surfcastView();
-    // Covered: brighter than the background by more than antialiasing's
-    // faintest edge; Cesium's credit (bottom left) is not the set's.
-    const mask = (img) => {
-      const m = new Uint8Array(640 * 480);
-      for (let y = 0; y < 480; ++y)
-        for (let x = 0; x < 640; ++x) {
-          const i = y * 640 + x;
-          m[i] = !(y >= 440 && x < 160) && img.data[4 * i] + img.data[4 * i + 1] + img.data[4 * i + 2] > 30 ? 1 : 0;
-        }
-      return m;
-    };
     // Pixels whose four neighbours are covered too: off the silhouette.
     const inner = (m) => m.map((v, i) => v && m[i - 1] && m[i + 1] && m[i - 640] && m[i + 640] ? 1 : 0);
-    const a = mask(png), b = mask(want), ai = inner(a), bi = inner(b);
+    const a = coverage(png), b = coverage(want), ai = inner(a), bi = inner(b);
     let both = 0, either = 0, n = 0;
     const sum = [[0, 0, 0], [0, 0, 0]];
     for (let i = 0; i < a.length; ++i) {
