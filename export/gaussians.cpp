@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <string>
 
 #include "byte_io.h"
 
@@ -15,9 +14,11 @@ namespace {
 constexpr uint32_t kSpzMagic = 0x5053474e;  // "NGSP"
 constexpr uint32_t kSpzVersion = 2;
 constexpr size_t kSpzMaxPoints = 10'000'000;  // what SPZ's reader accepts
-// SPZ's byte encodings (Niantic's load-spz.cc, version 2): colours as the DC
-// coefficient times 0.15 about 127.5, scales as 16 (ln s + 10).
+// SPZ's byte encodings (version 2): colours as the DC coefficient times 0.15
+// about 127.5, scales as 16 (ln s + 10), rotations' x, y, z about 127.5.
 constexpr double kSpzColorScale = 0.15;
+// The PLY's opacity is a logit: 1 has none, so opaque is this close to it.
+constexpr double kMostOpacity = 0.999;
 
 uint8_t toByte(double v) { return uint8_t(std::clamp(std::round(v), 0.0, 255.0)); }
 
@@ -32,49 +33,40 @@ std::array<float, 4> rotationToNormal(const Vec3f& n) {
     return {float(x / len), float(y / len), 0.f, float(w / len)};
 }
 
-void Gaussians::add(const Vec3f& position, const Vec3f& normal, float sigma, float thickness, float opacity, const Vec3f& color) {
-    positions.push_back(position);
-    scales.push_back({sigma, sigma, sigma * thickness});
-    rotations.push_back(rotationToNormal(normal));
-    opacities.push_back(opacity);
-    colors.push_back(color);
+SpzWriter::SpzWriter(double extent) {
+    while (fraction_ < 23 && std::ldexp(extent, fraction_ + 1) < double((1 << 23) - 1)) ++fraction_;
 }
 
-Result<std::vector<uint8_t>> writeSpz(const Gaussians& g) {
-    const size_t n = g.size();
-    if (n > kSpzMaxPoints) return Status::error("SPZ holds at most 10 million points, not " + std::to_string(n));
-    double largest = 0;
-    for (const Vec3f& p : g.positions) largest = std::max({largest, std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
-    // The most fraction bits that keep every coordinate within 24 signed bits.
-    int fraction = 0;
-    while (fraction < 23 && std::round(largest * double(1 << (fraction + 1))) <= double((1 << 23) - 1)) ++fraction;
-    if (std::round(largest * double(1 << fraction)) > double((1 << 23) - 1))
-        return Status::error("a position " + std::to_string(largest) + " from its tile's centre is beyond SPZ's 24-bit range");
+void SpzWriter::add(const Gaussian& g) {
+    for (int a = 0; a < 3; ++a) {
+        const double fixed = std::round(std::ldexp(double(g.position[a]), fraction_));
+        outside_ |= !(std::fabs(fixed) <= double((1 << 23) - 1));
+        const int32_t v = int32_t(std::clamp(fixed, -double(1 << 23), double((1 << 23) - 1)));
+        positions_.push_back(uint8_t(v & 0xff)), positions_.push_back(uint8_t((v >> 8) & 0xff));
+        positions_.push_back(uint8_t((v >> 16) & 0xff));
+    }
+    opacities_.push_back(toByte(g.opacity * 255.0));
+    for (int c = 0; c < 3; ++c) colors_.push_back(toByte((g.color[c] - 0.5) / kShY00 * kSpzColorScale * 255.0 + 127.5));
+    const double sigma = std::max(double(g.sigma), 1e-30);
+    for (double s : {sigma, sigma, sigma * g.thickness}) scales_.push_back(toByte((std::log(std::max(s, 1e-30)) + 10.0) * 16.0));
+    const auto q = rotationToNormal(g.normal);  // w >= 0, as SPZ 2 keeps it
+    for (int a = 0; a < 3; ++a) rotations_.push_back(toByte(q[size_t(a)] * 127.5 + 127.5));
+}
 
-    std::vector<uint8_t> raw(16 + n * (9 + 1 + 3 + 3 + 3));
+Result<std::vector<uint8_t>> SpzWriter::finish() const {
+    const size_t n = size();
+    if (n > kSpzMaxPoints) return Status::error("SPZ holds at most 10 million points, not " + std::to_string(n));
+    if (outside_) return Status::error("a position lies beyond the extent SPZ's fixed point was sized for");
+    std::vector<uint8_t> raw(16);
     le::put<uint32_t>(raw.data(), kSpzMagic);
     le::put<uint32_t>(raw.data() + 4, kSpzVersion);
     le::put<uint32_t>(raw.data() + 8, uint32_t(n));
     raw[12] = 0;  // spherical-harmonics degree
-    raw[13] = uint8_t(fraction);
+    raw[13] = uint8_t(fraction_);
     raw[14] = 0;  // flags: not antialiased, no extensions
     raw[15] = 0;
-    uint8_t* p = raw.data() + 16;
-    for (size_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) {
-            const int32_t fixed = int32_t(std::lround(double(g.positions[i][a]) * double(1 << fraction)));
-            *p++ = uint8_t(fixed & 0xff), *p++ = uint8_t((fixed >> 8) & 0xff), *p++ = uint8_t((fixed >> 16) & 0xff);
-        }
-    for (size_t i = 0; i < n; ++i) *p++ = toByte(g.opacities[i] * 255.0);
-    for (size_t i = 0; i < n; ++i)
-        for (int c = 0; c < 3; ++c) *p++ = toByte((g.colors[i][c] - 0.5) / kShY00 * kSpzColorScale * 255.0 + 127.5);
-    for (size_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) *p++ = toByte((std::log(std::max(g.scales[i][a], 1e-30f)) + 10.0) * 16.0);
-    for (size_t i = 0; i < n; ++i) {
-        const auto& q = g.rotations[i];
-        const double sign = q[3] < 0 ? -1.0 : 1.0;
-        for (int a = 0; a < 3; ++a) *p++ = toByte(sign * q[size_t(a)] * 127.5 + 127.5);
-    }
+    for (const auto* column : {&positions_, &opacities_, &colors_, &scales_, &rotations_})
+        raw.insert(raw.end(), column->begin(), column->end());
 
     // gzip (window bits 16 + 15), as SPZ readers inflate it.
     z_stream z = {};
@@ -90,6 +82,26 @@ Result<std::vector<uint8_t>> writeSpz(const Gaussians& g) {
     deflateEnd(&z);
     if (result != Z_STREAM_END) return Status::error("zlib: compressing failed");
     return out;
+}
+
+std::string plyHeader(uint64_t count, const std::string& comment) {
+    std::string h = "ply\nformat binary_little_endian 1.0\ncomment " + comment + "\nelement vertex " + std::to_string(count) + "\n";
+    for (const char* name : {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+                             "rot_0", "rot_1", "rot_2", "rot_3"})
+        h += std::string("property float ") + name + "\n";
+    return h + "end_header\n";
+}
+
+void plyRecord(const Gaussian& g, uint8_t out[kPlyRecordBytes]) {
+    const double alpha = std::clamp(double(g.opacity), 1 - kMostOpacity, kMostOpacity);
+    const double sigma = std::max(double(g.sigma), 1e-30);
+    const auto q = rotationToNormal(g.normal);
+    const float values[17] = {g.position.x, g.position.y, g.position.z, 0, 0, 0,
+                              float((g.color.x - 0.5) / kShY00), float((g.color.y - 0.5) / kShY00), float((g.color.z - 0.5) / kShY00),
+                              float(std::log(alpha / (1 - alpha))),
+                              float(std::log(sigma)), float(std::log(sigma)), float(std::log(std::max(sigma * g.thickness, 1e-30))),
+                              q[3], q[0], q[1], q[2]};
+    for (int i = 0; i < 17; ++i) le::put<float>(out + 4 * i, values[i]);
 }
 
 }  // namespace surfcast

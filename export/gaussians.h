@@ -1,11 +1,13 @@
 // Surfels as 3D Gaussians, for the splat formats (docs/EXPORT.md,
-// "Gaussians"): each surfel a flat Gaussian in its tangent plane, and SPZ,
-// Niantic's compressed container for them, which CesiumJS reads inside glTF
-// (KHR_gaussian_splatting_compression_spz_2) and splat viewers read alone.
+// "Gaussians"): each surfel a flat Gaussian in its tangent plane, written as
+// SPZ (Niantic's compressed splats, which CesiumJS reads inside glTF as
+// KHR_gaussian_splatting_compression_spz_2 and splat viewers read alone) or
+// as the 3D Gaussian splatting PLY.
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "status.h"
@@ -23,29 +25,49 @@ struct GaussianOptions {
     double opacity = 1.0;
 };
 
-// Gaussians in the caller's frame (positions relative to some origin).
-struct Gaussians {
-    std::vector<Vec3f> positions;
-    std::vector<Vec3f> scales;            // standard deviations along the local axes (linear, not log)
-    std::vector<std::array<float, 4>> rotations;  // unit quaternions x, y, z, w (w >= 0): local to the frame
-    std::vector<float> opacities;         // in [0, 1]
-    std::vector<Vec3f> colors;            // display sRGB in [0, 1]
-    size_t size() const { return positions.size(); }
-    void add(const Vec3f& position, const Vec3f& normal, float sigma, float thickness, float opacity, const Vec3f& color);
+// One Gaussian, in the file's frame.
+struct Gaussian {
+    Vec3f position;
+    Vec3f normal;   // unit: the local z axis
+    float sigma;    // in the tangent plane
+    float thickness;  // along the normal, as a fraction of sigma
+    float opacity;  // [0, 1]
+    Vec3f color;    // display sRGB, [0, 1]
 };
 
-// The rotation taking the local z axis to `normal` (unit), w >= 0.
+// The rotation taking the local z axis to `normal` (unit), as x, y, z, w with w >= 0.
 std::array<float, 4> rotationToNormal(const Vec3f& normal);
 
-// The zeroth spherical-harmonics coefficient that reproduces a display
-// colour c in [0, 1]: (c - 0.5) / Y00 (KHR_gaussian_splatting).
+// The zeroth spherical-harmonics basis value: a display colour c comes from
+// the coefficient (c - 0.5) / Y00 (KHR_gaussian_splatting).
 inline constexpr double kShY00 = 0.28209479177387814;
 
-// SPZ version 2 (gzip over a 16-byte header, then 24-bit fixed-point
-// positions, opacities, colours, log scales and rotations, each as bytes;
-// no higher spherical harmonics), stored as given: no change of axes.
-// The fixed point's fraction takes as many bits as the largest coordinate
-// leaves. Fails beyond SPZ's 10 million points.
-Result<std::vector<uint8_t>> writeSpz(const Gaussians& g);
+// SPZ version 2 (Niantic's load-spz.cc): gzip over a 16-byte header, then
+// 24-bit fixed-point positions, opacities, colours, log scales and
+// rotations, one column after another, as bytes; no higher spherical
+// harmonics. Coordinates are stored as given (SPZ's own axes are right, up,
+// back). Columns grow as Gaussians arrive: 19 bytes each.
+class SpzWriter {
+public:
+    // `extent`: the largest |coordinate| to come; the fixed point's fraction
+    // takes as many bits as it leaves of 24.
+    explicit SpzWriter(double extent);
+    void add(const Gaussian& g);
+    size_t size() const { return opacities_.size(); }
+    // Fails beyond SPZ's 10 million points, or for a coordinate past the extent.
+    Result<std::vector<uint8_t>> finish() const;
+
+private:
+    int fraction_ = 0;
+    bool outside_ = false;
+    std::vector<uint8_t> positions_, opacities_, colors_, scales_, rotations_;
+};
+
+// The 3D Gaussian splatting PLY (binary, little-endian, as the reference
+// implementation writes it): per Gaussian x, y, z, nx, ny, nz, f_dc_0..2,
+// opacity (logit), scale_0..2 (log), rot_0..3 (w, x, y, z), all float.
+inline constexpr size_t kPlyRecordBytes = 17 * 4;
+std::string plyHeader(uint64_t count, const std::string& comment);
+void plyRecord(const Gaussian& g, uint8_t out[kPlyRecordBytes]);
 
 }  // namespace surfcast

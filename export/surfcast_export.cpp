@@ -14,12 +14,14 @@
 #include "camera.h"
 #include "http_tile_source.h"
 #include "laz_export.h"
+#include "splat_export.h"
 #include "tiles3d_export.h"
 
 namespace {
 
 const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
        surfcast-export SET --format 3dtiles [--as splats|points] -o FOLDER
+       surfcast-export SET --format ply|spz [--level N|leaves | --splat-budget N] -o FILE
 
 Writes a tile set's points as another format. SET is a set's folder or its
 http(s) URL.
@@ -42,6 +44,16 @@ http(s) URL.
                         KHR_gaussian_splatting in SPZ, as CesiumJS reads
                         splats in 3D Tiles), or a glTF point with its LiDAR
                         attributes, which every 3D Tiles engine draws
+  --format ply          the 3D Gaussian splatting PLY that splat viewers read:
+                        one cut through the tree, each surfel a flat Gaussian,
+                        about the centre of the set's bounds (a comment keeps
+                        it), in the PLY's y-down axes
+  --format spz          the same Gaussians as SPZ 2 (Niantic's compressed
+                        splats, y up; at most 10 million)
+  --level N|leaves      ply, spz: the nodes of level N and the leaves above it,
+                        as surfcast-view --level draws (default: the leaves)
+  --splat-budget N      ply, spz: the deepest level whose cut holds at most N
+                        surfels (the leaves where they fit)
   --splat-scale S       splats: standard deviation S times the set's kernel
                         scale times the surfel's radius (default 1: Surfcast's
                         own reconstruction kernel)
@@ -73,7 +85,8 @@ int main(int argc, char** argv) {
     HttpOptions http;
     bool quiet = false;
     Tiles3dOptions tiles;
-    bool tilesOption = false;
+    bool tilesOption = false, asGiven = false, splatOption = false;
+    SplatCut cut;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         auto value = [&](std::string* out) {
@@ -90,7 +103,7 @@ int main(int argc, char** argv) {
         } else if (a == "--as") {
             if (!value(&v) || (v != "points" && v != "splats")) return usageError("--as wants points or splats");
             tiles.as = v == "splats" ? Tiles3dOptions::As::Splats : Tiles3dOptions::As::Points;
-            tilesOption = true;
+            tilesOption = asGiven = true;
         } else if (a == "--splat-scale" || a == "--splat-opacity") {
             char* end = nullptr;
             const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
@@ -99,6 +112,18 @@ int main(int argc, char** argv) {
                 return usageError(a + (scale ? " wants a number in (0, 100]" : " wants a number in (0, 1]"));
             (scale ? tiles.gaussians.sigmaScale : tiles.gaussians.opacity) = d;
             tilesOption = true;
+        } else if (a == "--level") {
+            char* end = nullptr;
+            const long l = value(&v) && v != "leaves" ? std::strtol(v.c_str(), &end, 10) : -1;
+            if (v != "leaves" && !(end && *end == '\0' && !v.empty() && l >= 0 && l <= 64)) return usageError("--level wants a level (0, 1, ...) or leaves");
+            cut.level = int(l);
+            splatOption = true;
+        } else if (a == "--splat-budget") {
+            char* end = nullptr;
+            const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
+            if (!(end && *end == '\0' && d >= 1 && d <= 1e12)) return usageError("--splat-budget wants a count of surfels (1 or more)");
+            cut.budget = uint64_t(d);
+            splatOption = true;
         } else if (a == "-o" || a == "--output") {
             if (!value(&output)) return usageError("-o wants a file");
         } else if (a == "--bbox") {
@@ -124,12 +149,19 @@ int main(int argc, char** argv) {
         }
     }
     if (set.empty()) return usageError("no set given");
-    if (format.empty()) return usageError("--format is required (laz, copc or 3dtiles)");
-    if (format != "laz" && format != "copc" && format != "3dtiles")
-        return usageError("--format " + format + ": the formats are laz, copc and 3dtiles");
+    if (format.empty()) return usageError("--format is required (laz, copc, 3dtiles, ply or spz)");
+    const bool splatFile = format == "ply" || format == "spz";
+    if (format != "laz" && format != "copc" && format != "3dtiles" && !splatFile)
+        return usageError("--format " + format + ": the formats are laz, copc, 3dtiles, ply and spz");
+    if (splatFile && (filter.box || !filter.classes.empty()))
+        return usageError("--format " + format + " takes a cut through the whole set (--bbox and --classes are for laz and copc)");
+    if (!splatFile && splatOption) return usageError("--level and --splat-budget are for --format ply and spz");
+    if (cut.level >= 0 && cut.budget > 0) return usageError("--level or --splat-budget, not both");
     if (format == "3dtiles" && (filter.box || !filter.classes.empty()))
         return usageError("--format 3dtiles exports the whole set (--bbox and --classes are for laz and copc)");
-    if (format != "3dtiles" && tilesOption) return usageError("--as, --splat-scale and --splat-opacity are for --format 3dtiles");
+    if (format != "3dtiles" && tilesOption && !splatFile)
+        return usageError("--as, --splat-scale and --splat-opacity are for --format 3dtiles, ply and spz");
+    if (splatFile && tiles.as == Tiles3dOptions::As::Points && asGiven) return usageError("--as is for --format 3dtiles");
     if (output.empty()) return usageError("-o FILE is required");
 
     auto reader = openTileset(set, http);
@@ -176,7 +208,18 @@ int main(int argc, char** argv) {
     }
     uint64_t bytes = 0, reported = 0;
     Status status;
-    if (format == "copc") {
+    if (splatFile) {
+        auto report = writeSplatFile(*reader, format == "ply" ? SplatFormat::Ply : SplatFormat::Spz, cut, tiles.gaussians, f,
+                                     [&, last = size_t(0)](size_t done, size_t all) mutable {
+                                         if (quiet || (done != all && done - last < std::max<size_t>(1, all / 20))) return;
+                                         last = done;
+                                         std::fprintf(stderr, "  %zu of %zu nodes\n", done, all);
+                                     });
+        if (!report) status = Status::error(partial + ": " + report.status().message());
+        else plan->points = report->splats;
+        if (report && !quiet) std::fprintf(stderr, "%llu splats from %zu nodes (%s)\n", (unsigned long long)report->splats, report->nodes, report->cut.c_str());
+        if (report && std::fseek(f, 0, SEEK_END) == 0) bytes = uint64_t(std::ftell(f));
+    } else if (format == "copc") {
         auto copc = writeCopcExport(*reader, filter, f);
         if (!copc) status = Status::error(partial + ": " + copc.status().message());
         else plan->points = copc->points;

@@ -10,6 +10,7 @@
 
 #include "byte_io.h"
 #include "folder_publish.h"
+#include "splat_export.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -26,7 +27,7 @@ constexpr int kArrayBuffer = 34962, kPoints = 0;
 double srgbToLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
 
 // The set's z-up coordinates as glTF's y-up ones (3D Tiles turns them back at load).
-Vec3d toYUp(const Vec3d& v) { return {v.x, v.z, -v.y}; }
+Vec3d toYUp(const Vec3d& v) { return toSplatAxes(v, SplatAxes::YUp); }
 
 // A glb under construction: accessors over one binary buffer, one
 // buffer view each (interleaved where vertex alignment asks for it).
@@ -189,30 +190,22 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
 // accessors have no data of their own).
 const std::vector<std::string> kSplatExtensions = {"KHR_gaussian_splatting", "KHR_gaussian_splatting_compression_spz_2"};
 
-// One node's glb as Gaussians about `centre` (world), in SPZ.
+// One node's glb as Gaussians about `centre` (world), in SPZ; `extent`: the
+// largest |coordinate| about the centre (the tile's box).
 Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord& node, const BlockData& b, const Vec3d& centre,
-                                      const Vec3d& origin, const GaussianOptions& options) {
-    const TilesetInfo& info = set.info();
+                                      double extent, const Vec3d& origin, const GaussianOptions& options) {
     const size_t n = b.size();
-    const double top = info.colorBits > 0 ? double((1u << info.colorBits) - 1) : 1.0;
-    Gaussians g;
+    SpzWriter spzWriter(extent);
     Vec3d lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
     for (size_t i = 0; i < n; ++i) {
-        const Vec3d p = toYUp(set.position(node, b, i) - centre);
-        const Vec3d normal = b.normals.size() == 3 * n ? Vec3d{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]} : Vec3d{0, 0, 1};
-        const double r = b.radii.empty() ? node.spacing : b.radii[i];
-        Vec3f color{1, 1, 1};
-        if (info.colorBits > 0)
-            for (int c = 0; c < 3; ++c) color[c] = float(b.colors[3 * i + size_t(c)] / top);
-        const double alpha = (b.opacity.empty() ? 1.0 : b.opacity[i] / 255.0) * options.opacity;
-        g.add(cast<float>(p), cast<float>(toYUp(normalizeOrZero(normal))), float(options.sigmaScale * info.kernelScale * r),
-              float(options.thickness), float(alpha), color);
+        const Gaussian g = surfelGaussian(set, node, b, i, centre, options, SplatAxes::YUp);
+        spzWriter.add(g);
         for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], double(g.positions.back()[a]));
-            hi[a] = std::max(hi[a], double(g.positions.back()[a]));
+            lo[a] = std::min(lo[a], double(g.position[a]));
+            hi[a] = std::max(hi[a], double(g.position[a]));
         }
     }
-    auto spz = writeSpz(g);
+    auto spz = spzWriter.finish();
     if (!spz) return spz.status();
 
     GlbBuilder glb;
@@ -291,8 +284,10 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
             auto block = set.readBlock(n);
             if (!block) return block.status();
             const Vec3d centre = (boxes[i].min + boxes[i].max) * 0.5;
-            auto glb = options.as == Tiles3dOptions::As::Splats ? splatGlb(set, n, *block, centre, origin, options.gaussians)
-                                                                 : nodeGlb(set, n, *block, centre, origin);
+            const Vec3d half = (boxes[i].max - boxes[i].min) * 0.5;
+            auto glb = options.as == Tiles3dOptions::As::Splats
+                           ? splatGlb(set, n, *block, centre, std::max({half.x, half.y, half.z}), origin, options.gaussians)
+                           : nodeGlb(set, n, *block, centre, origin);
             if (!glb) return Status::error(set.describe() + ": node " + n.key.name() + ": " + glb.status().message());
             SC_TRY(writeFileSynced((*folder)->path() + "/tiles/" + n.key.name() + ".glb", glb->data(), glb->size()));
             report.points += n.surfelCount;

@@ -1,0 +1,49 @@
+// A set's surfels as Gaussians (gaussians.h): the one surfel's Gaussian the
+// 3D Tiles splats and the splat files share, and the splat files, one cut
+// through the tree each (docs/EXPORT.md, "Splat files").
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <functional>
+#include <string>
+
+#include "gaussians.h"
+#include "tileset_reader.h"
+
+namespace surfcast {
+
+// The axes a splat format keeps, from the set's own (z up): glTF's and
+// SPZ's y up (x, z, -y), or the 3D Gaussian splatting PLY's y down (x, -z, y),
+// the camera frame its scenes are trained in. Both are rotations.
+enum class SplatAxes { YUp, YDown };
+Vec3d toSplatAxes(const Vec3d& v, SplatAxes axes);
+
+// Surfel i of a node's decoded block as a Gaussian about `centre` (world).
+Gaussian surfelGaussian(const TilesetReader& set, const NodeRecord& node, const BlockData& block, size_t i, const Vec3d& centre,
+                        const GaussianOptions& options, SplatAxes axes);
+
+// Which nodes a splat file holds: those of `level` and the leaves above it,
+// as surfcast-view --level draws; the leaves alone (level -1, the default);
+// or, with a budget, the deepest such level whose nodes hold at most
+// `budget` surfels (at least the root).
+struct SplatCut {
+    int level = -1;
+    uint64_t budget = 0;
+};
+
+enum class SplatFormat { Ply, Spz };
+
+struct SplatFileReport {
+    uint64_t splats = 0;
+    size_t nodes = 0;
+    std::string cut;  // "level N" or "leaves"
+};
+
+// Writes the cut's surfels to `f` as PLY (streamed, one node at a time) or
+// SPZ (19 bytes a surfel held, then compressed), about the centre of the
+// set's bounds, which the PLY's comment records. `progress`: nodes done, of all.
+Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat format, const SplatCut& cut, const GaussianOptions& options,
+                                       std::FILE* f, const std::function<void(size_t, size_t)>& progress = {});
+
+}  // namespace surfcast
