@@ -51,6 +51,7 @@ Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat for
     std::vector<size_t> chosen;
     for (size_t i = 0; i < nodes.size(); ++i)
         if (inCut(nodes[i], level) && nodes[i].surfelCount > 0) chosen.push_back(i);
+    std::sort(chosen.begin(), chosen.end(), [&](size_t a, size_t b) { return nodes[a].key < nodes[b].key; });
     uint64_t count = 0;
     for (size_t i : chosen) count += nodes[i].surfelCount;
     if (count == 0) return Status::error(set.describe() + ": " + report.cut + " holds no surfels");

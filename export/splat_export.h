@@ -41,8 +41,10 @@ struct SplatFileReport {
 };
 
 // Writes the cut's surfels to `f` as PLY (streamed, one node at a time) or
-// SPZ (19 bytes a surfel held, then compressed), about the centre of the
-// set's bounds, which the PLY's comment records. `progress`: nodes done, of all.
+// SPZ (19 bytes a surfel held, then compressed), node by node in key order
+// (level, then x, y, z), each node's surfels in block order, about the
+// centre of the set's bounds, which the PLY's comment records. `progress`:
+// nodes done, of all.
 Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat format, const SplatCut& cut, const GaussianOptions& options,
                                        std::FILE* f, const std::function<void(size_t, size_t)>& progress = {});
 

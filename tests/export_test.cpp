@@ -224,7 +224,7 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
 }
 
-// --format 3dtiles (its consumers check what it writes: web/test/tiles3d.test.mjs):
+// --format 3dtiles (its consumers check what it writes: web/test/exports.test.mjs):
 // a damaged block is an error naming its node, and the output folder is the
 // one before, never a part; nothing but a previous export is replaced.
 TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {

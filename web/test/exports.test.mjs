@@ -1,9 +1,11 @@
-// surfcast-export --format 3dtiles checked by its consumers, not by our own
-// reader: Khronos's glTF validator on every glb, glTF-Transform reading the
-// glbs back against the set as the browser client decodes it (format.ts,
-// block_decode.ts, draco3d), and CesiumJS loading the tileset from nginx on
-// loopback in headless Chromium. The set is autzen_trim.las from the shared
-// scans (colour, intensity, classification, returns).
+// surfcast-export's formats for other tools, checked by those tools, not by
+// our own reader: Khronos's glTF validator on every glb; glTF-Transform and
+// hand-written PLY and SPZ readers against the set as the browser client
+// decodes it (format.ts, block_decode.ts, draco3d); and the consumers
+// themselves in headless Chromium, from nginx on loopback: CesiumJS drawing
+// the 3D Tiles (points and splats) and Spark drawing the PLY and SPZ files,
+// each against surfcast-view at the same camera. The set is autzen_trim.las
+// from the shared scans (colour, intensity, classification, returns).
 
 import { after, before, describe, test } from "node:test";
 import assert from "node:assert/strict";
@@ -91,7 +93,7 @@ http { access_log off; types { text/html html; text/javascript js; text/css css;
   throw new Error("nginx did not start");
 }
 
-describe("3D Tiles export", { skip }, () => {
+describe("exports, as their consumers read them", { skip }, () => {
   before(() => {
     assert.ok(existsSync(scan), `${scan}: the shared scans are needed (SURFCAST_DATA_DIR)`);
     work = mkdtempSync(join(tmpdir(), "surfcast-tiles3d-"));
@@ -101,6 +103,7 @@ describe("3D Tiles export", { skip }, () => {
     execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--as", "points", "-q", "-o", out]);
     splats = join(work, "autzen-splats");
     execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "-q", "-o", splats]);  // splats: the default
+    for (const f of ["ply", "spz"]) execFileSync(bin("surfcast-export"), [set, "--format", f, "-q", "-o", join(work, `autzen.${f}`)]);
   });
   after(async () => {
     await cesiumBrowser?.close();
@@ -212,18 +215,89 @@ describe("3D Tiles export", { skip }, () => {
     t.diagnostic(`${compared} surfels compared; largest position error ${(worst * 1e6).toFixed(3)} millionths of a node's edge`);
   });
 
-  test("round trip: the splats' SPZ holds the set's surfels as Gaussians", async (t) => {
-    const { info, nodes } = readSet(set);
+  // A block decoder for node n of the set, as the browser client decodes it.
+  async function decoderFor(info) {
     const draco = await createRequire(import.meta.url)("draco3d").createDecoderModule({});
+    const blob = readFileSync(join(set, "blocks.bin"));
+    const extra = info.attributes.map((a) => a.name).filter((n) => !format.kFixedAttributes.includes(n));
+    const coloring = { by: "rgb", originZ: 0, elevationMin: 0, elevationMax: 1, intensityScale: 1, intensityOffset: 0,
+                       intensityP2: 0, intensityP98: 1, hiddenClasses: [] };
+    return (n, i) => blocks.decodeBlock(draco, {
+      id: 1, key: n.key, blob: blob.buffer.slice(blob.byteOffset + n.blockOffset, blob.byteOffset + n.blockOffset + n.blockSize),
+      crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits, min: format.nodeMin(info, n), edge: format.nodeEdge(info, n.level),
+      spacing: n.spacing, hasRadius: !!(n.flags & format.kFlagHasRadius), hasEdgeWeights: !!(n.flags & format.kFlagEdgeWeights),
+      colorBits: info.colorBits, weights: info.weights !== "none", extra, coloring, pick: i }).picked;
+  }
+
+  // The set's z-up axes from a splat file's: glTF's and SPZ's y up, or the PLY's y down.
+  const fromYUp = (v) => [v[0], -v[2], v[1]];
+  const fromYDown = (v) => [v[0], v[2], -v[1]];
+
+  // One Gaussian read back against surfel s: where it is (set coordinates,
+  // within `near`), its colour (within `colorStep`), its standard
+  // deviations (kernel scale times radius in the plane, 1 % of it along the
+  // normal; within a factor e^logStep) and the rotation taking z to the
+  // normal (quaternion x, y, z, w in the file's axes `axes`, within `turn`
+  // radians). Returns nothing; asserts.
+  function expectGaussian(g, s, info, { near, colorStep, logStep, turn, axes, what }) {
+    for (let a = 0; a < 3; ++a) assert.ok(Math.abs(g.position[a] - s.position[a]) <= near, `${what}: axis ${a}, ${g.position[a]} vs ${s.position[a]}`);
+    for (let c = 0; c < 3; ++c) assert.ok(Math.abs(g.color[c] - s.color[c]) <= colorStep, `${what}: colour ${c}, ${g.color[c]} vs ${s.color[c]}`);
+    const sigma = info.kernelScale * s.radius;
+    for (const [a, want] of [[0, sigma], [1, sigma], [2, 0.01 * sigma]])
+      assert.ok(Math.abs(Math.log(g.scales[a] / want)) <= logStep, `${what}: scale ${a}, ${g.scales[a]} vs ${want}`);
+    const [x, y, z, w] = g.rotation;
+    const nz = axes([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)]);
+    const len = Math.hypot(...s.normal);
+    const cos = (nz[0] * s.normal[0] + nz[1] * s.normal[1] + nz[2] * s.normal[2]) / len;
+    assert.ok(Math.acos(Math.min(1, cos)) <= turn(g), `${what}: the normal off by ${Math.acos(Math.min(1, cos))} rad`);
+  }
+
+  // SPZ 2 (Niantic's load-spz.cc): gzip over a header, then positions,
+  // opacities, colours, scales and rotations, each a column of bytes.
+  function readSpz(bytes) {
+    const spz = gunzipSync(bytes);
+    assert.equal(spz.readUInt32LE(0), 0x5053474e);
+    assert.equal(spz.readUInt32LE(4), 2);
+    const count = spz.readUInt32LE(8), fraction = spz[13];
+    assert.equal(spz.length, 16 + 19 * count);
+    const at = { position: 16, opacity: 16 + 9 * count, color: 16 + 10 * count, scale: 16 + 13 * count, rotation: 16 + 16 * count };
+    return {
+      count, fraction,
+      get(i) {
+        const [x, y, z] = [0, 1, 2].map((a) => (spz[at.rotation + 3 * i + a] - 127.5) / 127.5);
+        return {
+          // 24-bit fixed point with `fraction` bits.
+          position: [0, 1, 2].map((a) => spz.readIntLE(at.position + 9 * i + 3 * a, 3) / 2 ** fraction),
+          opacity: spz[at.opacity + i] / 255,
+          // The DC coefficient at 0.15 * 255 per unit about 127.5.
+          color: [0, 1, 2].map((c) => (spz[at.color + 3 * i + c] - 127.5) / (0.15 * 255) * 0.28209479177387814 + 0.5),
+          // ln s at 16 per unit, offset 10.
+          scales: [0, 1, 2].map((a) => Math.exp(spz[at.scale + 3 * i + a] / 16 - 10)),
+          // x, y, z at 127.5 per unit about 127.5; w >= 0.
+          rotation: [x, y, z, Math.sqrt(Math.max(0, 1 - x * x - y * y - z * z))],
+        };
+      },
+    };
+  }
+  // SPZ's byte steps: a colour byte is 1 / (0.15 * 255) of the DC coefficient;
+  // a scale byte 1/16 of its log; each of x, y, z rounds by up to 1/255 and
+  // w = sqrt(1 - x² - y² - z²) by (|x| + |y| + |z|) / (255 w) more, and a
+  // quaternion off by e turns a vector by at most 2e (plus the block's own
+  // normal rounding).
+  const spzColorStep = 0.5 / (0.15 * 255) * 0.28209479177387814 + 1e-9;
+  const spzTurn = (g) => {
+    const [x, y, z, w] = g.rotation;
+    return 2 * Math.hypot(1 / 255, 1 / 255, 1 / 255, (Math.abs(x) + Math.abs(y) + Math.abs(z)) / (255 * w)) + 1e-3;
+  };
+
+  test("round trip: the 3D Tiles splats' SPZ holds the set's surfels as Gaussians", async (t) => {
+    const { info, nodes } = readSet(set);
+    const decode = await decoderFor(info);
     const tileset = JSON.parse(readFileSync(join(splats, "tileset.json"), "utf8"));
     assert.deepEqual(tileset.extensionsRequired, ["3DTILES_content_gltf"]);
     assert.deepEqual(tileset.extensions["3DTILES_content_gltf"].extensionsRequired,
                      ["KHR_gaussian_splatting", "KHR_gaussian_splatting_compression_spz_2"]);
     const origin = tileset.root.transform.slice(12, 15);
-    const blob = readFileSync(join(set, "blocks.bin"));
-    const extra = info.attributes.map((a) => a.name).filter((n) => !format.kFixedAttributes.includes(n));
-    const coloring = { by: "rgb", originZ: 0, elevationMin: 0, elevationMax: 1, intensityScale: 1, intensityOffset: 0,
-                       intensityP2: 0, intensityP98: 1, hiddenClasses: [] };
     let compared = 0;
     for (const n of nodes.values()) {
       // The glb read by hand: its JSON chunk, and the SPZ its extension points at.
@@ -235,56 +309,70 @@ describe("3D Tiles export", { skip }, () => {
       const ext = prim.extensions.KHR_gaussian_splatting;
       assert.equal(ext.kernel, "ellipse");
       const view = gltf.bufferViews[ext.extensions.KHR_gaussian_splatting_compression_spz_2.bufferView];
-      const spz = gunzipSync(bin.subarray(view.byteOffset, view.byteOffset + view.byteLength));
-      // SPZ 2 (Niantic's load-spz.cc): header, then positions, opacities, colours, scales, rotations.
-      assert.equal(spz.readUInt32LE(0), 0x5053474e);
-      assert.equal(spz.readUInt32LE(4), 2);
-      const count = spz.readUInt32LE(8), fraction = spz[13];
-      assert.equal(count, n.surfelCount);
-      assert.equal(gltf.accessors[prim.attributes.POSITION].count, count);
-      const at = { position: 16, opacity: 16 + 9 * count, color: 16 + 10 * count, scale: 16 + 13 * count, rotation: 16 + 16 * count };
-      assert.equal(spz.length, 16 + 19 * count);
+      const spz = readSpz(bin.subarray(view.byteOffset, view.byteOffset + view.byteLength));
+      assert.equal(spz.count, n.surfelCount);
+      assert.equal(gltf.accessors[prim.attributes.POSITION].count, spz.count);
       const m = gltf.nodes[0].matrix;
       const edge = format.nodeEdge(info, n.level);
-      const job = { id: 1, key: n.key, blob: blob.buffer.slice(blob.byteOffset + n.blockOffset, blob.byteOffset + n.blockOffset + n.blockSize),
-                    crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits, min: format.nodeMin(info, n), edge,
-                    spacing: n.spacing, hasRadius: !!(n.flags & format.kFlagHasRadius),
-                    hasEdgeWeights: !!(n.flags & format.kFlagEdgeWeights), colorBits: info.colorBits, weights: info.weights !== "none",
-                    extra, coloring };
-      const step = Math.max(1, Math.floor(count / 40));
-      for (let i = 0; i < count; i += step) {
-        const s = blocks.decodeBlock(draco, { ...job, pick: i }).picked;
-        // Positions: 24-bit fixed point with `fraction` bits, y-up, about the tile's centre.
-        const p = [0, 1, 2].map((a) => (spz.readIntLE(at.position + 9 * i + 3 * a, 3)) / 2 ** fraction + m[12 + a]);
-        const world = [origin[0] + p[0], origin[1] - p[2], origin[2] + p[1]];
-        for (let a = 0; a < 3; ++a)
-          assert.ok(Math.abs(world[a] - s.position[a]) <= 2 ** -fraction / 2 + 1e-6 * edge, `node ${n.key} surfel ${i} axis ${a}`);
-        assert.equal(spz[at.opacity + i], 255, "opaque");
-        // Colour: the DC coefficient at 0.15 * 255 per unit about 127.5, within one byte.
-        for (let c = 0; c < 3; ++c) {
-          const shown = (spz[at.color + 3 * i + c] - 127.5) / (0.15 * 255) * 0.28209479177387814 + 0.5;
-          assert.ok(Math.abs(shown - s.color[c]) <= 0.5 / (0.15 * 255) * 0.28209479177387814 + 1e-9, `node ${n.key} surfel ${i} colour ${c}`);
-        }
-        // Scale: ln s at 16 per unit, offset 10; sigma = kernel scale * radius in the plane, 1 % of it along the normal.
-        const sigma = info.kernelScale * s.radius;
-        const scales = [0, 1, 2].map((a) => Math.exp(spz[at.scale + 3 * i + a] / 16 - 10));
-        for (const [a, want] of [[0, sigma], [1, sigma], [2, 0.01 * sigma]])
-          assert.ok(Math.abs(Math.log(scales[a] / want)) <= 1 / 32 + 1e-6, `node ${n.key} surfel ${i} scale ${a}: ${scales[a]} vs ${want}`);
-        // Rotation: x, y, z at 127.5 per unit about 127.5, w >= 0; it takes z to the normal (y-up).
-        const [x, y, z] = [0, 1, 2].map((a) => (spz[at.rotation + 3 * i + a] - 127.5) / 127.5);
-        const w = Math.sqrt(Math.max(0, 1 - x * x - y * y - z * z));
-        const nz = [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)];
-        const len = Math.hypot(...s.normal), want = [s.normal[0] / len, s.normal[2] / len, -s.normal[1] / len];
-        const cos = nz[0] * want[0] + nz[1] * want[1] + nz[2] * want[2];
-        // Each of x, y, z rounds by up to 1/255, and w = sqrt(1 - x² - y² - z²)
-        // by (|x| + |y| + |z|) / (255 w) more; a quaternion off by e turns
-        // a vector by at most 2e (plus the block's own normal rounding).
-        const e = Math.hypot(1 / 255, 1 / 255, 1 / 255, (Math.abs(x) + Math.abs(y) + Math.abs(z)) / (255 * w));
-        assert.ok(Math.acos(Math.min(1, cos)) <= 2 * e + 1e-3, `node ${n.key} surfel ${i}: the normal off by ${Math.acos(Math.min(1, cos))} rad`);
+      for (let i = 0; i < spz.count; i += Math.max(1, Math.floor(spz.count / 40))) {
+        const g = spz.get(i);
+        assert.equal(g.opacity, 1, "opaque");
+        const p = fromYUp([0, 1, 2].map((a) => g.position[a] + m[12 + a]));
+        g.position = p.map((v, a) => v + origin[a]);
+        expectGaussian(g, decode(n, i), info, { near: 2 ** -spz.fraction / 2 + 1e-6 * edge, colorStep: spzColorStep, logStep: 1 / 32 + 1e-6,
+                                               turn: spzTurn, axes: fromYUp, what: `node ${n.key} surfel ${i}` });
         ++compared;
       }
     }
     t.diagnostic(`${compared} splats compared`);
+  });
+
+  test("round trip: the PLY and SPZ files hold the leaves' surfels as Gaussians, node by node in key order", async (t) => {
+    const { info, nodes } = readSet(set);
+    const decode = await decoderFor(info);
+    const origin = info.boundsMin.map((m, a) => (m + info.boundsMax[a]) / 2);
+    const extent = Math.max(...info.boundsMax.map((m, a) => m - info.boundsMin[a]));
+    const key = (n) => [n.level, n.x, n.y, n.z];
+    const leaves = [...nodes.values()].filter((n) => n.childMask === 0 && n.surfelCount > 0)
+      .sort((a, b) => { const [p, q] = [key(a), key(b)]; for (let k = 0; k < 4; ++k) if (p[k] !== q[k]) return p[k] - q[k]; return 0; });
+    const total = leaves.reduce((s, n) => s + n.surfelCount, 0);
+
+    // The PLY: its header as the reference implementation writes it, then 17 floats a Gaussian.
+    const ply = readFileSync(join(work, "autzen.ply"));
+    const end = ply.indexOf("end_header\n") + "end_header\n".length;
+    const header = ply.subarray(0, end).toString();
+    assert.match(header, new RegExp(`^ply\nformat binary_little_endian 1.0\n(comment .*\n)*element vertex ${total}\n`));
+    const names = [...header.matchAll(/property float (\w+)/g)].map((m) => m[1]);
+    assert.deepEqual(names, ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+                             "rot_0", "rot_1", "rot_2", "rot_3"]);
+    assert.equal(ply.length, end + 68 * total);
+    const spz = readSpz(readFileSync(join(work, "autzen.spz")));
+    assert.equal(spz.count, total);
+    let record = 0, compared = 0;
+    for (const n of leaves) {
+      for (let i = 0; i < n.surfelCount; i += Math.max(1, Math.floor(n.surfelCount / 40))) {
+        const s = decode(n, i);
+        const f = (k) => ply.readFloatLE(end + 68 * (record + i) + 4 * k);
+        const g = {
+          position: fromYDown([f(0), f(1), f(2)]).map((v, a) => v + origin[a]),
+          color: [6, 7, 8].map((k) => f(k) * 0.28209479177387814 + 0.5),
+          scales: [10, 11, 12].map((k) => Math.exp(f(k))),
+          rotation: [f(14), f(15), f(16), f(13)],
+        };
+        // Opacity as a logit: opaque is 0.999.
+        assert.ok(Math.abs(1 / (1 + Math.exp(-f(9))) - 0.999) < 1e-6);
+        // Floats: the angle from acos(cos) near 1 has the square root of float's rounding (about 5e-4 rad).
+        expectGaussian(g, s, info, { near: 1e-6 * extent, colorStep: 1e-6, logStep: 1e-5, turn: () => 1e-3, axes: fromYDown,
+                                     what: `PLY node ${n.key} surfel ${i}` });
+        const z = spz.get(record + i);
+        z.position = fromYUp(z.position).map((v, a) => v + origin[a]);
+        expectGaussian(z, s, info, { near: 2 ** -spz.fraction / 2 + 1e-6 * extent, colorStep: spzColorStep, logStep: 1 / 32 + 1e-6,
+                                     turn: spzTurn, axes: fromYUp, what: `SPZ node ${n.key} surfel ${i}` });
+        ++compared;
+      }
+      record += n.surfelCount;
+    }
+    t.diagnostic(`${compared} of ${total} splats compared in each file`);
   });
 
   // Covered pixels of a 640 x 480 image: brighter than the background by
@@ -302,13 +390,18 @@ describe("3D Tiles export", { skip }, () => {
 
   // CesiumJS's view of an export (a folder under work/) at the test's camera,
   // from nginx on loopback; also the problems the page reported.
-  async function cesium(folder, params) {
+  // One static root for both consumers' pages, their own builds linked
+  // beside them as the pages ask, and the exports under sets/.
+  async function open() {
     if (!cesiumUrl) {
-      const root = join(work, "www");
+      const root = join(work, "www"), modules = join(web, "node_modules");
       mkdirSync(root);
-      symlinkSync(join(web, "node_modules", "cesium", "Build", "Cesium"), join(root, "cesium"));
+      symlinkSync(join(modules, "cesium", "Build", "Cesium"), join(root, "cesium"));
+      for (const f of ["three.module.js", "three.core.js"]) symlinkSync(join(modules, "three", "build", f), join(root, f));
+      symlinkSync(join(modules, "three", "examples", "jsm"), join(root, "three-addons"));
+      symlinkSync(join(modules, "@sparkjsdev", "spark", "dist", "spark.module.js"), join(root, "spark.module.js"));
       symlinkSync(work, join(root, "sets"));
-      copyFileSync(join(web, "examples", "cesium.html"), join(root, "cesium.html"));
+      for (const f of ["cesium.html", "spark.html"]) copyFileSync(join(web, "examples", f), join(root, f));
       cesiumUrl = await startNginx(root);
       cesiumBrowser = await puppeteer.launch({ executablePath: chromium, headless: true,
         args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--window-size=640,480"] });
@@ -320,26 +413,53 @@ describe("3D Tiles export", { skip }, () => {
     page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
     page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
     page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
-    await page.goto(`${cesiumUrl}/cesium.html?tileset=sets/${folder}/tileset.json&camera=${camera}${params}`);
-    await page.waitForFunction("window.cesiumState.loaded || window.cesiumState.errors.length > 0", { timeout: 120000 });
-    const state = await page.evaluate(() => window.cesiumState);
-    // Tiles load before they are drawn, and splats are drawn sorted first
-    // from their snapshot, then sorted again while the camera rests: 30
-    // frames after the last tile loaded (about 20 s in SwiftShader) the view
-    // has settled in every run seen. Then it is done when two screenshots,
-    // two frames apart, cover the same pixels to 0.5 % of the view (blending
-    // order moves a few edge pixels between frames).
-    const loadedAt = await page.evaluate(() => window.cesiumState.frames);
-    let png, last = -1, wait = 30;
+    return { page, problems };
+  }
+
+  // A page's view once settled: `frames` drawn after it loaded, then two
+  // screenshots, two frames apart, covering the same pixels to 0.5 % of the
+  // view (blending order moves a few edge pixels between frames).
+  async function settled(page, counter, frames) {
+    const loadedAt = await page.evaluate(`${counter}.frames`);
+    let png, last = -1, wait = frames;
     for (let i = 0; i < 20; ++i) {
-      const frames = await page.evaluate(() => window.cesiumState.frames);
-      await page.waitForFunction(`window.cesiumState.frames >= ${Math.max(frames + 2, loadedAt + wait)}`, { timeout: 120000 });
+      const now = await page.evaluate(`${counter}.frames`);
+      await page.waitForFunction(`${counter}.frames >= ${Math.max(now + 2, loadedAt + wait)}`, { timeout: 120000 });
       wait = 0;
       png = PNG.sync.read(await page.screenshot({ type: "png" }));
       const covered = coverage(png).reduce((a, b) => a + b, 0);
       if (covered > 0 && Math.abs(covered - last) <= 0.005 * 640 * 480) break;
       last = covered;
     }
+    return png;
+  }
+
+  // Spark's view of a splat file under work/, at the test's camera in the file's axes.
+  async function spark(file, axes) {
+    const { page, problems } = await open();
+    const { info } = readSet(set);
+    const origin = info.boundsMin.map((m, a) => (m + info.boundsMax[a]) / 2);
+    const v = camera.split(",").map(Number);
+    const at = [...axes(v.slice(0, 3).map((x, a) => x - origin[a])), ...axes(v.slice(3, 6).map((x, a) => x - origin[a])), ...axes(v.slice(6, 9)), v[9]];
+    await page.goto(`${cesiumUrl}/spark.html?splats=sets/${file}&camera=${at.join(",")}`);
+    await page.waitForFunction("window.sparkState.loaded || window.sparkState.errors.length > 0", { timeout: 120000 });
+    const state = await page.evaluate(() => window.sparkState);
+    // Spark sorts in a worker as it draws: a few frames settle it.
+    const png = await settled(page, "window.sparkState", 3);
+    await page.close();
+    return { state, png, problems };
+  }
+
+  async function cesium(folder, params) {
+    const { page, problems } = await open();
+    await page.goto(`${cesiumUrl}/cesium.html?tileset=sets/${folder}/tileset.json&camera=${camera}${params}`);
+    await page.waitForFunction("window.cesiumState.loaded || window.cesiumState.errors.length > 0", { timeout: 120000 });
+    const state = await page.evaluate(() => window.cesiumState);
+    // Tiles load before they are drawn, and splats are drawn sorted first
+    // from their snapshot, then sorted again while the camera rests: 30
+    // frames after the last tile loaded (about 20 s in SwiftShader) the view
+    // has settled in every run seen.
+    const png = await settled(page, "window.cesiumState", 30);
     await page.close();
     return { state, png, problems };
   }
@@ -416,4 +536,17 @@ describe("3D Tiles export", { skip }, () => {
     expectSameColours(r, 3);
     t.diagnostic(`CesiumJS splats: ${state.tiles} tiles, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
   });
+
+  for (const [file, axes, what] of [["autzen.ply", (v) => [v[0], -v[2], v[1]], "PLY"], ["autzen.spz", (v) => [v[0], v[2], -v[1]], "SPZ"]])
+    test(`Spark draws the ${what} file's splats where surfcast-view draws the set, in its colours`,
+         { skip: chromium ? false : "Chromium is missing" }, async (t) => {
+      const { state, png, problems } = await spark(file, axes);
+      assert.deepEqual(state.errors, []);
+      assert.deepEqual(problems, []);
+      assert.equal(state.splats, 110000);
+      const r = compare(png);
+      assert.ok(r.iou >= 0.8, `Spark's splats cover the pixels surfcast-view's do: IoU ${r.iou}`);
+      expectSameColours(r, what === "SPZ" ? 3 : 2);
+      t.diagnostic(`Spark ${what}: ${state.splats} splats, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
+    });
 });
