@@ -200,7 +200,13 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "laz", "--bbox", "0,0,0,1,x,1", "-o", out}, 2, "'x' is not a number"},
         {{dir_->file("autzen"), "--format", "laz", "--bbox", "5,0,0,1,1,1", "-o", out}, 2, "minimum exceeds its maximum on axis x"},
         {{dir_->file("autzen"), "--format", "laz", "--classes", "2,300", "-o", out}, 2, "'300' is not a class"},
-        {{dir_->file("autzen"), "--format", "ply", "-o", out}, 2, "--format ply: the formats are laz, copc and 3dtiles"},
+        {{dir_->file("autzen"), "--format", "las", "-o", out}, 2, "--format las: the formats are laz, copc, 3dtiles, ply and spz"},
+        {{dir_->file("autzen"), "--format", "ply", "--level", "two", "-o", out}, 2, "--level wants a level"},
+        {{dir_->file("autzen"), "--format", "spz", "--level", "2", "--splat-budget", "1000", "-o", out}, 2, "not both"},
+        {{dir_->file("autzen"), "--format", "ply", "--as", "points", "-o", out}, 2, "--as is for --format 3dtiles"},
+        {{dir_->file("autzen"), "--format", "laz", "--level", "2", "-o", out}, 2, "are for --format ply and spz"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--splat-scale", "0", "-o", out}, 2, "--splat-scale wants a number in (0, 100]"},
+        {{dir_->file("autzen"), "--format", "spz", "--bbox", "0,0,0,1,1,1", "-o", out}, 2, "takes a cut through the whole set"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--classes", "2", "-o", out}, 2, "exports the whole set"},
         {{dir_->file("autzen"), "--format", "laz"}, 2, "-o FILE is required"},
         {{dir_->file("nothing"), "--format", "laz", "-o", out}, 1, dir_->file("nothing")},
@@ -224,9 +230,10 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
 }
 
-// --format 3dtiles (its consumers check what it writes: web/test/exports.test.mjs):
-// a damaged block is an error naming its node, and the output folder is the
-// one before, never a part; nothing but a previous export is replaced.
+// --format 3dtiles, ply and spz (their consumers check what they write:
+// web/test/exports.test.mjs): a damaged block is an error naming its node,
+// and the output is the one before, never a part; nothing but a previous
+// export is replaced.
 TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
     const std::string good = dir_->file("autzen3d");
     auto r = test::run({test::binary("surfcast-export"), dir_->file("autzen"), "--format", "3dtiles", "-q", "-o", good});
@@ -253,6 +260,13 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
         EXPECT_NE(r.output.find("node " + victim.key.name()), std::string::npos) << r.output;
     }
     EXPECT_FALSE(fs::exists(dir_->file("damaged3d")));
+    for (const char* format : {"ply", "spz"}) {  // the splat files hold the leaves; the victim, the last node, is one
+        const std::string file = dir_->file(std::string("damaged.") + format);
+        r = test::run({test::binary("surfcast-export"), damaged, "--format", format, "-q", "-o", file});
+        EXPECT_EQ(r.exitCode, 1) << r.output;
+        EXPECT_NE(r.output.find("node " + victim.key.name()), std::string::npos) << r.output;
+        EXPECT_FALSE(fs::exists(file));
+    }
     EXPECT_EQ(test::readFile(good + "/tileset.json"), before) << "the previous export stays whole";
 
     // A Surfcast set (it has a tileset.json too) is not an export to replace.
