@@ -31,8 +31,8 @@ void removeLeftovers(const fs::path& out, const std::string& marker) {
             if (file.rfind(prefix, 0) != 0) continue;
             char* end = nullptr;
             const long pid = std::strtol(file.c_str() + prefix.size(), &end, 10);
-            // ".NAME.partial-PID" and what the process keeps beside it (the
-            // build's ".NAME.partial-PID-work").
+            // ".NAME.partial-PID" and what a writer keeps beside it
+            // (".NAME.partial-PID-SUFFIX": the build's "-work").
             if ((*end != '\0' && *end != '-') || pid <= 0 || pid == ::getpid()) continue;
             if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // still running (or not ours to judge)
             stale.push_back({entry.path(), kind[1] == 'o' && *end == '\0'});
@@ -75,7 +75,7 @@ Result<std::unique_ptr<PublishedFolder>> PublishedFolder::create(const std::stri
     if (out.filename().empty()) out = out.parent_path();
     std::error_code ec;
     if (fs::is_directory(out.parent_path(), ec)) removeLeftovers(out, marker);
-    if (fs::exists(out, ec) && !(fs::is_directory(out) && (fs::is_empty(out) || replaceable(out.string()))))
+    if (fs::exists(out, ec) && !(fs::is_directory(out, ec) && (fs::is_empty(out, ec) || replaceable(out.string()))))
         return Status::error(out.string() + ": exists and is not " + what + "; refusing to replace it");
     fs::create_directories(out.parent_path(), ec);
     std::unique_ptr<PublishedFolder> f(new PublishedFolder);

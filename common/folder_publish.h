@@ -1,7 +1,7 @@
 // A folder written whole beside its final place and swapped in, so that a
 // reader of the output finds the old folder or the new one, never a mix.
-// Everything goes into a hidden folder beside the output
-// (".NAME.partial-PID"), the folder's marker file (tileset.json) last, and
+// The writer puts everything into a hidden folder beside the output
+// (".NAME.partial-PID", path()), its marker file (tileset.json) last, and
 // publish() exchanges it with the output in one step (renameat2
 // RENAME_EXCHANGE); where the file system cannot exchange, the old folder is
 // moved aside (".NAME.old-PID") and the new one moved in. A writer killed at

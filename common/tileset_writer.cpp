@@ -25,8 +25,12 @@ constexpr char kUnorderedBlocks[] = "blocks.unordered";
 }  // namespace
 
 Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& output) {
-    auto folder = PublishedFolder::create(output, "tileset.json",
-                                          [](const std::string& out) { return fs::exists(fs::path(out) / "tileset.json"); }, "a tile set");
+    // A Surfcast set has a hierarchy.bin beside its tileset.json; a 3D Tiles
+    // export (surfcast-export) has a tileset.json alone, and is not replaced.
+    auto folder = PublishedFolder::create(output, "tileset.json", [](const std::string& out) {
+        std::error_code ec;
+        return fs::exists(fs::path(out) / "tileset.json", ec) && fs::exists(fs::path(out) / "hierarchy.bin", ec);
+    }, "a tile set");
     if (!folder) return folder.status();
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
     w->folder_ = std::move(*folder);

@@ -1,7 +1,8 @@
 // Writes a tile set atomically (folder_publish.h): everything goes into a
 // hidden folder beside the output, tileset.json last, and the folder is
 // swapped into place at the end, so a reader finds the old set or the new
-// one, whole. The kill-anywhere test in bad_input_test checks this at 20
+// one, whole (or, where the file system cannot exchange folders, for one
+// moment none). The kill-anywhere test in bad_input_test checks this at 20
 // random moments.
 //
 // Blocks are laid out in hierarchy order (hierarchyOrder), whatever order the
@@ -22,7 +23,8 @@ namespace surfcast {
 
 class TilesetWriter {
 public:
-    // Fails if `output` exists and is not a tile set (never clobbers other data).
+    // Fails if `output` exists and is neither empty nor a tile set (its
+    // tileset.json and hierarchy.bin): it never clobbers other data.
     static Result<std::unique_ptr<TilesetWriter>> create(const std::string& output);
     ~TilesetWriter();  // removes the partial folder unless finish() succeeded
 

@@ -13,14 +13,14 @@ namespace {
 
 constexpr uint32_t kSpzMagic = 0x5053474e;  // "NGSP"
 constexpr uint32_t kSpzVersion = 2;
-constexpr size_t kSpzMaxPoints = 10'000'000;  // what SPZ's reader accepts
 // SPZ's byte encodings (version 2): colours as the DC coefficient times 0.15
 // about 127.5, scales as 16 (ln s + 10), rotations' x, y, z about 127.5.
 constexpr double kSpzColorScale = 0.15;
 // The PLY's opacity is a logit: 1 has none, so opaque is this close to it.
 constexpr double kMostOpacity = 0.999;
 
-uint8_t toByte(double v) { return uint8_t(std::clamp(std::round(v), 0.0, 255.0)); }
+// NaN (which add() reports through finish()) becomes 0, not undefined behaviour.
+uint8_t toByte(double v) { return v >= 0 ? uint8_t(std::min(std::round(v), 255.0)) : 0; }
 
 }  // namespace
 
@@ -38,10 +38,14 @@ SpzWriter::SpzWriter(double extent) {
 }
 
 void SpzWriter::add(const Gaussian& g) {
+    nonFinite_ |= !(std::isfinite(g.sigma) && std::isfinite(g.thickness) && std::isfinite(g.opacity) && std::isfinite(g.normal.x) &&
+                    std::isfinite(g.normal.y) && std::isfinite(g.normal.z) && std::isfinite(g.color.x) && std::isfinite(g.color.y) &&
+                    std::isfinite(g.color.z));
     for (int a = 0; a < 3; ++a) {
         const double fixed = std::round(std::ldexp(double(g.position[a]), fraction_));
-        outside_ |= !(std::fabs(fixed) <= double((1 << 23) - 1));
-        const int32_t v = int32_t(std::clamp(fixed, -double(1 << 23), double((1 << 23) - 1)));
+        const bool inside = std::fabs(fixed) <= double((1 << 23) - 1);  // false for NaN too
+        outside_ |= !inside;
+        const int32_t v = inside ? int32_t(fixed) : 0;
         positions_.push_back(uint8_t(v & 0xff)), positions_.push_back(uint8_t((v >> 8) & 0xff));
         positions_.push_back(uint8_t((v >> 16) & 0xff));
     }
@@ -55,8 +59,9 @@ void SpzWriter::add(const Gaussian& g) {
 
 Result<std::vector<uint8_t>> SpzWriter::finish() const {
     const size_t n = size();
-    if (n > kSpzMaxPoints) return Status::error("SPZ holds at most 10 million points, not " + std::to_string(n));
+    if (n > kMaxPoints) return Status::error("SPZ holds at most 10 million points, not " + std::to_string(n));
     if (outside_) return Status::error("a position lies beyond the extent SPZ's fixed point was sized for");
+    if (nonFinite_) return Status::error("a Gaussian's size, normal, opacity or colour is not a finite number");
     std::vector<uint8_t> raw(16);
     le::put<uint32_t>(raw.data(), kSpzMagic);
     le::put<uint32_t>(raw.data() + 4, kSpzVersion);

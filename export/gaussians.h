@@ -18,9 +18,11 @@ namespace surfcast {
 // A surfel of radius r (its own, or its node's h) as a Gaussian of standard
 // deviation sigmaScale · k · r in its tangent plane (k: the set's kernel
 // scale, Surfcast's kernel V^r = (k r)² I) and `thickness` · that along its
-// normal, with the surfel's opacity times `opacity`.
+// normal, with the surfel's opacity times `opacity`. sigmaScale 0.75 brings
+// CesiumJS's and Spark's images closest to surfcast-view's (FLIP 0.038
+// against 0.051 at 1: bench/BENCHMARKS.md, "Splats against surfcast-view").
 struct GaussianOptions {
-    double sigmaScale = 1.0;
+    double sigmaScale = 0.75;
     double thickness = 0.01;
     double opacity = 1.0;
 };
@@ -46,20 +48,25 @@ inline constexpr double kShY00 = 0.28209479177387814;
 // 24-bit fixed-point positions, opacities, colours, log scales and
 // rotations, one column after another, as bytes; no higher spherical
 // harmonics. Coordinates are stored as given (SPZ's own axes are right, up,
-// back). Columns grow as Gaussians arrive: 19 bytes each.
+// back). Columns grow as Gaussians arrive, 19 bytes each; finish() copies
+// them once and compresses (about 64 bytes a Gaussian at the peak, measured).
+// Log scales outside [-10, 5.9] (standard deviations outside 4.5e-5 to 365
+// set units) clamp to that range, as SPZ's own writer clamps them.
 class SpzWriter {
 public:
+    static constexpr size_t kMaxPoints = 10'000'000;  // what SPZ's reader accepts
     // `extent`: the largest |coordinate| to come; the fixed point's fraction
     // takes as many bits as it leaves of 24.
     explicit SpzWriter(double extent);
     void add(const Gaussian& g);
     size_t size() const { return opacities_.size(); }
-    // Fails beyond SPZ's 10 million points, or for a coordinate past the extent.
+    // Fails beyond kMaxPoints, for a coordinate past the extent, or for a
+    // value that is not finite.
     Result<std::vector<uint8_t>> finish() const;
 
 private:
     int fraction_ = 0;
-    bool outside_ = false;
+    bool outside_ = false, nonFinite_ = false;
     std::vector<uint8_t> positions_, opacities_, colors_, scales_, rotations_;
 };
 

@@ -10,6 +10,14 @@ Vec3d toSplatAxes(const Vec3d& v, SplatAxes axes) {
     return axes == SplatAxes::YUp ? Vec3d{v.x, v.z, -v.y} : Vec3d{v.x, -v.z, v.y};
 }
 
+Status checkFiniteSurfels(const TilesetReader& set, const NodeRecord& node, const BlockData& block) {
+    for (float v : block.normals)
+        if (!std::isfinite(v)) return Status::error(set.describe() + ": node " + node.key.name() + ": a normal is not a finite number");
+    for (float v : block.radii)
+        if (!(std::isfinite(v) && v >= 0)) return Status::error(set.describe() + ": node " + node.key.name() + ": a radius is not a finite number");
+    return {};
+}
+
 Gaussian surfelGaussian(const TilesetReader& set, const NodeRecord& node, const BlockData& b, size_t i, const Vec3d& centre,
                         const GaussianOptions& options, SplatAxes axes) {
     const TilesetInfo& info = set.info();
@@ -55,6 +63,9 @@ Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat for
     uint64_t count = 0;
     for (size_t i : chosen) count += nodes[i].surfelCount;
     if (count == 0) return Status::error(set.describe() + ": " + report.cut + " holds no surfels");
+    if (format == SplatFormat::Spz && count > SpzWriter::kMaxPoints)
+        return Status::error(set.describe() + ": " + report.cut + " holds " + std::to_string(count) +
+                             " surfels, more than SPZ's 10 million (--level or --splat-budget chooses fewer)");
 
     const Vec3d origin = (info.bounds.min + info.bounds.max) * 0.5;
     const SplatAxes axes = format == SplatFormat::Ply ? SplatAxes::YDown : SplatAxes::YUp;
@@ -75,6 +86,7 @@ Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat for
         const NodeRecord& n = nodes[chosen[k]];
         auto block = set.readBlock(n);
         if (!block) return block.status();
+        SC_TRY(checkFiniteSurfels(set, n, *block));
         records.resize(block->size() * kPlyRecordBytes);
         for (size_t i = 0; i < block->size(); ++i) {
             const Gaussian g = surfelGaussian(set, n, *block, i, origin, options, axes);

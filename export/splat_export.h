@@ -19,6 +19,11 @@ namespace surfcast {
 enum class SplatAxes { YUp, YDown };
 Vec3d toSplatAxes(const Vec3d& v, SplatAxes axes);
 
+// Whether a decoded block's normals and radii are finite numbers, as
+// Gaussians need (a block's floats are not range-checked when decoded):
+// an error naming the node if not.
+Status checkFiniteSurfels(const TilesetReader& set, const NodeRecord& node, const BlockData& block);
+
 // Surfel i of a node's decoded block as a Gaussian about `centre` (world).
 Gaussian surfelGaussian(const TilesetReader& set, const NodeRecord& node, const BlockData& block, size_t i, const Vec3d& centre,
                         const GaussianOptions& options, SplatAxes axes);

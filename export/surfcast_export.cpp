@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include "camera.h"
@@ -55,7 +56,8 @@ http(s) URL.
   --splat-budget N      ply, spz: the deepest level whose cut holds at most N
                         surfels (the leaves where they fit)
   --splat-scale S       splats: standard deviation S times the set's kernel
-                        scale times the surfel's radius (default 1: Surfcast's
+                        scale times the surfel's radius (default 0.75, closest
+                        to surfcast-view in CesiumJS and Spark; 1 is Surfcast's
                         own reconstruction kernel)
   --splat-opacity A     splats: opacity A times the surfel's own (default 1)
   --bbox X0,Y0,Z0,X1,Y1,Z1
@@ -76,6 +78,15 @@ int usageError(const std::string& message) {
     return 2;
 }
 
+// Progress on stderr, a line each twentieth of the work: "  DONE of ALL UNIT".
+std::function<void(size_t, size_t)> progressLines(const char* unit) {
+    return [unit, last = size_t(0)](size_t done, size_t all) mutable {
+        if (done != all && done - last < std::max<size_t>(1, all / 20)) return;
+        last = done;
+        std::fprintf(stderr, "  %zu of %zu %s\n", done, all, unit);
+    };
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -85,7 +96,7 @@ int main(int argc, char** argv) {
     HttpOptions http;
     bool quiet = false;
     Tiles3dOptions tiles;
-    bool tilesOption = false, asGiven = false, splatOption = false;
+    bool asGiven = false, shapeGiven = false, cutGiven = false;  // options only some formats take
     SplatCut cut;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -99,11 +110,11 @@ int main(int argc, char** argv) {
             std::fputs(kUsage, stdout);
             return 0;
         } else if (a == "--format") {
-            if (!value(&format)) return usageError("--format wants laz or copc");
+            if (!value(&format)) return usageError("--format wants laz, copc, 3dtiles, ply or spz");
         } else if (a == "--as") {
             if (!value(&v) || (v != "points" && v != "splats")) return usageError("--as wants points or splats");
             tiles.as = v == "splats" ? Tiles3dOptions::As::Splats : Tiles3dOptions::As::Points;
-            tilesOption = asGiven = true;
+            asGiven = true;
         } else if (a == "--splat-scale" || a == "--splat-opacity") {
             char* end = nullptr;
             const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
@@ -111,19 +122,19 @@ int main(int argc, char** argv) {
             if (!(end && *end == '\0' && d > 0 && d <= (scale ? 100.0 : 1.0)))
                 return usageError(a + (scale ? " wants a number in (0, 100]" : " wants a number in (0, 1]"));
             (scale ? tiles.gaussians.sigmaScale : tiles.gaussians.opacity) = d;
-            tilesOption = true;
+            shapeGiven = true;
         } else if (a == "--level") {
             char* end = nullptr;
             const long l = value(&v) && v != "leaves" ? std::strtol(v.c_str(), &end, 10) : -1;
             if (v != "leaves" && !(end && *end == '\0' && !v.empty() && l >= 0 && l <= 64)) return usageError("--level wants a level (0, 1, ...) or leaves");
             cut.level = int(l);
-            splatOption = true;
+            cutGiven = true;
         } else if (a == "--splat-budget") {
             char* end = nullptr;
             const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
             if (!(end && *end == '\0' && d >= 1 && d <= 1e12)) return usageError("--splat-budget wants a count of surfels (1 or more)");
             cut.budget = uint64_t(d);
-            splatOption = true;
+            cutGiven = true;
         } else if (a == "-o" || a == "--output") {
             if (!value(&output)) return usageError("-o wants a file");
         } else if (a == "--bbox") {
@@ -153,15 +164,13 @@ int main(int argc, char** argv) {
     const bool splatFile = format == "ply" || format == "spz";
     if (format != "laz" && format != "copc" && format != "3dtiles" && !splatFile)
         return usageError("--format " + format + ": the formats are laz, copc, 3dtiles, ply and spz");
-    if (splatFile && (filter.box || !filter.classes.empty()))
-        return usageError("--format " + format + " takes a cut through the whole set (--bbox and --classes are for laz and copc)");
-    if (!splatFile && splatOption) return usageError("--level and --splat-budget are for --format ply and spz");
+    if (format != "laz" && format != "copc" && (filter.box || !filter.classes.empty()))
+        return usageError("--format " + format + " exports the whole set (--bbox and --classes are for laz and copc)");
+    if (asGiven && format != "3dtiles") return usageError("--as is for --format 3dtiles");
+    if (shapeGiven && ((format == "3dtiles" && tiles.as == Tiles3dOptions::As::Points) || (format != "3dtiles" && !splatFile)))
+        return usageError("--splat-scale and --splat-opacity are for splats (3dtiles --as splats, ply, spz)");
+    if (cutGiven && !splatFile) return usageError("--level and --splat-budget are for --format ply and spz");
     if (cut.level >= 0 && cut.budget > 0) return usageError("--level or --splat-budget, not both");
-    if (format == "3dtiles" && (filter.box || !filter.classes.empty()))
-        return usageError("--format 3dtiles exports the whole set (--bbox and --classes are for laz and copc)");
-    if (format != "3dtiles" && tilesOption && !splatFile)
-        return usageError("--as, --splat-scale and --splat-opacity are for --format 3dtiles, ply and spz");
-    if (splatFile && tiles.as == Tiles3dOptions::As::Points && asGiven) return usageError("--as is for --format 3dtiles");
     if (output.empty()) return usageError("-o FILE is required");
 
     auto reader = openTileset(set, http);
@@ -170,14 +179,8 @@ int main(int argc, char** argv) {
         return 1;
     }
     if (format == "3dtiles") {
-        Tiles3dOptions& options = tiles;
-        if (!quiet)
-            options.progress = [last = size_t(0)](size_t done, size_t all) mutable {
-                if (done != all && done - last < std::max<size_t>(1, all / 20)) return;
-                last = done;
-                std::fprintf(stderr, "  %zu of %zu tiles\n", done, all);
-            };
-        auto report = writeTiles3d(*reader, options, output);
+        if (!quiet) tiles.progress = progressLines("tiles");
+        auto report = writeTiles3d(*reader, tiles, output);
         if (!report) {
             std::fprintf(stderr, "surfcast-export: %s\n", report.status().message().c_str());
             return 1;
@@ -210,11 +213,7 @@ int main(int argc, char** argv) {
     Status status;
     if (splatFile) {
         auto report = writeSplatFile(*reader, format == "ply" ? SplatFormat::Ply : SplatFormat::Spz, cut, tiles.gaussians, f,
-                                     [&, last = size_t(0)](size_t done, size_t all) mutable {
-                                         if (quiet || (done != all && done - last < std::max<size_t>(1, all / 20))) return;
-                                         last = done;
-                                         std::fprintf(stderr, "  %zu of %zu nodes\n", done, all);
-                                     });
+                                     quiet ? std::function<void(size_t, size_t)>() : progressLines("nodes"));
         if (!report) status = Status::error(partial + ": " + report.status().message());
         else plan->points = report->splats;
         if (report && !quiet) std::fprintf(stderr, "%llu splats from %zu nodes (%s)\n", (unsigned long long)report->splats, report->nodes, report->cut.c_str());

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <unordered_map>
 
 #include <nlohmann/json.hpp>
@@ -23,14 +24,15 @@ constexpr uint32_t kGlbMagic = 0x46546C67;  // "glTF"
 constexpr uint32_t kChunkJson = 0x4E4F534A, kChunkBin = 0x004E4942;
 constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedByte = 5121;
 constexpr int kArrayBuffer = 34962, kPoints = 0;
+constexpr const char* kGenerator = "surfcast-export";
 
 double srgbToLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
 
 // The set's z-up coordinates as glTF's y-up ones (3D Tiles turns them back at load).
 Vec3d toYUp(const Vec3d& v) { return toSplatAxes(v, SplatAxes::YUp); }
 
-// A glb under construction: accessors over one binary buffer, one
-// buffer view each (interleaved where vertex alignment asks for it).
+// A glb under construction: accessors over one binary buffer, one buffer
+// view each (strided where glTF's 4-byte vertex alignment asks for it).
 class GlbBuilder {
 public:
     // A buffer view of `bytes` (padded to 4) with the given stride; returns its index.
@@ -183,6 +185,7 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
     gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
     gltf["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}}},
                                       {"extensions", {{"KHR_materials_unlit", json::object()}}}}});
+    if (!b.opacity.empty()) gltf["materials"][0]["alphaMode"] = "BLEND";  // COLOR_0's alpha is the surfel's opacity
     return glb.finish(gltf);
 }
 
@@ -238,24 +241,34 @@ Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord
 
 }  // namespace
 
+bool isTiles3dExport(const std::string& folder) {
+    std::ifstream in(fs::path(folder) / "tileset.json");
+    if (!in) return false;
+    const json j = json::parse(in, nullptr, false);
+    const json* generator = j.is_object() && j.contains("asset") && j["asset"].is_object() && j["asset"].contains("generator")
+                                ? &j["asset"]["generator"]
+                                : nullptr;
+    return generator && generator->is_string() && generator->get<std::string>().rfind(kGenerator, 0) == 0;
+}
+
 Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOptions& options, const std::string& output) {
     const TilesetInfo& info = set.info();
     const std::vector<NodeRecord>& nodes = set.nodes();
     if (nodes.empty()) return Status::error(set.describe() + ": the set holds no nodes");
-    // Never over a Surfcast set (which has a tileset.json too): only over a previous export.
-    auto folder = PublishedFolder::create(
-        output, "tileset.json",
-        [](const std::string& out) { return fs::exists(fs::path(out) / "tileset.json") && !fs::exists(fs::path(out) / "hierarchy.bin"); },
-        "a 3D Tiles export");
-    if (!folder) return folder.status();
-
     std::unordered_map<NodeKey, size_t, NodeKeyHash> index;
     for (size_t i = 0; i < nodes.size(); ++i) index[nodes[i].key] = i;
+    auto root = index.find(NodeKey{});
+    if (root == index.end()) return Status::error(set.describe() + ": the set has no root node");
+    // Only over a previous export (its tileset.json names surfcast-export),
+    // never over a Surfcast set or another tool's tileset.
+    auto folder = PublishedFolder::create(output, "tileset.json", isTiles3dExport, "a 3D Tiles export of surfcast-export");
+    if (!folder) return folder.status();
     const Vec3d origin = (info.bounds.min + info.bounds.max) * 0.5;
 
     // Each node's box (world): its cube cut to the bounds, grown by its
-    // position step and its descendants' (children come after their parents
-    // in the hierarchy's order, so a reverse walk sees them first).
+    // position step (splats: by their reach, 3 sigma, if more) and by its
+    // descendants' growth (deepest level first, so children come before
+    // their parent).
     std::vector<Box3d> boxes(nodes.size());
     std::vector<double> grow(nodes.size(), 0.0);
     std::vector<size_t> byLevel(nodes.size());
@@ -265,8 +278,10 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
         const NodeRecord& n = nodes[i];
         const double edge = nodeEdge(info, n.key.level);
         grow[i] = std::max(grow[i], edge / double((uint64_t(1) << n.positionBits) - 1));
+        if (options.as == Tiles3dOptions::As::Splats)  // a surfel's radius is at most its node's h
+            grow[i] = std::max(grow[i], 3 * options.gaussians.sigmaScale * info.kernelScale * n.spacing);
         if (n.key.level > 0) {
-            auto parent = index.find(NodeKey{uint8_t(n.key.level - 1), n.key.x / 2, n.key.y / 2, n.key.z / 2});
+            auto parent = index.find(n.key.parent());
             if (parent != index.end()) grow[parent->second] = std::max(grow[parent->second], grow[i]);
         }
         const Vec3d lo = nodeMin(info, n.key);
@@ -277,12 +292,15 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     }
 
     Tiles3dReport report;
-    fs::create_directories(fs::path((*folder)->path()) / "tiles");
+    std::error_code ec;
+    if (!fs::create_directory(fs::path((*folder)->path()) / "tiles", ec))
+        return Status::error((*folder)->path() + "/tiles: cannot create (" + ec.message() + ")");
     for (size_t i = 0; i < nodes.size(); ++i) {
         const NodeRecord& n = nodes[i];
         if (n.surfelCount > 0) {
             auto block = set.readBlock(n);
             if (!block) return block.status();
+            SC_TRY(checkFiniteSurfels(set, n, *block));
             const Vec3d centre = (boxes[i].min + boxes[i].max) * 0.5;
             const Vec3d half = (boxes[i].max - boxes[i].min) * 0.5;
             auto glb = options.as == Tiles3dOptions::As::Splats
@@ -298,6 +316,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     }
 
     // tileset.json: the tree, in the root's frame (the set's, less `origin`).
+    bool broken = false;  // a child the hierarchy lists but the set lacks (TilesetReader's checks rule it out)
     const auto tile = [&](auto& self, size_t i) -> json {
         const NodeRecord& n = nodes[i];
         const Vec3d c = (boxes[i].min + boxes[i].max) * 0.5 - origin, h = (boxes[i].max - boxes[i].min) * 0.5;
@@ -308,19 +327,21 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
         for (int c = 0; c < 8; ++c)
             if (n.childMask & (1u << c)) {
                 auto child = index.find(n.key.child(c));
-                if (child == index.end()) return json();  // readHierarchy guarantees children exist
+                if (child == index.end()) {
+                    broken = true;
+                    continue;
+                }
                 children.push_back(self(self, child->second));
             }
         if (!children.empty()) t["children"] = children;
         return t;
     };
-    auto root = index.find(NodeKey{});
-    if (root == index.end()) return Status::error(set.describe() + ": the set has no root node");
     json r = tile(tile, root->second);
+    if (broken) return Status::error(set.describe() + ": the hierarchy lists a child node the set does not hold");
     r["refine"] = "REPLACE";
     r["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin.x, origin.y, origin.z, 1};
     const double rootError = nodes[root->second].childMask ? 2.0 * nodes[root->second].spacing : nodes[root->second].spacing;
-    json tileset = {{"asset", {{"version", "1.1"}, {"generator", "surfcast-export 0.1.0"}}},
+    json tileset = {{"asset", {{"version", "1.1"}, {"generator", std::string(kGenerator) + " 0.1.0"}}},
                     {"geometricError", std::max(rootError, 0.0)},
                     {"root", r}};
     if (options.as == Tiles3dOptions::As::Splats) {

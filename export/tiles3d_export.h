@@ -7,8 +7,9 @@
 //   samples: the error of drawing it instead of its children), leaves too
 //   (their samples' error against the surface: engines size points by it).
 // - Bounding volumes are boxes: the node's cube cut to the set's bounds,
-//   grown by its position step and its descendants' (a quantized position
-//   may round past the bounds), so every child lies inside its parent.
+//   grown by its position step (a quantized position may round past the
+//   bounds) or, for splats, their reach, and by its descendants' growth, so
+//   every child lies inside its parent.
 // - Positions keep double precision where it matters: the root's transform
 //   carries the set's centre, each glb's node its tile's centre, and the
 //   floats in the glb are offsets from that. glTF is y-up; 3D Tiles turns
@@ -54,5 +55,9 @@ struct Tiles3dReport {
 // previous export there; refusing any other existing folder). Errors name
 // the node whose block fails.
 Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOptions& options, const std::string& output);
+
+// Whether `folder` holds a tileset.json that this export wrote (its asset's
+// generator is surfcast-export).
+bool isTiles3dExport(const std::string& folder);
 
 }  // namespace surfcast

@@ -206,8 +206,10 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "ply", "--as", "points", "-o", out}, 2, "--as is for --format 3dtiles"},
         {{dir_->file("autzen"), "--format", "laz", "--level", "2", "-o", out}, 2, "are for --format ply and spz"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--splat-scale", "0", "-o", out}, 2, "--splat-scale wants a number in (0, 100]"},
-        {{dir_->file("autzen"), "--format", "spz", "--bbox", "0,0,0,1,1,1", "-o", out}, 2, "takes a cut through the whole set"},
+        {{dir_->file("autzen"), "--format", "spz", "--bbox", "0,0,0,1,1,1", "-o", out}, 2, "exports the whole set"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--classes", "2", "-o", out}, 2, "exports the whole set"},
+        {{dir_->file("autzen"), "--format", "laz", "--splat-scale", "2", "-o", out}, 2, "are for splats"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--as", "points", "--splat-opacity", "0.5", "-o", out}, 2, "are for splats"},
         {{dir_->file("autzen"), "--format", "laz"}, 2, "-o FILE is required"},
         {{dir_->file("nothing"), "--format", "laz", "-o", out}, 1, dir_->file("nothing")},
     };
@@ -240,6 +242,8 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
     ASSERT_EQ(r.exitCode, 0) << r.output;
     const std::string before = test::readFile(good + "/tileset.json");
     ASSERT_NE(before.find("\"REPLACE\""), std::string::npos);
+    // A file of ours in the export: a replaced folder would lose it.
+    test::writeFile(good + "/sentinel", "kept");
 
     // The set with one byte flipped in the middle of one node's block.
     const std::string damaged = dir_->file("damaged");
@@ -247,6 +251,7 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
     auto set = TilesetReader::open(damaged);
     ASSERT_TRUE(set.ok()) << set.status().message();
     const NodeRecord& victim = set->nodes().back();
+    ASSERT_EQ(victim.childMask, 0) << "the splat files below hold the leaves: the victim must be one";
     {
         std::fstream f(damaged + "/blocks.bin", std::ios::in | std::ios::out | std::ios::binary);
         f.seekg(std::streamoff(victim.blockOffset + victim.blockSize / 2));
@@ -268,12 +273,23 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
         EXPECT_FALSE(fs::exists(file));
     }
     EXPECT_EQ(test::readFile(good + "/tileset.json"), before) << "the previous export stays whole";
+    EXPECT_EQ(test::readFile(good + "/sentinel"), "kept") << "the previous export stays in place";
 
-    // A Surfcast set (it has a tileset.json too) is not an export to replace.
+    // A Surfcast set (it has a tileset.json too) is not an export to replace,
+    // nor another tool's tileset; and surfcast-build does not replace an export.
     r = test::run({test::binary("surfcast-export"), damaged, "--format", "3dtiles", "-q", "-o", dir_->file("autzen")});
     EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find("is not a 3D Tiles export"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("is not a 3D Tiles export of surfcast-export"), std::string::npos) << r.output;
     EXPECT_TRUE(TilesetReader::open(dir_->file("autzen")).ok());
+    fs::create_directories(dir_->file("other"));
+    test::writeFile(dir_->file("other/tileset.json"), R"({"asset": {"version": "1.1", "generator": "another tool"}, "geometricError": 1})");
+    r = test::run({test::binary("surfcast-export"), dir_->file("autzen"), "--format", "3dtiles", "-q", "-o", dir_->file("other")});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("is not a 3D Tiles export of surfcast-export"), std::string::npos) << r.output;
+    r = test::run({test::binary("surfcast-build"), "-q", test::dataFile("autzen_trim.las"), "-o", good});
+    EXPECT_NE(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("is not a tile set"), std::string::npos) << r.output;
+    EXPECT_EQ(test::readFile(good + "/sentinel"), "kept");
     for (const auto& entry : fs::directory_iterator(dir_->path()))
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
 }

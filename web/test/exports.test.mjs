@@ -9,17 +9,16 @@
 
 import { after, before, describe, test } from "node:test";
 import assert from "node:assert/strict";
-import { execFileSync, spawn } from "node:child_process";
+import { execFileSync } from "node:child_process";
 import { createRequire } from "node:module";
-import { existsSync, mkdtempSync, readdirSync, readFileSync, rmSync, symlinkSync, copyFileSync, mkdirSync } from "node:fs";
-import { createServer } from "node:net";
+import { existsSync, mkdtempSync, readdirSync, readFileSync, rmSync, symlinkSync } from "node:fs";
 import { gunzipSync } from "node:zlib";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { Logger, NodeIO } from "@gltf-transform/core";
 import validator from "gltf-validator";
 import { PNG } from "pngjs";
-import puppeteer from "puppeteer-core";
+import { cameraIn, coverage, fromYDown, fromYUp, launch, settledView, startPages, toYDown, toYUp } from "./consumers.mjs";
 import { loadModule, web } from "./load_module.mjs";
 
 const build = process.env.SURFCAST_BUILD ?? join(web, "..", "build");
@@ -34,7 +33,9 @@ const format = await loadModule("src/format.ts");
 const blocks = await loadModule("src/block_decode.ts");
 
 let work, set, out, splats;
-let cesiumUrl, cesiumBrowser;
+let pagesUrl, browser;
+// surfcast-export's default --splat-scale (export/gaussians.h).
+const kSplatScale = 0.75;
 // Over the Autzen scan from its south-west, as surfcast-view takes a camera.
 const camera = "636300,848500,900,636590,849216,430,0,0,1,45";
 const children = [];
@@ -64,39 +65,10 @@ function readSet(dir) {
   return { info, nodes };
 }
 
-async function startNginx(root) {
-  for (let attempt = 0; attempt < 5; ++attempt) {
-    const port = await new Promise((resolve) => {
-      const s = createServer().listen(0, "127.0.0.1", () => {
-        const { port } = s.address();
-        s.close(() => resolve(port));
-      });
-    });
-    const prefix = mkdtempSync(join(work, "nginx-"));
-    const conf = join(prefix, "nginx.conf");
-    execFileSync("sh", ["-c", `cat > ${conf}`], { input: `daemon off; master_process off; worker_processes 1; pid ${prefix}/nginx.pid;
-error_log stderr; events { worker_connections 64; }
-http { access_log off; types { text/html html; text/javascript js; text/css css; application/wasm wasm; application/json json;
-  model/gltf-binary glb; image/png png; }
-  default_type application/octet-stream; client_body_temp_path ${prefix}; proxy_temp_path ${prefix}; fastcgi_temp_path ${prefix};
-  uwsgi_temp_path ${prefix}; scgi_temp_path ${prefix};
-  server { listen 127.0.0.1:${port}; root ${root}; } }
-` });
-    const child = spawn("/usr/sbin/nginx", ["-e", "stderr", "-p", prefix, "-c", conf], { stdio: "ignore" });
-    children.push(child);
-    for (let i = 0; i < 60; ++i) {
-      if (await fetch(`http://127.0.0.1:${port}/cesium.html`).then((r) => r.ok, () => false)) return `http://127.0.0.1:${port}`;
-      await new Promise((r) => setTimeout(r, 50));
-    }
-    child.kill();
-  }
-  throw new Error("nginx did not start");
-}
-
 describe("exports, as their consumers read them", { skip }, () => {
   before(() => {
     assert.ok(existsSync(scan), `${scan}: the shared scans are needed (SURFCAST_DATA_DIR)`);
-    work = mkdtempSync(join(tmpdir(), "surfcast-tiles3d-"));
+    work = mkdtempSync(join(tmpdir(), "surfcast-exports-"));
     set = join(work, "autzen");
     out = join(work, "autzen3d");
     execFileSync(bin("surfcast-build"), ["-q", scan, "--attributes", "all", "-o", set]);
@@ -106,7 +78,7 @@ describe("exports, as their consumers read them", { skip }, () => {
     for (const f of ["ply", "spz"]) execFileSync(bin("surfcast-export"), [set, "--format", f, "-q", "-o", join(work, `autzen.${f}`)]);
   });
   after(async () => {
-    await cesiumBrowser?.close();
+    await browser?.close();
     for (const c of children) c.kill();
     if (work) rmSync(work, { recursive: true, force: true });
   });
@@ -163,15 +135,11 @@ describe("exports, as their consumers read them", { skip }, () => {
 
   test("round trip: glTF-Transform reads back the set's surfels", async (t) => {
     const { info, nodes } = readSet(set);
-    const draco = await createRequire(import.meta.url)("draco3d").createDecoderModule({});
+    const decode = await decoderFor(info);
     const tileset = JSON.parse(readFileSync(join(out, "tileset.json"), "utf8"));
     const origin = tileset.root.transform.slice(12, 15);
     // It reads the glbs without the extensions' definitions (unlit, metadata): the attributes are the core's.
     const io = new NodeIO().setLogger(new Logger(Logger.Verbosity.ERROR));
-    const blob = readFileSync(join(set, "blocks.bin"));
-    const extra = info.attributes.map((a) => a.name).filter((n) => !format.kFixedAttributes.includes(n));
-    const coloring = { by: "rgb", originZ: 0, elevationMin: 0, elevationMax: 1, intensityScale: 1, intensityOffset: 0,
-                       intensityP2: 0, intensityP98: 1, hiddenClasses: [] };
     let compared = 0, worst = 0;
     for (const n of nodes.values()) {
       const doc = await io.readBinary(new Uint8Array(readFileSync(join(out, "tiles", `${n.key}.glb`))));
@@ -183,14 +151,9 @@ describe("exports, as their consumers read them", { skip }, () => {
       const edge = format.nodeEdge(info, n.level);
       // Float offsets from the tile's centre: a few ulps of the node's size.
       const tolerance = 1e-6 * edge;
-      const job = { id: 1, key: n.key, blob: blob.buffer.slice(blob.byteOffset + n.blockOffset, blob.byteOffset + n.blockOffset + n.blockSize),
-                    crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits, min: format.nodeMin(info, n), edge,
-                    spacing: n.spacing, hasRadius: !!(n.flags & format.kFlagHasRadius),
-                    hasEdgeWeights: !!(n.flags & format.kFlagEdgeWeights), colorBits: info.colorBits, weights: info.weights !== "none",
-                    extra, coloring };
       const step = Math.max(1, Math.floor(n.surfelCount / 40));
       for (let i = 0; i < n.surfelCount; i += step) {
-        const s = blocks.decodeBlock(draco, { ...job, pick: i }).picked;
+        const s = decode(n, i);
         // glTF is y-up: (x, y, z) of the set is (x, z, -y) in the glb.
         const p = position.getElement(i, []), q = [p[0] + tx, p[1] + ty, p[2] + tz];
         const world = [origin[0] + q[0], origin[1] - q[2], origin[2] + q[1]];
@@ -229,20 +192,16 @@ describe("exports, as their consumers read them", { skip }, () => {
       colorBits: info.colorBits, weights: info.weights !== "none", extra, coloring, pick: i }).picked;
   }
 
-  // The set's z-up axes from a splat file's: glTF's and SPZ's y up, or the PLY's y down.
-  const fromYUp = (v) => [v[0], -v[2], v[1]];
-  const fromYDown = (v) => [v[0], v[2], -v[1]];
-
   // One Gaussian read back against surfel s: where it is (set coordinates,
   // within `near`), its colour (within `colorStep`), its standard
-  // deviations (kernel scale times radius in the plane, 1 % of it along the
+  // deviations (kSplatScale times kernel scale times radius in the plane, 1 % of it along the
   // normal; within a factor e^logStep) and the rotation taking z to the
   // normal (quaternion x, y, z, w in the file's axes `axes`, within `turn`
   // radians). Returns nothing; asserts.
   function expectGaussian(g, s, info, { near, colorStep, logStep, turn, axes, what }) {
     for (let a = 0; a < 3; ++a) assert.ok(Math.abs(g.position[a] - s.position[a]) <= near, `${what}: axis ${a}, ${g.position[a]} vs ${s.position[a]}`);
     for (let c = 0; c < 3; ++c) assert.ok(Math.abs(g.color[c] - s.color[c]) <= colorStep, `${what}: colour ${c}, ${g.color[c]} vs ${s.color[c]}`);
-    const sigma = info.kernelScale * s.radius;
+    const sigma = kSplatScale * info.kernelScale * s.radius;
     for (const [a, want] of [[0, sigma], [1, sigma], [2, 0.01 * sigma]])
       assert.ok(Math.abs(Math.log(g.scales[a] / want)) <= logStep, `${what}: scale ${a}, ${g.scales[a]} vs ${want}`);
     const [x, y, z, w] = g.rotation;
@@ -375,93 +334,33 @@ describe("exports, as their consumers read them", { skip }, () => {
     t.diagnostic(`${compared} of ${total} splats compared in each file`);
   });
 
-  // Covered pixels of a 640 x 480 image: brighter than the background by
-  // more than antialiasing's faintest edge; Cesium's credit (bottom left)
-  // is not the set's.
-  function coverage(img) {
-    const m = new Uint8Array(640 * 480);
-    for (let y = 0; y < 480; ++y)
-      for (let x = 0; x < 640; ++x) {
-        const i = y * 640 + x;
-        m[i] = !(y >= 440 && x < 160) && img.data[4 * i] + img.data[4 * i + 1] + img.data[4 * i + 2] > 30 ? 1 : 0;
-      }
-    return m;
-  }
-
-  // CesiumJS's view of an export (a folder under work/) at the test's camera,
-  // from nginx on loopback; also the problems the page reported.
-  // One static root for both consumers' pages, their own builds linked
-  // beside them as the pages ask, and the exports under sets/.
-  async function open() {
-    if (!cesiumUrl) {
-      const root = join(work, "www"), modules = join(web, "node_modules");
-      mkdirSync(root);
-      symlinkSync(join(modules, "cesium", "Build", "Cesium"), join(root, "cesium"));
-      for (const f of ["three.module.js", "three.core.js"]) symlinkSync(join(modules, "three", "build", f), join(root, f));
-      symlinkSync(join(modules, "three", "examples", "jsm"), join(root, "three-addons"));
-      symlinkSync(join(modules, "@sparkjsdev", "spark", "dist", "spark.module.js"), join(root, "spark.module.js"));
-      symlinkSync(work, join(root, "sets"));
-      for (const f of ["cesium.html", "spark.html"]) copyFileSync(join(web, "examples", f), join(root, f));
-      cesiumUrl = await startNginx(root);
-      cesiumBrowser = await puppeteer.launch({ executablePath: chromium, headless: true,
-        args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--window-size=640,480"] });
+  // The consumers' pages (test/consumers.mjs), started on first use.
+  async function pages() {
+    if (!pagesUrl) {
+      pagesUrl = await startPages(work, join(work, "www"), children);
+      symlinkSync(work, join(work, "www", "sets"));
+      browser = await launch(chromium);
     }
-    const page = await cesiumBrowser.newPage();
-    await page.setViewport({ width: 640, height: 480 });
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
-    page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
-    page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
-    page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
-    return { page, problems };
-  }
-
-  // A page's view once settled: `frames` drawn after it loaded, then two
-  // screenshots, two frames apart, covering the same pixels to 0.5 % of the
-  // view (blending order moves a few edge pixels between frames).
-  async function settled(page, counter, frames) {
-    const loadedAt = await page.evaluate(`${counter}.frames`);
-    let png, last = -1, wait = frames;
-    for (let i = 0; i < 20; ++i) {
-      const now = await page.evaluate(`${counter}.frames`);
-      await page.waitForFunction(`${counter}.frames >= ${Math.max(now + 2, loadedAt + wait)}`, { timeout: 120000 });
-      wait = 0;
-      png = PNG.sync.read(await page.screenshot({ type: "png" }));
-      const covered = coverage(png).reduce((a, b) => a + b, 0);
-      if (covered > 0 && Math.abs(covered - last) <= 0.005 * 640 * 480) break;
-      last = covered;
-    }
-    return png;
+    return pagesUrl;
   }
 
   // Spark's view of a splat file under work/, at the test's camera in the file's axes.
   async function spark(file, axes) {
-    const { page, problems } = await open();
     const { info } = readSet(set);
     const origin = info.boundsMin.map((m, a) => (m + info.boundsMax[a]) / 2);
-    const v = camera.split(",").map(Number);
-    const at = [...axes(v.slice(0, 3).map((x, a) => x - origin[a])), ...axes(v.slice(3, 6).map((x, a) => x - origin[a])), ...axes(v.slice(6, 9)), v[9]];
-    await page.goto(`${cesiumUrl}/spark.html?splats=sets/${file}&camera=${at.join(",")}`);
-    await page.waitForFunction("window.sparkState.loaded || window.sparkState.errors.length > 0", { timeout: 120000 });
-    const state = await page.evaluate(() => window.sparkState);
+    const url = await pages();
     // Spark sorts in a worker as it draws: a few frames settle it.
-    const png = await settled(page, "window.sparkState", 3);
-    await page.close();
-    return { state, png, problems };
+    return settledView(browser, `${url}/spark.html?splats=sets/${file}&camera=${cameraIn(camera, origin, axes)}`, "window.sparkState", 3);
   }
 
+  // CesiumJS's view of an export (a folder under work/) at the test's camera.
   async function cesium(folder, params) {
-    const { page, problems } = await open();
-    await page.goto(`${cesiumUrl}/cesium.html?tileset=sets/${folder}/tileset.json&camera=${camera}${params}`);
-    await page.waitForFunction("window.cesiumState.loaded || window.cesiumState.errors.length > 0", { timeout: 120000 });
-    const state = await page.evaluate(() => window.cesiumState);
     // Tiles load before they are drawn, and splats are drawn sorted first
     // from their snapshot, then sorted again while the camera rests: 30
     // frames after the last tile loaded (about 20 s in SwiftShader) the view
     // has settled in every run seen.
-    const png = await settled(page, "window.cesiumState", 30);
-    await page.close();
-    return { state, png, problems };
+    const url = await pages();
+    return settledView(browser, `${url}/cesium.html?tileset=sets/${folder}/tileset.json&camera=${camera}${params}`, "window.cesiumState", 30);
   }
 
   // surfcast-view at the same camera, on the same black.
@@ -484,31 +383,39 @@ describe("exports, as their consumers read them", { skip }, () => {
     const inner = (m) => m.map((v, i) => v && m[i - 1] && m[i + 1] && m[i - 640] && m[i + 640] ? 1 : 0);
     const a = coverage(png), b = coverage(want), ai = inner(a), bi = inner(b);
     let both = 0, either = 0, n = 0;
-    const sum = [[0, 0, 0], [0, 0, 0]];
+    const sum = [[0, 0, 0], [0, 0, 0]], squares = [0, 0, 0];
     for (let i = 0; i < a.length; ++i) {
       both += a[i] & b[i];
       either += a[i] | b[i];
       if (!(ai[i] && bi[i])) continue;
       ++n;
-      for (let c = 0; c < 3; ++c) sum[0][c] += png.data[4 * i + c], sum[1][c] += want.data[4 * i + c];
+      for (let c = 0; c < 3; ++c) {
+        sum[0][c] += png.data[4 * i + c], sum[1][c] += want.data[4 * i + c];
+        squares[c] += want.data[4 * i + c] ** 2;
+      }
     }
     const [mine, theirs] = sum.map((s) => s.map((v) => v / n));
-    return { iou: both / either, n, mine, theirs, shown: `${mine.map((v) => v.toFixed(1))} against ${theirs.map((v) => v.toFixed(1))}` };
+    // The reference's colour spread over those pixels, its largest channel's.
+    const spread = Math.max(...theirs.map((m, c) => Math.sqrt(Math.max(0, squares[c] / n - m * m))));
+    return { iou: both / either, n, mine, theirs, spread,
+             shown: `${mine.map((v) => v.toFixed(1))} against ${theirs.map((v) => v.toFixed(1))}` };
   }
 
   // Mean colour off the silhouettes. Each renderer shows at a pixel a convex
   // combination of nearby surfels' stored colours (EWA: their normalized
-  // Gaussian average; Cesium's points: the nearest one's; its splats: a
+  // Gaussian average; Cesium's points: the nearest one's; the splats: a
   // front-to-back blend), so over the n pixels both estimate the surface's
   // area-weighted mean colour. They differ by rounding (the images' 8 bits:
-  // 0.5 level each; SPZ's colour bytes: 1 level) and by sampling: a pixel
-  // varies about the smoothed one by the scan's colour spread (about 40
-  // levels), averaged over n / 4 independent points (a point covers about 4
-  // pixels here), 3 sigma of which is 3 * 40 / sqrt(n / 4) = 0.7 level at
-  // n = 108,000. Hence 3 (2 where no SPZ rounding).
-  function expectSameColours(result, tolerance) {
+  // 0.5 level each; SPZ's colour bytes: up to 1 level more) and by sampling:
+  // a pixel varies about the smoothed one by the scene's colour spread
+  // (measured on the reference), averaged over n / 4 independent surfels (a
+  // surfel covers about 4 pixels at this camera): 3 sigma of that mean
+  // (0.7 level here: spread about 40, n about 108,000).
+  function expectSameColours(result, spz) {
+    const tolerance = 1 + (spz ? 1 : 0) + (3 * result.spread) / Math.sqrt(result.n / 4);
     for (let c = 0; c < 3; ++c)
-      assert.ok(Math.abs(result.mine[c] - result.theirs[c]) <= tolerance, `channel ${c}: ${result.shown}`);
+      assert.ok(Math.abs(result.mine[c] - result.theirs[c]) <= tolerance,
+                `channel ${c}: ${result.shown} (tolerance ${tolerance.toFixed(2)}, spread ${result.spread.toFixed(1)})`);
   }
 
   test("CesiumJS draws the points where surfcast-view draws the set, in its colours", { skip: chromium ? false : "Chromium is missing" },
@@ -520,8 +427,9 @@ describe("exports, as their consumers read them", { skip }, () => {
     assert.deepEqual(problems, []);
     assert.ok(state.tiles >= 1, `${state.tiles} tiles loaded`);
     const r = compare(png);
+    // 0.8: the issue's bar (measured 0.97; docs/EXPORT.md).
     assert.ok(r.iou >= 0.8, `Cesium's points cover the pixels surfcast-view's splats do: IoU ${r.iou}`);
-    expectSameColours(r, 2);
+    expectSameColours(r, false);
     t.diagnostic(`CesiumJS points: ${state.tiles} tiles, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
   });
 
@@ -533,20 +441,21 @@ describe("exports, as their consumers read them", { skip }, () => {
     assert.ok(state.tiles >= 1, `${state.tiles} tiles loaded`);
     const r = compare(png);
     assert.ok(r.iou >= 0.8, `Cesium's splats cover the pixels surfcast-view's do: IoU ${r.iou}`);
-    expectSameColours(r, 3);
+    expectSameColours(r, true);
     t.diagnostic(`CesiumJS splats: ${state.tiles} tiles, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
   });
 
-  for (const [file, axes, what] of [["autzen.ply", (v) => [v[0], -v[2], v[1]], "PLY"], ["autzen.spz", (v) => [v[0], v[2], -v[1]], "SPZ"]])
+  for (const [file, axes, what] of [["autzen.ply", toYDown, "PLY"], ["autzen.spz", toYUp, "SPZ"]])
     test(`Spark draws the ${what} file's splats where surfcast-view draws the set, in its colours`,
          { skip: chromium ? false : "Chromium is missing" }, async (t) => {
       const { state, png, problems } = await spark(file, axes);
       assert.deepEqual(state.errors, []);
       assert.deepEqual(problems, []);
-      assert.equal(state.splats, 110000);
+      const { nodes } = readSet(set);
+      assert.equal(state.splats, [...nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0), "the leaves' surfels");
       const r = compare(png);
       assert.ok(r.iou >= 0.8, `Spark's splats cover the pixels surfcast-view's do: IoU ${r.iou}`);
-      expectSameColours(r, what === "SPZ" ? 3 : 2);
+      expectSameColours(r, what === "SPZ");
       t.diagnostic(`Spark ${what}: ${state.splats} splats, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
     });
 });
