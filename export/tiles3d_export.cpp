@@ -88,6 +88,21 @@ private:
     json views_ = json::array(), accessors_ = json::array();
 };
 
+// A glTF of one node (translated by `t`, y-up, as a matrix: CesiumJS's
+// splat tiles read the matrix) holding one mesh of one primitive.
+json gltfOf(const NodeRecord& node, const Vec3d& t, const json& primitive, const std::vector<std::string>& used,
+            const std::vector<std::string>& required) {
+    json gltf;
+    gltf["asset"] = {{"version", "2.0"}, {"generator", std::string(kGenerator) + " 0.1.0"}};
+    gltf["extensionsUsed"] = used;
+    if (!required.empty()) gltf["extensionsRequired"] = required;
+    gltf["scene"] = 0;
+    gltf["scenes"] = json::array({{{"nodes", {0}}}});
+    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}}, {"name", node.key.name()}}});
+    gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
+    return gltf;
+}
+
 template <typename T>
 void put(std::vector<uint8_t>& bytes, size_t at, T value) {
     le::put<T>(bytes.data() + at, value);
@@ -153,7 +168,7 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
         lidar.push_back({"return_number", "_RETURN_NUMBER", kUnsignedByte, [&](size_t i) { return b.returnNumber[i]; }});
     if (!b.numberOfReturns.empty())
         lidar.push_back({"number_of_returns", "_NUMBER_OF_RETURNS", kUnsignedByte, [&](size_t i) { return b.numberOfReturns[i]; }});
-    json gltf;
+    json metadata;  // EXT_structural_metadata's schema and property attributes, where LiDAR attributes are
     json primitive = {{"mode", kPoints}, {"material", 0}};
     std::vector<std::string> used = {"KHR_materials_unlit"};
     if (!lidar.empty()) {
@@ -168,7 +183,7 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
             properties[l.property] = {{"attribute", l.attribute}};
             schema[l.property] = {{"type", "SCALAR"}, {"componentType", l.componentType == kUnsignedShort ? "UINT16" : "UINT8"}};
         }
-        gltf["extensions"]["EXT_structural_metadata"] = {
+        metadata = {
             {"schema", {{"id", "surfcast"}, {"classes", {{"surfel", {{"properties", schema}}}}}}},
             {"propertyAttributes", json::array({{{"class", "surfel"}, {"properties", properties}}})}};
         primitive["extensions"]["EXT_structural_metadata"] = {{"propertyAttributes", {0}}};
@@ -176,13 +191,8 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
     }
     primitive["attributes"] = attributes;
 
-    const Vec3d t = toYUp(centre - origin);
-    gltf["asset"] = {{"version", "2.0"}, {"generator", "surfcast-export 0.1.0"}};
-    gltf["extensionsUsed"] = used;
-    gltf["scene"] = 0;
-    gltf["scenes"] = json::array({{{"nodes", {0}}}});
-    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}}, {"name", node.key.name()}}});
-    gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
+    json gltf = gltfOf(node, toYUp(centre - origin), primitive, used, {});
+    if (!metadata.is_null()) gltf["extensions"]["EXT_structural_metadata"] = metadata;
     gltf["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}}},
                                       {"extensions", {{"KHR_materials_unlit", json::object()}}}}});
     if (!b.opacity.empty()) gltf["materials"][0]["alphaMode"] = "BLEND";  // COLOR_0's alpha is the surfel's opacity
@@ -227,15 +237,7 @@ Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord
                          {{"kernel", "ellipse"},
                           {"colorSpace", "srgb_rec709_display"},
                           {"extensions", {{"KHR_gaussian_splatting_compression_spz_2", {{"bufferView", view}}}}}}}}}};
-    const Vec3d t = toYUp(centre - origin);
-    json gltf;
-    gltf["asset"] = {{"version", "2.0"}, {"generator", "surfcast-export 0.1.0"}};
-    gltf["extensionsUsed"] = kSplatExtensions;
-    gltf["extensionsRequired"] = kSplatExtensions;
-    gltf["scene"] = 0;
-    gltf["scenes"] = json::array({{{"nodes", {0}}}});
-    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}}, {"name", node.key.name()}}});
-    gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
+    const json gltf = gltfOf(node, toYUp(centre - origin), primitive, kSplatExtensions, kSplatExtensions);
     return glb.finish(gltf);
 }
 

@@ -105,32 +105,42 @@ describe("exports, as their consumers read them", { skip }, () => {
     t.diagnostic(`infos: ${[...infos].join(" | ")}`);
   });
 
-  test("tileset.json: one tile per node, REPLACE, errors from h, boxes nested", () => {
+  test("tileset.json: one tile per node, REPLACE, errors from h, boxes nested and holding their surfels", async () => {
     const { info, nodes } = readSet(set);
-    const tileset = JSON.parse(readFileSync(join(out, "tileset.json"), "utf8"));
-    assert.equal(tileset.asset.version, "1.1");
-    assert.equal(tileset.root.refine, "REPLACE");
+    const decode = await decoderFor(info);
     const centre = info.boundsMin.map((m, a) => (m + info.boundsMax[a]) / 2);
-    assert.deepEqual(tileset.root.transform.slice(12, 15), centre, "the root carries the set's centre");
-    let tiles = 0;
-    const inside = (c, p) => [0, 1, 2].every((a) => c.box[a] - c.box[3 + 4 * a] >= p.box[a] - p.box[3 + 4 * a] - 1e-9 &&
-                                                      c.box[a] + c.box[3 + 4 * a] <= p.box[a] + p.box[3 + 4 * a] + 1e-9);
-    const walk = (tile, key, parent) => {
-      ++tiles;
-      const n = nodes.get(key);
-      assert.ok(n, `tile ${key} has a node`);
-      assert.equal(tile.content?.uri, `tiles/${key}.glb`);
-      assert.ok(existsSync(join(out, tile.content.uri)));
-      // A node's error is its spacing h, the distance its samples lie apart (leaves too).
-      assert.ok(Math.abs(tile.geometricError - n.spacing) <= 1e-6 * n.spacing, `tile ${key}'s error`);
-      if (parent) assert.ok(inside(tile.boundingVolume, parent.boundingVolume), `tile ${key} lies inside its parent`);
-      const kids = tile.children ?? [];
-      assert.equal(kids.length, [...Array(8).keys()].filter((c) => n.childMask & (1 << c)).length);
-      let c = 0;
-      for (let i = 0; i < 8; ++i) if (n.childMask & (1 << i)) walk(kids[c++], format.childKey(n, i), tile);
-    };
-    walk(tileset.root, "0-0-0-0", null);
-    assert.equal(tiles, nodes.size);
+    for (const dir of [out, splats]) {
+      const tileset = JSON.parse(readFileSync(join(dir, "tileset.json"), "utf8"));
+      assert.equal(tileset.asset.version, "1.1");
+      assert.equal(tileset.root.refine, "REPLACE");
+      assert.deepEqual(tileset.root.transform.slice(12, 15), centre, "the root carries the set's centre");
+      let tiles = 0;
+      const inside = (c, p) => [0, 1, 2].every((a) => c.box[a] - c.box[3 + 4 * a] >= p.box[a] - p.box[3 + 4 * a] - 1e-9 &&
+                                                        c.box[a] + c.box[3 + 4 * a] <= p.box[a] + p.box[3 + 4 * a] + 1e-9);
+      const walk = (tile, key, parent) => {
+        ++tiles;
+        const n = nodes.get(key);
+        assert.ok(n, `tile ${key} has a node`);
+        assert.equal(tile.content?.uri, `tiles/${key}.glb`);
+        assert.ok(existsSync(join(dir, tile.content.uri)));
+        // A node's error is its spacing h, the distance its samples lie apart (leaves too).
+        assert.ok(Math.abs(tile.geometricError - n.spacing) <= 1e-6 * n.spacing, `tile ${key}'s error`);
+        if (parent) assert.ok(inside(tile.boundingVolume, parent.boundingVolume), `tile ${key} lies inside its parent`);
+        // Its surfels (a sample, as the browser decodes them) lie in its box (root frame: less the centre).
+        const box = tile.boundingVolume.box;
+        for (let i = 0; i < n.surfelCount; i += Math.max(1, Math.floor(n.surfelCount / 20))) {
+          const p = decode(n, i).position;
+          for (let a = 0; a < 3; ++a)
+            assert.ok(Math.abs(p[a] - centre[a] - box[a]) <= box[3 + 4 * a] + 1e-9, `tile ${key}: surfel ${i} outside its box`);
+        }
+        const kids = tile.children ?? [];
+        assert.equal(kids.length, [...Array(8).keys()].filter((c) => n.childMask & (1 << c)).length);
+        let c = 0;
+        for (let i = 0; i < 8; ++i) if (n.childMask & (1 << i)) walk(kids[c++], format.childKey(n, i), tile);
+      };
+      walk(tileset.root, "0-0-0-0", null);
+      assert.equal(tiles, nodes.size);
+    }
   });
 
   test("round trip: glTF-Transform reads back the set's surfels", async (t) => {
