@@ -5,7 +5,9 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
+#include "gaussians.h"
 #include "las_reader.h"
 #include "test_support.h"
 #include "tileset_reader.h"
@@ -292,6 +294,39 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
     EXPECT_EQ(test::readFile(good + "/sentinel"), "kept");
     for (const auto& entry : fs::directory_iterator(dir_->path()))
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
+}
+
+// A block's floats are not range-checked when decoded, so a hostile one
+// with a valid CRC can hand the SPZ writer NaN or infinite values: an error,
+// never undefined behaviour (UBSan runs this in the sanitizer stage).
+TEST(Gaussians, SpzRefusesValuesThatAreNotFinite) {
+    const Gaussian good{{1, 2, 3}, {0, 0, 1}, 0.5f, 0.01f, 1.f, {0.5f, 0.5f, 0.5f}};
+    SpzWriter ok(10);
+    ok.add(good);
+    ASSERT_TRUE(ok.finish().ok());
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    Gaussian bad[5] = {good, good, good, good, good};
+    bad[0].sigma = nan;
+    bad[1].normal = {nan, 0, 1};
+    bad[2].opacity = inf;
+    bad[3].color = {0, nan, 0};
+    bad[4].position = {nan, 0, 0};
+    for (const Gaussian& g : bad) {
+        SpzWriter w(10);
+        w.add(good);
+        w.add(g);
+        auto r = w.finish();
+        ASSERT_FALSE(r.ok());
+        EXPECT_NE(r.status().message().find(&g == &bad[4] ? "beyond the extent" : "not a finite number"), std::string::npos)
+            << r.status().message();
+    }
+    // The extent sizes the fixed point: an extent of 1 leaves 22 fraction
+    // bits, so 1.9 fits in 24 signed bits (2^23 - 1 steps) and 2.1 does not.
+    for (const auto& [x, fits] : {std::pair{1.9f, true}, std::pair{2.1f, false}}) {
+        SpzWriter w(1);
+        w.add(Gaussian{{x, 0, 0}, {0, 0, 1}, 0.5f, 0.01f, 1.f, {0.5f, 0.5f, 0.5f}});
+        EXPECT_EQ(w.finish().ok(), fits) << x;
+    }
 }
 
 }  // namespace
