@@ -19,8 +19,8 @@ namespace surfcast {
 // deviation sigmaScale · k · r in its tangent plane (k: the set's kernel
 // scale, Surfcast's kernel V^r = (k r)² I) and `thickness` · that along its
 // normal, with the surfel's opacity times `opacity`. sigmaScale 0.75 brings
-// CesiumJS's and Spark's images closest to surfcast-view's (FLIP 0.038
-// against 0.051 at 1: bench/BENCHMARKS.md, "Splats against surfcast-view").
+// CesiumJS's and Spark's images closest to surfcast-view's
+// (bench/BENCHMARKS.md, "Splats against surfcast-view").
 struct GaussianOptions {
     double sigmaScale = 0.75;
     double thickness = 0.01;

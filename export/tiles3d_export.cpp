@@ -37,18 +37,16 @@ class GlbBuilder {
 public:
     // A buffer view of `bytes` (padded to 4) with the given stride; returns its index.
     int view(const std::vector<uint8_t>& bytes, int stride) {
-        json v = {{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", bytes.size()}, {"target", kArrayBuffer}};
-        if (stride) v["byteStride"] = stride;
-        bin_.insert(bin_.end(), bytes.begin(), bytes.end());
-        bin_.resize((bin_.size() + 3) & ~size_t(3), 0);
-        views_.push_back(v);
-        return int(views_.size() - 1);
+        const int v = blobView(bytes);
+        views_[size_t(v)]["target"] = kArrayBuffer;
+        if (stride) views_[size_t(v)]["byteStride"] = stride;
+        return v;
     }
     int accessor(int view, size_t offset, int componentType, bool normalized, const char* type, size_t count) {
-        json a = {{"bufferView", view}, {"byteOffset", offset}, {"componentType", componentType}, {"count", count}, {"type", type}};
-        if (normalized) a["normalized"] = true;
-        accessors_.push_back(a);
-        return int(accessors_.size() - 1);
+        const int a = accessor(componentType, normalized, type, count);
+        accessors_[size_t(a)]["bufferView"] = view;
+        accessors_[size_t(a)]["byteOffset"] = offset;
+        return a;
     }
     // A view of opaque bytes an extension decodes (no vertex target).
     int blobView(const std::vector<uint8_t>& bytes) {

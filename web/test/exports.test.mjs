@@ -47,7 +47,12 @@ function srgbFromLinear(c) {
 // The set as the browser client reads it: tileset.json, every hierarchy
 // record (following pages as the streaming client does), and a decoder for
 // one surfel of a node's block.
+const readSets = new Map();
 function readSet(dir) {
+  if (!readSets.has(dir)) readSets.set(dir, readSetOnce(dir));
+  return readSets.get(dir);
+}
+function readSetOnce(dir) {
   const info = format.parseTileset(readFileSync(join(dir, "tileset.json"), "utf8"), "tileset.json");
   const bytes = new Uint8Array(readFileSync(join(dir, "hierarchy.bin")));
   const index = format.readHierarchyIndex(bytes, bytes.length, "hierarchy.bin");
@@ -419,8 +424,7 @@ describe("exports, as their consumers read them", { skip }, () => {
   // 0.5 level each; SPZ's colour bytes: up to 1 level more) and by sampling:
   // a pixel varies about the smoothed one by the scene's colour spread
   // (measured on the reference), averaged over n / 4 independent surfels (a
-  // surfel covers about 4 pixels at this camera): 3 sigma of that mean
-  // (0.7 level here: spread about 40, n about 108,000).
+  // surfel covers about 4 pixels at this camera): 3 sigma of that mean.
   function expectSameColours(result, spz) {
     const tolerance = 1 + (spz ? 1 : 0) + (3 * result.spread) / Math.sqrt(result.n / 4);
     for (let c = 0; c < 3; ++c)
@@ -428,44 +432,36 @@ describe("exports, as their consumers read them", { skip }, () => {
                 `channel ${c}: ${result.shown} (tolerance ${tolerance.toFixed(2)}, spread ${result.spread.toFixed(1)})`);
   }
 
-  test("CesiumJS draws the points where surfcast-view draws the set, in its colours", { skip: chromium ? false : "Chromium is missing" },
-       async (t) => {
+  // A consumer's settled view against surfcast-view's: no errors, the
+  // pixels covered (0.8: the issue's bar) and the colours (expectSameColours).
+  function expectLikeSurfcastView(t, what, { state, png, problems }, spz) {
+    assert.deepEqual(state.errors, []);
+    assert.deepEqual(problems, []);
+    const r = compare(png);
+    assert.ok(r.iou >= 0.8, `${what} covers the pixels surfcast-view's splats do: IoU ${r.iou}`);
+    expectSameColours(r, spz);
+    t.diagnostic(`${what}: IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
+  }
+
+  for (const [folder, params, what] of [
     // Points sized by their tile's error, and no multisampling: a pixel
     // shows one point's colour, not a blend with the background.
-    const { state, png, problems } = await cesium("autzen3d", "&attenuation=1&msaa=1");
-    assert.deepEqual(state.errors, []);
-    assert.deepEqual(problems, []);
-    assert.ok(state.tiles >= 1, `${state.tiles} tiles loaded`);
-    const r = compare(png);
-    // 0.8: the issue's bar (measured 0.97; docs/EXPORT.md).
-    assert.ok(r.iou >= 0.8, `Cesium's points cover the pixels surfcast-view's splats do: IoU ${r.iou}`);
-    expectSameColours(r, false);
-    t.diagnostic(`CesiumJS points: ${state.tiles} tiles, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
-  });
-
-  test("CesiumJS draws the splats where surfcast-view draws the set, in its colours", { skip: chromium ? false : "Chromium is missing" },
-       async (t) => {
-    const { state, png, problems } = await cesium("autzen-splats", "");
-    assert.deepEqual(state.errors, []);
-    assert.deepEqual(problems, []);
-    assert.ok(state.tiles >= 1, `${state.tiles} tiles loaded`);
-    const r = compare(png);
-    assert.ok(r.iou >= 0.8, `Cesium's splats cover the pixels surfcast-view's do: IoU ${r.iou}`);
-    expectSameColours(r, true);
-    t.diagnostic(`CesiumJS splats: ${state.tiles} tiles, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
-  });
+    ["autzen3d", "&attenuation=1&msaa=1", "points"],
+    ["autzen-splats", "", "splats"],
+  ])
+    test(`CesiumJS draws the ${what} where surfcast-view draws the set, in its colours`,
+         { skip: chromium ? false : "Chromium is missing" }, async (t) => {
+      const view = await cesium(folder, params);
+      assert.ok(view.state.tiles >= 1, `${view.state.tiles} tiles loaded`);
+      expectLikeSurfcastView(t, `CesiumJS's ${what} (${view.state.tiles} tiles)`, view, what === "splats");
+    });
 
   for (const [file, axes, what] of [["autzen.ply", toYDown, "PLY"], ["autzen.spz", toYUp, "SPZ"]])
     test(`Spark draws the ${what} file's splats where surfcast-view draws the set, in its colours`,
          { skip: chromium ? false : "Chromium is missing" }, async (t) => {
-      const { state, png, problems } = await spark(file, axes);
-      assert.deepEqual(state.errors, []);
-      assert.deepEqual(problems, []);
+      const view = await spark(file, axes);
       const { nodes } = readSet(set);
-      assert.equal(state.splats, [...nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0), "the leaves' surfels");
-      const r = compare(png);
-      assert.ok(r.iou >= 0.8, `Spark's splats cover the pixels surfcast-view's do: IoU ${r.iou}`);
-      expectSameColours(r, what === "SPZ");
-      t.diagnostic(`Spark ${what}: ${state.splats} splats, IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown}`);
+      assert.equal(view.state.splats, [...nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0), "the leaves' surfels");
+      expectLikeSurfcastView(t, `Spark's ${what} file`, view, what === "SPZ");
     });
 });
