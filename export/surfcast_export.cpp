@@ -21,7 +21,7 @@
 namespace {
 
 const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
-       surfcast-export SET --format 3dtiles [--as splats|points] -o FOLDER
+       surfcast-export SET --format 3dtiles [--as splats|points] [--compression meshopt|none] -o FOLDER
        surfcast-export SET --format ply|spz [--level N|leaves | --splat-budget N] -o FILE
 
 Writes a tile set's points as another format. SET is a set's folder or its
@@ -45,6 +45,11 @@ http(s) URL.
                         KHR_gaussian_splatting in SPZ, as CesiumJS reads
                         splats in 3D Tiles), or a glTF point with its LiDAR
                         attributes, which every 3D Tiles engine draws
+  --compression meshopt|none
+                        3dtiles --as points: the vertex data compressed by
+                        meshoptimizer (default; EXT_meshopt_compression, which
+                        CesiumJS, three.js and Babylon.js read) or stored as it
+                        is, for glTF readers without the extension
   --format ply          the 3D Gaussian splatting PLY that splat viewers read:
                         one cut through the tree, each surfel a flat Gaussian,
                         about the centre of the set's bounds (a comment keeps
@@ -96,7 +101,7 @@ int main(int argc, char** argv) {
     HttpOptions http;
     bool quiet = false;
     Tiles3dOptions tiles;
-    bool asGiven = false, shapeGiven = false, cutGiven = false;  // options only some formats take
+    bool asGiven = false, compressionGiven = false, shapeGiven = false, cutGiven = false;  // options only some formats take
     SplatCut cut;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -115,6 +120,10 @@ int main(int argc, char** argv) {
             if (!value(&v) || (v != "points" && v != "splats")) return usageError("--as wants points or splats");
             tiles.as = v == "splats" ? Tiles3dOptions::As::Splats : Tiles3dOptions::As::Points;
             asGiven = true;
+        } else if (a == "--compression") {
+            if (!value(&v) || (v != "meshopt" && v != "none")) return usageError("--compression wants meshopt or none");
+            tiles.compression = v == "meshopt" ? Tiles3dOptions::Compression::Meshopt : Tiles3dOptions::Compression::None;
+            compressionGiven = true;
         } else if (a == "--splat-scale" || a == "--splat-opacity") {
             char* end = nullptr;
             const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
@@ -167,6 +176,8 @@ int main(int argc, char** argv) {
     if (format != "laz" && format != "copc" && (filter.box || !filter.classes.empty()))
         return usageError("--format " + format + " exports the whole set (--bbox and --classes are for laz and copc)");
     if (asGiven && format != "3dtiles") return usageError("--as is for --format 3dtiles");
+    if (compressionGiven && (format != "3dtiles" || tiles.as != Tiles3dOptions::As::Points))
+        return usageError("--compression is for --format 3dtiles --as points (splats are always SPZ)");
     if (shapeGiven && ((format == "3dtiles" && tiles.as == Tiles3dOptions::As::Points) || (format != "3dtiles" && !splatFile)))
         return usageError("--splat-scale and --splat-opacity are for splats (3dtiles --as splats, ply, spz)");
     if (cutGiven && !splatFile) return usageError("--level and --splat-budget are for --format ply and spz");

@@ -1,12 +1,16 @@
 #include "tiles3d_export.h"
 
 #include <algorithm>
+#include <array>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <unordered_map>
 
+#include <meshoptimizer.h>
 #include <nlohmann/json.hpp>
 
 #include "byte_io.h"
@@ -22,7 +26,7 @@ namespace {
 
 constexpr uint32_t kGlbMagic = 0x46546C67;  // "glTF"
 constexpr uint32_t kChunkJson = 0x4E4F534A, kChunkBin = 0x004E4942;
-constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedByte = 5121;
+constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedByte = 5121, kByte = 5120;
 constexpr int kArrayBuffer = 34962, kPoints = 0;
 constexpr const char* kGenerator = "surfcast-export";
 
@@ -32,27 +36,46 @@ double srgbToLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 
 Vec3d toYUp(const Vec3d& v) { return toSplatAxes(v, SplatAxes::YUp); }
 
 // A glb under construction: accessors over one binary buffer, one buffer
-// view each (strided where glTF's 4-byte vertex alignment asks for it).
+// view each. With `meshopt`, vertex views are stored compressed by
+// meshoptimizer's vertex codec (EXT_meshopt_compression): the view itself
+// then lies in a second, data-less buffer that decoders fill in.
 class GlbBuilder {
 public:
-    // A buffer view of `bytes` (padded to 4) with the given stride; returns its index.
-    int view(const std::vector<uint8_t>& bytes, int stride) {
-        const int v = blobView(bytes);
-        views_[size_t(v)]["target"] = kArrayBuffer;
-        if (stride) views_[size_t(v)]["byteStride"] = stride;
-        return v;
+    explicit GlbBuilder(bool meshopt = false) : meshopt_(meshopt) {}
+
+    // A vertex buffer view of `count` elements of `stride` bytes each (a
+    // multiple of 4, as glTF and the codec ask); returns its index.
+    // `filter`: the meshopt filter `bytes` are encoded for ("NONE" or
+    // "OCTAHEDRAL"); without meshopt they must be the filter's decoded form.
+    int view(const std::vector<uint8_t>& bytes, size_t count, int stride, const char* filter = "NONE") {
+        assert(bytes.size() == count * size_t(stride) && stride % 4 == 0);
+        if (!meshopt_) {
+            const int v = blobView(bytes);
+            views_[size_t(v)]["target"] = kArrayBuffer;
+            views_[size_t(v)]["byteStride"] = stride;
+            return v;
+        }
+        std::vector<uint8_t> packed(meshopt_encodeVertexBufferBound(count, size_t(stride)));
+        packed.resize(meshopt_encodeVertexBuffer(packed.data(), packed.size(), bytes.data(), count, size_t(stride)));
+        views_.push_back({{"buffer", 1}, {"byteOffset", fallback_}, {"byteLength", bytes.size()}, {"byteStride", stride},
+                          {"target", kArrayBuffer},
+                          {"extensions", {{"EXT_meshopt_compression", {{"buffer", 0}, {"byteOffset", bin_.size()},
+                                                                       {"byteLength", packed.size()}, {"byteStride", stride},
+                                                                       {"count", count}, {"mode", "ATTRIBUTES"},
+                                                                       {"filter", filter}}}}}});
+        append(packed);
+        fallback_ += bytes.size();  // a multiple of 4: stride is
+        return int(views_.size() - 1);
     }
-    int accessor(int view, size_t offset, int componentType, bool normalized, const char* type, size_t count) {
+    int accessor(int view, int componentType, bool normalized, const char* type, size_t count) {
         const int a = accessor(componentType, normalized, type, count);
         accessors_[size_t(a)]["bufferView"] = view;
-        accessors_[size_t(a)]["byteOffset"] = offset;
         return a;
     }
     // A view of opaque bytes an extension decodes (no vertex target).
     int blobView(const std::vector<uint8_t>& bytes) {
         views_.push_back({{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", bytes.size()}});
-        bin_.insert(bin_.end(), bytes.begin(), bytes.end());
-        bin_.resize((bin_.size() + 3) & ~size_t(3), 0);
+        append(bytes);
         return int(views_.size() - 1);
     }
     // An accessor whose data an extension supplies (no buffer view).
@@ -68,6 +91,8 @@ public:
         gltf["accessors"] = accessors_;
         gltf["bufferViews"] = views_;
         gltf["buffers"] = json::array({{{"byteLength", bin_.size()}}});
+        if (meshopt_)
+            gltf["buffers"].push_back({{"byteLength", fallback_}, {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
         std::string text = gltf.dump();
         text.resize((text.size() + 3) & ~size_t(3), ' ');
         std::vector<uint8_t> out(12 + 8 + text.size() + 8 + bin_.size());
@@ -82,13 +107,21 @@ public:
     }
 
 private:
+    void append(const std::vector<uint8_t>& bytes) {
+        bin_.insert(bin_.end(), bytes.begin(), bytes.end());
+        bin_.resize((bin_.size() + 3) & ~size_t(3), 0);
+    }
+
+    bool meshopt_;
     std::vector<uint8_t> bin_;
+    size_t fallback_ = 0;  // bytes of the data-less buffer's views
     json views_ = json::array(), accessors_ = json::array();
 };
 
-// A glTF of one node (translated by `t`, y-up, as a matrix: CesiumJS's
-// splat tiles read the matrix) holding one mesh of one primitive.
-json gltfOf(const NodeRecord& node, const Vec3d& t, const json& primitive, const std::vector<std::string>& used,
+// A glTF of one node (placed by the column-major `matrix`, into glTF's y-up
+// axes: CesiumJS's splat tiles read the matrix) holding one mesh of one
+// primitive.
+json gltfOf(const NodeRecord& node, const json& matrix, const json& primitive, const std::vector<std::string>& used,
             const std::vector<std::string>& required) {
     json gltf;
     gltf["asset"] = {{"version", "2.0"}, {"generator", std::string(kGenerator) + " 0.1.0"}};
@@ -96,46 +129,74 @@ json gltfOf(const NodeRecord& node, const Vec3d& t, const json& primitive, const
     if (!required.empty()) gltf["extensionsRequired"] = required;
     gltf["scene"] = 0;
     gltf["scenes"] = json::array({{{"nodes", {0}}}});
-    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}}, {"name", node.key.name()}}});
+    gltf["nodes"] = json::array({{{"mesh", 0}, {"matrix", matrix}, {"name", node.key.name()}}});
     gltf["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
     return gltf;
 }
+
+// The matrix taking a glb's coordinates, scaled by `scale`, from the set's
+// z-up axes to glTF's y-up ones ((x, y, z) to (x, z, -y)), then moved by `t`.
+json yUpMatrix(double scale, const Vec3d& t) { return {scale, 0, 0, 0, 0, 0, -scale, 0, 0, scale, 0, 0, t.x, t.y, t.z, 1}; }
 
 template <typename T>
 void put(std::vector<uint8_t>& bytes, size_t at, T value) {
     le::put<T>(bytes.data() + at, value);
 }
 
-// One node's glb: its surfels as points about `centre` (world).
-Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord& node, const BlockData& b, const Vec3d& centre,
-                                     const Vec3d& origin) {
+// The glTF extensions a point tile's glb uses; all but the unlit material and
+// the metadata are required (integer positions, compressed views).
+std::vector<std::string> pointExtensions(Tiles3dOptions::Compression compression) {
+    std::vector<std::string> e = {"KHR_mesh_quantization"};
+    if (compression == Tiles3dOptions::Compression::Meshopt) e.push_back("EXT_meshopt_compression");
+    return e;
+}
+
+// One node's glb: its surfels as points. Positions are the block's own
+// integers where they fit 16 bits (KHR_mesh_quantization: the node's matrix
+// scales them by the node's position step and places them at its corner),
+// so the tile holds exactly the set's positions; deeper ones are float
+// offsets from the corner. Normals are 8-bit (KHR_mesh_quantization); every
+// vertex view is compressed as `compression` says.
+// Adds the extensions it uses to `usedByAll`.
+Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord& node, const BlockData& b, const Vec3d& origin,
+                                     Tiles3dOptions::Compression compression, std::set<std::string>* usedByAll) {
     const TilesetInfo& info = set.info();
     const size_t n = b.size();
-    GlbBuilder glb;
+    GlbBuilder glb(compression == Tiles3dOptions::Compression::Meshopt);
     json attributes;
 
-    std::vector<uint8_t> positions(12 * n);
-    Vec3d lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    for (size_t i = 0; i < n; ++i) {
-        const Vec3d p = toYUp(set.position(node, b, i) - centre);
-        for (int a = 0; a < 3; ++a) {
-            const float f = float(p[a]);
-            put<float>(positions, 12 * i + 4 * size_t(a), f);
-            lo[a] = std::min(lo[a], double(f));
-            hi[a] = std::max(hi[a], double(f));
+    const double step = nodeEdge(info, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
+    const bool integers = node.positionBits <= 16;
+    const int positionStride = integers ? 8 : 12;  // 3 uint16 and 2 bytes of padding, or 3 floats
+    std::vector<uint8_t> positions(size_t(positionStride) * n, 0);
+    std::array<uint32_t, 3> lo{UINT32_MAX, UINT32_MAX, UINT32_MAX}, hi{0, 0, 0};
+    for (size_t i = 0; i < n; ++i)
+        for (size_t a = 0; a < 3; ++a) {
+            const uint32_t q = b.positions[3 * i + a];
+            lo[a] = std::min(lo[a], q), hi[a] = std::max(hi[a], q);
+            if (integers) put<uint16_t>(positions, 8 * i + 2 * a, uint16_t(q));
+            else put<float>(positions, 12 * i + 4 * a, float(q * step));
         }
-    }
-    attributes["POSITION"] = glb.accessor(glb.view(positions, 0), 0, kFloat, false, "VEC3", n);
-    glb.lastAccessor()["min"] = {lo.x, lo.y, lo.z};
-    glb.lastAccessor()["max"] = {hi.x, hi.y, hi.z};
+    attributes["POSITION"] =
+        glb.accessor(glb.view(positions, n, positionStride), integers ? kUnsignedShort : kFloat, false, "VEC3", n);
+    const double unit = integers ? 1.0 : step;  // min and max as the accessor holds them (float: as rounded)
+    glb.lastAccessor()["min"] = {float(lo[0] * unit), float(lo[1] * unit), float(lo[2] * unit)};
+    glb.lastAccessor()["max"] = {float(hi[0] * unit), float(hi[1] * unit), float(hi[2] * unit)};
 
     if (b.normals.size() == 3 * n) {
-        std::vector<uint8_t> normals(12 * n);
+        // Octahedral, 8 bits a coordinate (meshopt's filter): 3 signed bytes
+        // and one of padding once decoded.
+        std::vector<float> unit(4 * n, 0.0f);
         for (size_t i = 0; i < n; ++i) {
-            const Vec3d v = toYUp(normalizeOrZero(Vec3d{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]}));
-            for (int a = 0; a < 3; ++a) put<float>(normals, 12 * i + 4 * size_t(a), float(v[a]));
+            Vec3d v = normalizeOrZero(Vec3d{b.normals[3 * i], b.normals[3 * i + 1], b.normals[3 * i + 2]});
+            if (v == Vec3d{}) v = {0, 0, 1};  // glTF's normals are unit vectors
+            for (size_t a = 0; a < 3; ++a) unit[4 * i + a] = float(v[int(a)]);
         }
-        attributes["NORMAL"] = glb.accessor(glb.view(normals, 0), 0, kFloat, false, "VEC3", n);
+        std::vector<uint8_t> normals(4 * n);
+        meshopt_encodeFilterOct(normals.data(), n, 4, 8, unit.data());
+        const bool filtered = compression == Tiles3dOptions::Compression::Meshopt;
+        if (!filtered) meshopt_decodeFilterOct(normals.data(), n, 4);
+        attributes["NORMAL"] = glb.accessor(glb.view(normals, n, 4, filtered ? "OCTAHEDRAL" : "NONE"), kByte, true, "VEC3", n);
     }
     if (info.colorBits > 0 || !b.opacity.empty()) {
         // Linear RGB (glTF's COLOR_0) from the set's sRGB, and the opacity.
@@ -148,11 +209,11 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
             }
             put<uint16_t>(colors, 8 * i + 6, uint16_t(b.opacity.empty() ? 65535 : b.opacity[i] * 257));
         }
-        attributes["COLOR_0"] = glb.accessor(glb.view(colors, 0), 0, kUnsignedShort, true, "VEC4", n);
+        attributes["COLOR_0"] = glb.accessor(glb.view(colors, n, 8), kUnsignedShort, true, "VEC4", n);
     }
 
     // LiDAR attributes, each in 4-byte slots: glTF aligns every vertex
-    // attribute's elements to 4 bytes (compression would take the padding out).
+    // attribute's elements to 4 bytes (the codec takes the padding out).
     struct Lidar {
         const char *property, *attribute;
         int componentType;
@@ -168,7 +229,9 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
         lidar.push_back({"number_of_returns", "_NUMBER_OF_RETURNS", kUnsignedByte, [&](size_t i) { return b.numberOfReturns[i]; }});
     json metadata;  // EXT_structural_metadata's schema and property attributes, where LiDAR attributes are
     json primitive = {{"mode", kPoints}, {"material", 0}};
-    std::vector<std::string> used = {"KHR_materials_unlit"};
+    const std::vector<std::string> required = pointExtensions(compression);
+    std::vector<std::string> used = required;
+    used.push_back("KHR_materials_unlit");
     if (!lidar.empty()) {
         json properties, schema;
         for (const Lidar& l : lidar) {
@@ -177,7 +240,7 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
                 if (l.componentType == kUnsignedShort) put<uint16_t>(bytes, 4 * i, uint16_t(l.value(i)));
                 else bytes[4 * i] = uint8_t(l.value(i));
             }
-            attributes[l.attribute] = glb.accessor(glb.view(bytes, 4), 0, l.componentType, false, "SCALAR", n);
+            attributes[l.attribute] = glb.accessor(glb.view(bytes, n, 4), l.componentType, false, "SCALAR", n);
             properties[l.property] = {{"attribute", l.attribute}};
             schema[l.property] = {{"type", "SCALAR"}, {"componentType", l.componentType == kUnsignedShort ? "UINT16" : "UINT8"}};
         }
@@ -189,7 +252,8 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
     }
     primitive["attributes"] = attributes;
 
-    json gltf = gltfOf(node, toYUp(centre - origin), primitive, used, {});
+    usedByAll->insert(used.begin(), used.end());
+    json gltf = gltfOf(node, yUpMatrix(integers ? step : 1.0, toYUp(nodeMin(info, node.key) - origin)), primitive, used, required);
     if (!metadata.is_null()) gltf["extensions"]["EXT_structural_metadata"] = metadata;
     gltf["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}}},
                                       {"extensions", {{"KHR_materials_unlit", json::object()}}}}});
@@ -235,7 +299,8 @@ Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord
                          {{"kernel", "ellipse"},
                           {"colorSpace", "srgb_rec709_display"},
                           {"extensions", {{"KHR_gaussian_splatting_compression_spz_2", {{"bufferView", view}}}}}}}}}};
-    const json gltf = gltfOf(node, toYUp(centre - origin), primitive, kSplatExtensions, kSplatExtensions);
+    const Vec3d t = toYUp(centre - origin);  // the Gaussians are y-up already
+    const json gltf = gltfOf(node, {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}, primitive, kSplatExtensions, kSplatExtensions);
     return glb.finish(gltf);
 }
 
@@ -292,6 +357,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     }
 
     Tiles3dReport report;
+    std::set<std::string> pointsUse;  // the glTF extensions the point tiles use
     std::error_code ec;
     if (!fs::create_directory(fs::path((*folder)->path()) / "tiles", ec))
         return Status::error((*folder)->path() + "/tiles: cannot create (" + ec.message() + ")");
@@ -305,7 +371,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
             const Vec3d half = (boxes[i].max - boxes[i].min) * 0.5;
             auto glb = options.as == Tiles3dOptions::As::Splats
                            ? splatGlb(set, n, *block, centre, std::max({half.x, half.y, half.z}), origin, options.gaussians)
-                           : nodeGlb(set, n, *block, centre, origin);
+                           : nodeGlb(set, n, *block, origin, options.compression, &pointsUse);
             if (!glb) return Status::error(set.describe() + ": node " + n.key.name() + ": " + glb.status().message());
             SC_TRY(writeFileSynced((*folder)->path() + "/tiles/" + n.key.name() + ".glb", glb->data(), glb->size()));
             report.points += n.surfelCount;
@@ -344,12 +410,12 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     json tileset = {{"asset", {{"version", "1.1"}, {"generator", std::string(kGenerator) + " 0.1.0"}}},
                     {"geometricError", std::max(rootError, 0.0)},
                     {"root", r}};
-    if (options.as == Tiles3dOptions::As::Splats) {
-        // The glTF extensions the content needs, where engines look for them.
-        tileset["extensionsUsed"] = tileset["extensionsRequired"] = {"3DTILES_content_gltf"};
-        tileset["extensions"]["3DTILES_content_gltf"] = {{"extensionsUsed", kSplatExtensions},
-                                                         {"extensionsRequired", kSplatExtensions}};
-    }
+    // The glTF extensions the content needs, where engines look for them.
+    const bool splats = options.as == Tiles3dOptions::As::Splats;
+    tileset["extensionsUsed"] = tileset["extensionsRequired"] = {"3DTILES_content_gltf"};
+    tileset["extensions"]["3DTILES_content_gltf"] = {
+        {"extensionsUsed", splats ? kSplatExtensions : std::vector<std::string>(pointsUse.begin(), pointsUse.end())},
+        {"extensionsRequired", splats ? kSplatExtensions : pointExtensions(options.compression)}};
     const std::string text = tileset.dump(1);
     SC_TRY(writeFileSynced((*folder)->path() + "/tileset.json", text.data(), text.size()));
     report.bytes += text.size();

@@ -11,13 +11,17 @@
 //   bounds) or, for splats, their reach, and by its descendants' growth, so
 //   every child lies inside its parent.
 // - Positions keep double precision where it matters: the root's transform
-//   carries the set's centre, each glb's node its tile's centre, and the
-//   floats in the glb are offsets from that. glTF is y-up; 3D Tiles turns
+//   carries the set's centre, each glb's node its tile's centre (points:
+//   its node's corner), and the numbers in the glb are offsets from that. glTF is y-up; 3D Tiles turns
 //   it z-up (the set's own up) at load.
 // - Points: each surfel a glTF point with NORMAL and COLOR_0 (linear, as
 //   glTF defines it, 16 bits a channel, alpha its opacity), unlit; the
 //   classification, intensity and return numbers, where the set has them,
 //   as EXT_structural_metadata property attributes (class "surfel").
+//   Positions are the block's own integers (KHR_mesh_quantization), and the
+//   vertex data is compressed by meshoptimizer (EXT_meshopt_compression;
+//   KHR_draco_mesh_compression does not allow points): bench/BENCHMARKS.md,
+//   "3D Tiles export".
 // - Splats: each surfel a flat Gaussian (gaussians.h) in
 //   KHR_gaussian_splatting, compressed by SPZ
 //   (KHR_gaussian_splatting_compression_spz_2), which CesiumJS requires of
@@ -40,6 +44,10 @@ namespace surfcast {
 
 struct Tiles3dOptions {
     enum class As { Points, Splats } as = As::Splats;
+    // Points: their vertex data compressed by meshoptimizer
+    // (EXT_meshopt_compression: glTF's one compression for points, which
+    // CesiumJS reads), or not. Splats are SPZ either way.
+    enum class Compression { Meshopt, None } compression = Compression::Meshopt;
     GaussianOptions gaussians;  // splats
     // Told after each node: nodes written so far, of all.
     std::function<void(size_t, size_t)> progress;

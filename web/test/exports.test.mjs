@@ -1,5 +1,6 @@
 // surfcast-export's formats for other tools, checked by those tools, not by
-// our own reader: Khronos's glTF validator on every glb; glTF-Transform and
+// our own reader: Khronos's glTF validator on every glb; glTF-Transform
+// (with meshoptimizer's decoder, as CesiumJS decodes the points) and
 // hand-written PLY and SPZ readers against the set as the browser client
 // decodes it (format.ts, block_decode.ts, draco3d); and the consumers
 // themselves in headless Chromium, from nginx on loopback: CesiumJS drawing
@@ -16,6 +17,8 @@ import { gunzipSync } from "node:zlib";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { Logger, NodeIO } from "@gltf-transform/core";
+import { EXTMeshoptCompression, KHRMeshQuantization } from "@gltf-transform/extensions";
+import { MeshoptDecoder } from "meshoptimizer";
 import validator from "gltf-validator";
 import { PNG } from "pngjs";
 import { cameraIn, coverage, fromYDown, fromYUp, launch, settledView, startPages, toYDown, toYUp } from "./consumers.mjs";
@@ -32,7 +35,7 @@ const skip = existsSync(scan) || process.env.CI ? false : `${scan} is missing`;
 const format = await loadModule("src/format.ts");
 const blocks = await loadModule("src/block_decode.ts");
 
-let work, set, out, splats;
+let work, set, out, outRaw, splats;
 let pagesUrl, browser;
 // surfcast-export's default --splat-scale (export/gaussians.h).
 const kSplatScale = 0.75;
@@ -77,7 +80,9 @@ describe("exports, as their consumers read them", { skip }, () => {
     set = join(work, "autzen");
     out = join(work, "autzen3d");
     execFileSync(bin("surfcast-build"), ["-q", scan, "--attributes", "all", "-o", set]);
-    execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--as", "points", "-q", "-o", out]);
+    execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--as", "points", "-q", "-o", out]);  // meshopt: the default
+    outRaw = join(work, "autzen3d-raw");
+    execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--as", "points", "--compression", "none", "-q", "-o", outRaw]);
     splats = join(work, "autzen-splats");
     execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "-q", "-o", splats]);  // splats: the default
     for (const f of ["ply", "spz"]) execFileSync(bin("surfcast-export"), [set, "--format", f, "-q", "-o", join(work, `autzen.${f}`)]);
@@ -88,9 +93,13 @@ describe("exports, as their consumers read them", { skip }, () => {
     if (work) rmSync(work, { recursive: true, force: true });
   });
 
+  // The validator does not decode EXT_meshopt_compression (it reports it
+  // as unsupported): it checks the compressed points' structure, and the
+  // uncompressed export's data too, which the round trip shows the
+  // compressed one decodes to.
   test("Khronos's glTF validator: no errors or warnings in any glb", async (t) => {
     const infos = new Set();
-    for (const dir of [out, splats]) {
+    for (const dir of [out, outRaw, splats]) {
       const files = readdirSync(join(dir, "tiles"));
       assert.ok(files.length > 1);
       for (const f of files) {
@@ -114,7 +123,7 @@ describe("exports, as their consumers read them", { skip }, () => {
     const { info, nodes } = readSet(set);
     const decode = await decoderFor(info);
     const centre = info.boundsMin.map((m, a) => (m + info.boundsMax[a]) / 2);
-    for (const dir of [out, splats]) {
+    for (const dir of [out, outRaw, splats]) {
       const tileset = JSON.parse(readFileSync(join(dir, "tileset.json"), "utf8"));
       assert.equal(tileset.asset.version, "1.1");
       assert.equal(tileset.root.refine, "REPLACE");
@@ -148,38 +157,65 @@ describe("exports, as their consumers read them", { skip }, () => {
     }
   });
 
-  test("round trip: glTF-Transform reads back the set's surfels", async (t) => {
+  // Octahedral normals at 8 bits (meshopt's filter, then 8-bit components):
+  // an octahedral coordinate rounds by half a cell of 1/127, at most
+  // sqrt(2)/254 across; the octahedron's point moves by at most sqrt(3)
+  // times that (z = 1 - |u| - |v|) and its direction by sqrt(3) times more
+  // (|p| >= 1/sqrt(3)): 3 sqrt(2)/254 rad. Each decoded component then
+  // rounds to 1/127, at most sqrt(3)/254 more.
+  const kNormalTurn = (3 * Math.SQRT2 + Math.sqrt(3)) / 254;
+
+  test("round trip: glTF-Transform reads back the set's surfels, and the compressed points decode to the uncompressed ones", async (t) => {
     const { info, nodes } = readSet(set);
     const decode = await decoderFor(info);
     const tileset = JSON.parse(readFileSync(join(out, "tileset.json"), "utf8"));
+    assert.deepEqual(tileset.extensions["3DTILES_content_gltf"].extensionsRequired, ["KHR_mesh_quantization", "EXT_meshopt_compression"]);
     const origin = tileset.root.transform.slice(12, 15);
-    // It reads the glbs without the extensions' definitions (unlit, metadata): the attributes are the core's.
-    const io = new NodeIO().setLogger(new Logger(Logger.Verbosity.ERROR));
-    let compared = 0, worst = 0;
+    // The metadata and unlit extensions are read without their definitions: the attributes are the core's.
+    await MeshoptDecoder.ready;
+    const io = new NodeIO().setLogger(new Logger(Logger.Verbosity.ERROR)).registerExtensions([EXTMeshoptCompression, KHRMeshQuantization])
+      .registerDependencies({ "meshopt.decoder": MeshoptDecoder });
+    let compared = 0, worst = 0, worstTurn = 0;
     for (const n of nodes.values()) {
       const doc = await io.readBinary(new Uint8Array(readFileSync(join(out, "tiles", `${n.key}.glb`))));
+      const raw = await io.readBinary(new Uint8Array(readFileSync(join(outRaw, "tiles", `${n.key}.glb`))));
       const node = doc.getRoot().listNodes()[0];
       const prim = doc.getRoot().listMeshes()[0].listPrimitives()[0];
+      const rawPrim = raw.getRoot().listMeshes()[0].listPrimitives()[0];
+      assert.deepEqual(rawPrim.listSemantics(), prim.listSemantics());
+      // Exactly, but for the normals: meshoptimizer's octahedral filter
+      // rounds by a step differently from one version to another.
+      for (const semantic of prim.listSemantics()) {
+        const [a, b] = [prim, rawPrim].map((p) => p.getAttribute(semantic).getArray());
+        if (semantic === "NORMAL") assert.ok(a.length === b.length && a.every((v, i) => Math.abs(v - b[i]) <= 1), `node ${n.key}'s normals`);
+        else assert.deepEqual(a, b, `node ${n.key}'s ${semantic}`);
+      }
+      assert.deepEqual(raw.getRoot().listNodes()[0].getMatrix(), node.getMatrix());
       const position = prim.getAttribute("POSITION"), normal = prim.getAttribute("NORMAL"), color = prim.getAttribute("COLOR_0");
       assert.equal(position.getCount(), n.surfelCount, `node ${n.key}'s point count`);
-      const [tx, ty, tz] = node.getTranslation();
+      const m = node.getMatrix();
       const edge = format.nodeEdge(info, n.level);
-      // Float offsets from the tile's centre: a few ulps of the node's size.
-      const tolerance = 1e-6 * edge;
+      // The block's own integers scaled by the node's matrix: rounding only.
+      const tolerance = 1e-9 * edge;
       const step = Math.max(1, Math.floor(n.surfelCount / 40));
       for (let i = 0; i < n.surfelCount; i += step) {
         const s = decode(n, i);
+        const p = position.getElement(i, []);
+        const q = [0, 1, 2].map((r) => m[r] * p[0] + m[4 + r] * p[1] + m[8 + r] * p[2] + m[12 + r]);
         // glTF is y-up: (x, y, z) of the set is (x, z, -y) in the glb.
-        const p = position.getElement(i, []), q = [p[0] + tx, p[1] + ty, p[2] + tz];
-        const world = [origin[0] + q[0], origin[1] - q[2], origin[2] + q[1]];
+        const world = fromYUp(q).map((v, a) => v + origin[a]);
         for (let a = 0; a < 3; ++a) {
           worst = Math.max(worst, Math.abs(world[a] - s.position[a]) / edge);
           assert.ok(Math.abs(world[a] - s.position[a]) <= tolerance, `node ${n.key} surfel ${i} axis ${a}: ${world[a]} vs ${s.position[a]}`);
         }
-        // The block's normal (quantized, near unit length) made unit, as glTF asks.
-        const m = normal.getElement(i, []), len = Math.hypot(...s.normal);
-        assert.ok(Math.hypot(m[0] - s.normal[0] / len, -m[2] - s.normal[1] / len, m[1] - s.normal[2] / len) < 1e-6,
-                  `node ${n.key} surfel ${i}'s normal`);
+        // The block's normal, made unit, within the 8-bit octahedral rounding
+        // (turned by the node's matrix as glTF turns normals; its scale is uniform).
+        const v = normal.getElement(i, []);
+        const g = fromYUp([0, 1, 2].map((r) => m[r] * v[0] + m[4 + r] * v[1] + m[8 + r] * v[2]));
+        const len = Math.hypot(...s.normal) * Math.hypot(...g);
+        const turn = Math.acos(Math.min(1, (g[0] * s.normal[0] + g[1] * s.normal[1] + g[2] * s.normal[2]) / len));
+        worstTurn = Math.max(worstTurn, turn);
+        assert.ok(turn <= kNormalTurn, `node ${n.key} surfel ${i}'s normal is ${turn} rad off`);
         // COLOR_0 is linear (glTF's definition) at 16 bits: back to the set's 8-bit sRGB exactly.
         const c = color.getElement(i, []);
         for (let k = 0; k < 3; ++k) assert.equal(Math.round(srgbFromLinear(c[k]) * 255), Math.round(s.color[k] * 255));
@@ -190,7 +226,9 @@ describe("exports, as their consumers read them", { skip }, () => {
         ++compared;
       }
     }
-    t.diagnostic(`${compared} surfels compared; largest position error ${(worst * 1e6).toFixed(3)} millionths of a node's edge`);
+    const bytes = (dir) => readdirSync(join(dir, "tiles")).reduce((sum, f) => sum + readFileSync(join(dir, "tiles", f)).length, 0);
+    t.diagnostic(`${compared} surfels compared; largest position error ${(worst * 1e9).toFixed(3)} billionths of a node's edge, ` +
+                 `normal ${worstTurn.toFixed(4)} rad (bound ${kNormalTurn.toFixed(4)}); glbs ${bytes(out)} bytes, uncompressed ${bytes(outRaw)}`);
   });
 
   // A block decoder for node n of the set, as the browser client decodes it.
