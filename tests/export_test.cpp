@@ -3,6 +3,7 @@
 // reader: tests/tools/compare_las.py) and by the build's own LAS reader.
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -294,6 +295,62 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
     EXPECT_EQ(test::readFile(good + "/sentinel"), "kept");
     for (const auto& entry : fs::directory_iterator(dir_->path()))
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
+}
+
+// A node with more than 16 position bits (a float32 PLY's precision over
+// a kilometre: about 24 bits at one node) keeps its positions as float
+// offsets from its corner, not the block's integers, which
+// KHR_mesh_quantization's 16 bits cannot hold. Read back by hand from the
+// uncompressed export: every point where the set has it, to float rounding.
+TEST(Tiles3d, PointsBeyondSixteenBitsAreFloatOffsets) {
+    test::TempDir dir;
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex 400\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    for (int i = 0; i < 400; ++i)  // a jittered 20 x 20 grid over 1 km, gently sloped
+        ply += std::to_string(1000.0 + (i % 20) * 50.0 + (i * 7919 % 13) * 0.37) + " " +
+               std::to_string(2000.0 + (i / 20) * 50.0 + (i * 104729 % 11) * 0.41) + " " + std::to_string(30.0 + (i % 20) * 0.5) + "\n";
+    test::writeFile(dir.file("km.ply"), ply);
+    auto r = test::run({test::binary("surfcast-build"), "-q", dir.file("km.ply"), "-o", dir.file("km")});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    r = test::run({test::binary("surfcast-export"), dir.file("km"), "--format", "3dtiles", "--as", "points", "--compression", "none", "-q",
+                   "-o", dir.file("km3d")});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto set = TilesetReader::open(dir.file("km"));
+    ASSERT_TRUE(set.ok()) << set.status().message();
+    const auto tileset = nlohmann::json::parse(test::readFile(dir.file("km3d/tileset.json")));
+    const auto& t = tileset["root"]["transform"];
+    const Vec3d origin{t[12].get<double>(), t[13].get<double>(), t[14].get<double>()};
+    int wide = 0;
+    for (const NodeRecord& node : set->nodes()) {
+        if (node.positionBits <= 16 || node.surfelCount == 0) continue;
+        ++wide;
+        auto block = set->readBlock(node);
+        ASSERT_TRUE(block.ok()) << block.status().message();
+        const std::string glb = test::readFile(dir.file("km3d/tiles/" + node.key.name() + ".glb"));
+        ASSERT_GE(glb.size(), 28u);
+        uint32_t jsonLength = 0;
+        std::memcpy(&jsonLength, glb.data() + 12, 4);
+        const auto gltf = nlohmann::json::parse(glb.substr(20, jsonLength));
+        const char* bin = glb.data() + 28 + jsonLength;
+        const auto& accessor = gltf["accessors"][gltf["meshes"][0]["primitives"][0]["attributes"]["POSITION"].get<int>()];
+        ASSERT_EQ(accessor["componentType"], 5126) << node.key.name() << ": " << int(node.positionBits) << " bits, float positions";
+        ASSERT_EQ(accessor["count"], node.surfelCount);
+        const auto& view = gltf["bufferViews"][accessor["bufferView"].get<int>()];
+        ASSERT_EQ(view["byteStride"], 12);
+        const auto& m = gltf["nodes"][0]["matrix"];
+        const double edge = nodeEdge(set->info(), node.key.level);
+        for (size_t i = 0; i < node.surfelCount; ++i) {
+            float p[3];
+            std::memcpy(p, bin + view["byteOffset"].get<size_t>() + 12 * i, 12);
+            double q[3];  // glTF's y-up coordinates, less the root's translation
+            for (int row = 0; row < 3; ++row)
+                q[row] = m[row].get<double>() * p[0] + m[4 + row].get<double>() * p[1] + m[8 + row].get<double>() * p[2] + m[12 + row].get<double>();
+            const Vec3d world = origin + Vec3d{q[0], -q[2], q[1]};
+            const Vec3d want = set->position(node, *block, i);
+            for (int a = 0; a < 3; ++a)  // a float offset of at most the node's edge: 2^-24 of it, and the double sums
+                ASSERT_NEAR(world[a], want[a], edge * 1e-7) << node.key.name() << " point " << i << " axis " << a;
+        }
+    }
+    EXPECT_GT(wide, 0) << "no node of the set has more than 16 position bits";
 }
 
 // A block's floats are not range-checked when decoded, so a hostile one
