@@ -25,6 +25,11 @@ struct NodeKey {
         return {uint8_t(level + 1), 2 * x + ((i >> 2) & 1), 2 * y + ((i >> 1) & 1), 2 * z + (i & 1)};
     }
     constexpr NodeKey parent() const { return {uint8_t(level - 1), x / 2, y / 2, z / 2}; }
+    // The node's ancestor at `up` (a level at or above its own).
+    constexpr NodeKey ancestor(int up) const {
+        const int shift = level - up;
+        return {uint8_t(up), x >> shift, y >> shift, z >> shift};
+    }
     // Which child of its parent this node is.
     constexpr int childIndex() const { return int(((x & 1) << 2) | ((y & 1) << 1) | (z & 1)); }
     // Morton code of the node at its level: sorts children after parents' siblings

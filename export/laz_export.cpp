@@ -327,11 +327,6 @@ uint64_t depthFirstKey(const NodeKey& k) {
     return mortonCode(k.x << shift, k.y << shift, k.z << shift);
 }
 
-NodeKey ancestor(const NodeKey& k, int level) {
-    const int up = k.level - level;
-    return NodeKey{uint8_t(level), k.x >> up, k.y >> up, k.z >> up};
-}
-
 struct FileSink {
     std::FILE* f;
     Status failed;
@@ -416,12 +411,12 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
         const NodeRecord& leaf = set.nodes()[index];
         // Close the open nodes that are not above this leaf (deepest first), open those that are.
         size_t common = 0;
-        while (common < path.size() && common < leaf.key.level && path[common].key == ancestor(leaf.key, int(common))) ++common;
+        while (common < path.size() && common < leaf.key.level && path[common].key == leaf.key.ancestor(int(common))) ++common;
         while (status.ok() && path.size() > common) {
             status = emit(path.back().key, path.back().records);
             path.pop_back();
         }
-        for (int level = int(path.size()); status.ok() && level < leaf.key.level; ++level) path.push_back(Open{ancestor(leaf.key, level)});
+        for (int level = int(path.size()); status.ok() && level < leaf.key.level; ++level) path.push_back(Open{leaf.key.ancestor(level)});
         if (!status.ok()) break;
         leafRecords.clear();
         const std::vector<size_t> one{index};

@@ -21,7 +21,8 @@
 namespace {
 
 const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
-       surfcast-export SET --format 3dtiles [--as splats|points] [--compression meshopt|none] -o FOLDER
+       surfcast-export SET --format 3dtiles [--as splats|points] [--compression meshopt|none]
+                       [--tiling auto|explicit|implicit] -o FOLDER
        surfcast-export SET --format ply|spz [--level N|leaves | --splat-budget N] -o FILE
 
 Writes a tile set's points as another format. SET is a set's folder or its
@@ -50,6 +51,12 @@ http(s) URL.
                         meshoptimizer (default; EXT_meshopt_compression, which
                         CesiumJS, three.js and Babylon.js read) or stored as it
                         is, for glTF readers without the extension
+  --tiling auto|explicit|implicit
+                        3dtiles: every tile in tileset.json (explicit), or the
+                        tree in subtree files an engine reads as it descends
+                        (3D Tiles 1.1 implicit tiling, each tile's own box and
+                        error as tile metadata: engines draw sooner); auto
+                        (default): implicit above 10,000 nodes
   --format ply          the 3D Gaussian splatting PLY that splat viewers read:
                         one cut through the tree, each surfel a flat Gaussian,
                         about the centre of the set's bounds (a comment keeps
@@ -101,7 +108,7 @@ int main(int argc, char** argv) {
     HttpOptions http;
     bool quiet = false;
     Tiles3dOptions tiles;
-    bool asGiven = false, compressionGiven = false, shapeGiven = false, cutGiven = false;  // options only some formats take
+    bool asGiven = false, compressionGiven = false, tilingGiven = false, shapeGiven = false, cutGiven = false;  // options only some formats take
     SplatCut cut;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -124,6 +131,12 @@ int main(int argc, char** argv) {
             if (!value(&v) || (v != "meshopt" && v != "none")) return usageError("--compression wants meshopt or none");
             tiles.compression = v == "meshopt" ? Tiles3dOptions::Compression::Meshopt : Tiles3dOptions::Compression::None;
             compressionGiven = true;
+        } else if (a == "--tiling") {
+            if (!value(&v) || (v != "auto" && v != "explicit" && v != "implicit")) return usageError("--tiling wants auto, explicit or implicit");
+            tiles.tiling = v == "auto"       ? Tiles3dOptions::Tiling::Auto
+                           : v == "explicit" ? Tiles3dOptions::Tiling::Explicit
+                                             : Tiles3dOptions::Tiling::Implicit;
+            tilingGiven = true;
         } else if (a == "--splat-scale" || a == "--splat-opacity") {
             char* end = nullptr;
             const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
@@ -175,7 +188,7 @@ int main(int argc, char** argv) {
         return usageError("--format " + format + ": the formats are laz, copc, 3dtiles, ply and spz");
     if (format != "laz" && format != "copc" && (filter.box || !filter.classes.empty()))
         return usageError("--format " + format + " exports the whole set (--bbox and --classes are for laz and copc)");
-    if (asGiven && format != "3dtiles") return usageError("--as is for --format 3dtiles");
+    if ((asGiven || tilingGiven) && format != "3dtiles") return usageError(std::string(asGiven ? "--as" : "--tiling") + " is for --format 3dtiles");
     if (compressionGiven && (format != "3dtiles" || tiles.as != Tiles3dOptions::As::Points))
         return usageError("--compression is for --format 3dtiles --as points (splats are always SPZ)");
     if (shapeGiven && ((format == "3dtiles" && tiles.as == Tiles3dOptions::As::Points) || (format != "3dtiles" && !splatFile)))
@@ -197,9 +210,9 @@ int main(int argc, char** argv) {
             return 1;
         }
         if (!quiet)
-            std::fprintf(stderr, "wrote %s: %zu tiles, %llu points, %llu bytes (%.2f per point)\n", output.c_str(), report->tiles,
-                         (unsigned long long)report->points, (unsigned long long)report->bytes,
-                         report->points ? double(report->bytes) / double(report->points) : 0.0);
+            std::fprintf(stderr, "wrote %s: %zu tiles (%s tiling), %llu points, %llu bytes (%.2f per point)\n", output.c_str(),
+                         report->tiles, report->implicit ? "implicit" : "explicit", (unsigned long long)report->points,
+                         (unsigned long long)report->bytes, report->points ? double(report->bytes) / double(report->points) : 0.0);
         return 0;
     }
     Result<LazExportPlan> plan = LazExportPlan{};

@@ -16,6 +16,7 @@
 #include "byte_io.h"
 #include "folder_publish.h"
 #include "splat_export.h"
+#include "tiles3d_implicit.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -29,6 +30,13 @@ constexpr uint32_t kChunkJson = 0x4E4F534A, kChunkBin = 0x004E4942;
 constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedByte = 5121, kByte = 5120;
 constexpr int kArrayBuffer = 34962, kPoints = 0;
 constexpr const char* kGenerator = "surfcast-export";
+// Levels per subtree file of an implicit tileset: the fewest bytes, and the
+// least an engine reads before its first tile (BENCHMARKS "3D Tiles export").
+constexpr int kSubtreeLevels = 3;
+// --tiling auto: implicit above this many nodes, where an explicit
+// tileset.json (about 250 bytes a node) passes 2.5 MB, all read before an
+// engine draws its first tile (BENCHMARKS "3D Tiles export").
+constexpr size_t kImplicitAbove = 10000;
 
 double srgbToLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
 
@@ -381,42 +389,69 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
         if (options.progress) options.progress(i + 1, nodes.size());
     }
 
-    // tileset.json: the tree, in the root's frame (the set's, less `origin`).
-    bool broken = false;  // a child the hierarchy lists but the set lacks (TilesetReader's checks rule it out)
-    const auto tile = [&](auto& self, size_t i) -> json {
-        const NodeRecord& n = nodes[i];
+    // tileset.json: the tree, in the root's frame (the set's, less `origin`):
+    // every tile in it, or (implicit) the root with its subtrees' template.
+    const auto boxOf = [&](size_t i) -> std::array<double, 12> {
         const Vec3d c = (boxes[i].min + boxes[i].max) * 0.5 - origin, h = (boxes[i].max - boxes[i].min) * 0.5;
-        json t = {{"boundingVolume", {{"box", {c.x, c.y, c.z, h.x, 0, 0, 0, h.y, 0, 0, 0, h.z}}}},
-                  {"geometricError", double(n.spacing)}};
-        if (n.surfelCount > 0) t["content"] = {{"uri", "tiles/" + n.key.name() + ".glb"}};
-        json children = json::array();
-        for (int c = 0; c < 8; ++c)
-            if (n.childMask & (1u << c)) {
-                auto child = index.find(n.key.child(c));
-                if (child == index.end()) {
-                    broken = true;
-                    continue;
-                }
-                children.push_back(self(self, child->second));
-            }
-        if (!children.empty()) t["children"] = children;
-        return t;
+        return {c.x, c.y, c.z, h.x, 0, 0, 0, h.y, 0, 0, 0, h.z};
     };
-    json r = tile(tile, root->second);
-    if (broken) return Status::error(set.describe() + ": the hierarchy lists a child node the set does not hold");
+    const bool implicit = options.tiling == Tiles3dOptions::Tiling::Implicit ||
+                          (options.tiling == Tiles3dOptions::Tiling::Auto && nodes.size() > kImplicitAbove);
+    report.implicit = implicit;
+    json r;
+    if (implicit) {
+        std::vector<ImplicitTile> tiles(nodes.size());
+        int levels = 0;
+        for (size_t i = 0; i < nodes.size(); ++i) {
+            tiles[i] = {nodes[i].key, nodes[i].surfelCount > 0, boxOf(i), double(nodes[i].spacing)};
+            levels = std::max(levels, nodes[i].key.level + 1);
+        }
+        auto bytes = writeImplicitSubtrees(tiles, kSubtreeLevels, (*folder)->path());
+        if (!bytes) return Status::error(set.describe() + ": " + bytes.status().message());
+        report.bytes += *bytes;
+        // The root cube, which implicit tiling divides (each tile's own box is its metadata).
+        const double edge = nodeEdge(info, 0);
+        const Vec3d c = nodeMin(info, NodeKey{}) + Vec3d{edge, edge, edge} * 0.5 - origin;
+        r = {{"boundingVolume", {{"box", {c.x, c.y, c.z, edge / 2, 0, 0, 0, edge / 2, 0, 0, 0, edge / 2}}}},
+             {"geometricError", double(nodes[root->second].spacing)},
+             {"content", {{"uri", "tiles/{level}-{x}-{y}-{z}.glb"}}},
+             {"implicitTiling", implicitTiling(kSubtreeLevels, levels)}};
+    } else {
+        bool broken = false;  // a child the hierarchy lists but the set lacks (TilesetReader's checks rule it out)
+        const auto tile = [&](auto& self, size_t i) -> json {
+            const NodeRecord& n = nodes[i];
+            json t = {{"boundingVolume", {{"box", boxOf(i)}}}, {"geometricError", double(n.spacing)}};
+            if (n.surfelCount > 0) t["content"] = {{"uri", "tiles/" + n.key.name() + ".glb"}};
+            json children = json::array();
+            for (int c = 0; c < 8; ++c)
+                if (n.childMask & (1u << c)) {
+                    auto child = index.find(n.key.child(c));
+                    if (child == index.end()) {
+                        broken = true;
+                        continue;
+                    }
+                    children.push_back(self(self, child->second));
+                }
+            if (!children.empty()) t["children"] = children;
+            return t;
+        };
+        r = tile(tile, root->second);
+        if (broken) return Status::error(set.describe() + ": the hierarchy lists a child node the set does not hold");
+    }
     r["refine"] = "REPLACE";
     r["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin.x, origin.y, origin.z, 1};
     const double rootError = nodes[root->second].childMask ? 2.0 * nodes[root->second].spacing : nodes[root->second].spacing;
     json tileset = {{"asset", {{"version", "1.1"}, {"generator", std::string(kGenerator) + " 0.1.0"}}},
                     {"geometricError", std::max(rootError, 0.0)},
                     {"root", r}};
+    if (implicit) tileset["schema"] = implicitTileSchema();
     // The glTF extensions the content needs, where engines look for them.
     const bool splats = options.as == Tiles3dOptions::As::Splats;
     tileset["extensionsUsed"] = tileset["extensionsRequired"] = {"3DTILES_content_gltf"};
     tileset["extensions"]["3DTILES_content_gltf"] = {
         {"extensionsUsed", splats ? kSplatExtensions : std::vector<std::string>(pointsUse.begin(), pointsUse.end())},
         {"extensionsRequired", splats ? kSplatExtensions : pointExtensions(options.compression)}};
-    const std::string text = tileset.dump(1);
+    const std::string text = tileset.dump();  // compact: 2.7x smaller than indented at 10^8 points (BENCHMARKS "3D Tiles export")
     SC_TRY(writeFileSynced((*folder)->path() + "/tileset.json", text.data(), text.size()));
     report.bytes += text.size();
     SC_TRY((*folder)->publish());

@@ -48,6 +48,10 @@ struct Tiles3dOptions {
     // (EXT_meshopt_compression: glTF's one compression for points, which
     // CesiumJS reads), or not. Splats are SPZ either way.
     enum class Compression { Meshopt, None } compression = Compression::Meshopt;
+    // Every tile in tileset.json, or the tree as implicit-tiling subtree
+    // files (tiles3d_implicit.h); Auto: implicit for sets of more than
+    // 10,000 nodes.
+    enum class Tiling { Auto, Explicit, Implicit } tiling = Tiling::Auto;
     GaussianOptions gaussians;  // splats
     // Told after each node: nodes written so far, of all.
     std::function<void(size_t, size_t)> progress;
@@ -56,7 +60,8 @@ struct Tiles3dOptions {
 struct Tiles3dReport {
     size_t tiles = 0;
     uint64_t points = 0;    // surfels written, over all tiles
-    uint64_t bytes = 0;     // glb and tileset.json bytes
+    uint64_t bytes = 0;     // glb, tileset.json and subtree bytes
+    bool implicit = false;  // the tree went into subtree files
 };
 
 // Writes `set` as a 3D Tiles tileset into the folder `output` (replacing a

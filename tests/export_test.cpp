@@ -213,6 +213,10 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "3dtiles", "--classes", "2", "-o", out}, 2, "exports the whole set"},
         {{dir_->file("autzen"), "--format", "laz", "--splat-scale", "2", "-o", out}, 2, "are for splats"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--as", "points", "--splat-opacity", "0.5", "-o", out}, 2, "are for splats"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--compression", "draco", "-o", out}, 2, "--compression wants meshopt or none"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--compression", "none", "-o", out}, 2, "--compression is for --format 3dtiles --as points"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--tiling", "sparse", "-o", out}, 2, "--tiling wants auto, explicit or implicit"},
+        {{dir_->file("autzen"), "--format", "laz", "--tiling", "implicit", "-o", out}, 2, "--tiling is for --format 3dtiles"},
         {{dir_->file("autzen"), "--format", "laz"}, 2, "-o FILE is required"},
         {{dir_->file("nothing"), "--format", "laz", "-o", out}, 1, dir_->file("nothing")},
     };
