@@ -8,8 +8,11 @@
 // bench/.venv), IoU of the covered pixels, and the mean colour difference
 // over the pixels off both silhouettes.
 //
-// Usage: node bench/splat_bench.mjs [--build build] [--scales 0.75,1,1.25] [--opacities 1,0.7]
-// Sets: autzen_trim.las (../shared/data) and the built-in scene. Prints Markdown.
+// Usage: node bench/splat_bench.mjs [--build build] [--scales 0.75,1,1.25] [--opacities 1,0.7] [--sets NAME,...]
+// Sets: two shared scans (autzen_trim.las, lion_takanawa.copc.laz), the
+// built-in scene, and the accuracy harness's synthetic scenes
+// (accuracy_bench.py: its surfels and cameras); --sets picks some by the
+// start of their names. Prints Markdown.
 
 import { execFileSync } from "node:child_process";
 import { mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
@@ -31,11 +34,33 @@ const python = join(root, "bench", ".venv", "bin", "python");
 
 const work = mkdtempSync(join(tmpdir(), "surfcast-splat-bench-"));
 const children = [];
-const sets = [
-  { name: "autzen_trim.las", build: [join(root, "..", "shared", "data", "autzen_trim.las")],
-    camera: "636300,848500,900,636590,849216,430,0,0,1,45" },
+const data = join(root, "..", "shared", "data");
+let sets = [
+  { name: "autzen_trim.las", build: [join(data, "autzen_trim.las")], camera: "636300,848500,900,636590,849216,430,0,0,1,45" },
+  { name: "lion_takanawa.copc.laz", build: [join(data, "lion_takanawa.copc.laz")], camera: "-2.89,-4,4,-2.89,3.88,-1.165,0,0,1,45" },
   { name: "built-in scene, 300,000 points", build: ["--default-scene", "--scene-points", "300000"], camera: "4,-7,3.5,0,0,0.5,0,0,1,45" },
 ];
+// The accuracy harness's scenes: its surfels as PLY files and its cameras.
+{
+  const code = `
+import json, os, sys, numpy as np
+sys.path.insert(0, sys.argv[1])
+import accuracy_bench as ab
+rng = np.random.default_rng(1)
+out = []
+for name, (surfaces, camera) in ab.scenes().items():
+    pts, nrm, col = (np.concatenate(x) for x in zip(*(s.samples(rng) for s in surfaces)))
+    ply = os.path.join(sys.argv[2], name + ".ply")
+    ab.write_ply(ply, pts, nrm, col)
+    out.append({"name": "harness: " + name, "build": ["--weights", "analytic", ply], "camera": camera})
+print(json.dumps(out))
+`;
+  sets.push(...JSON.parse(execFileSync(python, ["-c", code, join(root, "bench"), work]).toString()));
+}
+if (opt("--sets", "")) {
+  const wanted = opt("--sets", "").split(",");
+  sets = sets.filter((s) => wanted.some((w) => s.name.startsWith(w) || s.name.startsWith(`harness: ${w}`)));
+}
 
 // The page's settled view (test/consumers.mjs) into `out`.
 async function view(browser, url, counter, frames, out) {

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "lod_selection.h"
+
 namespace surfcast {
 
 Vec3d toSplatAxes(const Vec3d& v, SplatAxes axes) {
@@ -49,16 +51,27 @@ Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat for
         for (const NodeRecord& n : nodes) sum += inCut(n, level) ? n.surfelCount : 0;
         return sum;
     };
-    int level = cut.level;
-    if (cut.budget > 0 && surfelsOf(-1) > cut.budget) {
-        level = 0;
-        while (level + 1 < info.levels && surfelsOf(level + 1) <= cut.budget) ++level;
-    }
     SplatFileReport report;
-    report.cut = level < 0 ? "leaves" : "level " + std::to_string(level);
     std::vector<size_t> chosen;
-    for (size_t i = 0; i < nodes.size(); ++i)
-        if (inCut(nodes[i], level) && nodes[i].surfelCount > 0) chosen.push_back(i);
+    if (cut.camera) {
+        // The client's own selection, every node at hand (lod_selection.h).
+        LodParams params;
+        params.targetPixels = cut.lodPixels;
+        if (cut.budget > 0) params.splatBudget = size_t(std::min<uint64_t>(cut.budget, SIZE_MAX));
+        const LodSelector selector(info, nodes);
+        for (const SelectedNode& s : selector.select(*cut.camera, cut.width, cut.height, params, [](uint32_t) { return true; }))
+            if (nodes[s.index].surfelCount > 0) chosen.push_back(s.index);
+        report.cut = "the camera's view";
+    } else {
+        int level = cut.level;
+        if (cut.budget > 0 && surfelsOf(-1) > cut.budget) {
+            level = 0;
+            while (level + 1 < info.levels && surfelsOf(level + 1) <= cut.budget) ++level;
+        }
+        report.cut = level < 0 ? "leaves" : "level " + std::to_string(level);
+        for (size_t i = 0; i < nodes.size(); ++i)
+            if (inCut(nodes[i], level) && nodes[i].surfelCount > 0) chosen.push_back(i);
+    }
     std::sort(chosen.begin(), chosen.end(), [&](size_t a, size_t b) { return nodes[a].key < nodes[b].key; });
     uint64_t count = 0;
     for (size_t i : chosen) count += nodes[i].surfelCount;

@@ -6,8 +6,10 @@
 #include <cstdint>
 #include <cstdio>
 #include <functional>
+#include <optional>
 #include <string>
 
+#include "camera.h"
 #include "gaussians.h"
 #include "tileset_reader.h"
 
@@ -31,10 +33,16 @@ Gaussian surfelGaussian(const TilesetReader& set, const NodeRecord& node, const 
 // Which nodes a splat file holds: those of `level` and the leaves above it,
 // as surfcast-view --level draws; the leaves alone (level -1, the default);
 // or, with a budget, the deepest such level whose nodes hold at most
-// `budget` surfels (at least the root).
+// `budget` surfels (at least the root). With a camera: the nodes
+// surfcast-view --lod draws for that view at width x height (culled to the
+// view, refined while a node's projected spacing exceeds `lodPixels`, within
+// `budget` surfels if one is given).
 struct SplatCut {
     int level = -1;
     uint64_t budget = 0;
+    std::optional<Camera> camera;
+    int width = 1280, height = 720;
+    double lodPixels = 1.0;
 };
 
 enum class SplatFormat { Ply, Spz };
@@ -42,7 +50,7 @@ enum class SplatFormat { Ply, Spz };
 struct SplatFileReport {
     uint64_t splats = 0;
     size_t nodes = 0;
-    std::string cut;  // "level N" or "leaves"
+    std::string cut;  // "level N", "leaves" or "the camera's view"
 };
 
 // Writes the cut's surfels to `f` as PLY (streamed, one node at a time) or

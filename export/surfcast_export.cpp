@@ -23,7 +23,8 @@ namespace {
 const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
        surfcast-export SET --format 3dtiles [--as splats|points] [--compression meshopt|none]
                        [--tiling auto|explicit|implicit] -o FOLDER
-       surfcast-export SET --format ply|spz [--level N|leaves | --splat-budget N] -o FILE
+       surfcast-export SET --format ply|spz [--level N|leaves | --splat-budget N | --camera C [--size WxH] [--lod PX]
+                       [--splat-budget N]] -o FILE
 
 Writes a tile set's points as another format. SET is a set's folder or its
 http(s) URL.
@@ -66,7 +67,15 @@ http(s) URL.
   --level N|leaves      ply, spz: the nodes of level N and the leaves above it,
                         as surfcast-view --level draws (default: the leaves)
   --splat-budget N      ply, spz: the deepest level whose cut holds at most N
-                        surfels (the leaves where they fit)
+                        surfels (the leaves where they fit); with --camera, at
+                        most N surfels of that view, as surfcast-view's budget
+  --camera EX,EY,EZ,TX,TY,TZ,UX,UY,UZ,FOV
+                        ply, spz: the nodes surfcast-view --lod draws for this
+                        camera (as surfcast-view takes it): what it sees, finer
+                        where it is nearer
+  --size WxH            with --camera: the view's pixels (default 1280x720)
+  --lod PX              with --camera: refine while a node's samples lie more
+                        than PX pixels apart on screen (default 1)
   --splat-scale S       splats: standard deviation S times the set's kernel
                         scale times the surfel's radius (default 0.75, closest
                         to surfcast-view in CesiumJS and Spark; 1 is Surfcast's
@@ -108,7 +117,7 @@ int main(int argc, char** argv) {
     HttpOptions http;
     bool quiet = false;
     Tiles3dOptions tiles;
-    bool asGiven = false, compressionGiven = false, tilingGiven = false, shapeGiven = false, cutGiven = false;  // options only some formats take
+    bool asGiven = false, compressionGiven = false, tilingGiven = false, shapeGiven = false, cutGiven = false, viewGiven = false;  // options only some formats take
     SplatCut cut;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -157,6 +166,25 @@ int main(int argc, char** argv) {
             if (!(end && *end == '\0' && d >= 1 && d <= 1e12)) return usageError("--splat-budget wants a count of surfels (1 or more)");
             cut.budget = uint64_t(d);
             cutGiven = true;
+        } else if (a == "--camera") {
+            if (!value(&v)) return usageError("--camera wants EX,EY,EZ,TX,TY,TZ,UX,UY,UZ,FOV");
+            auto camera = parseCamera(v);
+            if (!camera) return usageError("--camera: " + camera.status().message());
+            cut.camera = *camera;
+            cutGiven = true;
+        } else if (a == "--size") {
+            int w = 0, h = 0;
+            char tail = 0;
+            if (!value(&v) || std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > 16384 || h > 16384)
+                return usageError("--size wants WxH, 1 to 16384 pixels each");
+            cut.width = w, cut.height = h;
+            viewGiven = true;
+        } else if (a == "--lod") {
+            char* end = nullptr;
+            const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
+            if (!(end && *end == '\0' && d > 0 && d <= 1000)) return usageError("--lod wants pixels in (0, 1000]");
+            cut.lodPixels = d;
+            viewGiven = true;
         } else if (a == "-o" || a == "--output") {
             if (!value(&output)) return usageError("-o wants a file");
         } else if (a == "--bbox") {
@@ -193,8 +221,9 @@ int main(int argc, char** argv) {
         return usageError("--compression is for --format 3dtiles --as points (splats are always SPZ)");
     if (shapeGiven && ((format == "3dtiles" && tiles.as == Tiles3dOptions::As::Points) || (format != "3dtiles" && !splatFile)))
         return usageError("--splat-scale and --splat-opacity are for splats (3dtiles --as splats, ply, spz)");
-    if (cutGiven && !splatFile) return usageError("--level and --splat-budget are for --format ply and spz");
-    if (cut.level >= 0 && cut.budget > 0) return usageError("--level or --splat-budget, not both");
+    if ((cutGiven || viewGiven) && !splatFile) return usageError("--level, --splat-budget and --camera are for --format ply and spz");
+    if (cut.level >= 0 && (cut.budget > 0 || cut.camera)) return usageError(cut.camera ? "--level or --camera, not both" : "--level or --splat-budget, not both");
+    if (viewGiven && !cut.camera) return usageError("--size and --lod are for --camera");
     if (output.empty()) return usageError("-o FILE is required");
 
     auto reader = openTileset(set, http);

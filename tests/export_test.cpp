@@ -208,6 +208,11 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "spz", "--level", "2", "--splat-budget", "1000", "-o", out}, 2, "not both"},
         {{dir_->file("autzen"), "--format", "ply", "--as", "points", "-o", out}, 2, "--as is for --format 3dtiles"},
         {{dir_->file("autzen"), "--format", "laz", "--level", "2", "-o", out}, 2, "are for --format ply and spz"},
+        {{dir_->file("autzen"), "--format", "3dtiles", "--camera", "0,0,0,1,1,1,0,0,1,45", "-o", out}, 2, "are for --format ply and spz"},
+        {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0", "-o", out}, 2, "--camera: "},
+        {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0,1,1,1,0,0,1,45", "--level", "1", "-o", out}, 2, "--level or --camera, not both"},
+        {{dir_->file("autzen"), "--format", "spz", "--size", "640x480", "-o", out}, 2, "--size and --lod are for --camera"},
+        {{dir_->file("autzen"), "--format", "spz", "--camera", "0,0,0,1,1,1,0,0,1,45", "--lod", "0", "-o", out}, 2, "--lod wants pixels"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--splat-scale", "0", "-o", out}, 2, "--splat-scale wants a number in (0, 100]"},
         {{dir_->file("autzen"), "--format", "spz", "--bbox", "0,0,0,1,1,1", "-o", out}, 2, "exports the whole set"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--classes", "2", "-o", out}, 2, "exports the whole set"},
@@ -299,6 +304,44 @@ TEST_F(Export, ThreeDTilesFailWholeOnDamagedSets) {
     EXPECT_EQ(test::readFile(good + "/sentinel"), "kept");
     for (const auto& entry : fs::directory_iterator(dir_->path()))
         EXPECT_EQ(entry.path().filename().string().find(".partial-"), std::string::npos) << entry.path();
+}
+
+// --camera cuts a splat file as the client cuts a view: the file holds as
+// many splats as surfcast-view --lod draws at the same camera, size, level
+// of detail and budget (its last frame's count), and a budget takes the
+// coarsest gaps first, so the budgeted view holds fewer, within the budget.
+TEST_F(Export, SplatFileOfAViewHoldsWhatSurfcastViewDraws) {
+    const std::string camera = "636300,848500,900,636590,849216,430,0,0,1,45";
+    const auto plyCount = [](const std::string& path) {
+        const std::string head = test::readFile(path).substr(0, 400);
+        const size_t at = head.find("element vertex ");
+        return at == std::string::npos ? uint64_t(0) : std::stoull(head.substr(at + 15));
+    };
+    const auto viewCount = [&](const std::vector<std::string>& extra) {
+        std::vector<std::string> args = {test::binary("surfcast-view"), "--headless", dir_->file("autzen"), "--camera", camera, "--size",
+                                         "640x480", "--out", dir_->file("view.png")};
+        args.insert(args.end(), extra.begin(), extra.end());
+        auto r = test::run(args);
+        EXPECT_EQ(r.exitCode, 0) << r.output;
+        const size_t at = r.output.rfind("\"splats\":");
+        return at == std::string::npos ? uint64_t(0) : std::stoull(r.output.substr(at + 9));
+    };
+    uint64_t counts[2] = {};
+    for (int budgeted = 0; budgeted < 2; ++budgeted) {
+        std::vector<std::string> lod = {"--lod", "2"};
+        if (budgeted) lod.insert(lod.end(), {"--splat-budget", "20000"});
+        const std::string out = dir_->file(budgeted ? "view-budget.ply" : "view.ply");
+        std::vector<std::string> args = {test::binary("surfcast-export"), dir_->file("autzen"), "--format", "ply", "--camera", camera, "--size",
+                                         "640x480", "-q", "-o", out};
+        args.insert(args.end(), lod.begin(), lod.end());
+        auto r = test::run(args);
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        counts[budgeted] = plyCount(out);
+        EXPECT_EQ(counts[budgeted], viewCount(lod)) << (budgeted ? "with a budget" : "without a budget");
+    }
+    EXPECT_GT(counts[0], 20000u) << "the view without a budget needs more than the budget";
+    EXPECT_LE(counts[1], 20000u);
+    EXPECT_GT(counts[1], 0u);
 }
 
 // A node with more than 16 position bits (a float32 PLY's precision over
