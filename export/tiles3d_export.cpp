@@ -151,6 +151,37 @@ void put(std::vector<uint8_t>& bytes, size_t at, T value) {
     le::put<T>(bytes.data() + at, value);
 }
 
+// A block's LiDAR attributes, where it has them: the metadata property and
+// the vertex attribute names, and the values, little-endian, `size` bytes each.
+struct LidarColumn {
+    const char *property, *attribute;
+    size_t size;
+    std::vector<uint8_t> values;
+};
+std::vector<LidarColumn> lidarColumns(const BlockData& b) {
+    std::vector<LidarColumn> out;
+    const auto add = [&](const char* property, const char* attribute, const auto& values) {
+        if (values.empty()) return;
+        LidarColumn c{property, attribute, sizeof(values[0]), {}};
+        c.values.resize(values.size() * c.size);
+        for (size_t i = 0; i < values.size(); ++i)
+            if (c.size == 2) le::put<uint16_t>(&c.values[2 * i], values[i]);
+            else c.values[i] = uint8_t(values[i]);
+        out.push_back(std::move(c));
+    };
+    add("intensity", "_INTENSITY", b.intensity);
+    add("classification", "_CLASSIFICATION", b.classification);
+    add("return_number", "_RETURN_NUMBER", b.returnNumber);
+    add("number_of_returns", "_NUMBER_OF_RETURNS", b.numberOfReturns);
+    return out;
+}
+// EXT_structural_metadata's schema of those columns: the class "surfel".
+json lidarSchema(const std::vector<LidarColumn>& columns) {
+    json properties;
+    for (const LidarColumn& c : columns) properties[c.property] = {{"type", "SCALAR"}, {"componentType", c.size == 2 ? "UINT16" : "UINT8"}};
+    return {{"id", "surfcast"}, {"classes", {{"surfel", {{"properties", properties}}}}}};
+}
+
 // The glTF extensions a point tile's glb uses; all but the unlit material and
 // the metadata are required (integer positions, compressed views).
 std::vector<std::string> pointExtensions(Tiles3dOptions::Compression compression) {
@@ -220,41 +251,24 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
         attributes["COLOR_0"] = glb.accessor(glb.view(colors, n, 8), kUnsignedShort, true, "VEC4", n);
     }
 
-    // LiDAR attributes, each in 4-byte slots: glTF aligns every vertex
-    // attribute's elements to 4 bytes (the codec takes the padding out).
-    struct Lidar {
-        const char *property, *attribute;
-        int componentType;
-        std::function<uint32_t(size_t)> value;
-    };
-    std::vector<Lidar> lidar;
-    if (!b.intensity.empty()) lidar.push_back({"intensity", "_INTENSITY", kUnsignedShort, [&](size_t i) { return b.intensity[i]; }});
-    if (!b.classification.empty())
-        lidar.push_back({"classification", "_CLASSIFICATION", kUnsignedByte, [&](size_t i) { return b.classification[i]; }});
-    if (!b.returnNumber.empty())
-        lidar.push_back({"return_number", "_RETURN_NUMBER", kUnsignedByte, [&](size_t i) { return b.returnNumber[i]; }});
-    if (!b.numberOfReturns.empty())
-        lidar.push_back({"number_of_returns", "_NUMBER_OF_RETURNS", kUnsignedByte, [&](size_t i) { return b.numberOfReturns[i]; }});
+    const std::vector<LidarColumn> lidar = lidarColumns(b);
     json metadata;  // EXT_structural_metadata's schema and property attributes, where LiDAR attributes are
     json primitive = {{"mode", kPoints}, {"material", 0}};
     const std::vector<std::string> required = pointExtensions(compression);
     std::vector<std::string> used = required;
     used.push_back("KHR_materials_unlit");
     if (!lidar.empty()) {
-        json properties, schema;
-        for (const Lidar& l : lidar) {
+        // Each in 4-byte slots: glTF aligns every vertex attribute's elements
+        // to 4 bytes (the codec takes the padding out).
+        json properties;
+        for (const LidarColumn& l : lidar) {
             std::vector<uint8_t> bytes(4 * n, 0);
-            for (size_t i = 0; i < n; ++i) {
-                if (l.componentType == kUnsignedShort) put<uint16_t>(bytes, 4 * i, uint16_t(l.value(i)));
-                else bytes[4 * i] = uint8_t(l.value(i));
-            }
-            attributes[l.attribute] = glb.accessor(glb.view(bytes, n, 4), l.componentType, false, "SCALAR", n);
+            for (size_t i = 0; i < n; ++i) std::memcpy(&bytes[4 * i], &l.values[i * l.size], l.size);
+            attributes[l.attribute] = glb.accessor(glb.view(bytes, n, 4), l.size == 2 ? kUnsignedShort : kUnsignedByte, false, "SCALAR", n);
             properties[l.property] = {{"attribute", l.attribute}};
-            schema[l.property] = {{"type", "SCALAR"}, {"componentType", l.componentType == kUnsignedShort ? "UINT16" : "UINT8"}};
         }
-        metadata = {
-            {"schema", {{"id", "surfcast"}, {"classes", {{"surfel", {{"properties", schema}}}}}}},
-            {"propertyAttributes", json::array({{{"class", "surfel"}, {"properties", properties}}})}};
+        metadata = {{"schema", lidarSchema(lidar)},
+                    {"propertyAttributes", json::array({{{"class", "surfel"}, {"properties", properties}}})}};
         primitive["extensions"]["EXT_structural_metadata"] = {{"propertyAttributes", {0}}};
         used.push_back("EXT_structural_metadata");
     }
@@ -276,7 +290,7 @@ const std::vector<std::string> kSplatExtensions = {"KHR_gaussian_splatting", "KH
 // One node's glb as Gaussians about `centre` (world), in SPZ; `extent`: the
 // largest |coordinate| about the centre (the tile's box).
 Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord& node, const BlockData& b, const Vec3d& centre,
-                                      double extent, const Vec3d& origin, const GaussianOptions& options) {
+                                      double extent, const Vec3d& origin, const GaussianOptions& options, std::set<std::string>* usedByAll) {
     const size_t n = b.size();
     SpzWriter spzWriter(extent);
     Vec3d lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
@@ -307,8 +321,23 @@ Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord
                          {{"kernel", "ellipse"},
                           {"colorSpace", "srgb_rec709_display"},
                           {"extensions", {{"KHR_gaussian_splatting_compression_spz_2", {{"bufferView", view}}}}}}}}}};
+    // LiDAR attributes as a property table, a row per splat: every attribute
+    // of an SPZ primitive is read from the SPZ (CesiumJS), so the rows are
+    // the splats' implicit feature IDs (their vertex indices, EXT_mesh_features).
+    std::vector<std::string> used = kSplatExtensions;
+    json metadata;
+    if (const std::vector<LidarColumn> lidar = lidarColumns(b); !lidar.empty()) {
+        json properties;
+        for (const LidarColumn& l : lidar) properties[l.property] = {{"values", glb.blobView(l.values)}};
+        metadata = {{"schema", lidarSchema(lidar)},
+                    {"propertyTables", json::array({{{"class", "surfel"}, {"count", n}, {"properties", properties}}})}};
+        primitive["extensions"]["EXT_mesh_features"] = {{"featureIds", json::array({{{"featureCount", n}, {"propertyTable", 0}}})}};
+        used.insert(used.end(), {"EXT_mesh_features", "EXT_structural_metadata"});
+    }
+    usedByAll->insert(used.begin(), used.end());
     const Vec3d t = toYUp(centre - origin);  // the Gaussians are y-up already
-    const json gltf = gltfOf(node, {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}, primitive, kSplatExtensions, kSplatExtensions);
+    json gltf = gltfOf(node, {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}, primitive, used, kSplatExtensions);
+    if (!metadata.is_null()) gltf["extensions"]["EXT_structural_metadata"] = metadata;
     return glb.finish(gltf);
 }
 
@@ -365,7 +394,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     }
 
     Tiles3dReport report;
-    std::set<std::string> pointsUse;  // the glTF extensions the point tiles use
+    std::set<std::string> contentUses;  // the glTF extensions the tiles' glbs use
     std::error_code ec;
     if (!fs::create_directory(fs::path((*folder)->path()) / "tiles", ec))
         return Status::error((*folder)->path() + "/tiles: cannot create (" + ec.message() + ")");
@@ -378,8 +407,8 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
             const Vec3d centre = (boxes[i].min + boxes[i].max) * 0.5;
             const Vec3d half = (boxes[i].max - boxes[i].min) * 0.5;
             auto glb = options.as == Tiles3dOptions::As::Splats
-                           ? splatGlb(set, n, *block, centre, std::max({half.x, half.y, half.z}), origin, options.gaussians)
-                           : nodeGlb(set, n, *block, origin, options.compression, &pointsUse);
+                           ? splatGlb(set, n, *block, centre, std::max({half.x, half.y, half.z}), origin, options.gaussians, &contentUses)
+                           : nodeGlb(set, n, *block, origin, options.compression, &contentUses);
             if (!glb) return Status::error(set.describe() + ": node " + n.key.name() + ": " + glb.status().message());
             SC_TRY(writeFileSynced((*folder)->path() + "/tiles/" + n.key.name() + ".glb", glb->data(), glb->size()));
             report.points += n.surfelCount;
@@ -449,7 +478,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     const bool splats = options.as == Tiles3dOptions::As::Splats;
     tileset["extensionsUsed"] = tileset["extensionsRequired"] = {"3DTILES_content_gltf"};
     tileset["extensions"]["3DTILES_content_gltf"] = {
-        {"extensionsUsed", splats ? kSplatExtensions : std::vector<std::string>(pointsUse.begin(), pointsUse.end())},
+        {"extensionsUsed", std::vector<std::string>(contentUses.begin(), contentUses.end())},
         {"extensionsRequired", splats ? kSplatExtensions : pointExtensions(options.compression)}};
     const std::string text = tileset.dump();  // compact: 2.7x smaller than indented at 10^8 points (BENCHMARKS "3D Tiles export")
     SC_TRY(writeFileSynced((*folder)->path() + "/tileset.json", text.data(), text.size()));

@@ -25,8 +25,9 @@
 // - Splats: each surfel a flat Gaussian (gaussians.h) in
 //   KHR_gaussian_splatting, compressed by SPZ
 //   (KHR_gaussian_splatting_compression_spz_2), which CesiumJS requires of
-//   3D Tiles splats; no LiDAR attributes (CesiumJS reads every attribute of
-//   an SPZ primitive from the SPZ).
+//   3D Tiles splats; the LiDAR attributes as a property table with a row
+//   per splat (EXT_mesh_features' implicit feature IDs): CesiumJS reads
+//   every attribute of an SPZ primitive from the SPZ.
 //
 // Blocks are decoded one node at a time: memory holds one node, whatever
 // the set's size. The folder is written beside the output and swapped in

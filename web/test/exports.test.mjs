@@ -388,7 +388,7 @@ describe("exports, as their consumers read them", { skip }, () => {
     return 2 * Math.hypot(1 / 255, 1 / 255, 1 / 255, (Math.abs(x) + Math.abs(y) + Math.abs(z)) / (255 * w)) + 1e-3;
   };
 
-  test("round trip: the 3D Tiles splats' SPZ holds the set's surfels as Gaussians", async (t) => {
+  test("round trip: the 3D Tiles splats' SPZ holds the set's surfels as Gaussians, their LiDAR attributes a property table", async (t) => {
     const { info, nodes } = readSet(set);
     const decode = await decoderFor(info);
     const tileset = JSON.parse(readFileSync(join(splats, "tileset.json"), "utf8"));
@@ -412,9 +412,24 @@ describe("exports, as their consumers read them", { skip }, () => {
       assert.equal(gltf.accessors[prim.attributes.POSITION].count, spz.count);
       const m = gltf.nodes[0].matrix;
       const edge = format.nodeEdge(info, n.level);
+      // The LiDAR attributes: a property table whose rows are the splats'
+      // implicit feature IDs, their vertex indices (EXT_mesh_features).
+      assert.deepEqual(prim.extensions.EXT_mesh_features.featureIds, [{ featureCount: spz.count, propertyTable: 0 }]);
+      const metadata = gltf.extensions.EXT_structural_metadata;
+      const table = metadata.propertyTables[0];
+      assert.equal(table.count, spz.count);
+      const column = (name) => {
+        const v = gltf.bufferViews[table.properties[name].values];
+        const type = metadata.schema.classes[table.class].properties[name].componentType;
+        const b = bin.subarray(v.byteOffset, v.byteOffset + v.byteLength);
+        assert.equal(b.length, spz.count * (type === "UINT16" ? 2 : 1));
+        return (i) => (type === "UINT16" ? b.readUInt16LE(2 * i) : b[i]);
+      };
+      const columns = ["classification", "intensity", "return_number", "number_of_returns"].map((name) => [name, column(name)]);
       for (let i = 0; i < spz.count; i += Math.max(1, Math.floor(spz.count / 40))) {
         const g = spz.get(i);
         assert.equal(g.opacity, 1, "opaque");
+        for (const [name, value] of columns) assert.equal(value(i), decode(n, i).raw[name], `node ${n.key} splat ${i}'s ${name}`);
         const p = fromYUp([0, 1, 2].map((a) => g.position[a] + m[12 + a]));
         g.position = p.map((v, a) => v + origin[a]);
         expectGaussian(g, decode(n, i), info, { near: 2 ** -spz.fraction / 2 + 1e-6 * edge, colorStep: spzColorStep, logStep: 1 / 32 + 1e-6,
