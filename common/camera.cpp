@@ -3,6 +3,8 @@
 #include "render_defaults.h"  // kFrameMargin
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -64,6 +66,23 @@ Result<Box3d> parseBox(const std::string& text) {
     for (int a = 0; a < 3; ++a)
         if (b.min[a] > b.max[a]) return Status::error("box '" + text + "': its minimum exceeds its maximum on axis " + "xyz"[a]);
     return b;
+}
+
+Result<std::pair<int, int>> parseImageSize(const std::string& text) {
+    const auto fail = [&] { return Status::error("size '" + text + "': WxH wanted, each 1 to 16384 pixels"); };
+    const size_t x = text.find('x');
+    if (x == std::string::npos) return fail();
+    int side[2] = {};
+    for (int i = 0; i < 2; ++i) {
+        const std::string part = i == 0 ? text.substr(0, x) : text.substr(x + 1);
+        char* end = nullptr;
+        errno = 0;
+        const long v = std::strtol(part.c_str(), &end, 10);
+        if (part.empty() || !std::isdigit(static_cast<unsigned char>(part[0])) || *end != '\0' || errno == ERANGE || v < 1 || v > 16384)
+            return fail();
+        side[i] = int(v);
+    }
+    return std::pair{side[0], side[1]};
 }
 
 Result<std::vector<Camera>> parseCameraPath(const std::string& text, const std::string& what) {

@@ -12,6 +12,7 @@
 #include <array>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "status.h"
@@ -31,6 +32,9 @@ Result<Camera> parseCamera(const std::string& text);
 // A box, "xmin,ymin,zmin,xmax,ymax,zmax" (surfcast-view's --clip, the exports'
 // --bbox and bbox=): errors name the text.
 Result<Box3d> parseBox(const std::string& text);
+// An image size "WxH", each 1 to 16384 pixels (surfcast-view's and
+// surfcast-export's --size): errors name the text.
+Result<std::pair<int, int>> parseImageSize(const std::string& text);
 // A camera path: {"frames": [{"eye": [x,y,z], "target": [..], "up": [..], "fov": deg}, ...]}
 // ("up" defaults to +z, "fov" to 45). `what` names the source in errors.
 Result<std::vector<Camera>> parseCameraPath(const std::string& json, const std::string& what);

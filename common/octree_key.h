@@ -4,6 +4,7 @@
 #pragma once
 
 #include <compare>
+#include <cassert>
 #include <cstdint>
 #include <string>
 
@@ -27,6 +28,7 @@ struct NodeKey {
     constexpr NodeKey parent() const { return {uint8_t(level - 1), x / 2, y / 2, z / 2}; }
     // The node's ancestor at `up` (a level at or above its own).
     constexpr NodeKey ancestor(int up) const {
+        assert(up >= 0 && up <= level);
         const int shift = level - up;
         return {uint8_t(up), x >> shift, y >> shift, z >> shift};
     }

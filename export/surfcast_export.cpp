@@ -173,11 +173,9 @@ int main(int argc, char** argv) {
             cut.camera = *camera;
             cutGiven = true;
         } else if (a == "--size") {
-            int w = 0, h = 0;
-            char tail = 0;
-            if (!value(&v) || std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > 16384 || h > 16384)
-                return usageError("--size wants WxH, 1 to 16384 pixels each");
-            cut.width = w, cut.height = h;
+            auto size = value(&v) ? parseImageSize(v) : Result<std::pair<int, int>>(Status::error("--size wants WxH"));
+            if (!size) return usageError("--size wants WxH, 1 to 16384 pixels each");
+            cut.width = size->first, cut.height = size->second;
             viewGiven = true;
         } else if (a == "--lod") {
             char* end = nullptr;

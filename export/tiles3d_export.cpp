@@ -63,6 +63,7 @@ public:
             views_[size_t(v)]["byteStride"] = stride;
             return v;
         }
+        meshopt_encodeVertexVersion(0);  // the one EXT_meshopt_compression allows (later releases default to 1)
         std::vector<uint8_t> packed(meshopt_encodeVertexBufferBound(count, size_t(stride)));
         packed.resize(meshopt_encodeVertexBuffer(packed.data(), packed.size(), bytes.data(), count, size_t(stride)));
         views_.push_back({{"buffer", 1}, {"byteOffset", fallback_}, {"byteLength", bytes.size()}, {"byteStride", stride},
@@ -212,6 +213,8 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
     for (size_t i = 0; i < n; ++i)
         for (size_t a = 0; a < 3; ++a) {
             const uint32_t q = b.positions[3 * i + a];
+            if (q >> node.positionBits)  // a block's integers are not range-checked when decoded
+                return Status::error("a position exceeds the node's " + std::to_string(node.positionBits) + " bits");
             lo[a] = std::min(lo[a], q), hi[a] = std::max(hi[a], q);
             if (integers) put<uint16_t>(positions, 8 * i + 2 * a, uint16_t(q));
             else put<float>(positions, 12 * i + 4 * a, float(q * step));

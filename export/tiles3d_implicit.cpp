@@ -128,7 +128,7 @@ Result<uint64_t> writeImplicitSubtrees(const std::vector<ImplicitTile>& tiles, i
     if (!fs::create_directory(dir, ec)) return Status::error(dir.string() + ": cannot create (" + ec.message() + ")");
     uint64_t bytes = 0;
     for (const auto& [root, s] : subtrees) {
-        if (s.available.empty()) return Status::error("subtree " + root.name() + " has no tiles, only child subtrees: a node's parent is missing");
+        if (!s.available.count(0)) return Status::error("subtree " + root.name() + " lacks its root tile: a node's parent is missing");
         const std::vector<uint8_t> file = subtreeFile(s, levels);
         SC_TRY(writeFileSynced((dir / (root.name() + ".subtree")).string(), file.data(), file.size()));
         bytes += file.size();

@@ -212,6 +212,8 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0", "-o", out}, 2, "--camera: "},
         {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0,1,1,1,0,0,1,45", "--level", "1", "-o", out}, 2, "--level or --camera, not both"},
         {{dir_->file("autzen"), "--format", "spz", "--size", "640x480", "-o", out}, 2, "--size and --lod are for --camera"},
+        {{dir_->file("autzen"), "--format", "spz", "--camera", "0,0,0,1,1,1,0,0,1,45", "--size", "99999999999x1", "-o", out}, 2,
+         "--size wants WxH"},
         {{dir_->file("autzen"), "--format", "spz", "--camera", "0,0,0,1,1,1,0,0,1,45", "--lod", "0", "-o", out}, 2, "--lod wants pixels"},
         {{dir_->file("autzen"), "--format", "3dtiles", "--splat-scale", "0", "-o", out}, 2, "--splat-scale wants a number in (0, 100]"},
         {{dir_->file("autzen"), "--format", "spz", "--bbox", "0,0,0,1,1,1", "-o", out}, 2, "exports the whole set"},

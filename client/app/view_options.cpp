@@ -213,13 +213,10 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             if (!path) return (*exitCode = usageError(path.status().message())), false;
             o->cameras = *path;
         } else if (a == "--size") {
-            int w = 0, h = 0;
-            char tail = 0;
-            if (!value() || std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > 16384 ||
-                h > 16384)
-                return (*exitCode = usageError("--size wants WxH, each 1..16384")), false;
-            o->width = w;
-            o->height = h;
+            auto size = value() ? parseImageSize(v) : Result<std::pair<int, int>>(Status::error("--size wants WxH"));
+            if (!size) return (*exitCode = usageError("--size wants WxH, each 1..16384")), false;
+            o->width = size->first;
+            o->height = size->second;
         } else if (a == "--mode") {
             auto m = value() ? parseRenderMode(v) : std::nullopt;
             if (!m)
