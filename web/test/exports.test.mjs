@@ -386,13 +386,13 @@ describe("exports, as their consumers read them", { skip }, () => {
       };
       const columns = ["classification", "intensity", "return_number", "number_of_returns"].map((name) => [name, column(name)]);
       for (let i = 0; i < spz.count; i += Math.max(1, Math.floor(spz.count / 40))) {
-        const g = spz.get(i);
+        const g = spz.get(i), surfel = decode(n, i);
         assert.equal(g.opacity, 1, "opaque");
-        for (const [name, value] of columns) assert.equal(value(i), decode(n, i).raw[name], `node ${n.key} splat ${i}'s ${name}`);
+        for (const [name, value] of columns) assert.equal(value(i), surfel.raw[name], `node ${n.key} splat ${i}'s ${name}`);
         const p = fromYUp([0, 1, 2].map((a) => g.position[a] + m[12 + a]));
         g.position = p.map((v, a) => v + origin[a]);
-        expectGaussian(g, decode(n, i), info, { near: 2 ** -spz.fraction / 2 + 1e-6 * edge, colorStep: spzColorStep, logStep: 1 / 32 + 1e-6,
-                                               turn: spzTurn, axes: fromYUp, what: `node ${n.key} surfel ${i}` });
+        expectGaussian(g, surfel, info, { near: 2 ** -spz.fraction / 2 + 1e-6 * edge, colorStep: spzColorStep, logStep: 1 / 32 + 1e-6,
+                                          turn: spzTurn, axes: fromYUp, what: `node ${n.key} surfel ${i}` });
         ++compared;
       }
     }
