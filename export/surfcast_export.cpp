@@ -117,7 +117,8 @@ int main(int argc, char** argv) {
     HttpOptions http;
     bool quiet = false;
     Tiles3dOptions tiles;
-    bool asGiven = false, compressionGiven = false, tilingGiven = false, shapeGiven = false, cutGiven = false, viewGiven = false;  // options only some formats take
+    bool asGiven = false, compressionGiven = false, tilingGiven = false, shapeGiven = false, cutGiven = false, viewGiven = false,
+         levelGiven = false;  // options only some formats take
     SplatCut cut;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -159,7 +160,7 @@ int main(int argc, char** argv) {
             const long l = value(&v) && v != "leaves" ? std::strtol(v.c_str(), &end, 10) : -1;
             if (v != "leaves" && !(end && *end == '\0' && !v.empty() && l >= 0 && l <= 64)) return usageError("--level wants a level (0, 1, ...) or leaves");
             cut.level = int(l);
-            cutGiven = true;
+            cutGiven = levelGiven = true;
         } else if (a == "--splat-budget") {
             char* end = nullptr;
             const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
@@ -220,7 +221,7 @@ int main(int argc, char** argv) {
     if (shapeGiven && ((format == "3dtiles" && tiles.as == Tiles3dOptions::As::Points) || (format != "3dtiles" && !splatFile)))
         return usageError("--splat-scale and --splat-opacity are for splats (3dtiles --as splats, ply, spz)");
     if ((cutGiven || viewGiven) && !splatFile) return usageError("--level, --splat-budget and --camera are for --format ply and spz");
-    if (cut.level >= 0 && (cut.budget > 0 || cut.camera)) return usageError(cut.camera ? "--level or --camera, not both" : "--level or --splat-budget, not both");
+    if (levelGiven && (cut.budget > 0 || cut.camera)) return usageError(cut.camera ? "--level or --camera, not both" : "--level or --splat-budget, not both");
     if (viewGiven && !cut.camera) return usageError("--size and --lod are for --camera");
     if (output.empty()) return usageError("-o FILE is required");
 
