@@ -9,7 +9,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out}"
-scripts/setup.sh
+scripts/setup.sh --demo
 echo
 echo "== building the default scene's tile set into $out/sets/scene"
 build/bin/surfcast-build --default-scene -o "$out/sets/scene"

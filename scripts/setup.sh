@@ -1,10 +1,14 @@
 #!/usr/bin/env bash
 # Installs what Surfcast needs from Debian's packages (idempotent; run as root on
 # a fresh Debian 12, or with sudo available), then configures and builds.
-# Usage: scripts/setup.sh [--no-build] [--clang]
+# Usage: scripts/setup.sh [--no-build] [--clang] [--demo]
 #   --no-build  install only
 #   --clang     also clang, its sanitizer runtimes and LLVM's OpenMP runtime
 #               (the asan and tsan presets)
+#   --demo      only what the programs need (scripts/demo.sh): no test
+#               packages (Chromium, nginx, Xvfb, GoogleTest, cpp-httplib, the
+#               Python venv), no test or benchmark programs, and the browser
+#               viewer's build tools without the tests' (npm --omit=dev)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -12,10 +16,10 @@ packages=(
   build-essential cmake ninja-build pkg-config git zlib1g-dev
   libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev libmeshoptimizer-dev
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
-  libmicrohttpd-dev libcurl4-openssl-dev libcpp-httplib-dev nlohmann-json3-dev libgtest-dev libstb-dev
-  python3 python3-venv xvfb xdotool curl nginx-light
-  chromium
+  libmicrohttpd-dev libcurl4-openssl-dev nlohmann-json3-dev libstb-dev curl
 )
+# What the tests and benchmarks add.
+test_packages=(libcpp-httplib-dev libgtest-dev python3 python3-venv xvfb xdotool nginx-light chromium)
 # Node.js and npm build the browser viewer (web/): any node on PATH (the
 # machines here have 20 from a configured source), else Debian's (18).
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
@@ -25,14 +29,16 @@ command -v npm >/dev/null 2>&1 || packages+=(npm)
 # Debian 12's plain rustc is 1.63, older than the e57 crate needs).
 rust_minor=$(cargo --version 2>/dev/null | sed -n 's/^cargo 1\.\([0-9]*\).*/\1/p')
 [ "${rust_minor:-0}" -ge 73 ] || packages+=(cargo-web rustc-web)
-build=1
+build=1 demo=0
 for arg in "$@"; do
   case "$arg" in
     --no-build) build=0 ;;
     --clang) packages+=(clang libclang-rt-14-dev libomp-14-dev) ;;
-    *) echo "usage: scripts/setup.sh [--no-build] [--clang]" >&2; exit 2 ;;
+    --demo) demo=1 ;;
+    *) echo "usage: scripts/setup.sh [--no-build] [--clang] [--demo]" >&2; exit 2 ;;
   esac
 done
+((demo)) || packages+=("${test_packages[@]}")
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -47,5 +53,8 @@ if ((${#missing[@]})); then
 fi
 
 ((build)) || exit 0
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" ${CMAKE_ARGS:-}
+# Both ways are said outright: the one build folder serves both.
+with_tests=$( ((demo)) && echo OFF || echo ON )
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DSURFCAST_TESTS="$with_tests" \
+  -DSURFCAST_BENCH="$with_tests" ${CMAKE_ARGS:-}
 cmake --build build --parallel
