@@ -37,7 +37,7 @@ const skip = existsSync(scan) || process.env.CI ? false : `${scan} is missing`;
 const format = await loadModule("src/format.ts");
 const blocks = await loadModule("src/block_decode.ts");
 
-let work, set, out, outRaw, implicit, splats;
+let work, set, out, outRaw, implicit, splats, splatsImplicit;
 let pagesUrl, browser;
 // surfcast-export's default --splat-scale (export/gaussians.h).
 const kSplatScale = 0.75;
@@ -89,7 +89,8 @@ describe("exports, as their consumers read them", { skip }, () => {
     execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--as", "points", "--tiling", "implicit", "-q", "-o", implicit]);
     splats = join(work, "autzen-splats");
     execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "-q", "-o", splats]);  // splats: the default
-    execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--tiling", "implicit", "-q", "-o", join(work, "autzen-splats-implicit")]);
+    splatsImplicit = join(work, "autzen-splats-implicit");
+    execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "--tiling", "implicit", "-q", "-o", splatsImplicit]);
     for (const f of ["ply", "spz"]) execFileSync(bin("surfcast-export"), [set, "--format", f, "-q", "-o", join(work, `autzen.${f}`)]);
   });
   after(async () => {
@@ -183,6 +184,8 @@ describe("exports, as their consumers read them", { skip }, () => {
     return tiles.sort((a, b) => (key(a) < key(b) ? -1 : key(a) > key(b) ? 1 : 0));
   }
 
+  // Both kinds of content. CesiumJS draws the implicit points below; an
+  // implicit splat export's tiles are the explicit one's files, which it draws too.
   test("implicit tiling: 3d-tiles-tools finds the explicit tileset's tiles, boxes and errors in the subtrees", async () => {
     const { info, nodes } = readSet(set);
     const t = JSON.parse(readFileSync(join(implicit, "tileset.json"), "utf8"));
@@ -196,10 +199,14 @@ describe("exports, as their consumers read them", { skip }, () => {
     const min = format.nodeMin(info, nodes.get("0-0-0-0"));
     assert.deepEqual(t.root.boundingVolume.box, [0, 1, 2].map((a) => min[a] + edge / 2 - origin[a])
       .concat([edge / 2, 0, 0, 0, edge / 2, 0, 0, 0, edge / 2]));
-    const [explicitTiles, implicitTiles] = [await traverse(out), await traverse(implicit)];
-    assert.equal(explicitTiles.length, nodes.size);
-    assert.ok(readdirSync(join(implicit, "subtrees")).length > 1, "the tree spans more than one subtree");
-    assert.deepEqual(implicitTiles, explicitTiles);
+    for (const [explicitDir, implicitDir] of [[out, implicit], [splats, splatsImplicit]]) {
+      const [explicitTiles, implicitTiles] = [await traverse(explicitDir), await traverse(implicitDir)];
+      assert.equal(explicitTiles.length, nodes.size);
+      assert.ok(readdirSync(join(implicitDir, "subtrees")).length > 1, "the tree spans more than one subtree");
+      assert.deepEqual(implicitTiles, explicitTiles);
+      for (const f of readdirSync(join(explicitDir, "tiles")))
+        assert.ok(readFileSync(join(explicitDir, "tiles", f)).equals(readFileSync(join(implicitDir, "tiles", f))), `${f}: the same tile`);
+    }
   });
 
   // Octahedral normals at 8 bits (meshopt's filter, then 8-bit components):
@@ -547,13 +554,12 @@ describe("exports, as their consumers read them", { skip }, () => {
     ["autzen3d", "&attenuation=1&msaa=1", "points"],
     ["autzen3d-implicit", "&attenuation=1&msaa=1", "points tiled implicitly"],
     ["autzen-splats", "", "splats"],
-    ["autzen-splats-implicit", "", "splats tiled implicitly"],
   ])
     test(`CesiumJS draws the ${what} where surfcast-view draws the set, in its colours`,
          { skip: chromium ? false : "Chromium is missing" }, async (t) => {
       const view = await cesium(folder, params);
       assert.ok(view.state.tiles >= 1, `${view.state.tiles} tiles loaded`);
-      expectLikeSurfcastView(t, `CesiumJS's ${what} (${view.state.tiles} tiles)`, view, what.startsWith("splats"));
+      expectLikeSurfcastView(t, `CesiumJS's ${what} (${view.state.tiles} tiles)`, view, what === "splats");
     });
 
   for (const [file, axes, what] of [["autzen.ply", toYDown, "PLY"], ["autzen.spz", toYUp, "SPZ"]])
