@@ -5,7 +5,7 @@
 #   --no-build  install only
 #   --clang     also clang, its sanitizer runtimes and LLVM's OpenMP runtime
 #               (the asan and tsan presets)
-#   --demo      only what the programs need (scripts/demo.sh): no test
+#   --demo      only what the programs and scripts/demo.sh need: no test
 #               packages (Chromium, nginx, Xvfb, GoogleTest, cpp-httplib, the
 #               Python venv), no test or benchmark programs, and the browser
 #               viewer's build tools without the tests' (npm --omit=dev)
@@ -16,10 +16,10 @@ packages=(
   build-essential cmake ninja-build pkg-config git zlib1g-dev
   libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev libmeshoptimizer-dev
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
-  libmicrohttpd-dev libcurl4-openssl-dev nlohmann-json3-dev libstb-dev curl
+  libmicrohttpd-dev libcurl4-openssl-dev nlohmann-json3-dev libstb-dev curl python3
 )
 # What the tests and benchmarks add.
-test_packages=(libcpp-httplib-dev libgtest-dev python3 python3-venv xvfb xdotool nginx-light chromium)
+test_packages=(libcpp-httplib-dev libgtest-dev python3-venv xvfb xdotool nginx-light chromium)
 # Node.js and npm build the browser viewer (web/): any node on PATH (the
 # machines here have 20 from a configured source), else Debian's (18).
 command -v node >/dev/null 2>&1 || packages+=(nodejs)

@@ -211,6 +211,8 @@ TEST_F(Export, BadArgumentsAndSetsAreClearErrors) {
         {{dir_->file("autzen"), "--format", "3dtiles", "--camera", "0,0,0,1,1,1,0,0,1,45", "-o", out}, 2, "are for --format ply and spz"},
         {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0", "-o", out}, 2, "--camera: "},
         {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0,1,1,1,0,0,1,45", "--level", "1", "-o", out}, 2, "--level or --camera, not both"},
+        {{dir_->file("autzen"), "--format", "ply", "--camera", "0,0,0,1,1,1,0,0,1,45", "--level", "leaves", "-o", out}, 2, "--level or --camera, not both"},
+        {{dir_->file("autzen"), "--format", "ply", "--level", "leaves", "--splat-budget", "1000", "-o", out}, 2, "--level or --splat-budget, not both"},
         {{dir_->file("autzen"), "--format", "spz", "--size", "640x480", "-o", out}, 2, "--size and --lod are for --camera"},
         {{dir_->file("autzen"), "--format", "spz", "--camera", "0,0,0,1,1,1,0,0,1,45", "--size", "99999999999x1", "-o", out}, 2,
          "--size wants WxH"},

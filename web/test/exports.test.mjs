@@ -200,6 +200,8 @@ describe("exports, as their consumers read them", { skip }, () => {
     assert.deepEqual(t.root.boundingVolume.box, [0, 1, 2].map((a) => min[a] + edge / 2 - origin[a])
       .concat([edge / 2, 0, 0, 0, edge / 2, 0, 0, 0, edge / 2]));
     for (const [explicitDir, implicitDir] of [[out, implicit], [splats, splatsImplicit]]) {
+      const [a, b] = [explicitDir, implicitDir].map((d) => JSON.parse(readFileSync(join(d, "tileset.json"), "utf8")));
+      for (const k of ["asset", "extensionsUsed", "extensionsRequired", "extensions", "geometricError"]) assert.deepEqual(b[k], a[k], k);
       const [explicitTiles, implicitTiles] = [await traverse(explicitDir), await traverse(implicitDir)];
       assert.equal(explicitTiles.length, nodes.size);
       assert.ok(readdirSync(join(implicitDir, "subtrees")).length > 1, "the tree spans more than one subtree");
