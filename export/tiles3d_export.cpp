@@ -143,6 +143,9 @@ json gltfOf(const NodeRecord& node, const json& matrix, const json& primitive, c
     return gltf;
 }
 
+// The column-major matrix of a translation by `t`.
+json translation(const Vec3d& t) { return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}; }
+
 // The matrix taking a glb's coordinates, scaled by `scale`, from the set's
 // z-up axes to glTF's y-up ones ((x, y, z) to (x, z, -y)), then moved by `t`.
 json yUpMatrix(double scale, const Vec3d& t) { return {scale, 0, 0, 0, 0, 0, -scale, 0, 0, scale, 0, 0, t.x, t.y, t.z, 1}; }
@@ -338,8 +341,7 @@ Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord
         used.insert(used.end(), {"EXT_mesh_features", "EXT_structural_metadata"});
     }
     usedByAll->insert(used.begin(), used.end());
-    const Vec3d t = toYUp(centre - origin);  // the Gaussians are y-up already
-    json gltf = gltfOf(node, {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t.x, t.y, t.z, 1}, primitive, used, kSplatExtensions);
+    json gltf = gltfOf(node, translation(toYUp(centre - origin)), primitive, used, kSplatExtensions);  // the Gaussians are y-up already
     if (!metadata.is_null()) gltf["extensions"]["EXT_structural_metadata"] = metadata;
     return glb.finish(gltf);
 }
@@ -471,7 +473,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
         if (broken) return Status::error(set.describe() + ": the hierarchy lists a child node the set does not hold");
     }
     r["refine"] = "REPLACE";
-    r["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin.x, origin.y, origin.z, 1};
+    r["transform"] = translation(origin);
     const double rootError = nodes[root->second].childMask ? 2.0 * nodes[root->second].spacing : nodes[root->second].spacing;
     json tileset = {{"asset", {{"version", "1.1"}, {"generator", std::string(kGenerator) + " 0.1.0"}}},
                     {"geometricError", std::max(rootError, 0.0)},
