@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
@@ -287,7 +288,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["weights"] = info.weights;
     j["kernel_scale"] = info.kernelScale;
     if (!info.textureFilter.empty()) j["texture_filter"] = info.textureFilter;
-    j["hierarchy"] = {{"file", "hierarchy.bin"}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
+    j["hierarchy"] = {{"file", info.hierarchyFile}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
     j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
     return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
@@ -445,6 +446,10 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         if (!(info.kernelScale > 0)) fieldError("kernel_scale", "not positive");
         if (j.contains("texture_filter")) info.textureFilter = text(j, "", "texture_filter");
         const nlohmann::json& h = object(j, "", "hierarchy");
+        // Absent or "hierarchy.bin" in sets never updated in place.
+        if (h.contains("file")) info.hierarchyFile = text(h, "hierarchy", "file");
+        if (!validHierarchyFile(info.hierarchyFile))
+            fieldError("hierarchy.file", "'" + info.hierarchyFile + "' is not hierarchy.bin or hierarchy-XXXXXXXX.bin");
         info.hierarchyBytes = integer<uint64_t>(h, "hierarchy", "bytes");
         info.hierarchyPages = integer<uint32_t>(h, "hierarchy", "pages");
         info.pageDepth = integer<uint32_t>(h, "hierarchy", "page_depth");
@@ -464,6 +469,22 @@ Result<std::vector<NodeRecord>> readHierarchyOf(const TilesetInfo& info, const s
         return Status::error(what + ": " + std::to_string(bytes.size()) + " bytes whose size or CRC differs from tileset.json (" +
                              std::to_string(info.hierarchyBytes) + " bytes): a set being rebuilt, or a damaged copy");
     return readPages(bytes, info.blocksBytes, what);
+}
+
+std::string versionedHierarchyFile(uint32_t crc) {
+    char name[32];
+    std::snprintf(name, sizeof name, "hierarchy-%08x.bin", crc);
+    return name;
+}
+
+std::string buildRecordFile(const std::string& hierarchyFile) {
+    return "build" + hierarchyFile.substr(std::string("hierarchy").size());
+}
+
+bool validHierarchyFile(const std::string& name) {
+    if (name == "hierarchy.bin") return true;
+    if (name.size() != 22 || name.compare(0, 10, "hierarchy-") != 0 || name.compare(18, 4, ".bin") != 0) return false;
+    return std::all_of(name.begin() + 10, name.begin() + 18, [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
 }
 
 double nodeEdge(const TilesetInfo& info, int level) { return std::ldexp(info.rootEdge, -level); }

@@ -155,6 +155,10 @@ struct TilesetInfo {
     std::string weights;       // analytic | captured | none
     std::string textureFilter;  // optimal | ewa | nearest where the set was built from textured meshes; empty otherwise
     double kernelScale = 1.0;  // k of the reconstruction kernel V^r = (k h)^2 I the weights assume
+    // The hierarchy's file: "hierarchy.bin", or "hierarchy-XXXXXXXX.bin" (its
+    // CRC in hex) in a set updated in place, so that readers holding the
+    // previous tileset.json still find the previous hierarchy (kHierarchyFile*).
+    std::string hierarchyFile = "hierarchy.bin";
     uint64_t hierarchyBytes = 0;
     uint32_t hierarchyPages = 0;
     uint32_t hierarchyCrc = 0;  // CRC-32 of the whole hierarchy.bin
@@ -169,6 +173,16 @@ struct TilesetInfo {
         return nullptr;
     }
 };
+
+// The hierarchy file name of an updated set whose hierarchy has CRC `crc`;
+// and whether `name` is a hierarchy file name a reader may open (never a
+// path: tileset.json is untrusted).
+std::string versionedHierarchyFile(uint32_t crc);
+bool validHierarchyFile(const std::string& name);
+// The build record beside a hierarchy file (docs/FORMAT.md, "Updates in
+// place"): build.bin beside hierarchy.bin, build-XXXXXXXX.bin beside
+// hierarchy-XXXXXXXX.bin. Readers of the set never read it.
+std::string buildRecordFile(const std::string& hierarchyFile);
 
 std::string writeTilesetJson(const TilesetInfo& info);
 Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what);

@@ -20,9 +20,9 @@ Result<TilesetReader> TilesetReader::open(std::unique_ptr<TileSource> source) {
     auto info = readTilesetJson(std::string(json->begin(), json->end()), where + "/tileset.json");
     if (!info) return info.status();
     r.info_ = *info;
-    auto hierarchy = r.source_->file("hierarchy.bin", r.info_.hierarchyBytes);
+    auto hierarchy = r.source_->file(r.info_.hierarchyFile, r.info_.hierarchyBytes);
     if (!hierarchy) return hierarchy.status();
-    auto nodes = readHierarchyOf(r.info_, *hierarchy, where + "/hierarchy.bin");
+    auto nodes = readHierarchyOf(r.info_, *hierarchy, where + "/" + r.info_.hierarchyFile);
     if (!nodes) return nodes.status();
     r.nodes_ = std::move(*nodes);
     return r;
@@ -32,13 +32,15 @@ Result<TilesetReader> TilesetReader::open(const std::string& folder) {
     if (isUrl(folder)) return Status::error(folder + ": a URL, where a local folder is wanted");
     auto r = open(openFolderSource(folder));
     if (!r) return r;
-    // A folder's blocks.bin must be the size tileset.json says (a URL's
-    // ranges are checked as they arrive).
+    // A folder's blocks.bin must hold what tileset.json says (a URL's ranges
+    // are checked as they arrive). It may hold more: an update in place
+    // appends its blocks before it switches tileset.json (docs/FORMAT.md,
+    // "Updates in place").
     std::error_code error;
     const std::string blocksPath = folder + "/blocks.bin";
     const uint64_t size = std::filesystem::file_size(blocksPath, error);
     if (error) return Status::error(blocksPath + ": " + error.message());
-    if (size != r->info().blocksBytes)
+    if (size < r->info().blocksBytes)
         return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
                              std::to_string(r->info().blocksBytes));
     return r;

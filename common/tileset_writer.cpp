@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 
 #include "byte_io.h"
 #include "crc32.h"
@@ -42,6 +43,8 @@ Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& 
 
 TilesetWriter::~TilesetWriter() {
     if (blocks_) std::fclose(blocks_);
+    std::error_code ec;
+    if (!set_.empty()) fs::remove_all(partial_, ec);  // an update's own folder (a new set's: PublishedFolder's)
 }
 
 Status TilesetWriter::addNode(NodeRecord record, const std::vector<uint8_t>& blob) {
@@ -74,59 +77,87 @@ Status TilesetWriter::addPlacedNodes(const std::string& blocks, uint64_t bytes, 
     return {};
 }
 
+Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
+    std::lock_guard lock(mutex_);
+    for (const NodeRecord& r : records) {
+        if (set_.empty() || r.blockOffset > current_.blocksBytes || r.blockSize > current_.blocksBytes - r.blockOffset)
+            return Status::error("node " + r.key.name() + ": kept, but its block is not in the set's blocks.bin");
+        records_.push_back(r);
+        sources_.push_back(kKept);
+        blocksBytes_ += r.blockSize;
+    }
+    return {};
+}
+
+Result<std::unique_ptr<TilesetWriter>> TilesetWriter::update(const std::string& set, const TilesetInfo& current) {
+    std::unique_ptr<TilesetWriter> w(new TilesetWriter);
+    w->set_ = set;
+    w->current_ = current;
+    // A hidden folder inside the set for the new blobs and the build's work
+    // (readers and surfcast-serve never open it); a killed update's is
+    // cleared by the next one.
+    w->partial_ = set + "/.update-" + std::to_string(::getpid());
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(set, ec))
+        if (e.path().filename().string().rfind(".update-", 0) == 0) fs::remove_all(e.path(), ec);
+    fs::create_directories(w->partial_, ec);
+    if (ec) return Status::error(w->partial_ + ": cannot create (" + ec.message() + ")");
+    w->blocks_ = std::fopen((w->partial_ + "/" + kUnorderedBlocks).c_str(), "w+b");
+    if (!w->blocks_) return Status::error(w->partial_ + "/" + kUnorderedBlocks + ": cannot create");
+    return w;
+}
+
+Status TilesetWriter::readBlob(size_t i, std::map<uint32_t, int>& open, std::vector<uint8_t>& blob) {
+    const NodeRecord& r = records_[i];
+    blob.resize(r.blockSize);
+    int fd = ::fileno(blocks_);
+    if (sources_[i] != kOwnBlocks) {
+        auto it = open.find(sources_[i]);
+        if (it == open.end()) {
+            if (open.size() >= 64) {
+                for (auto [source, opened] : open) ::close(opened);
+                open.clear();
+            }
+            const int opened = ::open(placed_[sources_[i]].c_str(), O_RDONLY | O_CLOEXEC);
+            if (opened < 0) return Status::error(placed_[sources_[i]] + ": cannot open (" + std::strerror(errno) + ")");
+            it = open.emplace(sources_[i], opened).first;
+        }
+        fd = it->second;
+    }
+    const std::string from = sources_[i] == kOwnBlocks ? partial_ + "/" + kUnorderedBlocks : placed_[sources_[i]];
+    if (::pread(fd, blob.data(), blob.size(), off_t(r.blockOffset)) != ssize_t(blob.size()))
+        return Status::error(from + ": cannot read the block of node " + r.key.name() + " at byte " + std::to_string(r.blockOffset));
+    if (sources_[i] != kOwnBlocks && crc32(blob.data(), blob.size()) != r.blockCrc)
+        return Status::error(from + ": the block of node " + r.key.name() + " at byte " + std::to_string(r.blockOffset) +
+                             " fails its CRC (corrupt)");
+    return {};
+}
+
 Status TilesetWriter::finish(TilesetInfo& info) {
+    if (std::fflush(blocks_) != 0) return Status::error(partial_ + "/" + kUnorderedBlocks + ": write failed (disk full?)");
+    if (!set_.empty()) return finishUpdate(info);
     // blocks.bin: the blobs copied in hierarchy order from where they arrived
     // (addNode's file, or addPlacedNodes' files).
-    if (std::fflush(blocks_) != 0) return Status::error(partial_ + "/" + kUnorderedBlocks + ": write failed (disk full?)");
     std::map<NodeKey, size_t> index;
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     const fs::path ordered = fs::path(partial_) / "blocks.bin";
     std::FILE* out = std::fopen(ordered.c_str(), "wb");
     if (!out) return Status::error(ordered.string() + ": cannot create (" + std::strerror(errno) + ")");
-    // Placed blobs are read from their files, a few open at a time.
-    std::map<uint32_t, int> open;
-    auto closeAll = [&] {
-        for (auto [source, fd] : open) ::close(fd);
-        open.clear();
-    };
+    std::map<uint32_t, int> open;  // placed blobs' files, a few open at a time
     std::vector<uint8_t> blob;
     uint64_t offset = 0;
     bool ok = true;
     Status failed;
     for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
         const size_t i = index.at(key);
-        NodeRecord& r = records_[i];
-        blob.resize(r.blockSize);
-        int fd = ::fileno(blocks_);
-        if (sources_[i] != kOwnBlocks) {
-            auto it = open.find(sources_[i]);
-            if (it == open.end()) {
-                if (open.size() >= 64) closeAll();
-                const int opened = ::open(placed_[sources_[i]].c_str(), O_RDONLY | O_CLOEXEC);
-                if (opened < 0) {
-                    failed = Status::error(placed_[sources_[i]] + ": cannot open (" + std::strerror(errno) + ")");
-                    break;
-                }
-                it = open.emplace(sources_[i], opened).first;
-            }
-            fd = it->second;
-        }
-        if (::pread(fd, blob.data(), blob.size(), off_t(r.blockOffset)) != ssize_t(blob.size())) {
-            const std::string from = sources_[i] == kOwnBlocks ? partial_ + "/" + kUnorderedBlocks : placed_[sources_[i]];
-            failed = Status::error(from + ": cannot read the block of node " + key.name() + " at byte " + std::to_string(r.blockOffset));
-            break;
-        }
-        if (sources_[i] != kOwnBlocks && crc32(blob.data(), blob.size()) != r.blockCrc) {
-            failed = Status::error(placed_[sources_[i]] + ": the block of node " + key.name() + " at byte " +
-                                   std::to_string(r.blockOffset) + " fails its CRC (corrupt)");
-            break;
-        }
+        failed = readBlob(i, open, blob);
+        if (!failed.ok()) break;
         ok = std::fwrite(blob.data(), 1, blob.size(), out) == blob.size();
         if (!ok) break;
-        r.blockOffset = offset;
-        offset += r.blockSize;
+        records_[i].blockOffset = offset;
+        offset += records_[i].blockSize;
     }
-    closeAll();
+    for (auto [source, fd] : open) ::close(fd);
     if (!failed.ok()) {
         std::fclose(out);
         return failed;
@@ -140,15 +171,105 @@ Status TilesetWriter::finish(TilesetInfo& info) {
     fs::remove(fs::path(partial_) / kUnorderedBlocks, ec);
 
     std::vector<uint8_t> hierarchy = writeHierarchy(records_, info.pageDepth);
+    info.hierarchyFile = "hierarchy.bin";
     info.nodes = records_.size();
     info.hierarchyBytes = hierarchy.size();
     info.hierarchyCrc = crc32(hierarchy.data(), hierarchy.size());
     info.hierarchyPages = le::get<uint32_t>(hierarchy.data() + 12);  // page count, header byte 12
     info.blocksBytes = blocksBytes_;
     SC_TRY(writeFileSynced(partial_ + "/hierarchy.bin", hierarchy.data(), hierarchy.size()));
+    if (!record_.empty()) {
+        fs::rename(record_, fs::path(partial_) / buildRecordFile(info.hierarchyFile), ec);
+        if (ec) return Status::error(record_ + ": cannot move into the set (" + ec.message() + ")");
+    }
     std::string json = writeTilesetJson(info);
     SC_TRY(writeFileSynced(partial_ + "/tileset.json", json.data(), json.size()));
     return folder_->publish();
+}
+
+namespace {
+
+// Writes `bytes` beside `path`, flushes, and renames it into place.
+Status replaceFile(const std::string& path, const void* data, size_t size) {
+    const std::string partial = path + ".partial";
+    SC_TRY(writeFileSynced(partial, data, size));
+    if (::rename(partial.c_str(), path.c_str()) != 0) return Status::error(path + ": cannot rename into place (" + std::strerror(errno) + ")");
+    return {};
+}
+
+Status syncFolder(const std::string& dir) {
+    const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    const bool ok = fd >= 0 && ::fsync(fd) == 0;
+    if (fd >= 0) ::close(fd);
+    return ok ? Status{} : Status::error(dir + ": cannot flush the folder (" + std::strerror(errno) + ")");
+}
+
+}  // namespace
+
+Status TilesetWriter::finishUpdate(TilesetInfo& info) {
+    // The new blobs, in hierarchy order, after the current set's last byte (a
+    // killed update's bytes beyond it are cut first: no reader reads them).
+    const std::string blocksPath = set_ + "/blocks.bin";
+    const int out = ::open(blocksPath.c_str(), O_WRONLY | O_CLOEXEC);
+    if (out < 0) return Status::error(blocksPath + ": cannot open for writing (" + std::strerror(errno) + ")");
+    struct Closer {
+        int fd;
+        ~Closer() { ::close(fd); }
+    } closer{out};
+    if (::ftruncate(out, off_t(current_.blocksBytes)) != 0)
+        return Status::error(blocksPath + ": cannot cut to " + std::to_string(current_.blocksBytes) + " bytes (" + std::strerror(errno) + ")");
+    std::map<NodeKey, size_t> index;
+    for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
+    std::map<uint32_t, int> open;
+    std::vector<uint8_t> blob;
+    uint64_t offset = current_.blocksBytes;
+    Status failed;
+    for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
+        const size_t i = index.at(key);
+        if (sources_[i] == kKept) continue;
+        failed = readBlob(i, open, blob);
+        if (!failed.ok()) break;
+        if (::pwrite(out, blob.data(), blob.size(), off_t(offset)) != ssize_t(blob.size())) {
+            failed = Status::error(blocksPath + ": write failed (disk full?)");
+            break;
+        }
+        records_[i].blockOffset = offset;
+        offset += records_[i].blockSize;
+    }
+    for (auto [source, fd] : open) ::close(fd);
+    SC_TRY(failed);
+    if (::fsync(out) != 0) return Status::error(blocksPath + ": cannot flush to disk (" + std::strerror(errno) + ")");
+    std::fclose(blocks_);
+    blocks_ = nullptr;
+
+    std::vector<uint8_t> hierarchy = writeHierarchy(records_, info.pageDepth);
+    info.nodes = records_.size();
+    info.hierarchyBytes = hierarchy.size();
+    info.hierarchyCrc = crc32(hierarchy.data(), hierarchy.size());
+    info.hierarchyPages = le::get<uint32_t>(hierarchy.data() + 12);  // page count, header byte 12
+    info.hierarchyFile = versionedHierarchyFile(info.hierarchyCrc);
+    info.blocksBytes = offset;
+    SC_TRY(replaceFile(set_ + "/" + info.hierarchyFile, hierarchy.data(), hierarchy.size()));
+    std::error_code ec;
+    if (!record_.empty()) {
+        fs::rename(record_, fs::path(set_) / buildRecordFile(info.hierarchyFile), ec);
+        if (ec) return Status::error(record_ + ": cannot move into the set (" + ec.message() + ")");
+    }
+    SC_TRY(syncFolder(set_));
+    // The switch: one rename.
+    const std::string json = writeTilesetJson(info);
+    SC_TRY(replaceFile(set_ + "/tileset.json", json.data(), json.size()));
+    SC_TRY(syncFolder(set_));
+    // The previous version stays for readers that opened it; older ones go.
+    const std::set<std::string> keep = {info.hierarchyFile, current_.hierarchyFile, buildRecordFile(info.hierarchyFile),
+                                        buildRecordFile(current_.hierarchyFile)};
+    for (const auto& e : fs::directory_iterator(set_, ec)) {
+        const std::string name = e.path().filename().string();
+        const bool versioned = validHierarchyFile(name) || (name.rfind("build", 0) == 0 && validHierarchyFile("hierarchy" + name.substr(5)));
+        if (versioned && !keep.count(name)) fs::remove(e.path(), ec);
+    }
+    fs::remove_all(partial_, ec);
+    return {};
 }
 
 }  // namespace surfcast

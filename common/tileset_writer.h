@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -28,6 +29,16 @@ public:
     static Result<std::unique_ptr<TilesetWriter>> create(const std::string& output);
     ~TilesetWriter();  // removes the partial folder unless finish() succeeded
 
+    // An update in place of the set in folder `set`, whose tileset.json says
+    // `current` (docs/FORMAT.md, "Updates in place"): nodes added with
+    // addKeptNodes keep their blocks where they lie in its blocks.bin; every
+    // other blob is appended after current.blocksBytes; finish() writes the
+    // hierarchy as versionedHierarchyFile(its CRC) and then switches
+    // tileset.json with one rename, so a reader sees the old set or the new
+    // one. The previous version's hierarchy stays for clients that opened it;
+    // older ones go.
+    static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current);
+
     // Thread-safe: appends a node's blob to a temporary file and keeps the
     // record with its size and CRC.
     Status addNode(NodeRecord record, const std::vector<uint8_t>& blob);
@@ -35,6 +46,13 @@ public:
     // `bytes` bytes, checked here), at their records' offsets, sizes and
     // CRCs; finish() copies them, checking each CRC. The file stays until then.
     Status addPlacedNodes(const std::string& blocks, uint64_t bytes, const std::vector<NodeRecord>& records);
+
+    // An update's nodes whose blobs stay where they are in the set's blocks.bin
+    // (records as the current hierarchy holds them).
+    Status addKeptNodes(const std::vector<NodeRecord>& records);
+    // The build record (a plan.bin, stages.h) the set keeps for updates:
+    // the file at `path` is moved in as buildRecordFile(the hierarchy's name).
+    void setBuildRecord(const std::string& path) { record_ = path; }
 
     // blocks.bin in hierarchy order (the records' offsets filled in), then
     // hierarchy.bin, then tileset.json, then the exchange. `info` gets the
@@ -46,6 +64,9 @@ public:
 
 private:
     TilesetWriter() = default;
+    Status finishUpdate(TilesetInfo& info);
+    // Reads record i's blob from where it arrived (checking a placed blob's CRC).
+    Status readBlob(size_t i, std::map<uint32_t, int>& open, std::vector<uint8_t>& blob);
     std::unique_ptr<PublishedFolder> folder_;
     std::string partial_;           // folder_'s path
     std::FILE* blocks_ = nullptr;   // addNode's blobs in arrival order (blocks.unordered)
@@ -55,6 +76,10 @@ private:
     std::vector<uint32_t> sources_;      // per record: its blob's file in placed_, or kOwnBlocks
     std::vector<std::string> placed_;    // files of addPlacedNodes
     static constexpr uint32_t kOwnBlocks = ~0u;
+    static constexpr uint32_t kKept = ~1u;  // an update's node whose blob stays in place
+    std::string set_;          // an update's set folder; empty for a new set
+    TilesetInfo current_;      // an update's tileset.json before it
+    std::string record_;       // the build record to publish, if any
     std::mutex mutex_;
 };
 

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -19,6 +20,7 @@
 #include "crc32.h"
 #include "octree_builder.h"
 #include "stages.h"
+#include "update.h"
 #include "work_files.h"
 #include "http_tile_source.h"
 #include "input_file.h"
@@ -30,6 +32,7 @@ namespace {
 
 const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
+       surfcast-build --add INPUT... --to SET
        surfcast-build --info SET            (SET: a folder or an http(s) URL)
        surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
        surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
@@ -50,6 +53,13 @@ ranges from any host that honours Range (meshes are read from local files).
   --default-scene         add the built-in scanned scene (about 1.5 M points)
   --scene-points N        points of the built-in scene (default 1500000)
   --seed N                seed of the built-in scene and mesh sampling (default 1)
+  --add INPUT... --to SET add scans to a set in place: only the chunks the new
+                          points reach and the levels above them are built again;
+                          every other node keeps its bytes and byte range, the new
+                          blocks are appended and tileset.json switched last, so
+                          readers see the old set or the new one (README, "Updating
+                          a set"). The options are the set's own (its build record);
+                          only --threads and -q may be given
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how
@@ -177,6 +187,8 @@ struct Args {
     size_t part = 0, parts = 0;  // --part P/N (scan, count; P alone for distribute) and --parts N (plan)
     bool partGiven = false;
     std::vector<std::string> kept;  // the arguments but inputs and -o, which the plan stores as given
+    bool add = false;               // --add: the inputs go into the set --to names
+    std::string to;
 };
 
 // Parses `args` into `out`; returns -1, or the exit status (after --help, or a
@@ -213,6 +225,12 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             return 0;
         } else if (a == "-o" || a == "--output") {
             if (!value(&opt.output)) return usageError(a + " needs a folder");
+            continue;
+        } else if (a == "--add" && stage.empty()) {
+            out->add = true;
+            continue;
+        } else if (a == "--to" && stage.empty()) {
+            if (!value(&out->to)) return usageError("--to needs a tile set folder");
             continue;
         } else if (a == "--work" && !stage.empty()) {
             if (!value(&out->work)) return usageError("--work needs a folder");
@@ -450,6 +468,61 @@ surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart
 // One stage of a staged build (stages.h): scan, count and plan take the inputs
 // and options of a whole build, and plan stores them; the later stages read
 // them from the plan.
+// The command line a plan and a set's build record keep: the options but -q
+// and --threads N, which change no byte, then -o and the inputs.
+std::vector<std::string> storedCommandLine(const Args& a) {
+    std::vector<std::string> stored;
+    for (size_t i = 0; i < a.kept.size(); ++i) {
+        if (a.kept[i] == "--threads") ++i;
+        else if (a.kept[i] != "-q" && a.kept[i] != "--quiet") stored.push_back(a.kept[i]);
+    }
+    stored.insert(stored.end(), {"-o", a.opt.output});
+    stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
+    return stored;
+}
+
+// surfcast-build --add INPUT... --to SET: the update in place (update.h),
+// with the options of the set's build record.
+int runAdd(const Args& a) {
+    if (a.to.empty()) return usageError("--add needs the set to add to (--to SET)");
+    if (!a.opt.output.empty()) return usageError("--add updates the set --to names in place; it takes no -o");
+    if (a.opt.inputs.defaultScene || a.opt.inputs.paths.empty()) return usageError("--add needs input files to add");
+    for (size_t i = 0; i < a.kept.size(); ++i) {
+        if (a.kept[i] == "--threads") ++i;
+        else if (a.kept[i] != "-q" && a.kept[i] != "--quiet")
+            return usageError("--add takes the set's own build options from its build record, not " + a.kept[i] + " (only --threads and -q)");
+    }
+    auto added = absoluteInputs(a.opt.inputs.paths);
+    if (!added) return fail(added.status());
+    const std::string set = std::filesystem::absolute(a.to).lexically_normal().string();
+    std::string json;
+    {
+        std::ifstream in(set + "/tileset.json", std::ios::binary);
+        if (!in) return fail(surfcast::Status::error(set + ": not a tile set (no tileset.json)"));
+        json.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    auto info = surfcast::readTilesetJson(json, set + "/tileset.json");
+    if (!info) return fail(info.status());
+    const std::string recordPath = set + "/" + surfcast::buildRecordFile(info->hierarchyFile);
+    if (!std::filesystem::exists(recordPath))
+        return fail(surfcast::Status::error(set + ": keeps no build record (" + surfcast::buildRecordFile(info->hierarchyFile) +
+                                            "): it was built before updates existed; build it anew to update it"));
+    std::vector<std::string> stored;
+    auto record = surfcast::readPlan(recordPath, &stored);
+    if (!record) return fail(record.status());
+    Args planned;
+    if (parseArgs(stored, "plan", &planned) >= 0) return fail(surfcast::Status::error(recordPath + ": its command line does not parse"));
+    planned.opt.threads = a.opt.threads;
+    planned.opt.progress = a.opt.progress;
+    planned.opt.output = set;
+    planned.opt.inputs.paths.insert(planned.opt.inputs.paths.end(), added->begin(), added->end());
+    auto summary = surfcast::updateTileset(planned.opt, added->size(), set, *record, storedCommandLine(planned));
+    if (!summary) return fail(summary.status());
+    std::printf("updated %s (%zu inputs added, %zu chunks rebuilt)\n%s", set.c_str(), added->size(), summary->chunks,
+                summary->text().c_str());
+    return 0;
+}
+
 int runStage(const std::string& stage, const std::vector<std::string>& own) {
     Args a;
     if (int status = parseArgs(own, stage, &a); status >= 0) return status;
@@ -474,13 +547,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         // change no byte and which each stage gives its own), and the job it
         // names: the scans and counts of one job reduce together, never
         // another's.
-        std::vector<std::string> stored;
-        for (size_t i = 0; i < a.kept.size(); ++i) {
-            if (a.kept[i] == "--threads") ++i;
-            else if (a.kept[i] != "-q" && a.kept[i] != "--quiet") stored.push_back(a.kept[i]);
-        }
-        stored.insert(stored.end(), {"-o", a.opt.output});
-        stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
+        const std::vector<std::string> stored = storedCommandLine(a);
         std::string joined;
         for (const std::string& arg : stored) joined += arg + '\0';
         const uint32_t job = surfcast::crc32(joined.data(), joined.size());
@@ -595,6 +662,12 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     summary.chunks = layout.chunks().size();
     auto writer = surfcast::TilesetWriter::create(planned.opt.output);
     if (!writer) return fail(writer.status());
+    // The set keeps the plan as its build record (update.h).
+    const std::string record = (*writer)->partialDir() + "/build.record";
+    std::error_code copied;
+    std::filesystem::copy_file(work.plan(), record, copied);
+    if (copied) return fail(surfcast::Status::error(record + ": cannot copy the plan (" + copied.message() + ")"));
+    (*writer)->setBuildRecord(record);
     if (auto st = surfcast::mergeStage(c, *plan, layout, work, **writer, progress, &summary); !st.ok()) return fail(st);
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;
@@ -614,6 +687,10 @@ int main(int argc, char** argv) {
         return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
+    if (a.add || !a.to.empty()) {
+        if (!a.add) return usageError("--to names the set --add adds to");
+        return runAdd(a);
+    }
     const surfcast::BuildOptions& opt = a.opt;
     const surfcast::HttpOptions& http = a.http;
     const std::string& info = a.info;
@@ -635,6 +712,16 @@ int main(int argc, char** argv) {
         return 1;
     }
     a.opt.inputs.paths = std::move(*paths);
+    {
+        // The build record's command line: inputs and output absolute, so an
+        // update finds them from anywhere.
+        Args recorded = a;
+        auto absolute = absoluteInputs(a.opt.inputs.paths);
+        if (!absolute) return fail(absolute.status());
+        recorded.opt.inputs.paths = std::move(*absolute);
+        recorded.opt.output = std::filesystem::absolute(a.opt.output).lexically_normal().string();
+        a.opt.commandLine = storedCommandLine(recorded);
+    }
 
     auto summary = surfcast::buildTileset(a.opt);
     if (!summary) return fail(summary.status());

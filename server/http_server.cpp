@@ -207,6 +207,7 @@ struct RequestState {
 // What a response body points into, released with the response.
 struct BodyOwner {
     std::shared_ptr<const TilesetSnapshot> snapshot;
+    std::shared_ptr<const MappedFile> file;  // an earlier hierarchy file, outside the snapshot
     std::vector<std::string> texts;  // multipart framing, batch length prefixes
     std::string owned;               // a body built in memory (JSON, metrics)
 };
@@ -329,7 +330,8 @@ struct HttpServer::Impl {
 
     // Bytes of a mapped file with ETag, conditional requests and Range.
     void serveBytes(MHD_Connection* c, Reply& r, std::shared_ptr<const TilesetSnapshot> snap, const uint8_t* data,
-                    uint64_t size, const std::string& type, const std::string& etag, const char* cacheControl) {
+                    uint64_t size, const std::string& type, const std::string& etag, const char* cacheControl,
+                    std::shared_ptr<const MappedFile> file = nullptr) {
         r.header("ETag", etag);
         r.header("Cache-Control", cacheControl);
         r.header("Accept-Ranges", "bytes");
@@ -373,7 +375,8 @@ struct HttpServer::Impl {
                 }
                 break;
         }
-        r.owner->snapshot = std::move(snap);  // keeps the mapping alive until sent
+        r.owner->snapshot = std::move(snap);  // keeps the mappings alive until sent
+        r.owner->file = std::move(file);
     }
 
     void route(MHD_Connection* c, RequestState& st, Reply& r) {
@@ -411,11 +414,22 @@ struct HttpServer::Impl {
         if (!post && isViewerPath(path)) return viewer(c, st, r);
         std::string name, rest;
         if (!splitSetPath(path, &name, &rest)) return fail(r, 404, "not_found", "no such resource");
-        if (!post && (rest == "tileset.json" || rest == "hierarchy.bin" || rest == "blocks.bin")) {
-            st.route = rest;
+        if (!post && (rest == "tileset.json" || rest == "blocks.bin" || validHierarchyFile(rest))) {
+            const bool hierarchy = rest[0] == 'h';
+            st.route = hierarchy ? "hierarchy.bin" : rest;
             auto snap = snapshot(name, r);
             if (!snap) return;
-            const MappedFile& m = rest == "tileset.json" ? *snap->json : rest == "hierarchy.bin" ? *snap->hierarchy : *snap->blocks;
+            if (hierarchy && rest != "hierarchy.bin" && rest != snap->info.hierarchyFile) {
+                // An earlier version's hierarchy (an update in place kept it
+                // for clients that opened the set before): its name holds
+                // its CRC, so its bytes never change.
+                auto old = store.hierarchyFile(name, rest);
+                if (!old) return fail(r, 404, "not_found", "no such resource");
+                std::shared_ptr<const MappedFile> file = std::move(*old);
+                return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + rest.substr(10, 8) + "\"",
+                                  kRevalidate, file);
+            }
+            const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *snap->blocks;
             // Clients batch only where tileset.json's answer offers it
             // (docs/PROTOCOL.md, "Batch"); a static host never does.
             if (rest == "tileset.json") r.header("Surfcast-Batch", std::to_string(config.maxBatch));

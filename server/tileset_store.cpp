@@ -72,22 +72,24 @@ Result<std::shared_ptr<TilesetSnapshot>> TilesetStore::load(const std::string& n
     std::string where = root_ + "/" + name + "/";
     auto json = MappedFile::openAt(dir.fd, "tileset.json", where + "tileset.json");
     if (!json) return json.status();
-    auto hierarchy = MappedFile::openAt(dir.fd, "hierarchy.bin", where + "hierarchy.bin");
+    const auto& j = **json;
+    auto info = readTilesetJson(std::string(reinterpret_cast<const char*>(j.data()), j.size()), where + "tileset.json");
+    if (!info) return info.status();
+    auto hierarchy = MappedFile::openAt(dir.fd, info->hierarchyFile, where + info->hierarchyFile);
     if (!hierarchy) return hierarchy.status();
     auto blocks = MappedFile::openAt(dir.fd, "blocks.bin", where + "blocks.bin");
     if (!blocks) return blocks.status();
 
     auto snap = std::make_shared<TilesetSnapshot>();
     snap->name = name;
-    const auto& j = **json;
-    auto info = readTilesetJson(std::string(reinterpret_cast<const char*>(j.data()), j.size()), where + "tileset.json");
-    if (!info) return info.status();
     snap->info = *info;
     const auto& h = **hierarchy;
-    if ((*blocks)->size() != info->blocksBytes)
+    // An update in place appends to blocks.bin before it switches
+    // tileset.json: a longer file is the old set's, whole.
+    if ((*blocks)->size() < info->blocksBytes)
         return Status::error(where + "blocks.bin: " + std::to_string((*blocks)->size()) + " bytes, tileset.json says " +
                              std::to_string(info->blocksBytes) + " (a build in progress?)");
-    auto nodes = readHierarchyOf(*info, std::vector<uint8_t>(h.data(), h.data() + h.size()), where + "hierarchy.bin");
+    auto nodes = readHierarchyOf(*info, std::vector<uint8_t>(h.data(), h.data() + h.size()), where + info->hierarchyFile);
     if (!nodes) return nodes.status();
     for (const NodeRecord& n : *nodes) snap->nodes[n.key] = n;
     snap->version = crc32(j.data(), j.size());
@@ -101,6 +103,13 @@ Result<std::shared_ptr<TilesetSnapshot>> TilesetStore::load(const std::string& n
         snap->modified = st.st_mtim;
     }
     return snap;
+}
+
+Result<std::shared_ptr<MappedFile>> TilesetStore::hierarchyFile(const std::string& name, const std::string& file) {
+    if (!validName(name) || !validHierarchyFile(file)) return Status::error("no such file");
+    Fd dir{::openat(rootFd_, name.c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC)};
+    if (dir.fd < 0) return Status::error("no tile set named '" + name + "'");
+    return MappedFile::openAt(dir.fd, file, root_ + "/" + name + "/" + file);
 }
 
 std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name, std::string* error) {
@@ -179,7 +188,7 @@ public:
 private:
     Result<const MappedFile*> mapped(const std::string& name) const {
         if (name == "tileset.json") return s_->json.get();
-        if (name == "hierarchy.bin") return s_->hierarchy.get();
+        if (name == "hierarchy.bin" || name == s_->info.hierarchyFile) return s_->hierarchy.get();
         if (name == "blocks.bin") return s_->blocks.get();
         return Status::error(describe() + ": no file " + name);
     }

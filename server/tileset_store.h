@@ -67,6 +67,10 @@ public:
     std::shared_ptr<const TilesetSnapshot> get(const std::string& name, std::string* error);
     // Every loadable set, sorted by name.
     std::vector<std::shared_ptr<const TilesetSnapshot>> list();
+    // A hierarchy file of set `name` other than its current one (a client
+    // holding the tileset.json before an update in place still reads its
+    // pages); `file` must pass validHierarchyFile.
+    Result<std::shared_ptr<MappedFile>> hierarchyFile(const std::string& name, const std::string& file);
 
     const std::string& root() const { return root_; }
 

@@ -558,6 +558,7 @@ TEST(FormatConformance, TilesetJsonCases) {
             else if (field == "kernel_scale") EXPECT_EQ(info->kernelScale, want.get<double>());
             else if (field == "weights") EXPECT_EQ(info->weights, want.get<std::string>());
             else if (field == "blocks_bytes") EXPECT_EQ(info->blocksBytes, want.get<uint64_t>());
+            else if (field == "hierarchy_file") EXPECT_EQ(info->hierarchyFile, want.get<std::string>());
             else if (field == "hierarchy_bytes") EXPECT_EQ(info->hierarchyBytes, want.get<uint64_t>());
             else if (field == "hierarchy_pages") EXPECT_EQ(info->hierarchyPages, want.get<uint32_t>());
             else if (field == "hierarchy_crc") EXPECT_EQ(info->hierarchyCrc, want.get<uint32_t>());

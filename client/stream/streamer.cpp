@@ -34,12 +34,12 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     s->tilesetJson_ = std::move(*json);
     s->info_ = *info;
     // hierarchy.bin's header and page table, then page 0.
-    const std::string what = location + "/hierarchy.bin";
+    const std::string what = location + "/" + s->info_.hierarchyFile;
     const uint64_t indexBytes = kHierarchyHeaderSize + uint64_t(kPageEntrySize) * s->info_.hierarchyPages;
     if (s->info_.hierarchyPages == 0 || indexBytes > s->info_.hierarchyBytes)
         return Status::error(location + "/tileset.json: " + std::to_string(s->info_.hierarchyPages) +
                              " hierarchy pages do not fit hierarchy.bin's " + std::to_string(s->info_.hierarchyBytes) + " bytes");
-    auto head = s->source_->range("hierarchy.bin", 0, indexBytes);
+    auto head = s->source_->range(s->info_.hierarchyFile, 0, indexBytes);
     if (!head) return head.status();
     auto index = readHierarchyIndex(*head, s->info_.hierarchyBytes, what);
     if (!index) return index.status();
@@ -62,9 +62,9 @@ Result<std::vector<NodeRecord>> StreamingSet::fetchPageRecords(uint32_t page, co
         return Status::error(source_->describe() + "/hierarchy.bin: node " + root.name() + " points to page " +
                              std::to_string(page) + " of " + std::to_string(hierarchy_.pages.size()));
     const HierarchyPageEntry& entry = hierarchy_.pages[page];
-    auto bytes = source_->range("hierarchy.bin", entry.offset, uint64_t(entry.records) * kRecordSize);
+    auto bytes = source_->range(info_.hierarchyFile, entry.offset, uint64_t(entry.records) * kRecordSize);
     if (!bytes) return bytes.status();
-    return readHierarchyPage(hierarchy_, page, *bytes, root, info_.blocksBytes, source_->describe() + "/hierarchy.bin");
+    return readHierarchyPage(hierarchy_, page, *bytes, root, info_.blocksBytes, source_->describe() + "/" + info_.hierarchyFile);
 }
 
 StreamingSet::~StreamingSet() {

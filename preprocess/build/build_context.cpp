@@ -50,7 +50,8 @@ BuildOptions normalizeOptions(BuildOptions o) {
     return o;
 }
 
-Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOptions& options, InputStats stats, bool report) {
+Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOptions& options, InputStats stats, bool report,
+                                                                 const BuildContext* rootOf) {
     std::shared_ptr<BuildContext> c(new BuildContext);
     c->report_ = report;
     c->opt_ = normalizeOptions(options);
@@ -59,6 +60,17 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
     if (c->stats_.points == 0)
         return Status::error("the inputs hold no valid points (" + std::to_string(c->stats_.skipped) + " skipped: NaN/Inf or no return)");
     c->chooseRootBox();
+    if (rootOf) {
+        const Box3d& b = c->stats_.bounds;
+        const Vec3d lo = rootOf->rootMin_, hi = lo + Vec3d{1, 1, 1} * rootOf->rootEdge_;
+        for (int a = 0; a < 3; ++a)
+            if (!(b.min[a] >= lo[a] && b.max[a] < hi[a]))
+                return Status::error("the inputs reach beyond the set's root cube on axis " + std::string(1, "xyz"[a]) + " (" +
+                                     std::to_string(b.min[a]) + " to " + std::to_string(b.max[a]) + ", the cube " + std::to_string(lo[a]) +
+                                     " to " + std::to_string(hi[a]) + "): growing a set past its root is not built yet; build it anew from all its inputs");
+        c->rootMin_ = rootOf->rootMin_;
+        c->rootEdge_ = rootOf->rootEdge_;
+    }
     SC_TRY(c->chooseOrientationRules());
     SC_TRY(c->chooseAttributes());
     return std::shared_ptr<const BuildContext>(std::move(c));

@@ -56,7 +56,10 @@ public:
     // options.inputs.meshes, or their files). `options`: normalizeOptions'.
     // `report`: warn about attributes asked for and not stored (once per
     // build: the stages after the plan derive the same context quietly).
-    static Result<std::shared_ptr<const BuildContext>> derive(const BuildOptions& options, InputStats stats, bool report = true);
+    // `rootOf`: keep that context's root box (an update in place, whose kept
+    // blocks are positioned in it); the inputs must lie inside it.
+    static Result<std::shared_ptr<const BuildContext>> derive(const BuildOptions& options, InputStats stats, bool report = true,
+                                                              const BuildContext* rootOf = nullptr);
 
     const BuildOptions& options() const { return opt_; }
     const InputStats& stats() const { return stats_; }

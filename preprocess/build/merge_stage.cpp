@@ -10,7 +10,7 @@
 namespace surfcast {
 
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                  TilesetWriter& writer, Progress& progress, BuildSummary* summary) {
+                  TilesetWriter& writer, Progress& progress, BuildSummary* summary, std::map<size_t, ChunkOutput>* kept) {
     StepTimes steps = {};
     auto count = [&](const NodeRecord& r) {
         const size_t level = r.key.level;
@@ -28,9 +28,11 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
     ScalarTable upperScalars = context.emptyTable();  // rows of retained and the levels above them
     std::set<NodeKey> seen;
     for (size_t i = 0; i < layout.chunks().size(); ++i) {
-        auto out = readChunkOutput(work.nodes(i), context.emptyTable());
+        const bool isKept = kept && kept->count(i);
+        auto out = isKept ? Result<ChunkOutput>(std::move(kept->at(i))) : readChunkOutput(work.nodes(i), context.emptyTable());
         if (!out) return out.status();
-        if (out->plan != plan.id) return Status::error(work.nodes(i) + ": built for another plan (build chunk " + std::to_string(i) + " again)");
+        if (!isKept && out->plan != plan.id)
+            return Status::error(work.nodes(i) + ": built for another plan (build chunk " + std::to_string(i) + " again)");
         // Every node lies in its chunk, once.
         const NodeKey& chunkKey = layout.chunks()[i].key;
         for (const NodeRecord& r : out->records) {
@@ -40,7 +42,7 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
             if (!inside || !seen.insert(r.key).second)
                 return Status::error(work.nodes(i) + ": node " + r.key.name() + " is not chunk " + std::to_string(i) + "'s, or repeats");
         }
-        SC_TRY(writer.addPlacedNodes(work.blocks(i), out->blocksBytes, out->records));
+        SC_TRY(isKept ? writer.addKeptNodes(out->records) : writer.addPlacedNodes(work.blocks(i), out->blocksBytes, out->records));
         for (const NodeRecord& r : out->records) count(r);
         for (int s = 0; s < kStepCount; ++s) steps[s] += out->stepNs[s];
         summary->textureFit.add(out->fits);

@@ -15,16 +15,12 @@ namespace fs = std::filesystem;
 
 namespace surfcast {
 
-namespace {
-
-// Builds every chunk of `layout`, largest first (the long poles start early),
-// at most kChunksAtOnce at a time (the budget is split that many ways); more
-// threads work inside each chunk.
-Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                   Progress& progress) {
+// Largest first (the long poles start early), at most kChunksAtOnce at a time
+// (the budget is split that many ways); more threads work inside each chunk.
+Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, std::vector<size_t> order,
+                   const WorkFolder& work, Progress& progress) {
+    if (order.empty()) return {};
     const std::vector<Chunk>& chunks = layout.chunks();
-    std::vector<size_t> order(chunks.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return chunks[a].points > chunks[b].points; });
     const int threads = context.threads();
     const int workers = int(std::min({size_t(threads), size_t(kChunksAtOnce), order.size()}));
@@ -54,8 +50,6 @@ Status buildChunks(const BuildContext& context, const BuildPlan& plan, const Chu
     for (auto& t : pool) t.join();
     return firstError;
 }
-
-}  // namespace
 
 Result<BuildSummary> buildTileset(const BuildOptions& options) {
     const auto start = std::chrono::steady_clock::now();
@@ -87,8 +81,16 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     SC_TRY(readDistribution(work, *plan, layout));
     summary.chunks = layout.chunks().size();
     progress.begin("build", c.stats().points);
-    SC_TRY(buildChunks(c, *plan, layout, work, progress));
+    std::vector<size_t> all(layout.chunks().size());
+    for (size_t i = 0; i < all.size(); ++i) all[i] = i;
+    SC_TRY(buildChunks(c, *plan, layout, std::move(all), work, progress));
     summary.phaseSeconds.push_back({"build", progress.end()});
+    if (!options.commandLine.empty()) {
+        BuildPlan record = *plan;  // writePlan sets its id; the chunks were built to plan's
+        const std::string path = work.dir + "/build.record";
+        SC_TRY(writePlan(path, record, options.commandLine));
+        (*writer)->setBuildRecord(path);
+    }
     SC_TRY(mergeStage(c, *plan, layout, work, **writer, progress, &summary));
 
     summary.inputPoints = c.stats().points;

@@ -43,6 +43,10 @@ struct BuildOptions {
     // no scalar field.
     std::optional<std::vector<std::string>> attributes;
     bool progress = true;
+    // The command line the set's build record keeps (docs/FORMAT.md,
+    // "Updates in place"): options as surfcast-build parses them, -o and the
+    // inputs. Empty: the set keeps no record and cannot be updated.
+    std::vector<std::string> commandLine;
     // Colours of textured meshes' surfels (Zwicker et al. 2001, §5), on every
     // level: the texture filtered with each surfel's own kernel (ewa,
     // view-independent EWA), or the least-squares coefficients of eq. 10-11

@@ -23,6 +23,7 @@
 // names the file where it fails.
 #pragma once
 
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -30,6 +31,7 @@
 #include <vector>
 
 #include "build_context.h"
+#include "work_files.h"
 #include "chunker.h"
 #include "progress.h"
 #include "tileset_writer.h"
@@ -143,7 +145,16 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
 // Merge: reads every chunk's output (checking each block's CRC as it copies
 // it), builds the levels above the chunks and finishes `writer`. Fills the
 // summary's counts, steps, texture fit and phases "upper" and "write".
+// `kept`: an update's chunks taken as the set holds them (ChunkOutput's
+// records, placed in the set's blocks.bin, and its root decoded), by chunk
+// index; the writer keeps their blocks in place (TilesetWriter::update).
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                  TilesetWriter& writer, Progress& progress, BuildSummary* summary);
+                  TilesetWriter& writer, Progress& progress, BuildSummary* summary,
+                  std::map<size_t, ChunkOutput>* kept = nullptr);
+
+// Builds the chunks `which` of `layout` (chunkStage, removing their inputs),
+// largest first, kChunksAtOnce at a time; `progress` advances by their points.
+Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, std::vector<size_t> which,
+                   const WorkFolder& work, Progress& progress);
 
 }  // namespace surfcast

@@ -31,6 +31,9 @@ export interface TilesetInfo {
   weights: string;
   kernelScale: number;
   normalSource: string;
+  // "hierarchy.bin", or "hierarchy-XXXXXXXX.bin" in a set updated in place
+  // (FORMAT.md, "Updates in place").
+  hierarchyFile: string;
   hierarchyBytes: number;
   hierarchyPages: number;
   hierarchyCrc: number;
@@ -202,6 +205,9 @@ function readFields(j: Json): TilesetInfo {
   if (!(kernelScale > 0)) throw new FormatError("kernel_scale: not positive");
   if (Object.hasOwn(j, "texture_filter")) text(j, "", "texture_filter");
   const hierarchy = object(j, "", "hierarchy");
+  const hierarchyFile = Object.hasOwn(hierarchy, "file") ? text(hierarchy, "hierarchy", "file") : "hierarchy.bin";
+  if (!/^hierarchy(-[0-9a-f]{8})?\.bin$/.test(hierarchyFile))
+    throw new FormatError(`hierarchy.file: '${hierarchyFile}' is not hierarchy.bin or hierarchy-XXXXXXXX.bin`);
   const hierarchyBytes = integer(hierarchy, "hierarchy", "bytes", 0, kU64);
   const hierarchyPages = integer(hierarchy, "hierarchy", "pages", 0, kU32);
   integer(hierarchy, "hierarchy", "page_depth", 0, kU32);
@@ -210,7 +216,7 @@ function readFields(j: Json): TilesetInfo {
   const blocksBytes = integer(blocks, "blocks", "bytes", 0, kU64);
   if (text(blocks, "blocks", "codec") !== "draco") throw new FormatError(`blocks.codec: not "draco"`);
   return { version, rootMin, rootEdge, boundsMin, boundsMax, levels, grid, nodes, surfels, colorBits, attributes, weights,
-           kernelScale, normalSource, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, statistics };
+           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, statistics };
 }
 
 export function attribute(info: TilesetInfo, name: string): AttributeInfo | undefined {

@@ -167,14 +167,14 @@ export class Streamer<T> {
     const stop = () => false;
     const json = await withRetries(options.maxTries, () => source.text("tileset.json", kMaxTilesetJsonBytes), stop);
     const info = parseTileset(json, `${source.base}/tileset.json`);
-    const what = `${source.base}/hierarchy.bin`;
-    const head = await withRetries(options.maxTries, () => source.range("hierarchy.bin", 0, Math.min(info.hierarchyBytes, 32 + 16 * info.hierarchyPages)), stop);
+    const what = `${source.base}/${info.hierarchyFile}`;
+    const head = await withRetries(options.maxTries, () => source.range(info.hierarchyFile, 0, Math.min(info.hierarchyBytes, 32 + 16 * info.hierarchyPages)), stop);
     if (head.length < 32 || indexBytes(head) !== head.length)
       throw new FormatError(`${what}: its header does not declare the ${info.hierarchyPages} pages tileset.json lists`);
     const index = readHierarchyIndex(head, info.hierarchyBytes, what);
     const p0 = index.pages[0];
     if (!p0) throw new FormatError(`${what}: no pages`);
-    const bytes = await withRetries(options.maxTries, () => source.range("hierarchy.bin", p0.offset, p0.records * 64), stop);
+    const bytes = await withRetries(options.maxTries, () => source.range(info.hierarchyFile, p0.offset, p0.records * 64), stop);
     const page0 = readHierarchyPage(index, 0, bytes, "0-0-0-0", info.blocksBytes, what);
     const origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
     return new Streamer(source, info, origin, index, page0, uploader, workerUrl, coloring(info, origin), options);
@@ -249,9 +249,9 @@ export class Streamer<T> {
     this.pagesInFlight.add(page);
     ++this.requestsInFlight;
     const e = this.index.pages[page];
-    const what = `${this.source.base}/hierarchy.bin`;
+    const what = `${this.source.base}/${this.info.hierarchyFile}`;
     const attempt = async () => {
-      const bytes = await this.source.range("hierarchy.bin", e.offset, e.records * 64);
+      const bytes = await this.source.range(this.info.hierarchyFile, e.offset, e.records * 64);
       return readHierarchyPage(this.index, page, bytes, record.key, this.info.blocksBytes, what);
     };
     withRetries(this.options.maxTries, attempt, () => this.stats.gaveUp)

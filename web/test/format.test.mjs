@@ -45,6 +45,7 @@ const readers = {
   kernel_scale: (i) => i.kernelScale,
   weights: (i) => i.weights,
   blocks_bytes: (i) => i.blocksBytes,
+  hierarchy_file: (i) => i.hierarchyFile,
   hierarchy_bytes: (i) => i.hierarchyBytes,
   hierarchy_pages: (i) => i.hierarchyPages,
   hierarchy_crc: (i) => i.hierarchyCrc,

@@ -1,0 +1,229 @@
+// Updates in place (preprocess/build/update.h): `surfcast-build --add INPUT...
+// --to SET` against a fresh build of all the inputs, the kept nodes' bytes
+// and byte ranges, and bad input that must leave the set as it was.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <tuple>
+
+#include "block_codec.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+
+using namespace surfcast;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Point {
+    Vec3d p;
+    uint16_t intensity = 0;
+    uint8_t classification = 0, returnNumber = 0, returns = 0;
+    uint16_t color[3] = {};
+    bool matched = false;
+};
+
+// Every leaf point of a set (world positions, stored attributes), and the
+// largest quantization step of its leaves.
+std::vector<Point> leafPoints(const std::string& set, double* largestStep) {
+    auto reader = TilesetReader::open(set);
+    EXPECT_TRUE(reader) << reader.status().message();
+    std::vector<Point> out;
+    if (!reader) return out;
+    for (const NodeRecord& n : reader->nodes()) {
+        if (!(n.flags & kFlagInputPoints)) continue;
+        auto block = reader->readBlock(n);
+        EXPECT_TRUE(block) << block.status().message();
+        if (!block) continue;
+        *largestStep = std::max(*largestStep, nodeEdge(reader->info(), n.key.level) / double((uint64_t(1) << n.positionBits) - 1));
+        for (size_t i = 0; i < block->size(); ++i) {
+            Point q;
+            q.p = reader->position(n, *block, i);
+            q.intensity = block->intensity.at(i);
+            q.classification = block->classification.at(i);
+            q.returnNumber = block->returnNumber.at(i);
+            q.returns = block->numberOfReturns.at(i);
+            for (int c = 0; c < 3; ++c) q.color[c] = block->colors.at(3 * i + c);
+            out.push_back(q);
+        }
+    }
+    return out;
+}
+
+// How many of `want` have a point of `have` within `tolerance` (each used
+// once) with the same attributes.
+size_t matchPoints(const std::vector<Point>& want, std::vector<Point> have, double tolerance) {
+    const double cell = 4 * tolerance;
+    auto cellOf = [&](const Vec3d& p) {
+        return std::make_tuple(int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)), int64_t(std::floor(p.z / cell)));
+    };
+    std::map<std::tuple<int64_t, int64_t, int64_t>, std::vector<size_t>> grid;
+    for (size_t i = 0; i < have.size(); ++i) grid[cellOf(have[i].p)].push_back(i);
+    size_t matched = 0;
+    for (const Point& w : want) {
+        const auto [cx, cy, cz] = cellOf(w.p);
+        bool found = false;
+        for (int dx = -1; dx <= 1 && !found; ++dx)
+            for (int dy = -1; dy <= 1 && !found; ++dy)
+                for (int dz = -1; dz <= 1 && !found; ++dz) {
+                    auto it = grid.find({cx + dx, cy + dy, cz + dz});
+                    if (it == grid.end()) continue;
+                    for (size_t i : it->second) {
+                        Point& h = have[i];
+                        const Vec3d d = h.p - w.p;
+                        if (h.matched || std::max({std::fabs(d.x), std::fabs(d.y), std::fabs(d.z)}) > tolerance) continue;
+                        if (h.intensity != w.intensity || h.classification != w.classification || h.returnNumber != w.returnNumber ||
+                            h.returns != w.returns || h.color[0] != w.color[0] || h.color[1] != w.color[1] || h.color[2] != w.color[2])
+                            continue;
+                        h.matched = found = true;
+                        break;
+                    }
+                }
+        matched += found;
+    }
+    return matched;
+}
+
+std::vector<std::string> build(std::vector<std::string> args) {
+    args.insert(args.begin(), {test::binary("surfcast-build"), "-q", "--memory", "64M", "--capacity", "1000"});
+    return args;
+}
+
+// autzen_trim.las cut into 4 x 4 cells of files (tests/tools/split_laz.py);
+// r000005.laz is an inner cell, so the others span the same bounds.
+class UpdateTest : public ::testing::Test {
+protected:
+    void SetUp() override {
+        REQUIRE_DATA();
+        if (!fs::exists(SURFCAST_TEST_PYTHON)) {
+            if (std::getenv("CI")) FAIL() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";
+            GTEST_SKIP() << "no test venv at " SURFCAST_TEST_PYTHON;
+        }
+        auto split = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("autzen_trim.las"),
+                                dir.file("parts"), "--cells", "4x4x1", "--min-files", "16"});
+        ASSERT_EQ(split.exitCode, 0) << split.output;
+        for (int i = 0; i < 16; ++i) {
+            char name[32];
+            std::snprintf(name, sizeof name, "/parts/r%06d.laz", i);
+            (i == 5 ? added : base).push_back(dir.path() + name);
+        }
+        auto built = test::run(build([&] {
+            auto a = base;
+            a.insert(a.end(), {"-o", set()});
+            return a;
+        }()));
+        ASSERT_EQ(built.exitCode, 0) << built.output;
+    }
+    std::string set() const { return dir.file("set"); }
+
+    test::TempDir dir;
+    std::vector<std::string> base, added;
+};
+
+TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
+    auto before = TilesetReader::open(set());
+    ASSERT_TRUE(before) << before.status().message();
+    const std::string blocksBefore = test::readFile(set() + "/blocks.bin");
+    std::map<NodeKey, NodeRecord> recordsBefore;
+    for (const NodeRecord& n : before->nodes()) recordsBefore[n.key] = n;
+
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto all = base;
+    all.insert(all.end(), added.begin(), added.end());
+    all.insert(all.end(), {"-o", dir.file("fresh")});
+    auto fresh = test::run(build(all));
+    ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
+
+    auto after = TilesetReader::open(set());
+    ASSERT_TRUE(after) << after.status().message();
+    auto reference = TilesetReader::open(dir.file("fresh"));
+    ASSERT_TRUE(reference) << reference.status().message();
+    ASSERT_TRUE(verifyTileset(*after)) << "the updated set fails its checksums";
+    EXPECT_NE(after->info().hierarchyFile, "hierarchy.bin");
+    EXPECT_EQ(after->info().inputPoints, reference->info().inputPoints);
+    EXPECT_TRUE(after->info().statistics == reference->info().statistics);
+    EXPECT_TRUE(after->info().rootMin == reference->info().rootMin && after->info().rootEdge == reference->info().rootEdge);
+
+    // The same leaf points: the count, positions within the quantization
+    // step, attributes exact. A kept leaf holds the fresh build's bytes; a
+    // rebuilt one quantizes the set's leaf again, which the fresh build
+    // quantized once from the scan: |Q2(Q1 p) - Q3 p| <= s2/2 + s1/2 + s3/2,
+    // at most 1.5 times the largest leaf step s of either set.
+    double step = 0;
+    const std::vector<Point> updated = leafPoints(set(), &step), expected = leafPoints(dir.file("fresh"), &step);
+    ASSERT_EQ(updated.size(), expected.size());
+    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+
+    // Blocks the update kept lie where they lay, byte for byte; the rest was
+    // appended after them.
+    const std::string blocksAfter = test::readFile(set() + "/blocks.bin");
+    ASSERT_GT(blocksAfter.size(), blocksBefore.size());
+    EXPECT_TRUE(blocksAfter.compare(0, blocksBefore.size(), blocksBefore) == 0) << "the update rewrote bytes of blocks.bin";
+    size_t kept = 0, rebuilt = 0;
+    for (const NodeRecord& n : after->nodes()) {
+        if (n.blockOffset >= blocksBefore.size()) {
+            ++rebuilt;
+            continue;
+        }
+        ++kept;
+        auto it = recordsBefore.find(n.key);
+        ASSERT_NE(it, recordsBefore.end()) << n.key.name() << " points into the old blocks but was not in the set";
+        EXPECT_EQ(n.blockOffset, it->second.blockOffset) << n.key.name();
+        EXPECT_EQ(n.blockCrc, it->second.blockCrc) << n.key.name();
+    }
+    EXPECT_GT(kept, 0u) << "nothing was kept";
+    EXPECT_GT(rebuilt, 0u);
+    // The work was the change's: fewer bytes appended than a fresh build writes.
+    EXPECT_LT(blocksAfter.size() - blocksBefore.size(), reference->info().blocksBytes);
+
+    // The previous hierarchy stays for readers that opened it.
+    EXPECT_TRUE(fs::exists(set() + "/hierarchy.bin"));
+    EXPECT_TRUE(fs::exists(set() + "/" + after->info().hierarchyFile));
+    EXPECT_TRUE(fs::exists(set() + "/" + buildRecordFile(after->info().hierarchyFile)));
+    for (const auto& e : fs::directory_iterator(set()))
+        EXPECT_NE(e.path().filename().string().rfind(".update-", 0), 0u) << "left behind: " << e.path();
+}
+
+// Bad input during an update: the set's files stay as they were, and the
+// error names what is wrong.
+TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
+    std::map<std::string, std::string> files;
+    for (const auto& e : fs::directory_iterator(set())) files[e.path().filename().string()] = test::readFile(e.path().string());
+    auto expectUntouched = [&](const std::string& when) {
+        std::map<std::string, std::string> now;
+        for (const auto& e : fs::directory_iterator(set())) now[e.path().filename().string()] = test::readFile(e.path().string());
+        EXPECT_TRUE(now == files) << "the set changed after " << when;
+    };
+
+    // A truncated LAZ file.
+    const std::string bytes = test::readFile(added[0]);
+    const std::string broken = dir.file("broken.laz");
+    test::writeFile(broken, bytes.substr(0, bytes.size() / 2));
+    auto r = test::run({test::binary("surfcast-build"), "-q", "--add", broken, "--to", set()});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("broken.laz"), std::string::npos) << r.output;
+    expectUntouched("a truncated input");
+
+    // A scan beyond the set's root cube (re-rooting is not built yet).
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", test::dataFile("Megaplot.laz"), "--to", set()});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("root cube"), std::string::npos) << r.output;
+    expectUntouched("a scan outside the root cube");
+
+    // Build options are the set's own.
+    r = test::run({test::binary("surfcast-build"), "--add", added[0], "--to", set(), "--grid", "64"});
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("--grid"), std::string::npos) << r.output;
+    // A set without a build record.
+    fs::remove(set() + "/build.bin");
+    files.erase("build.bin");
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("build record"), std::string::npos) << r.output;
+    expectUntouched("a set without its record");
+}
+
+}  // namespace
