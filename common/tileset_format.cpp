@@ -288,6 +288,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["weights"] = info.weights;
     j["kernel_scale"] = info.kernelScale;
     if (!info.textureFilter.empty()) j["texture_filter"] = info.textureFilter;
+    if (!info.inputs.empty()) j["inputs"] = info.inputs;
     j["hierarchy"] = {{"file", info.hierarchyFile}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
     j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
@@ -445,6 +446,14 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         info.kernelScale = j.contains("kernel_scale") ? number(j, "", "kernel_scale") : 1.0;
         if (!(info.kernelScale > 0)) fieldError("kernel_scale", "not positive");
         if (j.contains("texture_filter")) info.textureFilter = text(j, "", "texture_filter");
+        if (j.contains("inputs")) {
+            const nlohmann::json& inputs = j["inputs"];
+            if (!inputs.is_array()) fieldError("inputs", "not an array");
+            for (size_t i = 0; i < inputs.size(); ++i) {
+                if (!inputs[i].is_string()) fieldError("inputs[" + std::to_string(i) + "]", "not a string");
+                info.inputs.push_back(inputs[i].get<std::string>());
+            }
+        }
         const nlohmann::json& h = object(j, "", "hierarchy");
         // Absent or "hierarchy.bin" in sets never updated in place.
         if (h.contains("file")) info.hierarchyFile = text(h, "hierarchy", "file");

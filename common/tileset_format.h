@@ -154,6 +154,9 @@ struct TilesetInfo {
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none
     std::string textureFilter;  // optimal | ewa | nearest where the set was built from textured meshes; empty otherwise
+    // The inputs' names, by provenance value (the "input" attribute), where
+    // the set holds more than one input; empty otherwise.
+    std::vector<std::string> inputs;
     double kernelScale = 1.0;  // k of the reconstruction kernel V^r = (k h)^2 I the weights assume
     // The hierarchy's file: "hierarchy.bin", or "hierarchy-XXXXXXXX.bin" (its
     // CRC in hex) in a set updated in place, so that readers holding the

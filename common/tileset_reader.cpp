@@ -114,6 +114,11 @@ Result<std::string> verifyTileset(const TilesetReader& reader) {
         << info.rootEdge << "\n  attributes:";
     for (const auto& a : info.attributes) out << " " << a.name << "(" << a.type << "x" << a.components << ")";
     out << "\n  normals: " << info.normalSource << ", weights: " << info.weights << "\n";
+    if (!info.inputs.empty()) {
+        out << "  inputs (the \"input\" attribute's values):";
+        for (size_t i = 0; i < info.inputs.size(); ++i) out << (i ? ", " : " ") << i << " " << info.inputs[i];
+        out << "\n";
+    }
     for (auto [level, counts] : perLevel)
         out << "  level " << level << ": " << counts.first << " nodes, " << counts.second << " surfels\n";
     out << "  bytes: hierarchy " << info.hierarchyBytes << ", blocks " << info.blocksBytes << " ("

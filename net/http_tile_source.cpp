@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "sigpipe.h"
+#include "tileset_format.h"
 
 namespace surfcast {
 namespace {
@@ -89,7 +90,14 @@ public:
     Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
         auto r = std::move(run({{name, "", nullptr, maxBytes, 200}})[0]);
         if (!r) return r.status();
-        if (name == "tileset.json") batchNodes_ = r->batchNodes;
+        if (name == "tileset.json") {
+            batchNodes_ = r->batchNodes;
+            // Batches ask for this version (?v=), which the server keeps
+            // serving after an update until the one after it (docs/PROTOCOL.md,
+            // "Versions"); an unreadable file pins none (its reader fails).
+            auto info = readTilesetJson(std::string(r->body.begin(), r->body.end()), base_ + "/tileset.json");
+            version_ = info ? uint64_t(info->hierarchyCrc) + 1 : 0;
+        }
         return std::move(r->body);
     }
     Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
@@ -290,7 +298,9 @@ private:
             if (!h) continue;
             sinks[i] = {h, q.wanted, q.maxBytes, 0, false, &responses[i].body};
             errors[i][0] = 0;
-            curl_easy_setopt(h, CURLOPT_URL, (base_ + "/" + q.name + query_).c_str());
+            std::string url = base_ + "/" + q.name + query_;
+            if (const uint64_t v = version_; q.post && v > 0) url += (query_.empty() ? "?v=" : "&v=") + std::to_string(v - 1);
+            curl_easy_setopt(h, CURLOPT_URL, url.c_str());
             curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
             curl_easy_setopt(h, CURLOPT_WRITEDATA, &sinks[i]);
             curl_easy_setopt(h, CURLOPT_ERRORBUFFER, errors[i].data());
@@ -541,6 +551,7 @@ private:
     HttpOptions options_;
     curl_slist* headers_;
     std::atomic<size_t> batchNodes_{0};  // tileset.json's Surfcast-Batch: 0 where it offers none
+    std::atomic<uint64_t> version_{0};   // 1 + the hierarchy CRC of the tileset.json read; 0: none
     std::mutex mutex_;
     std::vector<CURL*> idle_;  // easy handles not in use
     CURLM* multi_;

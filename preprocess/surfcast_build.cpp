@@ -32,7 +32,7 @@ namespace {
 
 const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
-       surfcast-build --add INPUT... --to SET
+       surfcast-build --add INPUT... | --remove NAME... | --replace OLD NEW  --to SET
        surfcast-build --info SET            (SET: a folder or an http(s) URL)
        surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
        surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
@@ -60,6 +60,11 @@ ranges from any host that honours Range (meshes are read from local files).
                           readers see the old set or the new one (README, "Updating
                           a set"). The options are the set's own (its build record);
                           only --threads and -q may be given
+  --remove NAME... --to SET
+                          remove the points of the set's inputs NAME (a path, or a
+                          file name only one input has), in place alike
+  --replace OLD NEW --to SET
+                          remove input OLD's points and add NEW's, in one update
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how
@@ -187,7 +192,9 @@ struct Args {
     size_t part = 0, parts = 0;  // --part P/N (scan, count; P alone for distribute) and --parts N (plan)
     bool partGiven = false;
     std::vector<std::string> kept;  // the arguments but inputs and -o, which the plan stores as given
-    bool add = false;               // --add: the inputs go into the set --to names
+    // An update in place of the set --to names: --add INPUT..., --remove
+    // NAME..., --replace OLD NEW (the positional arguments).
+    std::string update;
     std::string to;
 };
 
@@ -226,8 +233,9 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
         } else if (a == "-o" || a == "--output") {
             if (!value(&opt.output)) return usageError(a + " needs a folder");
             continue;
-        } else if (a == "--add" && stage.empty()) {
-            out->add = true;
+        } else if ((a == "--add" || a == "--remove" || a == "--replace") && stage.empty()) {
+            if (!out->update.empty() && out->update != a) return usageError(out->update + " and " + a + " are separate updates");
+            out->update = a;
             continue;
         } else if (a == "--to" && stage.empty()) {
             if (!value(&out->to)) return usageError("--to needs a tile set folder");
@@ -481,19 +489,41 @@ std::vector<std::string> storedCommandLine(const Args& a) {
     return stored;
 }
 
-// surfcast-build --add INPUT... --to SET: the update in place (update.h),
-// with the options of the set's build record.
-int runAdd(const Args& a) {
-    if (a.to.empty()) return usageError("--add needs the set to add to (--to SET)");
-    if (!a.opt.output.empty()) return usageError("--add updates the set --to names in place; it takes no -o");
-    if (a.opt.inputs.defaultScene || a.opt.inputs.paths.empty()) return usageError("--add needs input files to add");
+// The input of a set's build record that NAME names: its path as given
+// (made absolute), or its file name where only one input has it; -1 with
+// `error` set otherwise.
+long findInput(const std::vector<std::string>& paths, size_t first, const std::string& name, std::string* error) {
+    const std::string absolute = surfcast::isUrl(name) ? name : std::filesystem::absolute(name).lexically_normal().string();
+    long found = -1;
+    for (size_t i = 0; i < paths.size(); ++i)
+        if (paths[i] == absolute) return long(first + i);
+    for (size_t i = 0; i < paths.size(); ++i)
+        if (std::filesystem::path(paths[i]).filename() == name) {
+            if (found >= 0) {
+                *error = name + " names several of the set's inputs; give its path";
+                return -1;
+            }
+            found = long(first + i);
+        }
+    if (found < 0) *error = name + " is not one of the set's inputs (surfcast-build --info lists them)";
+    return found;
+}
+
+// surfcast-build --add INPUT... | --remove NAME... | --replace OLD NEW, --to
+// SET: the update in place (update.h), with the options of the set's build
+// record.
+int runUpdate(const Args& a) {
+    const std::string& mode = a.update;
+    if (a.to.empty()) return usageError(mode + " needs the set to update (--to SET)");
+    if (!a.opt.output.empty()) return usageError(mode + " updates the set --to names in place; it takes no -o");
+    if (a.opt.inputs.defaultScene || a.opt.inputs.paths.empty())
+        return usageError(mode == "--add" ? "--add needs input files to add" : mode == "--remove" ? "--remove needs the inputs to remove" : "--replace needs OLD and NEW");
+    if (mode == "--replace" && a.opt.inputs.paths.size() != 2) return usageError("--replace takes two inputs: OLD (in the set) and NEW");
     for (size_t i = 0; i < a.kept.size(); ++i) {
         if (a.kept[i] == "--threads") ++i;
         else if (a.kept[i] != "-q" && a.kept[i] != "--quiet")
-            return usageError("--add takes the set's own build options from its build record, not " + a.kept[i] + " (only --threads and -q)");
+            return usageError(mode + " takes the set's own build options from its build record, not " + a.kept[i] + " (only --threads and -q)");
     }
-    auto added = absoluteInputs(a.opt.inputs.paths);
-    if (!added) return fail(added.status());
     const std::string set = std::filesystem::absolute(a.to).lexically_normal().string();
     std::string json;
     {
@@ -515,11 +545,29 @@ int runAdd(const Args& a) {
     planned.opt.threads = a.opt.threads;
     planned.opt.progress = a.opt.progress;
     planned.opt.output = set;
-    planned.opt.inputs.paths.insert(planned.opt.inputs.paths.end(), added->begin(), added->end());
-    auto summary = surfcast::updateTileset(planned.opt, added->size(), set, *record, storedCommandLine(planned));
+
+    surfcast::UpdateRequest request;
+    std::vector<std::string> toAdd, toRemove;
+    if (mode == "--add") toAdd = a.opt.inputs.paths;
+    else if (mode == "--remove") toRemove = a.opt.inputs.paths;
+    else toRemove = {a.opt.inputs.paths[0]}, toAdd = {a.opt.inputs.paths[1]};
+    const size_t first = planned.opt.inputs.defaultScene ? 1 : 0;  // the scene is input 0
+    for (const std::string& name : toRemove) {
+        std::string error;
+        const long k = findInput(planned.opt.inputs.paths, first, name, &error);
+        if (k < 0) return fail(surfcast::Status::error(set + ": " + error));
+        request.removed.push_back(uint32_t(k));
+    }
+    if (!toAdd.empty()) {
+        auto added = absoluteInputs(toAdd);
+        if (!added) return fail(added.status());
+        request.added = added->size();
+        planned.opt.inputs.paths.insert(planned.opt.inputs.paths.end(), added->begin(), added->end());
+    }
+    auto summary = surfcast::updateTileset(planned.opt, request, set, *record, storedCommandLine(planned));
     if (!summary) return fail(summary.status());
-    std::printf("updated %s (%zu inputs added, %zu chunks rebuilt)\n%s", set.c_str(), added->size(), summary->chunks,
-                summary->text().c_str());
+    std::printf("updated %s (%zu inputs added, %zu removed; %zu chunks built again)\n%s", set.c_str(), request.added,
+                request.removed.size(), summary->chunks, summary->text().c_str());
     return 0;
 }
 
@@ -687,9 +735,9 @@ int main(int argc, char** argv) {
         return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
-    if (a.add || !a.to.empty()) {
-        if (!a.add) return usageError("--to names the set --add adds to");
-        return runAdd(a);
+    if (!a.update.empty() || !a.to.empty()) {
+        if (a.update.empty()) return usageError("--to names the set that --add, --remove or --replace updates");
+        return runUpdate(a);
     }
     const surfcast::BuildOptions& opt = a.opt;
     const surfcast::HttpOptions& http = a.http;

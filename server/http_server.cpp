@@ -4,11 +4,15 @@
 // see bench/BENCHMARKS.md. This is the only file that includes microhttpd.h.
 #include "http_server.h"
 
+#include "crc32.h"
+
 #include <arpa/inet.h>
 #include <microhttpd.h>
 #include <netinet/in.h>
 
 #include <atomic>
+#include <cerrno>
+#include <cstdlib>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -317,14 +321,23 @@ struct HttpServer::Impl {
 
     // Clients that pin a version (?v=, tileset.json's hierarchy.crc32) get
     // immutable caching; a stale pin is refused so they reload tileset.json.
-    bool checkVersion(MHD_Connection* c, Reply& r, const TilesetSnapshot& s, bool* pinned) {
+    // A request's ?v=: the snapshot of that version (the current one or the
+    // one it replaced) in *snap; 409 for any other.
+    bool checkVersion(MHD_Connection* c, Reply& r, const std::string& name, std::shared_ptr<const TilesetSnapshot>* snap,
+                      bool* pinned) {
         const char* v = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "v");
         *pinned = v != nullptr;
-        if (v && std::string(v) != std::to_string(s.info.hierarchyCrc)) {
-            fail(r, 409, "stale", std::string("version ") + v + " is not the current one (" +
-                                      std::to_string(s.info.hierarchyCrc) + "); reload tileset.json");
+        if (!v || std::string(v) == std::to_string((*snap)->info.hierarchyCrc)) return true;
+        char* end = nullptr;
+        errno = 0;
+        const unsigned long long version = std::strtoull(v, &end, 10);
+        auto old = *v && *end == 0 && errno == 0 && version <= UINT32_MAX ? store.pinned(name, uint32_t(version)) : nullptr;
+        if (!old) {
+            fail(r, 409, "stale", std::string("version ") + v + " is neither the current one (" +
+                                      std::to_string((*snap)->info.hierarchyCrc) + ") nor the one before it; reload tileset.json");
             return false;
         }
+        *snap = std::move(old);
         return true;
     }
 
@@ -419,14 +432,14 @@ struct HttpServer::Impl {
             st.route = hierarchy ? "hierarchy.bin" : rest;
             auto snap = snapshot(name, r);
             if (!snap) return;
-            if (hierarchy && rest != "hierarchy.bin" && rest != snap->info.hierarchyFile) {
-                // An earlier version's hierarchy (an update in place kept it
-                // for clients that opened the set before): its name holds
-                // its CRC, so its bytes never change.
+            if (hierarchy && rest != snap->info.hierarchyFile) {
+                // An earlier version's hierarchy, which an update in place
+                // keeps for clients that opened the set before it, served as
+                // a static host would (docs/FORMAT.md, "Updates in place").
                 auto old = store.hierarchyFile(name, rest);
                 if (!old) return fail(r, 404, "not_found", "no such resource");
                 std::shared_ptr<const MappedFile> file = std::move(*old);
-                return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + rest.substr(10, 8) + "\"",
+                return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + hex8(crc32(file->data(), size_t(file->size()))) + "\"",
                                   kRevalidate, file);
             }
             const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *snap->blocks;
@@ -444,10 +457,10 @@ struct HttpServer::Impl {
             if (!snap) return;
             NodeKey key;
             if (!NodeKey::parse(rest.substr(6), &key)) return fail(r, 400, "bad_request", "node keys look like L-X-Y-Z");
+            bool pinned = false;
+            if (!checkVersion(c, r, name, &snap, &pinned)) return;
             auto it = snap->nodes.find(key);
             if (it == snap->nodes.end()) return fail(r, 404, "not_found", "no node " + key.name());
-            bool pinned = false;
-            if (!checkVersion(c, r, *snap, &pinned)) return;
             const NodeRecord& n = it->second;
             std::string etag = "\"n-" + hex8(n.blockCrc) + "-" + std::to_string(n.blockSize) + "\"";
             return serveBytes(c, r, snap, snap->blocks->data() + n.blockOffset, n.blockSize, "application/octet-stream", etag,
@@ -534,7 +547,7 @@ struct HttpServer::Impl {
         auto snap = snapshot(name, r);
         if (!snap) return;
         bool pinned = false;
-        if (!checkVersion(c, r, *snap, &pinned)) return;
+        if (!checkVersion(c, r, name, &snap, &pinned)) return;
         std::vector<const NodeRecord*> nodes;
         std::string body = st.body;
         for (char& ch : body)

@@ -137,8 +137,21 @@ std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name
         return nullptr;
     }
     std::shared_ptr<const TilesetSnapshot> snap = std::move(*loaded);
-    sets_[name] = snap;
+    // Its mappings stay valid: an update in place only appends to blocks.bin
+    // and a rebuild replaces the files, whose old inodes the mappings hold.
+    auto& current = sets_[name];
+    if (current && current->info.hierarchyCrc != snap->info.hierarchyCrc) previous_[name] = current;
+    current = snap;
     return snap;
+}
+
+std::shared_ptr<const TilesetSnapshot> TilesetStore::pinned(const std::string& name, uint32_t version) {
+    std::lock_guard lock(mutex_);
+    for (auto* sets : {&sets_, &previous_}) {
+        auto it = sets->find(name);
+        if (it != sets->end() && it->second->info.hierarchyCrc == version) return it->second;
+    }
+    return nullptr;
 }
 
 std::vector<std::shared_ptr<const TilesetSnapshot>> TilesetStore::list() {
@@ -188,7 +201,7 @@ public:
 private:
     Result<const MappedFile*> mapped(const std::string& name) const {
         if (name == "tileset.json") return s_->json.get();
-        if (name == "hierarchy.bin" || name == s_->info.hierarchyFile) return s_->hierarchy.get();
+        if (name == s_->info.hierarchyFile) return s_->hierarchy.get();
         if (name == "blocks.bin") return s_->blocks.get();
         return Status::error(describe() + ": no file " + name);
     }

@@ -65,6 +65,12 @@ public:
     // The current snapshot of a set, reloaded if its files were replaced; null
     // with `error` set when there is no such set or it does not load.
     std::shared_ptr<const TilesetSnapshot> get(const std::string& name, std::string* error);
+    // The snapshot of set `name` at version `version` (its hierarchy CRC):
+    // the current one, or the one it replaced, which clients that opened the
+    // set before an update (or a rebuild) still read until they reopen
+    // (docs/PROTOCOL.md, "Versions"); null for any other version. Call get()
+    // first: it notices a replacement.
+    std::shared_ptr<const TilesetSnapshot> pinned(const std::string& name, uint32_t version);
     // Every loadable set, sorted by name.
     std::vector<std::shared_ptr<const TilesetSnapshot>> list();
     // A hierarchy file of set `name` other than its current one (a client
@@ -82,6 +88,7 @@ private:
     int rootFd_ = -1;
     std::mutex mutex_;
     std::unordered_map<std::string, std::shared_ptr<const TilesetSnapshot>> sets_;
+    std::unordered_map<std::string, std::shared_ptr<const TilesetSnapshot>> previous_;  // what each set's current one replaced
 };
 
 }  // namespace surfcast

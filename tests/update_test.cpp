@@ -1,11 +1,16 @@
 // Updates in place (preprocess/build/update.h): `surfcast-build --add INPUT...
-// --to SET` against a fresh build of all the inputs, the kept nodes' bytes
-// and byte ranges, and bad input that must leave the set as it was.
+// --to SET` against a fresh build of all the inputs, the kept nodes' bytes,
+// byte ranges and ETags (surfcast-serve before and after), the version before
+// it for clients that opened it, and bad input that must leave the set as it
+// was.
 #include <gtest/gtest.h>
+#include <httplib.h>
+#include <signal.h>
 
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <sstream>
 #include <tuple>
 
 #include "block_codec.h"
@@ -19,6 +24,7 @@ namespace {
 
 struct Point {
     Vec3d p;
+    int input = -1;  // the provenance attribute's value, where the set has it
     uint16_t intensity = 0;
     uint8_t classification = 0, returnNumber = 0, returns = 0;
     uint16_t color[3] = {};
@@ -27,29 +33,37 @@ struct Point {
 
 // Every leaf point of a set (world positions, stored attributes), and the
 // largest quantization step of its leaves.
-std::vector<Point> leafPoints(const std::string& set, double* largestStep) {
+void leafPoints(const std::string& set, double* largestStep, std::vector<Point>* points) {
     auto reader = TilesetReader::open(set);
-    EXPECT_TRUE(reader) << reader.status().message();
-    std::vector<Point> out;
-    if (!reader) return out;
+    ASSERT_TRUE(reader) << reader.status().message();
+    std::vector<Point>& out = *points;
     for (const NodeRecord& n : reader->nodes()) {
         if (!(n.flags & kFlagInputPoints)) continue;
-        auto block = reader->readBlock(n);
+        auto bytes = reader->readBlockBytes(n);
+        ASSERT_TRUE(bytes) << bytes.status().message();
+        BlockExpectation expect = reader->expectation(n);
+        expect.scalars = true;
+        auto block = decodeBlock(bytes->data(), bytes->size(), expect);
         EXPECT_TRUE(block) << block.status().message();
         if (!block) continue;
+        const ScalarAttribute* input = nullptr;
+        for (const ScalarAttribute& a : block->scalars)
+            if (a.name == "input") input = &a;
         *largestStep = std::max(*largestStep, nodeEdge(reader->info(), n.key.level) / double((uint64_t(1) << n.positionBits) - 1));
         for (size_t i = 0; i < block->size(); ++i) {
             Point q;
             q.p = reader->position(n, *block, i);
-            q.intensity = block->intensity.at(i);
+            // As read, not as stored: sets of other inputs quantize it from another minimum.
+            const AttributeInfo* intensity = reader->info().attribute("intensity");
+            q.intensity = uint16_t(std::lround(block->intensity.at(i) * intensity->scale + intensity->offset));
             q.classification = block->classification.at(i);
             q.returnNumber = block->returnNumber.at(i);
             q.returns = block->numberOfReturns.at(i);
             for (int c = 0; c < 3; ++c) q.color[c] = block->colors.at(3 * i + c);
+            if (input) q.input = int(input->values.at(i));
             out.push_back(q);
         }
     }
-    return out;
 }
 
 // How many of `want` have a point of `have` within `tolerance` (each used
@@ -109,6 +123,7 @@ protected:
             std::snprintf(name, sizeof name, "/parts/r%06d.laz", i);
             (i == 5 ? added : base).push_back(dir.path() + name);
         }
+        fs::create_directories(dir.file("sets"));
         auto built = test::run(build([&] {
             auto a = base;
             a.insert(a.end(), {"-o", set()});
@@ -116,7 +131,7 @@ protected:
         }()));
         ASSERT_EQ(built.exitCode, 0) << built.output;
     }
-    std::string set() const { return dir.file("set"); }
+    std::string set() const { return dir.file("sets/s"); }
 
     test::TempDir dir;
     std::vector<std::string> base, added;
@@ -153,7 +168,9 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     // quantized once from the scan: |Q2(Q1 p) - Q3 p| <= s2/2 + s1/2 + s3/2,
     // at most 1.5 times the largest leaf step s of either set.
     double step = 0;
-    const std::vector<Point> updated = leafPoints(set(), &step), expected = leafPoints(dir.file("fresh"), &step);
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
     ASSERT_EQ(updated.size(), expected.size());
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
 
@@ -185,6 +202,153 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     EXPECT_TRUE(fs::exists(set() + "/" + buildRecordFile(after->info().hierarchyFile)));
     for (const auto& e : fs::directory_iterator(set()))
         EXPECT_NE(e.path().filename().string().rfind(".update-", 0), 0u) << "left behind: " << e.path();
+}
+
+// Provenance: each leaf point's input attribute names the file it came
+// from (the files' own point counts, read by laspy), and --remove of the
+// added scan gives back the set before it: the same leaf points, within the
+// quantization step (1.5 steps: see above).
+TEST_F(UpdateTest, RemovingTheAddedScanGivesBackTheSetBefore) {
+    double step = 0;
+    std::vector<Point> original;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &original));
+    auto r = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+
+    auto withAdded = TilesetReader::open(set());
+    ASSERT_TRUE(withAdded) << withAdded.status().message();
+    const std::vector<std::string>& names = withAdded->info().inputs;
+    ASSERT_EQ(names.size(), 16u);
+    ASSERT_NE(withAdded->info().attribute("input"), nullptr);
+    EXPECT_EQ(withAdded->info().attribute("input")->type, "uint8");
+    std::vector<Point> points;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &points));
+    std::map<std::string, uint64_t> perInput;
+    for (const Point& p : points) {
+        ASSERT_GE(p.input, 0);
+        ASSERT_LT(size_t(p.input), names.size());
+        perInput[names[size_t(p.input)]]++;
+    }
+    std::string script = "import laspy, sys\nfor f in sys.argv[1:]: print(f.rsplit('/', 1)[1], laspy.open(f).header.point_count)\n";
+    std::vector<std::string> args = {SURFCAST_TEST_PYTHON, "-c", script};
+    args.insert(args.end(), base.begin(), base.end());
+    args.insert(args.end(), added.begin(), added.end());
+    auto counts = test::run(args);
+    ASSERT_EQ(counts.exitCode, 0) << counts.output;
+    std::istringstream lines(counts.output);
+    std::string name;
+    uint64_t n = 0;
+    size_t files = 0;
+    while (lines >> name >> n) {
+        EXPECT_EQ(perInput[name], n) << name;
+        ++files;
+    }
+    EXPECT_EQ(files, 16u);
+
+    r = test::run({test::binary("surfcast-build"), "-q", "--remove", fs::path(added[0]).filename().string(), "--to", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<Point> removed;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &removed));
+    ASSERT_EQ(removed.size(), original.size());
+    EXPECT_EQ(matchPoints(original, removed, 1.5 * step), original.size());
+    // Removed twice, or never there.
+    r = test::run({test::binary("surfcast-build"), "-q", "--remove", added[0], "--to", set()});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("no points"), std::string::npos) << r.output;
+    r = test::run({test::binary("surfcast-build"), "-q", "--remove", "nothing.laz", "--to", set()});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("not one of the set's inputs"), std::string::npos) << r.output;
+}
+
+// --replace OLD NEW equals a fresh build of the inputs without OLD and with NEW.
+TEST_F(UpdateTest, ReplacedScanEqualsAFreshBuild) {
+    const std::string old = base[6];
+    auto r = test::run({test::binary("surfcast-build"), "-q", "--replace", old, added[0], "--to", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<std::string> inputs;
+    for (const std::string& b : base)
+        if (b != old) inputs.push_back(b);
+    inputs.insert(inputs.end(), {added[0], "-o", dir.file("fresh")});
+    auto fresh = test::run(build(inputs));
+    ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
+    double step = 0;
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    for (Point& p : updated) p.input = -1;  // the two number their inputs differently
+    ASSERT_EQ(updated.size(), expected.size());
+    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+}
+
+// surfcast-serve across an update: nodes whose blocks did not change keep
+// their ETags (304 to a client's conditional request), and a client that read
+// tileset.json before the switch still gets its version's nodes, batches and
+// hierarchy.
+TEST_F(UpdateTest, ServedNodesKeepTheirETagsAndTheVersionBeforeStaysReadable) {
+    auto before = TilesetReader::open(set());
+    ASSERT_TRUE(before) << before.status().message();
+    const std::string oldVersion = std::to_string(before->info().hierarchyCrc);
+    const std::string oldHierarchy = test::readFile(set() + "/hierarchy.bin");
+    test::Child server = test::spawn({test::binary("surfcast-serve"), dir.file("sets"), "--bind", "127.0.0.1:0"});
+    ASSERT_TRUE(server.waitFor("(1 tile sets)\n")) << server.log;
+    const size_t at = server.log.find("http://127.0.0.1:");
+    ASSERT_NE(at, std::string::npos) << server.log;
+    httplib::Client c("127.0.0.1", std::atoi(server.log.c_str() + at + 17));
+    std::map<NodeKey, NodeRecord> oldRecords;
+    std::map<NodeKey, std::string> etags, bodies;
+    for (const NodeRecord& n : before->nodes()) {
+        auto r = c.Get("/sets/s/nodes/" + n.key.name());
+        ASSERT_TRUE(r && r->status == 200) << n.key.name();
+        oldRecords[n.key] = n;
+        etags[n.key] = r->get_header_value("ETag");
+        bodies[n.key] = r->body;
+    }
+
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto after = TilesetReader::open(set());
+    ASSERT_TRUE(after) << after.status().message();
+    auto json = c.Get("/sets/s/tileset.json");
+    ASSERT_TRUE(json && json->status == 200);
+    EXPECT_EQ(json->body, test::readFile(set() + "/tileset.json")) << "the server still serves the old version";
+
+    size_t same = 0, changed = 0;
+    std::vector<NodeKey> rebuilt;  // in both versions, with other bytes
+    for (const NodeRecord& n : after->nodes()) {
+        auto old = oldRecords.find(n.key);
+        const bool unchanged = old != oldRecords.end() && old->second.blockCrc == n.blockCrc && old->second.blockSize == n.blockSize;
+        httplib::Headers conditional;
+        if (old != oldRecords.end()) conditional.insert({"If-None-Match", etags[n.key]});
+        auto r = c.Get("/sets/s/nodes/" + n.key.name(), conditional);
+        ASSERT_TRUE(r) << n.key.name();
+        EXPECT_EQ(r->status, unchanged ? 304 : 200) << n.key.name();
+        (unchanged ? same : changed)++;
+        if (!unchanged && old != oldRecords.end()) rebuilt.push_back(n.key);
+    }
+    EXPECT_GT(same, 0u);
+    EXPECT_GT(changed, 0u);
+    ASSERT_FALSE(rebuilt.empty());
+
+    // The version before: its nodes by key, in a batch, and its hierarchy file.
+    for (const NodeKey& key : rebuilt) {
+        auto r = c.Get("/sets/s/nodes/" + key.name() + "?v=" + oldVersion);
+        ASSERT_TRUE(r && r->status == 200) << key.name();
+        EXPECT_EQ(r->body, bodies[key]) << key.name() << ": not the old version's block";
+    }
+    auto batch = c.Post("/sets/s/batch?v=" + oldVersion, rebuilt[0].name(), "text/plain");
+    ASSERT_TRUE(batch && batch->status == 200);
+    EXPECT_EQ(batch->body.substr(4), bodies[rebuilt[0]]);
+    auto hierarchy = c.Get("/sets/s/hierarchy.bin");
+    ASSERT_TRUE(hierarchy && hierarchy->status == 200);
+    EXPECT_TRUE(hierarchy->body == oldHierarchy) << "hierarchy.bin is the version before's";
+    auto current = c.Get("/sets/s/" + after->info().hierarchyFile);
+    ASSERT_TRUE(current && current->status == 200);
+    EXPECT_TRUE(current->body == test::readFile(set() + "/" + after->info().hierarchyFile));
+    auto stale = c.Get("/sets/s/nodes/" + rebuilt[0].name() + "?v=12345");
+    ASSERT_TRUE(stale);
+    EXPECT_EQ(stale->status, 409);
+    ::kill(server.pid, SIGTERM);
+    EXPECT_EQ(test::exitCode(server.pid), 0);
 }
 
 // Bad input during an update: the set's files stay as they were, and the

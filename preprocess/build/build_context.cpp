@@ -4,12 +4,15 @@
 #include <cassert>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <map>
 #include <set>
 #include <thread>
 #include <tuple>
 
 #include "block_codec.h"
+
+namespace fs = std::filesystem;
 
 namespace surfcast {
 
@@ -51,7 +54,7 @@ BuildOptions normalizeOptions(BuildOptions o) {
 }
 
 Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOptions& options, InputStats stats, bool report,
-                                                                 const BuildContext* rootOf) {
+                                                                 const BuildContext* set, bool keepLayout) {
     std::shared_ptr<BuildContext> c(new BuildContext);
     c->report_ = report;
     c->opt_ = normalizeOptions(options);
@@ -60,19 +63,28 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
     if (c->stats_.points == 0)
         return Status::error("the inputs hold no valid points (" + std::to_string(c->stats_.skipped) + " skipped: NaN/Inf or no return)");
     c->chooseRootBox();
-    if (rootOf) {
+    if (set) {
         const Box3d& b = c->stats_.bounds;
-        const Vec3d lo = rootOf->rootMin_, hi = lo + Vec3d{1, 1, 1} * rootOf->rootEdge_;
+        const Vec3d lo = set->rootMin_, hi = lo + Vec3d{1, 1, 1} * set->rootEdge_;
         for (int a = 0; a < 3; ++a)
             if (!(b.min[a] >= lo[a] && b.max[a] < hi[a]))
                 return Status::error("the inputs reach beyond the set's root cube on axis " + std::string(1, "xyz"[a]) + " (" +
                                      std::to_string(b.min[a]) + " to " + std::to_string(b.max[a]) + ", the cube " + std::to_string(lo[a]) +
                                      " to " + std::to_string(hi[a]) + "): growing a set past its root is not built yet; build it anew from all its inputs");
-        c->rootMin_ = rootOf->rootMin_;
-        c->rootEdge_ = rootOf->rootEdge_;
+        c->rootMin_ = set->rootMin_;
+        c->rootEdge_ = set->rootEdge_;
     }
     SC_TRY(c->chooseOrientationRules());
     SC_TRY(c->chooseAttributes());
+    if (set && keepLayout) {
+        c->leafStep_ = set->leafStep_;
+        std::copy(std::begin(set->store_), std::end(set->store_), std::begin(c->store_));
+        c->storeOpacity_ = set->storeOpacity_;
+        c->stored_ = set->stored_;
+        c->attributeNames_ = set->attributeNames_;
+        c->intensityOffset_ = set->intensityOffset_;
+        c->intensityStep_ = set->intensityStep_;
+    }
     return std::shared_ptr<const BuildContext>(std::move(c));
 }
 
@@ -130,6 +142,7 @@ TilesetInfo BuildContext::tilesetInfo() const {
     info.rootEdge = rootEdge_;
     info.bounds = stats_.bounds;
     info.colorBits = stats_.colorBits;
+    if (inputNames_.size() > 1) info.inputs = inputNames_;
     info.attributes.push_back({"position", "uint32", 3, 0});
     info.attributes.push_back({"normal", "float32", 3, opt_.normalBits});
     if (stats_.colorBits) info.attributes.push_back({"color", stats_.colorBits == 8 ? "uint8" : "uint16", 3, 0});
@@ -249,6 +262,29 @@ Status BuildContext::chooseAttributes() {
         q.step = f.field.resolution > 0 ? f.field.resolution : std::exp2(std::ceil(std::log2(range / floatSteps)));
         while (range / q.step > maxSteps) q.step *= 2;
         q.bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
+        stored_.push_back(q);
+        attributeNames_.push_back(q.name);
+    }
+    // Provenance: where the set holds more than one input, each point's input,
+    // in as many bits as their count needs, so that an update can remove an
+    // input's points (docs/FORMAT.md, "Provenance").
+    inputOfSource_.clear();
+    inputNames_.clear();
+    for (const SourceStats& src : stats_.sources) {
+        const bool scene = src.description.format == "scene";
+        if (!scene || inputNames_.empty() || inputNames_[0] != "default scene")
+            inputNames_.push_back(scene ? "default scene" : fs::path(src.description.path).filename().string());
+        inputOfSource_.push_back(scene ? 0 : uint32_t(inputNames_.size() - 1));
+    }
+    if (inputNames_.size() > 1) {
+        if (std::any_of(stored_.begin(), stored_.end(), [](const ScalarQuantization& q) { return q.name == kProvenanceAttribute; }))
+            return Status::error(std::string("--attributes: an input's field '") + kProvenanceAttribute +
+                                 "' has the name of the set's provenance attribute; leave it out");
+        ScalarQuantization q;
+        q.name = kProvenanceAttribute;
+        q.categorical = true;
+        q.provenance = true;
+        q.bits = std::max(1, int(std::ceil(std::log2(double(inputNames_.size())))));
         stored_.push_back(q);
         attributeNames_.push_back(q.name);
     }

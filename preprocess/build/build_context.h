@@ -56,10 +56,13 @@ public:
     // options.inputs.meshes, or their files). `options`: normalizeOptions'.
     // `report`: warn about attributes asked for and not stored (once per
     // build: the stages after the plan derive the same context quietly).
-    // `rootOf`: keep that context's root box (an update in place, whose kept
-    // blocks are positioned in it); the inputs must lie inside it.
+    // `set`: an update in place keeps that context's root box (its kept
+    // blocks are positioned in it), and the inputs must lie inside it; with
+    // `keepLayout` also its leaf step, its stored attributes and their
+    // quantization (what every block was written with: an update that removes
+    // points, whose values the set's layout still holds exactly).
     static Result<std::shared_ptr<const BuildContext>> derive(const BuildOptions& options, InputStats stats, bool report = true,
-                                                              const BuildContext* rootOf = nullptr);
+                                                              const BuildContext* set = nullptr, bool keepLayout = false);
 
     const BuildOptions& options() const { return opt_; }
     const InputStats& stats() const { return stats_; }
@@ -73,6 +76,11 @@ public:
     }
     const NormalContext& normals() const { return normals_; }
     std::span<const uint16_t> sourceIds() const { return sourceIds_; }
+    // Per source (InputStats::sources): the input it belongs to (the built-in
+    // scene's scans are input 0, then the paths in order), the provenance value.
+    std::span<const uint32_t> inputOfSource() const { return inputOfSource_; }
+    // The inputs' names as tileset.json lists them (docs/FORMAT.md, "Provenance").
+    const std::vector<std::string>& inputNames() const { return inputNames_; }
 
     // Stored attributes.
     bool stores(int lidar) const { return store_[lidar]; }
@@ -127,6 +135,8 @@ private:
     double leafStep_ = 0;  // quantization step at the leaves; 0: unknown precision
     NormalContext normals_;
     std::vector<uint16_t> sourceIds_;  // per input: its orientation rule, Surfel::source
+    std::vector<uint32_t> inputOfSource_;
+    std::vector<std::string> inputNames_;
     std::string normalSource_, textureFilter_;
     bool store_[kLidarCount] = {};  // per kLidarAttributes: stored
     bool storeOpacity_ = false;     // some surfel is translucent: "opacity" is stored

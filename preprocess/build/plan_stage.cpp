@@ -323,7 +323,8 @@ Status forEachPartBatch(const BuildContext& c, const InputPart& part, std::span<
     InputStats stats;  // the part's sources, as forEachBatch indexes them
     stats.sources.assign(c.stats().sources.begin() + long(part.firstSource),
                          c.stats().sources.begin() + long(part.firstSource + part.sources));
-    return forEachBatch(inputs, stats, c.rootMin(), c.sourceIds().subspan(part.firstSource, part.sources), stored, consume);
+    return forEachBatch(inputs, stats, c.rootMin(), c.sourceIds().subspan(part.firstSource, part.sources), stored, consume,
+                        c.inputOfSource().subspan(part.firstSource, part.sources));
 }
 
 Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& c, const InputPart& part, Progress& progress) {

@@ -39,9 +39,9 @@ Status sameLayout(const TilesetInfo& set, const TilesetInfo& updated, const std:
 
 // A decoded block's surfels as the builder holds them (positions relative to
 // the root minimum, colours in 16 bits, LiDAR values as read, the stored
-// scalar fields as rows of `table`), with orientation rule `source`.
-void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRecord& node, const BlockData& block, uint16_t source,
-                   std::vector<Surfel>* out, ScalarTable* table) {
+// scalar fields as rows of `table`), with orientation rules `rules`.
+void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRecord& node, const BlockData& block,
+                   const std::vector<uint16_t>& rules, std::vector<Surfel>* out, ScalarTable* table) {
     const TilesetInfo& info = set.info();
     const Vec3d origin = c.rootMin();
     const AttributeInfo* intensity = info.attribute(kLidarAttributes[kLidarIntensity]);
@@ -51,7 +51,7 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
         s.normal = Vec3f{block.normals[3 * i], block.normals[3 * i + 1], block.normals[3 * i + 2]};
         if (!block.colors.empty())
             for (int k = 0; k < 3; ++k) s.color[k] = info.colorBits == 8 ? uint16_t(block.colors[3 * i + k] * 257) : block.colors[3 * i + k];
-        s.source = source;
+        s.source = rules[i];
         // The stored intensity is (value - offset) / scale: its value again
         // stores as the same integer.
         if (!block.intensity.empty() && intensity)
@@ -84,12 +84,45 @@ bool inside(const NodeKey& key, const NodeKey& chunk) {
     return below >= 0 && (key.x >> below) == chunk.x && (key.y >> below) == chunk.y && (key.z >> below) == chunk.z;
 }
 
+
+// The statistics without the removed inputs' points (`gone`, decoded from
+// the set): their sources keep their places with no points, the bounds are
+// the other sources' again, and the histograms lose the points' values
+// (exact, but for intensities stored in steps wider than 1 and duplicates the
+// build merged, whose one surviving point had one input's provenance).
+void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource, const std::vector<uint32_t>& removed,
+                     const std::vector<Surfel>& gone) {
+    stats.bounds = Box3d{};
+    for (size_t i = 0; i < stats.sources.size(); ++i) {
+        SourceStats& src = stats.sources[i];
+        if (std::find(removed.begin(), removed.end(), inputOfSource[i]) != removed.end()) {
+            stats.points -= std::min(stats.points, src.points);
+            stats.skipped -= std::min(stats.skipped, src.skipped);
+            src.points = src.skipped = 0;
+            src.bounds = Box3d{};
+        } else if (src.points > 0) {
+            stats.bounds.extend(src.bounds);
+        }
+    }
+    AttributeStats& a = stats.attributes;
+    auto less = [](std::vector<uint64_t>& h, size_t v) {
+        if (v < h.size() && h[v] > 0) --h[v];
+    };
+    for (const Surfel& s : gone) {
+        if (a.intensityPoints) less(a.intensityHistogram, s.intensity), --a.intensityPoints;
+        if (a.classifiedPoints) less(a.classCounts, s.classification), --a.classifiedPoints;
+        if (a.returnPoints) less(a.returnsHistogram, s.returns), --a.returnPoints;
+        if (s.alpha < 255 && a.translucentPoints) --a.translucentPoints;
+    }
+}
+
 }  // namespace
 
-Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record,
-                                   const std::vector<std::string>& commandLine) {
+Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
+                                   const BuildPlan& record, const std::vector<std::string>& commandLine) {
     const auto start = std::chrono::steady_clock::now();
     const BuildOptions opt = normalizeOptions(options);
+    const size_t added = request.added;
     Progress progress(opt.progress);
     BuildSummary summary;
     auto reader = TilesetReader::open(set);
@@ -106,38 +139,105 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, co
     auto old = BuildContext::derive(setOptions, record.stats, false);
     if (!old) return old.status();
     SC_TRY(sameLayout(info, (*old)->tilesetInfo(), set + "/" + buildRecordFile(info.hierarchyFile) + " (not this set's record)"));
+    const auto oldRules = (*old)->sourceIds();
+    const auto oldInputs = (*old)->inputOfSource();
+    for (uint32_t k : request.removed) {
+        uint64_t points = 0;
+        for (size_t i = 0; i < oldInputs.size(); ++i) points += oldInputs[i] == k ? record.stats.sources[i].points : 0;
+        if (points == 0) return Status::error(set + ": input " + std::to_string(k) + " has no points in the set (removed before?)");
+    }
+    // A kept point's orientation rule is its input's (its first scan's: an
+    // input of several scans, an E57 file, has a rule per scan, which the set
+    // does not keep per point).
+    for (const SourceStats& src : record.stats.sources)
+        if (src.description.scanOrigins.size() > 1)
+            return Status::error(set + ": " + src.description.path +
+                                 " holds several scans, whose points' scans the set does not keep; build it anew");
+    auto ruleOf = [&](const BlockData& block) {
+        std::vector<uint16_t> rules(block.size(), oldRules.empty() ? 0 : oldRules[0]);
+        const ScalarAttribute* input = nullptr;
+        for (const ScalarAttribute& a : block.scalars)
+            if (a.name == kProvenanceAttribute) input = &a;
+        if (input)
+            for (size_t i = 0; i < rules.size(); ++i)
+                for (size_t src = 0; src < oldInputs.size(); ++src)
+                    if (oldInputs[src] == input->values[i]) {
+                        rules[i] = oldRules[src];
+                        break;
+                    }
+        return rules;
+    };
+    auto inputsOf = [&](const BlockData& block) {
+        std::vector<uint32_t> of(block.size(), 0);
+        for (const ScalarAttribute& a : block.scalars)
+            if (a.name == kProvenanceAttribute) of = a.values;
+        return of;
+    };
 
-    // The added inputs: scanned, then the context of them all, in the set's root cube.
-    InputOptions addedInputs = opt.inputs;
-    addedInputs.defaultScene = false;
-    addedInputs.paths.assign(opt.inputs.paths.end() - long(added), opt.inputs.paths.end());
-    progress.begin("scan", 0);
-    auto scanned = scanInputs(addedInputs, [&](uint64_t n) { progress.advance(n); });
-    if (!scanned) return scanned.status();
-    summary.phaseSeconds.push_back({"scan", progress.end()});
+    // The added inputs: scanned; all of them together must keep the set's layout.
+    InputStats stats = record.stats;
     const size_t oldSources = record.stats.sources.size();
-    const uint64_t addedPoints = scanned->points;
-    if (addedPoints == 0) return Status::error("the added inputs hold no valid points");
-    InputStats merged = mergeInputStats({record.stats, std::move(*scanned)}, {false, false});
-    auto derived = BuildContext::derive(opt, std::move(merged), true, old->get());
+    uint64_t addedPoints = 0;
+    if (added > 0) {
+        InputOptions addedInputs = opt.inputs;
+        addedInputs.defaultScene = false;
+        addedInputs.paths.assign(opt.inputs.paths.end() - long(added), opt.inputs.paths.end());
+        progress.begin("scan", 0);
+        auto scanned = scanInputs(addedInputs, [&](uint64_t n) { progress.advance(n); });
+        if (!scanned) return scanned.status();
+        summary.phaseSeconds.push_back({"scan", progress.end()});
+        addedPoints = scanned->points;
+        if (addedPoints == 0) return Status::error("the added inputs hold no valid points");
+        stats = mergeInputStats({std::move(stats), std::move(*scanned)}, {false, false});
+        auto all = BuildContext::derive(opt, stats, true, old->get());
+        if (!all) return all.status();
+        SC_TRY(sameLayout(info, (*all)->tilesetInfo(), set));
+        if (!std::equal(oldRules.begin(), oldRules.end(), (*all)->sourceIds().begin()))
+            return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
+    }
+
+    // The removed inputs' points: in the leaves their sources' bounds reach.
+    std::vector<Box3d> removedBoxes;
+    for (size_t i = 0; i < oldInputs.size(); ++i)
+        if (std::find(request.removed.begin(), request.removed.end(), oldInputs[i]) != request.removed.end())
+            removedBoxes.push_back(record.stats.sources[i].bounds);
+    auto reaches = [&](const NodeRecord& n, const std::vector<Box3d>& boxes, const Vec3d& shift) {
+        const Vec3d lo = nodeMin(info, n.key) - shift;
+        const double e = nodeEdge(info, n.key.level);
+        return std::any_of(boxes.begin(), boxes.end(), [&](const Box3d& b) {
+            for (int a = 0; a < 3; ++a)
+                if (lo[a] > b.max[a] || lo[a] + e < b.min[a]) return false;
+            return true;
+        });
+    };
+    std::vector<Surfel> gone;  // the removed points, relative to the root
+    if (!request.removed.empty()) {
+        progress.begin("find removed", 0);
+        for (const NodeRecord& n : reader->nodes()) {
+            if (!(n.flags & kFlagInputPoints) || !reaches(n, removedBoxes, Vec3d{})) continue;
+            auto block = decode(*reader, n);
+            if (!block) return block.status();
+            std::vector<Surfel> points;
+            appendSurfels(**old, *reader, n, *block, ruleOf(*block), &points, nullptr);
+            const std::vector<uint32_t> of = inputsOf(*block);
+            for (size_t i = 0; i < points.size(); ++i)
+                if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) gone.push_back(points[i]);
+            progress.advance(points.size());
+        }
+        summary.phaseSeconds.push_back({"find removed", progress.end()});
+        removeFromStats(stats, oldInputs, request.removed, gone);
+    }
+
+    // The context of what the set will hold, in the set's layout.
+    auto derived = BuildContext::derive(opt, std::move(stats), false, old->get(), true);
     if (!derived) return derived.status();
     const BuildContext& c = **derived;
     c.describe(&summary);
-    SC_TRY(sameLayout(info, c.tilesetInfo(), set));
-    const auto oldRules = (*old)->sourceIds();
-    if (!std::equal(oldRules.begin(), oldRules.end(), c.sourceIds().begin()))
-        return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
-    // Without provenance the kept points' inputs are unknown: every input
-    // must orient its normals by the same rule, which is then theirs.
-    if (std::any_of(oldRules.begin(), oldRules.end(), [&](uint16_t r) { return r != oldRules[0]; }))
-        return Status::error(set + ": its inputs orient their normals by different rules, which an update cannot tell apart yet; build it anew");
-    const uint16_t keptRule = oldRules.empty() ? 0 : oldRules[0];
 
-    // The plan of all the inputs: one part, the counts summed.
+    // The plan of all the inputs: one part, the counts changed by the points.
     BuildPlan plan;
     plan.stats = c.stats();
     InputPart all;
-    all.first = 0;
     all.last = (opt.inputs.defaultScene ? 1 : 0) + opt.inputs.paths.size();
     all.sources = c.stats().sources.size();
     all.points = c.stats().points;
@@ -146,7 +246,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, co
     if (!most) return most.status();
     plan.maxChunkPoints = *most;
     if (plan.maxChunkPoints != record.maxChunkPoints)
-        return Status::error(set + ": the added points outgrow the set's single chunk; build it anew from all its inputs");
+        return Status::error(set + ": the update changes whether the set's points fit one chunk; build it anew from all its inputs");
     InputPart addedPart;
     addedPart.first = all.last - added;
     addedPart.last = all.last;
@@ -154,30 +254,50 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, co
     addedPart.sources = c.stats().sources.size() - oldSources;
     addedPart.points = addedPoints;
     if (plan.maxChunkPoints > 0) {
-        progress.begin("count", addedPoints);
-        auto counts = countStage(c, addedPart, progress);
-        if (!counts) return counts.status();
-        summary.phaseSeconds.push_back({"count", progress.end()});
-        plan.counts = addCounts({record.counts, *counts});
+        std::map<uint32_t, int64_t> cells;
+        for (auto [cell, n] : record.counts) cells[cell] += n;
+        if (added > 0) {
+            progress.begin("count", addedPoints);
+            auto counts = countStage(c, addedPart, progress);
+            if (!counts) return counts.status();
+            summary.phaseSeconds.push_back({"count", progress.end()});
+            for (auto [cell, n] : *counts) cells[cell] += n;
+        }
+        for (const Surfel& s : gone) cells[uint32_t(ChunkLayout::cellIndex(s.position, c.rootEdge()))]--;
+        for (auto [cell, n] : cells)
+            if (n > 0) plan.counts.push_back({cell, uint32_t(std::min<int64_t>(n, UINT32_MAX))});
     }
     ChunkLayout layout = plan.layout(c);
     const ChunkLayout before = record.layout(**old);
 
-    // The chunks to build: those the added points or their halos reach, and
-    // those the set did not have.
+    // The chunks to build: those the added or removed points or their halos
+    // reach, and those the set did not have.
     std::set<NodeKey> oldChunks;
     for (const Chunk& ch : before.chunks()) oldChunks.insert(ch.key);
     std::vector<bool> touched(layout.chunks().size(), false);
     for (size_t i = 0; i < touched.size(); ++i) touched[i] = !oldChunks.count(layout.chunks()[i].key);
     std::vector<int> halo;
-    SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
-        for (const Surfel& s : batch) {
-            touched[size_t(layout.chunkOf(s.position))] = true;
+    auto touch = [&](std::span<const Surfel> points) {
+        for (const Surfel& s : points) {
+            const int own = layout.chunkOf(s.position);
+            if (own >= 0) touched[size_t(own)] = true;
             layout.haloChunksOf(s.position, &halo);
             for (int h : halo) touched[size_t(h)] = true;
         }
-        return Status{};
-    }));
+    };
+    touch(gone);
+    // A removed point's cell may be empty now, and so in no chunk: the chunk
+    // that held it is rebuilt where the layout keeps it.
+    std::map<NodeKey, size_t> chunkIndex;
+    for (size_t i = 0; i < layout.chunks().size(); ++i) chunkIndex[layout.chunks()[i].key] = i;
+    for (const Surfel& s : gone)
+        if (const int was = before.chunkOf(s.position); was >= 0)
+            if (auto it = chunkIndex.find(before.chunks()[size_t(was)].key); it != chunkIndex.end()) touched[it->second] = true;
+    if (added > 0)
+        SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+            touch(batch);
+            return Status{};
+        }));
 
     auto writer = TilesetWriter::update(set, info);
     if (!writer) return writer.status();
@@ -187,7 +307,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, co
     if (ec) return Status::error(work.dir + ": cannot create (" + ec.message() + ")");
 
     // Their points: the set's leaves that reach a rebuilt chunk or its halo,
-    // and the added points.
+    // but the removed inputs' points, and the added points.
     std::vector<Box3d> rebuilt;
     for (size_t i = 0; i < touched.size(); ++i)
         if (touched[i]) {
@@ -202,27 +322,32 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, co
     {
         ChunkWriter chunkWriter(layout, work.chunks(0), c.scalars().size());
         for (const NodeRecord& n : reader->nodes()) {
-            if (!(n.flags & kFlagInputPoints)) continue;
-            const Vec3d lo = c.nodeMinRel(n.key);
-            const double e = c.edge(n.key.level);
-            const bool reaches = std::any_of(rebuilt.begin(), rebuilt.end(), [&](const Box3d& b) {
-                for (int a = 0; a < 3; ++a)
-                    if (lo[a] > b.max[a] || lo[a] + e < b.min[a]) return false;
-                return true;
-            });
-            if (!reaches) continue;
+            if (!(n.flags & kFlagInputPoints) || !reaches(n, rebuilt, c.rootMin())) continue;
             auto block = decode(*reader, n);
             if (!block) return block.status();
             std::vector<Surfel> points;
             ScalarTable table = c.emptyTable();
-            appendSurfels(c, *reader, n, *block, keptRule, &points, &table);
+            appendSurfels(c, *reader, n, *block, ruleOf(*block), &points, &table);
+            if (!request.removed.empty()) {
+                const std::vector<uint32_t> of = inputsOf(*block);
+                size_t kept = 0;
+                const size_t fields = table.fields();
+                for (size_t i = 0; i < points.size(); ++i) {
+                    if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) continue;
+                    std::copy_n(table.values.begin() + long(i * fields), fields, table.values.begin() + long(kept * fields));
+                    points[kept++] = points[i];
+                }
+                points.resize(kept);
+                table.values.resize(kept * fields);
+            }
             SC_TRY(chunkWriter.add(points, table.values));
             progress.advance(points.size());
         }
-        SC_TRY(forEachPartBatch(c, addedPart, c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-            progress.advance(batch.size());
-            return chunkWriter.add(batch, scalars);
-        }));
+        if (added > 0)
+            SC_TRY(forEachPartBatch(c, addedPart, c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
+                progress.advance(batch.size());
+                return chunkWriter.add(batch, scalars);
+            }));
         SC_TRY(chunkWriter.finish());
     }
     summary.phaseSeconds.push_back({"distribute", progress.end()});
@@ -256,7 +381,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, co
                 out.root = std::make_unique<BuiltNode>();
                 out.root->key = key;
                 out.rootScalars = c.emptyTable();
-                appendSurfels(c, *reader, n, *block, keptRule, &out.root->surfels, &out.rootScalars);
+                appendSurfels(c, *reader, n, *block, ruleOf(*block), &out.root->surfels, &out.rootScalars);
             }
             break;
         }

@@ -1,6 +1,7 @@
-// Updates in place (docs/FORMAT.md, "Updates in place"): scans added to a
-// published set, rebuilding only the chunks the new points reach (their own
-// points and their halos) and the levels above the chunks. Every other node
+// Updates in place (docs/FORMAT.md, "Updates in place"): scans added to or
+// removed from a published set, rebuilding only the chunks the added or
+// removed points reach (their own points and their halos) and the levels
+// above the chunks. Every other node
 // keeps its block, its byte range and so its ETag; the new blocks are appended
 // to blocks.bin and the new hierarchy switched in with tileset.json.
 #pragma once
@@ -13,15 +14,24 @@
 
 namespace surfcast {
 
+// What an update changes: inputs added (the last `added` of the options'
+// paths, after the set's own) and inputs removed (their indices: the built-in
+// scene 0 where the set has it, then the set's paths in order), whose points
+// the provenance attribute names (docs/FORMAT.md, "Provenance").
+struct UpdateRequest {
+    size_t added = 0;
+    std::vector<uint32_t> removed;
+};
+
 // `options`: the set's build options (from its build record) with the added
-// inputs after its own, `threads` and `progress` as the update asks;
-// `added`: how many of options.inputs.paths are new (the last ones); `set`:
-// the set's folder; `record`: the set's build record, `commandLine` the one
-// the updated set's record keeps. Fails, leaving the set as it was, where the
-// added points change a decision the kept blocks depend on (the root cube,
-// the colour depth, an attribute's quantization) or where the set was built
-// with textured meshes or captured weights.
-Result<BuildSummary> updateTileset(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record,
-                                   const std::vector<std::string>& commandLine);
+// inputs after its own, `threads` and `progress` as the update asks; `set`:
+// the set's folder; `record`: the set's build record; `commandLine`: the one
+// the updated set's record keeps. A removed input keeps its place, with no
+// points, so that the other points' provenance stays. Fails, leaving the set
+// as it was, where the added points change a decision the kept blocks depend
+// on (the root cube, the colour depth, an attribute's quantization) or where
+// the set was built with textured meshes or captured weights.
+Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
+                                   const BuildPlan& record, const std::vector<std::string>& commandLine);
 
 }  // namespace surfcast

@@ -447,7 +447,7 @@ InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool
 
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
                     std::span<const uint16_t> sourceIds, std::span<const ScalarQuantization> stored,
-                    const BatchConsumer& consume) {
+                    const BatchConsumer& consume, std::span<const uint32_t> inputOf) {
     std::vector<InputPoint> batch(kBatchPoints);
     std::vector<Surfel> surfels(kBatchPoints);
     std::vector<uint32_t> scalars;
@@ -461,7 +461,7 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
         const std::vector<ScalarField>& own = reader.description().scalars;
         std::vector<int> from(stored.size(), -1);
         for (size_t f = 0; f < stored.size(); ++f)
-            for (size_t j = 0; j < own.size(); ++j)
+            for (size_t j = 0; j < own.size() && !stored[f].provenance; ++j)
                 if (own[j].name == stored[f].name) from[f] = int(j);
         while (true) {
             auto n = reader.read(batch.data(), batch.size());
@@ -484,6 +484,8 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
             }
             scalars.assign(*n * stored.size(), 0);
             for (size_t f = 0; f < stored.size(); ++f) {
+                if (stored[f].provenance && r < inputOf.size())
+                    for (size_t i = 0; i < *n; ++i) scalars[i * stored.size() + f] = inputOf[r];
                 if (from[f] < 0) continue;
                 const ScalarQuantization& q = stored[f];
                 const double maxQ = std::ldexp(1.0, q.bits) - 1;

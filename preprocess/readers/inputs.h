@@ -90,7 +90,13 @@ struct ScalarQuantization {
     bool categorical = false;
     double offset = 0, step = 1;
     int bits = 1;
+    // The set's provenance (docs/FORMAT.md, "Provenance"): each point's input,
+    // which forEachBatch fills in, not a field of the inputs.
+    bool provenance = false;
 };
+// The provenance attribute's name (reserved: an input's own field of this
+// name is not stored beside it).
+inline constexpr const char* kProvenanceAttribute = "input";
 
 struct InputStats {
     std::vector<SourceStats> sources;
@@ -114,10 +120,11 @@ InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool
 // Every accepted point as a Surfel (position minus `origin`, colour scaled to
 // 16 bits, LiDAR attributes as read, Surfel::source = sourceIds[input] + the
 // point's scan where its input has several), in
-// batches, with the `stored` scalar fields quantized: stored.size() per point.
+// batches, with the `stored` scalar fields quantized: stored.size() per point
+// (a provenance field: inputOf[source], the input each source belongs to).
 using BatchConsumer = std::function<Status(std::span<Surfel>, std::span<const uint32_t> scalars)>;
 Status forEachBatch(const InputOptions& options, const InputStats& stats, const Vec3d& origin,
                     std::span<const uint16_t> sourceIds, std::span<const ScalarQuantization> stored,
-                    const BatchConsumer& consume);
+                    const BatchConsumer& consume, std::span<const uint32_t> inputOf = {});
 
 }  // namespace surfcast

@@ -29,6 +29,9 @@ export class TileSource {
   // offers it (Surfcast-Batch: N, docs/PROTOCOL.md "Batch"); 0 elsewhere,
   // where nodes go by Range only, so a static host never sees a POST.
   batchNodes = 0;
+  // The set's version (hierarchy.crc32) batches ask for (?v=): surfcast-serve
+  // keeps serving it after an update until the one after (PROTOCOL.md, "Versions").
+  version: number | undefined;
   requests = 0;
   bytes = 0;
 
@@ -119,7 +122,7 @@ export class TileSource {
   // Several nodes' blobs in one POST (surfcast-serve's batch): for each key in
   // order, a little-endian u32 length, then the blob.
   async blobs(nodes: { key: string; blockSize: number }[]): Promise<Uint8Array[]> {
-    const url = `${this.base}/batch`;
+    const url = `${this.base}/batch${this.version === undefined ? "" : `?v=${this.version}`}`;
     const expected = nodes.reduce((s, n) => s + 4 + n.blockSize, 0);
     const r = await this.send(url, { method: "POST", body: nodes.map((n) => n.key).join(","),
                                      headers: this.headers({ "Content-Type": "text/plain" }) }, url);

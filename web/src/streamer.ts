@@ -167,6 +167,7 @@ export class Streamer<T> {
     const stop = () => false;
     const json = await withRetries(options.maxTries, () => source.text("tileset.json", kMaxTilesetJsonBytes), stop);
     const info = parseTileset(json, `${source.base}/tileset.json`);
+    source.version = info.hierarchyCrc;
     const what = `${source.base}/${info.hierarchyFile}`;
     const head = await withRetries(options.maxTries, () => source.range(info.hierarchyFile, 0, Math.min(info.hierarchyBytes, 32 + 16 * info.hierarchyPages)), stop);
     if (head.length < 32 || indexBytes(head) !== head.length)

@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""Updates in place against a rebuild, side by side (README, "Updating a set").
+
+The lion (lion_takanawa.copc.laz) tiled --tiles in x/y and cut into --cells
+files of about a million points each by tests/tools/split_laz.py: a survey of
+many files. The set of all files but one inner cell is built once; then, in
+this one process, one after the other:
+
+  update   a copy of that set, `surfcast-build --add CELL --to SET`;
+  rebuild  `surfcast-build` of every file, the cell included.
+
+For each: wall time, bytes written (the update: what it appended to
+blocks.bin, its hierarchy, build record and tileset.json; the rebuild: the
+whole set), and the bytes a client holding the old set must fetch again: the
+nodes whose block is not where and what it was (byte ranges of blocks.bin),
+and the nodes whose block bytes changed (surfcast-serve's node ETags are the
+block's CRC and size), each with the new hierarchy and tileset.json.
+
+Usage: bench/.venv/bin/python bench/update_bench.py [--tiles 18x17] [--cells 10x10x1]
+       [--work DIR] [--threads N] [--memory 2G]
+Prints Markdown for bench/BENCHMARKS.md ("Updates in place").
+"""
+import argparse
+import json
+import os
+import platform
+import shutil
+import struct
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DATA = os.environ.get("SURFCAST_DATA_DIR", os.path.join(ROOT, "..", "shared", "data"))
+BUILD = os.path.join(ROOT, "build", "bin", "surfcast-build")
+
+
+def records(set_dir):
+    """{(level, x, y, z): (offset, size, crc)} of a set's hierarchy."""
+    info = json.load(open(os.path.join(set_dir, "tileset.json")))
+    data = open(os.path.join(set_dir, info["hierarchy"].get("file", "hierarchy.bin")), "rb").read()
+    pages = struct.unpack_from("<I", data, 12)[0]
+    out = {}
+    for p in range(pages):
+        offset, count, _ = struct.unpack_from("<QII", data, 32 + 16 * p)
+        for i in range(count):
+            level, _, _, x, y, z, block, size, crc = struct.unpack_from("<BBHIIIQII", data, offset + 64 * i)
+            out[(level, x, y, z)] = (block, size, crc)
+    return out, len(data), info
+
+
+def run(args):
+    start = time.monotonic()
+    r = subprocess.run(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0:
+        sys.exit(f"{' '.join(args[:3])}...: exit {r.returncode}\n{r.stdout[-3000:]}")
+    return time.monotonic() - start, r.stdout
+
+
+def set_bytes(set_dir):
+    return sum(os.path.getsize(os.path.join(set_dir, f)) for f in os.listdir(set_dir))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--tiles", default="18x17")
+    ap.add_argument("--cells", default="10x10x1")
+    ap.add_argument("--work", default="/tmp/surfcast-update-bench")
+    ap.add_argument("--threads", default=str(os.cpu_count()))
+    ap.add_argument("--memory", default="2G")
+    a = ap.parse_args()
+    os.makedirs(a.work, exist_ok=True)
+    cells = os.path.join(a.work, "cells")
+    if not os.path.isdir(cells):
+        run([sys.executable, os.path.join(ROOT, "tests", "tools", "split_laz.py"), os.path.join(DATA, "lion_takanawa.copc.laz"),
+             cells, "--tiles", a.tiles, "--cells", a.cells, "--min-files", "10"])
+    files = sorted(os.path.join(cells, f) for f in os.listdir(cells))
+    # The middle cell (split_laz.py names a cell's file by its index
+    # (x * cells_y + y) * cells_z + z): an inner one.
+    cx, cy, cz = (int(v) for v in a.cells.split("x"))
+    added = os.path.join(cells, "r%06d.laz" % ((cx // 2 * cy + cy // 2) * cz))
+    if added not in files:
+        sys.exit(f"{added}: the middle cell holds no points; choose other --cells")
+    base = [f for f in files if f != added]
+    common = ["-q", "--threads", a.threads, "--memory", a.memory]
+    with open(os.path.join(a.work, "base.list"), "w") as f:
+        f.write("\n".join(base) + "\n")
+    with open(os.path.join(a.work, "all.list"), "w") as f:
+        f.write("\n".join(base + [added]) + "\n")
+    base_set, upd, fresh = (os.path.join(a.work, n) for n in ("base", "update", "rebuild"))
+    if not os.path.exists(os.path.join(base_set, "tileset.json")):
+        t, _ = run([BUILD, *common, "@" + os.path.join(a.work, "base.list"), "-o", base_set])
+        print(f"base set built in {t:.1f} s", file=sys.stderr)
+    old, _, old_info = records(base_set)
+    shutil.rmtree(upd, ignore_errors=True)
+    shutil.copytree(base_set, upd)
+
+    t_update, out_update = run([BUILD, "-q", "--threads", a.threads, "--add", added, "--to", upd])
+    shutil.rmtree(fresh, ignore_errors=True)
+    t_rebuild, _ = run([BUILD, *common, "@" + os.path.join(a.work, "all.list"), "-o", fresh])
+
+    rows = []
+    for name, folder, seconds in (("update", upd, t_update), ("rebuild", fresh, t_rebuild)):
+        new, hierarchy_bytes, info = records(folder)
+        json_bytes = os.path.getsize(os.path.join(folder, "tileset.json"))
+        if name == "update":
+            record = os.path.join(folder, "build" + info["hierarchy"]["file"][len("hierarchy"):])
+            written = info["blocks"]["bytes"] - old_info["blocks"]["bytes"] + hierarchy_bytes + os.path.getsize(record) + json_bytes
+        else:
+            written = set_bytes(folder)
+        by_range = sum(s for k, (o, s, c) in new.items() if old.get(k) != (o, s, c))
+        by_crc = sum(s for k, (o, s, c) in new.items() if k not in old or old[k][1:] != (s, c))
+        kept = sum(1 for k, r in new.items() if old.get(k) == r)
+        rows.append((name, seconds, written, by_range + hierarchy_bytes + json_bytes, by_crc + hierarchy_bytes + json_bytes,
+                     len(new), kept, info["blocks"]["bytes"], info["input_points"]))
+    added_points = rows[0][8] - old_info["input_points"]
+    print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+          f"`{' '.join(sys.argv)}`\n")
+    print(f"Set: {old_info['input_points']:,} points in {len(base)} files; added: {os.path.basename(added)}, "
+          f"{added_points:,} points ({100 * added_points / old_info['input_points']:.2f} %)\n")
+    print("| | time (s) | bytes written | re-download, byte ranges | re-download, node ETags | nodes | nodes kept in place | blocks.bin |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, seconds, written, by_range, by_crc, nodes, kept, blocks, _ in rows:
+        print(f"| {name} | {seconds:.1f} | {written:,} | {by_range:,} | {by_crc:,} | {nodes:,} | {kept:,} | {blocks:,} |")
+    u, r = rows
+    print(f"\nupdate / rebuild: time {u[1] / r[1]:.3f}, bytes written {u[2] / r[2]:.3f}, "
+          f"re-download by ranges {u[3] / r[3]:.3f}, by ETags {u[4] / r[4]:.3f}")
+    print("\nupdate's summary:\n```\n" + out_update.strip() + "\n```")
+
+
+if __name__ == "__main__":
+    main()
