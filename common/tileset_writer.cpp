@@ -30,7 +30,10 @@ Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& 
     // export (surfcast-export) has a tileset.json alone, and is not replaced.
     auto folder = PublishedFolder::create(output, "tileset.json", [](const std::string& out) {
         std::error_code ec;
-        return fs::exists(fs::path(out) / "tileset.json", ec) && fs::exists(fs::path(out) / "hierarchy.bin", ec);
+        if (!fs::exists(fs::path(out) / "tileset.json", ec)) return false;
+        for (const auto& e : fs::directory_iterator(out, ec))  // hierarchy.bin, or an updated set's hierarchy-XXXXXXXX.bin
+            if (validHierarchyFile(e.path().filename().string())) return true;
+        return false;
     }, "a tile set");
     if (!folder) return folder.status();
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
@@ -89,10 +92,12 @@ Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
     return {};
 }
 
-Result<std::unique_ptr<TilesetWriter>> TilesetWriter::update(const std::string& set, const TilesetInfo& current) {
+Result<std::unique_ptr<TilesetWriter>> TilesetWriter::update(const std::string& set, const TilesetInfo& current,
+                                                            const std::vector<NodeRecord>& currentNodes) {
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
     w->set_ = set;
     w->current_ = current;
+    for (const NodeRecord& r : currentNodes) w->currentNodes_[r.key] = r;
     // A hidden folder inside the set for the new blobs and the build's work
     // (readers and surfcast-serve never open it); a killed update's is
     // cleared by the next one.
@@ -210,7 +215,7 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     // The new blobs, in hierarchy order, after the current set's last byte (a
     // killed update's bytes beyond it are cut first: no reader reads them).
     const std::string blocksPath = set_ + "/blocks.bin";
-    const int out = ::open(blocksPath.c_str(), O_WRONLY | O_CLOEXEC);
+    const int out = ::open(blocksPath.c_str(), O_RDWR | O_CLOEXEC);
     if (out < 0) return Status::error(blocksPath + ": cannot open for writing (" + std::strerror(errno) + ")");
     struct Closer {
         int fd;
@@ -221,7 +226,7 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     std::map<NodeKey, size_t> index;
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     std::map<uint32_t, int> open;
-    std::vector<uint8_t> blob;
+    std::vector<uint8_t> blob, was;
     uint64_t offset = current_.blocksBytes;
     Status failed;
     for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
@@ -229,6 +234,15 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
         if (sources_[i] == kKept) continue;
         failed = readBlob(i, open, blob);
         if (!failed.ok()) break;
+        // Built again to the same bytes: it keeps its place (and its ETag).
+        if (auto it = currentNodes_.find(key); it != currentNodes_.end() && it->second.blockSize == blob.size() &&
+                                               it->second.blockCrc == records_[i].blockCrc) {
+            was.resize(blob.size());
+            if (::pread(out, was.data(), was.size(), off_t(it->second.blockOffset)) == ssize_t(was.size()) && was == blob) {
+                records_[i].blockOffset = it->second.blockOffset;
+                continue;
+            }
+        }
         if (::pwrite(out, blob.data(), blob.size(), off_t(offset)) != ssize_t(blob.size())) {
             failed = Status::error(blocksPath + ": write failed (disk full?)");
             break;

@@ -37,7 +37,10 @@ public:
     // tileset.json with one rename, so a reader sees the old set or the new
     // one. The previous version's hierarchy stays for clients that opened it;
     // older ones go.
-    static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current);
+    // A blob built again with the same bytes as the current node of its key
+    // (`currentNodes`) keeps that node's place too.
+    static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,
+                                                         const std::vector<NodeRecord>& currentNodes);
 
     // Thread-safe: appends a node's blob to a temporary file and keeps the
     // record with its size and CRC.
@@ -79,6 +82,7 @@ private:
     static constexpr uint32_t kKept = ~1u;  // an update's node whose blob stays in place
     std::string set_;          // an update's set folder; empty for a new set
     TilesetInfo current_;      // an update's tileset.json before it
+    std::map<NodeKey, NodeRecord> currentNodes_;  // and its nodes
     std::string record_;       // the build record to publish, if any
     std::mutex mutex_;
 };

@@ -33,6 +33,7 @@ namespace {
 const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (INPUT: a file, a folder, or @LIST)
        surfcast-build --default-scene -o OUT
        surfcast-build --add INPUT... | --remove NAME... | --replace OLD NEW  --to SET
+       surfcast-build --compact SET
        surfcast-build --info SET            (SET: a folder or an http(s) URL)
        surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
        surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
@@ -65,6 +66,9 @@ ranges from any host that honours Range (meshes are read from local files).
                           file name only one input has), in place alike
   --replace OLD NEW --to SET
                           remove input OLD's points and add NEW's, in one update
+  --compact SET           write the set anew without the blocks its updates
+                          replaced (replaced atomically, as a rebuild is: byte
+                          ranges change, node ETags do not)
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how
@@ -196,6 +200,7 @@ struct Args {
     // NAME..., --replace OLD NEW (the positional arguments).
     std::string update;
     std::string to;
+    std::string compact;  // --compact SET
 };
 
 // Parses `args` into `out`; returns -1, or the exit status (after --help, or a
@@ -236,6 +241,9 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
         } else if ((a == "--add" || a == "--remove" || a == "--replace") && stage.empty()) {
             if (!out->update.empty() && out->update != a) return usageError(out->update + " and " + a + " are separate updates");
             out->update = a;
+            continue;
+        } else if (a == "--compact" && stage.empty()) {
+            if (!value(&out->compact)) return usageError("--compact needs a tile set folder");
             continue;
         } else if (a == "--to" && stage.empty()) {
             if (!value(&out->to)) return usageError("--to needs a tile set folder");
@@ -571,6 +579,33 @@ int runUpdate(const Args& a) {
     return 0;
 }
 
+// surfcast-build --compact SET: the set written anew without the blocks its
+// updates replaced, its nodes' bytes (and so their ETags) as they were.
+int runCompact(const std::string& dir) {
+    auto reader = surfcast::TilesetReader::open(dir);
+    if (!reader) return fail(reader.status());
+    const std::string blocks = dir + "/blocks.bin";
+    std::error_code ec;
+    const uint64_t size = std::filesystem::file_size(blocks, ec);
+    if (ec) return fail(surfcast::Status::error(blocks + ": " + ec.message()));
+    auto writer = surfcast::TilesetWriter::create(dir);
+    if (!writer) return fail(writer.status());
+    const std::string record = dir + "/" + surfcast::buildRecordFile(reader->info().hierarchyFile);
+    if (std::filesystem::exists(record)) {
+        const std::string copy = (*writer)->partialDir() + "/build.record";
+        std::filesystem::copy_file(record, copy, ec);
+        if (ec) return fail(surfcast::Status::error(record + ": cannot copy (" + ec.message() + ")"));
+        (*writer)->setBuildRecord(copy);
+    }
+    if (auto st = (*writer)->addPlacedNodes(blocks, size, reader->nodes()); !st.ok()) return fail(st);
+    surfcast::TilesetInfo info = reader->info();
+    const uint64_t before = size;
+    if (auto st = (*writer)->finish(info); !st.ok()) return fail(st);
+    std::printf("compacted %s: blocks.bin %llu bytes, was %llu\n", dir.c_str(), (unsigned long long)info.blocksBytes,
+                (unsigned long long)before);
+    return 0;
+}
+
 int runStage(const std::string& stage, const std::vector<std::string>& own) {
     Args a;
     if (int status = parseArgs(own, stage, &a); status >= 0) return status;
@@ -735,6 +770,11 @@ int main(int argc, char** argv) {
         return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
+    if (!a.compact.empty()) {
+        if (!a.update.empty() || !a.opt.output.empty() || !a.opt.inputs.paths.empty() || a.opt.inputs.defaultScene)
+            return usageError("--compact SET takes no inputs, no -o and no update");
+        return runCompact(a.compact);
+    }
     if (!a.update.empty() || !a.to.empty()) {
         if (a.update.empty()) return usageError("--to names the set that --add, --remove or --replace updates");
         return runUpdate(a);

@@ -6,11 +6,15 @@
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <signal.h>
+#include <unistd.h>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <random>
 #include <sstream>
+#include <thread>
 #include <tuple>
 
 #include "block_codec.h"
@@ -258,6 +262,29 @@ TEST_F(UpdateTest, RemovingTheAddedScanGivesBackTheSetBefore) {
     r = test::run({test::binary("surfcast-build"), "-q", "--remove", "nothing.laz", "--to", set()});
     EXPECT_EQ(r.exitCode, 1) << r.output;
     EXPECT_NE(r.output.find("not one of the set's inputs"), std::string::npos) << r.output;
+
+    // --compact: the same nodes and bytes, none of the replaced ones.
+    auto updated = TilesetReader::open(set());
+    ASSERT_TRUE(updated) << updated.status().message();
+    std::map<NodeKey, std::pair<uint32_t, uint32_t>> blocks;
+    uint64_t live = 0;
+    for (const NodeRecord& n : updated->nodes()) blocks[n.key] = {n.blockCrc, n.blockSize}, live += n.blockSize;
+    ASSERT_GT(fs::file_size(set() + "/blocks.bin"), live) << "two updates left no replaced blocks to reclaim";
+    r = test::run({test::binary("surfcast-build"), "--compact", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto compacted = TilesetReader::open(set());
+    ASSERT_TRUE(compacted) << compacted.status().message();
+    EXPECT_TRUE(verifyTileset(*compacted));
+    EXPECT_EQ(fs::file_size(set() + "/blocks.bin"), live);
+    EXPECT_EQ(compacted->info().hierarchyFile, "hierarchy.bin");
+    std::map<NodeKey, std::pair<uint32_t, uint32_t>> after;
+    for (const NodeRecord& n : compacted->nodes()) after[n.key] = {n.blockCrc, n.blockSize};
+    EXPECT_TRUE(after == blocks) << "compaction changed a node's bytes";
+    EXPECT_TRUE(fs::exists(set() + "/build.bin"));
+    for (const auto& e : fs::directory_iterator(set())) {
+        const std::string name = e.path().filename().string();
+        EXPECT_TRUE(name == "tileset.json" || name == "hierarchy.bin" || name == "blocks.bin" || name == "build.bin") << name;
+    }
 }
 
 // --replace OLD NEW equals a fresh build of the inputs without OLD and with NEW.
@@ -349,6 +376,65 @@ TEST_F(UpdateTest, ServedNodesKeepTheirETagsAndTheVersionBeforeStaysReadable) {
     EXPECT_EQ(stale->status, 409);
     ::kill(server.pid, SIGTERM);
     EXPECT_EQ(test::exitCode(server.pid), 0);
+}
+
+// A kill at any moment of an update leaves the old set or the new one, whole
+// (every block's checksum verified), never a mix; the next update clears
+// what the killed ones left.
+TEST_F(UpdateTest, KillAnywhereLeavesTheOldSetOrTheNewOne) {
+    const std::string pristine = dir.file("pristine");
+    fs::copy(set(), pristine, fs::copy_options::recursive);
+    auto restore = [&] {
+        fs::remove_all(set());
+        fs::copy(pristine, set(), fs::copy_options::recursive);
+    };
+    const std::string oldJson = test::readFile(set() + "/tileset.json");
+    const std::vector<std::string> update = {test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()};
+    const auto t0 = std::chrono::steady_clock::now();
+    auto r = test::run(update);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const std::string newJson = test::readFile(set() + "/tileset.json");
+    ASSERT_NE(newJson, oldJson);
+    restore();
+    r = test::run(update);
+    ASSERT_EQ(test::readFile(set() + "/tileset.json"), newJson) << "the update is not deterministic: the check below needs it to be";
+
+    std::mt19937 random(34);
+    std::map<std::string, int> outcomes;
+    const int runs = test::kSanitized ? 6 : 20;
+    for (int i = 0; i < runs; ++i) {
+        restore();
+        const double at = std::uniform_real_distribution<double>(0, 1.1 * seconds)(random);
+        test::Child child = test::spawn(update);
+        std::this_thread::sleep_for(std::chrono::duration<double>(at));
+        ::kill(child.pid, SIGKILL);
+        test::exitCode(child.pid);
+        ::close(child.err);
+        const std::string json = test::readFile(set() + "/tileset.json");
+        const char* outcome = json == oldJson ? "old" : json == newJson ? "new" : "mixed";
+        ++outcomes[outcome];
+        EXPECT_NE(std::string(outcome), "mixed") << "killed after " << at << " s";
+        auto reader = TilesetReader::open(set());
+        ASSERT_TRUE(reader) << "killed after " << at << " s: " << reader.status().message();
+        auto verified = verifyTileset(*reader);
+        EXPECT_TRUE(verified) << "killed after " << at << " s: " << verified.status().message();
+    }
+    for (const auto& [what, n] : outcomes) std::printf("%s: %d\n", what.c_str(), n);
+    // An update after one killed half way (which leaves its folder and
+    // bytes past blocks.bytes) finishes, and leaves nothing of the other's.
+    restore();
+    test::Child child = test::spawn(update);
+    std::this_thread::sleep_for(std::chrono::duration<double>(0.5 * seconds));
+    ::kill(child.pid, SIGKILL);
+    test::exitCode(child.pid);
+    ::close(child.err);
+    if (test::readFile(set() + "/tileset.json") != oldJson) restore();
+    r = test::run(update);
+    EXPECT_EQ(test::readFile(set() + "/tileset.json"), newJson);
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    for (const auto& e : fs::directory_iterator(set()))
+        EXPECT_NE(e.path().filename().string().rfind(".update-", 0), 0u) << "left behind: " << e.path();
 }
 
 // Bad input during an update: the set's files stay as they were, and the

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <filesystem>
 #include <set>
+#include <unordered_set>
 
 #include "built_node.h"
 #include "tileset_reader.h"
@@ -299,7 +300,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
             return Status{};
         }));
 
-    auto writer = TilesetWriter::update(set, info);
+    auto writer = TilesetWriter::update(set, info, reader->nodes());
     if (!writer) return writer.status();
     const WorkFolder work{(*writer)->partialDir() + "/work"};
     std::error_code ec;
@@ -318,6 +319,37 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
             b.max = c.nodeMinRel(ch.key) + Vec3d{e + m, e + m, e + m};
             rebuilt.push_back(b);
         }
+    // Normals the build estimated are estimated again near the added and
+    // removed points, whose neighbourhoods changed (within one chunk-root cell
+    // of the finest rebuilt chunk: a normal's 16 neighbours lie far closer);
+    // elsewhere a point keeps its normal, and so its node its bytes.
+    double nearCell = c.rootEdge();
+    for (size_t i = 0; i < touched.size(); ++i)
+        if (touched[i]) nearCell = std::min(nearCell, layout.margin(int(i)) / kHaloCells);
+    std::unordered_set<uint64_t> changedCells;
+    auto cellKey = [&](const Vec3d& p, int dx, int dy, int dz) {
+        auto axis = [&](double v, int d) { return uint64_t(int64_t(std::floor(v / nearCell)) + d) & 0x1FFFFF; };
+        return axis(p.x, dx) << 42 | axis(p.y, dy) << 21 | axis(p.z, dz);
+    };
+    for (const Surfel& s : gone) changedCells.insert(cellKey(s.position, 0, 0, 0));
+    if (added > 0)
+        SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+            for (const Surfel& s : batch) changedCells.insert(cellKey(s.position, 0, 0, 0));
+            return Status{};
+        }));
+    auto nearChange = [&](const Vec3d& p) {
+        for (int dx = -1; dx <= 1; ++dx)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dz = -1; dz <= 1; ++dz)
+                    if (changedCells.count(cellKey(p, dx, dy, dz))) return true;
+        return false;
+    };
+    std::vector<bool> estimated;  // per input: its normals were estimated
+    for (size_t i = 0; i < oldInputs.size(); ++i) {
+        if (estimated.size() <= oldInputs[i]) estimated.resize(oldInputs[i] + 1, false);
+        if (!record.stats.sources[i].description.hasNormals) estimated[oldInputs[i]] = true;
+    }
+
     progress.begin("distribute", 0);
     {
         ChunkWriter chunkWriter(layout, work.chunks(0), c.scalars().size());
@@ -328,8 +360,10 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
             std::vector<Surfel> points;
             ScalarTable table = c.emptyTable();
             appendSurfels(c, *reader, n, *block, ruleOf(*block), &points, &table);
+            const std::vector<uint32_t> of = inputsOf(*block);
+            for (size_t i = 0; i < points.size(); ++i)
+                if (of[i] < estimated.size() && estimated[of[i]] && nearChange(points[i].position)) points[i].normal = Vec3f{};
             if (!request.removed.empty()) {
-                const std::vector<uint32_t> of = inputsOf(*block);
                 size_t kept = 0;
                 const size_t fields = table.fields();
                 for (size_t i = 0; i < points.size(); ++i) {
