@@ -16,8 +16,15 @@ nodes whose block is not where and what it was (byte ranges of blocks.bin),
 and the nodes whose block bytes changed (surfcast-serve's node ETags are the
 block's CRC and size), each with the new hierarchy and tileset.json.
 
+With --repeated N: the lion tiled 6 x 5 (10.26 M points) cut into 32 x 32
+cells of about 0.1 % each; the set of all cells but N, then those N added one
+update at a time. Against a fresh build of all the cells and the updated set
+compacted (--compact): blocks.bin's bytes, the live blocks' bytes (what a
+client streaming the whole set downloads), time, and the images of four
+views at --lod 1 against the fresh build's (mean FLIP, flip-evaluator).
+
 Usage: bench/.venv/bin/python bench/update_bench.py [--tiles 18x17] [--cells 10x10x1]
-       [--work DIR] [--threads N] [--memory 2G]
+       [--work DIR] [--threads N] [--memory 2G] [--repeated N]
 Prints Markdown for bench/BENCHMARKS.md ("Updates in place").
 """
 import argparse
@@ -61,6 +68,78 @@ def set_bytes(set_dir):
     return sum(os.path.getsize(os.path.join(set_dir, f)) for f in os.listdir(set_dir))
 
 
+def live_bytes(set_dir):
+    return sum(size for _, size, _ in records(set_dir)[0].values())
+
+
+def views(set_dir, out_prefix):
+    """Four views around the set at --lod 1, as float images in [0, 1]."""
+    import numpy as np
+    from PIL import Image
+    info = json.load(open(os.path.join(set_dir, "tileset.json")))
+    lo, hi = info["bounds"]["min"], info["bounds"]["max"]
+    centre = [(a + b) / 2 for a, b in zip(lo, hi)]
+    radius = max(b - a for a, b in zip(lo, hi))
+    images = []
+    for i, (dx, dy) in enumerate(((1, 0), (0, 1), (-1, 0), (0, -1))):
+        eye = [centre[0] + dx * radius, centre[1] + dy * radius, centre[2] + 0.6 * radius]
+        camera = ",".join(str(v) for v in eye + centre + [0, 0, 1, 45])
+        png = f"{out_prefix}_{i}.png"
+        subprocess.run([os.path.join(ROOT, "build", "bin", "surfcast-view"), "--headless", set_dir, "--size", "640x360",
+                        "--lod", "1", f"--camera={camera}", "--out", png], check=True, capture_output=True)
+        images.append(np.asarray(Image.open(png).convert("RGB")).astype(np.float32) / 255)
+    return images
+
+
+def repeated(a):
+    import flip_evaluator as flip
+    work = os.path.join(a.work, "repeated")
+    os.makedirs(work, exist_ok=True)
+    cells = os.path.join(work, "cells")
+    if not os.path.isdir(cells):
+        run([sys.executable, os.path.join(ROOT, "tests", "tools", "split_laz.py"), os.path.join(DATA, "lion_takanawa.copc.laz"),
+             cells, "--tiles", "6x5", "--cells", "32x32x1", "--min-files", "200"])
+    files = sorted(os.path.join(cells, f) for f in os.listdir(cells))
+    step = len(files) // a.repeated
+    adds = files[step // 2::step][:a.repeated]
+    base = [f for f in files if f not in adds]
+    for name, inputs in (("base.list", base), ("all.list", base + adds)):
+        with open(os.path.join(work, name), "w") as f:
+            f.write("\n".join(inputs) + "\n")
+    common = ["-q", "--threads", a.threads, "--memory", a.memory]
+    upd, fresh = os.path.join(work, "update"), os.path.join(work, "rebuild")
+    shutil.rmtree(upd, ignore_errors=True)
+    t_base, _ = run([BUILD, *common, "@" + os.path.join(work, "base.list"), "-o", upd])
+    base_bytes = os.path.getsize(os.path.join(upd, "blocks.bin"))
+    times = []
+    for f in adds:
+        t, _ = run([BUILD, "-q", "--threads", a.threads, "--add", f, "--to", upd])
+        times.append(t)
+    shutil.rmtree(fresh, ignore_errors=True)
+    t_fresh, _ = run([BUILD, *common, "@" + os.path.join(work, "all.list"), "-o", fresh])
+    updated_blocks, updated_live = os.path.getsize(os.path.join(upd, "blocks.bin")), live_bytes(upd)
+    ref = views(fresh, os.path.join(work, "fresh"))
+    img = views(upd, os.path.join(work, "updated"))
+    flips = [float(flip.evaluate(r, i, "LDR")[1]) for r, i in zip(ref, img)]
+    compacted = os.path.join(work, "compacted")
+    shutil.rmtree(compacted, ignore_errors=True)
+    shutil.copytree(upd, compacted)
+    t_compact, _ = run([BUILD, "--compact", compacted])
+    points = json.load(open(os.path.join(fresh, "tileset.json")))["input_points"]
+    print(f"\nRepeated appends: {len(adds)} updates of one cell each ({points / len(files):,.0f} points, "
+          f"{100 / len(files):.2f} % of {points:,}), to the set of the other {len(base)} cells (built in {t_base:.1f} s)\n")
+    print("| set | blocks.bin | live blocks (a whole-set download) | nodes | time (s) |")
+    print("|---|---|---|---|---|")
+    print(f"| fresh build of all cells | {os.path.getsize(os.path.join(fresh, 'blocks.bin')):,} | {live_bytes(fresh):,} | "
+          f"{len(records(fresh)[0]):,} | {t_fresh:.1f} |")
+    print(f"| after {len(adds)} updates | {updated_blocks:,} (base {base_bytes:,}) | {updated_live:,} | {len(records(upd)[0]):,} | "
+          f"{sum(times):.1f} in all, {min(times):.2f}-{max(times):.2f} each |")
+    print(f"| compacted | {os.path.getsize(os.path.join(compacted, 'blocks.bin')):,} | {live_bytes(compacted):,} | "
+          f"{len(records(compacted)[0]):,} | {t_compact:.1f} |")
+    print(f"\nMean FLIP of the updated set against the fresh build at --lod 1, four views: "
+          f"{', '.join(f'{v:.4f}' for v in flips)} (compaction moves no byte of a block)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tiles", default="18x17")
@@ -68,7 +147,10 @@ def main():
     ap.add_argument("--work", default="/tmp/surfcast-update-bench")
     ap.add_argument("--threads", default=str(os.cpu_count()))
     ap.add_argument("--memory", default="2G")
+    ap.add_argument("--repeated", type=int, default=0, help="appends of one 0.1 %% cell each (the drift case)")
     a = ap.parse_args()
+    if a.repeated:
+        return repeated(a)
     os.makedirs(a.work, exist_ok=True)
     cells = os.path.join(a.work, "cells")
     if not os.path.isdir(cells):

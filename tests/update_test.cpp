@@ -307,6 +307,78 @@ TEST_F(UpdateTest, ReplacedScanEqualsAFreshBuild) {
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
 }
 
+// A scan beyond the set's root cube grows the root: the old root becomes a
+// node of a cube of 2^d of its edges, so every kept node decodes, under its
+// new key, to the very points it held; the set equals a fresh build of all
+// the inputs in its leaf points.
+TEST_F(UpdateTest, GrowingPastTheRootKeepsTheOriginalNodesPoints) {
+    // The south-west quarter of the scan (cells 0, 1, 4, 5), then the far
+    // north-east cell: beyond the quarter's root cube.
+    const std::string quarter = dir.file("sets/q"), far = dir.path() + "/parts/r000015.laz";
+    std::vector<std::string> cells;
+    for (const char* c : {"r000000", "r000001", "r000004", "r000005"}) cells.push_back(dir.path() + "/parts/" + c + ".laz");
+    auto args = cells;
+    args.insert(args.end(), {"-o", quarter});
+    auto r = test::run(build(args));
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    fs::copy(quarter, dir.file("quarter-before"), fs::copy_options::recursive);
+    auto before = TilesetReader::open(dir.file("quarter-before"));
+    ASSERT_TRUE(before) << before.status().message();
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", far, "--to", quarter});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto after = TilesetReader::open(quarter);
+    ASSERT_TRUE(after) << after.status().message();
+    ASSERT_TRUE(verifyTileset(*after));
+
+    // The new root: 2^d old edges, the old root at whole edges from its corner.
+    const TilesetInfo &a = before->info(), &b = after->info();
+    const double ratio = b.rootEdge / a.rootEdge;
+    const int d = int(std::lround(std::log2(ratio)));
+    ASSERT_GE(d, 1);
+    ASSERT_EQ(std::ldexp(1.0, d), ratio);
+    uint32_t offset[3];
+    for (int axis = 0; axis < 3; ++axis) {
+        const double o = (a.rootMin[axis] - b.rootMin[axis]) / a.rootEdge;
+        ASSERT_EQ(o, std::round(o)) << "the old root is not aligned in the new one";
+        offset[axis] = uint32_t(o);
+    }
+    std::map<NodeKey, NodeRecord> oldNodes;
+    for (const NodeRecord& n : before->nodes()) {
+        NodeKey k = n.key;
+        k.level = uint8_t(n.key.level + d);
+        k.x += offset[0] << n.key.level, k.y += offset[1] << n.key.level, k.z += offset[2] << n.key.level;
+        oldNodes[k] = n;
+    }
+    size_t kept = 0;
+    for (const NodeRecord& n : after->nodes()) {
+        if (n.blockOffset >= a.blocksBytes) continue;
+        auto it = oldNodes.find(n.key);
+        ASSERT_NE(it, oldNodes.end()) << n.key.name() << ": kept, but no old node has this key once moved";
+        ASSERT_EQ(n.blockCrc, it->second.blockCrc) << n.key.name();
+        auto was = before->readBlock(it->second);
+        auto is = after->readBlock(n);
+        ASSERT_TRUE(was && is);
+        for (size_t i = 0; i < is->size(); ++i) {
+            const Vec3d p = after->position(n, *is, i), q = before->position(it->second, *was, i);
+            ASSERT_NEAR(p.x, q.x, 1e-9 * b.rootEdge) << n.key.name();
+            ASSERT_NEAR(p.y, q.y, 1e-9 * b.rootEdge) << n.key.name();
+            ASSERT_NEAR(p.z, q.z, 1e-9 * b.rootEdge) << n.key.name();
+        }
+        ++kept;
+    }
+    EXPECT_GT(kept, 0u) << "growing the root kept no node";
+
+    cells.insert(cells.end(), {far, "-o", dir.file("fresh")});
+    auto fresh = test::run(build(cells));
+    ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
+    double step = 0;
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(quarter, &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    ASSERT_EQ(updated.size(), expected.size());
+    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+}
+
 // surfcast-serve across an update: nodes whose blocks did not change keep
 // their ETags (304 to a client's conditional request), and a client that read
 // tileset.json before the switch still gets its version's nodes, batches and
@@ -457,11 +529,19 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
     EXPECT_NE(r.output.find("broken.laz"), std::string::npos) << r.output;
     expectUntouched("a truncated input");
 
-    // A scan beyond the set's root cube (re-rooting is not built yet).
-    r = test::run({test::binary("surfcast-build"), "-q", "--add", test::dataFile("Megaplot.laz"), "--to", set()});
+    // A scan the set's layout cannot take: the added cell with intensities
+    // 256 times the set's (0-254 become up to 65,024), whose range no longer
+    // fits the 12 bits the set's blocks store them in at a step of 1.
+    const std::string louder = dir.file("louder.laz");
+    auto written = test::run({SURFCAST_TEST_PYTHON, "-c",
+                              "import laspy, sys\nlas = laspy.read(sys.argv[1])\nlas.intensity = (las.intensity.astype('uint32') * 256)"
+                              ".clip(0, 65535).astype('uint16')\nlas.write(sys.argv[2])\n",
+                              added[0], louder});
+    ASSERT_EQ(written.exitCode, 0) << written.output;
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", louder, "--to", set()});
     EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find("root cube"), std::string::npos) << r.output;
-    expectUntouched("a scan outside the root cube");
+    EXPECT_NE(r.output.find("how attribute 'intensity' is stored"), std::string::npos) << r.output;
+    expectUntouched("a scan the set's layout cannot take");
 
     // Build options are the set's own.
     r = test::run({test::binary("surfcast-build"), "--add", added[0], "--to", set(), "--grid", "64"});

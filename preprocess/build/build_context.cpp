@@ -88,6 +88,13 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
     return std::shared_ptr<const BuildContext>(std::move(c));
 }
 
+std::shared_ptr<const BuildContext> BuildContext::rerooted(const BuildContext& c, const Vec3d& rootMin, double rootEdge) {
+    std::shared_ptr<BuildContext> r(new BuildContext(c));
+    r->rootMin_ = rootMin;
+    r->rootEdge_ = rootEdge;
+    return r;
+}
+
 ScalarTable BuildContext::emptyTable() const {
     ScalarTable t;
     for (const ScalarQuantization& q : stored_) t.categorical.push_back(q.categorical);

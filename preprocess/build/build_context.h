@@ -64,6 +64,10 @@ public:
     static Result<std::shared_ptr<const BuildContext>> derive(const BuildOptions& options, InputStats stats, bool report = true,
                                                               const BuildContext* set = nullptr, bool keepLayout = false);
 
+    // `c` with its root cube replaced (an update that grows a set past its
+    // root: the old root becomes a node of the new one).
+    static std::shared_ptr<const BuildContext> rerooted(const BuildContext& c, const Vec3d& rootMin, double rootEdge);
+
     const BuildOptions& options() const { return opt_; }
     const InputStats& stats() const { return stats_; }
     int threads() const { return threads_; }

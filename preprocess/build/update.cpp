@@ -80,6 +80,56 @@ Result<BlockData> decode(const TilesetReader& set, const NodeRecord& node) {
     return block;
 }
 
+// A set grown past its root cube: the old root becomes the node at `levels`
+// below the new root at `offset` (in old-root edges), so every old node keeps
+// its box, and so its block (positions are relative to the node).
+struct Growth {
+    int levels = 0;
+    uint32_t offset[3] = {};
+    Vec3d rootMin;
+    double rootEdge = 0;
+
+    NodeKey key(NodeKey k) const {
+        const int l = k.level;
+        k.level = uint8_t(l + levels);
+        k.x += offset[0] << l, k.y += offset[1] << l, k.z += offset[2] << l;
+        return k;
+    }
+    // A counting-grid cell (ChunkLayout::cellIndex) of the old root in the new one.
+    uint32_t cell(uint32_t index) const {
+        if (levels == 0) return index;
+        const uint32_t n = 1u << kCountLevel, mask = n - 1;
+        const uint32_t c[3] = {index >> (2 * kCountLevel), (index >> kCountLevel) & mask, index & mask};
+        uint32_t out[3];
+        for (int a = 0; a < 3; ++a) out[a] = ((offset[a] << kCountLevel) + c[a]) >> levels;
+        return (out[0] << (2 * kCountLevel)) | (out[1] << kCountLevel) | out[2];
+    }
+};
+
+// The smallest cube of 2^levels old root edges, aligned with the old root,
+// that holds `bounds` (levels 0: the old root holds them).
+Result<Growth> growRoot(const TilesetInfo& set, const Box3d& bounds) {
+    Growth g;
+    for (g.levels = 0; g.levels + set.levels <= kMaxLevel; ++g.levels) {
+        const double edge = std::ldexp(set.rootEdge, g.levels);
+        bool fits = true;
+        for (int a = 0; a < 3 && fits; ++a) {
+            const double lo = std::min(bounds.min[a], set.rootMin[a]);
+            const double steps = std::ceil((set.rootMin[a] - lo) / set.rootEdge);
+            g.offset[a] = uint32_t(steps);
+            g.rootMin[a] = set.rootMin[a] - steps * set.rootEdge;
+            fits = steps <= std::ldexp(1.0, g.levels) - 1 && bounds.max[a] < g.rootMin[a] + edge;
+        }
+        if (fits) {
+            g.rootEdge = edge;
+            if (g.levels == 0) g.rootMin = set.rootMin;
+            return g;
+        }
+    }
+    return Status::error("the added inputs lie too far from the set: its root would grow past level " + std::to_string(kMaxLevel) +
+                         "; build it anew from all its inputs");
+}
+
 bool inside(const NodeKey& key, const NodeKey& chunk) {
     const int below = int(key.level) - int(chunk.level);
     return below >= 0 && (key.x >> below) == chunk.x && (key.y >> below) == chunk.y && (key.z >> below) == chunk.z;
@@ -175,7 +225,11 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         return of;
     };
 
-    // The added inputs: scanned; all of them together must keep the set's layout.
+    // The added inputs: scanned; all of them together must keep the set's
+    // layout, in its root cube or in one grown around it.
+    std::shared_ptr<const BuildContext> root = *old;  // the set's layout in the updated set's root cube
+    TilesetInfo rootInfo = info;
+    Growth grow;
     InputStats stats = record.stats;
     const size_t oldSources = record.stats.sources.size();
     uint64_t addedPoints = 0;
@@ -190,9 +244,17 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         addedPoints = scanned->points;
         if (addedPoints == 0) return Status::error("the added inputs hold no valid points");
         stats = mergeInputStats({std::move(stats), std::move(*scanned)}, {false, false});
-        auto all = BuildContext::derive(opt, stats, true, old->get());
+        auto grown = growRoot(info, stats.bounds);
+        if (!grown) return grown.status();
+        grow = *grown;
+        if (grow.levels > 0) {
+            root = BuildContext::rerooted(**old, grow.rootMin, grow.rootEdge);
+            rootInfo.rootMin = grow.rootMin;
+            rootInfo.rootEdge = grow.rootEdge;
+        }
+        auto all = BuildContext::derive(opt, stats, true, root.get());
         if (!all) return all.status();
-        SC_TRY(sameLayout(info, (*all)->tilesetInfo(), set));
+        SC_TRY(sameLayout(rootInfo, (*all)->tilesetInfo(), set));
         if (!std::equal(oldRules.begin(), oldRules.end(), (*all)->sourceIds().begin()))
             return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
     }
@@ -219,7 +281,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
             auto block = decode(*reader, n);
             if (!block) return block.status();
             std::vector<Surfel> points;
-            appendSurfels(**old, *reader, n, *block, ruleOf(*block), &points, nullptr);
+            appendSurfels(*root, *reader, n, *block, ruleOf(*block), &points, nullptr);
             const std::vector<uint32_t> of = inputsOf(*block);
             for (size_t i = 0; i < points.size(); ++i)
                 if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) gone.push_back(points[i]);
@@ -230,7 +292,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     }
 
     // The context of what the set will hold, in the set's layout.
-    auto derived = BuildContext::derive(opt, std::move(stats), false, old->get(), true);
+    auto derived = BuildContext::derive(opt, std::move(stats), false, root.get(), true);
     if (!derived) return derived.status();
     const BuildContext& c = **derived;
     c.describe(&summary);
@@ -256,7 +318,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     addedPart.points = addedPoints;
     if (plan.maxChunkPoints > 0) {
         std::map<uint32_t, int64_t> cells;
-        for (auto [cell, n] : record.counts) cells[cell] += n;
+        for (auto [cell, n] : record.counts) cells[grow.cell(cell)] += n;
         if (added > 0) {
             progress.begin("count", addedPoints);
             auto counts = countStage(c, addedPart, progress);
@@ -274,7 +336,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     // The chunks to build: those the added or removed points or their halos
     // reach, and those the set did not have.
     std::set<NodeKey> oldChunks;
-    for (const Chunk& ch : before.chunks()) oldChunks.insert(ch.key);
+    for (const Chunk& ch : before.chunks()) oldChunks.insert(grow.key(ch.key));
     std::vector<bool> touched(layout.chunks().size(), false);
     for (size_t i = 0; i < touched.size(); ++i) touched[i] = !oldChunks.count(layout.chunks()[i].key);
     std::vector<int> halo;
@@ -292,15 +354,18 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     std::map<NodeKey, size_t> chunkIndex;
     for (size_t i = 0; i < layout.chunks().size(); ++i) chunkIndex[layout.chunks()[i].key] = i;
     for (const Surfel& s : gone)
-        if (const int was = before.chunkOf(s.position); was >= 0)
-            if (auto it = chunkIndex.find(before.chunks()[size_t(was)].key); it != chunkIndex.end()) touched[it->second] = true;
+        if (const int was = before.chunkOf(s.position + (c.rootMin() - (*old)->rootMin())); was >= 0)
+            if (auto it = chunkIndex.find(grow.key(before.chunks()[size_t(was)].key)); it != chunkIndex.end()) touched[it->second] = true;
     if (added > 0)
         SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             touch(batch);
             return Status{};
         }));
 
-    auto writer = TilesetWriter::update(set, info, reader->nodes());
+    // The set's nodes under the keys of the updated set's root.
+    std::vector<NodeRecord> nodes = reader->nodes();
+    for (NodeRecord& n : nodes) n.key = grow.key(n.key);
+    auto writer = TilesetWriter::update(set, info, nodes);
     if (!writer) return writer.status();
     const WorkFolder work{(*writer)->partialDir() + "/work"};
     std::error_code ec;
@@ -404,18 +469,19 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     std::map<size_t, ChunkOutput> kept;
     for (size_t i = 0; i < layout.chunks().size(); ++i)
         if (!touched[i]) kept[i].plan = plan.id;
-    for (const NodeRecord& n : reader->nodes()) {
+    for (size_t j = 0; j < nodes.size(); ++j) {
+        const NodeRecord& n = nodes[j];
         for (auto& [i, out] : kept) {
             const NodeKey& key = layout.chunks()[i].key;
             if (!inside(n.key, key)) continue;
             out.records.push_back(n);
             if (n.key == key && !(key == NodeKey{})) {
-                auto block = decode(*reader, n);
+                auto block = decode(*reader, reader->nodes()[j]);
                 if (!block) return block.status();
                 out.root = std::make_unique<BuiltNode>();
                 out.root->key = key;
                 out.rootScalars = c.emptyTable();
-                appendSurfels(c, *reader, n, *block, ruleOf(*block), &out.root->surfels, &out.rootScalars);
+                appendSurfels(c, *reader, reader->nodes()[j], *block, ruleOf(*block), &out.root->surfels, &out.rootScalars);
             }
             break;
         }
