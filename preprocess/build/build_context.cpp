@@ -68,9 +68,9 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
         const Vec3d lo = set->rootMin_, hi = lo + Vec3d{1, 1, 1} * set->rootEdge_;
         for (int a = 0; a < 3; ++a)
             if (!(b.min[a] >= lo[a] && b.max[a] < hi[a]))
-                return Status::error("the inputs reach beyond the set's root cube on axis " + std::string(1, "xyz"[a]) + " (" +
+                return Status::error("internal: the inputs reach beyond the set's root cube on axis " + std::string(1, "xyz"[a]) + " (" +
                                      std::to_string(b.min[a]) + " to " + std::to_string(b.max[a]) + ", the cube " + std::to_string(lo[a]) +
-                                     " to " + std::to_string(hi[a]) + "): growing a set past its root is not built yet; build it anew from all its inputs");
+                                     " to " + std::to_string(hi[a]) + "): an update grows the cube before it derives its context");
         c->rootMin_ = set->rootMin_;
         c->rootEdge_ = set->rootEdge_;
     }

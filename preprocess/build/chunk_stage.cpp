@@ -65,7 +65,7 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
         });
         size_t out = 0;
         for (size_t i = 0; i < v.size(); ++i) {
-            if (out > 0 && v[out - 1].position == v[i].position) v[out - 1].count += v[i].count;
+            if (out > 0 && v[out - 1].position == v[i].position && !(v[out - 1].fromSet && v[i].fromSet)) v[out - 1].count += v[i].count;
             else v[out++] = v[i];
         }
         v.resize(out);

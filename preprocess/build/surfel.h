@@ -22,8 +22,12 @@ struct Surfel {
     uint8_t returns = 0;     // return number in bits 0-3, number of returns in bits 4-7
     uint32_t row = 0;        // its stored scalar fields' row in the ScalarTable (sampler.h) of the nodes being built
     uint8_t alpha = 255;     // opacity, 255 = opaque; resampled levels take it prefiltered, as colour
+    // A leaf point of the set an update decoded (update.h): the set's leaves
+    // are distinct points (the build merged the exact duplicates), even where
+    // quantization gave two of them one position, so two such are never merged.
+    bool fromSet = false;
 };
-// 57 bytes of fields padded to the 8-byte alignment of the position.
+// 58 bytes of fields padded to the 8-byte alignment of the position.
 static_assert(sizeof(Surfel) == 64, "chunk files store Surfel records raw; keep them compact");
 
 }  // namespace surfcast

@@ -46,17 +46,26 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
     const TilesetInfo& info = set.info();
     const Vec3d origin = c.rootMin();
     const AttributeInfo* intensity = info.attribute(kLidarAttributes[kLidarIntensity]);
+    // A position quantized to the node's upper face lies in the neighbour's
+    // box: held just inside its own, it goes to its own chunk (a kept
+    // neighbour would drop it) and quantizes as before.
+    const double e = nodeEdge(info, node.key.level);
+    const Vec3d lo = nodeMin(info, node.key) - origin;
     for (size_t i = 0; i < block.size(); ++i) {
         Surfel s;
         s.position = set.position(node, block, i) - origin;
+        for (int a = 0; a < 3; ++a)
+            if (s.position[a] >= lo[a] + e) s.position[a] = std::nextafter(lo[a] + e, lo[a]);
         s.normal = Vec3f{block.normals[3 * i], block.normals[3 * i + 1], block.normals[3 * i + 2]};
         if (!block.colors.empty())
             for (int k = 0; k < 3; ++k) s.color[k] = info.colorBits == 8 ? uint16_t(block.colors[3 * i + k] * 257) : block.colors[3 * i + k];
         s.source = rules[i];
+        s.fromSet = node.flags & kFlagInputPoints;
         // The stored intensity is (value - offset) / scale: its value again
-        // stores as the same integer.
+        // stores as the same integer (the top step's value can pass 65535,
+        // which the clamp of storedIntensity also maps to the top).
         if (!block.intensity.empty() && intensity)
-            s.intensity = uint16_t(std::lround(block.intensity[i] * intensity->scale + intensity->offset));
+            s.intensity = uint16_t(std::clamp(std::lround(block.intensity[i] * intensity->scale + intensity->offset), 0l, 65535l));
         if (!block.classification.empty()) s.classification = block.classification[i];
         s.returns = uint8_t((block.returnNumber.empty() ? 0 : block.returnNumber[i] & 15) |
                             (block.numberOfReturns.empty() ? 0 : block.numberOfReturns[i] << 4));

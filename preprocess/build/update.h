@@ -29,8 +29,9 @@ struct UpdateRequest {
 // the updated set's record keeps. A removed input keeps its place, with no
 // points, so that the other points' provenance stays. Fails, leaving the set
 // as it was, where the added points change a decision the kept blocks depend
-// on (the root cube, the colour depth, an attribute's quantization) or where
-// the set was built with textured meshes or captured weights.
+// on (the colour depth, an attribute's quantization) or where the set was
+// built with textured meshes, captured weights or a file of several scans.
+// Points beyond the root cube grow it (the old root a node of the new one).
 Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
                                    const BuildPlan& record, const std::vector<std::string>& commandLine);
 
