@@ -280,7 +280,8 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     for (const auto& e : fs::directory_iterator(set_, ec)) {
         const std::string name = e.path().filename().string();
         const bool versioned = validHierarchyFile(name) || (name.rfind("build", 0) == 0 && validHierarchyFile("hierarchy" + name.substr(5)));
-        if (versioned && !keep.count(name)) fs::remove(e.path(), ec);
+        const bool partial = name.size() > 8 && name.compare(name.size() - 8, 8, ".partial") == 0;  // a killed update's
+        if ((versioned && !keep.count(name)) || partial) fs::remove(e.path(), ec);
     }
     fs::remove_all(partial_, ec);
     return {};

@@ -2,13 +2,16 @@
 // builder (octree_builder.h) and the verifier (tileset_reader.h) together.
 // Weight capture renders, so it runs as its own program (surfcast-weights, next
 // to this one): the build itself needs no Vulkan.
+#include <fcntl.h>
 #include <spawn.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -497,6 +500,22 @@ std::vector<std::string> storedCommandLine(const Args& a) {
     return stored;
 }
 
+// One update or compaction of a set at a time: an exclusive lock on its
+// folder, held until the process ends (a rebuild with -o does not take it).
+struct SetLock {
+    int fd = -1;
+    ~SetLock() {
+        if (fd >= 0) ::close(fd);
+    }
+};
+surfcast::Status lockSet(const std::string& set, SetLock* lock) {
+    lock->fd = ::open(set.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (lock->fd < 0) return surfcast::Status::error(set + ": cannot open (" + std::strerror(errno) + ")");
+    if (::flock(lock->fd, LOCK_EX | LOCK_NB) != 0)
+        return surfcast::Status::error(set + ": another update or compaction of this set is running");
+    return {};
+}
+
 // The input of a set's build record that NAME names: its path as given
 // (made absolute), or its file name where only one input has it; -1 with
 // `error` set otherwise.
@@ -533,6 +552,8 @@ int runUpdate(const Args& a) {
             return usageError(mode + " takes the set's own build options from its build record, not " + a.kept[i] + " (only --threads and -q)");
     }
     const std::string set = std::filesystem::absolute(a.to).lexically_normal().string();
+    SetLock lock;
+    if (auto st = lockSet(set, &lock); !st.ok()) return fail(st);
     std::string json;
     {
         std::ifstream in(set + "/tileset.json", std::ios::binary);
@@ -582,6 +603,8 @@ int runUpdate(const Args& a) {
 // surfcast-build --compact SET: the set written anew without the blocks its
 // updates replaced, its nodes' bytes (and so their ETags) as they were.
 int runCompact(const std::string& dir) {
+    SetLock lock;
+    if (auto st = lockSet(dir, &lock); !st.ok()) return fail(st);
     auto reader = surfcast::TilesetReader::open(dir);
     if (!reader) return fail(reader.status());
     const std::string blocks = dir + "/blocks.bin";
@@ -771,7 +794,7 @@ int main(int argc, char** argv) {
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
     if (!a.compact.empty()) {
-        if (!a.update.empty() || !a.opt.output.empty() || !a.opt.inputs.paths.empty() || a.opt.inputs.defaultScene)
+        if (!a.update.empty() || !a.to.empty() || !a.opt.output.empty() || !a.opt.inputs.paths.empty() || a.opt.inputs.defaultScene)
             return usageError("--compact SET takes no inputs, no -o and no update");
         return runCompact(a.compact);
     }

@@ -4,7 +4,6 @@
 // see bench/BENCHMARKS.md. This is the only file that includes microhttpd.h.
 #include "http_server.h"
 
-#include "crc32.h"
 
 #include <arpa/inet.h>
 #include <microhttpd.h>
@@ -439,7 +438,9 @@ struct HttpServer::Impl {
                 auto old = store.hierarchyFile(name, rest);
                 if (!old) return fail(r, 404, "not_found", "no such resource");
                 std::shared_ptr<const MappedFile> file = std::move(*old);
-                return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + hex8(crc32(file->data(), size_t(file->size()))) + "\"",
+                // hierarchy-XXXXXXXX.bin names its CRC; an updated set's hierarchy.bin never changes again.
+                const std::string tag = rest == "hierarchy.bin" ? "base-" + std::to_string(file->size()) : rest.substr(10, 8);
+                return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + tag + "\"",
                                   kRevalidate, file);
             }
             const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *snap->blocks;
@@ -448,7 +449,10 @@ struct HttpServer::Impl {
             if (rest == "tileset.json") r.header("Surfcast-Batch", std::to_string(config.maxBatch));
             // The JSON's CRC changes whenever any byte of the set does.
             std::string etag = "\"" + std::string(1, rest[0] == 't' ? 'j' : rest[0]) + "-" + hex8(snap->version) + "\"";
-            return serveBytes(c, r, snap, m.data(), m.size(), rest == "tileset.json" ? "application/json" : "application/octet-stream",
+            // blocks.bin: only what this version declares (an update appends
+            // before its switch, and the next one may cut a killed one's tail).
+            const uint64_t size = rest == "blocks.bin" ? std::min<uint64_t>(m.size(), snap->info.blocksBytes) : m.size();
+            return serveBytes(c, r, snap, m.data(), size, rest == "tileset.json" ? "application/json" : "application/octet-stream",
                               etag, kRevalidate);
         }
         if (!post && rest.rfind("nodes/", 0) == 0) {

@@ -133,6 +133,7 @@ std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name
         auto it = sets_.find(name);
         if (it != sets_.end() && exists) return it->second;
         sets_.erase(name);
+        previous_.erase(name);
         *error = loaded.status().message();
         return nullptr;
     }

@@ -95,6 +95,39 @@ std::shared_ptr<const BuildContext> BuildContext::rerooted(const BuildContext& c
     return r;
 }
 
+std::shared_ptr<const BuildContext> BuildContext::withLayoutOf(const BuildContext& c, const TilesetInfo& set) {
+    std::shared_ptr<BuildContext> r(new BuildContext(c));
+    r->rootMin_ = set.rootMin;
+    r->rootEdge_ = set.rootEdge;
+    r->attributeNames_.clear();
+    for (int i = 0; i < kLidarCount; ++i) {
+        r->store_[i] = set.attribute(kLidarAttributes[i]) != nullptr;
+        if (r->store_[i]) r->attributeNames_.push_back(kLidarAttributes[i]);
+    }
+    if (const AttributeInfo* a = set.attribute(kLidarAttributes[kLidarIntensity])) {
+        r->intensityOffset_ = int(std::lround(a->offset));
+        r->intensityStep_ = std::max(1, int(std::lround(a->scale)));
+    }
+    r->storeOpacity_ = set.attribute(kOpacityAttribute) != nullptr;
+    if (r->storeOpacity_) r->attributeNames_.push_back(kOpacityAttribute);
+    r->stored_.clear();
+    for (const AttributeInfo& a : set.attributes) {
+        if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) != std::end(kFixedAttributes) ||
+            lidarIndex(a.name) >= 0 || a.name == kOpacityAttribute)
+            continue;
+        ScalarQuantization q;
+        q.name = a.name;
+        q.categorical = a.kind == "categorical";
+        q.provenance = a.name == kProvenanceAttribute;
+        q.offset = a.offset;
+        q.step = a.scale;
+        q.bits = a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32;
+        r->stored_.push_back(q);
+        r->attributeNames_.push_back(q.name);
+    }
+    return r;
+}
+
 ScalarTable BuildContext::emptyTable() const {
     ScalarTable t;
     for (const ScalarQuantization& q : stored_) t.categorical.push_back(q.categorical);

@@ -67,6 +67,11 @@ public:
     // `c` with its root cube replaced (an update that grows a set past its
     // root: the old root becomes a node of the new one).
     static std::shared_ptr<const BuildContext> rerooted(const BuildContext& c, const Vec3d& rootMin, double rootEdge);
+    // `c` with the layout a set's tileset.json records (an update in place:
+    // its root cube, which attributes it stores and their quantization),
+    // whatever the statistics derive; a scalar field keeps its type's whole
+    // width, so values the update adds within the type are not clipped.
+    static std::shared_ptr<const BuildContext> withLayoutOf(const BuildContext& c, const TilesetInfo& set);
 
     const BuildOptions& options() const { return opt_; }
     const InputStats& stats() const { return stats_; }

@@ -192,7 +192,13 @@ Status ChunkWriter::add(std::span<const Surfel> points, std::span<const uint32_t
     assert(scalars.size() == points.size() * scalarsPerPoint_);
     for (size_t i = 0; i < points.size(); ++i) {
         const Surfel& s = points[i];
-        SC_TRY(append(layout_.chunkOf(s.position), false, s, scalars.data() + i * scalarsPerPoint_));
+        const int chunk = layout_.chunkOf(s.position);
+        // Counted points always have a chunk; an update's decoded ones, moved
+        // by quantization into a cell no point was counted in, may not.
+        if (chunk < 0)
+            return Status::error("a point at (" + std::to_string(s.position.x) + ", " + std::to_string(s.position.y) + ", " +
+                                 std::to_string(s.position.z) + ") from the root's corner lies in no chunk of the plan");
+        SC_TRY(append(chunk, false, s, scalars.data() + i * scalarsPerPoint_));
         layout_.haloChunksOf(s.position, &halo_);
         for (int h : halo_) SC_TRY(append(h, true, s, nullptr));
     }

@@ -38,6 +38,41 @@ Status sameLayout(const TilesetInfo& set, const TilesetInfo& updated, const std:
     return {};
 }
 
+// Whether the set's layout holds what an update adds: the attributes a fresh
+// build of all the inputs would store (`all`) are the set's, with its colour
+// depth, and the added values fit the set's quantization of each.
+Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& added, const std::string& where) {
+    auto refuse = [&](const std::string& what) {
+        return Status::error(where + ": the added inputs " + what + ", which the set's blocks were not written for; build the set "
+                             "anew from all its inputs");
+    };
+    if (set.colorBits != all.colorBits)
+        return refuse("change the colour depth (" + std::to_string(set.colorBits) + " to " + std::to_string(all.colorBits) + " bits)");
+    for (const AttributeInfo& a : all.attributes)
+        if (!set.attribute(a.name))
+            return refuse(a.name == kProvenanceAttribute ? std::string("make the set one of several inputs, whose points then carry their input")
+                                                         : "bring attribute '" + a.name + "'");
+    auto span = [](const AttributeInfo& a, int bits) { return a.offset + a.scale * (std::ldexp(1.0, bits) - 1); };
+    auto typeBits = [](const AttributeInfo& a) { return a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32; };
+    if (const AttributeInfo* a = set.attribute(kLidarAttributes[kLidarIntensity]); a && added.attributes.intensityPoints > 0) {
+        const auto& h = added.attributes.intensityHistogram;
+        const auto lo = std::find_if(h.begin(), h.end(), [](uint64_t n) { return n > 0; }) - h.begin();
+        const auto hi = h.rend() - std::find_if(h.rbegin(), h.rend(), [](uint64_t n) { return n > 0; }) - 1;
+        if (double(lo) < a->offset || double(hi) > span(*a, kIntensityBits))
+            return refuse("hold intensities " + std::to_string(lo) + "-" + std::to_string(hi) + " beyond the set's " +
+                          std::to_string(int(a->offset)) + "-" + std::to_string(int(span(*a, kIntensityBits))));
+    }
+    for (const ScalarStats& f : added.scalars) {
+        const AttributeInfo* a = set.attribute(f.field.name);
+        if (!a || f.points == 0) continue;
+        if (f.min < a->offset - 1e-9 * std::fabs(a->offset) || f.max > span(*a, typeBits(*a)))
+            return refuse("hold values of '" + f.field.name + "' beyond what the set stores");
+    }
+    if (const AttributeInfo* a = set.attribute(kProvenanceAttribute); a && all.inputs.size() > (uint64_t(1) << typeBits(*a)))
+        return refuse("bring the inputs past " + std::to_string(uint64_t(1) << typeBits(*a)) + ", what the input attribute holds");
+    return {};
+}
+
 // A decoded block's surfels as the builder holds them (positions relative to
 // the root minimum, colours in 16 bits, LiDAR values as read, the stored
 // scalar fields as rows of `table`), with orientation rules `rules`.
@@ -146,8 +181,8 @@ bool inside(const NodeKey& key, const NodeKey& chunk) {
 
 
 // The statistics without the removed inputs' points (`gone`, decoded from
-// the set): their sources keep their places with no points, the bounds are
-// the other sources' again, and the histograms lose the points' values
+// the set): their sources keep their places with no points, the set's bounds
+// are the other sources' again, and the histograms lose the points' values
 // (exact, but for intensities stored in steps wider than 1 and duplicates the
 // build merged, whose one surviving point had one input's provenance).
 void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource, const std::vector<uint32_t>& removed,
@@ -158,8 +193,7 @@ void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource,
         if (std::find(removed.begin(), removed.end(), inputOfSource[i]) != removed.end()) {
             stats.points -= std::min(stats.points, src.points);
             stats.skipped -= std::min(stats.skipped, src.skipped);
-            src.points = src.skipped = 0;
-            src.bounds = Box3d{};
+            src.points = src.skipped = 0;  // its bounds stay: its orientation rule must not change
         } else if (src.points > 0) {
             stats.bounds.extend(src.bounds);
         }
@@ -196,8 +230,12 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     // The set's context, from its record; the record must be this set's.
     BuildOptions setOptions = opt;
     setOptions.inputs.paths.resize(opt.inputs.paths.size() - added);
-    auto old = BuildContext::derive(setOptions, record.stats, false);
-    if (!old) return old.status();
+    auto derivedOld = BuildContext::derive(setOptions, record.stats, false);
+    if (!derivedOld) return derivedOld.status();
+    // Its layout is the set's own (what its blocks were written with), which
+    // the record's statistics need not derive again after an update.
+    const std::shared_ptr<const BuildContext> setContext = BuildContext::withLayoutOf(**derivedOld, info);
+    const auto* old = &setContext;
     SC_TRY(sameLayout(info, (*old)->tilesetInfo(), set + "/" + buildRecordFile(info.hierarchyFile) + " (not this set's record)"));
     const auto oldRules = (*old)->sourceIds();
     const auto oldInputs = (*old)->inputOfSource();
@@ -252,6 +290,11 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         summary.phaseSeconds.push_back({"scan", progress.end()});
         addedPoints = scanned->points;
         if (addedPoints == 0) return Status::error("the added inputs hold no valid points");
+        for (const SourceStats& src : scanned->sources)
+            if (src.description.scanOrigins.size() > 1)
+                return Status::error(src.description.path + ": holds several scans, whose points' scans a set does not keep for "
+                                     "later updates; build the set anew from all its inputs");
+        const InputStats addedStats = *scanned;
         stats = mergeInputStats({std::move(stats), std::move(*scanned)}, {false, false});
         auto grown = growRoot(info, stats.bounds);
         if (!grown) return grown.status();
@@ -261,9 +304,9 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
             rootInfo.rootMin = grow.rootMin;
             rootInfo.rootEdge = grow.rootEdge;
         }
-        auto all = BuildContext::derive(opt, stats, true, root.get());
+        auto all = BuildContext::derive(opt, stats, true, root.get());  // what a fresh build of them all stores
         if (!all) return all.status();
-        SC_TRY(sameLayout(rootInfo, (*all)->tilesetInfo(), set));
+        SC_TRY(holds(rootInfo, (*all)->tilesetInfo(), addedStats, set));
         if (!std::equal(oldRules.begin(), oldRules.end(), (*all)->sourceIds().begin()))
             return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
     }
