@@ -512,7 +512,8 @@ surfcast::Status lockSet(const std::string& set, SetLock* lock) {
     lock->fd = ::open(set.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (lock->fd < 0) return surfcast::Status::error(set + ": cannot open (" + std::strerror(errno) + ")");
     if (::flock(lock->fd, LOCK_EX | LOCK_NB) != 0)
-        return surfcast::Status::error(set + ": another update or compaction of this set is running");
+        return surfcast::Status::error(set + (errno == EWOULDBLOCK ? std::string(": another update or compaction of this set is running")
+                                                                   : ": cannot lock (" + std::string(std::strerror(errno)) + ")"));
     return {};
 }
 

@@ -4,6 +4,8 @@
 // see bench/BENCHMARKS.md. This is the only file that includes microhttpd.h.
 #include "http_server.h"
 
+#include "crc32.h"
+
 
 #include <arpa/inet.h>
 #include <microhttpd.h>
@@ -438,8 +440,9 @@ struct HttpServer::Impl {
                 auto old = store.hierarchyFile(name, rest);
                 if (!old) return fail(r, 404, "not_found", "no such resource");
                 std::shared_ptr<const MappedFile> file = std::move(*old);
-                // hierarchy-XXXXXXXX.bin names its CRC; an updated set's hierarchy.bin never changes again.
-                const std::string tag = rest == "hierarchy.bin" ? "base-" + std::to_string(file->size()) : rest.substr(10, 8);
+                // hierarchy-XXXXXXXX.bin names its CRC; hierarchy.bin's CRC is
+                // computed (a compaction or rebuild writes it anew).
+                const std::string tag = rest == "hierarchy.bin" ? hex8(crc32(file->data(), size_t(file->size()))) : rest.substr(10, 8);
                 return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + tag + "\"",
                                   kRevalidate, file);
             }

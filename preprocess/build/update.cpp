@@ -58,14 +58,16 @@ Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& a
         const auto& h = added.attributes.intensityHistogram;
         const auto lo = std::find_if(h.begin(), h.end(), [](uint64_t n) { return n > 0; }) - h.begin();
         const auto hi = h.rend() - std::find_if(h.rbegin(), h.rend(), [](uint64_t n) { return n > 0; }) - 1;
-        if (double(lo) < a->offset || double(hi) > span(*a, kIntensityBits))
+        // As BuildContext::chooseAttributes takes a range: (hi - offset) / step under 2^12.
+        const double top = a->offset + a->scale * std::ldexp(1.0, kIntensityBits) - 1;
+        if (double(lo) < a->offset || double(hi) > top)
             return refuse("hold intensities " + std::to_string(lo) + "-" + std::to_string(hi) + " beyond the set's " +
-                          std::to_string(int(a->offset)) + "-" + std::to_string(int(span(*a, kIntensityBits))));
+                          std::to_string(int(a->offset)) + "-" + std::to_string(int(top)));
     }
     for (const ScalarStats& f : added.scalars) {
         const AttributeInfo* a = set.attribute(f.field.name);
         if (!a || f.points == 0) continue;
-        if (f.min < a->offset - 1e-9 * std::fabs(a->offset) || f.max > span(*a, typeBits(*a)))
+        if (f.min < a->offset - 0.5 * a->scale || f.max > span(*a, typeBits(*a)) + 0.5 * a->scale)
             return refuse("hold values of '" + f.field.name + "' beyond what the set stores");
     }
     if (const AttributeInfo* a = set.attribute(kProvenanceAttribute); a && all.inputs.size() > (uint64_t(1) << typeBits(*a)))
@@ -236,7 +238,10 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     // the record's statistics need not derive again after an update.
     const std::shared_ptr<const BuildContext> setContext = BuildContext::withLayoutOf(**derivedOld, info);
     const auto* old = &setContext;
-    SC_TRY(sameLayout(info, (*old)->tilesetInfo(), set + "/" + buildRecordFile(info.hierarchyFile) + " (not this set's record)"));
+    const std::string recordName = set + "/" + buildRecordFile(info.hierarchyFile);
+    SC_TRY(sameLayout(info, (*old)->tilesetInfo(), recordName + " (not this set's record)"));
+    if ((*derivedOld)->stats().colorBits != info.colorBits || (info.inputs.size() > 1 && (*derivedOld)->inputNames() != info.inputs))
+        return Status::error(recordName + ": its inputs are not the set's (not this set's record)");
     const auto oldRules = (*old)->sourceIds();
     const auto oldInputs = (*old)->inputOfSource();
     for (uint32_t k : request.removed) {
