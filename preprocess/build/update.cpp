@@ -192,7 +192,8 @@ void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource,
     stats.bounds = Box3d{};
     for (size_t i = 0; i < stats.sources.size(); ++i) {
         SourceStats& src = stats.sources[i];
-        if (std::find(removed.begin(), removed.end(), inputOfSource[i]) != removed.end()) {
+        // Sources past the set's own are the ones this update adds, never removed.
+        if (i < inputOfSource.size() && std::find(removed.begin(), removed.end(), inputOfSource[i]) != removed.end()) {
             stats.points -= std::min(stats.points, src.points);
             stats.skipped -= std::min(stats.skipped, src.skipped);
             src.points = src.skipped = 0;  // its bounds stay: its orientation rule must not change
