@@ -617,7 +617,7 @@ TEST(TexturedMesh, DragonRendersLikeItsTexturedMesh) {
     REQUIRE_DATA();
     test::TempDir dir;
     const std::string obj = test::dataFile("fg_spkMgDragon/fg_spkMgDragon.obj");
-    auto build = test::run({test::binary("surfcast-build"), "-q", obj, "-o", dir.file("dragon")});
+    auto build = test::run({test::binary("surfcast-build"), "-q", obj, "--mesh-max-surfels", "1000000", "-o", dir.file("dragon")});
     ASSERT_EQ(build.exitCode, 0) << build.output;
     EXPECT_NE(build.output.find("map_Ks 'fg_spkMgDragon_specular.jpg' not found (unused)"), std::string::npos) << build.output;
     const std::string camera = "--camera=0.0,0.05,0.15,0.005,0.04,0,0,1,0,40";

@@ -38,13 +38,22 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
     l.rootEdge_ = rootEdge;
     l.grid_ = grid;
     l.cellChunk_.assign(counts.size(), -1);
-    // Sum of counts in a node's cells, by recursion over the pyramid (computed
-    // top-down on demand: the node count stays small, the grid is 2M cells).
-    std::function<uint64_t(const NodeKey&)> countOf = [&](const NodeKey& k) -> uint64_t {
-        if (k.level == kCountLevel) return counts[(size_t(k.x) * kCountCells + k.y) * kCountCells + k.z];
-        uint64_t sum = 0;
-        for (int c = 0; c < 8; ++c) sum += countOf(k.child(c));
-        return sum;
+    // Sums of the counts over each node's cells, levels 0 to kCountLevel (a
+    // node (x, y, z) of level L at (x·2^L + y)·2^L + z), summed bottom-up once.
+    std::vector<std::vector<uint64_t>> sums(kCountLevel + 1);
+    sums[kCountLevel].assign(counts.begin(), counts.end());
+    for (int level = kCountLevel; level > 0; --level) {
+        const size_t n = size_t(1) << level, half = n / 2;
+        const std::vector<uint64_t>& fine = sums[size_t(level)];
+        std::vector<uint64_t>& coarse = sums[size_t(level) - 1];
+        coarse.assign(half * half * half, 0);
+        for (size_t x = 0; x < n; ++x)
+            for (size_t y = 0; y < n; ++y)
+                for (size_t z = 0; z < n; ++z) coarse[((x / 2) * half + y / 2) * half + z / 2] += fine[(x * n + y) * n + z];
+    }
+    auto countOf = [&](const NodeKey& k) {
+        const size_t n = size_t(1) << k.level;
+        return sums[k.level][(size_t(k.x) * n + k.y) * n + k.z];
     };
     std::function<void(const NodeKey&, uint64_t)> place = [&](const NodeKey& k, uint64_t count) {
         if (count == 0) return;
@@ -68,22 +77,20 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
     // Cells whose 26 neighbours all belong to their own chunk (or to none):
     // their points are halo to no other chunk, the common case by far.
     l.interior_.assign(counts.size(), 0);
-    for (uint32_t x = 0; x < kCountCells; ++x)
-        for (uint32_t y = 0; y < kCountCells; ++y)
-            for (uint32_t z = 0; z < kCountCells; ++z) {
-                const size_t i = (size_t(x) * kCountCells + y) * kCountCells + z;
-                const int32_t own = l.cellChunk_[i];
+    const int64_t n = kCountCells;
+    for (int64_t x = 0; x < n; ++x)
+        for (int64_t y = 0; y < n; ++y)
+            for (int64_t z = 0; z < n; ++z) {
+                const int32_t own = l.cellChunk_[size_t((x * n + y) * n + z)];
                 if (own < 0) continue;
                 bool interior = true;
-                for (int dx = -1; dx <= 1 && interior; ++dx)
-                    for (int dy = -1; dy <= 1 && interior; ++dy)
-                        for (int dz = -1; dz <= 1 && interior; ++dz) {
-                            const int64_t n[3] = {int64_t(x) + dx, int64_t(y) + dy, int64_t(z) + dz};
-                            if (std::any_of(n, n + 3, [](int64_t v) { return v < 0 || v >= int64_t(kCountCells); })) continue;
-                            const int32_t id = l.cellChunk_[(size_t(n[0]) * kCountCells + size_t(n[1])) * kCountCells + size_t(n[2])];
+                for (int64_t nx = std::max<int64_t>(x - 1, 0); nx <= std::min(x + 1, n - 1) && interior; ++nx)
+                    for (int64_t ny = std::max<int64_t>(y - 1, 0); ny <= std::min(y + 1, n - 1) && interior; ++ny)
+                        for (int64_t nz = std::max<int64_t>(z - 1, 0); nz <= std::min(z + 1, n - 1) && interior; ++nz) {
+                            const int32_t id = l.cellChunk_[size_t((nx * n + ny) * n + nz)];
                             interior = id < 0 || id == own;
                         }
-                l.interior_[i] = interior;
+                l.interior_[size_t((x * n + y) * n + z)] = interior;
             }
     return l;
 }

@@ -81,11 +81,22 @@ export function coverage(img) {
   return m;
 }
 
+// The page's WebGL canvas as the page drew it (both pages keep the drawing
+// buffer): read in the page, between two of its frames. Chromium's own
+// screenshot waits for a compositor frame, which these pages' slow frames in
+// SwiftShader delay by 10-15 s each (bench/RELIABILITY.md, "CI stages").
+export async function canvasImage(page) {
+  const url = await page.evaluate(() => document.querySelector("canvas").toDataURL("image/png"));
+  const png = PNG.sync.read(Buffer.from(url.slice(url.indexOf(",") + 1), "base64"));
+  if (png.width !== width || png.height !== height) throw new Error(`the canvas is ${png.width} x ${png.height}, not ${width} x ${height}`);
+  return png;
+}
+
 // A page at `url` once its state object (`counter`: loaded, errors, frames)
 // says loaded and the view has settled: `frames` drawn after loading, then
-// two screenshots, two frames apart, covering the same pixels to 0.5 % of
+// two images of the canvas, two frames apart, covering the same pixels to 0.5 % of
 // the view (blending order moves a few edge pixels between frames). Returns
-// the state, the last screenshot and the page's problems (console errors,
+// the state, the last image and the page's problems (console errors,
 // page errors, failed requests, HTTP errors).
 export async function settledView(browser, url, counter, frames) {
   const page = await browser.newPage();
@@ -103,11 +114,11 @@ export async function settledView(browser, url, counter, frames) {
     const loadedAt = state.frames;
     let png, last = -1, wait = frames;
     for (let i = 0; ; ++i) {
-      if (i === 20) throw new Error(`${url}: the view did not settle in 20 screenshots`);
+      if (i === 20) throw new Error(`${url}: the view did not settle in 20 images`);
       const now = await page.evaluate(`${counter}.frames`);
       await page.waitForFunction(`${counter}.frames >= ${Math.max(now + 2, loadedAt + wait)}`, { timeout: 180000 });
       wait = 0;
-      png = PNG.sync.read(await page.screenshot({ type: "png" }));
+      png = await canvasImage(page);
       const covered = coverage(png).reduce((a, b) => a + b, 0);
       if (covered > 0 && Math.abs(covered - last) <= 0.005 * width * height) break;
       last = covered;
