@@ -70,7 +70,7 @@ async function view(browser, url, counter, frames, out) {
 }
 
 // FLIP, IoU and the inner mean colour difference of `image` against `reference`
-// (Cesium's credit, bottom left, masked in both).
+// (the bottom-left corner, where Cesium's credit lay over screenshots, masked in both).
 function score(reference, image) {
   const code = `
 import sys, numpy as np, flip_evaluator as flip

@@ -474,7 +474,7 @@ TEST(Stream, SurfcastServeOverHttpsWithAToken) {
 // Inputs at URLs (preprocess/readers/input_file.h): nginx serving the shared
 // scans as static files. A PCD, a COPC and a LAS file by URL, staged in four
 // parts (the COPC file cut at a chunk and the LAS file at 65,536 records, each
-// part reading its run by ranges), write the same bytes as one build of the
+// part reading its run by ranges; in one process under TSan), write the same bytes as one build of the
 // same files by path. A missing file, a URL with a query string or a user
 // name, and a mesh by URL each fail with the URL and why.
 TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {

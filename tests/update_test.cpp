@@ -143,7 +143,14 @@ std::vector<std::string> build(std::vector<std::string> args) {
 class UpdateTest : public ::testing::Test {
 protected:
     static void SetUpTestSuite() {
-        if (!fs::exists(test::dataFile("autzen_trim.las")) || !fs::exists(SURFCAST_TEST_PYTHON)) return;  // SetUp says why
+        base_.clear();
+        added_.clear();
+        sharedError_.clear();
+        if (!fs::exists(SURFCAST_TEST_PYTHON)) return;  // SetUp says why
+        if (!fs::exists(test::dataFile("autzen_trim.las"))) {
+            sharedError_ = "missing " + test::dataFile("autzen_trim.las");
+            return;
+        }
         shared_ = new test::TempDir;
         auto split = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("autzen_trim.las"),
                                 shared_->file("parts"), "--cells", "4x4x1", "--min-files", "16"});

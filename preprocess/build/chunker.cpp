@@ -38,22 +38,26 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
     l.rootEdge_ = rootEdge;
     l.grid_ = grid;
     l.cellChunk_.assign(counts.size(), -1);
-    // Sums of the counts over each node's cells, levels 0 to kCountLevel (a
-    // node (x, y, z) of level L at (x·2^L + y)·2^L + z), summed bottom-up once.
-    std::vector<std::vector<uint64_t>> sums(kCountLevel + 1);
-    sums[kCountLevel].assign(counts.begin(), counts.end());
+    // Sums of the counts over each node's cells, levels 0 to kCountLevel - 1
+    // (a node (x, y, z) of level L at (x·2^L + y)·2^L + z), summed bottom-up
+    // once; level kCountLevel is `counts` itself. Freed after the placement
+    // (2.3 MiB).
+    std::vector<std::vector<uint64_t>> sums(kCountLevel);
     for (int level = kCountLevel; level > 0; --level) {
         const size_t n = size_t(1) << level, half = n / 2;
-        const std::vector<uint64_t>& fine = sums[size_t(level)];
         std::vector<uint64_t>& coarse = sums[size_t(level) - 1];
         coarse.assign(half * half * half, 0);
         for (size_t x = 0; x < n; ++x)
             for (size_t y = 0; y < n; ++y)
-                for (size_t z = 0; z < n; ++z) coarse[((x / 2) * half + y / 2) * half + z / 2] += fine[(x * n + y) * n + z];
+                for (size_t z = 0; z < n; ++z) {
+                    const size_t i = (x * n + y) * n + z;
+                    coarse[((x / 2) * half + y / 2) * half + z / 2] += level == kCountLevel ? counts[i] : sums[size_t(level)][i];
+                }
     }
-    auto countOf = [&](const NodeKey& k) {
+    auto countOf = [&](const NodeKey& k) -> uint64_t {
         const size_t n = size_t(1) << k.level;
-        return sums[k.level][(size_t(k.x) * n + k.y) * n + k.z];
+        const size_t i = (size_t(k.x) * n + k.y) * n + k.z;
+        return k.level == kCountLevel ? counts[i] : sums[k.level][i];
     };
     std::function<void(const NodeKey&, uint64_t)> place = [&](const NodeKey& k, uint64_t count) {
         if (count == 0) return;
@@ -73,6 +77,8 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
         }
     };
     place(NodeKey{}, countOf(NodeKey{}));
+    sums.clear();
+    sums.shrink_to_fit();
 
     // Cells whose 26 neighbours all belong to their own chunk (or to none):
     // their points are halo to no other chunk, the common case by far.

@@ -70,7 +70,9 @@ export async function launch(chromium) {
 }
 
 // Covered pixels of an image: brighter than the background by more than
-// antialiasing's faintest edge; Cesium's credit (bottom left) is not the set's.
+// antialiasing's faintest edge, outside the bottom-left corner where Cesium's
+// credit lay over screenshots (the canvas has none; the corner is left out of
+// both images alike, so that the measures stay those of earlier runs).
 export function coverage(img) {
   const m = new Uint8Array(width * height);
   for (let y = 0; y < height; ++y)
@@ -84,7 +86,7 @@ export function coverage(img) {
 // The page's WebGL canvas as the page drew it (both pages keep the drawing
 // buffer): read in the page, between two of its frames. Chromium's own
 // screenshot waits for a compositor frame, which these pages' slow frames in
-// SwiftShader delay by 10-15 s each (bench/RELIABILITY.md, "CI stages").
+// SwiftShader delay by 9-15 s each (bench/RELIABILITY.md, "CI stages").
 export async function canvasImage(page) {
   const url = await page.evaluate(() => document.querySelector("canvas").toDataURL("image/png"));
   const png = PNG.sync.read(Buffer.from(url.slice(url.indexOf(",") + 1), "base64"));

@@ -479,8 +479,9 @@ describe("exports, as their consumers read them", { skip }, () => {
   async function cesium(folder, params) {
     // Tiles load before they are drawn, and splats are drawn sorted first
     // from their snapshot, then sorted again while the camera rests: 30
-    // frames after the last tile loaded (about 20 s in SwiftShader) the view
-    // has settled in every run seen.
+    // frames after the last tile loaded (about 20 s in SwiftShader: the first
+    // frames, before the splats are drawn, take milliseconds, the later ones
+    // 1-2 s) the view has settled in every run seen.
     const url = await pages();
     return settledView(browser, `${url}/cesium.html?tileset=sets/${folder}/tileset.json&camera=${camera}${params}`, "window.cesiumState", 30);
   }
