@@ -342,6 +342,56 @@ TEST_F(UpdateTest, RemovingTheAddedScanGivesBackTheSetBefore) {
     }
 }
 
+// A set of one input stores no provenance (docs/FORMAT.md): adding a second
+// input builds every node again with the attribute, to the leaf points of a
+// fresh build of both (1.5 steps: see above), and keeps the old blocks for
+// readers that opened the set before; --remove of the added input then gives
+// back the first input's points, each of input 0. The scan's west half (7
+// chunks) takes its east half, which grows its root (by two levels: the
+// halves' width is just over the half's root edge).
+TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
+    auto r = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("autzen_trim.las"), dir.file("halves"),
+                        "--cells", "2x1x1", "--min-files", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::string west = dir.file("halves/r000000.laz"), east = dir.file("halves/r000001.laz");
+    const std::string one = dir.file("sets/one");
+    r = test::run(build({west, "-o", one}));
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    double step = 0;
+    std::vector<Point> original;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(one, &step, &original));
+    ASSERT_FALSE(original.empty());
+    ASSERT_EQ(original[0].input, -1) << "a set of one input stores its points' input";
+    const std::string blocksBefore = test::readFile(one + "/blocks.bin");
+
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", east, "--to", one});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto after = TilesetReader::open(one);
+    ASSERT_TRUE(after) << after.status().message();
+    ASSERT_TRUE(verifyTileset(*after));
+    ASSERT_NE(after->info().attribute("input"), nullptr);
+    EXPECT_EQ(after->info().inputs, (std::vector<std::string>{"r000000.laz", "r000001.laz"}));
+    const std::string blocksAfter = test::readFile(one + "/blocks.bin");
+    EXPECT_TRUE(blocksAfter.compare(0, blocksBefore.size(), blocksBefore) == 0) << "the update rewrote bytes of blocks.bin";
+    for (const NodeRecord& n : after->nodes()) EXPECT_GE(n.blockOffset, blocksBefore.size()) << n.key.name() << " kept a block without provenance";
+
+    r = test::run(build({west, east, "-o", dir.file("fresh")}));
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(one, &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    ASSERT_EQ(updated.size(), expected.size());
+    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+
+    r = test::run({test::binary("surfcast-build"), "-q", "--remove", "r000001.laz", "--to", one});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<Point> removed;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(one, &step, &removed));
+    for (Point& p : original) p.input = 0;
+    ASSERT_EQ(removed.size(), original.size());
+    EXPECT_EQ(matchPoints(original, removed, 1.5 * step), original.size());
+}
+
 // --replace OLD NEW equals a fresh build of the inputs without OLD and with NEW.
 TEST_F(UpdateTest, ReplacedScanEqualsAFreshBuild) {
     const std::string old = base[6];

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <set>
 #include <thread>
 #include <tuple>
@@ -77,6 +78,12 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
     SC_TRY(c->chooseOrientationRules());
     SC_TRY(c->chooseAttributes());
     if (set && keepLayout) {
+        // The set's layout, and the provenance attribute where these inputs
+        // need it and the set, of one input, has none (update.cpp).
+        std::optional<ScalarQuantization> provenance;
+        for (const ScalarQuantization& q : c->stored_)
+            if (q.provenance && std::none_of(set->stored_.begin(), set->stored_.end(), [](const ScalarQuantization& s) { return s.provenance; }))
+                provenance = q;
         c->leafStep_ = set->leafStep_;
         std::copy(std::begin(set->store_), std::end(set->store_), std::begin(c->store_));
         c->storeOpacity_ = set->storeOpacity_;
@@ -84,6 +91,10 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
         c->attributeNames_ = set->attributeNames_;
         c->intensityOffset_ = set->intensityOffset_;
         c->intensityStep_ = set->intensityStep_;
+        if (provenance) {
+            c->stored_.push_back(*provenance);
+            c->attributeNames_.push_back(provenance->name);
+        }
     }
     return std::shared_ptr<const BuildContext>(std::move(c));
 }

@@ -60,7 +60,8 @@ public:
     // blocks are positioned in it), and the inputs must lie inside it; with
     // `keepLayout` also its leaf step, its stored attributes and their
     // quantization (what every block was written with: an update that removes
-    // points, whose values the set's layout still holds exactly).
+    // points, whose values the set's layout still holds exactly), and the
+    // provenance attribute where the inputs need it and the set has none.
     static Result<std::shared_ptr<const BuildContext>> derive(const BuildOptions& options, InputStats stats, bool report = true,
                                                               const BuildContext* set = nullptr, bool keepLayout = false);
 

@@ -39,8 +39,9 @@ Status sameLayout(const TilesetInfo& set, const TilesetInfo& updated, const std:
 }
 
 // Whether the set's layout holds what an update adds: the attributes a fresh
-// build of all the inputs would store (`all`) are the set's, with its colour
-// depth, and the added values fit the set's quantization of each.
+// build of all the inputs would store (`all`) are the set's (but provenance,
+// which a set of one input gains: see updateTileset), with its colour depth,
+// and the added values fit the set's quantization of each.
 Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& added, const std::string& where) {
     auto refuse = [&](const std::string& what) {
         return Status::error(where + ": the added inputs " + what + ", which the set's blocks were not written for; build the set "
@@ -49,9 +50,7 @@ Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& a
     if (set.colorBits != all.colorBits)
         return refuse("change the colour depth (" + std::to_string(set.colorBits) + " to " + std::to_string(all.colorBits) + " bits)");
     for (const AttributeInfo& a : all.attributes)
-        if (!set.attribute(a.name))
-            return refuse(a.name == kProvenanceAttribute ? std::string("make the set one of several inputs, whose points then carry their input")
-                                                         : "bring attribute '" + a.name + "'");
+        if (!set.attribute(a.name) && a.name != kProvenanceAttribute) return refuse("bring attribute '" + a.name + "'");
     auto span = [](const AttributeInfo& a, int bits) { return a.offset + a.scale * (std::ldexp(1.0, bits) - 1); };
     auto typeBits = [](const AttributeInfo& a) { return a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32; };
     if (const AttributeInfo* a = set.attribute(kLidarAttributes[kLidarIntensity]); a && added.attributes.intensityPoints > 0) {
@@ -83,16 +82,20 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
     const TilesetInfo& info = set.info();
     const Vec3d origin = c.rootMin();
     const AttributeInfo* intensity = info.attribute(kLidarAttributes[kLidarIntensity]);
-    // A position quantized to the node's upper face lies in the neighbour's
-    // box: held just inside its own, it goes to its own chunk (a kept
-    // neighbour would drop it) and quantizes as before.
+    // A position is held inside its node's box, [k e, (k + 1) e) relative to
+    // `origin`, so that it goes to its own chunk (a kept neighbour would drop
+    // it) and quantizes as before: one quantized to the node's upper face lies
+    // in the neighbour's box, and one on its lower face can round below it
+    // on the way from world coordinates. k e is exact (the root is aligned
+    // with the set's, `origin` a whole number of node edges from its minimum),
+    // as the chunks' cells, whole fractions of it, are.
     const double e = nodeEdge(info, node.key.level);
-    const Vec3d lo = nodeMin(info, node.key) - origin;
+    Vec3d lo = nodeMin(info, node.key) - origin;
+    for (int a = 0; a < 3; ++a) lo[a] = std::round(lo[a] / e) * e;
     for (size_t i = 0; i < block.size(); ++i) {
         Surfel s;
         s.position = set.position(node, block, i) - origin;
-        for (int a = 0; a < 3; ++a)
-            if (s.position[a] >= lo[a] + e) s.position[a] = std::nextafter(lo[a] + e, lo[a]);
+        for (int a = 0; a < 3; ++a) s.position[a] = std::clamp(s.position[a], lo[a], std::nextafter(lo[a] + e, lo[a]));
         s.normal = Vec3f{block.normals[3 * i], block.normals[3 * i + 1], block.normals[3 * i + 2]};
         if (!block.colors.empty())
             for (int k = 0; k < 3; ++k) s.color[k] = info.colorBits == 8 ? uint16_t(block.colors[3 * i + k] * 257) : block.colors[3 * i + k];
@@ -283,6 +286,11 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     std::shared_ptr<const BuildContext> root = *old;  // the set's layout in the updated set's root cube
     TilesetInfo rootInfo = info;
     Growth grow;
+    // A set of one input stores no provenance (docs/FORMAT.md): the first
+    // update that makes it one of several builds every chunk again, so that
+    // every block gains the attribute (its old blocks stay for readers that
+    // opened it, dead bytes until --compact).
+    bool addsProvenance = false;
     InputStats stats = record.stats;
     const size_t oldSources = record.stats.sources.size();
     uint64_t addedPoints = 0;
@@ -313,6 +321,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         auto all = BuildContext::derive(opt, stats, true, root.get());  // what a fresh build of them all stores
         if (!all) return all.status();
         SC_TRY(holds(rootInfo, (*all)->tilesetInfo(), addedStats, set));
+        addsProvenance = !info.attribute(kProvenanceAttribute) && (*all)->tilesetInfo().attribute(kProvenanceAttribute);
         if (!std::equal(oldRules.begin(), oldRules.end(), (*all)->sourceIds().begin()))
             return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
     }
@@ -366,7 +375,9 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     auto most = chunkPoints(c);
     if (!most) return most.status();
     plan.maxChunkPoints = *most;
-    if (plan.maxChunkPoints != record.maxChunkPoints)
+    // (Where every chunk is built again, only the chunks' size may change:
+    // provenance takes memory per point.)
+    if ((plan.maxChunkPoints == 0) != (record.maxChunkPoints == 0) || (!addsProvenance && plan.maxChunkPoints != record.maxChunkPoints))
         return Status::error(set + ": the update changes whether the set's points fit one chunk; build it anew from all its inputs");
     InputPart addedPart;
     addedPart.first = all.last - added;
@@ -396,7 +407,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     std::set<NodeKey> oldChunks;
     for (const Chunk& ch : before.chunks()) oldChunks.insert(grow.key(ch.key));
     std::vector<bool> touched(layout.chunks().size(), false);
-    for (size_t i = 0; i < touched.size(); ++i) touched[i] = !oldChunks.count(layout.chunks()[i].key);
+    for (size_t i = 0; i < touched.size(); ++i) touched[i] = addsProvenance || !oldChunks.count(layout.chunks()[i].key);
     std::vector<int> halo;
     auto touch = [&](std::span<const Surfel> points) {
         for (const Surfel& s : points) {

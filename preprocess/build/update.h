@@ -32,6 +32,8 @@ struct UpdateRequest {
 // on (the colour depth, an attribute's quantization) or where the set was
 // built with textured meshes, captured weights or a file of several scans.
 // Points beyond the root cube grow it (the old root a node of the new one).
+// A set of one input given a second builds every chunk again, as its blocks
+// then gain the provenance attribute.
 Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
                                    const BuildPlan& record, const std::vector<std::string>& commandLine);
 
