@@ -65,10 +65,7 @@ protected:
     }
     void SetUp() override {
         REQUIRE_DATA();
-        if (!fs::exists(SURFCAST_TEST_PYTHON)) {
-            if (std::getenv("CI")) FAIL() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";
-            GTEST_SKIP() << "no test venv at " SURFCAST_TEST_PYTHON;
-        }
+        REQUIRE_TEST_PYTHON();
         ASSERT_NE(dir_, nullptr);
     }
     static test::TempDir* dir_;

@@ -42,10 +42,7 @@ TEST(OutOfCore, PeakRssStaysWithinBudget) {
 // share one decode pool, so the budget holds.
 TEST(OutOfCore, ThousandsOfLazFilesStayWithinBudget) {
     REQUIRE_DATA();
-    if (!std::filesystem::exists(SURFCAST_TEST_PYTHON)) {
-        if (std::getenv("CI")) FAIL() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";
-        GTEST_SKIP() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";
-    }
+    REQUIRE_TEST_PYTHON();
     test::TempDir dir;
     auto split = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("lone-star.laz"),
                             dir.file("tiles"), "--cells", "32x32x8", "--min-files", "1000"});

@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -91,4 +93,14 @@ std::vector<uint8_t> fromHex(const std::string& hex);
             if (std::getenv("CI")) FAIL() << "shared data missing: " SURFCAST_DATA_DIR; \
             GTEST_SKIP() << "shared data missing: " SURFCAST_DATA_DIR;              \
         }                                                                           \
+    } while (0)
+
+// Skips (locally) or fails (under CI) when the tests' Python (laspy, numpy:
+// tests/requirements.txt) is missing; scripts/test.sh makes it.
+#define REQUIRE_TEST_PYTHON()                                                                                      \
+    do {                                                                                                           \
+        if (!std::filesystem::exists(SURFCAST_TEST_PYTHON)) {                                                      \
+            if (std::getenv("CI")) FAIL() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)"; \
+            GTEST_SKIP() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";                 \
+        }                                                                                                          \
     } while (0)

@@ -174,10 +174,7 @@ protected:
     }
     void SetUp() override {
         REQUIRE_DATA();
-        if (!fs::exists(SURFCAST_TEST_PYTHON)) {
-            if (std::getenv("CI")) FAIL() << "no test venv at " SURFCAST_TEST_PYTHON " (scripts/test.sh makes it)";
-            GTEST_SKIP() << "no test venv at " SURFCAST_TEST_PYTHON;
-        }
+        REQUIRE_TEST_PYTHON();
         ASSERT_TRUE(shared_ && sharedError_.empty()) << sharedError_;
         base = base_;
         added = added_;
