@@ -4,6 +4,7 @@
 #include "update.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <filesystem>
 #include <set>
@@ -460,22 +461,38 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     double nearCell = c.rootEdge();
     for (size_t i = 0; i < touched.size(); ++i)
         if (touched[i]) nearCell = std::min(nearCell, layout.margin(int(i)) / kHaloCells);
+    // Cells of that size holding a changed point, and the box they span: the
+    // box spares the 27 look-ups for the many decoded points far from the
+    // change (they were 16 % of an update's time: bench/BENCHMARKS.md,
+    // "Updates in place").
     std::unordered_set<uint64_t> changedCells;
-    auto cellKey = [&](const Vec3d& p, int dx, int dy, int dz) {
-        auto axis = [&](double v, int d) { return uint64_t(int64_t(std::floor(v / nearCell)) + d) & 0x1FFFFF; };
-        return axis(p.x, dx) << 42 | axis(p.y, dy) << 21 | axis(p.z, dz);
+    using Cell = std::array<int64_t, 3>;
+    Cell cellsMin{INT64_MAX, INT64_MAX, INT64_MAX}, cellsMax{INT64_MIN, INT64_MIN, INT64_MIN};
+    auto cellOf = [&](const Vec3d& p) {
+        return Cell{int64_t(std::floor(p.x / nearCell)), int64_t(std::floor(p.y / nearCell)), int64_t(std::floor(p.z / nearCell))};
     };
-    for (const Surfel& s : gone) changedCells.insert(cellKey(s.position, 0, 0, 0));
+    auto cellKey = [](const Cell& c) {
+        return (uint64_t(c[0]) & 0x1FFFFF) << 42 | (uint64_t(c[1]) & 0x1FFFFF) << 21 | (uint64_t(c[2]) & 0x1FFFFF);
+    };
+    auto changed = [&](const Vec3d& p) {
+        const Cell c = cellOf(p);
+        changedCells.insert(cellKey(c));
+        for (int a = 0; a < 3; ++a) cellsMin[a] = std::min(cellsMin[a], c[a]), cellsMax[a] = std::max(cellsMax[a], c[a]);
+    };
+    for (const Surfel& s : gone) changed(s.position);
     if (added > 0)
         SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
-            for (const Surfel& s : batch) changedCells.insert(cellKey(s.position, 0, 0, 0));
+            for (const Surfel& s : batch) changed(s.position);
             return Status{};
         }));
     auto nearChange = [&](const Vec3d& p) {
-        for (int dx = -1; dx <= 1; ++dx)
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dz = -1; dz <= 1; ++dz)
-                    if (changedCells.count(cellKey(p, dx, dy, dz))) return true;
+        const Cell c = cellOf(p);
+        for (int a = 0; a < 3; ++a)
+            if (c[a] < cellsMin[a] - 1 || c[a] > cellsMax[a] + 1) return false;
+        for (int64_t dx = -1; dx <= 1; ++dx)
+            for (int64_t dy = -1; dy <= 1; ++dy)
+                for (int64_t dz = -1; dz <= 1; ++dz)
+                    if (changedCells.count(cellKey({c[0] + dx, c[1] + dy, c[2] + dz}))) return true;
         return false;
     };
     std::vector<bool> estimated;  // per input: its normals were estimated
