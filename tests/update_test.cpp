@@ -382,6 +382,15 @@ TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
 
     r = test::run({test::binary("surfcast-build"), "-q", "--remove", "r000001.laz", "--to", one});
     ASSERT_EQ(r.exitCode, 0) << r.output;
+    // A set of one input has no input to remove: refused, before anything is read.
+    const std::string west2 = dir.file("sets/west");
+    r = test::run(build({west, "-o", west2}));
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::string tilesetBefore = test::readFile(west2 + "/tileset.json");
+    r = test::run({test::binary("surfcast-build"), "-q", "--replace", "r000000.laz", east, "--to", west2});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("a set of one input"), std::string::npos) << r.output;
+    EXPECT_EQ(test::readFile(west2 + "/tileset.json"), tilesetBefore);
     std::vector<Point> removed;
     ASSERT_NO_FATAL_FAILURE(leafPoints(one, &step, &removed));
     for (Point& p : original) p.input = 0;

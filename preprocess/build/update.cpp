@@ -249,6 +249,10 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         return Status::error(recordName + ": its inputs are not the set's (not this set's record)");
     const auto oldRules = (*old)->sourceIds();
     const auto oldInputs = (*old)->inputOfSource();
+    // A set of one input keeps no provenance: its one input is all of it.
+    if (!request.removed.empty() && !info.attribute(kProvenanceAttribute))
+        return Status::error(set + ": a set of one input, whose points carry no input to remove; build the set anew from the "
+                             "inputs it should hold");
     for (uint32_t k : request.removed) {
         uint64_t points = 0;
         for (size_t i = 0; i < oldInputs.size(); ++i) points += oldInputs[i] == k ? record.stats.sources[i].points : 0;
@@ -291,6 +295,8 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     // update that makes it one of several builds every chunk again, so that
     // every block gains the attribute (its old blocks stay for readers that
     // opened it, dead bytes until --compact).
+    // (The set's points then take provenance 0, its one input's, from the
+    // zero-filled last field of appendSurfels' rows.)
     bool addsProvenance = false;
     InputStats stats = record.stats;
     const size_t oldSources = record.stats.sources.size();
@@ -404,7 +410,8 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     const ChunkLayout before = record.layout(**old);
 
     // The chunks to build: those the added or removed points or their halos
-    // reach, and those the set did not have.
+    // reach, and those the set did not have (every chunk where the set gains
+    // provenance).
     std::set<NodeKey> oldChunks;
     for (const Chunk& ch : before.chunks()) oldChunks.insert(grow.key(ch.key));
     std::vector<bool> touched(layout.chunks().size(), false);
@@ -513,7 +520,8 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
             appendSurfels(c, *reader, n, *block, ruleOf(*block), &points, &table);
             const std::vector<uint32_t> of = inputsOf(*block);
             for (size_t i = 0; i < points.size(); ++i)
-                if (of[i] < estimated.size() && estimated[of[i]] && nearChange(points[i].position)) points[i].normal = Vec3f{};
+                if (of[i] < estimated.size() && estimated[of[i]] && (addsProvenance || nearChange(points[i].position)))
+                    points[i].normal = Vec3f{};  // (every chunk built again: every normal, as a fresh build estimates them)
             if (!request.removed.empty()) {
                 size_t kept = 0;
                 const size_t fields = table.fields();
