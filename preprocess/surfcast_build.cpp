@@ -43,6 +43,8 @@ const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (IN
        surfcast-build distribute --work W [--part P]
        surfcast-build chunk --work W I...
        surfcast-build merge --work W        (a build in stages: see below)
+       surfcast-build update-plan --work W --add INPUT... | --remove NAME... | --replace OLD NEW  --to SET
+       surfcast-build update-merge --work W (an update in stages: chunk between them)
 
 Builds a level-of-detail tile set (tileset.json, hierarchy.bin, blocks.bin)
 from point clouds and meshes. Inputs: PLY (points, or meshes with faces or
@@ -137,6 +139,14 @@ and chunks' files from W. plan scans and counts the inputs itself, or, with
 --parts N, reduces what scan and count wrote for parts 0/N to N-1/N (runs of
 consecutive inputs of about equal bytes; count runs once every scan is done);
 distribute --part P then reads part P alone.
+
+An update in stages: update-plan does all that precedes the chunks' builds
+(the scan and count of the added inputs, the removed points found, the set's
+points near the change and the added ones distributed) and writes W/plan.json
+with "build", the chunks to build; chunk builds them; update-merge builds the
+levels above and switches the set, as --add, --remove and --replace do in one
+process, with the same bytes. It fails, leaving the set as it is, where the
+set changed after update-plan.
 )";
 
 bool parseSize(const std::string& s, uint64_t* out) {
@@ -214,7 +224,7 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
     surfcast::HttpOptions& http = out->http;
     std::string& info = out->info;
     bool& captureWeights = out->captureWeights;
-    const bool later = stage == "distribute" || stage == "chunk" || stage == "merge";
+    const bool later = stage == "distribute" || stage == "chunk" || stage == "merge" || stage == "update-merge";
     const size_t argc = args.size();
     for (size_t i = 0; i < argc; ++i) {
         const size_t first = i;
@@ -241,14 +251,14 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
         } else if (a == "-o" || a == "--output") {
             if (!value(&opt.output)) return usageError(a + " needs a folder");
             continue;
-        } else if ((a == "--add" || a == "--remove" || a == "--replace") && stage.empty()) {
+        } else if ((a == "--add" || a == "--remove" || a == "--replace") && (stage.empty() || stage == "update-plan")) {
             if (!out->update.empty() && out->update != a) return usageError(out->update + " and " + a + " are separate updates");
             out->update = a;
             continue;
         } else if (a == "--compact" && stage.empty()) {
             if (!value(&out->compact)) return usageError("--compact needs a tile set folder");
             continue;
-        } else if (a == "--to" && stage.empty()) {
+        } else if (a == "--to" && (stage.empty() || stage == "update-plan")) {
             if (!value(&out->to)) return usageError("--to needs a tile set folder");
             continue;
         } else if (a == "--work" && !stage.empty()) {
@@ -411,8 +421,8 @@ surfcast::Result<std::vector<std::string>> absoluteInputs(const std::vector<std:
     return paths;
 }
 
-// plan.json: what a driver schedules by (docs/ARCHITECTURE.md, "Stages").
-surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast::BuildPlan& plan, const surfcast::BuildContext& c) {
+// Each chunk's points, from the plan's counts.
+std::vector<uint64_t> plannedChunkPoints(const surfcast::BuildPlan& plan, const surfcast::BuildContext& c) {
     surfcast::ChunkLayout layout = plan.layout(c);
     std::vector<uint64_t> points(layout.chunks().size(), 0);
     if (plan.counts.empty()) points[0] = c.stats().points;  // one chunk, not counted
@@ -422,11 +432,21 @@ surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast:
         const surfcast::Vec3d centre{(index / side / side + 0.5) * cell, (index / side % side + 0.5) * cell, (index % side + 0.5) * cell};
         points[size_t(layout.chunkOf(centre))] += n;
     }
+    return points;
+}
+
+// plan.json: what a driver schedules by (docs/ARCHITECTURE.md, "Stages"):
+// the chunks' points, the parts, and an update's chunks to build (`build`).
+surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast::BuildPlan& plan, const std::vector<uint64_t>& points,
+                               const std::vector<size_t>* build = nullptr) {
     std::ostringstream json;
-    json << "{\n  \"format\": \"surfcast-plan\",\n  \"points\": " << c.stats().points << ",\n  \"chunks\": " << points.size()
+    json << "{\n  \"format\": \"surfcast-plan\",\n  \"points\": " << plan.stats.points << ",\n  \"chunks\": " << points.size()
          << ",\n  \"chunk_points\": [";
     for (size_t i = 0; i < points.size(); ++i) json << (i ? ", " : "") << points[i];
-    // Each part from input `first`'s record `begin` to input `last`'s record `end` (0: up to input `last`).
+    if (build) {
+        json << "],\n  \"build\": [";
+        for (size_t i = 0; i < build->size(); ++i) json << (i ? ", " : "") << (*build)[i];
+    }
     json << "],\n  \"parts\": [";
     for (size_t i = 0; i < plan.parts.size(); ++i) {
         const surfcast::InputPart& p = plan.parts[i];
@@ -594,6 +614,19 @@ int runUpdate(const Args& a) {
         request.added = added->size();
         planned.opt.inputs.paths.insert(planned.opt.inputs.paths.end(), added->begin(), added->end());
     }
+    if (!a.work.empty()) {
+        // update-plan: the first stage of an update in stages (update.h).
+        const surfcast::WorkFolder work{std::filesystem::absolute(a.work).lexically_normal().string()};
+        std::error_code ec;
+        std::filesystem::create_directories(work.dir, ec);
+        if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
+        auto staged = surfcast::updatePlanStage(planned.opt, request, set, *record, storedCommandLine(planned), work);
+        if (!staged) return fail(staged.status());
+        if (auto st = writePlanJson(work, staged->plan, staged->chunkPoints, &staged->build); !st.ok()) return fail(st);
+        std::printf("planned the update of %s: %zu of %zu chunks to build, in %s\n", set.c_str(), staged->build.size(),
+                    staged->chunkPoints.size(), work.dir.c_str());
+        return 0;
+    }
     auto summary = surfcast::updateTileset(planned.opt, request, set, *record, storedCommandLine(planned));
     if (!summary) return fail(summary.status());
     std::printf("updated %s (%zu inputs added, %zu removed; %zu chunks built again)\n%s", set.c_str(), request.added,
@@ -714,8 +747,9 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         // A new plan: what earlier plans distributed and built goes (their
         // files name their plan, and the later stages would refuse them).
         for (const char* folder : {"chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
+        std::filesystem::remove(work.update(), ec);
         if (auto st = surfcast::writePlan(work.plan(), plan, stored); !st.ok()) return fail(st);
-        if (auto st = writePlanJson(work, plan, *context); !st.ok()) return fail(st);
+        if (auto st = writePlanJson(work, plan, plannedChunkPoints(plan, *context)); !st.ok()) return fail(st);
         std::printf("planned %zu chunks for %llu points in %s\n", plan.layout(*context).chunks().size(),
                     (unsigned long long)context->stats().points, work.dir.c_str());
         return 0;
@@ -731,7 +765,24 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     const size_t inputCount = planned.opt.inputs.paths.size() + (planned.opt.inputs.defaultScene ? 1 : 0);
     if (plan->parts.back().last != inputCount)
         return fail(surfcast::Status::error(work.plan() + ": its parts do not cover its " + std::to_string(inputCount) + " inputs"));
-    auto derived = surfcast::BuildContext::derive(planned.opt, plan->stats, false);
+    // A staged update's plan (update.bin beside plan.bin) is distributed by
+    // update-plan, and merged into its set by update-merge.
+    const bool update = std::filesystem::exists(work.update());
+    if (update && (stage == "distribute" || stage == "merge"))
+        return usageError(work.dir + " holds an update's plan, which update-plan distributed; run chunk, then update-merge");
+    if (!update && stage == "update-merge") return usageError(work.dir + " holds no update's plan (update.bin): run update-plan first");
+    if (stage == "update-merge") {
+        const std::string& set = planned.opt.output;
+        SetLock lock;
+        if (auto st = lockSet(set, &lock); !st.ok()) return fail(st);
+        auto summary = surfcast::updateMergeStage(planned.opt, *plan, work);
+        if (!summary) return fail(summary.status());
+        std::error_code ec;
+        for (const char* folder : {"chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
+        std::printf("updated %s (%zu chunks built again)\n%s", set.c_str(), summary->chunks, summary->text().c_str());
+        return 0;
+    }
+    auto derived = update ? surfcast::updateContext(planned.opt, *plan, work) : surfcast::BuildContext::derive(planned.opt, plan->stats, false);
     if (!derived) return fail(derived.status());
     const surfcast::BuildContext& c = **derived;
     // The meshes' store: within what the budget leaves while distribute reads
@@ -790,8 +841,16 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
 
 int main(int argc, char** argv) {
     std::vector<std::string> args(argv + 1, argv + argc);
-    if (!args.empty() && (args[0] == "scan" || args[0] == "count" || args[0] == "plan" || args[0] == "distribute" || args[0] == "chunk" || args[0] == "merge"))
+    if (!args.empty() && (args[0] == "scan" || args[0] == "count" || args[0] == "plan" || args[0] == "distribute" || args[0] == "chunk" ||
+                          args[0] == "merge" || args[0] == "update-merge"))
         return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
+    if (!args.empty() && args[0] == "update-plan") {
+        Args a;
+        if (int status = parseArgs(std::vector<std::string>(args.begin() + 1, args.end()), "update-plan", &a); status >= 0) return status;
+        if (a.work.empty()) return usageError("update-plan needs --work DIR, a folder every stage's process sees");
+        if (a.update.empty()) return usageError("update-plan needs --add, --remove or --replace, and --to SET");
+        return runUpdate(a);
+    }
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
     if (!a.compact.empty()) {

@@ -10,6 +10,7 @@ come from the driver's own environment, which `surfcast-dask --help` makes.
 """
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -222,6 +223,50 @@ class DaskBuild(unittest.TestCase):
         self.assertEqual(r.returncode, 0, r.stderr)
         self.assertIn(f"resuming: plan done, {len(done) - 1} of ", r.stderr)
         self.assertTrue(same_set(out, self.path("one")))
+
+    def test_update_same_bytes_as_one_process(self):
+        # An update through the driver (update-plan, chunk tasks, update-merge)
+        # against surfcast-build's in one process, on a copy of the set at the
+        # same path (the build record names it): every file the same bytes.
+        # autzen_trim.las in 4 x 4 files (update_test's cells): r000005.laz
+        # added to the others, then r000000.laz removed.
+        require_data(self)
+        parts = self.path("parts")
+        split = subprocess.run([TEST_PYTHON, os.path.join(REPO, "tests", "tools", "split_laz.py"),
+                                os.path.join(DATA, "autzen_trim.las"), parts, "--cells", "4x4x1", "--min-files", "16"],
+                               capture_output=True, text=True)
+        self.assertEqual(split.returncode, 0, split.stderr)
+        added = os.path.join(parts, "r000005.laz")
+        base = [os.path.join(parts, f) for f in sorted(os.listdir(parts)) if f != "r000005.laz"]
+        out = self.path("set")
+        one_process(base + ["--memory", "64M", "--capacity", "1000"], out)
+        for i, update in enumerate((["--add", added], ["--remove", "r000000.laz"])):
+            before = self.path(f"before-{i}")
+            shutil.copytree(out, before)
+            r = subprocess.run([SURFCAST_BUILD, "-q"] + update + ["--to", out], capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            expected = self.path(f"expected-{i}")
+            os.rename(out, expected)
+            shutil.copytree(before, out)
+            report = self.path(f"update-{i}.json")
+            r = subprocess.run([DRIVER, "--scheduler", self.cluster.address, "-q", "--report", report] + update + ["--to", out],
+                               capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertEqual(sorted(os.listdir(out)), sorted(os.listdir(expected)), update)
+            for f in os.listdir(out):
+                self.assertEqual(read(os.path.join(out, f)), read(os.path.join(expected, f)), f"{update}: {f}")
+            with open(report) as f:
+                record = json.load(f)
+            stages = [t["stage"] for t in record["tasks"]]
+            self.assertEqual(stages[0], "update-plan")
+            self.assertEqual(stages[-1], "update-merge")
+            # Some chunks built again, as tasks, and some kept (surfcast-build
+            # prints how many it built again: "; N chunks built again").
+            built = int(re.search(r"(\d+) chunks built again", r.stdout).group(1))
+            self.assertEqual(stages.count("chunk"), built, update)
+            self.assertGreaterEqual(built, 2, update)
+            self.assertLess(built, record["chunks"], update)
+            self.assertFalse(os.path.exists(os.path.join(self.dir, ".set.dask-work")), "work folder left")
 
     def test_bad_file_among_many_names_it_and_keeps_the_old_set(self):
         require_data(self)

@@ -717,4 +717,33 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
     expectUntouched("a set without its record");
 }
 
+// An update in stages (update.h) holds for the version of the set it was
+// planned on: where another update switched the set after update-plan, the
+// chunk and update-merge stages fail, naming the set, and leave it as that
+// update left it.
+TEST_F(UpdateTest, StagedUpdateFailsWhereTheSetChangedAfterItsPlan) {
+    const std::string work = dir.file("work");
+    auto r = test::run({test::binary("surfcast-build"), "update-plan", "-q", "--work", work, "--add", added[0], "--to", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    ASSERT_NE(r.output.find("chunks to build"), std::string::npos) << r.output;
+    r = test::run({test::binary("surfcast-build"), "-q", "--remove", base[0], "--to", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::map<std::string, std::string> files;
+    for (const auto& e : fs::directory_iterator(set())) files[e.path().filename().string()] = test::readFile(e.path().string());
+
+    r = test::run({test::binary("surfcast-build"), "chunk", "-q", "--work", work, "0"});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find(set() + ": changed since this update was planned"), std::string::npos) << r.output;
+    r = test::run({test::binary("surfcast-build"), "update-merge", "-q", "--work", work});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find(set() + ": changed since this update was planned"), std::string::npos) << r.output;
+    std::map<std::string, std::string> now;
+    for (const auto& e : fs::directory_iterator(set())) now[e.path().filename().string()] = test::readFile(e.path().string());
+    EXPECT_TRUE(now == files);
+    // A build's stages refuse the update's work folder, and the reverse.
+    r = test::run({test::binary("surfcast-build"), "merge", "-q", "--work", work});
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("holds an update's plan"), std::string::npos) << r.output;
+}
+
 }  // namespace

@@ -53,11 +53,7 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
     summary->phaseSeconds.push_back({"distribute", progress.end()});
     if (seen != expected)
         return Status::error("the inputs changed while being read: " + std::to_string(expected) + " points, then " + std::to_string(seen));
-    ByteWriter w;
-    w.put(plan.id);
-    w.put(uint64_t(layout.chunks().size()));
-    for (const Chunk& c : layout.chunks()) w.put(c.written.points), w.put(c.written.haloPoints);
-    SC_TRY(writeWorkFile(folder + "/distribution.bin", kDistributionMagic, w));
+    SC_TRY(writeDistribution(folder + "/distribution.bin", plan, layout));
     // Into place in one step: exchanged with an earlier run's folder (whose
     // files then go with `folder`), or renamed where there is none. A chunk
     // stage reading the part meanwhile sees one folder or the other, whole.
@@ -67,6 +63,14 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
         ::renameat2(AT_FDCWD, folder.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) != 0)
         return Status::error(target + ": cannot move the part's chunk files into place (" + std::strerror(errno) + ")");
     return {};
+}
+
+Status writeDistribution(const std::string& path, const BuildPlan& plan, const ChunkLayout& layout) {
+    ByteWriter w;
+    w.put(plan.id);
+    w.put(uint64_t(layout.chunks().size()));
+    for (const Chunk& c : layout.chunks()) w.put(c.written.points), w.put(c.written.haloPoints);
+    return writeWorkFile(path, kDistributionMagic, w);
 }
 
 Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout) {

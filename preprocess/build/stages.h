@@ -49,6 +49,7 @@ struct WorkFolder {
     std::string distribution(size_t part) const { return chunks(part) + "/distribution.bin"; }
     std::string nodes(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".nodes"; }
     std::string blocks(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".blocks"; }
+    std::string update() const { return dir + "/update.bin"; }  // a staged update's own record (update.h)
 };
 
 // A run of consecutive inputs' records, from record `begin` of input `first`
@@ -129,6 +130,9 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
 // distribution.bin (each chunk's point and halo counts from this part).
 Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t part,
                        const WorkFolder& work, Progress& progress, BuildSummary* summary);
+// distribution.bin at `path`: each chunk's point and halo counts as
+// `layout`'s chunks were written, for `plan`.
+Status writeDistribution(const std::string& path, const BuildPlan& plan, const ChunkLayout& layout);
 // Each chunk's files of every part, with their counts, from distribution.bin.
 Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout);
 

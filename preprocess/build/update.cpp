@@ -7,10 +7,13 @@
 #include <array>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <optional>
 #include <set>
 #include <unordered_set>
 
 #include "built_node.h"
+#include "crc32.h"
 #include "tileset_reader.h"
 #include "tileset_writer.h"
 
@@ -180,6 +183,17 @@ Result<Growth> growRoot(const TilesetInfo& set, const Box3d& bounds) {
                          "; build it anew from all its inputs");
 }
 
+// Whether node `n`'s box, less `shift`, meets any of `boxes`.
+bool reaches(const TilesetInfo& info, const NodeRecord& n, const std::vector<Box3d>& boxes, const Vec3d& shift) {
+    const Vec3d lo = nodeMin(info, n.key) - shift;
+    const double e = nodeEdge(info, n.key.level);
+    return std::any_of(boxes.begin(), boxes.end(), [&](const Box3d& b) {
+        for (int a = 0; a < 3; ++a)
+            if (lo[a] > b.max[a] || lo[a] + e < b.min[a]) return false;
+        return true;
+    });
+}
+
 bool inside(const NodeKey& key, const NodeKey& chunk) {
     const int below = int(key.level) - int(chunk.level);
     return below >= 0 && (key.x >> below) == chunk.x && (key.y >> below) == chunk.y && (key.z >> below) == chunk.z;
@@ -217,87 +231,171 @@ void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource,
     }
 }
 
-}  // namespace
+constexpr char kUpdateMagic[9] = "SCUPDT01";
 
-Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
-                                   const BuildPlan& record, const std::vector<std::string>& commandLine) {
-    const auto start = std::chrono::steady_clock::now();
-    const BuildOptions opt = normalizeOptions(options);
-    const size_t added = request.added;
-    Progress progress(opt.progress);
-    BuildSummary summary;
+// Which version of the set an update was planned on: the CRC-32 of its
+// tileset.json, which every update writes anew (it names a new hierarchy).
+Result<uint32_t> setVersion(const std::string& set) {
+    std::ifstream in(set + "/tileset.json", std::ios::binary);
+    if (!in) return Status::error(set + ": not a tile set (no tileset.json)");
+    const std::string json{std::istreambuf_iterator<char>(in), {}};
+    return crc32(json.data(), json.size());
+}
+
+Result<BuildPlan> readBuildRecord(const std::string& set) {
+    std::ifstream in(set + "/tileset.json", std::ios::binary);
+    if (!in) return Status::error(set + ": not a tile set (no tileset.json)");
+    const std::string json{std::istreambuf_iterator<char>(in), {}};
+    auto info = readTilesetJson(json, set + "/tileset.json");
+    if (!info) return info.status();
+    std::vector<std::string> args;
+    return readPlan(set + "/" + buildRecordFile(info->hierarchyFile), &args);
+}
+
+// An update's course: plan (all that precedes the chunks' builds), distribute
+// and merge, one after another in one process (updateTileset), or as stages
+// with the work folder between them, where resume takes up what plan decided
+// (update.bin) from the set as it still is.
+class Update {
+public:
+    Status plan(const BuildOptions& options, const UpdateRequest& request, const std::string& set, const BuildPlan& record,
+                Progress& progress, BuildSummary* summary);
+    // The rebuilt chunks' points: the set's own near them and the added ones,
+    // to work.chunks(0), whose distribution.bin names the plan's id.
+    Status distribute(const WorkFolder& work, Progress& progress, BuildSummary* summary);
+    Status write(const std::string& path) const;
+    Status resume(const BuildOptions& options, BuildPlan plan, const std::string& path);
+    // The set's writer, its nodes under the keys of the updated set's root.
+    Result<std::unique_ptr<TilesetWriter>> writer() const;
+    // The levels above the chunks (the rebuilt ones read from `work`, the kept
+    // ones as the set holds them), and the switch.
+    Status merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const;
+
+    const BuildContext& context() const { return *context_; }
+    const std::shared_ptr<const BuildContext>& sharedContext() const { return context_; }
+    const BuildPlan& buildPlan() const { return plan_; }
+    BuildPlan& buildPlan() { return plan_; }
+    const ChunkLayout& layout() const { return layout_; }
+    ChunkLayout& layout() { return layout_; }
+    std::vector<size_t> rebuilt() const {
+        std::vector<size_t> which;
+        for (size_t i = 0; i < touched_.size(); ++i)
+            if (touched_[i]) which.push_back(i);
+        return which;
+    }
+
+private:
+    // The set and its context, from its record; the record must be its own.
+    Status open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record);
+    std::vector<uint16_t> rulesOf(const BlockData& block) const;
+
+    BuildOptions opt_;
+    UpdateRequest request_;
+    std::string set_;
+    uint32_t version_ = 0;
+    std::optional<TilesetReader> reader_;
+    BuildPlan record_;
+    std::shared_ptr<const BuildContext> old_;   // the set's, in its layout
+    std::shared_ptr<const BuildContext> root_;  // the set's layout in the updated set's root cube
+    std::shared_ptr<const BuildContext> context_;  // what the updated set holds, in the set's layout
+    std::vector<uint16_t> oldRules_;
+    std::vector<uint32_t> oldInputs_;
+    Growth grow_;
+    bool addsProvenance_ = false;
+    InputPart addedPart_;
+    std::vector<Surfel> gone_;  // the removed points, relative to the root
+    BuildPlan plan_;
+    ChunkLayout layout_;
+    std::vector<bool> touched_;  // per chunk: built again
+};
+
+Status Update::open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record) {
+    opt_ = normalizeOptions(options);
+    request_.added = added;
+    set_ = set;
+    record_ = record;
+    auto version = setVersion(set);
+    if (!version) return version.status();
+    version_ = *version;
     auto reader = TilesetReader::open(set);
     if (!reader) return reader.status();
-    const TilesetInfo& info = reader->info();
+    reader_ = std::move(*reader);
+    const TilesetInfo& info = reader_->info();
     if (!info.textureFilter.empty())
         return Status::error(set + ": built from textured meshes, whose texture fields an update does not rebuild yet; build it anew");
     if (info.weights == "captured")
         return Status::error(set + ": its weights were captured by rendering; an update cannot keep them; build it anew");
-
-    // The set's context, from its record; the record must be this set's.
-    BuildOptions setOptions = opt;
-    setOptions.inputs.paths.resize(opt.inputs.paths.size() - added);
+    BuildOptions setOptions = opt_;
+    setOptions.inputs.paths.resize(opt_.inputs.paths.size() - added);
     auto derivedOld = BuildContext::derive(setOptions, record.stats, false);
     if (!derivedOld) return derivedOld.status();
     // Its layout is the set's own (what its blocks were written with), which
     // the record's statistics need not derive again after an update.
-    const std::shared_ptr<const BuildContext> setContext = BuildContext::withLayoutOf(**derivedOld, info);
-    const auto* old = &setContext;
+    old_ = BuildContext::withLayoutOf(**derivedOld, info);
+    root_ = old_;
     const std::string recordName = set + "/" + buildRecordFile(info.hierarchyFile);
-    SC_TRY(sameLayout(info, (*old)->tilesetInfo(), recordName + " (not this set's record)"));
+    SC_TRY(sameLayout(info, old_->tilesetInfo(), recordName + " (not this set's record)"));
     if ((*derivedOld)->stats().colorBits != info.colorBits || (info.inputs.size() > 1 && (*derivedOld)->inputNames() != info.inputs))
         return Status::error(recordName + ": its inputs are not the set's (not this set's record)");
-    const auto oldRules = (*old)->sourceIds();
-    const auto oldInputs = (*old)->inputOfSource();
+    oldRules_.assign(old_->sourceIds().begin(), old_->sourceIds().end());
+    oldInputs_.assign(old_->inputOfSource().begin(), old_->inputOfSource().end());
+    return {};
+}
+
+// A kept point's orientation rule is its input's (its first scan's: a set
+// keeps no scan per point, so an update refuses inputs of several scans).
+std::vector<uint16_t> Update::rulesOf(const BlockData& block) const {
+    std::vector<uint16_t> rules(block.size(), oldRules_.empty() ? 0 : oldRules_[0]);
+    const ScalarAttribute* input = nullptr;
+    for (const ScalarAttribute& a : block.scalars)
+        if (a.name == kProvenanceAttribute) input = &a;
+    if (input)
+        for (size_t i = 0; i < rules.size(); ++i)
+            for (size_t src = 0; src < oldInputs_.size(); ++src)
+                if (oldInputs_[src] == input->values[i]) {
+                    rules[i] = oldRules_[src];
+                    break;
+                }
+    return rules;
+}
+
+std::vector<uint32_t> inputsOf(const BlockData& block) {
+    std::vector<uint32_t> of(block.size(), 0);
+    for (const ScalarAttribute& a : block.scalars)
+        if (a.name == kProvenanceAttribute) of = a.values;
+    return of;
+}
+
+Status Update::plan(const BuildOptions& options, const UpdateRequest& request, const std::string& set, const BuildPlan& record,
+                    Progress& progress, BuildSummary* summary) {
+    const size_t added = request.added;
+    SC_TRY(open(options, added, set, record));
+    request_ = request;
+    const BuildOptions& opt = opt_;
+    const TilesetInfo& info = reader_->info();
     // A set of one input keeps no provenance: its one input is all of it.
     if (!request.removed.empty() && !info.attribute(kProvenanceAttribute))
         return Status::error(set + ": a set of one input, whose points carry no input to remove; build the set anew from the "
                              "inputs it should hold");
     for (uint32_t k : request.removed) {
         uint64_t points = 0;
-        for (size_t i = 0; i < oldInputs.size(); ++i) points += oldInputs[i] == k ? record.stats.sources[i].points : 0;
+        for (size_t i = 0; i < oldInputs_.size(); ++i) points += oldInputs_[i] == k ? record.stats.sources[i].points : 0;
         if (points == 0) return Status::error(set + ": input " + std::to_string(k) + " has no points in the set (removed before?)");
     }
-    // A kept point's orientation rule is its input's (its first scan's: an
-    // input of several scans, an E57 file, has a rule per scan, which the set
-    // does not keep per point).
     for (const SourceStats& src : record.stats.sources)
         if (src.description.scanOrigins.size() > 1)
             return Status::error(set + ": " + src.description.path +
                                  " holds several scans, whose points' scans the set does not keep; build it anew");
-    auto ruleOf = [&](const BlockData& block) {
-        std::vector<uint16_t> rules(block.size(), oldRules.empty() ? 0 : oldRules[0]);
-        const ScalarAttribute* input = nullptr;
-        for (const ScalarAttribute& a : block.scalars)
-            if (a.name == kProvenanceAttribute) input = &a;
-        if (input)
-            for (size_t i = 0; i < rules.size(); ++i)
-                for (size_t src = 0; src < oldInputs.size(); ++src)
-                    if (oldInputs[src] == input->values[i]) {
-                        rules[i] = oldRules[src];
-                        break;
-                    }
-        return rules;
-    };
-    auto inputsOf = [&](const BlockData& block) {
-        std::vector<uint32_t> of(block.size(), 0);
-        for (const ScalarAttribute& a : block.scalars)
-            if (a.name == kProvenanceAttribute) of = a.values;
-        return of;
-    };
 
     // The added inputs: scanned; all of them together must keep the set's
     // layout, in its root cube or in one grown around it.
-    std::shared_ptr<const BuildContext> root = *old;  // the set's layout in the updated set's root cube
     TilesetInfo rootInfo = info;
-    Growth grow;
     // A set of one input stores no provenance (docs/FORMAT.md): the first
     // update that makes it one of several builds every chunk again, so that
     // every block gains the attribute (its old blocks stay for readers that
     // opened it, dead bytes until --compact).
     // (The set's points then take provenance 0, its one input's, from the
     // zero-filled last field of appendSurfels' rows.)
-    bool addsProvenance = false;
     InputStats stats = record.stats;
     const size_t oldSources = record.stats.sources.size();
     uint64_t addedPoints = 0;
@@ -308,7 +406,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         progress.begin("scan", 0);
         auto scanned = scanInputs(addedInputs, [&](uint64_t n) { progress.advance(n); });
         if (!scanned) return scanned.status();
-        summary.phaseSeconds.push_back({"scan", progress.end()});
+        summary->phaseSeconds.push_back({"scan", progress.end()});
         addedPoints = scanned->points;
         if (addedPoints == 0) return Status::error("the added inputs hold no valid points");
         for (const SourceStats& src : scanned->sources)
@@ -319,155 +417,142 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
         stats = mergeInputStats({std::move(stats), std::move(*scanned)}, {false, false});
         auto grown = growRoot(info, stats.bounds);
         if (!grown) return grown.status();
-        grow = *grown;
-        if (grow.levels > 0) {
-            root = BuildContext::rerooted(**old, grow.rootMin, grow.rootEdge);
-            rootInfo.rootMin = grow.rootMin;
-            rootInfo.rootEdge = grow.rootEdge;
+        grow_ = *grown;
+        if (grow_.levels > 0) {
+            root_ = BuildContext::rerooted(*old_, grow_.rootMin, grow_.rootEdge);
+            rootInfo.rootMin = grow_.rootMin;
+            rootInfo.rootEdge = grow_.rootEdge;
         }
-        auto all = BuildContext::derive(opt, stats, true, root.get());  // what a fresh build of them all stores
+        auto all = BuildContext::derive(opt, stats, true, root_.get());  // what a fresh build of them all stores
         if (!all) return all.status();
         SC_TRY(holds(rootInfo, (*all)->tilesetInfo(), addedStats, set));
-        addsProvenance = !info.attribute(kProvenanceAttribute) && (*all)->tilesetInfo().attribute(kProvenanceAttribute);
-        if (!std::equal(oldRules.begin(), oldRules.end(), (*all)->sourceIds().begin()))
+        addsProvenance_ = !info.attribute(kProvenanceAttribute) && (*all)->tilesetInfo().attribute(kProvenanceAttribute);
+        if (!std::equal(oldRules_.begin(), oldRules_.end(), (*all)->sourceIds().begin()))
             return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
     }
 
     // The removed inputs' points: in the leaves their sources' bounds reach.
     std::vector<Box3d> removedBoxes;
-    for (size_t i = 0; i < oldInputs.size(); ++i)
-        if (std::find(request.removed.begin(), request.removed.end(), oldInputs[i]) != request.removed.end())
+    for (size_t i = 0; i < oldInputs_.size(); ++i)
+        if (std::find(request.removed.begin(), request.removed.end(), oldInputs_[i]) != request.removed.end())
             removedBoxes.push_back(record.stats.sources[i].bounds);
-    auto reaches = [&](const NodeRecord& n, const std::vector<Box3d>& boxes, const Vec3d& shift) {
-        const Vec3d lo = nodeMin(info, n.key) - shift;
-        const double e = nodeEdge(info, n.key.level);
-        return std::any_of(boxes.begin(), boxes.end(), [&](const Box3d& b) {
-            for (int a = 0; a < 3; ++a)
-                if (lo[a] > b.max[a] || lo[a] + e < b.min[a]) return false;
-            return true;
-        });
-    };
-    std::vector<Surfel> gone;  // the removed points, relative to the root
     if (!request.removed.empty()) {
         progress.begin("find removed", 0);
-        for (const NodeRecord& n : reader->nodes()) {
-            if (!(n.flags & kFlagInputPoints) || !reaches(n, removedBoxes, Vec3d{})) continue;
-            auto block = decode(*reader, n);
+        for (const NodeRecord& n : reader_->nodes()) {
+            if (!(n.flags & kFlagInputPoints) || !reaches(info, n, removedBoxes, Vec3d{})) continue;
+            auto block = decode(*reader_, n);
             if (!block) return block.status();
             std::vector<Surfel> points;
-            appendSurfels(*root, *reader, n, *block, ruleOf(*block), &points, nullptr);
+            appendSurfels(*root_, *reader_, n, *block, rulesOf(*block), &points, nullptr);
             const std::vector<uint32_t> of = inputsOf(*block);
             for (size_t i = 0; i < points.size(); ++i)
-                if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) gone.push_back(points[i]);
+                if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) gone_.push_back(points[i]);
             progress.advance(points.size());
         }
-        summary.phaseSeconds.push_back({"find removed", progress.end()});
-        removeFromStats(stats, oldInputs, request.removed, gone);
+        summary->phaseSeconds.push_back({"find removed", progress.end()});
+        removeFromStats(stats, oldInputs_, request.removed, gone_);
     }
 
     // The context of what the set will hold, in the set's layout.
-    auto derived = BuildContext::derive(opt, std::move(stats), false, root.get(), true);
+    auto derived = BuildContext::derive(opt, std::move(stats), false, root_.get(), true);
     if (!derived) return derived.status();
-    const BuildContext& c = **derived;
-    c.describe(&summary);
+    context_ = *derived;
+    const BuildContext& c = *context_;
+    c.describe(summary);
 
     // The plan of all the inputs: one part, the counts changed by the points.
-    BuildPlan plan;
-    plan.stats = c.stats();
     InputPart all;
     all.last = (opt.inputs.defaultScene ? 1 : 0) + opt.inputs.paths.size();
     all.sources = c.stats().sources.size();
     all.points = c.stats().points;
-    plan.parts = {all};
+    plan_.stats = c.stats();
+    plan_.parts = {all};
     auto most = chunkPoints(c);
     if (!most) return most.status();
-    plan.maxChunkPoints = *most;
+    plan_.maxChunkPoints = *most;
     // (Where every chunk is built again, only the chunks' size may change:
     // provenance takes memory per point.)
-    if ((plan.maxChunkPoints == 0) != (record.maxChunkPoints == 0) || (!addsProvenance && plan.maxChunkPoints != record.maxChunkPoints))
+    if ((plan_.maxChunkPoints == 0) != (record.maxChunkPoints == 0) ||
+        (!addsProvenance_ && plan_.maxChunkPoints != record.maxChunkPoints))
         return Status::error(set + ": the update changes whether the set's points fit one chunk; build it anew from all its inputs");
-    InputPart addedPart;
-    addedPart.first = all.last - added;
-    addedPart.last = all.last;
-    addedPart.firstSource = oldSources;
-    addedPart.sources = c.stats().sources.size() - oldSources;
-    addedPart.points = addedPoints;
-    if (plan.maxChunkPoints > 0) {
+    addedPart_.first = all.last - added;
+    addedPart_.last = all.last;
+    addedPart_.firstSource = oldSources;
+    addedPart_.sources = c.stats().sources.size() - oldSources;
+    addedPart_.points = addedPoints;
+    if (plan_.maxChunkPoints > 0) {
         std::map<uint32_t, int64_t> cells;
-        for (auto [cell, n] : record.counts) cells[grow.cell(cell)] += n;
+        for (auto [cell, n] : record.counts) cells[grow_.cell(cell)] += n;
         if (added > 0) {
             progress.begin("count", addedPoints);
-            auto counts = countStage(c, addedPart, progress);
+            auto counts = countStage(c, addedPart_, progress);
             if (!counts) return counts.status();
-            summary.phaseSeconds.push_back({"count", progress.end()});
+            summary->phaseSeconds.push_back({"count", progress.end()});
             for (auto [cell, n] : *counts) cells[cell] += n;
         }
-        for (const Surfel& s : gone) cells[uint32_t(ChunkLayout::cellIndex(s.position, c.rootEdge()))]--;
+        for (const Surfel& s : gone_) cells[uint32_t(ChunkLayout::cellIndex(s.position, c.rootEdge()))]--;
         for (auto [cell, n] : cells)
-            if (n > 0) plan.counts.push_back({cell, uint32_t(std::min<int64_t>(n, UINT32_MAX))});
+            if (n > 0) plan_.counts.push_back({cell, uint32_t(std::min<int64_t>(n, UINT32_MAX))});
     }
-    ChunkLayout layout = plan.layout(c);
-    const ChunkLayout before = record.layout(**old);
+    layout_ = plan_.layout(c);
+    const ChunkLayout before = record.layout(*old_);
 
     // The chunks to build: those the added or removed points or their halos
     // reach, and those the set did not have (every chunk where the set gains
     // provenance).
     std::set<NodeKey> oldChunks;
-    for (const Chunk& ch : before.chunks()) oldChunks.insert(grow.key(ch.key));
-    std::vector<bool> touched(layout.chunks().size(), false);
-    for (size_t i = 0; i < touched.size(); ++i) touched[i] = addsProvenance || !oldChunks.count(layout.chunks()[i].key);
+    for (const Chunk& ch : before.chunks()) oldChunks.insert(grow_.key(ch.key));
+    touched_.assign(layout_.chunks().size(), false);
+    for (size_t i = 0; i < touched_.size(); ++i) touched_[i] = addsProvenance_ || !oldChunks.count(layout_.chunks()[i].key);
     std::vector<int> halo;
     auto touch = [&](std::span<const Surfel> points) {
         for (const Surfel& s : points) {
-            const int own = layout.chunkOf(s.position);
-            if (own >= 0) touched[size_t(own)] = true;
-            layout.haloChunksOf(s.position, &halo);
-            for (int h : halo) touched[size_t(h)] = true;
+            const int own = layout_.chunkOf(s.position);
+            if (own >= 0) touched_[size_t(own)] = true;
+            layout_.haloChunksOf(s.position, &halo);
+            for (int h : halo) touched_[size_t(h)] = true;
         }
     };
-    touch(gone);
+    touch(gone_);
     // A removed point's cell may be empty now, and so in no chunk: the chunk
     // that held it is rebuilt where the layout keeps it.
     std::map<NodeKey, size_t> chunkIndex;
-    for (size_t i = 0; i < layout.chunks().size(); ++i) chunkIndex[layout.chunks()[i].key] = i;
-    for (const Surfel& s : gone)
-        if (const int was = before.chunkOf(s.position + (c.rootMin() - (*old)->rootMin())); was >= 0)
-            if (auto it = chunkIndex.find(grow.key(before.chunks()[size_t(was)].key)); it != chunkIndex.end()) touched[it->second] = true;
+    for (size_t i = 0; i < layout_.chunks().size(); ++i) chunkIndex[layout_.chunks()[i].key] = i;
+    for (const Surfel& s : gone_)
+        if (const int was = before.chunkOf(s.position + (c.rootMin() - old_->rootMin())); was >= 0)
+            if (auto it = chunkIndex.find(grow_.key(before.chunks()[size_t(was)].key)); it != chunkIndex.end()) touched_[it->second] = true;
     if (added > 0)
-        SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        SC_TRY(forEachPartBatch(c, addedPart_, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             touch(batch);
             return Status{};
         }));
+    return {};
+}
 
-    // The set's nodes under the keys of the updated set's root.
-    std::vector<NodeRecord> nodes = reader->nodes();
-    for (NodeRecord& n : nodes) n.key = grow.key(n.key);
-    auto writer = TilesetWriter::update(set, info, nodes);
-    if (!writer) return writer.status();
-    const WorkFolder work{(*writer)->partialDir() + "/work"};
-    std::error_code ec;
-    fs::create_directories(work.chunks(0), ec);
-    if (ec) return Status::error(work.dir + ": cannot create (" + ec.message() + ")");
-
+Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSummary* summary) {
+    const BuildContext& c = *context_;
+    const TilesetInfo& info = reader_->info();
+    const size_t added = request_.added;
+    const std::vector<uint32_t>& removed = request_.removed;
     // Their points: the set's leaves that reach a rebuilt chunk or its halo,
     // but the removed inputs' points, and the added points.
-    std::vector<Box3d> rebuilt;
-    for (size_t i = 0; i < touched.size(); ++i)
-        if (touched[i]) {
-            const Chunk& ch = layout.chunks()[i];
-            const double m = layout.margin(int(i)), e = c.edge(ch.key.level);
+    std::vector<Box3d> boxes;
+    for (size_t i = 0; i < touched_.size(); ++i)
+        if (touched_[i]) {
+            const Chunk& ch = layout_.chunks()[i];
+            const double m = layout_.margin(int(i)), e = c.edge(ch.key.level);
             Box3d b;
             b.min = c.nodeMinRel(ch.key) - Vec3d{m, m, m};
             b.max = c.nodeMinRel(ch.key) + Vec3d{e + m, e + m, e + m};
-            rebuilt.push_back(b);
+            boxes.push_back(b);
         }
     // Normals the build estimated are estimated again near the added and
     // removed points, whose neighbourhoods changed (within one chunk-root cell
     // of the finest rebuilt chunk: a normal's 16 neighbours lie far closer);
     // elsewhere a point keeps its normal, and so its node its bytes.
     double nearCell = c.rootEdge();
-    for (size_t i = 0; i < touched.size(); ++i)
-        if (touched[i]) nearCell = std::min(nearCell, layout.margin(int(i)) / kHaloCells);
+    for (size_t i = 0; i < touched_.size(); ++i)
+        if (touched_[i]) nearCell = std::min(nearCell, layout_.margin(int(i)) / kHaloCells);
     // Cells of that size holding a changed point, and the box they span: the
     // box spares the 27 look-ups for the many decoded points far from the
     // change (they were 16 % of an update's time: bench/BENCHMARKS.md,
@@ -478,116 +563,249 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     auto cellOf = [&](const Vec3d& p) {
         return Cell{int64_t(std::floor(p.x / nearCell)), int64_t(std::floor(p.y / nearCell)), int64_t(std::floor(p.z / nearCell))};
     };
-    auto cellKey = [](const Cell& c) {
-        return (uint64_t(c[0]) & 0x1FFFFF) << 42 | (uint64_t(c[1]) & 0x1FFFFF) << 21 | (uint64_t(c[2]) & 0x1FFFFF);
+    auto cellKey = [](const Cell& cell) {
+        return (uint64_t(cell[0]) & 0x1FFFFF) << 42 | (uint64_t(cell[1]) & 0x1FFFFF) << 21 | (uint64_t(cell[2]) & 0x1FFFFF);
     };
     auto changed = [&](const Vec3d& p) {
-        const Cell c = cellOf(p);
-        changedCells.insert(cellKey(c));
-        for (int a = 0; a < 3; ++a) cellsMin[a] = std::min(cellsMin[a], c[a]), cellsMax[a] = std::max(cellsMax[a], c[a]);
+        const Cell cell = cellOf(p);
+        changedCells.insert(cellKey(cell));
+        for (int a = 0; a < 3; ++a) cellsMin[a] = std::min(cellsMin[a], cell[a]), cellsMax[a] = std::max(cellsMax[a], cell[a]);
     };
-    for (const Surfel& s : gone) changed(s.position);
+    for (const Surfel& s : gone_) changed(s.position);
     if (added > 0)
-        SC_TRY(forEachPartBatch(c, addedPart, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        SC_TRY(forEachPartBatch(c, addedPart_, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             for (const Surfel& s : batch) changed(s.position);
             return Status{};
         }));
     auto nearChange = [&](const Vec3d& p) {
-        const Cell c = cellOf(p);
+        const Cell cell = cellOf(p);
         for (int a = 0; a < 3; ++a)
-            if (c[a] < cellsMin[a] - 1 || c[a] > cellsMax[a] + 1) return false;
+            if (cell[a] < cellsMin[a] - 1 || cell[a] > cellsMax[a] + 1) return false;
         for (int64_t dx = -1; dx <= 1; ++dx)
             for (int64_t dy = -1; dy <= 1; ++dy)
                 for (int64_t dz = -1; dz <= 1; ++dz)
-                    if (changedCells.count(cellKey({c[0] + dx, c[1] + dy, c[2] + dz}))) return true;
+                    if (changedCells.count(cellKey({cell[0] + dx, cell[1] + dy, cell[2] + dz}))) return true;
         return false;
     };
     std::vector<bool> estimated;  // per input: its normals were estimated
-    for (size_t i = 0; i < oldInputs.size(); ++i) {
-        if (estimated.size() <= oldInputs[i]) estimated.resize(oldInputs[i] + 1, false);
-        if (!record.stats.sources[i].description.hasNormals) estimated[oldInputs[i]] = true;
+    for (size_t i = 0; i < oldInputs_.size(); ++i) {
+        if (estimated.size() <= oldInputs_[i]) estimated.resize(oldInputs_[i] + 1, false);
+        if (!record_.stats.sources[i].description.hasNormals) estimated[oldInputs_[i]] = true;
     }
 
+    std::error_code ec;
+    fs::create_directories(work.chunks(0), ec);
+    if (ec) return Status::error(work.chunks(0) + ": cannot create (" + ec.message() + ")");
     progress.begin("distribute", 0);
-    {
-        ChunkWriter chunkWriter(layout, work.chunks(0), c.scalars().size());
-        for (const NodeRecord& n : reader->nodes()) {
-            if (!(n.flags & kFlagInputPoints) || !reaches(n, rebuilt, c.rootMin())) continue;
-            auto block = decode(*reader, n);
-            if (!block) return block.status();
-            std::vector<Surfel> points;
-            ScalarTable table = c.emptyTable();
-            appendSurfels(c, *reader, n, *block, ruleOf(*block), &points, &table);
-            const std::vector<uint32_t> of = inputsOf(*block);
-            for (size_t i = 0; i < points.size(); ++i)
-                if (of[i] < estimated.size() && estimated[of[i]] && (addsProvenance || nearChange(points[i].position)))
-                    points[i].normal = Vec3f{};  // (every chunk built again: every normal, as a fresh build estimates them)
-            if (!request.removed.empty()) {
-                size_t kept = 0;
-                const size_t fields = table.fields();
-                for (size_t i = 0; i < points.size(); ++i) {
-                    if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) continue;
-                    std::copy_n(table.values.begin() + long(i * fields), fields, table.values.begin() + long(kept * fields));
-                    points[kept++] = points[i];
-                }
-                points.resize(kept);
-                table.values.resize(kept * fields);
+    ChunkWriter chunkWriter(layout_, work.chunks(0), c.scalars().size());
+    for (const NodeRecord& n : reader_->nodes()) {
+        // (Every chunk built again where the set gains provenance: every leaf.)
+        if (!(n.flags & kFlagInputPoints) || (!addsProvenance_ && !reaches(info, n, boxes, c.rootMin()))) continue;
+        auto block = decode(*reader_, n);
+        if (!block) return block.status();
+        std::vector<Surfel> points;
+        ScalarTable table = c.emptyTable();
+        appendSurfels(c, *reader_, n, *block, rulesOf(*block), &points, &table);
+        const std::vector<uint32_t> of = inputsOf(*block);
+        for (size_t i = 0; i < points.size(); ++i)
+            if (of[i] < estimated.size() && estimated[of[i]] && (addsProvenance_ || nearChange(points[i].position)))
+                points[i].normal = Vec3f{};  // (every chunk built again: every normal, as a fresh build estimates them)
+        if (!removed.empty()) {
+            size_t kept = 0;
+            const size_t fields = table.fields();
+            for (size_t i = 0; i < points.size(); ++i) {
+                if (std::find(removed.begin(), removed.end(), of[i]) != removed.end()) continue;
+                std::copy_n(table.values.begin() + long(i * fields), fields, table.values.begin() + long(kept * fields));
+                points[kept++] = points[i];
             }
-            SC_TRY(chunkWriter.add(points, table.values));
-            progress.advance(points.size());
+            points.resize(kept);
+            table.values.resize(kept * fields);
         }
-        if (added > 0)
-            SC_TRY(forEachPartBatch(c, addedPart, c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-                progress.advance(batch.size());
-                return chunkWriter.add(batch, scalars);
-            }));
-        SC_TRY(chunkWriter.finish());
+        SC_TRY(chunkWriter.add(points, table.values));
+        progress.advance(points.size());
     }
-    summary.phaseSeconds.push_back({"distribute", progress.end()});
-    std::vector<size_t> build;
-    uint64_t buildPoints = 0;
-    for (size_t i = 0; i < layout.chunks().size(); ++i) {
-        Chunk& ch = layout.chunks()[i];
+    if (added > 0)
+        SC_TRY(forEachPartBatch(c, addedPart_, c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
+            progress.advance(batch.size());
+            return chunkWriter.add(batch, scalars);
+        }));
+    SC_TRY(chunkWriter.finish());
+    summary->phaseSeconds.push_back({"distribute", progress.end()});
+    for (Chunk& ch : layout_.chunks()) {
         ch.points = ch.written.points;
         ch.haloPoints = ch.written.haloPoints;
         ch.pieces = {ch.written};
-        if (touched[i]) build.push_back(i), buildPoints += ch.points;
     }
-    summary.chunks = build.size();
-    progress.begin("build", buildPoints);
-    SC_TRY(buildChunks(c, plan, layout, build, work, progress));
-    summary.phaseSeconds.push_back({"build", progress.end()});
+    summary->chunks = boxes.size();
+    return writeDistribution(work.distribution(0), plan_, layout_);
+}
 
+// update.bin: the set's version, the added inputs' count, the growth of the
+// root and the chunks built again (the rest a stage derives again from the
+// plan and the set).
+Status Update::write(const std::string& path) const {
+    ByteWriter w;
+    w.put(plan_.id);
+    w.put(version_);
+    w.put(uint64_t(request_.added));
+    w.put(uint32_t(grow_.levels));
+    for (int a = 0; a < 3; ++a) w.put(grow_.offset[a]);
+    for (int a = 0; a < 3; ++a) w.put(grow_.rootMin[a]);
+    w.put(grow_.rootEdge);
+    const std::vector<size_t> which = rebuilt();
+    w.put(uint64_t(which.size()));
+    for (size_t i : which) w.put(uint64_t(i));
+    return writeWorkFile(path, kUpdateMagic, w);
+}
+
+Status Update::resume(const BuildOptions& options, BuildPlan plan, const std::string& path) {
+    auto bytes = readWorkFile(path, kUpdateMagic);
+    if (!bytes) return bytes.status();
+    ByteReader r(*bytes);
+    const Status corrupt = Status::error(path + ": malformed update record");
+    if (r.get<uint32_t>() != plan.id) return Status::error(path + ": written for another plan (plan the update again)");
+    const uint32_t version = r.get<uint32_t>();
+    const uint64_t added = r.get<uint64_t>();
+    grow_.levels = int(r.get<uint32_t>());
+    for (int a = 0; a < 3; ++a) grow_.offset[a] = r.get<uint32_t>();
+    for (int a = 0; a < 3; ++a) grow_.rootMin[a] = r.get<double>();
+    grow_.rootEdge = r.get<double>();
+    const uint64_t count = r.getCount(8);
+    std::vector<uint64_t> which(count);
+    for (uint64_t& i : which) i = r.get<uint64_t>();
+    if (!r.ok() || r.left() != 0 || added > options.inputs.paths.size() || grow_.levels > kMaxLevel) return corrupt;
+
+    const std::string set = options.output;
+    auto record = readBuildRecord(set);
+    if (!record) return record.status();
+    SC_TRY(open(options, size_t(added), set, *record));
+    if (version_ != version)
+        return Status::error(set + ": changed since this update was planned (another update or compaction ran); run the update again");
+    if (grow_.levels > 0) root_ = BuildContext::rerooted(*old_, grow_.rootMin, grow_.rootEdge);
+    auto derived = BuildContext::derive(opt_, plan.stats, false, root_.get(), true);
+    if (!derived) return derived.status();
+    context_ = *derived;
+    plan_ = std::move(plan);
+    layout_ = plan_.layout(*context_);
+    touched_.assign(layout_.chunks().size(), false);
+    for (uint64_t i : which) {
+        if (i >= touched_.size()) return corrupt;
+        touched_[i] = true;
+    }
+    return {};
+}
+
+Result<std::unique_ptr<TilesetWriter>> Update::writer() const {
+    std::vector<NodeRecord> nodes = reader_->nodes();
+    for (NodeRecord& n : nodes) n.key = grow_.key(n.key);
+    return TilesetWriter::update(set_, reader_->info(), nodes);
+}
+
+Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const {
+    const BuildContext& c = *context_;
     // The kept chunks: their nodes as the set holds them, their roots decoded
     // for the levels above.
     std::map<size_t, ChunkOutput> kept;
-    for (size_t i = 0; i < layout.chunks().size(); ++i)
-        if (!touched[i]) kept[i].plan = plan.id;
-    for (size_t j = 0; j < nodes.size(); ++j) {
-        const NodeRecord& n = nodes[j];
+    for (size_t i = 0; i < layout_.chunks().size(); ++i)
+        if (!touched_[i]) kept[i].plan = plan_.id;
+    const std::vector<NodeRecord>& nodes = reader_->nodes();
+    for (const NodeRecord& n : nodes) {
+        const NodeKey key = grow_.key(n.key);
         for (auto& [i, out] : kept) {
-            const NodeKey& key = layout.chunks()[i].key;
-            if (!inside(n.key, key)) continue;
-            out.records.push_back(n);
-            if (n.key == key && !(key == NodeKey{})) {
-                auto block = decode(*reader, reader->nodes()[j]);
+            const NodeKey& chunk = layout_.chunks()[i].key;
+            if (!inside(key, chunk)) continue;
+            NodeRecord moved = n;
+            moved.key = key;
+            out.records.push_back(moved);
+            if (key == chunk && !(chunk == NodeKey{})) {
+                auto block = decode(*reader_, n);
                 if (!block) return block.status();
                 out.root = std::make_unique<BuiltNode>();
-                out.root->key = key;
+                out.root->key = chunk;
                 out.rootScalars = c.emptyTable();
-                appendSurfels(c, *reader, reader->nodes()[j], *block, ruleOf(*block), &out.root->surfels, &out.rootScalars);
+                appendSurfels(c, *reader_, n, *block, rulesOf(*block), &out.root->surfels, &out.rootScalars);
             }
             break;
         }
     }
-    BuildPlan copy = plan;
+    return mergeStage(c, plan_, layout_, work, writer, progress, summary, &kept);
+}
+
+}  // namespace
+
+Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
+                                   const BuildPlan& record, const std::vector<std::string>& commandLine) {
+    const auto start = std::chrono::steady_clock::now();
+    Progress progress(options.progress);
+    BuildSummary summary;
+    Update update;
+    SC_TRY(update.plan(options, request, set, record, progress, &summary));
+    auto writer = update.writer();
+    if (!writer) return writer.status();
+    const WorkFolder work{(*writer)->partialDir() + "/work"};
+    SC_TRY(update.distribute(work, progress, &summary));
+    const BuildContext& c = update.context();
+    uint64_t buildPoints = 0;
+    for (size_t i : update.rebuilt()) buildPoints += update.layout().chunks()[i].points;
+    progress.begin("build", buildPoints);
+    SC_TRY(buildChunks(c, update.buildPlan(), update.layout(), update.rebuilt(), work, progress));
+    summary.phaseSeconds.push_back({"build", progress.end()});
+    BuildPlan copy = update.buildPlan();
     const std::string recordPath = (*writer)->partialDir() + "/build.record";
     SC_TRY(writePlan(recordPath, copy, commandLine));
     (*writer)->setBuildRecord(recordPath);
-    SC_TRY(mergeStage(c, plan, layout, work, **writer, progress, &summary, &kept));
+    SC_TRY(update.merge(**writer, work, progress, &summary));
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;
     summary.totalSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary.peakRss = peakRssBytes();
+    return summary;
+}
+
+Result<StagedUpdate> updatePlanStage(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
+                                            const BuildPlan& record, const std::vector<std::string>& commandLine,
+                                            const WorkFolder& work) {
+    Progress progress(options.progress);
+    BuildSummary summary;
+    Update update;
+    SC_TRY(update.plan(options, request, set, record, progress, &summary));
+    // A new plan: what an earlier one distributed and built goes.
+    std::error_code ec;
+    for (const char* folder : {"chunks", "nodes"}) fs::remove_all(work.dir + "/" + folder, ec);
+    fs::remove(work.update(), ec);
+    SC_TRY(writePlan(work.plan(), update.buildPlan(), commandLine));  // (sets the plan's id, which the chunk files name)
+    SC_TRY(update.distribute(work, progress, &summary));
+    SC_TRY(update.write(work.update()));
+    StagedUpdate staged{update.buildPlan(), {}, update.rebuilt()};
+    for (const Chunk& ch : update.layout().chunks()) staged.chunkPoints.push_back(ch.points);
+    return staged;
+}
+
+Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work) {
+    Update update;
+    SC_TRY(update.resume(options, plan, work.update()));
+    return update.sharedContext();
+}
+
+Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work) {
+    Progress progress(options.progress);
+    BuildSummary summary;
+    Update update;
+    SC_TRY(update.resume(options, plan, work.update()));
+    update.context().describe(&summary);
+    SC_TRY(readDistribution(work, update.buildPlan(), update.layout()));
+    summary.chunks = update.rebuilt().size();
+    auto writer = update.writer();
+    if (!writer) return writer.status();
+    // The set keeps the plan as its build record (update.h).
+    const std::string record = (*writer)->partialDir() + "/build.record";
+    std::error_code ec;
+    fs::copy_file(work.plan(), record, ec);
+    if (ec) return Status::error(record + ": cannot copy the plan (" + ec.message() + ")");
+    (*writer)->setBuildRecord(record);
+    SC_TRY(update.merge(**writer, work, progress, &summary));
+    summary.inputPoints = update.context().stats().points;
+    summary.skippedPoints = update.context().stats().skipped;
     summary.peakRss = peakRssBytes();
     return summary;
 }

@@ -37,4 +37,25 @@ struct UpdateRequest {
 Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
                                    const BuildPlan& record, const std::vector<std::string>& commandLine);
 
+// The update in stages (stages.h), each its own process, for a driver that
+// runs the chunks' builds as tasks (scripts/surfcast-dask), with the same
+// bytes as updateTileset:
+//   update-plan   updatePlanStage: all that precedes the chunks' builds, into
+//                 `work` (plan.bin, the chunk files, update.bin)
+//   chunk I       chunkStage, with updateContext's context
+//   update-merge  updateMergeStage: the levels above the chunks, and the switch
+// The later stages take `options` from plan.bin's command line (-o names the
+// set) and fail, naming the set, where it changed after the plan (another
+// update ran): a plan holds for the version of the set it was made on.
+struct StagedUpdate {
+    BuildPlan plan;                    // as plan.bin holds it
+    std::vector<uint64_t> chunkPoints;  // per chunk of the layout: its points
+    std::vector<size_t> build;         // the chunks to build
+};
+Result<StagedUpdate> updatePlanStage(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
+                                            const BuildPlan& record, const std::vector<std::string>& commandLine,
+                                            const WorkFolder& work);
+Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work);
+Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work);
+
 }  // namespace surfcast
