@@ -27,6 +27,7 @@
 #include "work_files.h"
 #include "http_tile_source.h"
 #include "input_file.h"
+#include "set_reader.h"
 #include "tileset_reader.h"
 
 extern char** environ;
@@ -37,6 +38,7 @@ const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (IN
        surfcast-build --default-scene -o OUT
        surfcast-build --add INPUT... | --remove NAME... | --replace OLD NEW  --to SET
        surfcast-build --compact SET
+       surfcast-build --merge SET1 SET2... [options] -o OUT
        surfcast-build --info SET            (SET: a folder or an http(s) URL)
        surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
        surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
@@ -71,6 +73,13 @@ ranges from any host that honours Range (meshes are read from local files).
                           file name only one input has), in place alike
   --replace OLD NEW --to SET
                           remove input OLD's points and add NEW's, in one update
+  --merge SET1 SET2... -o OUT
+                          join tile sets built apart into one: a build from
+                          their points (each set's leaves: positions, normals,
+                          colours, attributes), with SET1's build options (its
+                          build record) and then the command line's; each set is
+                          one input of the joined set (--remove takes it out
+                          again). A tile set's folder is an input anywhere
   --compact SET           write the set anew without the blocks its updates
                           replaced (replaced atomically, as a rebuild is: byte
                           ranges change, node ETags do not)
@@ -214,6 +223,7 @@ struct Args {
     std::string update;
     std::string to;
     std::string compact;  // --compact SET
+    bool merge = false;   // --merge SET...: the positional arguments are tile sets
 };
 
 // Parses `args` into `out`; returns -1, or the exit status (after --help, or a
@@ -254,6 +264,9 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
         } else if ((a == "--add" || a == "--remove" || a == "--replace") && (stage.empty() || stage == "update-plan")) {
             if (!out->update.empty() && out->update != a) return usageError(out->update + " and " + a + " are separate updates");
             out->update = a;
+            continue;
+        } else if (a == "--merge" && stage.empty()) {
+            out->merge = true;
             continue;
         } else if (a == "--compact" && stage.empty()) {
             if (!value(&out->compact)) return usageError("--compact needs a tile set folder");
@@ -544,9 +557,9 @@ long findInput(const std::vector<std::string>& paths, size_t first, const std::s
     const std::string absolute = surfcast::isUrl(name) ? name : std::filesystem::absolute(name).lexically_normal().string();
     long found = -1;
     for (size_t i = 0; i < paths.size(); ++i)
-        if (paths[i] == absolute) return long(first + i);
+        if (paths[i] == absolute || (surfcast::isSetInput(paths[i]) && paths[i] == absolute + "/tileset.json")) return long(first + i);
     for (size_t i = 0; i < paths.size(); ++i)
-        if (std::filesystem::path(paths[i]).filename() == name) {
+        if (surfcast::inputName(paths[i]) == name) {
             if (found >= 0) {
                 *error = name + " names several of the set's inputs; give its path";
                 return -1;
@@ -555,6 +568,34 @@ long findInput(const std::vector<std::string>& paths, size_t first, const std::s
         }
     if (found < 0) *error = name + " is not one of the set's inputs (surfcast-build --info lists them)";
     return found;
+}
+
+// The build record of the set in folder `set` (update.h): its plan, and its
+// command line parsed into `planned`. `purpose`: what the record is for, in
+// the error where the set keeps none; with `found`, a set without a record is
+// no error (*found says whether it had one).
+surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record, Args* planned, const std::string& purpose,
+                            bool* found = nullptr) {
+    std::string json;
+    {
+        std::ifstream in(set + "/tileset.json", std::ios::binary);
+        if (!in) return surfcast::Status::error(set + ": not a tile set (no tileset.json)");
+        json.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    auto info = surfcast::readTilesetJson(json, set + "/tileset.json");
+    if (!info) return info.status();
+    const std::string recordPath = set + "/" + surfcast::buildRecordFile(info->hierarchyFile);
+    if (found) *found = std::filesystem::exists(recordPath);
+    if (found && !*found) return {};
+    if (!std::filesystem::exists(recordPath))
+        return surfcast::Status::error(set + ": keeps no build record (" + surfcast::buildRecordFile(info->hierarchyFile) +
+                                       "): it was built before updates existed; build it anew to " + purpose);
+    std::vector<std::string> stored;
+    auto read = surfcast::readPlan(recordPath, &stored);
+    if (!read) return read.status();
+    *record = std::move(*read);
+    if (parseArgs(stored, "plan", planned) >= 0) return surfcast::Status::error(recordPath + ": its command line does not parse");
+    return {};
 }
 
 // surfcast-build --add INPUT... | --remove NAME... | --replace OLD NEW, --to
@@ -575,23 +616,9 @@ int runUpdate(const Args& a) {
     const std::string set = std::filesystem::absolute(a.to).lexically_normal().string();
     SetLock lock;
     if (auto st = lockSet(set, &lock); !st.ok()) return fail(st);
-    std::string json;
-    {
-        std::ifstream in(set + "/tileset.json", std::ios::binary);
-        if (!in) return fail(surfcast::Status::error(set + ": not a tile set (no tileset.json)"));
-        json.assign(std::istreambuf_iterator<char>(in), {});
-    }
-    auto info = surfcast::readTilesetJson(json, set + "/tileset.json");
-    if (!info) return fail(info.status());
-    const std::string recordPath = set + "/" + surfcast::buildRecordFile(info->hierarchyFile);
-    if (!std::filesystem::exists(recordPath))
-        return fail(surfcast::Status::error(set + ": keeps no build record (" + surfcast::buildRecordFile(info->hierarchyFile) +
-                                            "): it was built before updates existed; build it anew to update it"));
-    std::vector<std::string> stored;
-    auto record = surfcast::readPlan(recordPath, &stored);
-    if (!record) return fail(record.status());
+    surfcast::BuildPlan record;
     Args planned;
-    if (parseArgs(stored, "plan", &planned) >= 0) return fail(surfcast::Status::error(recordPath + ": its command line does not parse"));
+    if (auto st = readRecord(set, &record, &planned, "update it"); !st.ok()) return fail(st);
     planned.opt.threads = a.opt.threads;
     planned.opt.progress = a.opt.progress;
     planned.opt.output = set;
@@ -620,14 +647,14 @@ int runUpdate(const Args& a) {
         std::error_code ec;
         std::filesystem::create_directories(work.dir, ec);
         if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
-        auto staged = surfcast::updatePlanStage(planned.opt, request, set, *record, storedCommandLine(planned), work);
+        auto staged = surfcast::updatePlanStage(planned.opt, request, set, record, storedCommandLine(planned), work);
         if (!staged) return fail(staged.status());
         if (auto st = writePlanJson(work, staged->plan, staged->chunkPoints, &staged->build); !st.ok()) return fail(st);
         std::printf("planned the update of %s: %zu of %zu chunks to build, in %s\n", set.c_str(), staged->build.size(),
                     staged->chunkPoints.size(), work.dir.c_str());
         return 0;
     }
-    auto summary = surfcast::updateTileset(planned.opt, request, set, *record, storedCommandLine(planned));
+    auto summary = surfcast::updateTileset(planned.opt, request, set, record, storedCommandLine(planned));
     if (!summary) return fail(summary.status());
     std::printf("updated %s (%zu inputs added, %zu removed; %zu chunks built again)\n%s", set.c_str(), request.added,
                 request.removed.size(), summary->chunks, summary->text().c_str());
@@ -853,6 +880,8 @@ int main(int argc, char** argv) {
     }
     Args a;
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
+    if (a.merge && (!a.update.empty() || !a.to.empty() || !a.compact.empty()))
+        return usageError("--merge writes a new set (-o OUT); it takes no --add, --remove, --replace, --to or --compact");
     if (!a.compact.empty()) {
         if (!a.update.empty() || !a.to.empty() || !a.opt.output.empty() || !a.opt.inputs.paths.empty() || a.opt.inputs.defaultScene)
             return usageError("--compact SET takes no inputs, no -o and no update");
@@ -861,6 +890,30 @@ int main(int argc, char** argv) {
     if (!a.update.empty() || !a.to.empty()) {
         if (a.update.empty()) return usageError("--to names the set that --add, --remove or --replace updates");
         return runUpdate(a);
+    }
+    if (a.merge) {
+        // A build from the sets' points (set_reader.h), with the first set's
+        // build options (its record, where it keeps one), then the command line's.
+        if (a.opt.inputs.defaultScene) return usageError("--merge joins tile sets; it takes no --default-scene");
+        if (a.opt.output.empty()) return usageError("--merge needs the folder to write the joined set to (-o OUT)");
+        if (a.opt.inputs.paths.size() < 2) return usageError("--merge joins two or more tile sets");
+        std::vector<std::string> sets;
+        for (const std::string& set : a.opt.inputs.paths) {
+            const std::filesystem::path json = std::filesystem::path(set) / "tileset.json";
+            if (!std::filesystem::is_regular_file(json)) return fail(surfcast::Status::error(set + ": not a tile set (no tileset.json)"));
+            sets.push_back(json.string());
+        }
+        surfcast::BuildPlan record;
+        Args first;
+        bool found = false;
+        if (auto st = readRecord(a.opt.inputs.paths[0], &record, &first, "merge it", &found); !st.ok()) return fail(st);
+        std::vector<std::string> args = first.kept;
+        args.insert(args.end(), a.kept.begin(), a.kept.end());
+        args.insert(args.end(), {"-o", a.opt.output});
+        args.insert(args.end(), sets.begin(), sets.end());
+        Args merged;
+        if (int status = parseArgs(args, "", &merged); status >= 0) return status;
+        a = std::move(merged);
     }
     const surfcast::BuildOptions& opt = a.opt;
     const surfcast::HttpOptions& http = a.http;

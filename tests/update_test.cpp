@@ -398,6 +398,58 @@ TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
     EXPECT_EQ(matchPoints(original, removed, 1.5 * step), original.size());
 }
 
+// --merge joins sets built apart: a build from their leaves equals a fresh
+// build of all their inputs in the same sense as an update (the same leaf
+// points: the count, positions within the quantizations, attributes exact,
+// each set one input), with the first set's build options; --remove of a set
+// gives back the other's points.
+TEST_F(UpdateTest, MergeJoinsSetsBuiltApart) {
+    auto r = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("autzen_trim.las"), dir.file("halves"),
+                        "--cells", "2x1x1", "--min-files", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::string west = dir.file("halves/r000000.laz"), east = dir.file("halves/r000001.laz");
+    const std::string westSet = dir.file("sets/west"), eastSet = dir.file("sets/east"), merged = dir.file("sets/merged");
+    ASSERT_EQ(test::run(build({west, "-o", westSet})).exitCode, 0);
+    ASSERT_EQ(test::run(build({east, "-o", eastSet})).exitCode, 0);
+    // Not a set: refused, and nothing written.
+    r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, dir.file("halves"), "-o", merged});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find(dir.file("halves") + ": not a tile set"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(merged));
+
+    // (No build options given: the first set's, --memory 64M --capacity 1000.)
+    r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, eastSet, "-o", merged});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    ASSERT_EQ(test::run(build({west, east, "-o", dir.file("fresh")})).exitCode, 0);
+    auto joined = TilesetReader::open(merged);
+    auto fresh = TilesetReader::open(dir.file("fresh"));
+    ASSERT_TRUE(joined && fresh);
+    ASSERT_TRUE(verifyTileset(*joined));
+    EXPECT_EQ(joined->info().inputs, (std::vector<std::string>{"west", "east"}));
+    // The same capacity cuts the same nodes (the default's would cut far fewer).
+    EXPECT_EQ(joined->nodes().size(), fresh->nodes().size());
+    // Each quantization moves a point by at most half its step: the set's
+    // own, then the joined set's, against the fresh build's; 1.5 of the
+    // largest step bounds the three.
+    double step = 0;
+    std::vector<Point> westPoints, eastPoints, joinedPoints, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(westSet, &step, &westPoints));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(eastSet, &step, &eastPoints));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(merged, &step, &joinedPoints));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    ASSERT_EQ(joinedPoints.size(), expected.size());
+    ASSERT_EQ(joinedPoints.size(), westPoints.size() + eastPoints.size());
+    EXPECT_EQ(matchPoints(expected, joinedPoints, 1.5 * step), expected.size()) << "leaf step " << step;
+
+    r = test::run({test::binary("surfcast-build"), "-q", "--remove", "east", "--to", merged});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<Point> left;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(merged, &step, &left));
+    for (Point& p : westPoints) p.input = 0;
+    ASSERT_EQ(left.size(), westPoints.size());
+    EXPECT_EQ(matchPoints(westPoints, left, 1.5 * step), westPoints.size());
+}
+
 // --replace OLD NEW equals a fresh build of the inputs without OLD and with NEW.
 TEST_F(UpdateTest, ReplacedScanEqualsAFreshBuild) {
     const std::string old = base[6];

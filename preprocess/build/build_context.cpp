@@ -12,6 +12,7 @@
 #include <tuple>
 
 #include "block_codec.h"
+#include "set_reader.h"
 
 namespace fs = std::filesystem;
 
@@ -324,7 +325,7 @@ Status BuildContext::chooseAttributes() {
     for (const SourceStats& src : stats_.sources) {
         const bool scene = src.description.format == "scene";
         if (!scene || inputNames_.empty() || inputNames_[0] != "default scene")
-            inputNames_.push_back(scene ? "default scene" : fs::path(src.description.path).filename().string());
+            inputNames_.push_back(scene ? "default scene" : inputName(src.description.path));
         inputOfSource_.push_back(scene ? 0 : uint32_t(inputNames_.size() - 1));
     }
     if (inputNames_.size() > 1) {

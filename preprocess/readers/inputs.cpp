@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "byte_stream.h"
+#include "set_reader.h"
 #include "e57_reader.h"
 #include "las_reader.h"
 #include "pcd_reader.h"
@@ -78,13 +79,14 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
     if (*kind == InputKind::Mesh && isUrl(path))
         return Status::error(path + ": meshes are read from local files only (point files may be URLs)");
     if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
+    if (isSetInput(path)) return openSetReader(path, options.scalars);
     if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars);
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
         return openPcdReader(path, options.scalars, options.readAlpha);
     if (las) return openLasReader(path, options.threads, options.scalars, range);
     if (ext == ".e57" || std::string(magic, 4) == "ASTM") return openE57Reader(path, options.scalars);
     if (isTextExtension(ext)) return openTextReader(path, options.columns);
-    return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, E57, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL)");
+    return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, E57, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL, a tile set's tileset.json)");
 }
 
 uint16_t scaled(uint16_t raw, double scale) { return uint16_t(std::min(65535.0, raw * scale)); }
@@ -121,6 +123,8 @@ Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>
                 out.push_back(isUrl(p.string()) || p.is_absolute() ? p.string() : (base / p).string());
             }
             if (in.bad()) return Status::error(list + ": read error");
+        } else if (fs::is_directory(arg, ec) && fs::exists(fs::path(arg) / "tileset.json", ec)) {
+            out.push_back((fs::path(arg) / "tileset.json").string());  // a tile set: its points (set_reader.h)
         } else if (fs::is_directory(arg, ec)) {
             std::vector<std::string> found;
             fs::recursive_directory_iterator it(arg, fs::directory_options::skip_permission_denied, ec), end;

@@ -40,9 +40,10 @@ struct InputOptions {
 // A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.
 inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return opacity == 1 ? alpha : uint8_t(std::lround(alpha * opacity)); }
 
-// The input files that `args` name, in order: a file as itself, a folder as
-// every file under it with an extension some reader takes (recursively, sorted
-// by path), and "@LIST" as the paths in the text file LIST, one per line
+// The input files that `args` name, in order: a file as itself, a tile set's
+// folder as its tileset.json (set_reader.h), another folder as every file
+// under it with an extension some reader takes (recursively, sorted by path;
+// tile sets within it are not inputs), and "@LIST" as the paths in the text file LIST, one per line
 // (blank lines and lines starting with '#' skipped; relative paths are taken
 // relative to LIST's folder).
 Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>& args);

@@ -1,0 +1,126 @@
+// A tile set's leaves as input points (set_reader.h).
+#include "set_reader.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "inputs.h"
+#include "tileset_reader.h"
+
+namespace surfcast {
+
+namespace {
+
+class SetReader final : public PointReader {
+public:
+    SetReader(TilesetReader set, const std::string& path, const ScalarSelection& scalars) : set_(std::move(set)) {
+        const TilesetInfo& info = set_.info();
+        desc_.path = path;
+        desc_.format = "tileset";
+        desc_.hasNormals = true;
+        desc_.hasColors = info.colorBits > 0;
+        desc_.colorBits = info.colorBits > 0 ? info.colorBits : 8;
+        intensity_ = info.attribute(kLidarAttributes[kLidarIntensity]);
+        desc_.hasIntensity = intensity_ != nullptr;
+        desc_.hasClassification = info.attribute(kLidarAttributes[kLidarClassification]) != nullptr;
+        desc_.hasReturns = info.attribute(kLidarAttributes[kLidarReturnNumber]) != nullptr;
+        desc_.airborne = info.normalSource == "estimated-up";
+        for (size_t i = 0; i < set_.nodes().size(); ++i) {
+            const NodeRecord& n = set_.nodes()[i];
+            if (!(n.flags & kFlagInputPoints)) continue;
+            leaves_.push_back(i);
+            desc_.declaredPoints += n.surfelCount;
+            desc_.precision = std::max(desc_.precision, std::ldexp(nodeEdge(info, n.key.level), -int(n.positionBits)));
+        }
+        for (const AttributeInfo& a : info.attributes) {
+            if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) != std::end(kFixedAttributes) ||
+                lidarIndex(a.name) >= 0 || a.name == kOpacityAttribute || a.name == kProvenanceAttribute || !scalars.wants(a.name))
+                continue;
+            desc_.scalars.push_back({a.name, a.kind == "categorical", a.scale});
+            fields_.push_back(&a);
+        }
+    }
+
+    const InputDescription& description() const override { return desc_; }
+
+    Result<size_t> read(InputPoint* out, size_t max) override {
+        scalarValues_.clear();
+        size_t n = 0;
+        while (n < max) {
+            if (at_ == block_.size()) {
+                if (next_ == leaves_.size()) break;
+                SC_TRY(decodeNext());
+                continue;
+            }
+            const size_t i = at_++;
+            InputPoint& p = out[n++];
+            p = InputPoint{};
+            p.position = set_.position(*node_, block_, i);
+            p.normal = Vec3f{block_.normals[3 * i], block_.normals[3 * i + 1], block_.normals[3 * i + 2]};
+            // In the 16-bit range, as every reader gives colours (8-bit values times 257).
+            if (!block_.colors.empty())
+                for (int k = 0; k < 3; ++k) p.color[k] = uint16_t(block_.colors[3 * i + k] * (set_.info().colorBits == 8 ? 257 : 1));
+            // Stored as (value - offset) / scale: the value again (the top
+            // step's can pass 65535, which a build clamps to the top too).
+            if (intensity_ && !block_.intensity.empty())
+                p.intensity = uint16_t(std::clamp(std::lround(block_.intensity[i] * intensity_->scale + intensity_->offset), 0l, 65535l));
+            if (!block_.classification.empty()) p.classification = block_.classification[i];
+            p.returns = uint8_t((block_.returnNumber.empty() ? 0 : block_.returnNumber[i] & 15) |
+                                (block_.numberOfReturns.empty() ? 0 : block_.numberOfReturns[i] << 4));
+            if (!block_.opacity.empty()) p.alpha = block_.opacity[i];
+            for (size_t f = 0; f < fields_.size(); ++f)
+                scalarValues_.push_back(scalarIndex_[f] < 0 ? NAN
+                                                            : block_.scalars[size_t(scalarIndex_[f])].values[i] * fields_[f]->scale +
+                                                                  fields_[f]->offset);
+        }
+        return n;
+    }
+
+private:
+    Status decodeNext() {
+        node_ = &set_.nodes()[leaves_[next_++]];
+        auto bytes = set_.readBlockBytes(*node_);
+        if (!bytes) return bytes.status();
+        BlockExpectation e = set_.expectation(*node_);
+        e.scalars = !fields_.empty();
+        auto block = decodeBlock(bytes->data(), bytes->size(), e);
+        if (!block) return Status::error(desc_.path + ": node " + node_->key.name() + ": " + block.status().message());
+        block_ = std::move(*block);
+        at_ = 0;
+        scalarIndex_.assign(fields_.size(), -1);
+        for (size_t f = 0; f < fields_.size(); ++f)
+            for (size_t k = 0; k < block_.scalars.size(); ++k)
+                if (block_.scalars[k].name == fields_[f]->name) scalarIndex_[f] = int(k);
+        return {};
+    }
+
+    TilesetReader set_;
+    InputDescription desc_;
+    std::vector<size_t> leaves_;                // indices in set_.nodes() of the input-point nodes
+    std::vector<const AttributeInfo*> fields_;  // per desc_.scalars, in set_.info()
+    const AttributeInfo* intensity_ = nullptr;
+    const NodeRecord* node_ = nullptr;
+    BlockData block_;
+    size_t next_ = 0, at_ = 0;
+    std::vector<int> scalarIndex_;  // per field: its index in block_.scalars, or -1
+};
+
+}  // namespace
+
+bool isSetInput(const std::string& path) { return std::filesystem::path(path).filename() == "tileset.json"; }
+
+std::string inputName(const std::string& path) {
+    const std::filesystem::path p(path);
+    return (isSetInput(path) ? p.parent_path().filename() : p.filename()).string();
+}
+
+Result<std::unique_ptr<PointReader>> openSetReader(const std::string& path, const ScalarSelection& scalars) {
+    if (isUrl(path)) return Status::error(path + ": a tile set is read as an input from a local folder only");
+    const std::string folder = std::filesystem::path(path).parent_path().string();
+    auto set = TilesetReader::open(folder.empty() ? std::string(".") : folder);
+    if (!set) return set.status();
+    return std::unique_ptr<PointReader>(std::make_unique<SetReader>(std::move(*set), path, scalars));
+}
+
+}  // namespace surfcast
