@@ -73,10 +73,12 @@ Result<std::vector<uint8_t>> TilesetReader::readBlockBytes(const NodeRecord& nod
     return bytes;
 }
 
-Result<BlockData> TilesetReader::readBlock(const NodeRecord& node) const {
+Result<BlockData> TilesetReader::readBlock(const NodeRecord& node, bool scalars) const {
     auto bytes = readBlockBytes(node);
     if (!bytes) return bytes.status();
-    auto block = decodeBlock(bytes->data(), bytes->size(), expectation(node));
+    BlockExpectation e = expectation(node);
+    e.scalars = scalars;
+    auto block = decodeBlock(bytes->data(), bytes->size(), e);
     if (!block) return Status::error(describe() + "/blocks.bin: node " + node.key.name() + ": " + block.status().message());
     if (block->size() != node.surfelCount)
         return Status::error(describe() + "/blocks.bin: node " + node.key.name() + " decodes to " +

@@ -26,7 +26,9 @@ public:
 
     // The node's raw blob, checked against its CRC.
     Result<std::vector<uint8_t>> readBlockBytes(const NodeRecord& node) const;
-    Result<BlockData> readBlock(const NodeRecord& node) const;
+    // The node's block decoded (with its scalar attributes where `scalars`),
+    // checked against the hierarchy's surfel count; errors name the node.
+    Result<BlockData> readBlock(const NodeRecord& node, bool scalars = false) const;
     // World-space position of quantized surfel i of a decoded block.
     Vec3d position(const NodeRecord& node, const BlockData& block, size_t i) const;
 

@@ -72,12 +72,8 @@ Status forEachKept(const TilesetReader& set, const PointFilter& filter, const st
     for (size_t index : nodes) {
         if (stop && stop()) return Status::error("export stopped");
         const NodeRecord& n = set.nodes()[index];
-        auto bytes = set.readBlockBytes(n);
-        if (!bytes) return bytes.status();
-        BlockExpectation e = set.expectation(n);
-        e.scalars = scalars;
-        auto block = decodeBlock(bytes->data(), bytes->size(), e);
-        if (!block) return Status::error(set.describe() + ": node " + n.key.name() + ": " + block.status().message());
+        auto block = set.readBlock(n, scalars);
+        if (!block) return block.status();
         for (size_t i = 0; i < block->size(); ++i) {
             if (!filter.classes.empty() && !keepClass[block->classification.empty() ? 0 : block->classification[i]]) continue;
             const Vec3d p = set.position(n, *block, i);

@@ -416,6 +416,17 @@ TEST_F(UpdateTest, MergeJoinsSetsBuiltApart) {
     EXPECT_EQ(r.exitCode, 1) << r.output;
     EXPECT_NE(r.output.find(dir.file("halves") + ": not a tile set"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(merged));
+    // A set with a corrupt block: refused, naming it, and nothing written.
+    const std::string corrupt = dir.file("sets/corrupt");
+    fs::copy(eastSet, corrupt, fs::copy_options::recursive);
+    std::string blocks = test::readFile(corrupt + "/blocks.bin");
+    blocks[blocks.size() / 2] ^= 0x5A;
+    test::writeFile(corrupt + "/blocks.bin", blocks);
+    r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, corrupt, "-o", merged});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find(corrupt), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("CRC"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(merged));
 
     // (No build options given: the first set's, --memory 64M --capacity 1000.)
     r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, eastSet, "-o", merged});

@@ -85,12 +85,7 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     for (size_t i = 0; i < all.size(); ++i) all[i] = i;
     SC_TRY(buildChunks(c, *plan, layout, std::move(all), work, progress));
     summary.phaseSeconds.push_back({"build", progress.end()});
-    if (!options.commandLine.empty()) {
-        BuildPlan record = *plan;  // writePlan sets its id; the chunks were built to plan's
-        const std::string path = work.dir + "/build.record";
-        SC_TRY(writePlan(path, record, options.commandLine));
-        (*writer)->setBuildRecord(path);
-    }
+    if (!options.commandLine.empty()) SC_TRY(keepBuildRecord(**writer, work.dir, *plan, options.commandLine));
     SC_TRY(mergeStage(c, *plan, layout, work, **writer, progress, &summary));
 
     summary.inputPoints = c.stats().points;

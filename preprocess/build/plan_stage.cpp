@@ -416,6 +416,13 @@ Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::
     return writeWorkFile(path, kPlanMagic, w);
 }
 
+Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan plan, std::span<const std::string> commandLine) {
+    const std::string path = dir + "/build.record";
+    SC_TRY(writePlan(path, plan, commandLine));
+    writer.setBuildRecord(path);
+    return {};
+}
+
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args) {
     auto bytes = readWorkFile(path, kPlanMagic);
     if (!bytes) return bytes.status();

@@ -125,6 +125,10 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
 // CLI's later stages read their options from it). Sets plan.id.
 Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args);
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args);
+// The set's build record (update.h), handed to `writer`: `plan` (a copy:
+// writePlan sets its id, and the chunks were built to the plan's) with
+// `commandLine`, written as dir/build.record.
+Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan plan, std::span<const std::string> commandLine);
 
 // Distribute: writes part `part`'s points to its chunk files and
 // distribution.bin (each chunk's point and halo counts from this part).

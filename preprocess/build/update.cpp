@@ -123,16 +123,6 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
     }
 }
 
-Result<BlockData> decode(const TilesetReader& set, const NodeRecord& node) {
-    auto bytes = set.readBlockBytes(node);
-    if (!bytes) return bytes.status();
-    BlockExpectation e = set.expectation(node);
-    e.scalars = true;
-    auto block = decodeBlock(bytes->data(), bytes->size(), e);
-    if (!block) return Status::error(set.describe() + ": node " + node.key.name() + ": " + block.status().message());
-    return block;
-}
-
 // A set grown past its root cube: the old root becomes the node at `levels`
 // below the new root at `offset` (in old-root edges), so every old node keeps
 // its box, and so its block (positions are relative to the node).
@@ -440,7 +430,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         progress.begin("find removed", 0);
         for (const NodeRecord& n : reader_->nodes()) {
             if (!(n.flags & kFlagInputPoints) || !reaches(info, n, removedBoxes, Vec3d{})) continue;
-            auto block = decode(*reader_, n);
+            auto block = reader_->readBlock(n, true);
             if (!block) return block.status();
             std::vector<Surfel> points;
             appendSurfels(*root_, *reader_, n, *block, rulesOf(*block), &points, nullptr);
@@ -601,7 +591,7 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
     for (const NodeRecord& n : reader_->nodes()) {
         // (Every chunk built again where the set gains provenance: every leaf.)
         if (!(n.flags & kFlagInputPoints) || (!addsProvenance_ && !reaches(info, n, boxes, c.rootMin()))) continue;
-        auto block = decode(*reader_, n);
+        auto block = reader_->readBlock(n, true);
         if (!block) return block.status();
         std::vector<Surfel> points;
         ScalarTable table = c.emptyTable();
@@ -718,7 +708,7 @@ Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& pr
             moved.key = key;
             out.records.push_back(moved);
             if (key == chunk && !(chunk == NodeKey{})) {
-                auto block = decode(*reader_, n);
+                auto block = reader_->readBlock(n, true);
                 if (!block) return block.status();
                 out.root = std::make_unique<BuiltNode>();
                 out.root->key = chunk;
@@ -750,10 +740,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     progress.begin("build", buildPoints);
     SC_TRY(buildChunks(c, update.buildPlan(), update.layout(), update.rebuilt(), work, progress));
     summary.phaseSeconds.push_back({"build", progress.end()});
-    BuildPlan copy = update.buildPlan();
-    const std::string recordPath = (*writer)->partialDir() + "/build.record";
-    SC_TRY(writePlan(recordPath, copy, commandLine));
-    (*writer)->setBuildRecord(recordPath);
+    SC_TRY(keepBuildRecord(**writer, (*writer)->partialDir(), update.buildPlan(), commandLine));
     SC_TRY(update.merge(**writer, work, progress, &summary));
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;

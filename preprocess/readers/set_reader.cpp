@@ -80,12 +80,8 @@ public:
 private:
     Status decodeNext() {
         node_ = &set_.nodes()[leaves_[next_++]];
-        auto bytes = set_.readBlockBytes(*node_);
-        if (!bytes) return bytes.status();
-        BlockExpectation e = set_.expectation(*node_);
-        e.scalars = !fields_.empty();
-        auto block = decodeBlock(bytes->data(), bytes->size(), e);
-        if (!block) return Status::error(desc_.path + ": node " + node_->key.name() + ": " + block.status().message());
+        auto block = set_.readBlock(*node_, !fields_.empty());
+        if (!block) return block.status();
         block_ = std::move(*block);
         at_ = 0;
         scalarIndex_.assign(fields_.size(), -1);
