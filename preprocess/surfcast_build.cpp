@@ -449,13 +449,17 @@ std::vector<uint64_t> plannedChunkPoints(const surfcast::BuildPlan& plan, const 
 }
 
 // plan.json: what a driver schedules by (docs/ARCHITECTURE.md, "Stages"):
-// the chunks' points, the parts, and an update's chunks to build (`build`).
-surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast::BuildPlan& plan, const std::vector<uint64_t>& points,
-                               const std::vector<size_t>* build = nullptr) {
+// the chunks' points and nodes, the parts, and an update's chunks to build
+// (`build`).
+surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast::BuildPlan& plan, const surfcast::ChunkLayout& layout,
+                               const std::vector<uint64_t>& points, const std::vector<size_t>* build = nullptr) {
     std::ostringstream json;
     json << "{\n  \"format\": \"surfcast-plan\",\n  \"points\": " << plan.stats.points << ",\n  \"chunks\": " << points.size()
          << ",\n  \"chunk_points\": [";
     for (size_t i = 0; i < points.size(); ++i) json << (i ? ", " : "") << points[i];
+    // Each chunk's node (level-x-y-z, as docs/FORMAT.md names nodes).
+    json << "],\n  \"chunk_nodes\": [";
+    for (size_t i = 0; i < layout.chunks().size(); ++i) json << (i ? ", " : "") << '"' << layout.chunks()[i].key.name() << '"';
     if (build) {
         json << "],\n  \"build\": [";
         for (size_t i = 0; i < build->size(); ++i) json << (i ? ", " : "") << (*build)[i];
@@ -649,7 +653,7 @@ int runUpdate(const Args& a) {
         if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
         auto staged = surfcast::updatePlanStage(planned.opt, request, set, record, storedCommandLine(planned), work);
         if (!staged) return fail(staged.status());
-        if (auto st = writePlanJson(work, staged->plan, staged->chunkPoints, &staged->build); !st.ok()) return fail(st);
+        if (auto st = writePlanJson(work, staged->plan, staged->layout, staged->chunkPoints, &staged->build); !st.ok()) return fail(st);
         std::printf("planned the update of %s: %zu of %zu chunks to build, in %s\n", set.c_str(), staged->build.size(),
                     staged->chunkPoints.size(), work.dir.c_str());
         return 0;
@@ -776,7 +780,7 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         for (const char* folder : {"chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
         std::filesystem::remove(work.update(), ec);
         if (auto st = surfcast::writePlan(work.plan(), plan, stored); !st.ok()) return fail(st);
-        if (auto st = writePlanJson(work, plan, plannedChunkPoints(plan, *context)); !st.ok()) return fail(st);
+        if (auto st = writePlanJson(work, plan, plan.layout(*context), plannedChunkPoints(plan, *context)); !st.ok()) return fail(st);
         std::printf("planned %zu chunks for %llu points in %s\n", plan.layout(*context).chunks().size(),
                     (unsigned long long)context->stats().points, work.dir.c_str());
         return 0;

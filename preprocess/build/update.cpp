@@ -763,7 +763,7 @@ Result<StagedUpdate> updatePlanStage(const BuildOptions& options, const UpdateRe
     SC_TRY(writePlan(work.plan(), update.buildPlan(), commandLine));  // (sets the plan's id, which the chunk files name)
     SC_TRY(update.distribute(work, progress, &summary));
     SC_TRY(update.write(work.update()));
-    StagedUpdate staged{update.buildPlan(), {}, update.rebuilt()};
+    StagedUpdate staged{update.buildPlan(), update.layout(), {}, update.rebuilt()};
     for (const Chunk& ch : update.layout().chunks()) staged.chunkPoints.push_back(ch.points);
     return staged;
 }

@@ -49,6 +49,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
 // update ran): a plan holds for the version of the set it was made on.
 struct StagedUpdate {
     BuildPlan plan;                    // as plan.bin holds it
+    ChunkLayout layout;                // its chunks, as distributed
     std::vector<uint64_t> chunkPoints;  // per chunk of the layout: its points
     std::vector<size_t> build;         // the chunks to build
 };
