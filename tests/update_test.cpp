@@ -261,6 +261,48 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
         EXPECT_NE(e.path().filename().string().rfind(".update-", 0), 0u) << "left behind: " << e.path();
 }
 
+// Images at --lod 1 from four views around the set, 640 x 360, within mean
+// FLIP 0.01 of the fresh build's (the bound the living-sets issue sets; the
+// benchmark's 104 M-point update measured 0.0019-0.0024: bench/BENCHMARKS.md,
+// "Updates in place").
+TEST_F(UpdateTest, ImagesAtLod1MatchAFreshBuild) {
+    auto r = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto all = base;
+    all.insert(all.end(), added.begin(), added.end());
+    all.insert(all.end(), {"-o", dir.file("fresh")});
+    ASSERT_EQ(test::run(build(all)).exitCode, 0);
+    auto fresh = TilesetReader::open(dir.file("fresh"));
+    ASSERT_TRUE(fresh);
+    const Box3d& b = fresh->info().bounds;
+    const Vec3d centre = (b.min + b.max) * 0.5, size = b.max - b.min;
+    const double radius = std::max({size.x, size.y, size.z});
+    const int around[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
+    for (int v = 0; v < 4; ++v) {
+        const Vec3d eye = centre + Vec3d{around[v][0] * radius, around[v][1] * radius, 0.6 * radius};
+        std::ostringstream camera;
+        camera.precision(17);
+        camera << "--camera=" << eye.x << ',' << eye.y << ',' << eye.z << ',' << centre.x << ',' << centre.y << ',' << centre.z
+               << ",0,0,1,45";
+        std::string images[2];
+        for (int k = 0; k < 2; ++k) {
+            images[k] = dir.file("view" + std::to_string(v) + (k ? "-updated.png" : "-fresh.png"));
+            auto view = test::run({test::binary("surfcast-view"), "--headless", k ? set() : dir.file("fresh"), "--size", "640x360", "--lod",
+                                   "1", camera.str(), "--out", images[k]});
+            ASSERT_EQ(view.exitCode, 0) << view.output;
+            // (A view of little of the set would pass any bound: each covers over a tenth of the frame.)
+            const auto frames = test::jsonLines(view.output);
+            ASSERT_FALSE(frames.empty()) << view.output;
+            EXPECT_GT(frames.back()["pixels_covered"].get<double>(), 0.1 * 640 * 360) << "view " << v;
+        }
+        auto flip = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/flip_mean.py", images[0], images[1]});
+        ASSERT_EQ(flip.exitCode, 0) << flip.output;
+        const double mean = std::stod(flip.output);
+        EXPECT_LT(mean, 0.01) << "view " << v;
+        EXPECT_GT(mean, 0.0) << "view " << v << ": the updated set renders exactly as the fresh build (is it the same set?)";
+    }
+}
+
 // Provenance: each leaf point's input attribute names the file it came
 // from (the files' own point counts, read by laspy), and --remove of the
 // added scan gives back the set before it: the same leaf points, within the
