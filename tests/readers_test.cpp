@@ -244,6 +244,24 @@ TEST(LasReader, AutzenMatchesProvenance) {
     EXPECT_EQ(hi, 236);
 }
 
+// The coordinate system a file declares (PROVENANCE.md, read there by
+// laspy and pyproj): autzen's WKT VLR, before its GeoTIFF keys; lone-star's
+// GeoTIFF keys alone (model type 2, raster type 3, geographic WGS 84).
+TEST(LasReader, CoordinateSystemsMatchProvenance) {
+    REQUIRE_DATA();
+    auto autzen = openLasReader(test::dataFile("autzen_trim.las"));
+    ASSERT_TRUE(autzen.ok()) << autzen.status().message();
+    EXPECT_EQ((*autzen)->description().crs.rfind("PROJCS[\"NAD_1983_HARN_Lambert_Conformal_Conic\"", 0), 0u) << (*autzen)->description().crs;
+    EXPECT_EQ(crsName((*autzen)->description().crs), "NAD_1983_HARN_Lambert_Conformal_Conic");
+    auto lone = openLasReader(test::dataFile("lone-star.laz"));
+    ASSERT_TRUE(lone.ok()) << lone.status().message();
+    EXPECT_EQ((*lone)->description().crs, "GeoTIFF keys: 1025=2 1024=3 2048=4326");
+    EXPECT_EQ(crsName((*lone)->description().crs), "EPSG:4326");
+    auto lion = openLasReader(test::dataFile("lion_takanawa.copc.laz"));
+    ASSERT_TRUE(lion.ok()) << lion.status().message();
+    EXPECT_EQ((*lion)->description().crs, "") << "PROVENANCE: no CRS";
+}
+
 TEST(LasReader, EveryPointFormatAndVersion) {
     TempDir dir;
     const size_t minLength[11] = {20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67};

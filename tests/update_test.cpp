@@ -810,6 +810,25 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
     EXPECT_NE(r.output.find("beyond the set's 0-4095"), std::string::npos) << r.output;
     expectUntouched("a scan the set's layout cannot take");
 
+    // A scan in another coordinate system: the added cell declaring WGS 84
+    // (a WKT VLR) where the set's cells declare autzen's (split_laz.py keeps them).
+    const std::string elsewhere = dir.file("elsewhere.laz");
+    written = test::run({SURFCAST_TEST_PYTHON, "-c",
+                         "import laspy, sys\nlas = laspy.read(sys.argv[1])\n"
+                         "las.header.vlrs = [v for v in las.header.vlrs if v.user_id != 'LASF_Projection']\n"
+                         "las.header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr('GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\","
+                         "SPHEROID[\"WGS 84\",6378137,298.257223563]],PRIMEM[\"Greenwich\",0],UNIT[\"degree\",0.0174532925199433]]'))\n"
+                         "las.write(sys.argv[2])\n",
+                         added[0], elsewhere});
+    ASSERT_EQ(written.exitCode, 0) << written.output;
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", elsewhere, "--to", set()});
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("elsewhere.laz: declares another coordinate system (WGS 84) than the set's inputs "
+                            "(NAD_1983_HARN_Lambert_Conformal_Conic)"),
+              std::string::npos)
+        << r.output;
+    expectUntouched("a scan in another coordinate system");
+
     // Build options are the set's own.
     r = test::run({test::binary("surfcast-build"), "--add", added[0], "--to", set(), "--grid", "64"});
     EXPECT_EQ(r.exitCode, 2) << r.output;

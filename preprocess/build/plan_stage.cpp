@@ -17,8 +17,11 @@ namespace {
 
 // A format change bumps its magic, here and in scripts/surfcast-dask, which
 // judges work files whole by them (dask_test fails where the two differ).
-constexpr char kPlanMagic[9] = "SCPLAN04";
-constexpr char kScanMagic[9] = "SCSCAN04";
+constexpr char kPlanMagic[9] = "SCPLAN05";
+constexpr char kScanMagic[9] = "SCSCAN05";
+// A set's build record written before the inputs' coordinate systems were
+// kept (the stats without InputDescription::crs): still read, for updates.
+constexpr char kPlanMagicWithoutCrs[9] = "SCPLAN04";
 constexpr char kCountMagic[9] = "SCCOUNT2";
 
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
@@ -94,6 +97,7 @@ void putStats(ByteWriter& w, const InputStats& s) {
         const InputDescription& d = src.description;
         w.putString(d.path);
         w.putString(d.format);
+        w.putString(d.crs);
         w.put(d.declaredPoints);
         for (bool b : {d.hasNormals, d.hasColors, d.textured, d.hasIntensity, d.hasClassification, d.hasReturns,
                        d.float32Coordinates, d.scanOriginIsDefault, d.airborne})
@@ -137,12 +141,13 @@ void putStats(ByteWriter& w, const InputStats& s) {
     w.put(s.largestMeshBytes);
 }
 
-bool getStats(ByteReader& r, InputStats& s) {
+bool getStats(ByteReader& r, InputStats& s, bool withCrs = true) {
     s.sources.resize(r.getCount(64));
     for (SourceStats& src : s.sources) {
         InputDescription& d = src.description;
         d.path = r.getString();
         d.format = r.getString();
+        if (withCrs) d.crs = r.getString();
         d.declaredPoints = r.get<uint64_t>();
         for (bool* b : {&d.hasNormals, &d.hasColors, &d.textured, &d.hasIntensity, &d.hasClassification, &d.hasReturns,
                         &d.float32Coordinates, &d.scanOriginIsDefault, &d.airborne})
@@ -425,14 +430,16 @@ Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan 
 
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args) {
     auto bytes = readWorkFile(path, kPlanMagic);
-    if (!bytes) return bytes.status();
+    const bool withCrs = bytes.ok();
+    if (!withCrs) bytes = readWorkFile(path, kPlanMagicWithoutCrs);
+    if (!bytes) return readWorkFile(path, kPlanMagic).status();
     ByteReader r(*bytes);
     const Status corrupt = Status::error(path + ": malformed plan");
     BuildPlan plan;
     plan.id = crc32(bytes->data(), bytes->size());
     args->resize(r.getCount(4));
     for (std::string& arg : *args) arg = r.getString();
-    if (!getStats(r, plan.stats)) return corrupt;
+    if (!getStats(r, plan.stats, withCrs)) return corrupt;
     plan.parts.resize(r.getCount(32));
     for (InputPart& p : plan.parts) p = getPart(r);
     plan.maxChunkPoints = r.get<uint64_t>();

@@ -403,6 +403,16 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
             if (src.description.scanOrigins.size() > 1)
                 return Status::error(src.description.path + ": holds several scans, whose points' scans a set does not keep for "
                                      "later updates; build the set anew from all its inputs");
+        // The added inputs declare the set's coordinate system, where both
+        // declare one (the first of its inputs that does).
+        const auto declared = std::find_if(record.stats.sources.begin(), record.stats.sources.end(),
+                                           [](const SourceStats& src) { return !src.description.crs.empty(); });
+        if (declared != record.stats.sources.end())
+            for (const SourceStats& src : scanned->sources)
+                if (!src.description.crs.empty() && src.description.crs != declared->description.crs)
+                    return Status::error(src.description.path + ": declares another coordinate system (" + crsName(src.description.crs) +
+                                         ") than the set's inputs (" + crsName(declared->description.crs) +
+                                         "); reproject it to theirs, or build the set anew from all its inputs");
         const InputStats addedStats = *scanned;
         stats = mergeInputStats({std::move(stats), std::move(*scanned)}, {false, false});
         auto grown = growRoot(info, stats.bounds);

@@ -60,6 +60,10 @@ struct InputDescription {
     std::vector<std::optional<Vec3d>> scanOrigins;
     bool scanOriginIsDefault = false; // the format's default (0,0,0), possibly meaningless
     bool airborne = false;           // aerial LiDAR: normals point up
+    // The coordinate system the file declares, as its own text (a LAS or LAZ
+    // file's WKT VLR, else its GeoTIFF keys: las_reader.cpp); empty where it
+    // declares none or the format has no such field. An update compares it.
+    std::string crs;
     std::vector<ScalarField> scalars; // the scalar fields this reader decodes (its ScalarSelection's), in value order
 };
 

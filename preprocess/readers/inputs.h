@@ -40,6 +40,11 @@ struct InputOptions {
 // A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.
 inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return opacity == 1 ? alpha : uint8_t(std::lround(alpha * opacity)); }
 
+// A short name of the coordinate system InputDescription::crs holds, for
+// messages: a WKT's own name, or the EPSG code of GeoTIFF keys 3072
+// (projected) or 2048 (geographic).
+std::string crsName(const std::string& crs);
+
 // The input files that `args` name, in order: a file as itself, a tile set's
 // folder as its tileset.json (set_reader.h), another folder as every file
 // under it with an extension some reader takes (recursively, sorted by path;

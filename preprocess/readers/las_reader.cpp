@@ -5,6 +5,7 @@
 #include <surfcast_laz.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -37,6 +38,8 @@ constexpr uint16_t kLaszipRecord = 22204;
 constexpr char kSpecUser[] = "LASF_Spec";
 constexpr uint16_t kExtraBytesRecord = 4;
 constexpr size_t kExtraBytesDescriptor = 192;
+constexpr char kProjectionUser[] = "LASF_Projection";
+constexpr uint16_t kWktRecord = 2112, kGeoKeysRecord = 34735, kGeoDoublesRecord = 34736, kGeoAsciiRecord = 34737;
 // GPS time is a double with no step of its own: it is stored to 2^-20 s
 // (0.95 µs), the pulse spacing of a 1 MHz scanner.
 constexpr double kGpsTimeResolution = 0x1p-20;  // bytes per dimension in the Extra Bytes VLR (LAS 1.4 R15, table 24)
@@ -209,6 +212,9 @@ private:
 struct Vlrs {
     std::optional<std::vector<uint8_t>> laszip, extraBytes;
     int extraBytesIndex = -1;
+    // The coordinate system (LAS 1.4 R15, 2.5): OGC WKT, or GeoTIFF's keys
+    // with their double and ASCII parameters.
+    std::optional<std::vector<uint8_t>> wkt, geoKeys, geoDoubles, geoAscii;
 };
 
 Result<Vlrs> readVlrs(ByteStream& in, size_t headerSize, uint32_t vlrCount, uint32_t dataOffset) {
@@ -221,8 +227,13 @@ Result<Vlrs> readVlrs(ByteStream& in, size_t headerSize, uint32_t vlrCount, uint
             return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR " + std::to_string(i) + " runs past the point data");
         uint16_t record = le::get<uint16_t>(h + 18), length = le::get<uint16_t>(h + 20);
         auto user = [&](const char* name) { return std::strncmp(reinterpret_cast<const char*>(h + 2), name, 16) == 0; };
+        const bool projection = user(kProjectionUser);
         std::optional<std::vector<uint8_t>>* keep = user(kLaszipUser) && record == kLaszipRecord       ? &out.laszip
                                                     : user(kSpecUser) && record == kExtraBytesRecord ? &out.extraBytes
+                                                    : projection && record == kWktRecord             ? &out.wkt
+                                                    : projection && record == kGeoKeysRecord         ? &out.geoKeys
+                                                    : projection && record == kGeoDoublesRecord      ? &out.geoDoubles
+                                                    : projection && record == kGeoAsciiRecord        ? &out.geoAscii
                                                                                                      : nullptr;
         if (keep) {
             std::vector<uint8_t> payload(length);  // at most 64 KiB: the field is 16-bit
@@ -233,6 +244,42 @@ Result<Vlrs> readVlrs(ByteStream& in, size_t headerSize, uint32_t vlrCount, uint
         } else if (!in.skip(length)) {
             return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR truncated");
         }
+    }
+    return out;
+}
+
+// The coordinate system the VLRs declare, as text (InputDescription::crs):
+// the WKT, else every GeoTIFF key as "id=value" (a value stored in the double
+// or ASCII parameters given from them; one they do not hold, as "?").
+std::string crsOf(const Vlrs& v) {
+    if (v.wkt) {
+        std::string wkt(v.wkt->begin(), std::find(v.wkt->begin(), v.wkt->end(), 0));
+        while (!wkt.empty() && std::isspace(static_cast<unsigned char>(wkt.back()))) wkt.pop_back();
+        if (!wkt.empty()) return wkt;
+    }
+    if (!v.geoKeys || v.geoKeys->size() < 8) return {};
+    const std::vector<uint8_t>& k = *v.geoKeys;
+    const size_t keys = std::min<size_t>(le::get<uint16_t>(&k[6]), k.size() / 8 - 1);
+    std::string out = "GeoTIFF keys:";
+    for (size_t i = 1; i <= keys; ++i) {
+        const uint16_t id = le::get<uint16_t>(&k[8 * i]), where = le::get<uint16_t>(&k[8 * i + 2]);
+        const uint16_t count = le::get<uint16_t>(&k[8 * i + 4]), value = le::get<uint16_t>(&k[8 * i + 6]);
+        std::string text = "?";
+        if (where == 0) {
+            text = std::to_string(value);
+        } else if (where == kGeoDoublesRecord && v.geoDoubles && (size_t(value) + count) * 8 <= v.geoDoubles->size()) {
+            text.clear();
+            for (size_t j = 0; j < count; ++j) {
+                char number[32];
+                std::snprintf(number, sizeof number, "%s%.17g", j ? "," : "", le::get<double>(&(*v.geoDoubles)[8 * (value + j)]));
+                text += number;
+            }
+        } else if (where == kGeoAsciiRecord && v.geoAscii && size_t(value) + count <= v.geoAscii->size()) {
+            text.assign(v.geoAscii->begin() + value, v.geoAscii->begin() + value + count);
+            while (!text.empty() && (text.back() == '|' || text.back() == 0)) text.pop_back();  // GeoTIFF ends each string with '|'
+            text = '"' + text + '"';
+        }
+        out += " " + std::to_string(id) + "=" + text;
     }
     return out;
 }
@@ -411,6 +458,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.hasReturns = true;
     desc.colorBits = 16;
     desc.precision = std::min({l.scale[0], l.scale[1], l.scale[2]});
+    desc.crs = crsOf(l.vlrs);
     desc.airborne = true;
 
     std::vector<std::pair<ScalarField, ScalarLayout>> fields;

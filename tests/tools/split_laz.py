@@ -55,6 +55,8 @@ def main():
         header = laspy.LasHeader(point_format=fmt, version=src.header.version)
         header.scales = src.header.scales
         header.offsets = cmin  # per-file offsets, as an octree writer sets them
+        # The source's coordinate system (its WKT and GeoTIFF VLRs), as such a writer keeps it.
+        header.vlrs.extend(v for v in src.header.vlrs if v.user_id == "LASF_Projection")
         rec = laspy.ScaleAwarePointRecord.zeros(len(sel), header=header)
         rec.x, rec.y, rec.z = x[sel], y[sel], z[sel]
         for name in src.point_format.standard_dimension_names:  # extra bytes are left out
