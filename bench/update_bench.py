@@ -23,8 +23,13 @@ compacted (--compact): blocks.bin's bytes, the live blocks' bytes (what a
 client streaming the whole set downloads), time, and the images of four
 views at --lod 1 against the fresh build's (mean FLIP, flip-evaluator).
 
+With --dask N: the same update of a copy of the base set in one process and
+through scripts/surfcast-dask on a local cluster of N workers (the update's
+stages as tasks), side by side: wall time, and whether every file of the two
+sets is the same bytes (no rebuild).
+
 Usage: bench/.venv/bin/python bench/update_bench.py [--tiles 18x17] [--cells 10x10x1]
-       [--work DIR] [--threads N] [--memory 2G] [--repeated N]
+       [--work DIR] [--threads N] [--memory 2G] [--repeated N | --dask N]
 Prints Markdown for bench/BENCHMARKS.md ("Updates in place").
 """
 import argparse
@@ -140,6 +145,29 @@ def repeated(a):
           f"{', '.join(f'{v:.4f}' for v in flips)} (compaction moves no byte of a block)")
 
 
+def dask_update(a, base_set, upd, added, t_update):
+    """The update just made in one process (`upd`), made again through the
+    Dask driver on a copy of the base set at the same path (the build record
+    names it): time side by side, and the two sets' bytes compared."""
+    one = upd + ".one-process"
+    shutil.rmtree(one, ignore_errors=True)
+    os.rename(upd, one)
+    shutil.copytree(base_set, upd)
+    report = os.path.join(a.work, "dask-update.json")
+    t_dask, out = run([os.path.join(ROOT, "scripts", "surfcast-dask"), "--local", str(a.dask), "-q", "--report", report,
+                       "--add", added, "--to", upd])
+    same = sorted(os.listdir(one)) == sorted(os.listdir(upd)) and all(
+        open(os.path.join(one, f), "rb").read() == open(os.path.join(upd, f), "rb").read() for f in os.listdir(one))
+    stages = json.load(open(report))["stages"]
+    print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
+    print("| update | time (s) | stages (tasks, s) | same bytes |")
+    print("|---|---|---|---|")
+    print(f"| one process (--threads {a.threads}) | {t_update:.1f} | | |")
+    print(f"| surfcast-dask, {a.dask} workers | {t_dask:.1f} | " +
+          ", ".join(f"{k} {v['tasks']}, {v['seconds']:.1f}" for k, v in stages.items()) + f" | {'yes' if same else 'NO'} |")
+    shutil.rmtree(one, ignore_errors=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tiles", default="18x17")
@@ -148,6 +176,7 @@ def main():
     ap.add_argument("--threads", default=str(os.cpu_count()))
     ap.add_argument("--memory", default="2G")
     ap.add_argument("--repeated", type=int, default=0, help="appends of one 0.1 %% cell each (the drift case)")
+    ap.add_argument("--dask", type=int, default=0, help="the update in one process against surfcast-dask on N local workers")
     a = ap.parse_args()
     if a.repeated:
         return repeated(a)
@@ -178,6 +207,8 @@ def main():
     shutil.copytree(base_set, upd)
 
     t_update, out_update = run([BUILD, "-q", "--threads", a.threads, "--add", added, "--to", upd])
+    if a.dask:
+        return dask_update(a, base_set, upd, added, t_update)
     shutil.rmtree(fresh, ignore_errors=True)
     t_rebuild, _ = run([BUILD, *common, "@" + os.path.join(a.work, "all.list"), "-o", fresh])
 
