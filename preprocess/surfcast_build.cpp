@@ -558,7 +558,8 @@ surfcast::Status lockSet(const std::string& set, SetLock* lock) {
 // (made absolute), or its file name where only one input has it; -1 with
 // `error` set otherwise.
 long findInput(const std::vector<std::string>& paths, size_t first, const std::string& name, std::string* error) {
-    const std::string absolute = surfcast::isUrl(name) ? name : std::filesystem::absolute(name).lexically_normal().string();
+    std::string absolute = surfcast::isUrl(name) ? name : std::filesystem::absolute(name).lexically_normal().string();
+    while (absolute.size() > 1 && absolute.back() == '/') absolute.pop_back();  // a set's folder given as "team_b/"
     long found = -1;
     for (size_t i = 0; i < paths.size(); ++i)
         if (paths[i] == absolute || (surfcast::isSetInput(paths[i]) && paths[i] == absolute + "/tileset.json")) return long(first + i);
@@ -595,7 +596,7 @@ surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record,
         return surfcast::Status::error(set + ": keeps no build record (" + surfcast::buildRecordFile(info->hierarchyFile) +
                                        "): it was built before updates existed; build it anew to " + purpose);
     std::vector<std::string> stored;
-    auto read = surfcast::readPlan(recordPath, &stored);
+    auto read = surfcast::readPlan(recordPath, &stored, true);
     if (!read) return read.status();
     *record = std::move(*read);
     if (parseArgs(stored, "plan", planned) >= 0) return surfcast::Status::error(recordPath + ": its command line does not parse");
@@ -802,18 +803,30 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     if (update && (stage == "distribute" || stage == "merge"))
         return usageError(work.dir + " holds an update's plan, which update-plan distributed; run chunk, then update-merge");
     if (!update && stage == "update-merge") return usageError(work.dir + " holds no update's plan (update.bin): run update-plan first");
+    if (update && (stage == "chunk" || stage == "update-merge")) {
+        // A task run again after the switch (a worker lost after it, a
+        // driver started again): the set holds this update already.
+        auto applied = surfcast::updateApplied(planned.opt, work);
+        if (!applied) return fail(applied.status());
+        if (*applied) {
+            std::printf("%s holds this update already (its build record is %s)\n", planned.opt.output.c_str(), work.plan().c_str());
+            return 0;
+        }
+    }
     if (stage == "update-merge") {
         const std::string& set = planned.opt.output;
         SetLock lock;
         if (auto st = lockSet(set, &lock); !st.ok()) return fail(st);
-        auto summary = surfcast::updateMergeStage(planned.opt, *plan, work);
+        auto summary = surfcast::updateMergeStage(planned.opt, *plan, stored, work);
         if (!summary) return fail(summary.status());
         std::error_code ec;
         for (const char* folder : {"chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
         std::printf("updated %s (%zu chunks built again)\n%s", set.c_str(), summary->chunks, summary->text().c_str());
         return 0;
     }
-    auto derived = update ? surfcast::updateContext(planned.opt, *plan, work) : surfcast::BuildContext::derive(planned.opt, plan->stats, false);
+    std::vector<size_t> updateChunks;  // an update's chunks to build
+    auto derived = update ? surfcast::updateContext(planned.opt, *plan, work, &updateChunks)
+                          : surfcast::BuildContext::derive(planned.opt, plan->stats, false);
     if (!derived) return fail(derived.status());
     const surfcast::BuildContext& c = **derived;
     // The meshes' store: within what the budget leaves while distribute reads
@@ -835,6 +848,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         for (size_t i : a.chunks)
             if (i >= layout.chunks().size())
                 return usageError("chunk " + std::to_string(i) + ": the plan has chunks 0 to " + std::to_string(layout.chunks().size() - 1));
+            else if (update && std::find(updateChunks.begin(), updateChunks.end(), i) == updateChunks.end())
+                return usageError("chunk " + std::to_string(i) + ": the update keeps it as the set holds it (plan.json's \"build\" names the chunks to build)");
         if (auto st = surfcast::readDistribution(work, *plan, layout); !st.ok()) return fail(st);
         uint64_t points = 0;
         for (size_t i : a.chunks) points += layout.chunks()[i].points;
@@ -851,12 +866,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     summary.chunks = layout.chunks().size();
     auto writer = surfcast::TilesetWriter::create(planned.opt.output);
     if (!writer) return fail(writer.status());
-    // The set keeps the plan as its build record (update.h).
-    const std::string record = (*writer)->partialDir() + "/build.record";
-    std::error_code copied;
-    std::filesystem::copy_file(work.plan(), record, copied);
-    if (copied) return fail(surfcast::Status::error(record + ": cannot copy the plan (" + copied.message() + ")"));
-    (*writer)->setBuildRecord(record);
+    // The set keeps the plan as its build record (update.h): plan.bin's bytes, synced.
+    if (auto st = surfcast::keepBuildRecord(**writer, (*writer)->partialDir(), *plan, stored); !st.ok()) return fail(st);
     if (auto st = surfcast::mergeStage(c, *plan, layout, work, **writer, progress, &summary); !st.ok()) return fail(st);
     summary.inputPoints = c.stats().points;
     summary.skippedPoints = c.stats().skipped;
@@ -897,7 +908,8 @@ int main(int argc, char** argv) {
     }
     if (a.merge) {
         // A build from the sets' points (set_reader.h), with the first set's
-        // build options (its record, where it keeps one), then the command line's.
+        // build options (its record, where it keeps one; not those of reading
+        // its inputs), then the command line's.
         if (a.opt.inputs.defaultScene) return usageError("--merge joins tile sets; it takes no --default-scene");
         if (a.opt.output.empty()) return usageError("--merge needs the folder to write the joined set to (-o OUT)");
         if (a.opt.inputs.paths.size() < 2) return usageError("--merge joins two or more tile sets");
@@ -911,7 +923,19 @@ int main(int argc, char** argv) {
         Args first;
         bool found = false;
         if (auto st = readRecord(a.opt.inputs.paths[0], &record, &first, "merge it", &found); !st.ok()) return fail(st);
-        std::vector<std::string> args = first.kept;
+        // Options of how the first set read its inputs act on the sets'
+        // points no more: they hold the result (--opacity would scale their
+        // alpha twice, --default-scene add the scene again).
+        std::vector<std::string> args;
+        for (size_t i = 0; i < first.kept.size(); ++i) {
+            const std::string& o = first.kept[i];
+            if (o == "--scene-points" || o == "--seed" || o == "--opacity" || o == "--columns" || o == "--mesh-spacing" ||
+                o == "--mesh-max-surfels" || o == "--texture-filter")
+                ++i;
+            else if (o != "--default-scene" && o != "--read-alpha" && o != "--vertices-only" && o != "--allow-missing-textures" &&
+                     o != "--allow-outside-paths")
+                args.push_back(o);
+        }
         args.insert(args.end(), a.kept.begin(), a.kept.end());
         args.insert(args.end(), {"-o", a.opt.output});
         args.insert(args.end(), sets.begin(), sets.end());

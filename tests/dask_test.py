@@ -267,6 +267,18 @@ class DaskBuild(unittest.TestCase):
             self.assertGreaterEqual(built, 2, update)
             self.assertLess(built, record["chunks"], update)
             self.assertFalse(os.path.exists(os.path.join(self.dir, ".set.dask-work")), "work folder left")
+        # A driver started again on the work folder of an update it finished
+        # (kept here; a driver killed after the switch leaves it too) finds
+        # the set done, and changes nothing.
+        update = ["--add", os.path.join(parts, "r000000.laz"), "--to", out]
+        driver = [DRIVER, "--scheduler", self.cluster.address, "-q"] + update
+        r = subprocess.run(driver + ["--keep-work"], capture_output=True, text=True)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        files = {f: read(os.path.join(out, f)) for f in os.listdir(out)}
+        r = subprocess.run(driver, capture_output=True, text=True)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("holds this update already", r.stderr)
+        self.assertEqual({f: read(os.path.join(out, f)) for f in os.listdir(out)}, files)
 
     def test_bad_file_among_many_names_it_and_keeps_the_old_set(self):
         require_data(self)

@@ -257,6 +257,16 @@ TEST(LasReader, CoordinateSystemsMatchProvenance) {
     ASSERT_TRUE(lone.ok()) << lone.status().message();
     EXPECT_EQ((*lone)->description().crs, "GeoTIFF keys: 1025=2 1024=3 2048=4326");
     EXPECT_EQ(crsName((*lone)->description().crs), "EPSG:4326");
+    // One code in WKT (WKT1's closing AUTHORITY, WKT2's ID) and GeoTIFF keys
+    // is one coordinate system; a code within the WKT (its datum's) is not the root's.
+    const std::string wkt1 = "GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\",SPHEROID[\"WGS 84\",6378137,298.257223563,AUTHORITY[\"EPSG\",\"7030\"]],"
+                             "AUTHORITY[\"EPSG\",\"6326\"]],PRIMEM[\"Greenwich\",0],UNIT[\"degree\",0.0174532925199433],AUTHORITY[\"EPSG\",\"4326\"]]";
+    const std::string wkt2 = "GEOGCRS[\"WGS 84\",DATUM[\"World Geodetic System 1984\",ELLIPSOID[\"WGS 84\",6378137,298.257223563]],"
+                             "CS[ellipsoidal,2],ID[\"EPSG\",4326]]";
+    EXPECT_EQ(crsIdentity(wkt1), "EPSG:4326");
+    EXPECT_EQ(crsIdentity(wkt2), "EPSG:4326");
+    EXPECT_EQ(crsIdentity((*lone)->description().crs), "EPSG:4326");
+    EXPECT_NE(crsIdentity((*autzen)->description().crs), "EPSG:4326");
     auto lion = openLasReader(test::dataFile("lion_takanawa.copc.laz"));
     ASSERT_TRUE(lion.ok()) << lion.status().message();
     EXPECT_EQ((*lion)->description().crs, "") << "PROVENANCE: no CRS";

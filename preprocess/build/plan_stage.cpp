@@ -8,6 +8,7 @@
 #include "crc32.h"
 #include "input_file.h"
 #include "las_reader.h"
+#include "set_reader.h"
 #include "stages.h"
 #include "work_files.h"
 
@@ -246,7 +247,8 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
     std::vector<double> weight;
     if (scene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
     for (const std::string& path : inputs.paths) {
-        auto bytes = inputFileSize(path);  // a URL's asks its host
+        // A URL's asks its host; a tile set weighs as its blocks (set_reader.h).
+        auto bytes = inputFileSize(isSetInput(path) ? (std::filesystem::path(path).parent_path() / "blocks.bin").string() : path);
         weight.push_back(bytes ? double(*bytes) + 1 : 1.0);  // unreadable: its reader names the error
     }
     double total = 0;
@@ -408,7 +410,8 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
     return plan;
 }
 
-Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args) {
+namespace {
+ByteWriter planPayload(const BuildPlan& plan, std::span<const std::string> args) {
     ByteWriter w;
     w.put(uint64_t(args.size()));
     for (const std::string& a : args) w.putString(a);
@@ -417,6 +420,17 @@ Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::
     for (const InputPart& p : plan.parts) putPart(w, p);
     w.put(plan.maxChunkPoints);
     putCounts(w, plan.counts);
+    return w;
+}
+}  // namespace
+
+uint32_t planId(const BuildPlan& plan, std::span<const std::string> args) {
+    ByteWriter w = planPayload(plan, args);
+    return crc32(w.bytes().data(), w.bytes().size());
+}
+
+Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args) {
+    ByteWriter w = planPayload(plan, args);
     plan.id = crc32(w.bytes().data(), w.bytes().size());
     return writeWorkFile(path, kPlanMagic, w);
 }
@@ -428,10 +442,10 @@ Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan 
     return {};
 }
 
-Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args) {
+Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args, bool buildRecord) {
     auto bytes = readWorkFile(path, kPlanMagic);
     const bool withCrs = bytes.ok();
-    if (!withCrs) bytes = readWorkFile(path, kPlanMagicWithoutCrs);
+    if (!withCrs && buildRecord) bytes = readWorkFile(path, kPlanMagicWithoutCrs);
     if (!bytes) return readWorkFile(path, kPlanMagic).status();
     ByteReader r(*bytes);
     const Status corrupt = Status::error(path + ": malformed plan");

@@ -73,7 +73,7 @@ struct InputPart {
     bool continuesSource() const { return begin > 0 && sources > 0; }
 };
 // Part `part` of `parts`: runs of about equal bytes (file sizes; the scene
-// at 32 bytes a point), so that a file's records belong to the part their
+// at 32 bytes a point, a tile set at its blocks.bin's), so that a file's records belong to the part their
 // byte position falls in (the whole of an uncut input to the part of its
 // middle byte). Parts may outnumber the inputs: some are then empty.
 InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts);
@@ -124,7 +124,11 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
 // plan.bin: the plan and `args`, the command line that made it (the staged
 // CLI's later stages read their options from it). Sets plan.id.
 Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args);
-Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args);
+// The id writePlan gives `plan` with `args`.
+uint32_t planId(const BuildPlan& plan, std::span<const std::string> args);
+// `buildRecord`: the file is a set's build record (update.h), which may be
+// one written before the inputs' coordinate systems were kept (SCPLAN04).
+Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args, bool buildRecord = false);
 // The set's build record (update.h), handed to `writer`: `plan` (a copy:
 // writePlan sets its id, and the chunks were built to the plan's) with
 // `commandLine`, written as dir/build.record.

@@ -232,14 +232,21 @@ Result<uint32_t> setVersion(const std::string& set) {
     return crc32(json.data(), json.size());
 }
 
-Result<BuildPlan> readBuildRecord(const std::string& set) {
+// The path of the set's current build record (named by its hierarchy's).
+Result<std::string> buildRecordPath(const std::string& set) {
     std::ifstream in(set + "/tileset.json", std::ios::binary);
     if (!in) return Status::error(set + ": not a tile set (no tileset.json)");
     const std::string json{std::istreambuf_iterator<char>(in), {}};
     auto info = readTilesetJson(json, set + "/tileset.json");
     if (!info) return info.status();
+    return set + "/" + buildRecordFile(info->hierarchyFile);
+}
+
+Result<BuildPlan> readBuildRecord(const std::string& set) {
+    auto path = buildRecordPath(set);
+    if (!path) return path.status();
     std::vector<std::string> args;
-    return readPlan(set + "/" + buildRecordFile(info->hierarchyFile), &args);
+    return readPlan(*path, &args, true);
 }
 
 // An update's course: plan (all that precedes the chunks' builds), distribute
@@ -254,7 +261,7 @@ public:
     // to work.chunks(0), whose distribution.bin names the plan's id.
     Status distribute(const WorkFolder& work, Progress& progress, BuildSummary* summary);
     Status write(const std::string& path) const;
-    Status resume(const BuildOptions& options, BuildPlan plan, const std::string& path);
+    Status resume(const BuildOptions& options, BuildPlan plan, const WorkFolder& work);
     // The set's writer, its nodes under the keys of the updated set's root.
     Result<std::unique_ptr<TilesetWriter>> writer() const;
     // The levels above the chunks (the rebuilt ones read from `work`, the kept
@@ -404,12 +411,16 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
                 return Status::error(src.description.path + ": holds several scans, whose points' scans a set does not keep for "
                                      "later updates; build the set anew from all its inputs");
         // The added inputs declare the set's coordinate system, where both
-        // declare one (the first of its inputs that does).
-        const auto declared = std::find_if(record.stats.sources.begin(), record.stats.sources.end(),
-                                           [](const SourceStats& src) { return !src.description.crs.empty(); });
-        if (declared != record.stats.sources.end())
+        // declare one (the first of its inputs that does and stays).
+        const SourceStats* declared = nullptr;
+        for (size_t i = 0; i < record.stats.sources.size() && !declared; ++i) {
+            const SourceStats& src = record.stats.sources[i];
+            const bool removed = std::find(request.removed.begin(), request.removed.end(), oldInputs_[i]) != request.removed.end();
+            if (!src.description.crs.empty() && src.points > 0 && !removed) declared = &src;
+        }
+        if (declared)
             for (const SourceStats& src : scanned->sources)
-                if (!src.description.crs.empty() && src.description.crs != declared->description.crs)
+                if (!src.description.crs.empty() && crsIdentity(src.description.crs) != crsIdentity(declared->description.crs))
                     return Status::error(src.description.path + ": declares another coordinate system (" + crsName(src.description.crs) +
                                          ") than the set's inputs (" + crsName(declared->description.crs) +
                                          "); reproject it to theirs, or build the set anew from all its inputs");
@@ -640,9 +651,10 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
     return writeDistribution(work.distribution(0), plan_, layout_);
 }
 
-// update.bin: the set's version, the added inputs' count, the growth of the
-// root and the chunks built again (the rest a stage derives again from the
-// plan and the set).
+// update.bin: the plan's id, the set's version, the added inputs' count, the
+// growth of the root (levels and the old root's offset: the new root follows
+// from the set) and the chunks built again; the rest a stage derives again
+// from the plan and the set.
 Status Update::write(const std::string& path) const {
     ByteWriter w;
     w.put(plan_.id);
@@ -650,15 +662,14 @@ Status Update::write(const std::string& path) const {
     w.put(uint64_t(request_.added));
     w.put(uint32_t(grow_.levels));
     for (int a = 0; a < 3; ++a) w.put(grow_.offset[a]);
-    for (int a = 0; a < 3; ++a) w.put(grow_.rootMin[a]);
-    w.put(grow_.rootEdge);
     const std::vector<size_t> which = rebuilt();
     w.put(uint64_t(which.size()));
     for (size_t i : which) w.put(uint64_t(i));
     return writeWorkFile(path, kUpdateMagic, w);
 }
 
-Status Update::resume(const BuildOptions& options, BuildPlan plan, const std::string& path) {
+Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFolder& work) {
+    const std::string path = work.update();
     auto bytes = readWorkFile(path, kUpdateMagic);
     if (!bytes) return bytes.status();
     ByteReader r(*bytes);
@@ -666,21 +677,31 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const std::st
     if (r.get<uint32_t>() != plan.id) return Status::error(path + ": written for another plan (plan the update again)");
     const uint32_t version = r.get<uint32_t>();
     const uint64_t added = r.get<uint64_t>();
-    grow_.levels = int(r.get<uint32_t>());
+    const uint32_t levels = r.get<uint32_t>();
     for (int a = 0; a < 3; ++a) grow_.offset[a] = r.get<uint32_t>();
-    for (int a = 0; a < 3; ++a) grow_.rootMin[a] = r.get<double>();
-    grow_.rootEdge = r.get<double>();
     const uint64_t count = r.getCount(8);
     std::vector<uint64_t> which(count);
     for (uint64_t& i : which) i = r.get<uint64_t>();
-    if (!r.ok() || r.left() != 0 || added > options.inputs.paths.size() || grow_.levels > kMaxLevel) return corrupt;
+    if (!r.ok() || r.left() != 0 || added > options.inputs.paths.size() || levels > uint32_t(kMaxLevel)) return corrupt;
+    grow_.levels = int(levels);
+    for (int a = 0; a < 3; ++a)
+        if (grow_.offset[a] > (uint32_t(1) << levels) - 1) return corrupt;
 
+    // The set must be the version planned on (checked before it is read).
     const std::string set = options.output;
+    auto now = setVersion(set);
+    if (!now) return now.status();
+    if (*now != version)
+        return Status::error(set + ": changed since this update was planned in " + work.dir +
+                             " (another update or compaction ran); remove " + work.dir + " and run the update again");
     auto record = readBuildRecord(set);
     if (!record) return record.status();
     SC_TRY(open(options, size_t(added), set, *record));
-    if (version_ != version)
-        return Status::error(set + ": changed since this update was planned (another update or compaction ran); run the update again");
+    if (version_ != version) return Status::error(set + ": changed while this update read it; run the update again");
+    // The grown root, as growRoot makes it from the set's.
+    const TilesetInfo& info = reader_->info();
+    grow_.rootEdge = std::ldexp(info.rootEdge, grow_.levels);
+    for (int a = 0; a < 3; ++a) grow_.rootMin[a] = info.rootMin[a] - double(grow_.offset[a]) * info.rootEdge;
     if (grow_.levels > 0) root_ = BuildContext::rerooted(*old_, grow_.rootMin, grow_.rootEdge);
     auto derived = BuildContext::derive(opt_, plan.stats, false, root_.get(), true);
     if (!derived) return derived.status();
@@ -760,46 +781,55 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
 }
 
 Result<StagedUpdate> updatePlanStage(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
-                                            const BuildPlan& record, const std::vector<std::string>& commandLine,
-                                            const WorkFolder& work) {
+                                     const BuildPlan& record, const std::vector<std::string>& commandLine, const WorkFolder& work) {
     Progress progress(options.progress);
     BuildSummary summary;
     Update update;
     SC_TRY(update.plan(options, request, set, record, progress, &summary));
-    // A new plan: what an earlier one distributed and built goes.
+    // A new plan: what an earlier one wrote goes. update.bin comes before
+    // plan.bin, so that no stage takes the folder for a build's; plan.json,
+    // what a driver schedules by, comes last (the caller writes it).
     std::error_code ec;
+    for (const std::string& file : {work.dir + "/plan.json", work.update(), work.plan()}) fs::remove(file, ec);
     for (const char* folder : {"chunks", "nodes"}) fs::remove_all(work.dir + "/" + folder, ec);
-    fs::remove(work.update(), ec);
-    SC_TRY(writePlan(work.plan(), update.buildPlan(), commandLine));  // (sets the plan's id, which the chunk files name)
-    SC_TRY(update.distribute(work, progress, &summary));
+    update.buildPlan().id = planId(update.buildPlan(), commandLine);  // the id the chunk files name
     SC_TRY(update.write(work.update()));
+    SC_TRY(writePlan(work.plan(), update.buildPlan(), commandLine));
+    SC_TRY(update.distribute(work, progress, &summary));
     StagedUpdate staged{update.buildPlan(), update.layout(), {}, update.rebuilt()};
     for (const Chunk& ch : update.layout().chunks()) staged.chunkPoints.push_back(ch.points);
     return staged;
 }
 
-Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work) {
+Result<bool> updateApplied(const BuildOptions& options, const WorkFolder& work) {
+    auto record = buildRecordPath(options.output);
+    if (!record) return record.status();
+    std::ifstream a(*record, std::ios::binary), b(work.plan(), std::ios::binary);
+    if (!a || !b) return false;
+    return std::string{std::istreambuf_iterator<char>(a), {}} == std::string{std::istreambuf_iterator<char>(b), {}};
+}
+
+Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work,
+                                                          std::vector<size_t>* build) {
     Update update;
-    SC_TRY(update.resume(options, plan, work.update()));
+    SC_TRY(update.resume(options, plan, work));
+    *build = update.rebuilt();
     return update.sharedContext();
 }
 
-Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work) {
+Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const std::vector<std::string>& commandLine,
+                                      const WorkFolder& work) {
     Progress progress(options.progress);
     BuildSummary summary;
     Update update;
-    SC_TRY(update.resume(options, plan, work.update()));
+    SC_TRY(update.resume(options, plan, work));
     update.context().describe(&summary);
     SC_TRY(readDistribution(work, update.buildPlan(), update.layout()));
     summary.chunks = update.rebuilt().size();
     auto writer = update.writer();
     if (!writer) return writer.status();
-    // The set keeps the plan as its build record (update.h).
-    const std::string record = (*writer)->partialDir() + "/build.record";
-    std::error_code ec;
-    fs::copy_file(work.plan(), record, ec);
-    if (ec) return Status::error(record + ": cannot copy the plan (" + ec.message() + ")");
-    (*writer)->setBuildRecord(record);
+    // The set keeps the plan as its build record (update.h): plan.bin's bytes.
+    SC_TRY(keepBuildRecord(**writer, (*writer)->partialDir(), update.buildPlan(), commandLine));
     SC_TRY(update.merge(**writer, work, progress, &summary));
     summary.inputPoints = update.context().stats().points;
     summary.skippedPoints = update.context().stats().skipped;

@@ -41,22 +41,28 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
 // runs the chunks' builds as tasks (scripts/surfcast-dask), with the same
 // bytes as updateTileset:
 //   update-plan   updatePlanStage: all that precedes the chunks' builds, into
-//                 `work` (plan.bin, the chunk files, update.bin)
-//   chunk I       chunkStage, with updateContext's context
+//                 `work` (update.bin, plan.bin, the chunk files)
+//   chunk I       chunkStage, with updateContext's context, for the chunks
+//                 `build` names
 //   update-merge  updateMergeStage: the levels above the chunks, and the switch
 // The later stages take `options` from plan.bin's command line (-o names the
-// set) and fail, naming the set, where it changed after the plan (another
-// update ran): a plan holds for the version of the set it was made on.
+// set) and fail, naming the set and the work folder, where the set changed
+// after the plan (another update ran): a plan holds for the version of the
+// set it was made on. updateApplied tells a stage run again after the switch
+// that the set already holds the update (its build record is plan.bin).
 struct StagedUpdate {
     BuildPlan plan;                    // as plan.bin holds it
     ChunkLayout layout;                // its chunks, as distributed
-    std::vector<uint64_t> chunkPoints;  // per chunk of the layout: its points
+    std::vector<uint64_t> chunkPoints;  // per chunk of the layout: the points distributed to it
     std::vector<size_t> build;         // the chunks to build
 };
 Result<StagedUpdate> updatePlanStage(const BuildOptions& options, const UpdateRequest& request, const std::string& set,
-                                            const BuildPlan& record, const std::vector<std::string>& commandLine,
-                                            const WorkFolder& work);
-Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work);
-Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work);
+                                     const BuildPlan& record, const std::vector<std::string>& commandLine, const WorkFolder& work);
+Result<bool> updateApplied(const BuildOptions& options, const WorkFolder& work);
+Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work,
+                                                          std::vector<size_t>* build);
+// `commandLine`: plan.bin's, which the set's build record keeps.
+Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const std::vector<std::string>& commandLine,
+                                      const WorkFolder& work);
 
 }  // namespace surfcast

@@ -100,6 +100,28 @@ bool readableExtension(const std::string& path) {
 
 }  // namespace
 
+std::string crsIdentity(const std::string& crs) {
+    if (crs.rfind("GeoTIFF keys:", 0) == 0) {
+        for (const char* key : {" 3072=", " 2048="})
+            if (const size_t at = crs.find(key); at != std::string::npos)
+                return "EPSG:" + crs.substr(at + 6, crs.find(' ', at + 6) - (at + 6));
+        return crs;
+    }
+    // The WKT's own code is its last (WKT1 AUTHORITY and WKT2 ID close the
+    // definition they name; the root's closes it).
+    static const std::string kAuthority = "AUTHORITY[\"EPSG\",\"", kId = "ID[\"EPSG\",";
+    const size_t authority = crs.rfind(kAuthority), id = crs.rfind(kId);
+    if (authority != std::string::npos && (id == std::string::npos || authority > id)) {
+        const size_t from = authority + kAuthority.size();
+        return "EPSG:" + crs.substr(from, crs.find('"', from) - from);
+    }
+    if (id != std::string::npos) {
+        const size_t from = id + kId.size();
+        return "EPSG:" + crs.substr(from, crs.find_first_of(",]", from) - from);
+    }
+    return crs;
+}
+
 std::string crsName(const std::string& crs) {
     if (crs.rfind("GeoTIFF keys:", 0) == 0) {
         for (const char* key : {" 3072=", " 2048="})

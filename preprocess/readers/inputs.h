@@ -44,6 +44,10 @@ inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return opacity == 1 ?
 // messages: a WKT's own name, or the EPSG code of GeoTIFF keys 3072
 // (projected) or 2048 (geographic).
 std::string crsName(const std::string& crs);
+// What two coordinate systems are compared by: the EPSG code where the text
+// gives one (GeoTIFF keys 3072 or 2048, the WKT's closing AUTHORITY or ID),
+// so that a WKT and GeoTIFF keys of one code agree; else the text itself.
+std::string crsIdentity(const std::string& crs);
 
 // The input files that `args` name, in order: a file as itself, a tile set's
 // folder as its tileset.json (set_reader.h), another folder as every file

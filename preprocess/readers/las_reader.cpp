@@ -260,6 +260,7 @@ std::string crsOf(const Vlrs& v) {
     if (!v.geoKeys || v.geoKeys->size() < 8) return {};
     const std::vector<uint8_t>& k = *v.geoKeys;
     const size_t keys = std::min<size_t>(le::get<uint16_t>(&k[6]), k.size() / 8 - 1);
+    if (keys == 0) return {};
     std::string out = "GeoTIFF keys:";
     for (size_t i = 1; i <= keys; ++i) {
         const uint16_t id = le::get<uint16_t>(&k[8 * i]), where = le::get<uint16_t>(&k[8 * i + 2]);

@@ -42,6 +42,10 @@ public:
         }
     }
 
+    // Its pointers point into set_: never copied or moved.
+    SetReader(const SetReader&) = delete;
+    SetReader& operator=(const SetReader&) = delete;
+
     const InputDescription& description() const override { return desc_; }
 
     Result<size_t> read(InputPoint* out, size_t max) override {
