@@ -131,6 +131,30 @@ size_t matchPoints(const std::vector<Point>& want, const std::vector<Point>& hav
     return matched;
 }
 
+// Every file of a folder, by name.
+std::map<std::string, std::string> folderFiles(const std::string& dir) {
+    std::map<std::string, std::string> files;
+    for (const auto& e : fs::directory_iterator(dir)) files[e.path().filename().string()] = test::readFile(e.path().string());
+    return files;
+}
+
+// `update` (--add ..., --remove ...) of `set` in stages (update.h):
+// update-plan, chunk of the chunks plan.json names, update-merge.
+void stagedUpdate(const std::string& set, const std::string& work, const std::vector<std::string>& update) {
+    std::vector<std::string> plan = {test::binary("surfcast-build"), "update-plan", "-q", "--work", work};
+    plan.insert(plan.end(), update.begin(), update.end());
+    plan.insert(plan.end(), {"--to", set});
+    auto r = test::run(plan);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<std::string> chunk = {test::binary("surfcast-build"), "chunk", "-q", "--work", work};
+    const nlohmann::json planned = nlohmann::json::parse(test::readFile(work + "/plan.json"));
+    for (size_t i : planned["build"]) chunk.push_back(std::to_string(i));
+    r = test::run(chunk);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    r = test::run({test::binary("surfcast-build"), "update-merge", "-q", "--work", work});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+}
+
 std::vector<std::string> build(std::vector<std::string> args) {
     args.insert(args.begin(), {test::binary("surfcast-build"), "-q", "--memory", "64M", "--capacity", "1000"});
     return args;
@@ -403,8 +427,15 @@ TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
     ASSERT_EQ(original[0].input, -1) << "a set of one input stores its points' input";
     const std::string blocksBefore = test::readFile(one + "/blocks.bin");
 
+    fs::copy(one, dir.file("one-before"), fs::copy_options::recursive);
     r = test::run({test::binary("surfcast-build"), "-q", "--add", east, "--to", one});
     ASSERT_EQ(r.exitCode, 0) << r.output;
+    // In stages, the same bytes (every chunk built again, provenance gained).
+    const auto oneProcess = folderFiles(one);
+    fs::remove_all(one);
+    fs::copy(dir.file("one-before"), one, fs::copy_options::recursive);
+    ASSERT_NO_FATAL_FAILURE(stagedUpdate(one, dir.file("work"), {"--add", east}));
+    EXPECT_TRUE(folderFiles(one) == oneProcess) << "the update in stages wrote other bytes than in one process";
     auto after = TilesetReader::open(one);
     ASSERT_TRUE(after) << after.status().message();
     ASSERT_TRUE(verifyTileset(*after));
@@ -643,6 +674,13 @@ TEST_F(UpdateTest, GrowingPastTheRootKeepsTheOriginalNodesPoints) {
         ++kept;
     }
     EXPECT_GT(kept, 0u) << "growing the root kept no node";
+
+    // In stages, the same bytes: update.bin's growth gives the root again.
+    const auto oneProcess = folderFiles(quarter);
+    fs::remove_all(quarter);
+    fs::copy(dir.file("quarter-before"), quarter, fs::copy_options::recursive);
+    ASSERT_NO_FATAL_FAILURE(stagedUpdate(quarter, dir.file("work"), {"--add", far}));
+    EXPECT_TRUE(folderFiles(quarter) == oneProcess) << "the update in stages wrote other bytes than in one process";
 
     cells.insert(cells.end(), {far, "-o", dir.file("fresh")});
     auto fresh = test::run(build(cells));
