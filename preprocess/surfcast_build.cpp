@@ -464,6 +464,7 @@ surfcast::Status writePlanJson(const surfcast::WorkFolder& work, const surfcast:
         json << "],\n  \"build\": [";
         for (size_t i = 0; i < build->size(); ++i) json << (i ? ", " : "") << (*build)[i];
     }
+    // Each part from input `first`'s record `begin` to input `last`'s record `end` (0: up to input `last`).
     json << "],\n  \"parts\": [";
     for (size_t i = 0; i < plan.parts.size(); ++i) {
         const surfcast::InputPart& p = plan.parts[i];

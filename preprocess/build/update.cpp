@@ -223,21 +223,25 @@ void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource,
 
 constexpr char kUpdateMagic[9] = "SCUPDT01";
 
+Result<std::string> tilesetText(const std::string& set) {
+    std::ifstream in(set + "/tileset.json", std::ios::binary);
+    if (!in) return Status::error(set + ": not a tile set (no tileset.json)");
+    return std::string{std::istreambuf_iterator<char>(in), {}};
+}
+
 // Which version of the set an update was planned on: the CRC-32 of its
 // tileset.json, which every update writes anew (it names a new hierarchy).
 Result<uint32_t> setVersion(const std::string& set) {
-    std::ifstream in(set + "/tileset.json", std::ios::binary);
-    if (!in) return Status::error(set + ": not a tile set (no tileset.json)");
-    const std::string json{std::istreambuf_iterator<char>(in), {}};
-    return crc32(json.data(), json.size());
+    auto json = tilesetText(set);
+    if (!json) return json.status();
+    return crc32(json->data(), json->size());
 }
 
 // The path of the set's current build record (named by its hierarchy's).
 Result<std::string> buildRecordPath(const std::string& set) {
-    std::ifstream in(set + "/tileset.json", std::ios::binary);
-    if (!in) return Status::error(set + ": not a tile set (no tileset.json)");
-    const std::string json{std::istreambuf_iterator<char>(in), {}};
-    auto info = readTilesetJson(json, set + "/tileset.json");
+    auto json = tilesetText(set);
+    if (!json) return json.status();
+    auto info = readTilesetJson(*json, set + "/tileset.json");
     if (!info) return info.status();
     return set + "/" + buildRecordFile(info->hierarchyFile);
 }
