@@ -2,7 +2,7 @@
 // --to SET` against a fresh build of all the inputs, the kept nodes' bytes,
 // byte ranges and ETags (surfcast-serve before and after), the version before
 // it for clients that opened it, and bad input that must leave the set as it
-// was.
+// was. The cases in stages and of --merge: update_test_stages.cpp.
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <signal.h>
@@ -22,201 +22,13 @@
 #include "block_codec.h"
 #include "test_support.h"
 #include "tileset_reader.h"
+#include "update_support.h"
 
 using namespace surfcast;
+using namespace surfcast::update_test;
 namespace fs = std::filesystem;
 
 namespace {
-
-struct Point {
-    Vec3d p;
-    int input = -1;  // the provenance attribute's value, where the set has it
-    uint16_t intensity = 0;
-    uint8_t classification = 0, returnNumber = 0, returns = 0;
-    uint16_t color[3] = {};
-};
-
-// Every leaf point of a set (world positions, stored attributes), and the
-// largest quantization step of its leaves.
-void leafPoints(const std::string& set, double* largestStep, std::vector<Point>* points) {
-    auto reader = TilesetReader::open(set);
-    ASSERT_TRUE(reader) << reader.status().message();
-    std::vector<Point>& out = *points;
-    for (const NodeRecord& n : reader->nodes()) {
-        if (!(n.flags & kFlagInputPoints)) continue;
-        auto bytes = reader->readBlockBytes(n);
-        ASSERT_TRUE(bytes) << bytes.status().message();
-        BlockExpectation expect = reader->expectation(n);
-        expect.scalars = true;
-        auto block = decodeBlock(bytes->data(), bytes->size(), expect);
-        EXPECT_TRUE(block) << block.status().message();
-        if (!block) continue;
-        const ScalarAttribute* input = nullptr;
-        for (const ScalarAttribute& a : block->scalars)
-            if (a.name == "input") input = &a;
-        *largestStep = std::max(*largestStep, nodeEdge(reader->info(), n.key.level) / double((uint64_t(1) << n.positionBits) - 1));
-        for (size_t i = 0; i < block->size(); ++i) {
-            Point q;
-            q.p = reader->position(n, *block, i);
-            // As read, not as stored: sets of other inputs quantize it from another minimum.
-            // Each where the set stores it (the lion has no classes or returns).
-            if (const AttributeInfo* intensity = reader->info().attribute("intensity"))
-                q.intensity = uint16_t(std::lround(block->intensity.at(i) * intensity->scale + intensity->offset));
-            if (!block->classification.empty()) q.classification = block->classification.at(i);
-            if (!block->returnNumber.empty()) q.returnNumber = block->returnNumber.at(i);
-            if (!block->numberOfReturns.empty()) q.returns = block->numberOfReturns.at(i);
-            if (!block->colors.empty())
-                for (int c = 0; c < 3; ++c) q.color[c] = block->colors.at(3 * i + c);
-            if (input) q.input = int(input->values.at(i));
-            out.push_back(q);
-        }
-    }
-}
-
-// How many of `want` have a point of `have` within `tolerance` (each used
-// once) with the same attributes and input: a maximum matching (nearest pairs first,
-// then augmenting paths), as points quantized onto a coarse lattice leave
-// several candidates each.
-size_t matchPoints(const std::vector<Point>& want, const std::vector<Point>& have, double tolerance) {
-    const double cell = 4 * tolerance;
-    auto cellOf = [&](const Vec3d& p) {
-        return std::make_tuple(int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)), int64_t(std::floor(p.z / cell)));
-    };
-    std::map<std::tuple<int64_t, int64_t, int64_t>, std::vector<size_t>> grid;
-    for (size_t i = 0; i < have.size(); ++i) grid[cellOf(have[i].p)].push_back(i);
-    std::vector<std::tuple<double, size_t, size_t>> pairs;  // distance, want, have
-    for (size_t j = 0; j < want.size(); ++j) {
-        const Point& w = want[j];
-        const auto [cx, cy, cz] = cellOf(w.p);
-        for (int dx = -1; dx <= 1; ++dx)
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dz = -1; dz <= 1; ++dz) {
-                    auto it = grid.find({cx + dx, cy + dy, cz + dz});
-                    if (it == grid.end()) continue;
-                    for (size_t i : it->second) {
-                        const Point& h = have[i];
-                        const Vec3d d = h.p - w.p;
-                        const double distance = std::max({std::fabs(d.x), std::fabs(d.y), std::fabs(d.z)});
-                        if (distance > tolerance || h.input != w.input || h.intensity != w.intensity || h.classification != w.classification ||
-                            h.returnNumber != w.returnNumber || h.returns != w.returns || h.color[0] != w.color[0] ||
-                            h.color[1] != w.color[1] || h.color[2] != w.color[2])
-                            continue;
-                        pairs.push_back({distance, j, i});
-                    }
-                }
-    }
-    std::sort(pairs.begin(), pairs.end());
-    std::vector<std::vector<size_t>> edges(want.size());
-    std::vector<long> partnerOf(have.size(), -1), partner(want.size(), -1);
-    size_t matched = 0;
-    for (const auto& [distance, j, i] : pairs) {
-        edges[j].push_back(i);
-        if (partner[j] < 0 && partnerOf[i] < 0) partner[j] = long(i), partnerOf[i] = long(j), ++matched;
-    }
-    // Kuhn's augmenting paths from each point the greedy pass left alone.
-    std::vector<size_t> seen(have.size(), SIZE_MAX);
-    std::function<bool(size_t, size_t)> augment = [&](size_t j, size_t round) {
-        for (size_t i : edges[j]) {
-            if (seen[i] == round) continue;
-            seen[i] = round;
-            if (partnerOf[i] < 0 || augment(size_t(partnerOf[i]), round)) {
-                partnerOf[i] = long(j), partner[j] = long(i);
-                return true;
-            }
-        }
-        return false;
-    };
-    for (size_t j = 0; j < want.size(); ++j)
-        if (partner[j] < 0 && augment(j, j)) ++matched;
-    return matched;
-}
-
-// Every file of a folder, by name.
-std::map<std::string, std::string> folderFiles(const std::string& dir) {
-    std::map<std::string, std::string> files;
-    for (const auto& e : fs::directory_iterator(dir)) files[e.path().filename().string()] = test::readFile(e.path().string());
-    return files;
-}
-
-// `update` (--add ..., --remove ...) of `set` in stages (update.h):
-// update-plan, chunk of the chunks plan.json names, update-merge.
-void stagedUpdate(const std::string& set, const std::string& work, const std::vector<std::string>& update) {
-    std::vector<std::string> plan = {test::binary("surfcast-build"), "update-plan", "-q", "--work", work};
-    plan.insert(plan.end(), update.begin(), update.end());
-    plan.insert(plan.end(), {"--to", set});
-    auto r = test::run(plan);
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    std::vector<std::string> chunk = {test::binary("surfcast-build"), "chunk", "-q", "--work", work};
-    const nlohmann::json planned = nlohmann::json::parse(test::readFile(work + "/plan.json"));
-    for (size_t i : planned["build"]) chunk.push_back(std::to_string(i));
-    r = test::run(chunk);
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    r = test::run({test::binary("surfcast-build"), "update-merge", "-q", "--work", work});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-}
-
-std::vector<std::string> build(std::vector<std::string> args) {
-    args.insert(args.begin(), {test::binary("surfcast-build"), "-q", "--memory", "64M", "--capacity", "1000"});
-    return args;
-}
-
-// autzen_trim.las cut into 4 x 4 cells of files (tests/tools/split_laz.py);
-// r000005.laz is an inner cell, so the others span the same bounds. The cells
-// and the set of all but the inner one are made once for the program's cases
-// (CI's time: bench/RELIABILITY.md, "CI stages"); each case updates its own
-// copy of the set, and finds the cells at parts/ in its folder too.
-class UpdateTest : public ::testing::Test {
-protected:
-    static void SetUpTestSuite() {
-        base_.clear();
-        added_.clear();
-        sharedError_.clear();
-        if (!fs::exists(SURFCAST_TEST_PYTHON)) return;  // SetUp says why
-        if (!fs::exists(test::dataFile("autzen_trim.las"))) {
-            sharedError_ = "missing " + test::dataFile("autzen_trim.las");
-            return;
-        }
-        shared_ = new test::TempDir;
-        auto split = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("autzen_trim.las"),
-                                shared_->file("parts"), "--cells", "4x4x1", "--min-files", "16"});
-        if (split.exitCode != 0) {
-            sharedError_ = "split_laz.py: " + split.output;
-            return;
-        }
-        for (int i = 0; i < 16; ++i) {
-            char name[32];
-            std::snprintf(name, sizeof name, "/parts/r%06d.laz", i);
-            (i == 5 ? added_ : base_).push_back(shared_->path() + name);
-        }
-        auto args = base_;
-        args.insert(args.end(), {"-o", shared_->file("base-set")});
-        auto built = test::run(build(args));
-        if (built.exitCode != 0) sharedError_ = "the base set: " + built.output;
-    }
-    static void TearDownTestSuite() {
-        delete shared_;
-        shared_ = nullptr;
-    }
-    void SetUp() override {
-        REQUIRE_DATA();
-        REQUIRE_TEST_PYTHON();
-        ASSERT_TRUE(shared_ && sharedError_.empty()) << sharedError_;
-        base = base_;
-        added = added_;
-        fs::create_directory_symlink(shared_->file("parts"), dir.file("parts"));
-        fs::create_directories(dir.file("sets"));
-        fs::copy(shared_->file("base-set"), set(), fs::copy_options::recursive);
-    }
-    std::string set() const { return dir.file("sets/s"); }
-
-    test::TempDir dir;
-    std::vector<std::string> base, added;
-
-private:
-    static inline test::TempDir* shared_ = nullptr;
-    static inline std::string sharedError_;
-    static inline std::vector<std::string> base_, added_;
-};
 
 TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     auto before = TilesetReader::open(set());
@@ -469,90 +281,6 @@ TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
     for (Point& p : original) p.input = 0;
     ASSERT_EQ(removed.size(), original.size());
     EXPECT_EQ(matchPoints(original, removed, 1.5 * step), original.size());
-}
-
-// --merge joins sets built apart: a build from their leaves equals a fresh
-// build of all their inputs in the same sense as an update (the same leaf
-// points: the count, positions within the quantizations, attributes exact,
-// each set one input), with the first set's build options; --remove of a set
-// gives back the other's points.
-TEST_F(UpdateTest, MergeJoinsSetsBuiltApart) {
-    auto r = test::run({SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/split_laz.py", test::dataFile("autzen_trim.las"), dir.file("halves"),
-                        "--cells", "2x1x1", "--min-files", "2"});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    const std::string west = dir.file("halves/r000000.laz"), east = dir.file("halves/r000001.laz");
-    const std::string westSet = dir.file("sets/west"), eastSet = dir.file("sets/east"), merged = dir.file("sets/merged");
-    ASSERT_EQ(test::run(build({west, "-o", westSet})).exitCode, 0);
-    ASSERT_EQ(test::run(build({east, "-o", eastSet})).exitCode, 0);
-    // Not a set: refused, and nothing written.
-    r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, dir.file("halves"), "-o", merged});
-    EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find(dir.file("halves") + ": not a tile set"), std::string::npos) << r.output;
-    EXPECT_FALSE(fs::exists(merged));
-    // A set with a corrupt block: refused, naming it, and nothing written.
-    const std::string corrupt = dir.file("sets/corrupt");
-    fs::copy(eastSet, corrupt, fs::copy_options::recursive);
-    std::string blocks = test::readFile(corrupt + "/blocks.bin");
-    blocks[blocks.size() / 2] ^= 0x5A;
-    test::writeFile(corrupt + "/blocks.bin", blocks);
-    r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, corrupt, "-o", merged});
-    EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find(corrupt), std::string::npos) << r.output;
-    EXPECT_NE(r.output.find("CRC"), std::string::npos) << r.output;
-    EXPECT_FALSE(fs::exists(merged));
-
-    // (No build options given: the first set's, --memory 64M --capacity 1000.)
-    r = test::run({test::binary("surfcast-build"), "-q", "--merge", westSet, eastSet, "-o", merged});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    ASSERT_EQ(test::run(build({west, east, "-o", dir.file("fresh")})).exitCode, 0);
-    auto joined = TilesetReader::open(merged);
-    auto fresh = TilesetReader::open(dir.file("fresh"));
-    ASSERT_TRUE(joined && fresh);
-    ASSERT_TRUE(verifyTileset(*joined));
-    EXPECT_EQ(joined->info().inputs, (std::vector<std::string>{"west", "east"}));
-    // The same capacity cuts the same nodes (the default's would cut far fewer).
-    EXPECT_EQ(joined->nodes().size(), fresh->nodes().size());
-    // Each quantization moves a point by at most half its step: the set's
-    // own, then the joined set's, against the fresh build's; 1.5 of the
-    // largest step bounds the three.
-    double step = 0;
-    std::vector<Point> westPoints, eastPoints, joinedPoints, expected;
-    ASSERT_NO_FATAL_FAILURE(leafPoints(westSet, &step, &westPoints));
-    ASSERT_NO_FATAL_FAILURE(leafPoints(eastSet, &step, &eastPoints));
-    ASSERT_NO_FATAL_FAILURE(leafPoints(merged, &step, &joinedPoints));
-    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
-    ASSERT_EQ(joinedPoints.size(), expected.size());
-    ASSERT_EQ(joinedPoints.size(), westPoints.size() + eastPoints.size());
-    EXPECT_EQ(matchPoints(expected, joinedPoints, 1.5 * step), expected.size()) << "leaf step " << step;
-
-    // How the first set read its inputs acts on its points no more: built
-    // at --opacity 0.5, its points keep opacity 128 in the joined set (not 64).
-    const std::string translucent = dir.file("sets/translucent"), joined2 = dir.file("sets/joined2");
-    ASSERT_EQ(test::run(build({west, "--opacity", "0.5", "-o", translucent})).exitCode, 0);
-    r = test::run({test::binary("surfcast-build"), "-q", "--merge", translucent, eastSet, "-o", joined2});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    auto second = TilesetReader::open(joined2);
-    ASSERT_TRUE(second);
-    std::map<int, std::set<int>> opacities;  // by input
-    for (const NodeRecord& n : second->nodes()) {
-        if (!(n.flags & kFlagInputPoints)) continue;
-        auto block = second->readBlock(n, true);
-        ASSERT_TRUE(block) << block.status().message();
-        ASSERT_FALSE(block->opacity.empty());
-        auto input = std::find_if(block->scalars.begin(), block->scalars.end(), [](const ScalarAttribute& a) { return a.name == "input"; });
-        ASSERT_NE(input, block->scalars.end());
-        for (size_t i = 0; i < block->size(); ++i) opacities[int(input->values.at(i))].insert(block->opacity[i]);
-    }
-    EXPECT_EQ(opacities[0], (std::set<int>{128}));
-    EXPECT_EQ(opacities[1], (std::set<int>{255}));
-
-    r = test::run({test::binary("surfcast-build"), "-q", "--remove", "east", "--to", merged});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    std::vector<Point> left;
-    ASSERT_NO_FATAL_FAILURE(leafPoints(merged, &step, &left));
-    for (Point& p : westPoints) p.input = 0;
-    ASSERT_EQ(left.size(), westPoints.size());
-    EXPECT_EQ(matchPoints(westPoints, left, 1.5 * step), westPoints.size());
 }
 
 // --replace OLD NEW equals a fresh build of the inputs without OLD and with NEW.
@@ -854,15 +582,18 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
     EXPECT_NE(r.output.find("broken.laz"), std::string::npos) << r.output;
     expectUntouched("a truncated input");
 
+    // The added cell rewritten by laspy: `edit` runs on `las`, read from it, before it is written to `name`.
+    auto rewritten = [&](const std::string& name, const std::string& edit) {
+        auto w = test::run({SURFCAST_TEST_PYTHON, "-c", "import laspy, sys\nlas = laspy.read(sys.argv[1])\n" + edit + "las.write(sys.argv[2])\n",
+                            added[0], dir.file(name)});
+        EXPECT_EQ(w.exitCode, 0) << w.output;
+        return dir.file(name);
+    };
+
     // A scan the set's layout cannot take: the added cell with intensities
     // 256 times the set's (0-254 become up to 65,024), whose range no longer
     // fits the 12 bits the set's blocks store them in at a step of 1.
-    const std::string louder = dir.file("louder.laz");
-    auto written = test::run({SURFCAST_TEST_PYTHON, "-c",
-                              "import laspy, sys\nlas = laspy.read(sys.argv[1])\nlas.intensity = (las.intensity.astype('uint32') * 256)"
-                              ".clip(0, 65535).astype('uint16')\nlas.write(sys.argv[2])\n",
-                              added[0], louder});
-    ASSERT_EQ(written.exitCode, 0) << written.output;
+    const std::string louder = rewritten("louder.laz", "las.intensity = (las.intensity.astype('uint32') * 256).clip(0, 65535).astype('uint16')\n");
     r = test::run({test::binary("surfcast-build"), "-q", "--add", louder, "--to", set()});
     EXPECT_EQ(r.exitCode, 1) << r.output;
     EXPECT_NE(r.output.find("beyond the set's 0-4095"), std::string::npos) << r.output;
@@ -870,15 +601,11 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
 
     // A scan in another coordinate system: the added cell declaring WGS 84
     // (a WKT VLR) where the set's cells declare autzen's (split_laz.py keeps them).
-    const std::string elsewhere = dir.file("elsewhere.laz");
-    written = test::run({SURFCAST_TEST_PYTHON, "-c",
-                         "import laspy, sys\nlas = laspy.read(sys.argv[1])\n"
-                         "las.header.vlrs = [v for v in las.header.vlrs if v.user_id != 'LASF_Projection']\n"
-                         "las.header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr('GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\","
-                         "SPHEROID[\"WGS 84\",6378137,298.257223563]],PRIMEM[\"Greenwich\",0],UNIT[\"degree\",0.0174532925199433]]'))\n"
-                         "las.write(sys.argv[2])\n",
-                         added[0], elsewhere});
-    ASSERT_EQ(written.exitCode, 0) << written.output;
+    const std::string elsewhere =
+        rewritten("elsewhere.laz",
+                  "las.header.vlrs = [v for v in las.header.vlrs if v.user_id != 'LASF_Projection']\n"
+                  "las.header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr('GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\","
+                  "SPHEROID[\"WGS 84\",6378137,298.257223563]],PRIMEM[\"Greenwich\",0],UNIT[\"degree\",0.0174532925199433]]'))\n");
     r = test::run({test::binary("surfcast-build"), "-q", "--add", elsewhere, "--to", set()});
     EXPECT_EQ(r.exitCode, 1) << r.output;
     EXPECT_NE(r.output.find("elsewhere.laz: declares another coordinate system (WGS 84) than the set's inputs "
@@ -898,107 +625,6 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
     EXPECT_EQ(r.exitCode, 1) << r.output;
     EXPECT_NE(r.output.find("build record"), std::string::npos) << r.output;
     expectUntouched("a set without its record");
-}
-
-// Byte-identical to a fresh build where the chunk plan is unchanged: every
-// node of a chunk the update keeps (one the added points and their halos do
-// not reach, in the plan of all the inputs) holds the bytes the fresh build
-// writes for its key, as both read the same points there and build
-// deterministically. Nodes of the rebuilt chunks are not: they are built from
-// the set's leaves, quantized once more and with the normals far from the
-// change kept (a rebuilt node may still keep its old place where it encodes
-// to its old bytes). The update runs in stages here, whose plan.json names
-// the chunks (the same bytes as in one process: dask_test).
-TEST_F(UpdateTest, KeptChunksAreByteIdenticalToAFreshBuild) {
-    const std::string work = dir.file("work");
-    auto r = test::run({test::binary("surfcast-build"), "update-plan", "-q", "--work", work, "--add", added[0], "--to", set()});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    const nlohmann::json plan = nlohmann::json::parse(test::readFile(work + "/plan.json"));
-    std::vector<std::string> command = {test::binary("surfcast-build"), "chunk", "-q", "--work", work};
-    std::set<size_t> rebuilt;
-    for (size_t i : plan["build"]) rebuilt.insert(i), command.push_back(std::to_string(i));
-    ASSERT_EQ(test::run(command).exitCode, 0);
-    // A chunk the update keeps is not built.
-    size_t keptIndex = 0;
-    while (rebuilt.count(keptIndex)) ++keptIndex;
-    r = test::run({test::binary("surfcast-build"), "chunk", "-q", "--work", work, std::to_string(keptIndex)});
-    EXPECT_EQ(r.exitCode, 2) << r.output;
-    EXPECT_NE(r.output.find("the update keeps it"), std::string::npos) << r.output;
-    r = test::run({test::binary("surfcast-build"), "update-merge", "-q", "--work", work});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    // Run again after the switch (a task Dask repeats): the set holds the update, and stays.
-    const std::string tileset = test::readFile(set() + "/tileset.json");
-    r = test::run({test::binary("surfcast-build"), "update-merge", "-q", "--work", work});
-    EXPECT_EQ(r.exitCode, 0) << r.output;
-    EXPECT_NE(r.output.find("holds this update already"), std::string::npos) << r.output;
-    EXPECT_EQ(test::readFile(set() + "/tileset.json"), tileset);
-    auto all = base;
-    all.insert(all.end(), added.begin(), added.end());
-    all.insert(all.end(), {"-o", dir.file("fresh")});
-    ASSERT_EQ(test::run(build(all)).exitCode, 0);
-
-    std::vector<NodeKey> keptChunks;
-    for (size_t i = 0; i < plan["chunk_nodes"].size(); ++i) {
-        NodeKey key;
-        ASSERT_TRUE(NodeKey::parse(plan["chunk_nodes"][i].get<std::string>(), &key));
-        if (!rebuilt.count(i)) keptChunks.push_back(key);
-    }
-    ASSERT_FALSE(keptChunks.empty());
-    ASSERT_FALSE(rebuilt.empty());
-    auto inKeptChunk = [&](const NodeKey& key) {
-        return std::any_of(keptChunks.begin(), keptChunks.end(), [&](const NodeKey& chunk) {
-            const int below = int(key.level) - int(chunk.level);
-            return below >= 0 && (key.x >> below) == chunk.x && (key.y >> below) == chunk.y && (key.z >> below) == chunk.z;
-        });
-    };
-    auto after = TilesetReader::open(set());
-    auto fresh = TilesetReader::open(dir.file("fresh"));
-    ASSERT_TRUE(after && fresh);
-    std::map<NodeKey, NodeRecord> freshNodes;
-    for (const NodeRecord& n : fresh->nodes()) freshNodes[n.key] = n;
-    size_t compared = 0;
-    for (const NodeRecord& n : after->nodes()) {
-        if (!inKeptChunk(n.key)) continue;
-        auto it = freshNodes.find(n.key);
-        ASSERT_NE(it, freshNodes.end()) << n.key.name() << " is in a kept chunk but not in the fresh build";
-        EXPECT_EQ(n.blockCrc, it->second.blockCrc) << n.key.name();
-        EXPECT_EQ(n.blockSize, it->second.blockSize) << n.key.name();
-        ++compared;
-    }
-    EXPECT_GT(compared, 0u);
-    // And every node of a kept chunk: the fresh build has none there the update lacks.
-    size_t inKept = 0;
-    for (const NodeRecord& n : fresh->nodes()) inKept += inKeptChunk(n.key);
-    EXPECT_EQ(inKept, compared);
-}
-
-// An update in stages (update.h) holds for the version of the set it was
-// planned on: where another update switched the set after update-plan, the
-// chunk and update-merge stages fail, naming the set, and leave it as that
-// update left it.
-TEST_F(UpdateTest, StagedUpdateFailsWhereTheSetChangedAfterItsPlan) {
-    const std::string work = dir.file("work");
-    auto r = test::run({test::binary("surfcast-build"), "update-plan", "-q", "--work", work, "--add", added[0], "--to", set()});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    ASSERT_NE(r.output.find("chunks to build"), std::string::npos) << r.output;
-    r = test::run({test::binary("surfcast-build"), "-q", "--remove", base[0], "--to", set()});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    std::map<std::string, std::string> files;
-    for (const auto& e : fs::directory_iterator(set())) files[e.path().filename().string()] = test::readFile(e.path().string());
-
-    r = test::run({test::binary("surfcast-build"), "chunk", "-q", "--work", work, "0"});
-    EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find(set() + ": changed since this update was planned"), std::string::npos) << r.output;
-    r = test::run({test::binary("surfcast-build"), "update-merge", "-q", "--work", work});
-    EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find(set() + ": changed since this update was planned"), std::string::npos) << r.output;
-    std::map<std::string, std::string> now;
-    for (const auto& e : fs::directory_iterator(set())) now[e.path().filename().string()] = test::readFile(e.path().string());
-    EXPECT_TRUE(now == files);
-    // A build's merge refuses the update's work folder.
-    r = test::run({test::binary("surfcast-build"), "merge", "-q", "--work", work});
-    EXPECT_EQ(r.exitCode, 2) << r.output;
-    EXPECT_NE(r.output.find("holds an update's plan"), std::string::npos) << r.output;
 }
 
 }  // namespace
