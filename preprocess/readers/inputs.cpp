@@ -124,10 +124,8 @@ std::string crsIdentity(const std::string& crs) {
 
 std::string crsName(const std::string& crs) {
     if (crs.rfind("GeoTIFF keys:", 0) == 0) {
-        for (const char* key : {" 3072=", " 2048="})
-            if (const size_t at = crs.find(key); at != std::string::npos)
-                return "EPSG:" + crs.substr(at + 6, crs.find(' ', at + 6) - (at + 6));
-        return crs.substr(0, 80);
+        const std::string code = crsIdentity(crs);
+        return code != crs ? code : crs.substr(0, 80);
     }
     const size_t open = crs.find("[\""), close = open == std::string::npos ? open : crs.find('"', open + 2);
     return close == std::string::npos ? crs.substr(0, 80) : crs.substr(open + 2, close - open - 2);
