@@ -86,10 +86,16 @@ Result<BlockData> TilesetReader::readBlock(const NodeRecord& node, bool scalars)
     return block;
 }
 
+double positionStep(const TilesetInfo& info, const NodeRecord& node) {
+    return nodeEdge(info, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
+}
+
+Vec3d quantizedPosition(const TilesetInfo& info, const NodeRecord& node, const uint32_t q[3]) {
+    return nodeMin(info, node.key) + Vec3d{double(q[0]), double(q[1]), double(q[2])} * positionStep(info, node);
+}
+
 Vec3d surfelPosition(const TilesetInfo& info, const NodeRecord& node, const BlockData& block, size_t i) {
-    double step = nodeEdge(info, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
-    Vec3d q{double(block.positions[3 * i]), double(block.positions[3 * i + 1]), double(block.positions[3 * i + 2])};
-    return nodeMin(info, node.key) + q * step;
+    return quantizedPosition(info, node, &block.positions[3 * i]);
 }
 
 Vec3d TilesetReader::position(const NodeRecord& node, const BlockData& block, size_t i) const {

@@ -45,6 +45,9 @@ private:
 // metadata alone (for readers of blocks fetched elsewhere, e.g. over HTTP).
 BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& node);
 Vec3d surfelPosition(const TilesetInfo& info, const NodeRecord& node, const BlockData& block, size_t i);
+// A node's quantization step, and the world position of quantized position q.
+double positionStep(const TilesetInfo& info, const NodeRecord& node);
+Vec3d quantizedPosition(const TilesetInfo& info, const NodeRecord& node, const uint32_t q[3]);
 
 // Verify a tile set: every CRC, every block decodes with the declared
 // attributes and count. Returns a summary text on success.

@@ -223,7 +223,7 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
     double finest = HUGE_VAL, coarsest = 0;
     for (const NodeRecord& n : set.nodes()) {
         if (!(n.flags & kFlagInputPoints)) continue;
-        const double step = nodeEdge(info, n.key.level) / double((uint64_t(1) << n.positionBits) - 1);
+        const double step = positionStep(info, n);
         finest = std::min(finest, step);
         coarsest = std::max(coarsest, step);
     }

@@ -85,7 +85,7 @@ Result<SplatFileReport> writeSplatFile(const TilesetReader& set, SplatFormat for
     const auto failed = [&] { return Status::error(std::string("write failed (") + std::strerror(errno) + ")"); };
     // Every position lies within the bounds grown by the coarsest node's step.
     double step = 0, half = 0;
-    for (size_t i : chosen) step = std::max(step, nodeEdge(info, nodes[i].key.level) / double((uint64_t(1) << nodes[i].positionBits) - 1));
+    for (size_t i : chosen) step = std::max(step, positionStep(info, nodes[i]));
     for (int a = 0; a < 3; ++a) half = std::max(half, (info.bounds.max[a] - info.bounds.min[a]) * 0.5);
     SpzWriter spz(half + step);
     if (format == SplatFormat::Ply) {

@@ -208,7 +208,7 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
     GlbBuilder glb(compression == Tiles3dOptions::Compression::Meshopt);
     json attributes;
 
-    const double step = nodeEdge(info, node.key.level) / double((uint64_t(1) << node.positionBits) - 1);
+    const double step = positionStep(info, node);
     const bool integers = node.positionBits <= 16;
     const int positionStride = integers ? 8 : 12;  // 3 uint16 and 2 bytes of padding, or 3 floats
     std::vector<uint8_t> positions(size_t(positionStride) * n, 0);

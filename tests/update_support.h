@@ -52,7 +52,7 @@ inline void leafPoints(const std::string& set, double* largestStep, std::vector<
         const ScalarAttribute* input = nullptr;
         for (const ScalarAttribute& a : block->scalars)
             if (a.name == "input") input = &a;
-        *largestStep = std::max(*largestStep, nodeEdge(reader->info(), n.key.level) / double((uint64_t(1) << n.positionBits) - 1));
+        *largestStep = std::max(*largestStep, positionStep(reader->info(), n));
         for (size_t i = 0; i < block->size(); ++i) {
             Point q;
             q.p = reader->position(n, *block, i);
@@ -206,6 +206,8 @@ protected:
         fs::copy(shared_->file("base-set"), set(), fs::copy_options::recursive);
     }
     std::string set() const { return dir.file("sets/s"); }
+    // The base set as built, which no case changes.
+    static std::string shared() { return shared_->file("base-set"); }
 
     test::TempDir dir;
     std::vector<std::string> base, added;

@@ -78,28 +78,55 @@ Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& a
     return {};
 }
 
+// A node's quantization as the builder holds its decoded positions: world
+// positions less `origin`, each held inside the node's box [k e, (k + 1) e)
+// relative to `origin`, so that it goes to its own chunk (a kept neighbour
+// would drop it) and quantizes as before: one quantized to the node's upper
+// face lies in the neighbour's box, and one on its lower face can round below
+// it on the way from world coordinates. k e is exact (the root is aligned
+// with the set's, `origin` a whole number of node edges from its minimum), as
+// the chunks' cells, whole fractions of it, are.
+class NodeGrid {
+public:
+    NodeGrid(const TilesetInfo& info, const NodeRecord& node, const Vec3d& origin)
+        : info_(&info), node_(node), origin_(origin), min_(nodeMin(info, node.key)), step_(positionStep(info, node)),
+          edge_(nodeEdge(info, node.key.level)), top_(double((uint64_t(1) << node.positionBits) - 1)) {
+        lo_ = min_ - origin;
+        for (int a = 0; a < 3; ++a) lo_[a] = std::round(lo_[a] / edge_) * edge_;
+    }
+    const NodeRecord& node() const { return node_; }
+    Vec3d decoded(const uint32_t q[3]) const {
+        Vec3d p = quantizedPosition(*info_, node_, q) - origin_;
+        for (int a = 0; a < 3; ++a) p[a] = std::clamp(p[a], lo_[a], std::nextafter(lo_[a] + edge_, lo_[a]));
+        return p;
+    }
+    // Where the node's block holds p (relative to `origin`): quantized as
+    // encodeNode quantizes, then decoded.
+    Vec3d snapped(const Vec3d& p) const {
+        uint32_t q[3];
+        for (int a = 0; a < 3; ++a) q[a] = uint32_t(std::clamp(std::round((p[a] + origin_[a] - min_[a]) / step_), 0.0, top_));
+        return decoded(q);
+    }
+
+private:
+    const TilesetInfo* info_;
+    NodeRecord node_;
+    Vec3d origin_, min_, lo_;
+    double step_, edge_, top_;
+};
+
 // A decoded block's surfels as the builder holds them (positions relative to
-// the root minimum, colours in 16 bits, LiDAR values as read, the stored
-// scalar fields as rows of `table`), with orientation rules `rules`.
+// the root minimum as NodeGrid holds them, colours in 16 bits, LiDAR values
+// as read, the stored scalar fields as rows of `table`), with orientation
+// rules `rules`.
 void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRecord& node, const BlockData& block,
                    const std::vector<uint16_t>& rules, std::vector<Surfel>* out, ScalarTable* table) {
     const TilesetInfo& info = set.info();
-    const Vec3d origin = c.rootMin();
     const AttributeInfo* intensity = info.attribute(kLidarAttributes[kLidarIntensity]);
-    // A position is held inside its node's box, [k e, (k + 1) e) relative to
-    // `origin`, so that it goes to its own chunk (a kept neighbour would drop
-    // it) and quantizes as before: one quantized to the node's upper face lies
-    // in the neighbour's box, and one on its lower face can round below it
-    // on the way from world coordinates. k e is exact (the root is aligned
-    // with the set's, `origin` a whole number of node edges from its minimum),
-    // as the chunks' cells, whole fractions of it, are.
-    const double e = nodeEdge(info, node.key.level);
-    Vec3d lo = nodeMin(info, node.key) - origin;
-    for (int a = 0; a < 3; ++a) lo[a] = std::round(lo[a] / e) * e;
+    const NodeGrid grid(info, node, c.rootMin());
     for (size_t i = 0; i < block.size(); ++i) {
         Surfel s;
-        s.position = set.position(node, block, i) - origin;
-        for (int a = 0; a < 3; ++a) s.position[a] = std::clamp(s.position[a], lo[a], std::nextafter(lo[a] + e, lo[a]));
+        s.position = grid.decoded(&block.positions[3 * i]);
         s.normal = Vec3f{block.normals[3 * i], block.normals[3 * i + 1], block.normals[3 * i + 2]};
         if (!block.colors.empty())
             for (int k = 0; k < 3; ++k) s.color[k] = info.colorBits == 8 ? uint16_t(block.colors[3 * i + k] * 257) : block.colors[3 * i + k];
@@ -122,6 +149,60 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
         out->push_back(s);
     }
 }
+
+// The set's leaves by key, to move each added point onto the grid of the leaf
+// it lies in: an added point that repeats one of the set's exactly then meets
+// it at the position appendSurfels decodes, and buildSubtree keeps one of the
+// two, as a fresh build keeps one of exact duplicates. (The leaves' steps are
+// at most the inputs' precision, so distinct points on an input's lattice stay
+// distinct; a point that lies in no leaf meets none of the set's points.)
+class SetLeaves {
+public:
+    SetLeaves(const TilesetReader& set, const Vec3d& origin) : info_(set.info()), origin_(origin) {
+        for (const NodeRecord& n : set.nodes()) nodes_[n.key] = &n;
+    }
+    void snap(std::span<Surfel> points) {
+        for (Surfel& s : points) {
+            const Vec3d p = s.position + origin_ - info_.rootMin;
+            // Points come in scan order: most lie in the leaf of the one before.
+            if (!last_ || keyAt(p, last_->node().key.level) != last_->node().key) {
+                const NodeRecord* leaf = find(p);
+                if (!leaf) continue;
+                last_.emplace(info_, *leaf, origin_);
+            }
+            s.position = last_->snapped(s.position);
+        }
+    }
+
+private:
+    // The key at `level` of position p relative to the root minimum (what
+    // the builder's halving splits give it, but on a split's very plane).
+    std::optional<NodeKey> keyAt(const Vec3d& p, int level) const {
+        const double e = nodeEdge(info_, level), cells = std::ldexp(1.0, level);
+        NodeKey k{uint8_t(level)};
+        for (int a = 0; a < 3; ++a) {
+            const double i = std::floor(p[a] / e);
+            if (!(i >= 0 && i < cells)) return std::nullopt;
+            (a == 0 ? k.x : a == 1 ? k.y : k.z) = uint32_t(i);
+        }
+        return k;
+    }
+    const NodeRecord* find(const Vec3d& p) const {
+        for (int level = 0; level <= kMaxLevel; ++level) {
+            const auto key = keyAt(p, level);
+            if (!key) return nullptr;
+            const auto it = nodes_.find(*key);
+            if (it == nodes_.end()) return nullptr;
+            if (it->second->flags & kFlagInputPoints) return it->second;
+        }
+        return nullptr;
+    }
+
+    const TilesetInfo& info_;
+    Vec3d origin_;
+    std::unordered_map<NodeKey, const NodeRecord*, NodeKeyHash> nodes_;
+    std::optional<NodeGrid> last_;
+};
 
 // A set grown past its root cube: the old root becomes the node at `levels`
 // below the new root at `offset` (in old-root edges), so every old node keeps
@@ -289,6 +370,14 @@ private:
     // The set and its context, from its record; the record must be its own.
     Status open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record);
     std::vector<uint16_t> rulesOf(const BlockData& block) const;
+    // The added points, each batch snapped onto the set's leaves (SetLeaves):
+    // every pass over them sees them where the chunks receive them.
+    Status forEachAdded(std::span<const ScalarQuantization> stored, const BatchConsumer& consume) {
+        return forEachPartBatch(*context_, addedPart_, stored, [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
+            leaves_->snap(batch);
+            return consume(batch, scalars);
+        });
+    }
 
     BuildOptions opt_;
     UpdateRequest request_;
@@ -304,6 +393,7 @@ private:
     Growth grow_;
     bool addsProvenance_ = false;
     InputPart addedPart_;
+    std::optional<SetLeaves> leaves_;  // the set's, in the updated set's root
     std::vector<Surfel> gone_;  // the removed points, relative to the root
     BuildPlan plan_;
     ChunkLayout layout_;
@@ -474,6 +564,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     context_ = *derived;
     const BuildContext& c = *context_;
     c.describe(summary);
+    leaves_.emplace(*reader_, c.rootMin());
 
     // The plan of all the inputs: one part, the counts changed by the points.
     InputPart all;
@@ -500,10 +591,15 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         for (auto [cell, n] : record.counts) cells[grow_.cell(cell)] += n;
         if (added > 0) {
             progress.begin("count", addedPoints);
-            auto counts = countStage(c, addedPart_, progress);
-            if (!counts) return counts.status();
+            std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
+            SC_TRY(forEachAdded({}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+                for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, c.rootEdge())]++;
+                progress.advance(batch.size());
+                return Status{};
+            }));
             summary->phaseSeconds.push_back({"count", progress.end()});
-            for (auto [cell, n] : *counts) cells[cell] += n;
+            for (size_t i = 0; i < counts.size(); ++i)
+                if (counts[i]) cells[uint32_t(i)] += counts[i];
         }
         for (const Surfel& s : gone_) cells[uint32_t(ChunkLayout::cellIndex(s.position, c.rootEdge()))]--;
         for (auto [cell, n] : cells)
@@ -537,7 +633,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         if (const int was = before.chunkOf(s.position + (c.rootMin() - old_->rootMin())); was >= 0)
             if (auto it = chunkIndex.find(grow_.key(before.chunks()[size_t(was)].key)); it != chunkIndex.end()) touched_[it->second] = true;
     if (added > 0)
-        SC_TRY(forEachPartBatch(c, addedPart_, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        SC_TRY(forEachAdded({}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             touch(batch);
             return Status{};
         }));
@@ -588,7 +684,7 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
     };
     for (const Surfel& s : gone_) changed(s.position);
     if (added > 0)
-        SC_TRY(forEachPartBatch(c, addedPart_, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        SC_TRY(forEachAdded({}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             for (const Surfel& s : batch) changed(s.position);
             return Status{};
         }));
@@ -640,7 +736,7 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         progress.advance(points.size());
     }
     if (added > 0)
-        SC_TRY(forEachPartBatch(c, addedPart_, c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
+        SC_TRY(forEachAdded(c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
             progress.advance(batch.size());
             return chunkWriter.add(batch, scalars);
         }));
