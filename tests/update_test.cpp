@@ -125,6 +125,27 @@ TEST_F(UpdateTest, AnAddedCopyOfTheSetsScanMergesAsInAFreshBuild) {
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
 }
 
+// An input of float coordinates has no lattice to take the set's quantized
+// points back to, so the update snaps the added points onto the set's leaves
+// instead (update.cpp, SetLeaves): a copy of the scan merges all the same.
+TEST_F(UpdateTest, AnAddedCopyOfAFloatScanMergesAsInAFreshBuild) {
+    const std::string scan = test::dataFile("fragment.pcd"), copy = dir.file("again.pcd");
+    fs::copy_file(scan, copy);
+    auto built = test::run(build({scan, "-o", dir.file("scan")}));
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", copy, "--to", dir.file("scan")});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto fresh = test::run(build({scan, copy, "-o", dir.file("fresh")}));
+    ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
+
+    double step = 0;
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("scan"), &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    ASSERT_EQ(updated.size(), expected.size());
+    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+}
+
 // Images at --lod 1 from four views around the set, 640 x 360, within mean
 // FLIP 0.01 of the fresh build's (the bound the living-sets issue sets; the
 // benchmark's 104 M-point update measured 0.0019-0.0024: bench/BENCHMARKS.md,

@@ -18,11 +18,13 @@ namespace {
 
 // A format change bumps its magic, here and in scripts/surfcast-dask, which
 // judges work files whole by them (dask_test fails where the two differ).
-constexpr char kPlanMagic[9] = "SCPLAN05";
-constexpr char kScanMagic[9] = "SCSCAN05";
-// A set's build record written before the inputs' coordinate systems were
-// kept (the stats without InputDescription::crs): still read, for updates.
-constexpr char kPlanMagicWithoutCrs[9] = "SCPLAN04";
+constexpr char kPlanMagic[9] = "SCPLAN06";
+constexpr char kScanMagic[9] = "SCSCAN06";
+// A set's build record of an earlier format, still read for updates: 05
+// without the inputs' lattices (InputDescription::latticeScale), 04 without
+// their coordinate systems either.
+constexpr int kPlanVersion = 6;
+constexpr int kOldestRecordVersion = 4;
 constexpr char kCountMagic[9] = "SCCOUNT2";
 
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
@@ -105,6 +107,7 @@ void putStats(ByteWriter& w, const InputStats& s) {
             w.put(uint8_t(b));
         w.put(int32_t(d.colorBits));
         w.put(d.precision);
+        for (int a = 0; a < 3; ++a) w.put(d.latticeScale[a]), w.put(d.latticeOffset[a]);
         w.put(uint64_t(d.scanOrigins.size()));
         for (const std::optional<Vec3d>& origin : d.scanOrigins) {
             w.put(uint8_t(origin.has_value()));
@@ -142,19 +145,21 @@ void putStats(ByteWriter& w, const InputStats& s) {
     w.put(s.largestMeshBytes);
 }
 
-bool getStats(ByteReader& r, InputStats& s, bool withCrs = true) {
+bool getStats(ByteReader& r, InputStats& s, int version = kPlanVersion) {
     s.sources.resize(r.getCount(64));
     for (SourceStats& src : s.sources) {
         InputDescription& d = src.description;
         d.path = r.getString();
         d.format = r.getString();
-        if (withCrs) d.crs = r.getString();
+        if (version >= 5) d.crs = r.getString();
         d.declaredPoints = r.get<uint64_t>();
         for (bool* b : {&d.hasNormals, &d.hasColors, &d.textured, &d.hasIntensity, &d.hasClassification, &d.hasReturns,
                         &d.float32Coordinates, &d.scanOriginIsDefault, &d.airborne})
             *b = r.get<uint8_t>() != 0;
         d.colorBits = r.get<int32_t>();
         d.precision = r.get<double>();
+        if (version >= 6)
+            for (int a = 0; a < 3; ++a) d.latticeScale[a] = r.get<double>(), d.latticeOffset[a] = r.get<double>();
         d.scanOrigins.resize(r.getCount(25));
         for (std::optional<Vec3d>& origin : d.scanOrigins) {
             const bool has = r.get<uint8_t>() != 0;
@@ -444,8 +449,12 @@ Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan 
 
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args, bool buildRecord) {
     auto bytes = readWorkFile(path, kPlanMagic);
-    const bool withCrs = bytes.ok();
-    if (!withCrs && buildRecord) bytes = readWorkFile(path, kPlanMagicWithoutCrs);
+    int version = kPlanVersion;
+    while (!bytes && buildRecord && version > kOldestRecordVersion) {
+        char magic[9] = "SCPLAN00";
+        magic[7] = char('0' + --version);
+        bytes = readWorkFile(path, magic);
+    }
     if (!bytes) return readWorkFile(path, kPlanMagic).status();
     ByteReader r(*bytes);
     const Status corrupt = Status::error(path + ": malformed plan");
@@ -453,7 +462,7 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
     plan.id = crc32(bytes->data(), bytes->size());
     args->resize(r.getCount(4));
     for (std::string& arg : *args) arg = r.getString();
-    if (!getStats(r, plan.stats, withCrs)) return corrupt;
+    if (!getStats(r, plan.stats, version)) return corrupt;
     plan.parts.resize(r.getCount(32));
     for (InputPart& p : plan.parts) p = getPart(r);
     plan.maxChunkPoints = r.get<uint64_t>();

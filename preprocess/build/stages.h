@@ -127,7 +127,7 @@ Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::
 // The id writePlan gives `plan` with `args`.
 uint32_t planId(const BuildPlan& plan, std::span<const std::string> args);
 // `buildRecord`: the file is a set's build record (update.h), which may be
-// one written before the inputs' coordinate systems were kept (SCPLAN04).
+// one of an earlier format (SCPLAN04 and 05: plan_stage.cpp).
 Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* args, bool buildRecord = false);
 // The set's build record (update.h), handed to `writer`: `plan` (a copy:
 // writePlan sets its id, and the chunks were built to the plan's) with

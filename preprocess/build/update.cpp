@@ -78,6 +78,11 @@ Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& a
     return {};
 }
 
+// An input's coordinate lattice (InputDescription::latticeScale).
+struct Lattice {
+    Vec3d scale, offset;
+};
+
 // A node's quantization as the builder holds its decoded positions: world
 // positions less `origin`, each held inside the node's box [k e, (k + 1) e)
 // relative to `origin`, so that it goes to its own chunk (a kept neighbour
@@ -95,8 +100,22 @@ public:
         for (int a = 0; a < 3; ++a) lo_[a] = std::round(lo_[a] / edge_) * edge_;
     }
     const NodeRecord& node() const { return node_; }
-    Vec3d decoded(const uint32_t q[3]) const {
-        Vec3d p = quantizedPosition(*info_, node_, q) - origin_;
+    // Quantized position q; with its input's `lattice`, the lattice point
+    // that quantizes to q, where one does: the input's very coordinates, as
+    // its reader gives them (las_reader.cpp: integer * scale + offset).
+    Vec3d decoded(const uint32_t q[3], const Lattice* lattice = nullptr) const {
+        Vec3d w = quantizedPosition(*info_, node_, q);
+        if (lattice) {
+            Vec3d raw;
+            bool on = true;
+            for (int a = 0; a < 3 && on; ++a) {
+                const double k = std::round((w[a] - lattice->offset[a]) / lattice->scale[a]);
+                raw[a] = k * lattice->scale[a] + lattice->offset[a];
+                on = std::fabs(k) <= INT32_MAX && quantized(raw[a], a) == q[a];
+            }
+            if (on) w = raw;
+        }
+        Vec3d p = w - origin_;
         for (int a = 0; a < 3; ++a) p[a] = std::clamp(p[a], lo_[a], std::nextafter(lo_[a] + edge_, lo_[a]));
         return p;
     }
@@ -104,11 +123,13 @@ public:
     // encodeNode quantizes, then decoded.
     Vec3d snapped(const Vec3d& p) const {
         uint32_t q[3];
-        for (int a = 0; a < 3; ++a) q[a] = uint32_t(std::clamp(std::round((p[a] + origin_[a] - min_[a]) / step_), 0.0, top_));
+        for (int a = 0; a < 3; ++a) q[a] = quantized(p[a] + origin_[a], a);
         return decoded(q);
     }
 
 private:
+    uint32_t quantized(double world, int a) const { return uint32_t(std::clamp(std::round((world - min_[a]) / step_), 0.0, top_)); }
+
     const TilesetInfo* info_;
     NodeRecord node_;
     Vec3d origin_, min_, lo_;
@@ -116,17 +137,18 @@ private:
 };
 
 // A decoded block's surfels as the builder holds them (positions relative to
-// the root minimum as NodeGrid holds them, colours in 16 bits, LiDAR values
-// as read, the stored scalar fields as rows of `table`), with orientation
-// rules `rules`.
+// the root minimum as NodeGrid holds them, each on its input's `lattices`
+// where given, colours in 16 bits, LiDAR values as read, the stored scalar
+// fields as rows of `table`), with orientation rules `rules`.
 void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRecord& node, const BlockData& block,
-                   const std::vector<uint16_t>& rules, std::vector<Surfel>* out, ScalarTable* table) {
+                   const std::vector<uint16_t>& rules, std::span<const Lattice* const> lattices, std::vector<Surfel>* out,
+                   ScalarTable* table) {
     const TilesetInfo& info = set.info();
     const AttributeInfo* intensity = info.attribute(kLidarAttributes[kLidarIntensity]);
     const NodeGrid grid(info, node, c.rootMin());
     for (size_t i = 0; i < block.size(); ++i) {
         Surfel s;
-        s.position = grid.decoded(&block.positions[3 * i]);
+        s.position = grid.decoded(&block.positions[3 * i], lattices.empty() ? nullptr : lattices[i]);
         s.normal = Vec3f{block.normals[3 * i], block.normals[3 * i + 1], block.normals[3 * i + 2]};
         if (!block.colors.empty())
             for (int k = 0; k < 3; ++k) s.color[k] = info.colorBits == 8 ? uint16_t(block.colors[3 * i + k] * 257) : block.colors[3 * i + k];
@@ -334,6 +356,13 @@ Result<BuildPlan> readBuildRecord(const std::string& set) {
     return readPlan(*path, &args, true);
 }
 
+std::vector<uint32_t> inputsOf(const BlockData& block) {
+    std::vector<uint32_t> of(block.size(), 0);
+    for (const ScalarAttribute& a : block.scalars)
+        if (a.name == kProvenanceAttribute) of = a.values;
+    return of;
+}
+
 // An update's course: plan (all that precedes the chunks' builds), distribute
 // and merge, one after another in one process (updateTileset), or as stages
 // with the work folder between them, where resume takes up what plan decided
@@ -370,11 +399,19 @@ private:
     // The set and its context, from its record; the record must be its own.
     Status open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record);
     std::vector<uint16_t> rulesOf(const BlockData& block) const;
+    // A block of the set as the builder holds it (appendSurfels), its leaves'
+    // points on their inputs' lattices where the set's points all have one.
+    void decode(const BuildContext& c, const NodeRecord& n, const BlockData& block, std::vector<Surfel>* out, ScalarTable* table) const {
+        std::vector<const Lattice*> lattices;
+        if (!lattices_.empty() && (n.flags & kFlagInputPoints))
+            for (uint32_t input : inputsOf(block)) lattices.push_back(input < lattices_.size() ? &lattices_[input] : nullptr);
+        appendSurfels(c, *reader_, n, block, rulesOf(block), lattices, out, table);
+    }
     // The added points, each batch snapped onto the set's leaves (SetLeaves):
     // every pass over them sees them where the chunks receive them.
     Status forEachAdded(std::span<const ScalarQuantization> stored, const BatchConsumer& consume) {
         return forEachPartBatch(*context_, addedPart_, stored, [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-            leaves_->snap(batch);
+            if (leaves_) leaves_->snap(batch);
             return consume(batch, scalars);
         });
     }
@@ -393,7 +430,13 @@ private:
     Growth grow_;
     bool addsProvenance_ = false;
     InputPart addedPart_;
-    std::optional<SetLeaves> leaves_;  // the set's, in the updated set's root
+    // Per input of the set, its lattice, where every input with points has
+    // one (a file of one LAS/LAZ source), so that the set's leaf points are
+    // the inputs' very points again, which an added point repeating one
+    // meets exactly, as in a fresh build; else empty, and the added points
+    // are snapped onto the set's leaves instead (SetLeaves).
+    std::vector<Lattice> lattices_;
+    std::optional<SetLeaves> leaves_;
     std::vector<Surfel> gone_;  // the removed points, relative to the root
     BuildPlan plan_;
     ChunkLayout layout_;
@@ -430,6 +473,22 @@ Status Update::open(const BuildOptions& options, size_t added, const std::string
         return Status::error(recordName + ": its inputs are not the set's (not this set's record)");
     oldRules_.assign(old_->sourceIds().begin(), old_->sourceIds().end());
     oldInputs_.assign(old_->inputOfSource().begin(), old_->inputOfSource().end());
+    const size_t inputs = oldInputs_.empty() ? 0 : *std::max_element(oldInputs_.begin(), oldInputs_.end()) + 1;
+    std::vector<int> sources(inputs, 0), withPoints(inputs, 0);
+    lattices_.assign(inputs, Lattice{});
+    for (size_t i = 0; i < oldInputs_.size(); ++i) {
+        const InputDescription& d = record.stats.sources[i].description;
+        sources[oldInputs_[i]]++;
+        withPoints[oldInputs_[i]] += record.stats.sources[i].points > 0;
+        lattices_[oldInputs_[i]] = {d.latticeScale, d.latticeOffset};
+    }
+    for (size_t i = 0; i < inputs; ++i) {
+        const Vec3d& scale = lattices_[i].scale;
+        if (withPoints[i] && (sources[i] != 1 || !(scale.x > 0 && scale.y > 0 && scale.z > 0))) {
+            lattices_.clear();
+            break;
+        }
+    }
     return {};
 }
 
@@ -450,12 +509,6 @@ std::vector<uint16_t> Update::rulesOf(const BlockData& block) const {
     return rules;
 }
 
-std::vector<uint32_t> inputsOf(const BlockData& block) {
-    std::vector<uint32_t> of(block.size(), 0);
-    for (const ScalarAttribute& a : block.scalars)
-        if (a.name == kProvenanceAttribute) of = a.values;
-    return of;
-}
 
 Status Update::plan(const BuildOptions& options, const UpdateRequest& request, const std::string& set, const BuildPlan& record,
                     Progress& progress, BuildSummary* summary) {
@@ -548,7 +601,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
             auto block = reader_->readBlock(n, true);
             if (!block) return block.status();
             std::vector<Surfel> points;
-            appendSurfels(*root_, *reader_, n, *block, rulesOf(*block), &points, nullptr);
+            decode(*root_, n, *block, &points, nullptr);
             const std::vector<uint32_t> of = inputsOf(*block);
             for (size_t i = 0; i < points.size(); ++i)
                 if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) gone_.push_back(points[i]);
@@ -564,7 +617,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     context_ = *derived;
     const BuildContext& c = *context_;
     c.describe(summary);
-    leaves_.emplace(*reader_, c.rootMin());
+    if (lattices_.empty()) leaves_.emplace(*reader_, c.rootMin());
 
     // The plan of all the inputs: one part, the counts changed by the points.
     InputPart all;
@@ -716,7 +769,7 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         if (!block) return block.status();
         std::vector<Surfel> points;
         ScalarTable table = c.emptyTable();
-        appendSurfels(c, *reader_, n, *block, rulesOf(*block), &points, &table);
+        decode(c, n, *block, &points, &table);
         const std::vector<uint32_t> of = inputsOf(*block);
         for (size_t i = 0; i < points.size(); ++i)
             if (of[i] < estimated.size() && estimated[of[i]] && (addsProvenance_ || nearChange(points[i].position)))
@@ -844,7 +897,7 @@ Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& pr
                 out.root = std::make_unique<BuiltNode>();
                 out.root->key = chunk;
                 out.rootScalars = c.emptyTable();
-                appendSurfels(c, *reader_, n, *block, rulesOf(*block), &out.root->surfels, &out.rootScalars);
+                decode(c, n, *block, &out.root->surfels, &out.rootScalars);
             }
             break;
         }

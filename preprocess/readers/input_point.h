@@ -55,6 +55,10 @@ struct InputDescription {
     int colorBits = 8;               // bits of the file's colour channels (8 or 16)
     double precision = 0;            // coordinate step the file can express (LAS scale); 0: unknown
     bool float32Coordinates = false; // 24 significant bits: the step follows the magnitude
+    // Where the file stores integers, position = integer * scale + offset per
+    // axis (LAS/LAZ): a position known within half a step gives back the very
+    // coordinates (an update's decoded leaves: update.cpp). Scale 0: none.
+    Vec3d latticeScale, latticeOffset;
     // Where the scanner stood for each scan of the file, where the format says
     // (InputPoint::scan indexes it; empty: one scan, origin unknown).
     std::vector<std::optional<Vec3d>> scanOrigins;

@@ -459,6 +459,8 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.hasReturns = true;
     desc.colorBits = 16;
     desc.precision = std::min({l.scale[0], l.scale[1], l.scale[2]});
+    desc.latticeScale = {l.scale[0], l.scale[1], l.scale[2]};
+    desc.latticeOffset = {l.offset[0], l.offset[1], l.offset[2]};
     desc.crs = crsOf(l.vlrs);
     desc.airborne = true;
 
