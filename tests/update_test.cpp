@@ -12,6 +12,7 @@
 #include <cmath>
 #include <functional>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 #include <random>
@@ -101,26 +102,38 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
 // overlapping flight lines with the same returns): a fresh build merges each
 // pair, keeping the lower input's, and so must the update, whose set points
 // are decoded from their leaves while the added ones are read raw (stop 56
-// kept both: 114,212 leaf points where the fresh build has 110,000).
+// kept both: 114,212 leaf points where the fresh build has 110,000). Beside
+// it, the same scan moved by 0.4 of its coordinates' step: on another
+// lattice, so no point repeats one of the set's, though most quantize to a
+// position of one (which the update must not take for a repeat).
 TEST_F(UpdateTest, AnAddedCopyOfTheSetsScanMergesAsInAFreshBuild) {
-    const std::string copy = dir.file("again.laz");
+    const std::string copy = dir.file("again.laz"), moved = dir.file("moved.laz");
     fs::copy_file(base[3], copy);
-    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", copy, "--to", set()});
+    const char* script =
+        "import laspy, sys\n"
+        "f = laspy.read(sys.argv[1])\n"
+        "f.header.offsets = f.header.offsets + 0.4 * f.header.scales\n"
+        "f.write(sys.argv[2])\n"
+        "print(len(f.points))\n";
+    auto written = test::run({SURFCAST_TEST_PYTHON, "-c", script, base[3], moved});
+    ASSERT_EQ(written.exitCode, 0) << written.output;
+    const size_t movedPoints = std::stoul(written.output);
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", copy, moved, "--to", set()});
     ASSERT_EQ(update.exitCode, 0) << update.output;
     auto all = base;
-    all.insert(all.end(), {copy, "-o", dir.file("fresh")});
+    all.insert(all.end(), {copy, moved, "-o", dir.file("fresh")});
     auto fresh = test::run(build(all));
     ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
 
     // As AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes: every point within
     // 1.5 leaf steps, attributes and input exact; the set before holds each
-    // of the copy's points already, so the count is the set's.
+    // of the copy's points already, and none of the moved scan's.
     double step = 0;
     std::vector<Point> before, updated, expected;
     ASSERT_NO_FATAL_FAILURE(leafPoints(shared(), &step, &before));
     ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
-    EXPECT_EQ(expected.size(), before.size());
+    EXPECT_EQ(expected.size(), before.size() + movedPoints);
     ASSERT_EQ(updated.size(), expected.size());
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
 }
@@ -144,6 +157,41 @@ TEST_F(UpdateTest, AnAddedCopyOfAFloatScanMergesAsInAFreshBuild) {
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
     ASSERT_EQ(updated.size(), expected.size());
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+}
+
+// Added points that repeat none of the set's keep their positions: two of
+// them closer than the leaf's step, 3.3 steps from a point of the set, stay
+// two, as in a fresh build (snapping every added point onto the leaf's grid,
+// as this stop's first fix did, made the two one).
+TEST_F(UpdateTest, AddedPointsOnNoneOfTheSetsPositionsKeepTheirOwn) {
+    const std::string scan = test::dataFile("fragment.pcd"), pairs = dir.file("pairs.xyz");
+    auto built = test::run(build({scan, "-o", dir.file("scan")}));
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    double step = 0;
+    std::vector<Point> before;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("scan"), &step, &before));
+    ASSERT_GT(step, 0);
+    {
+        std::ofstream out(pairs);
+        out.precision(12);
+        for (size_t i = 0; i < before.size(); i += 97)
+            for (double k : {3.3, 3.5}) {
+                const Vec3d p = before[i].p + Vec3d{1, 1, 1} * (k * step);
+                out << p.x << ' ' << p.y << ' ' << p.z << '\n';
+            }
+        ASSERT_TRUE(out.good());
+    }
+    const size_t added = 2 * ((before.size() + 96) / 97);
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", pairs, "--to", dir.file("scan")});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto fresh = test::run(build({scan, pairs, "-o", dir.file("fresh")}));
+    ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
+
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("scan"), &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    EXPECT_EQ(expected.size(), before.size() + added);
+    EXPECT_EQ(updated.size(), before.size() + added);
 }
 
 // Images at --lod 1 from four views around the set, 640 x 360, within mean

@@ -63,10 +63,17 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
             return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
                                                 scalars.row(c.row) + fields);
         });
+        // (A point of an update's set that took an added one in stands for a
+        // set point still: another set point at its position stays apart.)
         size_t out = 0;
         for (size_t i = 0; i < v.size(); ++i) {
-            if (out > 0 && v[out - 1].position == v[i].position && !(v[out - 1].fromSet && v[i].fromSet)) v[out - 1].count += v[i].count;
-            else v[out++] = v[i];
+            Surfel& kept = v[out - (out > 0)];
+            if (out > 0 && kept.position == v[i].position && !(kept.fromSet && v[i].fromSet)) {
+                kept.count += v[i].count;
+                kept.fromSet = kept.fromSet || v[i].fromSet;
+            } else {
+                v[out++] = v[i];
+            }
         }
         v.resize(out);
     } else {

@@ -339,10 +339,12 @@ Status forEachPartBatch(const BuildContext& c, const InputPart& part, std::span<
                         c.inputOfSource().subspan(part.firstSource, part.sources));
 }
 
-Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& c, const InputPart& part, Progress& progress) {
+Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& c, const InputPart& part, Progress& progress,
+                                                              const std::function<Status(std::span<Surfel>)>& adjust) {
     std::vector<std::pair<uint32_t, uint32_t>> occupied;
     std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
     SC_TRY(forEachPartBatch(c, part, {}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        if (adjust) SC_TRY(adjust(batch));
         for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, c.rootEdge())]++;
         progress.advance(batch.size());
         return Status{};

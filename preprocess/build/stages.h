@@ -23,6 +23,7 @@
 // names the file where it fails.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <span>
@@ -111,7 +112,9 @@ Result<InputStats> readScan(const std::string& path, InputPart* part, uint32_t j
 Result<uint64_t> chunkPoints(const BuildContext& context);
 
 // Count: part `part`'s points on the counting grid, occupied cells by index.
-Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& context, const InputPart& part, Progress& progress);
+// `adjust` moves each batch's points first where given (an update's: update.cpp).
+Result<std::vector<std::pair<uint32_t, uint32_t>>> countStage(const BuildContext& context, const InputPart& part, Progress& progress,
+                                                              const std::function<Status(std::span<Surfel>)>& adjust = {});
 Status writeCount(const std::string& path, const std::vector<std::pair<uint32_t, uint32_t>>& counts, uint32_t job);
 Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& path, uint32_t job);
 // Sums sparse counts (each sorted by cell) into one, sorted by cell.

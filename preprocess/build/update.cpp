@@ -8,6 +8,8 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <map>
 #include <optional>
 #include <set>
 #include <unordered_set>
@@ -111,7 +113,7 @@ public:
             for (int a = 0; a < 3 && on; ++a) {
                 const double k = std::round((w[a] - lattice->offset[a]) / lattice->scale[a]);
                 raw[a] = k * lattice->scale[a] + lattice->offset[a];
-                on = std::fabs(k) <= INT32_MAX && quantized(raw[a], a) == q[a];
+                on = k >= INT32_MIN && k <= INT32_MAX && quantized(raw[a], a) == q[a];
             }
             if (on) w = raw;
         }
@@ -119,12 +121,11 @@ public:
         for (int a = 0; a < 3; ++a) p[a] = std::clamp(p[a], lo_[a], std::nextafter(lo_[a] + edge_, lo_[a]));
         return p;
     }
-    // Where the node's block holds p (relative to `origin`): quantized as
-    // encodeNode quantizes, then decoded.
-    Vec3d snapped(const Vec3d& p) const {
-        uint32_t q[3];
-        for (int a = 0; a < 3; ++a) q[a] = quantized(p[a] + origin_[a], a);
-        return decoded(q);
+    // The quantized position of p (relative to `origin`) in the node: as
+    // encodeNode quantizes it, but from world coordinates (a tie may round
+    // the other way).
+    std::array<uint32_t, 3> quantize(const Vec3d& p) const {
+        return {quantized(p.x + origin_.x, 0), quantized(p.y + origin_.y, 1), quantized(p.z + origin_.z, 2)};
     }
 
 private:
@@ -172,28 +173,44 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
     }
 }
 
-// The set's leaves by key, to move each added point onto the grid of the leaf
-// it lies in: an added point that repeats one of the set's exactly then meets
-// it at the position appendSurfels decodes, and buildSubtree keeps one of the
-// two, as a fresh build keeps one of exact duplicates. (The leaves' steps are
-// at most the inputs' precision, so distinct points on an input's lattice stay
-// distinct; a point that lies in no leaf meets none of the set's points.)
+// The set's leaves whose points stay decoded (Update::recovers), to move an
+// added point that quantizes to one of their points' positions onto it: a
+// repeat of the set's point then meets it, and buildSubtree keeps one of the
+// two, as a fresh build keeps one of exact duplicates. (A neighbour of the
+// set's point within the leaf's step meets it too, where a fresh build keeps
+// both; any other added point keeps its position.)
 class SetLeaves {
 public:
-    SetLeaves(const TilesetReader& set, const Vec3d& origin) : info_(set.info()), origin_(origin) {
+    SetLeaves(const TilesetReader& set, const Vec3d& origin, std::function<bool(const NodeRecord&)> decodedOnly)
+        : set_(set), info_(set.info()), origin_(origin), decodedOnly_(std::move(decodedOnly)) {
         for (const NodeRecord& n : set.nodes()) nodes_[n.key] = &n;
     }
-    void snap(std::span<Surfel> points) {
+    Status snap(std::span<Surfel> points) {
         for (Surfel& s : points) {
             const Vec3d p = s.position + origin_ - info_.rootMin;
             // Points come in scan order: most lie in the leaf of the one before.
-            if (!last_ || keyAt(p, last_->node().key.level) != last_->node().key) {
+            if (!last_ || keyAt(p, last_->grid.node().key.level) != last_->grid.node().key) {
                 const NodeRecord* leaf = find(p);
+                last_ = nullptr;
                 if (!leaf) continue;
-                last_.emplace(info_, *leaf, origin_);
+                auto it = leaves_.find(leaf->key);
+                if (it == leaves_.end()) {
+                    Leaf l{NodeGrid(info_, *leaf, origin_), {}};
+                    if (decodedOnly_(*leaf)) {
+                        auto block = set_.readBlock(*leaf);
+                        if (!block) return block.status();
+                        for (size_t i = 0; i < block->size(); ++i)
+                            l.held.push_back({block->positions[3 * i], block->positions[3 * i + 1], block->positions[3 * i + 2]});
+                        std::sort(l.held.begin(), l.held.end());
+                    }
+                    it = leaves_.emplace(leaf->key, std::move(l)).first;
+                }
+                last_ = &it->second;
             }
-            s.position = last_->snapped(s.position);
+            const auto q = last_->grid.quantize(s.position);
+            if (std::binary_search(last_->held.begin(), last_->held.end(), q)) s.position = last_->grid.decoded(q.data());
         }
+        return {};
     }
 
 private:
@@ -220,10 +237,17 @@ private:
         return nullptr;
     }
 
+    struct Leaf {
+        NodeGrid grid;
+        std::vector<std::array<uint32_t, 3>> held;  // its points' quantized positions, sorted (none where recovered)
+    };
+    const TilesetReader& set_;
     const TilesetInfo& info_;
     Vec3d origin_;
+    std::function<bool(const NodeRecord&)> decodedOnly_;
     std::unordered_map<NodeKey, const NodeRecord*, NodeKeyHash> nodes_;
-    std::optional<NodeGrid> last_;
+    std::map<NodeKey, Leaf> leaves_;  // the leaves added points reached, kept for every pass over them
+    Leaf* last_ = nullptr;
 };
 
 // A set grown past its root cube: the old root becomes the node at `levels`
@@ -369,6 +393,10 @@ std::vector<uint32_t> inputsOf(const BlockData& block) {
 // (update.bin) from the set as it still is.
 class Update {
 public:
+    // SetLeaves and the decoded blocks refer into the set's reader it holds.
+    Update() = default;
+    Update(const Update&) = delete;
+    Update& operator=(const Update&) = delete;
     Status plan(const BuildOptions& options, const UpdateRequest& request, const std::string& set, const BuildPlan& record,
                 Progress& progress, BuildSummary* summary);
     // The rebuilt chunks' points: the set's own near them and the added ones,
@@ -403,7 +431,7 @@ private:
     // points on their inputs' lattices where the set's points all have one.
     void decode(const BuildContext& c, const NodeRecord& n, const BlockData& block, std::vector<Surfel>* out, ScalarTable* table) const {
         std::vector<const Lattice*> lattices;
-        if (!lattices_.empty() && (n.flags & kFlagInputPoints))
+        if (recovers(n))
             for (uint32_t input : inputsOf(block)) lattices.push_back(input < lattices_.size() ? &lattices_[input] : nullptr);
         appendSurfels(c, *reader_, n, block, rulesOf(block), lattices, out, table);
     }
@@ -411,9 +439,16 @@ private:
     // every pass over them sees them where the chunks receive them.
     Status forEachAdded(std::span<const ScalarQuantization> stored, const BatchConsumer& consume) {
         return forEachPartBatch(*context_, addedPart_, stored, [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-            if (leaves_) leaves_->snap(batch);
+            SC_TRY(leaves_->snap(batch));
             return consume(batch, scalars);
         });
+    }
+    // Whether leaf n's points are taken back to their inputs' coordinates:
+    // where every input has a lattice, and the leaf's step is below each
+    // scale, so that the lattice point nearest a stored position is the
+    // input's (a set whose leaf step is unknown, or capped, keeps them decoded).
+    bool recovers(const NodeRecord& n) const {
+        return !lattices_.empty() && (n.flags & kFlagInputPoints) && positionStep(reader_->info(), n) < smallestScale_;
     }
 
     BuildOptions opt_;
@@ -432,10 +467,11 @@ private:
     InputPart addedPart_;
     // Per input of the set, its lattice, where every input with points has
     // one (a file of one LAS/LAZ source), so that the set's leaf points are
-    // the inputs' very points again, which an added point repeating one
-    // meets exactly, as in a fresh build; else empty, and the added points
-    // are snapped onto the set's leaves instead (SetLeaves).
+    // the inputs' very points again (recovers), which an added point
+    // repeating one meets exactly, as in a fresh build; else empty. Added
+    // points are snapped onto the leaves that stay decoded (SetLeaves).
     std::vector<Lattice> lattices_;
+    double smallestScale_ = 0;  // of lattices_, on any axis
     std::optional<SetLeaves> leaves_;
     std::vector<Surfel> gone_;  // the removed points, relative to the root
     BuildPlan plan_;
@@ -482,12 +518,12 @@ Status Update::open(const BuildOptions& options, size_t added, const std::string
         withPoints[oldInputs_[i]] += record.stats.sources[i].points > 0;
         lattices_[oldInputs_[i]] = {d.latticeScale, d.latticeOffset};
     }
-    for (size_t i = 0; i < inputs; ++i) {
+    smallestScale_ = HUGE_VAL;
+    for (size_t i = 0; i < inputs && !lattices_.empty(); ++i) {
         const Vec3d& scale = lattices_[i].scale;
-        if (withPoints[i] && (sources[i] != 1 || !(scale.x > 0 && scale.y > 0 && scale.z > 0))) {
-            lattices_.clear();
-            break;
-        }
+        if (!withPoints[i]) continue;
+        if (sources[i] != 1 || !(scale.x > 0 && scale.y > 0 && scale.z > 0)) lattices_.clear();
+        else smallestScale_ = std::min({smallestScale_, scale.x, scale.y, scale.z});
     }
     return {};
 }
@@ -617,7 +653,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     context_ = *derived;
     const BuildContext& c = *context_;
     c.describe(summary);
-    if (lattices_.empty()) leaves_.emplace(*reader_, c.rootMin());
+    leaves_.emplace(*reader_, c.rootMin(), [this](const NodeRecord& n) { return !recovers(n); });
 
     // The plan of all the inputs: one part, the counts changed by the points.
     InputPart all;
@@ -644,15 +680,10 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         for (auto [cell, n] : record.counts) cells[grow_.cell(cell)] += n;
         if (added > 0) {
             progress.begin("count", addedPoints);
-            std::vector<uint32_t> counts(size_t(1) << (3 * kCountLevel), 0);
-            SC_TRY(forEachAdded({}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
-                for (const Surfel& s : batch) counts[ChunkLayout::cellIndex(s.position, c.rootEdge())]++;
-                progress.advance(batch.size());
-                return Status{};
-            }));
+            auto counts = countStage(c, addedPart_, progress, [&](std::span<Surfel> batch) { return leaves_->snap(batch); });
+            if (!counts) return counts.status();
             summary->phaseSeconds.push_back({"count", progress.end()});
-            for (size_t i = 0; i < counts.size(); ++i)
-                if (counts[i]) cells[uint32_t(i)] += counts[i];
+            for (auto [cell, n] : *counts) cells[cell] += n;
         }
         for (const Surfel& s : gone_) cells[uint32_t(ChunkLayout::cellIndex(s.position, c.rootEdge()))]--;
         for (auto [cell, n] : cells)
