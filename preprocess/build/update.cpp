@@ -439,7 +439,7 @@ private:
     // every pass over them sees them where the chunks receive them.
     Status forEachAdded(std::span<const ScalarQuantization> stored, const BatchConsumer& consume) {
         return forEachPartBatch(*context_, addedPart_, stored, [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-            SC_TRY(leaves_->snap(batch));
+            if (leaves_) SC_TRY(leaves_->snap(batch));
             return consume(batch, scalars);
         });
     }
@@ -472,7 +472,7 @@ private:
     // points are snapped onto the leaves that stay decoded (SetLeaves).
     std::vector<Lattice> lattices_;
     double smallestScale_ = 0;  // of lattices_, on any axis
-    std::optional<SetLeaves> leaves_;
+    std::optional<SetLeaves> leaves_;  // none where every leaf recovers
     std::vector<Surfel> gone_;  // the removed points, relative to the root
     BuildPlan plan_;
     ChunkLayout layout_;
@@ -544,7 +544,6 @@ std::vector<uint16_t> Update::rulesOf(const BlockData& block) const {
                 }
     return rules;
 }
-
 
 Status Update::plan(const BuildOptions& options, const UpdateRequest& request, const std::string& set, const BuildPlan& record,
                     Progress& progress, BuildSummary* summary) {
@@ -653,7 +652,10 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     context_ = *derived;
     const BuildContext& c = *context_;
     c.describe(summary);
-    leaves_.emplace(*reader_, c.rootMin(), [this](const NodeRecord& n) { return !recovers(n); });
+    // (Where every leaf recovers, no added point is moved.)
+    const auto& nodes = reader_->nodes();
+    if (std::any_of(nodes.begin(), nodes.end(), [&](const NodeRecord& n) { return (n.flags & kFlagInputPoints) && !recovers(n); }))
+        leaves_.emplace(*reader_, c.rootMin(), [this](const NodeRecord& n) { return !recovers(n); });
 
     // The plan of all the inputs: one part, the counts changed by the points.
     InputPart all;
@@ -680,7 +682,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         for (auto [cell, n] : record.counts) cells[grow_.cell(cell)] += n;
         if (added > 0) {
             progress.begin("count", addedPoints);
-            auto counts = countStage(c, addedPart_, progress, [&](std::span<Surfel> batch) { return leaves_->snap(batch); });
+            auto counts = countStage(c, addedPart_, progress, [&](std::span<Surfel> batch) { return leaves_ ? leaves_->snap(batch) : Status{}; });
             if (!counts) return counts.status();
             summary->phaseSeconds.push_back({"count", progress.end()});
             for (auto [cell, n] : *counts) cells[cell] += n;
