@@ -117,7 +117,7 @@ TEST_F(UpdateTest, AnAddedCopyOfTheSetsScanMergesAsInAFreshBuild) {
         "print(len(f.points))\n";
     auto written = test::run({SURFCAST_TEST_PYTHON, "-c", script, base[3], moved});
     ASSERT_EQ(written.exitCode, 0) << written.output;
-    const size_t movedPoints = std::stoul(written.output);
+    const size_t movedPoints = std::stoul(written.output.substr(written.output.find_last_of('\n', written.output.size() - 2) + 1));
     auto update = test::run({test::binary("surfcast-build"), "-q", "--add", copy, moved, "--to", set()});
     ASSERT_EQ(update.exitCode, 0) << update.output;
     auto all = base;
@@ -138,6 +138,42 @@ TEST_F(UpdateTest, AnAddedCopyOfTheSetsScanMergesAsInAFreshBuild) {
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
 }
 
+// Where the set stores intensity in steps wider than 1 (a range past 4,096
+// values), a set point decodes to its step's value, not its own. Of it and
+// an added repeat, the set's input must stay all the same, as in a fresh
+// build (docs/FORMAT.md: the lowest stored intensity, then input), or removing
+// the repeat again would take the set's point with it.
+TEST_F(UpdateTest, RemovingARepeatOfTheSetsScanGivesBackTheSet) {
+    const std::string wide = dir.file("wide.laz"), again = dir.file("again.laz");
+    const char* script =
+        "import laspy, sys, numpy as np\n"
+        "f = laspy.read(sys.argv[1])\n"
+        "f.intensity = np.minimum(f.intensity.astype(np.int64) * 97 + np.arange(len(f.points)) % 89, 65535).astype(np.uint16)\n"
+        "f.write(sys.argv[2])\n"
+        "f.write(sys.argv[3])\n";
+    auto written = test::run({SURFCAST_TEST_PYTHON, "-c", script, base[3], wide, again});
+    ASSERT_EQ(written.exitCode, 0) << written.output;
+    auto built = test::run(build({wide, base[4], "-o", dir.file("wide-set")}));
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    fs::copy(dir.file("wide-set"), dir.file("before"), fs::copy_options::recursive);
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", again, "--to", dir.file("wide-set")});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    update = test::run({test::binary("surfcast-build"), "-q", "--remove", "again.laz", "--to", dir.file("wide-set")});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+
+    auto reader = TilesetReader::open(dir.file("before"));
+    ASSERT_TRUE(reader) << reader.status().message();
+    const AttributeInfo* intensity = reader->info().attribute("intensity");
+    ASSERT_NE(intensity, nullptr);
+    ASSERT_GT(intensity->scale, 1) << "the case needs intensity steps wider than 1";
+    double step = 0;
+    std::vector<Point> before, after;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("before"), &step, &before));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("wide-set"), &step, &after));
+    ASSERT_EQ(after.size(), before.size());
+    EXPECT_EQ(matchPoints(before, after, 1.5 * step), before.size()) << "leaf step " << step;
+}
+
 // An input of float coordinates has no lattice to take the set's quantized
 // points back to, so the update snaps the added points onto the set's leaves
 // instead (update.cpp, SetLeaves): a copy of the scan merges all the same.
@@ -146,15 +182,18 @@ TEST_F(UpdateTest, AnAddedCopyOfAFloatScanMergesAsInAFreshBuild) {
     fs::copy_file(scan, copy);
     auto built = test::run(build({scan, "-o", dir.file("scan")}));
     ASSERT_EQ(built.exitCode, 0) << built.output;
+    fs::copy(dir.file("scan"), dir.file("before"), fs::copy_options::recursive);
     auto update = test::run({test::binary("surfcast-build"), "-q", "--add", copy, "--to", dir.file("scan")});
     ASSERT_EQ(update.exitCode, 0) << update.output;
     auto fresh = test::run(build({scan, copy, "-o", dir.file("fresh")}));
     ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
 
     double step = 0;
-    std::vector<Point> updated, expected;
-    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("scan"), &step, &updated));
+    std::vector<Point> before, updated, expected;
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("scan"), &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("before"), &step, &before));
+    EXPECT_EQ(expected.size(), before.size()) << "the fresh build keeps the copy's points apart";
     ASSERT_EQ(updated.size(), expected.size());
     EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
 }
@@ -192,6 +231,45 @@ TEST_F(UpdateTest, AddedPointsOnNoneOfTheSetsPositionsKeepTheirOwn) {
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
     EXPECT_EQ(expected.size(), before.size() + added);
     EXPECT_EQ(updated.size(), before.size() + added);
+}
+
+// --replace of a float scan: the added points are not moved onto the
+// removed scan's points, so two of them within a tenth and three tenths of a
+// leaf step of a removed point stay two, as in a fresh build without it.
+TEST_F(UpdateTest, ReplacedFloatScanLeavesNoPointOnTheRemovedOnes) {
+    const std::string scan = test::dataFile("fragment.pcd"), other = test::dataFile("milk_cartoon_all_small_clorox.pcd");
+    const std::string pairs = dir.file("pairs.xyz");
+    auto built = test::run(build({scan, other, "-o", dir.file("set")}));
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    double step = 0;
+    std::vector<Point> before;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("set"), &step, &before));
+    size_t written = 0;
+    {
+        std::ofstream out(pairs);
+        out.precision(12);
+        for (size_t i = 0; i < before.size(); i += 97)
+            if (before[i].input == 0)
+                for (double k : {0.1, 0.3}) {
+                    const Vec3d p = before[i].p + Vec3d{1, 1, 1} * (k * step);
+                    out << p.x << ' ' << p.y << ' ' << p.z << '\n';
+                    ++written;
+                }
+        ASSERT_TRUE(out.good());
+    }
+    ASSERT_GT(written, 0u);
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--replace", "fragment.pcd", pairs, "--to", dir.file("set")});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto fresh = test::run(build({other, pairs, "-o", dir.file("fresh")}));
+    ASSERT_EQ(fresh.exitCode, 0) << fresh.output;
+
+    size_t others = 0;
+    for (const Point& p : before) others += p.input == 1;
+    std::vector<Point> updated, expected;
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("set"), &step, &updated));
+    ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
+    EXPECT_EQ(expected.size(), others + written);
+    EXPECT_EQ(updated.size(), others + written);
 }
 
 // Images at --lod 1 from four views around the set, 640 x 360, within mean

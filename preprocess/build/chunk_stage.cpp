@@ -50,15 +50,20 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
         node->inputPoints = true;
         node->surfels.assign(first, last);
         auto& v = node->surfels;
-        // Of exact duplicates, the one kept has the lowest class, then intensity,
-        // returns, colour and scalar fields in order (docs/FORMAT.md): the same
-        // whatever the input order.
+        // Of exact duplicates, the one kept has the lowest class, then stored
+        // intensity, returns, stored colour and scalar fields in order
+        // (docs/FORMAT.md): the same whatever the input order, and the same
+        // for an update's decoded set points as for their raw values, so that
+        // of a set's point and its repeat the lower input stays.
         const size_t fields = scalars.fields();
+        const bool colors8 = ctx.stats().colorBits == 8;
+        auto stored = [&](const Surfel& s) {
+            const auto color = [&](int k) { return colors8 ? s.color[k] >> 8 : s.color[k]; };
+            return std::make_tuple(s.position.x, s.position.y, s.position.z, s.classification, ctx.storedIntensity(s.intensity), s.returns,
+                                   color(0), color(1), color(2));
+        };
         std::sort(v.begin(), v.end(), [&](const Surfel& a, const Surfel& c) {
-            const auto ka = std::tie(a.position.x, a.position.y, a.position.z, a.classification, a.intensity, a.returns,
-                                     a.color[0], a.color[1], a.color[2]);
-            const auto kc = std::tie(c.position.x, c.position.y, c.position.z, c.classification, c.intensity, c.returns,
-                                     c.color[0], c.color[1], c.color[2]);
+            const auto ka = stored(a), kc = stored(c);
             if (ka != kc || fields == 0) return ka < kc;
             return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
                                                 scalars.row(c.row) + fields);

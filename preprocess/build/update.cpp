@@ -173,21 +173,32 @@ void appendSurfels(const BuildContext& c, const TilesetReader& set, const NodeRe
     }
 }
 
-// The set's leaves whose points stay decoded (Update::recovers), to move an
-// added point that quantizes to one of their points' positions onto it: a
-// repeat of the set's point then meets it, and buildSubtree keeps one of the
-// two, as a fresh build keeps one of exact duplicates. (A neighbour of the
-// set's point within the leaf's step meets it too, where a fresh build keeps
+std::vector<uint32_t> inputsOf(const BlockData& block) {
+    std::vector<uint32_t> of(block.size(), 0);
+    for (const ScalarAttribute& a : block.scalars)
+        if (a.name == kProvenanceAttribute) of = a.values;
+    return of;
+}
+
+// The set's leaf points that stay decoded (Update::latticeOf), to move an
+// added point that quantizes to one of their positions onto it: a repeat of
+// the set's point then meets it, and buildSubtree keeps one of the two, as a
+// fresh build keeps one of exact duplicates. (A distinct added point within
+// the leaf's step of such a point meets it too, where a fresh build keeps
 // both; any other added point keeps its position.)
 class SetLeaves {
 public:
-    SetLeaves(const TilesetReader& set, const Vec3d& origin, std::function<bool(const NodeRecord&)> decodedOnly)
-        : set_(set), info_(set.info()), origin_(origin), decodedOnly_(std::move(decodedOnly)) {
+    // `decoded`: whether leaf n's points of an input stay decoded; `removed`:
+    // the inputs whose points go (no added point is moved onto those).
+    SetLeaves(const TilesetReader& set, const Vec3d& origin, std::function<bool(const NodeRecord&, uint32_t)> decoded,
+              std::vector<uint32_t> removed)
+        : set_(set), info_(set.info()), origin_(origin), shift_(origin - set.info().rootMin), decoded_(std::move(decoded)),
+          removed_(std::move(removed)) {
         for (const NodeRecord& n : set.nodes()) nodes_[n.key] = &n;
     }
     Status snap(std::span<Surfel> points) {
         for (Surfel& s : points) {
-            const Vec3d p = s.position + origin_ - info_.rootMin;
+            const Vec3d p = s.position + shift_;
             // Points come in scan order: most lie in the leaf of the one before.
             if (!last_ || keyAt(p, last_->grid.node().key.level) != last_->grid.node().key) {
                 const NodeRecord* leaf = find(p);
@@ -196,13 +207,13 @@ public:
                 auto it = leaves_.find(leaf->key);
                 if (it == leaves_.end()) {
                     Leaf l{NodeGrid(info_, *leaf, origin_), {}};
-                    if (decodedOnly_(*leaf)) {
-                        auto block = set_.readBlock(*leaf);
-                        if (!block) return block.status();
-                        for (size_t i = 0; i < block->size(); ++i)
+                    auto block = set_.readBlock(*leaf, true);
+                    if (!block) return block.status();
+                    const std::vector<uint32_t> of = inputsOf(*block);
+                    for (size_t i = 0; i < block->size(); ++i)
+                        if (decoded_(*leaf, of[i]) && std::find(removed_.begin(), removed_.end(), of[i]) == removed_.end())
                             l.held.push_back({block->positions[3 * i], block->positions[3 * i + 1], block->positions[3 * i + 2]});
-                        std::sort(l.held.begin(), l.held.end());
-                    }
+                    std::sort(l.held.begin(), l.held.end());
                     it = leaves_.emplace(leaf->key, std::move(l)).first;
                 }
                 last_ = &it->second;
@@ -239,12 +250,13 @@ private:
 
     struct Leaf {
         NodeGrid grid;
-        std::vector<std::array<uint32_t, 3>> held;  // its points' quantized positions, sorted (none where recovered)
+        std::vector<std::array<uint32_t, 3>> held;  // its decoded points' quantized positions, sorted
     };
     const TilesetReader& set_;
     const TilesetInfo& info_;
-    Vec3d origin_;
-    std::function<bool(const NodeRecord&)> decodedOnly_;
+    Vec3d origin_, shift_;  // shift_: from positions relative to `origin` to ones relative to the set's root
+    std::function<bool(const NodeRecord&, uint32_t)> decoded_;
+    std::vector<uint32_t> removed_;
     std::unordered_map<NodeKey, const NodeRecord*, NodeKeyHash> nodes_;
     std::map<NodeKey, Leaf> leaves_;  // the leaves added points reached, kept for every pass over them
     Leaf* last_ = nullptr;
@@ -380,13 +392,6 @@ Result<BuildPlan> readBuildRecord(const std::string& set) {
     return readPlan(*path, &args, true);
 }
 
-std::vector<uint32_t> inputsOf(const BlockData& block) {
-    std::vector<uint32_t> of(block.size(), 0);
-    for (const ScalarAttribute& a : block.scalars)
-        if (a.name == kProvenanceAttribute) of = a.values;
-    return of;
-}
-
 // An update's course: plan (all that precedes the chunks' builds), distribute
 // and merge, one after another in one process (updateTileset), or as stages
 // with the work folder between them, where resume takes up what plan decided
@@ -428,11 +433,11 @@ private:
     Status open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record);
     std::vector<uint16_t> rulesOf(const BlockData& block) const;
     // A block of the set as the builder holds it (appendSurfels), its leaves'
-    // points on their inputs' lattices where the set's points all have one.
+    // points on their inputs' lattices where latticeOf gives one.
     void decode(const BuildContext& c, const NodeRecord& n, const BlockData& block, std::vector<Surfel>* out, ScalarTable* table) const {
         std::vector<const Lattice*> lattices;
-        if (recovers(n))
-            for (uint32_t input : inputsOf(block)) lattices.push_back(input < lattices_.size() ? &lattices_[input] : nullptr);
+        if (n.flags & kFlagInputPoints)
+            for (uint32_t input : inputsOf(block)) lattices.push_back(latticeOf(n, input));
         appendSurfels(c, *reader_, n, block, rulesOf(block), lattices, out, table);
     }
     // The added points, each batch snapped onto the set's leaves (SetLeaves):
@@ -443,12 +448,15 @@ private:
             return consume(batch, scalars);
         });
     }
-    // Whether leaf n's points are taken back to their inputs' coordinates:
-    // where every input has a lattice, and the leaf's step is below each
-    // scale, so that the lattice point nearest a stored position is the
-    // input's (a set whose leaf step is unknown, or capped, keeps them decoded).
-    bool recovers(const NodeRecord& n) const {
-        return !lattices_.empty() && (n.flags & kFlagInputPoints) && positionStep(reader_->info(), n) < smallestScale_;
+    // The lattice that leaf n's points of `input` are taken back to: the
+    // input's, where it has one and the leaf's step is below its scale on
+    // every axis, so that the lattice point nearest a stored position is the
+    // input's own (a leaf whose step is unknown or capped keeps them decoded).
+    const Lattice* latticeOf(const NodeRecord& n, uint32_t input) const {
+        if (input >= lattices_.size()) return nullptr;
+        const Lattice& l = lattices_[input];
+        const double step = positionStep(reader_->info(), n);
+        return l.scale.x > step && l.scale.y > step && l.scale.z > step ? &l : nullptr;
     }
 
     BuildOptions opt_;
@@ -465,14 +473,13 @@ private:
     Growth grow_;
     bool addsProvenance_ = false;
     InputPart addedPart_;
-    // Per input of the set, its lattice, where every input with points has
-    // one (a file of one LAS/LAZ source), so that the set's leaf points are
-    // the inputs' very points again (recovers), which an added point
-    // repeating one meets exactly, as in a fresh build; else empty. Added
-    // points are snapped onto the leaves that stay decoded (SetLeaves).
+    // Per input of the set, its lattice where it is a file of one LAS/LAZ
+    // source (else scale 0), so that the set's leaf points of it are its very
+    // points again (latticeOf), which an added point repeating one meets
+    // exactly, as in a fresh build. Added points are snapped onto the set's
+    // points that stay decoded (SetLeaves).
     std::vector<Lattice> lattices_;
-    double smallestScale_ = 0;  // of lattices_, on any axis
-    std::optional<SetLeaves> leaves_;  // none where every leaf recovers
+    std::optional<SetLeaves> leaves_;  // none where every leaf point is taken back
     std::vector<Surfel> gone_;  // the removed points, relative to the root
     BuildPlan plan_;
     ChunkLayout layout_;
@@ -510,20 +517,12 @@ Status Update::open(const BuildOptions& options, size_t added, const std::string
     oldRules_.assign(old_->sourceIds().begin(), old_->sourceIds().end());
     oldInputs_.assign(old_->inputOfSource().begin(), old_->inputOfSource().end());
     const size_t inputs = oldInputs_.empty() ? 0 : *std::max_element(oldInputs_.begin(), oldInputs_.end()) + 1;
-    std::vector<int> sources(inputs, 0), withPoints(inputs, 0);
+    std::vector<int> sources(inputs, 0);
     lattices_.assign(inputs, Lattice{});
     for (size_t i = 0; i < oldInputs_.size(); ++i) {
         const InputDescription& d = record.stats.sources[i].description;
-        sources[oldInputs_[i]]++;
-        withPoints[oldInputs_[i]] += record.stats.sources[i].points > 0;
-        lattices_[oldInputs_[i]] = {d.latticeScale, d.latticeOffset};
-    }
-    smallestScale_ = HUGE_VAL;
-    for (size_t i = 0; i < inputs && !lattices_.empty(); ++i) {
-        const Vec3d& scale = lattices_[i].scale;
-        if (!withPoints[i]) continue;
-        if (sources[i] != 1 || !(scale.x > 0 && scale.y > 0 && scale.z > 0)) lattices_.clear();
-        else smallestScale_ = std::min({smallestScale_, scale.x, scale.y, scale.z});
+        if (sources[oldInputs_[i]]++ == 0) lattices_[oldInputs_[i]] = {d.latticeScale, d.latticeOffset};
+        else lattices_[oldInputs_[i]] = Lattice{};  // (several sources: the default scene)
     }
     return {};
 }
@@ -652,10 +651,19 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     context_ = *derived;
     const BuildContext& c = *context_;
     c.describe(summary);
-    // (Where every leaf recovers, no added point is moved.)
-    const auto& nodes = reader_->nodes();
-    if (std::any_of(nodes.begin(), nodes.end(), [&](const NodeRecord& n) { return (n.flags & kFlagInputPoints) && !recovers(n); }))
-        leaves_.emplace(*reader_, c.rootMin(), [this](const NodeRecord& n) { return !recovers(n); });
+    // (Where every leaf point is taken back, no added point is moved: every
+    // input with points has a lattice finer than no leaf's step.)
+    double largestStep = 0, smallestScale = HUGE_VAL;
+    for (const NodeRecord& n : reader_->nodes())
+        if (n.flags & kFlagInputPoints) largestStep = std::max(largestStep, positionStep(info, n));
+    for (size_t i = 0; i < oldInputs_.size(); ++i)
+        if (record.stats.sources[i].points > 0) {
+            const Vec3d& scale = lattices_[oldInputs_[i]].scale;
+            smallestScale = std::min({smallestScale, scale.x, scale.y, scale.z});
+        }
+    if (largestStep >= smallestScale)
+        leaves_.emplace(*reader_, c.rootMin(), [this](const NodeRecord& n, uint32_t input) { return !latticeOf(n, input); },
+                        request.removed);
 
     // The plan of all the inputs: one part, the counts changed by the points.
     InputPart all;
