@@ -652,7 +652,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     const BuildContext& c = *context_;
     c.describe(summary);
     // (Where every leaf point is taken back, no added point is moved: every
-    // input with points has a lattice finer than no leaf's step.)
+    // input with points has a lattice whose scale passes every leaf's step.)
     double largestStep = 0, smallestScale = HUGE_VAL;
     for (const NodeRecord& n : reader_->nodes())
         if (n.flags & kFlagInputPoints) largestStep = std::max(largestStep, positionStep(info, n));
