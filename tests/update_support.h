@@ -129,6 +129,14 @@ inline size_t matchPoints(const std::vector<Point>& want, const std::vector<Poin
     return matched;
 }
 
+// `have` holds `want`'s points: the same count, each within 1.5 times the
+// largest leaf step `step` (the bound AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes
+// derives), attributes and input exact.
+inline void expectSamePoints(const std::vector<Point>& want, const std::vector<Point>& have, double step) {
+    ASSERT_EQ(have.size(), want.size());
+    EXPECT_EQ(matchPoints(want, have, 1.5 * step), want.size()) << "leaf step " << step;
+}
+
 // Every file of a folder, by name.
 inline std::map<std::string, std::string> folderFiles(const std::string& dir) {
     std::map<std::string, std::string> files;

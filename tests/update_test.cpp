@@ -65,8 +65,7 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     std::vector<Point> updated, expected;
     ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 
     // Blocks the update kept lie where they lay, byte for byte; the rest was
     // appended after them.
@@ -134,8 +133,7 @@ TEST_F(UpdateTest, AnAddedCopyOfTheSetsScanMergesAsInAFreshBuild) {
     ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
     EXPECT_EQ(expected.size(), before.size() + movedPoints);
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 }
 
 // Where the set stores intensity in steps wider than 1 (a range past 4,096
@@ -170,8 +168,7 @@ TEST_F(UpdateTest, RemovingARepeatOfTheSetsScanGivesBackTheSet) {
     std::vector<Point> before, after;
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("before"), &step, &before));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("wide-set"), &step, &after));
-    ASSERT_EQ(after.size(), before.size());
-    EXPECT_EQ(matchPoints(before, after, 1.5 * step), before.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(before, after, step));
 }
 
 // An input of float coordinates has no lattice to take the set's quantized
@@ -194,8 +191,7 @@ TEST_F(UpdateTest, AnAddedCopyOfAFloatScanMergesAsInAFreshBuild) {
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("scan"), &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("before"), &step, &before));
     EXPECT_EQ(expected.size(), before.size()) << "the fresh build keeps the copy's points apart";
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 }
 
 // Added points that repeat none of the set's keep their positions: two of
@@ -358,8 +354,7 @@ TEST_F(UpdateTest, RemovingTheAddedScanGivesBackTheSetBefore) {
     ASSERT_EQ(r.exitCode, 0) << r.output;
     std::vector<Point> removed;
     ASSERT_NO_FATAL_FAILURE(leafPoints(set(), &step, &removed));
-    ASSERT_EQ(removed.size(), original.size());
-    EXPECT_EQ(matchPoints(original, removed, 1.5 * step), original.size());
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(original, removed, step));
     // Removed twice, or never there.
     r = test::run({test::binary("surfcast-build"), "-q", "--remove", added[0], "--to", set()});
     EXPECT_EQ(r.exitCode, 1) << r.output;
@@ -437,8 +432,7 @@ TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
     std::vector<Point> updated, expected;
     ASSERT_NO_FATAL_FAILURE(leafPoints(one, &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 
     r = test::run({test::binary("surfcast-build"), "-q", "--remove", "r000001.laz", "--to", one});
     ASSERT_EQ(r.exitCode, 0) << r.output;
@@ -454,8 +448,7 @@ TEST_F(UpdateTest, ASetOfOneInputTakesASecond) {
     std::vector<Point> removed;
     ASSERT_NO_FATAL_FAILURE(leafPoints(one, &step, &removed));
     for (Point& p : original) p.input = 0;
-    ASSERT_EQ(removed.size(), original.size());
-    EXPECT_EQ(matchPoints(original, removed, 1.5 * step), original.size());
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(original, removed, step));
 }
 
 // --replace OLD NEW equals a fresh build of the inputs without OLD and with NEW.
@@ -475,8 +468,7 @@ TEST_F(UpdateTest, ReplacedScanEqualsAFreshBuild) {
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
     for (auto* points : {&updated, &expected})
         for (Point& p : *points) p.input = -1;  // the two number their inputs differently
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 }
 
 // Every leaf point survives an update on a scan whose points lie on the
@@ -513,8 +505,7 @@ TEST_F(UpdateTest, PointsOnTheNodesFacesStayInTheirChunk) {
     ASSERT_EQ(r.exitCode, 0) << r.output;
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("lion-set"), &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("lion-fresh"), &step, &expected));
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 }
 
 // A scan beyond the set's root cube grows the root: the old root becomes a
@@ -592,8 +583,7 @@ TEST_F(UpdateTest, GrowingPastTheRootKeepsTheOriginalNodesPoints) {
     std::vector<Point> updated, expected;
     ASSERT_NO_FATAL_FAILURE(leafPoints(quarter, &step, &updated));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
-    ASSERT_EQ(updated.size(), expected.size());
-    EXPECT_EQ(matchPoints(expected, updated, 1.5 * step), expected.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 
     // A second update after the first grew the root (the record's statistics
     // now derive another root than the set's): the far cell removed again
@@ -603,8 +593,7 @@ TEST_F(UpdateTest, GrowingPastTheRootKeepsTheOriginalNodesPoints) {
     std::vector<Point> again, original;
     ASSERT_NO_FATAL_FAILURE(leafPoints(quarter, &step, &again));
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("quarter-before"), &step, &original));
-    ASSERT_EQ(again.size(), original.size());
-    EXPECT_EQ(matchPoints(original, again, 1.5 * step), original.size()) << "leaf step " << step;
+    ASSERT_NO_FATAL_FAILURE(expectSamePoints(original, again, step));
 }
 
 // surfcast-serve across an update: nodes whose blocks did not change keep
