@@ -63,6 +63,9 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
                                    color(0), color(1), color(2));
         };
         std::sort(v.begin(), v.end(), [&](const Surfel& a, const Surfel& c) {
+            // Positions alone order all but duplicates (stored() begins with them).
+            for (int axis = 0; axis < 3; ++axis)
+                if (a.position[axis] != c.position[axis]) return a.position[axis] < c.position[axis];
             const auto ka = stored(a), kc = stored(c);
             if (ka != kc || fields == 0) return ka < kc;
             return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
