@@ -68,9 +68,9 @@ TEST(OutOfCore, ThousandsOfLazFilesStayWithinBudget) {
 }
 
 // A point near any cell of a chunk's border, toward a neighbouring cell of
-// another chunk, is that chunk's halo (the cells' boxes touch: distance 0,
-// within any margin), wherever the layout marks cells interior to skip the
-// search. Brute force over the 26 neighbours against fromCounts's layout,
+// another chunk, is that chunk's halo (0.001 of a cell from the neighbour's
+// cell, well inside the smallest margin here, 4/128 of a cell), wherever the
+// layout marks cells interior to skip the search. Brute force over the 26 neighbours against fromCounts's layout,
 // with chunks of many sizes next to each other and empty cells between.
 TEST(OutOfCore, CellsBesideAnotherChunkSendTheirPointsToItsHalo) {
     const uint32_t n = 1u << kCountLevel;

@@ -101,17 +101,9 @@ export async function canvasImage(page) {
 // the state, the last image and the page's problems (console errors,
 // page errors, failed requests, HTTP errors).
 export async function settledView(browser, url, counter, frames) {
-  const page = await browser.newPage();
-  await page.setViewport({ width, height });
-  const problems = [];
-  page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
-  page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
-  page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
-  page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+  const { page, problems } = await openPage(browser);
   try {
-    await page.goto(url);
-    await page.waitForFunction(`${counter}.loaded || ${counter}.errors.length > 0`, { timeout: 180000 });
-    const state = await page.evaluate(counter);
+    const state = await load(page, url, counter);
     if (state.errors.length) return { state, png: null, problems };
     const loadedAt = state.frames;
     let png, last = -1, wait = frames;
@@ -129,4 +121,35 @@ export async function settledView(browser, url, counter, frames) {
   } finally {
     await page.close();
   }
+}
+
+// A page at `url` once its state object says loaded, its state and problems
+// as settledView's, without waiting for a frame.
+export async function loadedView(browser, url, counter) {
+  const { page, problems } = await openPage(browser);
+  try {
+    return { state: await load(page, url, counter), problems };
+  } finally {
+    await page.close();
+  }
+}
+
+// A page at the consumers' size whose problems (console errors, page errors,
+// failed requests, HTTP errors) go into `problems`.
+async function openPage(browser) {
+  const page = await browser.newPage();
+  await page.setViewport({ width, height });
+  const problems = [];
+  page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
+  page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
+  page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
+  page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+  return { page, problems };
+}
+
+// Goes to `url` and waits until `counter` says loaded or holds errors; its state.
+async function load(page, url, counter) {
+  await page.goto(url);
+  await page.waitForFunction(`${counter}.loaded || ${counter}.errors.length > 0`, { timeout: 180000 });
+  return page.evaluate(counter);
 }

@@ -23,7 +23,7 @@ import { MeshoptDecoder } from "meshoptimizer";
 import { ResourceResolvers, TilesetTraverser } from "3d-tiles-tools";
 import validator from "gltf-validator";
 import { PNG } from "pngjs";
-import { cameraIn, coverage, fromYDown, fromYUp, launch, settledView, startPages, toYDown, toYUp } from "./consumers.mjs";
+import { cameraIn, coverage, fromYDown, fromYUp, launch, loadedView, settledView, startPages, toYDown, toYUp } from "./consumers.mjs";
 import { loadModule, web } from "./load_module.mjs";
 
 const build = process.env.SURFCAST_BUILD ?? join(web, "..", "build");
@@ -46,7 +46,8 @@ const camera = "636300,848500,900,636590,849216,430,0,0,1,45";
 // Spark draws the files of this level's cut (27,000 splats), against
 // surfcast-view --level: a frame of the leaves' 110,000 takes SwiftShader
 // about 2 s, a vertex shader per splat (bench/RELIABILITY.md, "CI stages",
-// stop 58). The leaves' files are read back whole below.
+// stop 58). The leaves' files are checked against the set below, and Spark
+// loads them too.
 const sparkLevel = 1;
 const children = [];
 
@@ -474,13 +475,15 @@ describe("exports, as their consumers read them", { skip }, () => {
     return pagesUrl;
   }
 
-  // Spark's view of a splat file under work/, at the test's camera in the file's axes.
-  async function spark(file, axes) {
+  // Spark's view of a splat file under work/, at the test's camera in the
+  // file's axes; or, `loadOnly`, its state once the file is loaded.
+  async function spark(file, axes, loadOnly = false) {
     const { info } = readSet(set);
     const origin = info.boundsMin.map((m, a) => (m + info.boundsMax[a]) / 2);
-    const url = await pages();
+    const url = `${await pages()}/spark.html?splats=sets/${file}&camera=${cameraIn(camera, origin, axes)}`;
+    if (loadOnly) return loadedView(browser, url, "window.sparkState");
     // Spark sorts in a worker as it draws: a few frames settle it.
-    return settledView(browser, `${url}/spark.html?splats=sets/${file}&camera=${cameraIn(camera, origin, axes)}`, "window.sparkState", 3);
+    return settledView(browser, url, "window.sparkState", 3);
   }
 
   // CesiumJS's view of an export (a folder under work/) at the test's camera.
@@ -581,6 +584,15 @@ describe("exports, as their consumers read them", { skip }, () => {
       const view = await cesium(folder, params, what === "splats");
       assert.ok(view.state.tiles >= 1, `${view.state.tiles} tiles loaded`);
       expectLikeSurfcastView(t, `CesiumJS's ${what} (${view.state.tiles} tiles)`, view, what === "splats");
+    });
+
+  for (const [file, axes, what] of [["autzen.ply", toYDown, "PLY"], ["autzen.spz", toYUp, "SPZ"]])
+    test(`Spark loads the ${what} file of the leaves, every splat`, { skip: chromium ? false : "Chromium is missing" }, async () => {
+      const { state, problems } = await spark(file, axes, true);
+      assert.deepEqual(state.errors, []);
+      assert.deepEqual(problems, []);
+      const { nodes } = readSet(set);
+      assert.equal(state.splats, [...nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0), "the leaves' surfels");
     });
 
   for (const [file, axes, what] of [["autzen-level.ply", toYDown, "PLY"], ["autzen-level.spz", toYUp, "SPZ"]])
