@@ -59,11 +59,10 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
         const bool colors8 = ctx.stats().colorBits == 8;
         auto stored = [&](const Surfel& s) {
             const auto color = [&](int k) { return colors8 ? s.color[k] >> 8 : s.color[k]; };
-            return std::make_tuple(s.position.x, s.position.y, s.position.z, s.classification, ctx.storedIntensity(s.intensity), s.returns,
-                                   color(0), color(1), color(2));
+            return std::make_tuple(s.classification, ctx.storedIntensity(s.intensity), s.returns, color(0), color(1), color(2));
         };
         std::sort(v.begin(), v.end(), [&](const Surfel& a, const Surfel& c) {
-            // Positions alone order all but duplicates (stored() begins with them).
+            // By position; exact duplicates by their stored values.
             for (int axis = 0; axis < 3; ++axis)
                 if (a.position[axis] != c.position[axis]) return a.position[axis] < c.position[axis];
             const auto ka = stored(a), kc = stored(c);
