@@ -83,9 +83,9 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
     // Cells whose 26 neighbours all belong to their own chunk (or to none):
     // their points are halo to no other chunk, the common case by far. A
     // chunk is a cube of cells, so a cell off its cube's faces is interior
-    // without a look; only the faces' cells read their neighbours (in
-    // CI's many small builds, the 27 reads of every cell were 7 % of the ASan
-    // suite's CPU: bench/RELIABILITY.md, "CI stages", stop 58).
+    // without a look; only the faces' cells read their neighbours (the 27
+    // reads of every cell were a hot spot of CI's many small builds:
+    // bench/RELIABILITY.md, "CI stages", stop 58).
     l.interior_.assign(counts.size(), 0);
     const int64_t n = kCountCells;
     auto anotherBeside = [&](int64_t x, int64_t y, int64_t z, int32_t own) {

@@ -43,11 +43,10 @@ let pagesUrl, browser;
 const kSplatScale = 0.75;
 // Over the Autzen scan from its south-west, as surfcast-view takes a camera.
 const camera = "636300,848500,900,636590,849216,430,0,0,1,45";
-// Spark draws the files of this level's cut (27,000 splats), against
-// surfcast-view --level: a frame of the leaves' 110,000 takes SwiftShader
-// about 2 s, a vertex shader per splat (bench/RELIABILITY.md, "CI stages",
-// stop 58). The leaves' files are checked against the set below, and Spark
-// loads them too.
+// Spark draws the files of this level's cut, a quarter of the leaves'
+// splats, against surfcast-view --level: SwiftShader's frames cost per splat
+// (bench/RELIABILITY.md, "CI stages", stop 58). The leaves' files are checked
+// against the set below, and Spark loads them too.
 const sparkLevel = 1;
 const children = [];
 
