@@ -474,6 +474,9 @@ describe("exports, as their consumers read them", { skip }, () => {
     return pagesUrl;
   }
 
+  // The set's leaves' surfels: what a splat file of the leaves holds.
+  const leafSurfels = () => [...readSet(set).nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0);
+
   // Spark's view of a splat file under work/, at the test's camera in the
   // file's axes; or, `loadOnly`, its state once the file is loaded.
   async function spark(file, axes, loadOnly = false) {
@@ -565,8 +568,7 @@ describe("exports, as their consumers read them", { skip }, () => {
     assert.deepEqual(problems, []);
     const r = compare(png, level);
     assert.ok(r.iou >= 0.8, `${what} covers the pixels surfcast-view's splats do: IoU ${r.iou}`);
-    const leaves = [...readSet(set).nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0);
-    const tolerance = expectSameColours(r, spz, 4 * (surfels ? leaves / surfels : 1));
+    const tolerance = expectSameColours(r, spz, 4 * (surfels ? leafSurfels() / surfels : 1));
     t.diagnostic(`${what}: IoU ${r.iou.toFixed(3)} with surfcast-view; mean colour over ${r.n} inner pixels ${r.shown} ` +
                  `(tolerance ${tolerance.toFixed(2)})`);
   }
@@ -590,8 +592,7 @@ describe("exports, as their consumers read them", { skip }, () => {
       const { state, problems } = await spark(file, axes, true);
       assert.deepEqual(state.errors, []);
       assert.deepEqual(problems, []);
-      const { nodes } = readSet(set);
-      assert.equal(state.splats, [...nodes.values()].reduce((sum, n) => sum + (n.childMask ? 0 : n.surfelCount), 0), "the leaves' surfels");
+      assert.equal(state.splats, leafSurfels(), "the leaves' surfels");
     });
 
   for (const [file, axes, what] of [["autzen-level.ply", toYDown, "PLY"], ["autzen-level.spz", toYUp, "SPZ"]])
