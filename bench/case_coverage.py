@@ -1,0 +1,197 @@
+#!/usr/bin/env python3
+"""Which product lines and branches each test case of the ASan stage runs, and
+which heavy cases run nothing the stage's other cases do not.
+
+  cmake --preset asan-coverage && cmake --build build-asan-coverage --parallel
+  bench/case_coverage.py run [--build build-asan-coverage] [--out DIR] [-R REGEX]
+  bench/case_coverage.py report [--out DIR] [--min-seconds S] [--drop CASE ...]
+
+`run` runs every case of every test program alone (ctest's command, filter,
+working folder and environment, and scripts/sanitize.sh's sanitizer options),
+two programs at a time as the stage does, with each process's profile under
+LLVM_PROFILE_FILE (the programs a case starts write theirs too). It keeps, per
+case, its seconds and the set of lines and branch directions it ran in the
+product's sources (common/ net/ preprocess/ export/ server/ client/), not the
+tests' own code. `report` then drops the heaviest cases first, each only while
+every line and branch direction it runs is run by a case still kept, and
+prints what the stage would save. The decision and its numbers:
+bench/RELIABILITY.md, "What each CI stage covers".
+
+Line coverage says which code ran under the sanitizer, not with which data: a
+case whose lines another case runs can still be the only one with its sizes.
+The report is where to look first, not a verdict.
+"""
+import argparse
+import concurrent.futures
+import json
+import os
+import pathlib
+import re
+import shutil
+import subprocess
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+PRODUCT = ("common/", "net/", "preprocess/", "export/", "server/", "client/")
+# The programs a test may start, beside the test program itself.
+PROGRAMS = ("surfcast-build", "surfcast-view", "surfcast-serve", "surfcast-export", "surfcast-weights",
+            "surfcast-mesh-reference")
+# scripts/sanitize.sh's options for the ASan stage.
+SANITIZER_ENV = {"UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1",
+                 "ASAN_OPTIONS": "detect_leaks=1:strict_string_checks=1", "OMP_WAIT_POLICY": "passive"}
+
+
+def ctest_tests(build):
+    out = subprocess.run(["ctest", "--test-dir", str(build), "--show-only=json-v1"], check=True,
+                         capture_output=True, text=True).stdout
+    tests = []
+    for t in json.loads(out)["tests"]:
+        props = {p["name"]: p["value"] for p in t.get("properties", [])}
+        if not t.get("command"):
+            sys.exit(f"case_coverage: ctest names no command for {t['name']}: build {build} first")
+        env = dict(e.split("=", 1) for e in props.get("ENVIRONMENT", []))
+        tests.append({"name": t["name"], "command": t["command"], "env": env,
+                      "cwd": props.get("WORKING_DIRECTORY", str(build))})
+    return tests
+
+
+def list_cases(test):
+    """The cases ctest's command runs (its own --gtest_filter applies)."""
+    out = subprocess.run(test["command"] + ["--gtest_list_tests"], check=True, capture_output=True, text=True,
+                         cwd=test["cwd"], env={**os.environ, **SANITIZER_ENV, "LLVM_PROFILE_FILE": os.devnull}).stdout
+    cases, suite = [], None
+    for line in out.splitlines():
+        if not line.strip():
+            continue
+        if not line.startswith(" "):
+            suite = line.split("#")[0].strip()
+        else:
+            cases.append(suite + line.split("#")[0].strip())
+    return cases
+
+
+def covered(profdata, objects):
+    """(file:line) and (file:line:block:branch) items the profile ran, product sources only."""
+    args = ["llvm-cov", "export", "-format=lcov", "-instr-profile", str(profdata), str(objects[0])]
+    for o in objects[1:]:
+        args += ["-object", str(o)]
+    out = subprocess.run(args, check=True, capture_output=True, text=True).stdout
+    items, path = set(), None
+    for line in out.splitlines():
+        if line.startswith("SF:"):
+            rel = os.path.relpath(line[3:], ROOT)
+            path = rel if rel.startswith(PRODUCT) else None
+        elif path is None:
+            continue
+        elif line.startswith("DA:"):
+            number, count = line[3:].split(",")[:2]
+            if int(count) > 0:
+                items.add(f"{path}:{number}")
+        elif line.startswith("BRDA:"):
+            number, block, branch, taken = line[5:].split(",")
+            if taken not in ("-", "0"):
+                items.add(f"{path}:{number}:{block}:{branch}")
+    return items
+
+
+def run_program(test, cases, build, out):
+    bin_dir = build / "bin"
+    objects = [pathlib.Path(test["command"][0])] + [bin_dir / p for p in PROGRAMS if (bin_dir / p).exists()]
+    results = {}
+    for case in cases:
+        raw = out / "raw" / case
+        shutil.rmtree(raw, ignore_errors=True)
+        raw.mkdir(parents=True)
+        command = [a for a in test["command"] if not a.startswith("--gtest_filter=")] + [f"--gtest_filter={case}"]
+        env = {**os.environ, **SANITIZER_ENV, **test["env"], "LLVM_PROFILE_FILE": str(raw / "%p-%m.profraw")}
+        start = time.monotonic()
+        done = subprocess.run(command, cwd=test["cwd"], env=env, capture_output=True, text=True)
+        seconds = time.monotonic() - start
+        profiles = sorted(raw.glob("*.profraw"))
+        profdata = out / "profdata" / f"{case}.profdata"
+        profdata.parent.mkdir(exist_ok=True)
+        subprocess.run(["llvm-profdata", "merge", "-sparse", "-o", str(profdata)] + [str(p) for p in profiles],
+                       check=True)
+        shutil.rmtree(raw)
+        items = covered(profdata, objects)
+        results[case] = {"test": test["name"], "seconds": round(seconds, 2), "exit": done.returncode,
+                         "processes": len(profiles), "items": sorted(items)}
+        status = "ok" if done.returncode == 0 else f"EXIT {done.returncode}"
+        print(f"{seconds:7.1f} s {len(items):6d} items {len(profiles):3d} processes  {case}  {status}", flush=True)
+        if done.returncode != 0:
+            (out / f"{case}.log").write_text(done.stdout + done.stderr)
+    (out / "cases").mkdir(exist_ok=True)
+    (out / "cases" / f"{test['name']}.json").write_text(json.dumps(results))
+    return results
+
+
+def run(args):
+    build, out = pathlib.Path(args.build).resolve(), pathlib.Path(args.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    tests = [t for t in ctest_tests(build) if re.search(args.R, t["name"])]
+    work = [(t, list_cases(t)) for t in tests]
+    # Longest programs first (most cases first: a stand-in for their cost).
+    work.sort(key=lambda w: -len(w[1]))
+    with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
+        for f in [pool.submit(run_program, t, cases, build, out) for t, cases in work]:
+            f.result()
+
+
+def report(args):
+    out = pathlib.Path(args.out)
+    cases = {}
+    for f in sorted((out / "cases").glob("*.json")):
+        cases.update(json.loads(f.read_text()))
+    failed = [c for c, r in cases.items() if r["exit"] != 0]
+    if failed:
+        print("cases that failed (their coverage is partial):", ", ".join(failed))
+    counts = {}
+    for r in cases.values():
+        for item in r["items"]:
+            counts[item] = counts.get(item, 0) + 1
+    total = sum(r["seconds"] for r in cases.values())
+    print(f"{len(cases)} cases, {total:.0f} s alone, {len(counts)} product lines and branch directions run")
+    kept = dict(cases)
+    dropped = []
+    forced = set(args.drop or [])
+    for case, r in sorted(cases.items(), key=lambda kv: -kv[1]["seconds"]):
+        if (r["seconds"] < args.min_seconds or re.search(args.keep, case)) and case not in forced:
+            continue
+        unique = [i for i in r["items"] if counts[i] == 1]
+        if unique and case not in forced:
+            lines = sorted({":".join(i.split(":")[:2]) for i in unique})
+            print(f"  keep {case} ({r['seconds']:.1f} s): {len(unique)} items only it runs, e.g. {', '.join(lines[:4])}")
+            continue
+        if unique:
+            print(f"  drop {case} ({r['seconds']:.1f} s) as asked, losing {len(unique)} items: "
+                  f"{', '.join(sorted(unique)[:6])}")
+        for i in r["items"]:
+            counts[i] -= 1
+        del kept[case]
+        dropped.append(case)
+    saved = sum(cases[c]["seconds"] for c in dropped)
+    print(f"dropped {len(dropped)} cases, {saved:.0f} s of {total:.0f} s alone, every item still run:")
+    for c in dropped:
+        print(f"  {c} ({cases[c]['test']}, {cases[c]['seconds']:.1f} s)")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run each case alone and keep what it covers")
+    r.add_argument("--build", default=str(ROOT / "build-asan-coverage"))
+    r.add_argument("--out", default=str(ROOT / "build-asan-coverage" / "case-coverage"))
+    r.add_argument("--jobs", type=int, default=2)
+    r.add_argument("-R", default="", help="only the ctest tests whose names match")
+    p = sub.add_parser("report", help="the heavy cases whose lines other cases run")
+    p.add_argument("--out", default=str(ROOT / "build-asan-coverage" / "case-coverage"))
+    p.add_argument("--min-seconds", type=float, default=3.0, help="consider dropping only cases this slow")
+    p.add_argument("--keep", default="(?!)", help="a regex of cases kept whatever other cases run")
+    p.add_argument("--drop", nargs="*", help="cases to drop whatever they alone run (prints what is lost)")
+    args = parser.parse_args()
+    run(args) if args.command == "run" else report(args)
+
+
+if __name__ == "__main__":
+    main()
