@@ -76,9 +76,14 @@ def covered(profdata, objects):
     args = ["llvm-cov", "export", "-format=lcov", "-instr-profile", str(profdata), str(objects[0])]
     for o in objects[1:]:
         args += ["-object", str(o)]
-    out = subprocess.run(args, check=True, capture_output=True, text=True).stdout
+    return product_items(subprocess.run(args, check=True, capture_output=True, text=True).stdout)
+
+
+def product_items(lcov):
+    """The lines (file:line) and branch directions (file:line:block:branch) an
+    LCOV text counts as run, in the product's sources only."""
     items, path = set(), None
-    for line in out.splitlines():
+    for line in lcov.splitlines():
         if line.startswith("SF:"):
             rel = os.path.relpath(line[3:], ROOT)
             path = rel if rel.startswith(PRODUCT) else None
