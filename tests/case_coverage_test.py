@@ -46,14 +46,15 @@ class ProductItems(unittest.TestCase):
 def write_cases(folder, cases):
     os.makedirs(os.path.join(folder, "cases"))
     with open(os.path.join(folder, "cases", "some_test.json"), "w") as f:
-        json.dump({name: {"test": "some_test", "seconds": s, "exit": 0, "processes": 1, "items": items}
-                   for name, (s, items) in cases.items()}, f)
+        json.dump({name: {"test": "some_test", "seconds": s, "exit": status, "processes": 0 if status is None else 1,
+                          "items": items}
+                   for name, (s, items, status) in cases.items()}, f)
 
 
 def dropped(folder, *args):
     out = subprocess.run([sys.executable, TOOL, "report", "--out", folder, *args], check=True, capture_output=True,
                          text=True).stdout
-    return [line.split()[0] for line in out.split("every item still run:")[1].strip().splitlines()]
+    return [line.split()[0] for line in out.split("every item still run:")[1].splitlines() if line.startswith("  ")]
 
 
 class Report(unittest.TestCase):
@@ -61,16 +62,40 @@ class Report(unittest.TestCase):
         # Slowest first: A.Slow's a is run by Bad.Input and A.Fast too, its b
         # by A.Mid, so it goes (b is now A.Mid's alone). A.Unique alone runs
         # d. A.Mid is b's last case. Bad.Input matches --keep. A.Fast's a
-        # (Bad.Input) and c (A.Mid) stay run: it goes too.
+        # (Bad.Input) and c (A.Mid) stay run: it goes too. (Written in no
+        # order of their times.)
         with tempfile.TemporaryDirectory() as folder:
-            write_cases(folder, {"A.Slow": (10, ["a", "b"]), "A.Unique": (9, ["d"]), "A.Mid": (8, ["b", "c"]),
-                                 "Bad.Input": (7, ["a"]), "A.Fast": (1, ["a", "c"])})
+            write_cases(folder, {"A.Fast": (1, ["a", "c"], 0), "Bad.Input": (7, ["a"], 0), "A.Slow": (10, ["a", "b"], 0),
+                                 "A.Mid": (8, ["b", "c"], 0), "A.Unique": (9, ["d"], 0)})
             self.assertEqual(dropped(folder, "--min-seconds", "0", "--keep", "^Bad\\."), ["A.Slow", "A.Fast"])
-            # Without --keep, Bad.Input (7 s) goes before A.Fast, which then
-            # is a's last case and stays.
-            self.assertEqual(dropped(folder, "--min-seconds", "0"), ["A.Slow", "Bad.Input"])
+            # With no case kept by name, Bad.Input (7 s) goes before A.Fast,
+            # which then is a's last case and stays.
+            self.assertEqual(dropped(folder, "--min-seconds", "0", "--keep", "(?!)"), ["A.Slow", "Bad.Input"])
             # Cases faster than --min-seconds are never dropped.
             self.assertEqual(dropped(folder, "--min-seconds", "5", "--keep", "^Bad\\."), ["A.Slow"])
+
+    def test_keeps_cases_whose_measurement_is_incomplete(self):
+        # A failed case, and one that left no profile (a killed process
+        # writes none), would otherwise go first: every item they show is
+        # run by another case (or they show none).
+        with tempfile.TemporaryDirectory() as folder:
+            write_cases(folder, {"F.Failed": (20, ["a"], 1), "F.NoProfile": (15, [], None), "F.Other": (1, ["a"], 0)})
+            self.assertEqual(dropped(folder, "--min-seconds", "0"), ["F.Other"])
+
+
+class SkipList(unittest.TestCase):
+    def test_every_case_the_asan_stage_leaves_out_by_coverage_exists(self):
+        # A misspelt name in a negative --gtest_filter skips nothing, silently.
+        names = case_coverage.cmake_list()
+        self.assertGreater(len(names), 0)
+        sources = ""
+        for name in os.listdir(os.path.join(REPO, "tests")):
+            if name.endswith(".cpp"):
+                with open(os.path.join(REPO, "tests", name)) as f:
+                    sources += f.read()
+        for name in names:
+            suite, case = name.split(".")
+            self.assertRegex(sources, rf"TEST(_F)?\({suite}, {case}\)", name)
 
 
 if __name__ == "__main__":
