@@ -46,9 +46,8 @@ class ProductItems(unittest.TestCase):
 def write_cases(folder, cases):
     os.makedirs(os.path.join(folder, "cases"))
     with open(os.path.join(folder, "cases", "some_test.json"), "w") as f:
-        json.dump({name: {"test": "some_test", "seconds": s, "exit": status, "processes": 0 if status is None else 1,
-                          "items": items}
-                   for name, (s, items, status) in cases.items()}, f)
+        json.dump({name: {"test": "some_test", "seconds": s, "exit": status, "processes": processes, "items": items}
+                   for name, (s, items, status, processes) in cases.items()}, f)
 
 
 def dropped(folder, *args):
@@ -65,8 +64,8 @@ class Report(unittest.TestCase):
         # (Bad.Input) and c (A.Mid) stay run: it goes too. (Written in no
         # order of their times.)
         with tempfile.TemporaryDirectory() as folder:
-            write_cases(folder, {"A.Fast": (1, ["a", "c"], 0), "Bad.Input": (7, ["a"], 0), "A.Slow": (10, ["a", "b"], 0),
-                                 "A.Mid": (8, ["b", "c"], 0), "A.Unique": (9, ["d"], 0)})
+            write_cases(folder, {"A.Fast": (1, ["a", "c"], 0, 1), "Bad.Input": (7, ["a"], 0, 1),
+                                 "A.Slow": (10, ["a", "b"], 0, 2), "A.Mid": (8, ["b", "c"], 0, 1), "A.Unique": (9, ["d"], 0, 3)})
             self.assertEqual(dropped(folder, "--min-seconds", "0", "--keep", "^Bad\\."), ["A.Slow", "A.Fast"])
             # With no case kept by name, Bad.Input (7 s) goes before A.Fast,
             # which then is a's last case and stays.
@@ -75,11 +74,11 @@ class Report(unittest.TestCase):
             self.assertEqual(dropped(folder, "--min-seconds", "5", "--keep", "^Bad\\."), ["A.Slow"])
 
     def test_keeps_cases_whose_measurement_is_incomplete(self):
-        # A failed case, and one that left no profile (a killed process
-        # writes none), would otherwise go first: every item they show is
-        # run by another case (or they show none).
+        # A failed case, and one whose test passed but whose processes left no
+        # profile (a killed process writes none), would otherwise go first:
+        # every item they show is run by another case (or they show none).
         with tempfile.TemporaryDirectory() as folder:
-            write_cases(folder, {"F.Failed": (20, ["a"], 1), "F.NoProfile": (15, [], None), "F.Other": (1, ["a"], 0)})
+            write_cases(folder, {"F.Failed": (20, ["a"], 1, 1), "F.NoProfile": (15, [], 0, 0), "F.Other": (1, ["a"], 0, 1)})
             self.assertEqual(dropped(folder, "--min-seconds", "0"), ["F.Other"])
 
 
