@@ -22,15 +22,20 @@ bench/RELIABILITY.md, "What each CI stage covers".
 Line coverage says which code ran under the sanitizer, not with which data: a
 case whose lines another case runs can still be the only one with its sizes.
 A killed process writes no profile, so a case that failed, or whose
-processes left none, is never dropped.
+processes left none or no product line, is never dropped. A passing case
+that kills only some of its processes shows part of what it ran, unseen: the
+cases that SIGKILL their builds (`KillAnywhere...`, `BadInput.*`) are kept by
+--keep's default.
 """
 import argparse
 import concurrent.futures
+import functools
 import json
 import os
 import pathlib
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -41,13 +46,15 @@ PRODUCT = ("common/", "net/", "preprocess/", "export/", "server/", "client/")
 PROGRAMS = ("surfcast-build", "surfcast-view", "surfcast-serve", "surfcast-export", "surfcast-weights",
             "surfcast-mesh-reference")
 # Cases kept whatever they share: their inputs (bad input) and their timing
-# (the server's clients) are the point, and lines do not show them.
-KEEP = r"^(BadInput|ServerTest)\."
+# (the server's clients) are the point, and lines do not show them; and the
+# cases that SIGKILL their builds, whose profiles are lost.
+KEEP = r"^(BadInput|ServerTest)\.|\.KillAnywhere"
 # scripts/sanitize.sh's options for the ASan stage.
 SANITIZER_ENV = {"UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1",
                  "ASAN_OPTIONS": "detect_leaks=1:strict_string_checks=1", "OMP_WAIT_POLICY": "passive"}
 
 
+@functools.lru_cache(maxsize=None)
 def llvm_tool(name):
     """llvm-cov or llvm-profdata of the clang that builds the preset (their profile formats must match)."""
     major = subprocess.run(["clang++", "-dumpversion"], check=True, capture_output=True, text=True).stdout.split(".")[0]
@@ -128,19 +135,28 @@ def run_program(test, cases, build, out):
         command = [a for a in test["command"] if not a.startswith("--gtest_filter=")] + [f"--gtest_filter={case}"]
         env = {**os.environ, **SANITIZER_ENV, **test["env"], "LLVM_PROFILE_FILE": str(raw / "%p-%m.profraw")}
         start = time.monotonic()
-        try:  # scripts/sanitize.sh's ctest timeout
-            done = subprocess.run(command, cwd=test["cwd"], env=env, capture_output=True, text=True, timeout=3600)
-            status, log = done.returncode, done.stdout + done.stderr
-        except subprocess.TimeoutExpired as e:
-            status, log = "timeout", f"{e}"
+        # A session of its own, so that a timeout (scripts/sanitize.sh's ctest
+        # one) stops the servers and windows the case started too.
+        proc = subprocess.Popen(command, cwd=test["cwd"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True, start_new_session=True)
+        try:
+            log = proc.communicate(timeout=3600)[0]
+            status = proc.returncode
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            log = proc.communicate()[0] + "\ncase_coverage: timed out after 3600 s"
+            status = "timeout"
         seconds = time.monotonic() - start
         profiles = sorted(raw.glob("*.profraw"))
         items = set()
         if profiles:
             profdata = out / "profdata" / f"{case}.profdata"
-            subprocess.run([llvm_tool("llvm-profdata"), "merge", "-sparse", "-o", str(profdata)] +
-                           [str(p) for p in profiles], check=True)
-            items = covered(profdata, objects)
+            merged = subprocess.run([llvm_tool("llvm-profdata"), "merge", "-sparse", "-o", str(profdata)] +
+                                    [str(p) for p in profiles], capture_output=True, text=True)
+            if merged.returncode == 0:
+                items = covered(profdata, objects)
+            else:  # a damaged profile: the case counts as unmeasured
+                status, log = "unreadable profile", log + merged.stderr
         shutil.rmtree(raw)
         results[case] = {"test": test["name"], "seconds": round(seconds, 2), "exit": status,
                          "processes": len(profiles), "items": sorted(items)}
@@ -156,6 +172,7 @@ def run_program(test, cases, build, out):
 def run(args):
     build, out = pathlib.Path(args.build).resolve(), pathlib.Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
+    llvm_tool("llvm-cov"), llvm_tool("llvm-profdata")  # a missing tool is an error now, not after a case
     tests = [t for t in ctest_tests(build) if re.search(args.R, t["name"])]
     work = [(t, list_cases(t)) for t in tests]
     # Longest programs first (most cases first: a stand-in for their cost).

@@ -74,11 +74,13 @@ class Report(unittest.TestCase):
             self.assertEqual(dropped(folder, "--min-seconds", "5", "--keep", "^Bad\\."), ["A.Slow"])
 
     def test_keeps_cases_whose_measurement_is_incomplete(self):
-        # A failed case, and one whose test passed but whose processes left no
-        # profile (a killed process writes none), would otherwise go first:
-        # every item they show is run by another case (or they show none).
+        # A failed case, one whose test passed but whose processes left no
+        # profile (a killed process writes none), and one whose profile holds
+        # no product line would otherwise go first: every item they show is
+        # run by another case (or they show none).
         with tempfile.TemporaryDirectory() as folder:
-            write_cases(folder, {"F.Failed": (20, ["a"], 1, 1), "F.NoProfile": (15, [], 0, 0), "F.Other": (1, ["a"], 0, 1)})
+            write_cases(folder, {"F.Failed": (20, ["a"], 1, 1), "F.NoProfile": (15, [], 0, 0), "F.NoItems": (12, [], 0, 1),
+                                 "F.Other": (1, ["a"], 0, 1)})
             self.assertEqual(dropped(folder, "--min-seconds", "0"), ["F.Other"])
 
 
