@@ -40,12 +40,14 @@ export class TileSource {
   }
 
   // surfcast-serve's LAZ export of the points in `box` (world coordinates,
-  // bounds included) of the `classes` given (all where undefined):
-  // docs/PROTOCOL.md, "Export". Static hosts have no such route (404).
-  async exportLaz(box: Box, classes?: number[]): Promise<Blob> {
-    const query = new URLSearchParams({ bbox: [...box.min, ...box.max].join(",") });
+  // bounds included; every point where undefined) of the `classes` given
+  // (all where undefined): docs/PROTOCOL.md, "Export". Static hosts have no
+  // such route (404).
+  async exportLaz(box?: Box, classes?: number[]): Promise<Blob> {
+    const query = new URLSearchParams();
+    if (box) query.set("bbox", [...box.min, ...box.max].join(","));
     if (classes) query.set("classes", classes.join(","));
-    const url = `${this.base}/export.laz?${query}`;
+    const url = `${this.base}/export.laz${query.size ? `?${query}` : ""}`;
     ++this.requests;
     const r = await fetch(url, { headers: this.headers() });  // no timeout: a large export takes a while
     if (!r.ok) {

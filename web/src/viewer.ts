@@ -256,9 +256,11 @@ export class SurfcastViewer extends EventTarget {
     this.changed();
   }
 
-  // The input points in `box` (the set's bounds by default) of the classes
-  // shown, as LAZ, from surfcast-serve's export route (docs/PROTOCOL.md).
-  async exportLaz(box: Box = { min: this.info.boundsMin, max: this.info.boundsMax }): Promise<Blob> {
+  // The input points in `box` of the classes shown, as LAZ, from
+  // surfcast-serve's export route (docs/PROTOCOL.md). Without a box, every
+  // point: the request has no bbox (the set's bounds as one would cut leaf
+  // points that round to just outside them).
+  async exportLaz(box?: Box): Promise<Blob> {
     const shown = this.hidden.length ? [...this.info.statistics.classCounts.keys()].filter((c) => !this.hidden.includes(c))
                                      : undefined;
     try {

@@ -472,6 +472,36 @@ describe("browser viewer", { skip }, () => {
                  `${want.readBigUInt64LE(247)} points downloaded`);
   });
 
+  test("no clip box: the download is the whole set, every input point, as surfcast-export writes it without a box", async (t) => {
+    const { page, problems } = await openPage();
+    const downloads = mkdtempSync(join(work, "downloads-"));
+    await (await page.createCDPSession()).send("Browser.setDownloadBehavior", { behavior: "allow", downloadPath: downloads });
+    const asked = [];
+    page.on("request", (r) => r.url().includes("/export.laz") && asked.push(r.url()));
+    await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
+    await page.waitForFunction("window.surfcast.converged || window.surfcast.errors.length > 0", { timeout: 60000 });
+    await page.click("#download");
+    await page.waitForFunction("window.surfcast.exports === 1 || window.surfcast.errors.length > 0", { timeout: 60000 });
+    assert.deepEqual(await page.evaluate(() => window.surfcast.errors), []);
+    const file = join(downloads, "scene.laz");
+    await waitFor(() => existsSync(file) && readdirSync(downloads).length === 1, "the download", 20000);
+    await page.close();
+    // No box asked for: the set's bounds as a box would cut the leaf points
+    // that their quantization puts just outside them.
+    assert.equal(asked.length, 1, asked.join(" "));
+    assert.equal(new URL(asked[0]).searchParams.has("bbox"), false, asked[0]);
+    const expected = join(work, "whole.laz");
+    execFileSync(bin("surfcast-export"), [join(work, "sets", "scene"), "--format", "laz", "-o", expected]);
+    const [got, want] = [readFileSync(file), readFileSync(expected)];
+    const points = JSON.parse(readFileSync(join(work, "sets", "scene", "tileset.json"), "utf8")).input_points;
+    assert.equal(got.readBigUInt64LE(247), BigInt(points), "the LAS header counts every input point of tileset.json");
+    got.fill(0, 90, 94);  // the creation day and year
+    want.fill(0, 90, 94);
+    assert.ok(got.equals(want), `the download (${got.length} bytes) is surfcast-export's (${want.length} bytes)`);
+    assert.deepEqual(problems, []);
+    t.diagnostic(`whole set: ${points} points downloaded`);
+  });
+
   test("legends: class names and counts, only this class as surfcast-view --classes draws it, the palette's range", async () => {
     const classCamera = kClassCamera;
     const { page, problems } = await openPage();
