@@ -202,6 +202,22 @@ Status replaceFile(const std::string& path, const void* data, size_t size) {
     return {};
 }
 
+// Whether the set in folder `set` is still the version `current` that an
+// update read at its start (its tileset.json names the same hierarchy and
+// blocks.bin bytes): what another writer put there since must stay whole.
+Status sameVersion(const std::string& set, const TilesetInfo& current) {
+    const std::string path = set + "/tileset.json";
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return Status::error(set + ": its tileset.json is gone since this update read the set; run the update again");
+    auto now = readTilesetJson(std::string{std::istreambuf_iterator<char>(in), {}}, path);
+    if (!now) return now.status();
+    if (now->hierarchyFile != current.hierarchyFile || now->hierarchyCrc != current.hierarchyCrc ||
+        now->hierarchyBytes != current.hierarchyBytes || now->blocksBytes != current.blocksBytes)
+        return Status::error(set + ": changed since this update read it (another build, update or compaction wrote it); the update "
+                             "stops before writing, leaving the set as that one wrote it: run the update again");
+    return {};
+}
+
 Status syncFolder(const std::string& dir) {
     const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     const bool ok = fd >= 0 && ::fsync(fd) == 0;
@@ -212,6 +228,9 @@ Status syncFolder(const std::string& dir) {
 }  // namespace
 
 Status TilesetWriter::finishUpdate(TilesetInfo& info) {
+    // The set must be the version the update read: cutting and appending to
+    // another's blocks.bin would tear it.
+    SC_TRY(sameVersion(set_, current_));
     // The new blobs, in hierarchy order, after the current set's last byte (a
     // killed update's bytes beyond it are cut first: no reader reads them).
     const std::string blocksPath = set_ + "/blocks.bin";

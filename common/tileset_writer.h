@@ -36,7 +36,9 @@ public:
     // hierarchy as versionedHierarchyFile(its CRC) and then switches
     // tileset.json with one rename, so a reader sees the old set or the new
     // one. The previous version's hierarchy stays for clients that opened it;
-    // older ones go.
+    // older ones go. finish() fails before it writes, naming the set, where
+    // the set's tileset.json no longer names `current`'s hierarchy and
+    // blocks.bin bytes (another writer replaced the set meanwhile).
     // A blob built again with the same bytes as the current node of its key
     // (`currentNodes`) keeps that node's place too.
     static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,

@@ -5,6 +5,7 @@
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -409,10 +410,51 @@ int fail(const surfcast::Status& status) {
     return 1;
 }
 
+// One writer of a set at a time (a build or --merge over it, an update, a
+// compaction, a weight capture): an exclusive lock on its folder, held from
+// before the writer reads the set until the process ends; another writer
+// fails at once.
+struct SetLock {
+    int fd = -1;
+    ~SetLock() {
+        if (fd >= 0) ::close(fd);
+    }
+};
+// A build or compaction swaps a new folder in for the set's: a lock granted
+// on the folder it replaced guards nothing, so it is taken again on the one
+// the path names, a few times at most.
+constexpr int kLockAttempts = 8;
+surfcast::Status lockSet(const std::string& set, SetLock* lock) {
+    for (int attempt = 0; attempt < kLockAttempts; ++attempt) {
+        if (lock->fd >= 0) ::close(lock->fd);
+        lock->fd = ::open(set.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (lock->fd < 0) return surfcast::Status::error(set + ": cannot open (" + std::strerror(errno) + ")");
+        if (::flock(lock->fd, LOCK_EX | LOCK_NB) != 0)
+            return surfcast::Status::error(set + (errno == EWOULDBLOCK ? std::string(": another build, update or compaction of this set is running")
+                                                                       : ": cannot lock (" + std::string(std::strerror(errno)) + ")"));
+        struct stat held, named;
+        if (::fstat(lock->fd, &held) == 0 && ::stat(set.c_str(), &named) == 0 && held.st_dev == named.st_dev && held.st_ino == named.st_ino)
+            return {};
+    }
+    return surfcast::Status::error(set + ": replaced by other writers again and again while this one waited for its lock");
+}
+
+// The set `output` names, locked where it exists already (a new one has no
+// other writer to wait for; a path that is no folder, TilesetWriter refuses).
+surfcast::Status lockOutput(const std::string& output, SetLock* lock) {
+    const std::string set = std::filesystem::absolute(output).lexically_normal().string();
+    std::error_code ec;
+    return std::filesystem::is_directory(set, ec) ? lockSet(set, lock) : surfcast::Status{};
+}
+
 // Prints what a build wrote and runs the weight capture where asked.
 int finishBuild(const Args& a, const surfcast::BuildSummary& summary) {
     std::printf("wrote %s\n%s", a.opt.output.c_str(), summary.text().c_str());
     if (a.captureWeights) {
+        // The capture writes the set again, under the lock of the folder the
+        // build swapped in (the build's own is on the one it replaced).
+        SetLock lock;
+        if (auto st = lockOutput(a.opt.output, &lock); !st.ok()) return fail(st);
         std::fflush(stdout);
         int status = runWeightCapture(a.opt.output, !a.opt.progress);
         if (status != 0) {
@@ -536,23 +578,6 @@ std::vector<std::string> storedCommandLine(const Args& a) {
     stored.insert(stored.end(), {"-o", a.opt.output});
     stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
     return stored;
-}
-
-// One update or compaction of a set at a time: an exclusive lock on its
-// folder, held until the process ends (a rebuild with -o does not take it).
-struct SetLock {
-    int fd = -1;
-    ~SetLock() {
-        if (fd >= 0) ::close(fd);
-    }
-};
-surfcast::Status lockSet(const std::string& set, SetLock* lock) {
-    lock->fd = ::open(set.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (lock->fd < 0) return surfcast::Status::error(set + ": cannot open (" + std::strerror(errno) + ")");
-    if (::flock(lock->fd, LOCK_EX | LOCK_NB) != 0)
-        return surfcast::Status::error(set + (errno == EWOULDBLOCK ? std::string(": another update or compaction of this set is running")
-                                                                   : ": cannot lock (" + std::string(std::strerror(errno)) + ")"));
-    return {};
 }
 
 // The input of a set's build record that NAME names: its path as given
@@ -863,6 +888,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         return 0;
     }
     // merge
+    SetLock lock;
+    if (auto st = lockOutput(planned.opt.output, &lock); !st.ok()) return fail(st);
     c.describe(&summary);
     summary.chunks = layout.chunks().size();
     auto writer = surfcast::TilesetWriter::create(planned.opt.output);
@@ -959,6 +986,8 @@ int main(int argc, char** argv) {
     }
     if (opt.output.empty()) return usageError("no output folder (-o OUT)");
     if (opt.inputs.paths.empty() && !opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
+    SetLock lock;
+    if (auto st = lockOutput(opt.output, &lock); !st.ok()) return fail(st);
     auto paths = surfcast::expandInputPaths(opt.inputs.paths);
     if (!paths) {
         std::fprintf(stderr, "surfcast-build: %s\n", paths.status().message().c_str());

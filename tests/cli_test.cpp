@@ -1,11 +1,30 @@
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/file.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
+#include <map>
+
+#include <nlohmann/json.hpp>
 
 #include "test_support.h"
+#include "tileset_reader.h"
+#include "tileset_writer.h"
 
 using namespace surfcast;
+
+namespace {
+
+// Every file of a set's folder, by name.
+std::map<std::string, std::string> setFiles(const std::string& dir) {
+    std::map<std::string, std::string> files;
+    for (const auto& e : std::filesystem::directory_iterator(dir)) files[e.path().filename().string()] = test::readFile(e.path().string());
+    return files;
+}
+
+}  // namespace
 
 TEST(Cli, HelpAndUsageErrors) {
     auto help = test::run({test::binary("surfcast-build"), "--help"});
@@ -82,4 +101,97 @@ TEST(Cli, FoldersAndListsOfInputs) {
     EXPECT_EQ(empty.exitCode, 1);
     EXPECT_NE(empty.output.find("holds no file of a readable format"), std::string::npos) << empty.output;
     EXPECT_FALSE(std::filesystem::exists(dir.file("t")));
+}
+
+// Every writer of a set takes the lock on its folder that updates take
+// (an exclusive flock, held until it ends): while another writer holds it, a
+// rebuild with -o, --merge, a staged build's merge, an update and a
+// compaction fail at once, naming the set, and leave it as it was.
+TEST(Cli, WritersOfASetFailWhileAnotherHoldsItsLock) {
+    test::TempDir dir;
+    const std::string set = dir.file("s"), other = dir.file("t"), work = dir.file("work");
+    const std::string build = test::binary("surfcast-build");
+    for (const std::string& out : {set, other}) {
+        auto r = test::run({build, "-q", "--default-scene", "--scene-points", "20000", "-o", out});
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+    }
+    // A staged build into the set, up to its merge.
+    auto r = test::run({build, "plan", "-q", "--work", work, "--default-scene", "--scene-points", "30000", "-o", set});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    ASSERT_EQ(test::run({build, "distribute", "-q", "--work", work}).exitCode, 0);
+    const size_t chunks = nlohmann::json::parse(test::readFile(work + "/plan.json"))["chunks"].get<size_t>();
+    for (size_t i = 0; i < chunks; ++i) ASSERT_EQ(test::run({build, "chunk", "-q", "--work", work, std::to_string(i)}).exitCode, 0);
+    test::writeFile(dir.file("added.xyz"), "0 0 0\n0.1 0 0\n0 0.1 0\n");
+    const std::map<std::string, std::string> before = setFiles(set);
+
+    const int held = ::open(set.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    ASSERT_GE(held, 0);
+    ASSERT_EQ(::flock(held, LOCK_EX | LOCK_NB), 0);
+    const std::vector<std::vector<std::string>> writers = {
+        {build, "-q", "--default-scene", "--scene-points", "30000", "-o", set},
+        {build, "-q", "--merge", other, set, "-o", set},
+        {build, "merge", "-q", "--work", work},
+        {build, "-q", "--add", dir.file("added.xyz"), "--to", set},
+        {build, "-q", "--compact", set},
+    };
+    for (const auto& args : writers) {
+        r = test::run(args);
+        EXPECT_EQ(r.exitCode, 1) << args[1] << " " << args[2] << ": " << r.output;
+        EXPECT_NE(r.output.find(set + ": another build, update or compaction of this set is running"), std::string::npos)
+            << args[1] << " " << args[2] << ": " << r.output;
+    }
+    EXPECT_TRUE(setFiles(set) == before) << "a writer changed the set while another held its lock";
+    ::close(held);
+
+    // Once the lock is free, the rebuild writes the set.
+    r = test::run({build, "-q", "--default-scene", "--scene-points", "30000", "-o", set});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_FALSE(setFiles(set) == before);
+    r = test::run({build, "--info", set});
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+}
+
+// An update writes the version of the set it read at its start or nothing.
+// The update's own steps (those updateTileset takes: the set read, its
+// writer made, then finish) with a rebuild of the set in between, which no
+// lock stopped (a writer that takes none: the lock is advisory): finish
+// fails, naming the set, and the rebuilt set stays whole, byte for byte.
+TEST(Cli, AnUpdateWhoseSetWasReplacedUnderItFailsAndLeavesTheNewerSet) {
+    test::TempDir dir;
+    const std::string set = dir.file("s");
+    const std::string build = test::binary("surfcast-build");
+    auto r = test::run({build, "-q", "--default-scene", "--scene-points", "20000", "-o", set});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+
+    auto reader = TilesetReader::open(set);
+    ASSERT_TRUE(reader) << reader.status().message();
+    auto writer = TilesetWriter::update(set, reader->info(), reader->nodes());
+    ASSERT_TRUE(writer) << writer.status().message();
+    // Every node kept but the root, whose blob comes again, one byte changed
+    // (so that it is appended).
+    std::vector<NodeRecord> kept;
+    const NodeRecord* root = nullptr;
+    for (const NodeRecord& n : reader->nodes())
+        if (n.key == NodeKey{}) root = &n;
+        else kept.push_back(n);
+    ASSERT_TRUE(root);
+    ASSERT_TRUE((*writer)->addKeptNodes(kept).ok());
+    const std::string blocks = test::readFile(set + "/blocks.bin");
+    std::vector<uint8_t> blob(blocks.begin() + long(root->blockOffset), blocks.begin() + long(root->blockOffset + root->blockSize));
+    blob.back() ^= 1;
+    ASSERT_TRUE((*writer)->addNode(*root, blob).ok());
+
+    r = test::run({build, "-q", "--default-scene", "--scene-points", "30000", "-o", set});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::map<std::string, std::string> rebuilt = setFiles(set);
+
+    TilesetInfo info = reader->info();
+    const Status finished = (*writer)->finish(info);
+    ASSERT_FALSE(finished.ok()) << "the update wrote over a set it did not read";
+    EXPECT_NE(finished.message().find(set + ": changed since this update read it"), std::string::npos) << finished.message();
+    writer->reset();  // (its hidden folder gone, as when an update ends)
+    EXPECT_TRUE(setFiles(set) == rebuilt) << "the update changed the set that replaced the one it read";
+    r = test::run({build, "--info", set});
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("checksums verified"), std::string::npos) << r.output;
 }
