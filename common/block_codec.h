@@ -64,6 +64,9 @@ inline constexpr const char* kLidarAttributes[] = {"intensity", "classification"
 enum LidarAttribute { kLidarIntensity, kLidarClassification, kLidarReturnNumber, kLidarNumberOfReturns, kLidarCount };
 // Per-surfel opacity: after the LiDAR attributes, before the scalar ones.
 inline constexpr const char* kOpacityAttribute = "opacity";
+// The provenance attribute's name (docs/FORMAT.md, "Provenance"; reserved: an
+// input's own field of this name is not stored beside it).
+inline constexpr const char* kProvenanceAttribute = "input";
 // Index in kLidarAttributes, or -1.
 inline int lidarIndex(const std::string& name) {
     for (int i = 0; i < kLidarCount; ++i)

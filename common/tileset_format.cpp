@@ -249,6 +249,39 @@ using ordered_json = nlohmann::ordered_json;
 ordered_json vec(const Vec3d& v) { return ordered_json::array({v.x, v.y, v.z}); }
 }  // namespace
 
+namespace {
+std::string hex(const std::vector<uint8_t>& bytes) {
+    static const char digits[] = "0123456789abcdef";
+    std::string out;
+    for (uint8_t b : bytes) out += digits[b >> 4], out += digits[b & 15];
+    return out;
+}
+nlohmann::ordered_json lasJson(const LasSourceInfo& las) {
+    nlohmann::ordered_json j = nlohmann::ordered_json::object();
+    if (las.pointFormat >= 0) j["point_format"] = las.pointFormat;
+    if (las.gpsTimeType >= 0) j["gps_time_type"] = las.gpsTimeType;
+    if (!las.systemIdentifier.empty()) j["system_identifier"] = las.systemIdentifier;
+    if (!las.generatingSoftware.empty()) j["generating_software"] = las.generatingSoftware;
+    if (las.colorMultiplier != 257) j["color_multiplier"] = las.colorMultiplier;
+    if (las.creationYear >= 0) j["creation"] = {{"day", las.creationDay}, {"year", las.creationYear}};
+    if (las.scale.x > 0) {
+        j["scale"] = {las.scale.x, las.scale.y, las.scale.z};
+        j["offset"] = {las.offset.x, las.offset.y, las.offset.z};
+    }
+    if (!las.crsVlrs.empty()) {
+        nlohmann::ordered_json vlrs = nlohmann::ordered_json::array();
+        for (const auto& [record, payload] : las.crsVlrs) vlrs.push_back({{"record", record}, {"data", hex(payload)}});
+        j["crs_vlrs"] = vlrs;
+    }
+    if (!las.extraBytes.empty()) {
+        nlohmann::ordered_json eb = nlohmann::ordered_json::array();
+        for (const std::vector<uint8_t>& d : las.extraBytes) eb.push_back(hex(d));
+        j["extra_bytes"] = eb;
+    }
+    return j;
+}
+}  // namespace
+
 std::string writeTilesetJson(const TilesetInfo& info) {
     ordered_json j;
     j["format"] = "surfcast-tileset";
@@ -274,6 +307,14 @@ std::string writeTilesetJson(const TilesetInfo& info) {
         attrs.push_back(e);
     }
     j["attributes"] = attrs;
+    if (!info.constants.empty()) {
+        ordered_json constants = ordered_json::array();
+        for (const ConstantAttribute& c : info.constants) constants.push_back({{"name", c.name}, {"value", c.value}});
+        j["constants"] = constants;
+    }
+    if (!info.leftOut.empty()) j["left_out"] = info.leftOut;
+    if (info.las.present) j["las"] = lasJson(info.las);
+    if (info.duplicatesKept) j["duplicates"] = "kept";
     const TilesetStatistics& st = info.statistics;
     ordered_json stats = {{"elevation", {{"min", st.elevationMin}, {"max", st.elevationMax}}}};
     if (st.intensity)
@@ -357,6 +398,78 @@ Vec3d vec3(const nlohmann::json& o, const std::string& parent, const std::string
     if (!v.is_array() || v.size() != 3) fieldError(path, "not an array of three numbers");
     return {number(v[0], path), number(v[1], path), number(v[2], path)};
 }
+// Hex digits into bytes, at most `most` of them.
+std::vector<uint8_t> unhex(const nlohmann::json& v, const std::string& path, size_t most) {
+    if (!v.is_string()) fieldError(path, shown(v) + " is not a string");
+    const std::string& s = v.get_ref<const std::string&>();
+    if (s.size() % 2 || s.size() / 2 > most) fieldError(path, "not hex digits of at most " + std::to_string(most) + " bytes");
+    std::vector<uint8_t> out(s.size() / 2);
+    for (size_t i = 0; i < s.size(); ++i) {
+        const char c = s[i];
+        const int d = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+        if (d < 0) fieldError(path, "not hex digits");
+        out[i / 2] = uint8_t(out[i / 2] << 4 | d);
+    }
+    return out;
+}
+// LAS's VLR payloads are at most 65,535 bytes; an Extra Bytes descriptor is 192.
+constexpr size_t kMaxVlrPayload = 65535, kExtraBytesDescriptorBytes = 192;
+LasSourceInfo readLas(const nlohmann::json& j) {
+    LasSourceInfo las;
+    las.present = true;
+    if (j.contains("point_format")) {
+        las.pointFormat = integer<int>(j, "las", "point_format");
+        if (las.pointFormat < 0 || las.pointFormat > 10) fieldError("las.point_format", "not 0 to 10");
+    }
+    if (j.contains("gps_time_type")) {
+        las.gpsTimeType = integer<int>(j, "las", "gps_time_type");
+        if (las.gpsTimeType != 0 && las.gpsTimeType != 1) fieldError("las.gps_time_type", "not 0 or 1");
+    }
+    if (j.contains("color_multiplier")) {
+        las.colorMultiplier = integer<int>(j, "las", "color_multiplier");
+        if (las.colorMultiplier != 1 && las.colorMultiplier != 256 && las.colorMultiplier != 257)
+            fieldError("las.color_multiplier", "not 1, 256 or 257");
+    }
+    if (j.contains("system_identifier")) las.systemIdentifier = text(j, "las", "system_identifier");
+    if (j.contains("generating_software")) las.generatingSoftware = text(j, "las", "generating_software");
+    if (j.contains("creation")) {
+        const nlohmann::json& c = object(j, "las", "creation");
+        las.creationDay = integer<uint16_t>(c, "las.creation", "day");
+        las.creationYear = integer<uint16_t>(c, "las.creation", "year");
+    }
+    if (j.contains("scale")) {
+        las.scale = vec3(j, "las", "scale");
+        las.offset = vec3(j, "las", "offset");
+        if (!(las.scale.x > 0 && las.scale.y > 0 && las.scale.z > 0)) fieldError("las.scale", "not positive");
+    }
+    if (j.contains("crs_vlrs")) {
+        const nlohmann::json& vlrs = j["crs_vlrs"];
+        if (!vlrs.is_array()) fieldError("las.crs_vlrs", "not an array");
+        for (size_t i = 0; i < vlrs.size(); ++i) {
+            const std::string at = "las.crs_vlrs[" + std::to_string(i) + "]";
+            if (!vlrs[i].is_object()) fieldError(at, "not an object");
+            las.crsVlrs.push_back({integer<uint16_t>(vlrs[i], at, "record"), unhex(member(vlrs[i], at, "data"), at + ".data", kMaxVlrPayload)});
+        }
+    }
+    if (j.contains("extra_bytes")) {
+        const nlohmann::json& eb = j["extra_bytes"];
+        if (!eb.is_array() || eb.size() > kMaxVlrPayload / kExtraBytesDescriptorBytes) fieldError("las.extra_bytes", "not an array of at most 341 descriptors");
+        for (size_t i = 0; i < eb.size(); ++i) {
+            const std::string at = "las.extra_bytes[" + std::to_string(i) + "]";
+            las.extraBytes.push_back(unhex(eb[i], at, kExtraBytesDescriptorBytes));
+            const std::vector<uint8_t>& d = las.extraBytes.back();
+            if (d.size() != kExtraBytesDescriptorBytes) fieldError(at, "not a 192-byte descriptor");
+            // One scalar of data type 1-10 (LAS 1.4 R15, table 24), a finite non-zero scale where it has one.
+            double scale = 1, offset = 0;
+            std::memcpy(&scale, &d[112], 8);
+            std::memcpy(&offset, &d[136], 8);
+            if (d[2] < 1 || d[2] > 10) fieldError(at, "data type " + std::to_string(d[2]) + " is not 1 to 10");
+            if (((d[3] & 8) && (scale == 0 || !std::isfinite(scale))) || ((d[3] & 16) && !std::isfinite(offset)))
+                fieldError(at, "scale or offset is not a finite non-zero number");
+        }
+    }
+    return las;
+}
 }  // namespace
 
 Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& what) {
@@ -408,6 +521,29 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
             if (added.quantizationBits < 0 || added.quantizationBits > 30)
                 fieldError(at + ".quantization_bits", std::to_string(added.quantizationBits) + " is not 0 to 30" + of);
             info.attributes.push_back(std::move(added));
+        }
+        if (j.contains("constants")) {
+            const nlohmann::json& constants = j["constants"];
+            if (!constants.is_array()) fieldError("constants", "not an array");
+            for (size_t i = 0; i < constants.size(); ++i) {
+                const std::string at = "constants[" + std::to_string(i) + "]";
+                if (!constants[i].is_object()) fieldError(at, "not an object");
+                info.constants.push_back({text(constants[i], at, "name"), number(constants[i], at, "value")});
+            }
+        }
+        if (j.contains("left_out")) {
+            const nlohmann::json& names = j["left_out"];
+            if (!names.is_array()) fieldError("left_out", "not an array");
+            for (size_t i = 0; i < names.size(); ++i) {
+                if (!names[i].is_string()) fieldError("left_out[" + std::to_string(i) + "]", "not a string");
+                info.leftOut.push_back(names[i].get<std::string>());
+            }
+        }
+        if (j.contains("las")) info.las = readLas(object(j, "", "las"));
+        if (j.contains("duplicates")) {
+            const std::string d = text(j, "", "duplicates");
+            if (d != "kept" && d != "merged") fieldError("duplicates", "'" + d + "' is not kept or merged");
+            info.duplicatesKept = d == "kept";
         }
         // Absent in version 1: the elevation range is the bounds'.
         TilesetStatistics& st = info.statistics;

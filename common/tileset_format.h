@@ -137,6 +137,35 @@ struct TilesetStatistics {
     bool operator==(const TilesetStatistics&) const = default;
 };
 
+// A dimension every input point carries with one value: recorded once in
+// tileset.json instead of per surfel, and given back by every export.
+struct ConstantAttribute {
+    std::string name;  // a LiDAR attribute's or a scalar field's name
+    double value = 0;
+    bool operator==(const ConstantAttribute&) const = default;
+};
+
+// What the LAS/LAZ inputs' headers say beyond their points, where every such
+// input agrees, so that a LAS export gives it back (docs/FORMAT.md, "las").
+struct LasSourceInfo {
+    bool present = false;        // some input was LAS or LAZ
+    int pointFormat = -1;        // the inputs' point data record format (0-10); -1 where they differ
+    int gpsTimeType = -1;        // global encoding bit 0: 0 GPS week time, 1 adjusted standard GPS time; -1 unknown
+    std::string systemIdentifier, generatingSoftware;  // empty where they differ
+    int creationDay = -1, creationYear = -1;            // -1 where they differ
+    Vec3d scale, offset;         // the coordinate lattice (scale 0 where they differ)
+    // How the inputs wrote a set's 8-bit colour c in LAS's 16-bit fields: c
+    // itself (1), c·256 or c·257 (LAS's convention, and where they differ).
+    int colorMultiplier = 257;
+    // The coordinate system's VLRs (user LASF_Projection) as the inputs have
+    // them: record id and payload (WKT 2112, GeoTIFF 34735-34737).
+    std::vector<std::pair<uint16_t, std::vector<uint8_t>>> crsVlrs;
+    // The Extra Bytes VLR's 192-byte descriptors of the dimensions the set
+    // knows by name (FORMAT.md "Scalar attributes"), in record order.
+    std::vector<std::vector<uint8_t>> extraBytes;
+    bool operator==(const LasSourceInfo&) const = default;
+};
+
 // Everything in tileset.json.
 struct TilesetInfo {
     std::string generator;
@@ -150,6 +179,14 @@ struct TilesetInfo {
     Box3d bounds;              // tight bounds of the input points
     int colorBits = 0;         // 0: no colour; 8 or 16 bits per channel
     std::vector<AttributeInfo> attributes;  // in the order they appear in each block
+    std::vector<ConstantAttribute> constants;  // dimensions of one value over the set, in no block
+    // Dimensions some input carries that the set neither stores nor holds as
+    // a constant (a viewing set: not an archive of its inputs).
+    std::vector<std::string> leftOut;
+    LasSourceInfo las;
+    // Leaves hold every input point (a set built with --attributes all: an
+    // archive of its inputs), not one of each exact duplicate position.
+    bool duplicatesKept = false;
     TilesetStatistics statistics;
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none
@@ -173,6 +210,11 @@ struct TilesetInfo {
     const AttributeInfo* attribute(const std::string& name) const {
         for (const AttributeInfo& a : attributes)
             if (a.name == name) return &a;
+        return nullptr;
+    }
+    const ConstantAttribute* constant(const std::string& name) const {
+        for (const ConstantAttribute& c : constants)
+            if (c.name == name) return &c;
         return nullptr;
     }
 };

@@ -13,11 +13,23 @@ namespace surfcast {
 
 namespace {
 
-// LAS 1.4 (ASPRS R15): the header, a VLR's header, point format 6's record and 7's.
+// LAS 1.4 (ASPRS R15): the header, a VLR's header.
 constexpr size_t kHeaderBytes = 375, kVlrHeaderBytes = 54;
-constexpr size_t kRecordBytes6 = 30, kRecordBytes7 = 36;
 // Scan angle's unit in point formats 6-10 (degrees).
 constexpr double kScanAngleUnit = 0.006;
+// Tables 7-17: each point format's record bytes and where its optional
+// fields start (0: the format has none).
+constexpr size_t kFormatBytes[11] = {20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67};
+constexpr size_t kGpsAt[11] = {0, 20, 0, 20, 20, 20, 22, 22, 22, 22, 22};
+constexpr size_t kRgbAt[11] = {0, 0, 20, 28, 0, 28, 0, 30, 30, 0, 30};
+constexpr size_t kNirAt[11] = {0, 0, 0, 0, 0, 0, 0, 0, 36, 0, 36};
+constexpr size_t kWaveAt[11] = {0, 0, 0, 0, 28, 34, 0, 0, 0, 30, 38};
+// The Extra Bytes VLR (LASF_Spec 4): 192-byte descriptors; data types 1-10
+// are the scalars u8, i8, u16, i16, u32, i32, u64, i64, f32, f64 (table 24).
+constexpr size_t kExtraBytesDescriptor = 192;
+constexpr size_t kExtraTypeBytes[11] = {0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
+constexpr int kExtraF64 = 10;
+constexpr uint16_t kExtraBytesRecord = 4, kWktRecord = 2112;
 
 Box3d nodeBox(const TilesetInfo& info, const NodeKey& key) {
     Box3d b;
@@ -45,22 +57,148 @@ std::vector<size_t> reachedLeaves(const TilesetReader& set, const PointFilter& f
     return out;
 }
 
-// The LAS fields a set may carry as scalar attributes (the LAS reader's names).
-struct LasScalars {
-    const AttributeInfo *gpsTime = nullptr, *scanAngle = nullptr, *userData = nullptr, *pointSourceId = nullptr;
-    bool any() const { return gpsTime || scanAngle || userData || pointSourceId; }
+// The LAS dimensions beyond position and colour, as the LAS reader names them
+// (las_reader.h), in this order.
+enum Dim {
+    kIntensity, kClassification, kReturnNumber, kNumberOfReturns, kScanAngle, kUserData, kPointSourceId, kGpsTime,
+    kClassFlags, kScanChannel, kScanDirection, kEdgeOfFlightLine, kNir,
+    kWaveIndex, kWaveOffset, kWaveSize, kWaveLocation, kWaveX, kWaveY, kWaveZ, kDimCount
+};
+constexpr const char* kDimNames[kDimCount] = {
+    "intensity", "classification", "return_number", "number_of_returns", "scan_angle", "user_data", "point_source_id", "gps_time",
+    "classification_flags", "scan_channel", "scan_direction_flag", "edge_of_flight_line", "nir",
+    "wavepacket_index", "wavepacket_offset", "wavepacket_size", "return_point_wave_location", "x_t", "y_t", "z_t"};
+
+// Where a dimension's values come from: a stored attribute (value = stored ·
+// scale + offset), the set's constant, or nowhere (the export writes 0).
+struct DimSource {
+    const AttributeInfo* attribute = nullptr;
+    int lidar = -1;       // a LiDAR attribute's index (kLidarAttributes), else a scalar attribute
+    int scalar = -1;      // the scalar attribute's index among a block's scalars
+    const AttributeInfo* low = nullptr;  // a wide field's low part (docs/FORMAT.md), added
+    int lowScalar = -1;
+    double constant = 0;
+    bool known = false;   // stored or constant
 };
 
-LasScalars lasScalars(const TilesetInfo& info) {
-    return {info.attribute("gps_time"), info.attribute("scan_angle"), info.attribute("user_data"), info.attribute("point_source_id")};
+constexpr const char* kLowPartSuffix = ":low";
+
+// A scalar attribute's index among a block's scalars, which blocks list in tileset.json's order.
+int scalarIndexOf(const TilesetInfo& info, const AttributeInfo* a) {
+    int k = 0;
+    for (const AttributeInfo& b : info.attributes) {
+        if (&b == a) break;
+        if (!b.kind.empty() && lidarIndex(b.name) < 0 && b.name != kOpacityAttribute) ++k;
+    }
+    return k;
 }
 
-// A scalar attribute's value for surfel i, or NaN where the block lacks it.
-double scalarValue(const BlockData& b, const AttributeInfo* a, size_t i) {
-    if (!a) return NAN;
-    for (const ScalarAttribute& s : b.scalars)
-        if (s.name == a->name) return s.values[i] * a->scale + a->offset;
-    return NAN;
+// The values a set gives for the LAS dimensions and its extra bytes.
+struct Dimensions {
+    DimSource dims[kDimCount];
+    std::vector<DimSource> extra;                    // per extra-bytes descriptor
+    std::vector<std::vector<uint8_t>> descriptors;   // the Extra Bytes VLR's, in record order
+    bool scalars = false;                            // some value comes from a scalar attribute
+
+    bool has(Dim d) const { return dims[d].known; }
+    bool anyWave() const { return has(kWaveIndex) || has(kWaveOffset) || has(kWaveSize) || has(kWaveLocation); }
+};
+
+std::string descriptorName(const std::vector<uint8_t>& d) {
+    return std::string(reinterpret_cast<const char*>(&d[4]), strnlen(reinterpret_cast<const char*>(&d[4]), 32));
+}
+
+DimSource sourceOf(const TilesetInfo& info, const std::string& name) {
+    DimSource s;
+    if (const AttributeInfo* a = info.attribute(name)) {
+        s.attribute = a;
+        s.lidar = lidarIndex(name);
+        s.known = true;
+        if (s.lidar < 0) {
+            s.scalar = scalarIndexOf(info, a);
+            s.low = info.attribute(name + kLowPartSuffix);
+            if (s.low) s.lowScalar = scalarIndexOf(info, s.low);
+        }
+    } else if (const ConstantAttribute* c = info.constant(name)) {
+        s.constant = c->value;
+        s.known = true;
+    }
+    return s;
+}
+
+Dimensions dimensionsOf(const TilesetInfo& info) {
+    Dimensions d;
+    for (int k = 0; k < kDimCount; ++k) d.dims[k] = sourceOf(info, kDimNames[k]);
+    auto standard = [&](const std::string& name) {
+        const bool lowPart = name.ends_with(kLowPartSuffix) && info.attribute(name.substr(0, name.size() - std::strlen(kLowPartSuffix)));
+        return lowPart || name == kProvenanceAttribute || name == kOpacityAttribute ||
+               std::find_if(std::begin(kDimNames), std::end(kDimNames), [&](const char* n) { return name == n; }) != std::end(kDimNames);
+    };
+    // The inputs' extra-bytes dimensions the set keeps, as they described them...
+    for (const std::vector<uint8_t>& e : info.las.extraBytes) {
+        const DimSource s = sourceOf(info, descriptorName(e));
+        if (!s.known || standard(descriptorName(e))) continue;
+        d.descriptors.push_back(e);
+        d.extra.push_back(s);
+    }
+    // ...and any other field of the inputs (PLY, PCD, E57) as a double.
+    std::vector<std::string> names;
+    for (const AttributeInfo& a : info.attributes)
+        if (!a.kind.empty()) names.push_back(a.name);
+    for (const ConstantAttribute& c : info.constants) names.push_back(c.name);
+    for (const std::string& name : names) {
+        const bool described = std::any_of(d.descriptors.begin(), d.descriptors.end(), [&](const auto& e) { return descriptorName(e) == name; });
+        if (standard(name) || described || name.size() > 32) continue;
+        std::vector<uint8_t> e(kExtraBytesDescriptor, 0);
+        e[2] = kExtraF64;
+        std::memcpy(&e[4], name.data(), name.size());
+        d.descriptors.push_back(e);
+        d.extra.push_back(sourceOf(info, name));
+    }
+    for (const DimSource& s : d.dims) d.scalars = d.scalars || s.scalar >= 0;
+    for (const DimSource& s : d.extra) d.scalars = d.scalars || s.scalar >= 0;
+    return d;
+}
+
+// A dimension's value for surfel i of block b.
+double valueOf(const DimSource& s, const BlockData& b, size_t i) {
+    if (!s.attribute) return s.constant;
+    double stored = 0;
+    switch (s.lidar) {
+    case kLidarIntensity: stored = b.intensity.empty() ? 0 : b.intensity[i]; break;
+    case kLidarClassification: stored = b.classification.empty() ? 0 : b.classification[i]; break;
+    case kLidarReturnNumber: stored = b.returnNumber.empty() ? 0 : b.returnNumber[i]; break;
+    case kLidarNumberOfReturns: stored = b.numberOfReturns.empty() ? 0 : b.numberOfReturns[i]; break;
+    default: stored = size_t(s.scalar) < b.scalars.size() ? b.scalars[size_t(s.scalar)].values[i] : 0;
+    }
+    const double low = s.low && size_t(s.lowScalar) < b.scalars.size() ? b.scalars[size_t(s.lowScalar)].values[i] * s.low->scale : 0;
+    return stored * s.attribute->scale + s.attribute->offset + low;
+}
+
+// The point format that holds the set's dimensions: the inputs' own where
+// they agree on one (so legacy records come back as they were), else the
+// LAS 1.4 format of what is stored (COPC: 6, 7 or 8 only, its spec's).
+int pointFormatOf(const TilesetInfo& info, const Dimensions& d, bool copc) {
+    const bool rgb = info.colorBits != 0, nir = d.has(kNir), wave = d.anyWave();
+    const int own = info.las.pointFormat;
+    if (!copc && own >= 0 && (kRgbAt[own] != 0) == rgb && (kNirAt[own] != 0 || !nir) && (kWaveAt[own] != 0 || !wave)) return own;
+    if (copc) return nir ? 8 : rgb ? 7 : 6;
+    return wave ? (rgb || nir ? 10 : 9) : nir ? 8 : rgb ? 7 : 6;
+}
+
+// What a record at `format` plus the extra bytes holds of the dimensions
+// (the export's summary), and what it cannot.
+void describeDimensions(const TilesetInfo& info, const Dimensions& d, LazExportPlan* plan) {
+    const int f = plan->pointFormat;
+    for (int k = 0; k < kDimCount; ++k) {
+        if (!d.has(Dim(k))) continue;
+        const bool held = (k != kGpsTime || kGpsAt[f]) && (k != kNir || kNirAt[f]) && (k != kScanChannel || f >= 6) &&
+                          (k < kWaveIndex || kWaveAt[f]);
+        (held ? plan->dimensions : plan->leftOut).push_back(kDimNames[k]);
+    }
+    if (info.colorBits) plan->dimensions.push_back("rgb");
+    for (const std::vector<uint8_t>& e : d.descriptors) plan->dimensions.push_back(descriptorName(e));
+    for (const std::string& name : info.leftOut) plan->leftOut.push_back(name);
 }
 
 // Visits each kept point of the leaves `nodes` (decoding each once).
@@ -84,32 +222,85 @@ Status forEachKept(const TilesetReader& set, const PointFilter& filter, const st
     return {};
 }
 
-// Point format 6's fields (and 7's colour) of surfel i of block b at p into
-// `r` (zeroed, of the format's size); its coordinates' integers in q.
-Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info, const LasScalars& scalars, const NodeRecord& n,
+template <class T>
+T clamped(double v) {
+    return T(std::clamp(std::round(v), double(std::numeric_limits<T>::min()), double(std::numeric_limits<T>::max())));
+}
+
+// An extra-bytes value as its descriptor stores it: raw = (value - offset) / scale.
+void putExtra(uint8_t* at, const std::vector<uint8_t>& e, double v) {
+    const int type = e[2], options = e[3];
+    if (options & 16) v -= le::get<double>(&e[136]);
+    if (options & 8) v /= le::get<double>(&e[112]);
+    switch (type) {
+    case 1: *at = clamped<uint8_t>(v); break;
+    case 2: *at = uint8_t(clamped<int8_t>(v)); break;
+    case 3: le::put<uint16_t>(at, clamped<uint16_t>(v)); break;
+    case 4: le::put<int16_t>(at, clamped<int16_t>(v)); break;
+    case 5: le::put<uint32_t>(at, clamped<uint32_t>(v)); break;
+    case 6: le::put<int32_t>(at, clamped<int32_t>(v)); break;
+    case 7: le::put<uint64_t>(at, v > 0 ? (v < 0x1p64 ? uint64_t(std::round(v)) : UINT64_MAX) : 0); break;
+    case 8: le::put<int64_t>(at, v > -0x1p63 ? (v < 0x1p63 ? int64_t(std::round(v)) : INT64_MAX) : INT64_MIN); break;
+    case 9: le::put<float>(at, float(v)); break;
+    default: le::put<double>(at, v); break;
+    }
+}
+
+// The record of surfel i of block b at p into `r` (zeroed, plan.recordBytes
+// long), in the plan's point format (tables 7-17) and extra bytes; its
+// coordinates' integers in q.
+Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info, const Dimensions& d, const NodeRecord& n,
                   const BlockData& b, size_t i, const Vec3d& p, int32_t q[3]) {
     for (int a = 0; a < 3; ++a) {
-        const double v = std::round((p[a] - plan.offset[a]) / plan.scale);
+        const double v = std::round((p[a] - plan.offset[a]) / plan.scale[a]);
         if (!(v >= -2147483648.0 && v <= 2147483647.0))
             return Status::error("node " + n.key.name() + ": a point outside the bounds the export planned");
         q[a] = int32_t(v);
         le::put<int32_t>(r + 4 * a, q[a]);
     }
-    if (!b.intensity.empty()) le::put<uint16_t>(r + 12, b.intensity[i]);
-    const uint8_t ret = b.returnNumber.empty() ? 1 : b.returnNumber[i], count = b.numberOfReturns.empty() ? 1 : b.numberOfReturns[i];
-    r[14] = uint8_t((ret & 0x0F) | (count << 4));
-    r[16] = b.classification.empty() ? 0 : b.classification[i];
-    const double userData = scalarValue(b, scalars.userData, i), angle = scalarValue(b, scalars.scanAngle, i);
-    const double source = scalarValue(b, scalars.pointSourceId, i), gps = scalarValue(b, scalars.gpsTime, i);
-    if (!std::isnan(userData)) r[17] = uint8_t(std::clamp(std::lround(userData), 0L, 255L));
-    if (!std::isnan(angle)) le::put<int16_t>(r + 18, int16_t(std::clamp(std::lround(angle / kScanAngleUnit), -32768L, 32767L)));
-    if (!std::isnan(source)) le::put<uint16_t>(r + 20, uint16_t(std::clamp(std::lround(source), 0L, 65535L)));
-    if (!std::isnan(gps)) le::put<double>(r + 22, gps);
-    if (plan.pointFormat == 7)
+    auto value = [&](Dim k) { return valueOf(d.dims[k], b, i); };
+    auto bit = [&](Dim k, int bits) { return uint8_t(int(value(k)) & ((1 << bits) - 1)); };
+    const int f = plan.pointFormat;
+    le::put<uint16_t>(r + 12, clamped<uint16_t>(value(kIntensity)));
+    // A point of no known return is its pulse's only one.
+    const int ret = d.has(kReturnNumber) ? int(value(kReturnNumber)) : 1, count = d.has(kNumberOfReturns) ? int(value(kNumberOfReturns)) : 1;
+    const uint8_t flags = bit(kClassFlags, 4), direction = bit(kScanDirection, 1), edge = bit(kEdgeOfFlightLine, 1);
+    if (f < 6) {
+        r[14] = uint8_t((ret & 7) | (count & 7) << 3 | direction << 6 | edge << 7);
+        r[15] = uint8_t((int(value(kClassification)) & 31) | (flags & 7) << 5);
+        r[16] = uint8_t(clamped<int8_t>(value(kScanAngle)));
+        r[17] = clamped<uint8_t>(value(kUserData));
+        le::put<uint16_t>(r + 18, clamped<uint16_t>(value(kPointSourceId)));
+    } else {
+        r[14] = uint8_t((ret & 15) | (count & 15) << 4);
+        r[15] = uint8_t(flags | bit(kScanChannel, 2) << 4 | direction << 6 | edge << 7);
+        r[16] = clamped<uint8_t>(value(kClassification));
+        r[17] = clamped<uint8_t>(value(kUserData));
+        le::put<int16_t>(r + 18, clamped<int16_t>(value(kScanAngle) / kScanAngleUnit));
+        le::put<uint16_t>(r + 20, clamped<uint16_t>(value(kPointSourceId)));
+    }
+    if (kGpsAt[f]) le::put<double>(r + kGpsAt[f], value(kGpsTime));
+    if (kRgbAt[f] && !b.colors.empty())
         for (int c = 0; c < 3; ++c) {
             const uint16_t v = b.colors[3 * i + size_t(c)];
-            le::put<uint16_t>(r + 30 + 2 * c, info.colorBits == 8 ? uint16_t(v * 257) : v);
+            le::put<uint16_t>(r + kRgbAt[f] + 2 * size_t(c), info.colorBits == 8 ? uint16_t(v * info.las.colorMultiplier) : v);
         }
+    if (kNirAt[f]) le::put<uint16_t>(r + kNirAt[f], clamped<uint16_t>(value(kNir)));
+    if (const size_t w = kWaveAt[f]) {
+        r[w] = clamped<uint8_t>(value(kWaveIndex));
+        const double offset = value(kWaveOffset);
+        le::put<uint64_t>(r + w + 1, offset > 0 ? (offset < 0x1p64 ? uint64_t(std::round(offset)) : UINT64_MAX) : 0);
+        le::put<uint32_t>(r + w + 9, clamped<uint32_t>(value(kWaveSize)));
+        le::put<float>(r + w + 13, float(value(kWaveLocation)));
+        le::put<float>(r + w + 17, float(value(kWaveX)));
+        le::put<float>(r + w + 21, float(value(kWaveY)));
+        le::put<float>(r + w + 25, float(value(kWaveZ)));
+    }
+    size_t at = kFormatBytes[f];
+    for (size_t k = 0; k < d.descriptors.size(); ++k) {
+        putExtra(r + at, d.descriptors[k], valueOf(d.extra[k], b, i));
+        at += kExtraTypeBytes[d.descriptors[k][2]];
+    }
     return {};
 }
 
@@ -118,39 +309,68 @@ void putText(uint8_t* at, const std::string& text, size_t size) {
     std::memcpy(at, text.data(), std::min(text.size(), size));
 }
 
-void putVlr(uint8_t* v, const char* user, uint16_t record, size_t bytes, const char* description) {
-    putText(v + 2, user, 16);
-    le::put<uint16_t>(v + 18, record);
-    le::put<uint16_t>(v + 20, uint16_t(bytes));
-    putText(v + 22, description, 32);
-}
-
 // The LAS 1.4 header and its VLRs: COPC's info VLR first where given (COPC
-// wants it there), then the LASzip VLR; `evlrStart` and `evlrs` say where
-// extended VLRs follow the point data.
-std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const std::vector<uint8_t>& laszipVlr,
+// wants it there), the LASzip VLR, the coordinate system's VLRs and the Extra
+// Bytes VLR; `evlrStart` and `evlrs` say where extended VLRs follow the point
+// data. The inputs' header fields where the set kept them (LasSourceInfo).
+std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const LasSourceInfo& las, const std::vector<uint8_t>& laszipVlr,
                                const std::vector<uint8_t>* copcInfo = nullptr, uint64_t evlrStart = 0, uint32_t evlrs = 0) {
-    const size_t recordBytes = plan.pointFormat == 7 ? kRecordBytes7 : kRecordBytes6;
-    const size_t copcBytes = copcInfo ? kVlrHeaderBytes + copcInfo->size() : 0;
-    std::vector<uint8_t> h(kHeaderBytes + copcBytes + kVlrHeaderBytes + laszipVlr.size(), 0);
+    std::vector<std::pair<uint16_t, const std::vector<uint8_t>*>> projection;
+    bool wkt = false, geoTiff = false;
+    for (const auto& [record, payload] : las.crsVlrs) {
+        projection.push_back({record, &payload});
+        (record == kWktRecord ? wkt : geoTiff) = true;
+    }
+    std::vector<uint8_t> extraBytes;
+    for (const std::vector<uint8_t>& e : plan.extraBytes) extraBytes.insert(extraBytes.end(), e.begin(), e.end());
+    std::vector<uint8_t> h(kHeaderBytes, 0);
+    uint32_t vlrs = 0;
+    auto addVlr = [&](const char* user, uint16_t record, const std::vector<uint8_t>& payload, const char* description) {
+        const size_t at = h.size();
+        h.resize(at + kVlrHeaderBytes + payload.size(), 0);
+        putText(&h[at + 2], user, 16);
+        le::put<uint16_t>(&h[at + 18], record);
+        le::put<uint16_t>(&h[at + 20], uint16_t(payload.size()));
+        putText(&h[at + 22], description, 32);
+        std::copy(payload.begin(), payload.end(), h.begin() + ptrdiff_t(at + kVlrHeaderBytes));
+        ++vlrs;
+    };
+    if (copcInfo) addVlr("copc", 1, *copcInfo, "COPC info");
+    addVlr("laszip encoded", 22204, laszipVlr, "by surfcast-export (laz crate)");
+    for (const auto& [record, payload] : projection) addVlr("LASF_Projection", record, *payload, "coordinate system");
+    if (!extraBytes.empty()) addVlr("LASF_Spec", kExtraBytesRecord, extraBytes, "Extra Bytes");
+
     std::memcpy(h.data(), "LASF", 4);
-    le::put<uint16_t>(&h[6], 1u << 4);  // global encoding: WKT (required for formats 6-10)
+    // Global encoding: bit 0 the GPS time's type, bit 4 a WKT coordinate
+    // system (required for formats 6-10, unless the inputs' is GeoTIFF's).
+    const bool wktBit = wkt || (plan.pointFormat >= 6 && !geoTiff);
+    le::put<uint16_t>(&h[6], uint16_t((las.gpsTimeType == 1 ? 1u : 0u) | (wktBit ? 1u << 4 : 0u)));
     h[24] = 1;
     h[25] = 4;
-    putText(&h[26], "surfcast", 32);
+    putText(&h[26], las.systemIdentifier.empty() ? "surfcast" : las.systemIdentifier, 32);
     putText(&h[58], "surfcast-export", 32);
-    const std::time_t now = std::time(nullptr);
-    std::tm utc{};
-    gmtime_r(&now, &utc);
-    le::put<uint16_t>(&h[90], uint16_t(utc.tm_yday + 1));
-    le::put<uint16_t>(&h[92], uint16_t(utc.tm_year + 1900));
+    if (las.creationYear >= 0) {
+        le::put<uint16_t>(&h[90], uint16_t(las.creationDay));
+        le::put<uint16_t>(&h[92], uint16_t(las.creationYear));
+    } else {
+        const std::time_t now = std::time(nullptr);
+        std::tm utc{};
+        gmtime_r(&now, &utc);
+        le::put<uint16_t>(&h[90], uint16_t(utc.tm_yday + 1));
+        le::put<uint16_t>(&h[92], uint16_t(utc.tm_year + 1900));
+    }
     le::put<uint16_t>(&h[94], uint16_t(kHeaderBytes));
     le::put<uint32_t>(&h[96], uint32_t(h.size()));  // offset to the point data
-    le::put<uint32_t>(&h[100], copcInfo ? 2 : 1);   // LASzip's VLR, after COPC's
+    le::put<uint32_t>(&h[100], vlrs);
     h[104] = uint8_t(plan.pointFormat | 0x80);      // bit 7: compressed (LASzip's convention)
-    le::put<uint16_t>(&h[105], uint16_t(recordBytes));
+    le::put<uint16_t>(&h[105], uint16_t(plan.recordBytes));
+    // Formats 0-5 fill the legacy counts too, where they fit (R15, 2.4).
+    if (plan.pointFormat < 6 && plan.points <= UINT32_MAX) {
+        le::put<uint32_t>(&h[107], uint32_t(plan.points));
+        for (size_t k = 0; k < 5; ++k) le::put<uint32_t>(&h[111 + 4 * k], uint32_t(plan.pointsByReturn[k]));
+    }
     for (int a = 0; a < 3; ++a) {
-        le::put<double>(&h[131 + 8 * size_t(a)], plan.scale);
+        le::put<double>(&h[131 + 8 * size_t(a)], plan.scale[a]);
         le::put<double>(&h[155 + 8 * size_t(a)], plan.offset[a]);
         le::put<double>(&h[179 + 16 * size_t(a)], plan.points ? plan.bounds.max[a] : 0);
         le::put<double>(&h[187 + 16 * size_t(a)], plan.points ? plan.bounds.min[a] : 0);
@@ -158,14 +378,7 @@ std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const std::vector<uint
     le::put<uint64_t>(&h[235], evlrStart);
     le::put<uint32_t>(&h[243], evlrs);
     le::put<uint64_t>(&h[247], plan.points);
-    uint8_t* v = &h[kHeaderBytes];
-    if (copcInfo) {
-        putVlr(v, "copc", 1, copcInfo->size(), "COPC info");
-        std::memcpy(v + kVlrHeaderBytes, copcInfo->data(), copcInfo->size());
-        v += copcBytes;
-    }
-    putVlr(v, "laszip encoded", 22204, laszipVlr.size(), "by surfcast-export (laz crate)");
-    std::memcpy(v + kVlrHeaderBytes, laszipVlr.data(), laszipVlr.size());
+    for (size_t k = 0; k < 15; ++k) le::put<uint64_t>(&h[255 + 8 * k], plan.pointsByReturn[k]);
     return h;
 }
 
@@ -208,17 +421,27 @@ uint64_t exportPointsAtMost(const TilesetReader& set, const PointFilter& filter)
     return n;
 }
 
-Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter, const StopExport& stop) {
+namespace {
+
+// The plan of a LAZ export, or (`copc`) the layout alone of a COPC export,
+// whose writer counts the points as it goes.
+Result<LazExportPlan> planExport(const TilesetReader& set, const PointFilter& filter, bool copc, const StopExport& stop) {
     const TilesetInfo& info = set.info();
     if (!filter.classes.empty() && !info.attribute("classification"))
         return Status::error(set.describe() + ": the set stores no classification to choose classes by");
     LazExportPlan plan;
     plan.nodes = reachedLeaves(set, filter);
-    plan.pointFormat = info.colorBits ? 7 : 6;
+    const Dimensions d = dimensionsOf(info);
+    plan.pointFormat = pointFormatOf(info, d, copc);
+    plan.extraBytes = d.descriptors;
+    plan.recordBytes = kFormatBytes[plan.pointFormat];
+    for (const std::vector<uint8_t>& e : d.descriptors) plan.recordBytes += kExtraTypeBytes[e[2]];
+    describeDimensions(info, d, &plan);
     // One grid for every export of a set, whatever its box, so that boxes
-    // exported apart merge exactly: the LAS scale is the power of ten at or
-    // below the finest leaf step (exporting loses less than half of it), the
-    // offset the whole numbers below the set's bounds, grown by half the
+    // exported apart merge exactly: the inputs' own LAS lattice where they
+    // agree on one (the very coordinates come back), else the power of ten at
+    // or below the finest leaf step (exporting loses less than half of it)
+    // and the whole numbers below the set's bounds, grown by half the
     // coarsest leaf step, which hold every leaf's positions.
     double finest = HUGE_VAL, coarsest = 0;
     for (const NodeRecord& n : set.nodes()) {
@@ -230,26 +453,39 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
     Box3d all = info.bounds;
     all.min = all.min - Vec3d{1, 1, 1} * (coarsest / 2);
     all.max = all.max + Vec3d{1, 1, 1} * (coarsest / 2);
-    plan.scale = std::pow(10.0, std::floor(std::log10(std::clamp(finest, 1e-9, 1e9))));
-    for (int a = 0; a < 3; ++a) plan.offset[a] = std::floor(all.min[a]);
     auto fits = [&] {  // every coordinate in LAS's 32-bit integers
         for (int a = 0; a < 3; ++a)
-            if ((all.max[a] - plan.offset[a]) / plan.scale > 2147483647.0) return false;
+            if ((all.max[a] - plan.offset[a]) / plan.scale[a] > 2147483647.0 || (all.min[a] - plan.offset[a]) / plan.scale[a] < -2147483648.0)
+                return false;
         return true;
     };
-    while (!fits()) plan.scale *= 10;
+    plan.scale = info.las.scale;
+    plan.offset = info.las.offset;
+    if (!(info.las.scale.x > 0) || !fits()) {
+        const double scale = std::pow(10.0, std::floor(std::log10(std::clamp(finest, 1e-9, 1e9))));
+        plan.scale = {scale, scale, scale};
+        for (int a = 0; a < 3; ++a) plan.offset[a] = std::floor(all.min[a]);
+        while (!fits()) plan.scale = plan.scale * 10.0;
+    }
+    if (copc) return plan;
 
-    const bool whole = !filter.box && filter.classes.empty();
+    // Every leaf whole, no decoding (a third of the export's time,
+    // bench/BENCHMARKS.md "LAZ export"), unless the header's counts by
+    // return need the points' returns: the records count the points, and the
+    // grown bounds hold them.
+    const DimSource& returns = d.dims[kReturnNumber];
+    const bool whole = !filter.box && filter.classes.empty() && !returns.attribute;
     if (whole) {
-        // Every leaf whole, no decoding (a third of the export's time,
-        // bench/BENCHMARKS.md "LAZ export"): the records count the points,
-        // and the grown bounds hold them.
         for (size_t i : plan.nodes) plan.points += set.nodes()[i].surfelCount;
         if (plan.points) plan.bounds = all;
+        const int only = returns.known ? int(returns.constant) : 1;
+        if (only >= 1 && only <= 15) plan.pointsByReturn[only - 1] = plan.points;
     } else {
-        SC_TRY(forEachKept(set, filter, plan.nodes, false, stop, [&](const NodeRecord&, const BlockData&, size_t, const Vec3d& p) -> Status {
+        SC_TRY(forEachKept(set, filter, plan.nodes, false, stop, [&](const NodeRecord&, const BlockData& b, size_t i, const Vec3d& p) -> Status {
             plan.bounds.extend(p);
             ++plan.points;
+            const int r = returns.known ? int(valueOf(returns, b, i)) : 1;
+            if (r >= 1 && r <= 15) ++plan.pointsByReturn[r - 1];
             return {};
         }));
     }
@@ -257,36 +493,43 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
     // The bounds of the integers the records hold: rounding is monotonic, so
     // the points' own bounds round to theirs; grown bounds round outward.
     for (int a = 0; a < 3; ++a) {
-        const double lo = (plan.bounds.min[a] - plan.offset[a]) / plan.scale, hi = (plan.bounds.max[a] - plan.offset[a]) / plan.scale;
-        plan.bounds.min[a] = plan.offset[a] + (whole ? std::floor(lo) : double(std::llround(lo))) * plan.scale;
-        plan.bounds.max[a] = plan.offset[a] + (whole ? std::ceil(hi) : double(std::llround(hi))) * plan.scale;
+        const double lo = (plan.bounds.min[a] - plan.offset[a]) / plan.scale[a], hi = (plan.bounds.max[a] - plan.offset[a]) / plan.scale[a];
+        plan.bounds.min[a] = plan.offset[a] + (whole ? std::floor(lo) : double(std::llround(lo))) * plan.scale[a];
+        plan.bounds.max[a] = plan.offset[a] + (whole ? std::ceil(hi) : double(std::llround(hi))) * plan.scale[a];
     }
     return plan;
 }
 
+}  // namespace
+
+Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter& filter, const StopExport& stop) {
+    return planExport(set, filter, false, stop);
+}
+
 Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const LazExportPlan& plan,
                       const std::function<Status(const uint8_t*, size_t)>& out, const StopExport& stop) {
+    const uint16_t extra = uint16_t(plan.recordBytes - kFormatBytes[plan.pointFormat]);
     uint8_t vlr[1024];
     size_t vlrBytes = 0;
-    if (sc_laz_vlr(uint8_t(plan.pointFormat), 0, 0, vlr, sizeof vlr, &vlrBytes) != 0)
+    if (sc_laz_vlr(uint8_t(plan.pointFormat), extra, 0, vlr, sizeof vlr, &vlrBytes) != 0)
         return Status::error("LAZ: no LASzip VLR for point format " + std::to_string(plan.pointFormat));
-    const std::vector<uint8_t> header = lasHeader(plan, std::vector<uint8_t>(vlr, vlr + vlrBytes));
+    const TilesetInfo& info = set.info();
+    const std::vector<uint8_t> header = lasHeader(plan, info.las, std::vector<uint8_t>(vlr, vlr + vlrBytes));
     SC_TRY(out(header.data(), header.size()));
 
     WriteContext context{&out, {}};
     char err[512] = {};
-    ScLazWriter* writer = sc_laz_writer_open(&WriteContext::write, &context, header.size(), uint8_t(plan.pointFormat), 0, 0, err, sizeof err);
+    ScLazWriter* writer = sc_laz_writer_open(&WriteContext::write, &context, header.size(), uint8_t(plan.pointFormat), extra, 0, err, sizeof err);
     if (!writer) return Status::error(std::string("LAZ compressor: ") + err);
     const auto failure = [&](const char* what) {
         return context.failed.ok() ? Status::error(std::string("LAZ compressor: ") + what + ": " + err) : context.failed;
     };
-    const TilesetInfo& info = set.info();
-    const LasScalars scalars = lasScalars(info);
-    const size_t recordBytes = plan.pointFormat == 7 ? kRecordBytes7 : kRecordBytes6;
+    const Dimensions d = dimensionsOf(info);
+    const size_t recordBytes = plan.recordBytes;
     std::vector<uint8_t> records;
     uint64_t written = 0;
     const NodeRecord* current = nullptr;
-    Status status = forEachKept(set, filter, plan.nodes, scalars.any(), stop, [&](const NodeRecord& n, const BlockData& b, size_t i, const Vec3d& p) -> Status {
+    Status status = forEachKept(set, filter, plan.nodes, d.scalars, stop, [&](const NodeRecord& n, const BlockData& b, size_t i, const Vec3d& p) -> Status {
         if (current != &n && !records.empty()) {  // a block's records at a time
             if (sc_laz_writer_write(writer, records.data(), records.size() / recordBytes, err, sizeof err) != 0) return failure("write");
             records.clear();
@@ -296,7 +539,7 @@ Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const
         const size_t at = records.size();
         records.resize(at + recordBytes, 0);
         int32_t q[3];
-        if (Status s = fillRecord(&records[at], plan, info, scalars, n, b, i, p, q); !s) return Status::error(set.describe() + ": " + s.message());
+        if (Status s = fillRecord(&records[at], plan, info, d, n, b, i, p, q); !s) return Status::error(set.describe() + ": " + s.message());
         return {};
     });
     if (status.ok() && !records.empty() && sc_laz_writer_write(writer, records.data(), records.size() / recordBytes, err, sizeof err) != 0)
@@ -340,28 +583,28 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
     const TilesetInfo& info = set.info();
     if (!filter.classes.empty() && !info.attribute("classification"))
         return Status::error(set.describe() + ": the set stores no classification to choose classes by");
-    // The layout of a whole set's export (no decoding): the records' scale
-    // and offset hold any point of the set; the counts and bounds of the
-    // points kept go into the header once they are written.
-    auto whole = planLazExport(set, PointFilter{});  // no filter: no decoding
-    if (!whole) return whole.status();
-    LazExportPlan plan = *whole;
-    plan.nodes = reachedLeaves(set, filter);
+    // The layout (no decoding): the records' scale and offset hold any point
+    // of the set; the counts and bounds of the points kept go into the header
+    // once they are written.
+    auto layout = planExport(set, filter, true, stop);
+    if (!layout) return layout.status();
+    LazExportPlan plan = *layout;
     std::sort(plan.nodes.begin(), plan.nodes.end(),
               [&](size_t a, size_t b) { return depthFirstKey(set.nodes()[a].key) < depthFirstKey(set.nodes()[b].key); });
+    const uint16_t extra = uint16_t(plan.recordBytes - kFormatBytes[plan.pointFormat]);
     uint8_t vlr[1024];
     size_t vlrBytes = 0;
-    if (sc_laz_vlr(uint8_t(plan.pointFormat), 0, 1, vlr, sizeof vlr, &vlrBytes) != 0)
+    if (sc_laz_vlr(uint8_t(plan.pointFormat), extra, 1, vlr, sizeof vlr, &vlrBytes) != 0)
         return Status::error("LAZ: no LASzip VLR for point format " + std::to_string(plan.pointFormat));
     const std::vector<uint8_t> laszip(vlr, vlr + vlrBytes);
     std::vector<uint8_t> copcInfo(kCopcInfoBytes, 0);
-    const size_t headerBytes = lasHeader(plan, laszip, &copcInfo).size();
+    const size_t headerBytes = lasHeader(plan, info.las, laszip, &copcInfo).size();
     std::vector<uint8_t> zeros(headerBytes, 0);  // the header, written last
     if (std::fwrite(zeros.data(), 1, zeros.size(), f) != zeros.size()) return Status::error(std::string("cannot write: ") + std::strerror(errno));
 
     FileSink sink{f, {}};
     char err[512] = {};
-    ScLazWriter* writer = sc_laz_writer_open(&FileSink::write, &sink, headerBytes, uint8_t(plan.pointFormat), 0, 1, err, sizeof err);
+    ScLazWriter* writer = sc_laz_writer_open(&FileSink::write, &sink, headerBytes, uint8_t(plan.pointFormat), extra, 1, err, sizeof err);
     if (!writer) return Status::error(std::string("LAZ compressor: ") + err);
     const auto failure = [&](const char* what) {
         return sink.failed.ok() ? Status::error(std::string("LAZ compressor: ") + what + ": " + err) : sink.failed;
@@ -383,8 +626,8 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
         std::vector<uint8_t> records{};
     };
     std::vector<Open> path;
-    const LasScalars scalars = lasScalars(info);
-    const size_t recordBytes = plan.pointFormat == 7 ? kRecordBytes7 : kRecordBytes6;
+    const Dimensions d = dimensionsOf(info);
+    const size_t recordBytes = plan.recordBytes;
     CopcReport report;
     int32_t lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
     double gpsMin = HUGE_VAL, gpsMax = -HUGE_VAL;
@@ -416,7 +659,7 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
         if (!status.ok()) break;
         leafRecords.clear();
         const std::vector<size_t> one{index};
-        status = forEachKept(set, filter, one, scalars.any(), stop, [&](const NodeRecord& n, const BlockData& b, size_t i, const Vec3d& p) -> Status {
+        status = forEachKept(set, filter, one, d.scalars, stop, [&](const NodeRecord& n, const BlockData& b, size_t i, const Vec3d& p) -> Status {
             std::vector<uint8_t>* into = &leafRecords;
             for (Open& o : path) {
                 const Vec3d min = nodeMin(info, o.key);
@@ -433,16 +676,18 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
             const size_t at = into->size();
             into->resize(at + recordBytes, 0);
             int32_t q[3];
-            SC_TRY(fillRecord(&(*into)[at], plan, info, scalars, n, b, i, p, q));
+            SC_TRY(fillRecord(&(*into)[at], plan, info, d, n, b, i, p, q));
             for (int a = 0; a < 3; ++a) {
                 lo[a] = std::min(lo[a], q[a]);
                 hi[a] = std::max(hi[a], q[a]);
             }
-            const double gps = scalarValue(b, scalars.gpsTime, i);
-            if (!std::isnan(gps)) {
+            if (d.has(kGpsTime)) {
+                const double gps = valueOf(d.dims[kGpsTime], b, i);
                 gpsMin = std::min(gpsMin, gps);
                 gpsMax = std::max(gpsMax, gps);
             }
+            const int r = d.has(kReturnNumber) ? int(valueOf(d.dims[kReturnNumber], b, i)) : 1;
+            if (r >= 1 && r <= 15) ++plan.pointsByReturn[r - 1];
             ++report.points;
             return {};
         });
@@ -496,16 +741,19 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
     le::put<double>(&copcInfo[64], gpsMin <= gpsMax ? gpsMax : 0);
     plan.points = report.points;
     for (int a = 0; a < 3; ++a) {
-        plan.bounds.min[a] = plan.offset[a] + lo[a] * plan.scale;
-        plan.bounds.max[a] = plan.offset[a] + hi[a] * plan.scale;
+        plan.bounds.min[a] = plan.offset[a] + lo[a] * plan.scale[a];
+        plan.bounds.max[a] = plan.offset[a] + hi[a] * plan.scale[a];
     }
-    const std::vector<uint8_t> header = lasHeader(plan, laszip, &copcInfo, uint64_t(evlrStart), 1);
+    const std::vector<uint8_t> header = lasHeader(plan, info.las, laszip, &copcInfo, uint64_t(evlrStart), 1);
     uint8_t offset[8];
     le::put<uint64_t>(offset, table);
     if (std::fseek(f, 0, SEEK_SET) != 0 || std::fwrite(header.data(), 1, header.size(), f) != header.size() ||
         std::fwrite(offset, 1, 8, f) != 8)  // the chunk table's offset, over its -1
         return Status::error(std::string("cannot write: ") + std::strerror(errno));
     report.nodes = entries.size();
+    report.pointFormat = plan.pointFormat;
+    report.dimensions = plan.dimensions;
+    report.leftOut = plan.leftOut;
     return report;
 }
 

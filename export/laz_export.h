@@ -1,11 +1,13 @@
 // A tile set's points back out as LAZ: the input points its leaves hold
 // (docs/FORMAT.md: leaves are the input points, exact duplicates merged),
-// those inside a box and of the classes asked for, with their colour,
-// intensity, classification, returns and the LAS fields the set stores as
-// scalar attributes (gps_time, scan_angle, user_data, point_source_id).
-// LAS 1.4, point format 6 (7 with colour), compressed by the `laz` crate
-// (preprocess/readers/laz_ffi), written as a stream: surfcast-export writes
-// it to a file, surfcast-serve sends it as it is produced. Or COPC, to a file.
+// those inside a box and of the classes asked for, with the value (never the
+// stored code) of every dimension the set keeps, stored or constant: colour,
+// the LiDAR attributes, the LAS fields (las_reader.h) and the Extra Bytes
+// dimensions, other inputs' scalar fields as float64 extra bytes; and the
+// inputs' header fields the set kept (LasSourceInfo). LAS 1.4, compressed by
+// the `laz` crate (preprocess/readers/laz_ffi), written as a stream:
+// surfcast-export writes it to a file, surfcast-serve sends it as it is
+// produced. Or COPC, to a file.
 #pragma once
 
 #include <cstdint>
@@ -35,10 +37,19 @@ Result<std::vector<uint8_t>> parseClasses(const std::string& text);
 struct LazExportPlan {
     std::vector<size_t> nodes;  // indices into set.nodes(): leaves the filter reaches, in hierarchy order
     uint64_t points = 0;
+    uint64_t pointsByReturn[15] = {};  // of the points kept, by return number 1-15
     Box3d bounds;
-    double scale = 0.001;  // per axis, as LAS stores it
+    Vec3d scale{0.001, 0.001, 0.001};  // per axis, as LAS stores it
     Vec3d offset;
-    int pointFormat = 6;   // 6, or 7 with colour
+    // The inputs' own point format where they agree on one that holds what
+    // the set keeps, else LAS 1.4's 6-10 (COPC: 6-8) by colour, NIR and wave
+    // packets; the record's bytes, with the Extra Bytes VLR's descriptors.
+    int pointFormat = 6;
+    size_t recordBytes = 30;
+    std::vector<std::vector<uint8_t>> extraBytes;
+    // The dimensions the records carry values of (stored or constant), and
+    // those the inputs had that the set or the point format left out.
+    std::vector<std::string> dimensions, leftOut;
 };
 
 // The most points the filter can keep, from the hierarchy alone (the
@@ -69,6 +80,8 @@ Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const
 struct CopcReport {
     uint64_t points = 0;
     size_t nodes = 0;
+    int pointFormat = 6;
+    std::vector<std::string> dimensions, leftOut;  // as LazExportPlan's
 };
 Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& filter, std::FILE* f, const StopExport& stop = {});
 

@@ -100,6 +100,18 @@ int usageError(const std::string& message) {
 }
 
 // Progress on stderr, a line each twentieth of the work: "  DONE of ALL UNIT".
+// The summary's lines on what a LAS export carries and what it leaves out.
+std::string dimensionSummary(const std::vector<std::string>& carried, const std::vector<std::string>& leftOut) {
+    auto list = [](const std::vector<std::string>& names) {
+        std::string out;
+        for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+        return out.empty() ? std::string("none") : out;
+    };
+    std::string out = "dimensions: x, y, z, " + list(carried) + "\n";
+    if (!leftOut.empty()) out += "left out (the set or the point format does not keep them): " + list(leftOut) + "\n";
+    return out;
+}
+
 std::function<void(size_t, size_t)> progressLines(const char* unit) {
     return [unit, last = size_t(0)](size_t done, size_t all) mutable {
         if (done != all && done - last < std::max<size_t>(1, all / 20)) return;
@@ -251,7 +263,9 @@ int main(int argc, char** argv) {
             return 1;
         }
         if (!quiet)
-            std::fprintf(stderr, "%llu points from %zu leaves; LAS scale %g\n", (unsigned long long)plan->points, plan->nodes.size(), plan->scale);
+            std::fprintf(stderr, "%llu points from %zu leaves; LAS point format %d, scale %g %g %g\n%s", (unsigned long long)plan->points,
+                         plan->nodes.size(), plan->pointFormat, plan->scale.x, plan->scale.y, plan->scale.z,
+                         dimensionSummary(plan->dimensions, plan->leftOut).c_str());
     }
 
     // Written beside the output, then renamed over it: a reader finds the old file or the whole new one.
@@ -274,7 +288,9 @@ int main(int argc, char** argv) {
         auto copc = writeCopcExport(*reader, filter, f);
         if (!copc) status = Status::error(partial + ": " + copc.status().message());
         else plan->points = copc->points;
-        if (copc && !quiet) std::fprintf(stderr, "%llu points in %zu octree nodes\n", (unsigned long long)copc->points, copc->nodes);
+        if (copc && !quiet)
+            std::fprintf(stderr, "%llu points in %zu octree nodes; LAS point format %d\n%s", (unsigned long long)copc->points, copc->nodes,
+                         copc->pointFormat, dimensionSummary(copc->dimensions, copc->leftOut).c_str());
         if (copc && std::fseek(f, 0, SEEK_END) == 0) bytes = uint64_t(std::ftell(f));
     } else {
         status = writeLazExport(*reader, filter, *plan, [&](const uint8_t* data, size_t n) -> Status {

@@ -20,11 +20,11 @@ namespace {
 
 // autzen_trim.las stores coordinates at 0.01 (its scale): a leaf keeps them
 // within half of that (FORMAT.md: leaves use the input's own precision), and
-// the export's LAS scale (the power of ten at or below the finest leaf step,
-// 0.001 here) adds at most half of its own. Matching exported points to the
-// original's within that distance finds each one, and a box grown and
-// shrunk by it brackets the points the export keeps.
-constexpr double kPositionError = 0.005 + 0.0005;
+// the export writes them on the input's own lattice, so they come back
+// exactly; matching exported points to the original's within half a step
+// finds each one all the same, and a box grown and shrunk by it brackets the
+// points the export keeps.
+constexpr double kPositionError = 0.005;
 
 nlohmann::json compare(const std::string& original, const std::string& exported, const std::vector<std::string>& filter) {
     std::vector<std::string> args = {SURFCAST_TEST_PYTHON, SURFCAST_TEST_TOOLS "/compare_las.py", original, exported, "--tolerance",
@@ -81,25 +81,19 @@ TEST_F(Export, WholeSetGivesBackItsInputPoints) {
     const nlohmann::json c = compare(test::dataFile("autzen_trim.las"), out, {});
     EXPECT_EQ(c["exported"], 110000);  // PROVENANCE.md; no exact duplicates among them
     EXPECT_EQ(c["matched"], 110000);
-    EXPECT_LE(c["largest_error"].get<double>(), kPositionError);
-    EXPECT_EQ(c["point_format"], 7);
+    EXPECT_EQ(c["largest_error"].get<double>(), 0.0);
+    EXPECT_EQ(c["point_format"], 3);  // the input's own
     // The header's bounds hold every point; for a whole set they come from
-    // tileset.json grown by half the coarsest leaf step (0.005 at most here)
-    // and rounded outward to the LAS scale (0.001), while the extreme point
-    // itself may lie half a step inside the input's bound: 0.011 of slack at most.
+    // tileset.json grown by half the coarsest leaf step (0.005 here) and
+    // rounded outward to the LAS scale (0.01): 0.01 of slack at most.
     EXPECT_TRUE(c["inside_header"].get<bool>());
-    EXPECT_LE(c["header_slack"].get<double>(), 0.005 + 0.005 + 0.001 + 1e-9);
+    EXPECT_LE(c["header_slack"].get<double>(), 0.01 + 1e-9);
     for (const char* d : {"intensity", "classification", "return_number", "number_of_returns", "user_data", "red", "green", "blue"})
         EXPECT_EQ(c["same"][d], 110000) << d;
-    // gps_time is a float the set stores quantized: within half its step.
-    auto set = TilesetReader::open(dir_->file("autzen"));
-    ASSERT_TRUE(set.ok());
-    const AttributeInfo* gps = set->info().attribute("gps_time");
-    ASSERT_NE(gps, nullptr);
-    EXPECT_LE(c["gps_time_error"].get<double>(), gps->scale / 2 + 1e-9);
-    // Whole degrees in the original (format 1), 0.006-degree units in format
-    // 7: a degree is a whole number of them only to within half a unit.
-    EXPECT_LE(c["scan_angle_error"].get<double>(), 0.003 + 1e-9);
+    // gps_time's values are multiples of a power of two that spans their
+    // range in 32 bits: stored exactly. Scan angles in whole degrees, as they came.
+    EXPECT_EQ(c["gps_time_error"].get<double>(), 0.0);
+    EXPECT_EQ(c["scan_angle_error"].get<double>(), 0.0);
     // The chunk table's offset is at the file's end (the stream never seeks
     // back): the build's own reader finds it there too.
     EXPECT_EQ(countWithOwnReader(out), 110000u);

@@ -29,10 +29,9 @@ constexpr double kFloat32Epsilon = 0x1.0p-24;
 constexpr double kFarOrigin = 10;
 // Data whose height is under this fraction of its width is terrain: normals up.
 constexpr double kFlatRatio = 0.25;
-// Most bits of a stored scalar field (Draco's integer attributes are 32-bit).
-constexpr int kMaxScalarBits = 32;
-// Bits of a stored floating-point scalar field (ScalarField::resolution 0).
-constexpr int kFloatScalarBits = 24;
+// Most bits of a stored scalar field (Draco's integer attributes are 32-bit),
+// and of a field stored exactly in two (a double's significand).
+constexpr int kMaxScalarBits = 32, kMaxWideScalarBits = 53;
 
 double distanceToBox(const Vec3d& p, const Box3d& b) {
     Vec3d d;
@@ -92,6 +91,10 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
         c->attributeNames_ = set->attributeNames_;
         c->intensityOffset_ = set->intensityOffset_;
         c->intensityStep_ = set->intensityStep_;
+        c->duplicatesKept_ = set->duplicatesKept_;
+        c->constants_ = set->constants_;
+        c->leftOut_ = set->leftOut_;
+        c->las_ = set->las_;
         if (provenance) {
             c->stored_.push_back(*provenance);
             c->attributeNames_.push_back(provenance->name);
@@ -120,6 +123,10 @@ std::shared_ptr<const BuildContext> BuildContext::withLayoutOf(const BuildContex
         r->intensityOffset_ = int(std::lround(a->offset));
         r->intensityStep_ = std::max(1, int(std::lround(a->scale)));
     }
+    r->duplicatesKept_ = set.duplicatesKept;
+    r->constants_ = set.constants;
+    r->leftOut_ = set.leftOut;
+    r->las_ = set.las;
     r->storeOpacity_ = set.attribute(kOpacityAttribute) != nullptr;
     if (r->storeOpacity_) r->attributeNames_.push_back(kOpacityAttribute);
     r->stored_.clear();
@@ -134,6 +141,11 @@ std::shared_ptr<const BuildContext> BuildContext::withLayoutOf(const BuildContex
         q.offset = a.offset;
         q.step = a.scale;
         q.bits = a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32;
+        // A wide field's low part follows its top part (chooseAttributes).
+        if (!r->stored_.empty() && q.name == r->stored_.back().name + kLowPartSuffix) {
+            q.lowPart = true;
+            r->stored_.back().lowBits = q.bits = int(std::lround(std::log2(r->stored_.back().step / q.step)));
+        }
         r->stored_.push_back(q);
         r->attributeNames_.push_back(q.name);
     }
@@ -149,7 +161,8 @@ ScalarTable BuildContext::emptyTable() const {
 uint16_t BuildContext::storedIntensity(uint16_t intensity) const {
     // Clamped: an input without intensity (beside ones with it) reads as 0,
     // below the range of those that carry it.
-    return uint16_t(std::clamp(std::lround(double(intensity - intensityOffset_) / intensityStep_), 0l, long(1 << kIntensityBits) - 1));
+    return uint16_t(std::clamp(std::lround(double(intensity - intensityOffset_) / intensityStep_), 0l,
+                               long(1 << intensityCodeBits(intensityStep_)) - 1));
 }
 
 bool BuildContext::anyTexture() const {
@@ -209,6 +222,10 @@ TilesetInfo BuildContext::tilesetInfo() const {
     if (storeOpacity_) info.attributes.push_back({kOpacityAttribute, "uint8", 1, 0, "continuous", 1.0 / 255, 0.0});
     for (const ScalarQuantization& q : stored_)
         info.attributes.push_back({q.name, scalarType(q.bits), 1, 0, q.categorical ? "categorical" : "continuous", q.step, q.offset});
+    info.constants = constants_;
+    info.leftOut = leftOut_;
+    info.las = las_;
+    info.duplicatesKept = duplicatesKept_;
     info.statistics = statistics();
     info.normalSource = normalSource_;
     info.weights = opt_.weights ? "analytic" : "none";
@@ -268,6 +285,10 @@ Status BuildContext::chooseAttributes() {
     const size_t values[kLidarCount] = {distinct(a.intensityHistogram, self), distinct(a.classCounts, self),
                                         distinct(a.returnsHistogram, self), distinct(a.returnsHistogram, self)};
     for (int i = 0; i < kLidarCount; ++i) store_[i] = carried[i] && (opt_.attributes || values[i] > 1);
+    constants_.clear();
+    leftOut_.clear();
+    // Every dimension asked for (--attributes all): every point too, so the set can stand in for its inputs.
+    duplicatesKept_ = opt_.inputs.scalars.all;
     if (opt_.attributes) {
         for (const std::string& name : *opt_.attributes) {
             int i = lidarIndex(name);
@@ -287,21 +308,33 @@ Status BuildContext::chooseAttributes() {
     store_[kLidarReturnNumber] = store_[kLidarNumberOfReturns] = store_[kLidarReturnNumber] || store_[kLidarNumberOfReturns];
     for (int i = 0; i < kLidarCount; ++i)
         if (store_[i]) attributeNames_.push_back(kLidarAttributes[i]);
+    // What is carried and not stored: its one value where it has one (the
+    // exports write it), else a dimension the set leaves out.
+    auto only = [](const std::vector<uint64_t>& histogram) {
+        return double(std::find_if(histogram.begin(), histogram.end(), [](uint64_t n) { return n > 0; }) - histogram.begin());
+    };
+    const double one[kLidarCount] = {only(a.intensityHistogram), only(a.classCounts), double(int(only(a.returnsHistogram)) & 15),
+                                     double(int(only(a.returnsHistogram)) >> 4)};
+    for (int i = 0; i < kLidarCount; ++i)
+        if (carried[i] && !store_[i]) {
+            if (values[i] == 1) constants_.push_back({kLidarAttributes[i], one[i]});
+            else leftOut_.push_back(kLidarAttributes[i]);
+        }
     // Opacity only where some point is translucent: an opaque set carries none.
     storeOpacity_ = a.translucentPoints > 0;
     if (storeOpacity_) attributeNames_.push_back(kOpacityAttribute);
     // Scalar fields (selected by name or with "all": every one found that
-    // varies is stored): exact at the file's own resolution where it has one
-    // and the range fits 32 bits; floating ones in the power-of-two step that
-    // splits the set's range into at most 2^24 (float32's precision).
+    // varies is stored): exact where the range fits 32 bits at the file's own
+    // resolution, or for floating-point fields at the finest bit any value
+    // sets; else in the finest power-of-two step that fits.
     for (const ScalarStats& f : stats_.scalars) {
         // A constant field carries no information per point; stored, it still
         // costs Draco's kd-tree coder: seven constant fields beside the usual
-        // attributes doubled the bytes of a scan (bench/BENCHMARKS.md).
+        // attributes doubled the bytes of a scan (bench/BENCHMARKS.md). The
+        // set records its value once instead.
         if (!(f.max > f.min)) {
-            if (report_)
-                std::fprintf(stderr, "warning: --attributes %s: %s across the set; not stored\n", f.field.name.c_str(),
-                         f.points ? ("constant (" + std::to_string(f.min) + ")").c_str() : "no valid value");
+            if (f.points) constants_.push_back({f.field.name, f.min});
+            else if (report_) std::fprintf(stderr, "warning: --attributes %s: no valid value across the set; not stored\n", f.field.name.c_str());
             continue;
         }
         ScalarQuantization q;
@@ -309,9 +342,30 @@ Status BuildContext::chooseAttributes() {
         q.categorical = f.field.categorical;
         const double lo = f.min, range = f.max - f.min;
         const double maxSteps = std::ldexp(1.0, kMaxScalarBits) - 1;
-        const double floatSteps = std::ldexp(1.0, kFloatScalarBits) - 1;
         q.offset = lo;
-        q.step = f.field.resolution > 0 ? f.field.resolution : std::exp2(std::ceil(std::log2(range / floatSteps)));
+        q.step = f.field.resolution > 0 ? f.field.resolution
+                 : f.finestBit != INT_MAX ? std::ldexp(1.0, f.finestBit)
+                                          : std::exp2(std::ceil(std::log2(range / maxSteps)));
+        // Exact in more bits than one attribute holds, up to a double's 53:
+        // two attributes, the top 32 bits and the rest (ScalarQuantization).
+        const int exactBits = int(std::ceil(std::log2(std::round(range / q.step) + 1)));
+        if (exactBits > kMaxScalarBits && exactBits <= kMaxWideScalarBits) {
+            q.lowBits = exactBits - kMaxScalarBits;
+            q.bits = kMaxScalarBits;
+            ScalarQuantization low = q;
+            low.name += kLowPartSuffix;
+            low.offset = 0;
+            low.bits = q.lowBits;
+            low.lowBits = 0;
+            low.lowPart = true;
+            q.step = std::ldexp(q.step, q.lowBits);
+            stored_.push_back(q);
+            stored_.push_back(low);
+            attributeNames_.push_back(q.name);
+            attributeNames_.push_back(low.name);
+            continue;
+        }
+        if (range / q.step > maxSteps) q.step = std::max(q.step, std::exp2(std::ceil(std::log2(range / maxSteps))));
         while (range / q.step > maxSteps) q.step *= 2;
         q.bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
         stored_.push_back(q);
@@ -348,9 +402,47 @@ Status BuildContext::chooseAttributes() {
         const TilesetStatistics st = statistics();
         intensityOffset_ = int(st.intensityMin);
         intensityStep_ = 1;
-        while ((st.intensityMax - st.intensityMin) / intensityStep_ >= double(1 << kIntensityBits)) intensityStep_ *= 2;
+        // Asked for by name (or all): the values themselves.
+        const bool exact = opt_.attributes.has_value();
+        while (!exact && (st.intensityMax - st.intensityMin) / intensityStep_ >= double(1 << kIntensityBits)) intensityStep_ *= 2;
     }
+    // The files' fields the readers did not decode (asked for by no --attributes).
+    for (const SourceStats& src : stats_.sources)
+        for (const std::string& name : src.description.otherScalars)
+            if (std::find(leftOut_.begin(), leftOut_.end(), name) == leftOut_.end()) leftOut_.push_back(name);
+    chooseLasSource();
     return {};
+}
+
+// What the LAS inputs' headers agree on (LasSourceInfo): a field where they
+// differ is left unknown.
+void BuildContext::chooseLasSource() {
+    las_ = {};
+    for (const SourceStats& src : stats_.sources) {
+        const LasSourceInfo& l = src.description.las;
+        if (!l.present) continue;
+        const int multiplier = src.colorMax <= 255 ? 1 : src.colorsTimes256 ? 256 : 257;
+        if (!las_.present) {
+            las_ = l;
+            las_.extraBytes.clear();
+            las_.colorMultiplier = multiplier;
+        } else {
+            if (las_.colorMultiplier != multiplier) las_.colorMultiplier = 257;
+            if (las_.pointFormat != l.pointFormat) las_.pointFormat = -1;
+            if (las_.gpsTimeType != l.gpsTimeType) las_.gpsTimeType = -1;
+            if (las_.systemIdentifier != l.systemIdentifier) las_.systemIdentifier.clear();
+            if (las_.generatingSoftware != l.generatingSoftware) las_.generatingSoftware.clear();
+            if (las_.creationDay != l.creationDay || las_.creationYear != l.creationYear) las_.creationDay = las_.creationYear = -1;
+            if (las_.scale != l.scale || las_.offset != l.offset) las_.scale = las_.offset = {};
+            if (las_.crsVlrs != l.crsVlrs) las_.crsVlrs.clear();
+        }
+        // Each named dimension's first descriptor (the one whose name, type and scale the export writes).
+        for (const std::vector<uint8_t>& d : l.extraBytes) {
+            auto name = [](const std::vector<uint8_t>& e) { return std::string(reinterpret_cast<const char*>(&e[4]), strnlen(reinterpret_cast<const char*>(&e[4]), 32)); };
+            if (std::none_of(las_.extraBytes.begin(), las_.extraBytes.end(), [&](const auto& e) { return name(e) == name(d); }))
+                las_.extraBytes.push_back(d);
+        }
+    }
 }
 
 // The cubic root box around the points' bounds, and the leaves' quantization step.

@@ -23,8 +23,11 @@
 
 namespace surfcast {
 
-// Bits of the stored intensity (chooseAttributes).
+// Bits of the stored intensity (chooseAttributes): a 12-bit code by default,
+// the value itself (step 1) where --attributes asks for intensity.
 inline constexpr int kIntensityBits = 12;
+// The bits of a set's intensity codes: 16 where it stores values (step 1), else 12.
+inline int intensityCodeBits(double step) { return step == 1 ? 16 : kIntensityBits; }
 
 // Where the build's time goes, summed over threads (BuildSummary::stepSeconds).
 enum Step { kStepNormals, kStepOctree, kStepAttributes, kStepTextures, kStepEncode, kStepCount };
@@ -97,6 +100,8 @@ public:
     bool storesOpacity() const { return storeOpacity_; }
     const std::vector<ScalarQuantization>& scalars() const { return stored_; }
     ScalarTable emptyTable() const;
+    // Leaves keep every input point, exact duplicate positions too (TilesetInfo::duplicatesKept).
+    bool keepsDuplicates() const { return duplicatesKept_; }
     // The quantized intensity a surfel stores.
     uint16_t storedIntensity(uint16_t intensity) const;
 
@@ -134,6 +139,7 @@ private:
     void chooseRootBox();
     Status chooseOrientationRules();
     Status chooseAttributes();
+    void chooseLasSource();
     TilesetStatistics statistics() const;
 
     BuildOptions opt_;
@@ -153,6 +159,10 @@ private:
     std::vector<ScalarQuantization> stored_;  // scalar fields stored, in block order
     std::vector<std::string> attributeNames_;  // LiDAR attributes, opacity and scalar fields stored
     int intensityOffset_ = 0, intensityStep_ = 1;  // stored intensity = (value - offset) / step
+    std::vector<ConstantAttribute> constants_;  // dimensions of one value, in no block
+    std::vector<std::string> leftOut_;           // dimensions the inputs carry and the set does not keep
+    LasSourceInfo las_;                          // what the LAS inputs' headers agree on
+    bool duplicatesKept_ = false;
     // Per orientation rule: the texture of the textured mesh that alone has it
     // (--texture-filter ewa or optimal), else null.
     std::vector<std::shared_ptr<const TextureField>> textureFields_;

@@ -46,7 +46,7 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
     auto first = pts.begin() + long(b), last = pts.begin() + long(e);
     bool identical = std::all_of(first, last, [&](const Surfel& s) { return s.position == first->position; });
     if (e - b <= ctx.options().capacity || key.level >= kMaxLevel || identical) {
-        // Leaf: the input points themselves, exact duplicates merged.
+        // Leaf: the input points themselves, exact duplicates merged unless the set keeps them.
         node->inputPoints = true;
         node->surfels.assign(first, last);
         auto& v = node->surfels;
@@ -72,8 +72,10 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
         });
         // (A point of an update's set that took an added one in stands for a
         // set point still: another set point at its position stays apart.)
-        size_t out = 0;
-        for (size_t i = 0; i < v.size(); ++i) {
+        // A set that keeps every point merges none (sorted all the same: the
+        // same bytes whatever the input order).
+        size_t out = ctx.keepsDuplicates() ? v.size() : 0;
+        for (size_t i = out; i < v.size(); ++i) {
             Surfel& kept = v[out - (out > 0)];
             if (out > 0 && kept.position == v[i].position && !(kept.fromSet && v[i].fromSet)) {
                 kept.count += v[i].count;

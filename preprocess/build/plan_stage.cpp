@@ -18,12 +18,13 @@ namespace {
 
 // A format change bumps its magic, here and in scripts/surfcast-dask, which
 // judges work files whole by them (dask_test fails where the two differ).
-constexpr char kPlanMagic[9] = "SCPLAN06";
-constexpr char kScanMagic[9] = "SCSCAN06";
-// A set's build record of an earlier format, still read for updates: 05
-// without the inputs' lattices (InputDescription::latticeScale), 04 without
-// their coordinate systems either.
-constexpr int kPlanVersion = 6;
+constexpr char kPlanMagic[9] = "SCPLAN07";
+constexpr char kScanMagic[9] = "SCSCAN07";
+// A set's build record of an earlier format, still read for updates: 06
+// without the LAS headers' fields, the fields not decoded and the scalars'
+// finest bits, 05 without the inputs' lattices (InputDescription::latticeScale)
+// either, 04 without their coordinate systems either.
+constexpr int kPlanVersion = 7;
 constexpr int kOldestRecordVersion = 4;
 constexpr char kCountMagic[9] = "SCCOUNT2";
 
@@ -93,6 +94,41 @@ bool getHistogram(ByteReader& r, std::vector<uint64_t>& h) {
     return r.ok();
 }
 
+// A LAS input's header fields and the names of the fields a reader skipped.
+void putLas(ByteWriter& w, const InputDescription& d) {
+    w.put(uint64_t(d.otherScalars.size()));
+    for (const std::string& name : d.otherScalars) w.putString(name);
+    const LasSourceInfo& l = d.las;
+    w.put(uint8_t(l.present));
+    for (int v : {l.pointFormat, l.gpsTimeType, l.creationDay, l.creationYear}) w.put(int32_t(v));
+    w.putString(l.systemIdentifier);
+    w.putString(l.generatingSoftware);
+    w.put(uint64_t(l.crsVlrs.size()));
+    for (const auto& [record, payload] : l.crsVlrs) w.put(record), w.putString(std::string(payload.begin(), payload.end()));
+    w.put(uint64_t(l.extraBytes.size()));
+    for (const std::vector<uint8_t>& e : l.extraBytes) w.putString(std::string(e.begin(), e.end()));
+}
+void getLas(ByteReader& r, InputDescription& d) {
+    d.otherScalars.resize(r.getCount(8));
+    for (std::string& name : d.otherScalars) name = r.getString();
+    LasSourceInfo& l = d.las;
+    l.present = r.get<uint8_t>() != 0;
+    for (int* v : {&l.pointFormat, &l.gpsTimeType, &l.creationDay, &l.creationYear}) *v = r.get<int32_t>();
+    l.systemIdentifier = r.getString();
+    l.generatingSoftware = r.getString();
+    l.crsVlrs.resize(r.getCount(10));
+    for (auto& [record, payload] : l.crsVlrs) {
+        record = r.get<uint16_t>();
+        const std::string bytes = r.getString();
+        payload.assign(bytes.begin(), bytes.end());
+    }
+    l.extraBytes.resize(r.getCount(8));
+    for (std::vector<uint8_t>& e : l.extraBytes) {
+        const std::string bytes = r.getString();
+        e.assign(bytes.begin(), bytes.end());
+    }
+    if (l.present) l.scale = d.latticeScale, l.offset = d.latticeOffset;
+}
 
 void putStats(ByteWriter& w, const InputStats& s) {
     w.put(uint64_t(s.sources.size()));
@@ -115,11 +151,13 @@ void putStats(ByteWriter& w, const InputStats& s) {
         }
         w.put(uint64_t(d.scalars.size()));
         for (const ScalarField& f : d.scalars) putField(w, f);
+        putLas(w, d);
         w.put(src.points);
         w.put(src.skipped);
         putBox(w, src.bounds);
         w.put(src.colorMax);
         w.put(uint8_t(src.colors8Bit));
+        w.put(uint8_t(src.colorsTimes256));
         w.put(src.colorScale);
     }
     w.put(s.points);
@@ -141,6 +179,7 @@ void putStats(ByteWriter& w, const InputStats& s) {
         w.put(f.points);
         w.put(f.min);
         w.put(f.max);
+        w.put(int32_t(f.finestBit));
     }
     w.put(s.largestMeshBytes);
 }
@@ -169,11 +208,13 @@ bool getStats(ByteReader& r, InputStats& s, int version = kPlanVersion) {
         }
         d.scalars.resize(r.getCount(13));
         for (ScalarField& f : d.scalars) f = getField(r);
+        if (version >= 7) getLas(r, d);
         src.points = r.get<uint64_t>();
         src.skipped = r.get<uint64_t>();
         src.bounds = getBox(r);
         src.colorMax = r.get<uint16_t>();
         src.colors8Bit = r.get<uint8_t>() != 0;
+        if (version >= 7) src.colorsTimes256 = r.get<uint8_t>() != 0;
         src.colorScale = r.get<double>();
     }
     s.points = r.get<uint64_t>();
@@ -194,6 +235,7 @@ bool getStats(ByteReader& r, InputStats& s, int version = kPlanVersion) {
         f.points = r.get<uint64_t>();
         f.min = r.get<double>();
         f.max = r.get<double>();
+        if (version >= 7) f.finestBit = r.get<int32_t>();
     }
     s.largestMeshBytes = r.get<uint64_t>();
     return r.ok();

@@ -64,8 +64,8 @@ Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& a
         const auto& h = added.attributes.intensityHistogram;
         const auto lo = std::find_if(h.begin(), h.end(), [](uint64_t n) { return n > 0; }) - h.begin();
         const auto hi = h.rend() - std::find_if(h.rbegin(), h.rend(), [](uint64_t n) { return n > 0; }) - 1;
-        // As BuildContext::chooseAttributes takes a range: (hi - offset) / step under 2^12.
-        const double top = a->offset + a->scale * std::ldexp(1.0, kIntensityBits) - 1;
+        // As BuildContext::chooseAttributes takes a range: (hi - offset) / step within the code's bits.
+        const double top = a->offset + a->scale * std::ldexp(1.0, intensityCodeBits(a->scale)) - 1;
         if (double(lo) < a->offset || double(hi) > top)
             return refuse("hold intensities " + std::to_string(lo) + "-" + std::to_string(hi) + " beyond the set's " +
                           std::to_string(int(a->offset)) + "-" + std::to_string(int(top)));

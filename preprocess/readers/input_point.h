@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "status.h"
+#include "tileset_format.h"
 #include "vec3.h"
 
 namespace surfcast {
@@ -69,6 +70,8 @@ struct InputDescription {
     // declares none or the format has no such field. An update compares it.
     std::string crs;
     std::vector<ScalarField> scalars; // the scalar fields this reader decodes (its ScalarSelection's), in value order
+    std::vector<std::string> otherScalars;  // the file's scalar fields it does not decode, by name
+    LasSourceInfo las;               // a LAS or LAZ file's header fields (las.present); the lattice in latticeScale/Offset
 };
 
 // A streaming reader: never holds the whole file. Points with NaN or infinite

@@ -1,6 +1,7 @@
 #include "inputs.h"
 
 #include <algorithm>
+#include <bit>
 #include <condition_variable>
 #include <filesystem>
 #include <fstream>
@@ -129,6 +130,14 @@ std::string crsName(const std::string& crs) {
     }
     const size_t open = crs.find("[\""), close = open == std::string::npos ? open : crs.find('"', open + 2);
     return close == std::string::npos ? crs.substr(0, 80) : crs.substr(open + 2, close - open - 2);
+}
+
+int finestBitOf(double v) {
+    if (v == 0 || !std::isfinite(v)) return INT_MAX;
+    int e = 0;
+    // v = f · 2^e with 0.5 <= |f| < 1: f's 53 significant bits as an integer.
+    const uint64_t m = uint64_t(std::fabs(std::frexp(v, &e)) * 0x1p53);
+    return e - 53 + std::countr_zero(m);
 }
 
 bool ScalarSelection::wants(const std::string& name) const {
@@ -380,6 +389,7 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
                     // 8-bit values scaled by 257 (v = c·257) or shifted by 8 (v = c·256).
                     uint16_t v = p.color[c];
                     if ((v >> 8) * 257 != v && (v & 0xFF) != 0) s.colors8Bit = false;
+                    if (v & 0xFF) s.colorsTimes256 = false;
                 }
                 if (s.description.hasIntensity) a.intensityHistogram[p.intensity]++;
                 if (s.description.hasClassification) a.classCounts[p.classification]++;
@@ -391,6 +401,7 @@ Result<InputStats> scanInputs(const InputOptions& options, const std::function<v
                     ScalarStats& t = stats.scalars[fields[f]];
                     t.min = std::min(t.min, v);
                     t.max = std::max(t.max, v);
+                    t.finestBit = std::min(t.finestBit, finestBitOf(v));
                     t.points++;
                 }
             }
@@ -437,6 +448,7 @@ InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool
             // under it were 8-bit codes only if they were all 0.
             auto codes8Bit = [](const SourceStats& s) { return s.colorScale == 257 ? s.colorMax == 0 : s.colors8Bit; };
             a.colors8Bit = codes8Bit(a) && codes8Bit(b);
+            a.colorsTimes256 = a.colorsTimes256 && b.colorsTimes256;
             a.colorMax = std::max(a.colorMax, b.colorMax);
             a.colorScale = 1;
             if (a.description.colorBits == 16 && a.colorMax <= 255) {
@@ -473,6 +485,7 @@ InputStats mergeInputStats(std::vector<InputStats> parts, const std::vector<bool
             it->points += f.points;
             it->min = std::min(it->min, f.min);
             it->max = std::max(it->max, f.max);
+            it->finestBit = std::min(it->finestBit, f.finestBit);
         }
     }
     for (const SourceStats& s : all.sources)  // after the joins: a cut file's colours are judged whole
@@ -497,7 +510,7 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
         std::vector<int> from(stored.size(), -1);
         for (size_t f = 0; f < stored.size(); ++f)
             for (size_t j = 0; j < own.size() && !stored[f].provenance; ++j)
-                if (own[j].name == stored[f].name) from[f] = int(j);
+                if (own[j].name == stored[f].name || (stored[f].lowPart && own[j].name + kLowPartSuffix == stored[f].name)) from[f] = int(j);
         while (true) {
             auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
@@ -524,9 +537,20 @@ Status forEachBatch(const InputOptions& options, const InputStats& stats, const 
                 if (from[f] < 0) continue;
                 const ScalarQuantization& q = stored[f];
                 const double maxQ = std::ldexp(1.0, q.bits) - 1;
+                // A wide field's parts: the whole code N of its finest step, split.
+                const ScalarQuantization* wide = q.lowBits ? &q : q.lowPart && f > 0 ? &stored[f - 1] : nullptr;
+                const double fine = wide ? std::ldexp(wide->step, -wide->lowBits) : 0;
+                const double maxN = wide ? std::ldexp(1.0, wide->bits + wide->lowBits) - 1 : 0;
                 for (size_t i = 0; i < *n; ++i) {
                     const double v = reader.scalarValues()[i * own.size() + size_t(from[f])];
-                    if (!std::isnan(v)) scalars[i * stored.size() + f] = uint32_t(std::clamp(std::round((v - q.offset) / q.step), 0.0, maxQ));
+                    if (std::isnan(v)) continue;
+                    uint32_t& out = scalars[i * stored.size() + f];
+                    if (wide) {
+                        const uint64_t all = uint64_t(std::clamp(std::round((v - wide->offset) / fine), 0.0, maxN));
+                        out = uint32_t(q.lowPart ? all & ((uint64_t(1) << wide->lowBits) - 1) : all >> wide->lowBits);
+                    } else {
+                        out = uint32_t(std::clamp(std::round((v - q.offset) / q.step), 0.0, maxQ));
+                    }
                 }
             }
             SC_TRY(consume(std::span<Surfel>(surfels.data(), *n), scalars));

@@ -2,6 +2,7 @@
 // what each input's colours really hold.
 #pragma once
 
+#include <climits>
 #include <cmath>
 #include <functional>
 #include <memory>
@@ -9,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "block_codec.h"
 #include "default_scene.h"
 #include "input_point.h"
 #include "mesh_reader.h"
@@ -71,6 +73,7 @@ struct SourceStats {
     Box3d bounds;
     uint16_t colorMax = 0;      // largest raw colour channel value
     bool colors8Bit = true;     // every channel value is exactly representable in 8 bits
+    bool colorsTimes256 = true; // every channel value is a multiple of 256 (8-bit values shifted)
     double colorScale = 1;      // multiplier to the 16-bit range (LAS files storing 0..255 get 257)
 };
 
@@ -90,23 +93,33 @@ struct ScalarStats {
     ScalarField field;
     uint64_t points = 0;  // with a valid (non-NaN) value
     double min = HUGE_VAL, max = -HUGE_VAL;
+    // The exponent of the finest bit any value sets (v = m · 2^e with m an
+    // odd integer: the least e); every value is a multiple of 2^finestBit.
+    int finestBit = INT_MAX;
 };
+
+// The least e with v = m · 2^e for an integer m (INT_MAX for 0).
+int finestBitOf(double v);
 
 // How a stored scalar field maps to the integers blocks carry:
 // q = round((v - offset) / step), clamped to [0, 2^bits - 1]. A point without
-// a valid value (NaN, or an input without the field) gets 0.
+// a valid value (NaN, or an input without the field) gets 0. A field exact
+// in more than 32 bits is two of them (docs/FORMAT.md, "Scalar attributes"):
+// with N = round((v - offset) / (step / 2^lowBits)), this one holds N >> lowBits
+// and the next, "<name>:low" (lowPart; offset 0), N's lowBits lowest bits.
 struct ScalarQuantization {
     std::string name;
     bool categorical = false;
     double offset = 0, step = 1;
     int bits = 1;
+    int lowBits = 0;
+    bool lowPart = false;
     // The set's provenance (docs/FORMAT.md, "Provenance"): each point's input,
     // which forEachBatch fills in, not a field of the inputs.
     bool provenance = false;
 };
-// The provenance attribute's name (reserved: an input's own field of this
-// name is not stored beside it).
-inline constexpr const char* kProvenanceAttribute = "input";
+// The suffix of a wide field's low part (ScalarQuantization::lowPart).
+inline constexpr const char* kLowPartSuffix = ":low";
 
 struct InputStats {
     std::vector<SourceStats> sources;

@@ -40,26 +40,26 @@ constexpr uint16_t kExtraBytesRecord = 4;
 constexpr size_t kExtraBytesDescriptor = 192;
 constexpr char kProjectionUser[] = "LASF_Projection";
 constexpr uint16_t kWktRecord = 2112, kGeoKeysRecord = 34735, kGeoDoublesRecord = 34736, kGeoAsciiRecord = 34737;
-// GPS time is a double with no step of its own: it is stored to 2^-20 s
-// (0.95 µs), the pulse spacing of a 1 MHz scanner.
-constexpr double kGpsTimeResolution = 0x1p-20;  // bytes per dimension in the Extra Bytes VLR (LAS 1.4 R15, table 24)
 
-// Bytes each point format needs before any extra bytes, and where RGB starts
-// (0 when the format has no colour).
-struct FormatLayout { size_t minLength; size_t rgbOffset; };
-constexpr FormatLayout kFormats[11] = {
-    {20, 0}, {28, 0}, {26, 20}, {34, 28}, {57, 0}, {63, 28}, {30, 0}, {36, 30}, {38, 30}, {59, 0}, {67, 30}};
+// Bytes each point format needs before any extra bytes, where RGB starts (0
+// when the format has no colour), and where the wave packet starts (0: none).
+struct FormatLayout { size_t minLength; size_t rgbOffset; size_t wavePacket; };
+constexpr FormatLayout kFormats[11] = {{20, 0, 0},  {28, 0, 0},  {26, 20, 0}, {34, 28, 0},  {57, 0, 28}, {63, 28, 34},
+                                       {30, 0, 0},  {36, 30, 0}, {38, 30, 0}, {59, 0, 30}, {67, 30, 38}};
 
 // A per-point scalar field's place in the record and its decoding:
 // value = raw · scale + offset, NaN where raw equals the no-data value.
+// Bit fields (flags packed in a byte) take `bits` bits from bit `shift` of a U8.
 struct ScalarLayout {
     enum Type { U8, I8, U16, I16, U32, I32, U64, I64, F32, F64 } type = U8;
     size_t offset = 0;
     double scale = 1, add = 0;
     bool hasNoData = false;
     double noData = 0;
+    int shift = 0, bits = 0;  // bits 0: the whole value
 };
 
+// Bytes per data type of the Extra Bytes VLR (LAS 1.4 R15, table 24).
 constexpr size_t kTypeSize[] = {1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
 
 double rawValue(const uint8_t* p, ScalarLayout::Type t) {
@@ -186,7 +186,7 @@ public:
             }
             double* values = scalarValues_.data() + n * scalars_.size();
             for (const ScalarLayout& f : scalars_) {
-                const double raw = rawValue(r + f.offset, f.type);
+                const double raw = f.bits ? double(r[f.offset] >> f.shift & ((1 << f.bits) - 1)) : rawValue(r + f.offset, f.type);
                 *values++ = f.hasNoData && raw == f.noData ? NAN : raw * f.scale + f.add;
             }
             ++n;
@@ -290,7 +290,7 @@ std::string crsOf(const Vlrs& v) {
 // name the VLR; deprecated array and undocumented dimensions are skipped (their
 // bytes still counted).
 Status scalarFields(const std::string& path, int format, size_t recordLength, const Vlrs& vlrs,
-                    std::vector<std::pair<ScalarField, ScalarLayout>>* out) {
+                    std::vector<std::pair<ScalarField, ScalarLayout>>* out, std::vector<std::vector<uint8_t>>* descriptors) {
     auto add = [&](const char* name, bool categorical, double resolution, ScalarLayout::Type type, size_t offset, double scale) {
         ScalarLayout l;
         l.type = type;
@@ -298,17 +298,45 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
         l.scale = scale;
         out->push_back({{name, categorical, resolution}, l});
     };
+    auto addBits = [&](const char* name, size_t offset, int shift, int bits) {
+        ScalarLayout l;
+        l.offset = offset;
+        l.shift = shift;
+        l.bits = bits;
+        out->push_back({{name, true, 1}, l});
+    };
+    // GPS time and the waveform's floats are stored exactly where the set's
+    // range allows (resolution 0: BuildContext::chooseAttributes).
     if (format < 6) {
         add("scan_angle", false, 1, ScalarLayout::I8, 16, 1);  // the rank, whole degrees
         add("user_data", true, 1, ScalarLayout::U8, 17, 1);
         add("point_source_id", true, 1, ScalarLayout::U16, 18, 1);
-        if (format == 1 || format >= 3) add("gps_time", false, kGpsTimeResolution, ScalarLayout::F64, 20, 1);
+        if (format == 1 || format >= 3) add("gps_time", false, 0, ScalarLayout::F64, 20, 1);
+        // Table 7: byte 15's bits 5-7 are LAS 1.4's flag bits 0-2 (synthetic, key point, withheld).
+        addBits("classification_flags", 15, 5, 3);
+        addBits("scan_direction_flag", 14, 6, 1);
+        addBits("edge_of_flight_line", 14, 7, 1);
     } else {
         add("scan_angle", false, 0.006, ScalarLayout::I16, 18, 0.006);  // 0.006 degree units
         add("user_data", true, 1, ScalarLayout::U8, 17, 1);
         add("point_source_id", true, 1, ScalarLayout::U16, 20, 1);
-        add("gps_time", false, kGpsTimeResolution, ScalarLayout::F64, 22, 1);
+        add("gps_time", false, 0, ScalarLayout::F64, 22, 1);
         if (format == 8 || format == 10) add("nir", false, 1, ScalarLayout::U16, 36, 1);
+        // Table 13: byte 15 holds the flags (synthetic, key point, withheld, overlap) in
+        // bits 0-3, the scanner channel in 4-5, scan direction 6, edge of flight line 7.
+        addBits("classification_flags", 15, 0, 4);
+        addBits("scan_channel", 15, 4, 2);
+        addBits("scan_direction_flag", 15, 6, 1);
+        addBits("edge_of_flight_line", 15, 7, 1);
+    }
+    if (const size_t w = kFormats[format].wavePacket) {  // tables 12, 16: the wave packet's fields
+        add("wavepacket_index", true, 1, ScalarLayout::U8, w, 1);
+        add("wavepacket_offset", false, 1, ScalarLayout::U64, w + 1, 1);
+        add("wavepacket_size", false, 1, ScalarLayout::U32, w + 9, 1);
+        add("return_point_wave_location", false, 0, ScalarLayout::F32, w + 13, 1);
+        add("x_t", false, 0, ScalarLayout::F32, w + 17, 1);
+        add("y_t", false, 0, ScalarLayout::F32, w + 21, 1);
+        add("z_t", false, 0, ScalarLayout::F32, w + 25, 1);
     }
     if (!vlrs.extraBytes) return {};
     const std::vector<uint8_t>& v = *vlrs.extraBytes;
@@ -346,6 +374,7 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
                 l.hasNoData = (options & 1) != 0;
                 const bool integral = l.type < ScalarLayout::F32;
                 out->push_back({{name, false, integral ? std::fabs(l.scale) : 0}, l});
+                descriptors->emplace_back(e, e + kExtraBytesDescriptor);
             }
         } else if (type != 0) {
             std::fprintf(stderr, "warning: %s: deprecated array type %d; skipped\n", dim.c_str(), type);
@@ -368,7 +397,12 @@ struct LasHeader {
     uint64_t count = 0;
     double scale[3] = {}, offset[3] = {};
     Vlrs vlrs;
+    LasSourceInfo source;  // the fields an export gives back (all but the lattice, the CRS and the extra bytes)
 };
+
+std::string headerText(const uint8_t* at, size_t size) {
+    return std::string(reinterpret_cast<const char*>(at), strnlen(reinterpret_cast<const char*>(at), size));
+}
 
 // Reads and checks `in`'s header and VLRs.
 Result<LasHeader> readLasHeader(ByteStream& in) {
@@ -387,6 +421,13 @@ Result<LasHeader> readLasHeader(ByteStream& in) {
     l.count = le::get<uint32_t>(h + 107);
     l.compressed = (formatId & kCompressedBits) != 0;
     l.format = formatId & 0x3F;
+    l.source.present = true;
+    l.source.pointFormat = l.format;
+    l.source.gpsTimeType = le::get<uint16_t>(h + 6) & 1;
+    l.source.systemIdentifier = headerText(h + 26, 32);
+    l.source.generatingSoftware = headerText(h + 58, 32);
+    l.source.creationDay = le::get<uint16_t>(h + 90);
+    l.source.creationYear = le::get<uint16_t>(h + 92);
     if (l.format > 10) return Status::error(path + ": byte 104: unknown point data format " + std::to_string(l.format));
     if (l.recordLength < kFormats[l.format].minLength)
         return Status::error(path + ": byte 105: record length " + std::to_string(l.recordLength) + " is shorter than format " +
@@ -463,14 +504,22 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.latticeOffset = {l.offset[0], l.offset[1], l.offset[2]};
     desc.crs = crsOf(l.vlrs);
     desc.airborne = true;
+    desc.las = l.source;
+    desc.las.scale = desc.latticeScale;
+    desc.las.offset = desc.latticeOffset;
+    for (const auto& [record, payload] : {std::pair{kWktRecord, &l.vlrs.wkt}, {kGeoKeysRecord, &l.vlrs.geoKeys},
+                                          {kGeoDoublesRecord, &l.vlrs.geoDoubles}, {kGeoAsciiRecord, &l.vlrs.geoAscii}})
+        if (*payload) desc.las.crsVlrs.push_back({record, **payload});
 
     std::vector<std::pair<ScalarField, ScalarLayout>> fields;
-    SC_TRY(scalarFields(path, l.format, l.recordLength, l.vlrs, &fields));
+    SC_TRY(scalarFields(path, l.format, l.recordLength, l.vlrs, &fields, &desc.las.extraBytes));
     std::vector<ScalarLayout> layouts;
     for (auto& [field, layout] : fields)
         if (scalars.wants(field.name)) {
             desc.scalars.push_back(field);
             layouts.push_back(layout);
+        } else {
+            desc.otherScalars.push_back(field.name);
         }
 
     std::unique_ptr<RecordSource> source;

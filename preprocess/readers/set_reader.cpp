@@ -1,6 +1,8 @@
 // A tile set's leaves as input points (set_reader.h).
 #include "set_reader.h"
 
+#include <cstring>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -35,10 +37,37 @@ public:
         }
         for (const AttributeInfo& a : info.attributes) {
             if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) != std::end(kFixedAttributes) ||
-                lidarIndex(a.name) >= 0 || a.name == kOpacityAttribute || a.name == kProvenanceAttribute || !scalars.wants(a.name))
+                lidarIndex(a.name) >= 0 || a.name == kOpacityAttribute || a.name == kProvenanceAttribute ||
+                (a.name.ends_with(kLowPartSuffix) && info.attribute(a.name.substr(0, a.name.size() - std::strlen(kLowPartSuffix)))))
                 continue;
-            desc_.scalars.push_back({a.name, a.kind == "categorical", a.scale});
+            // A wide field is its two parts' sum, at its low part's step (ScalarQuantization).
+            const AttributeInfo* low = info.attribute(a.name + kLowPartSuffix);
+            if (!scalars.wants(a.name)) {
+                desc_.otherScalars.push_back(a.name);
+                continue;
+            }
+            desc_.scalars.push_back({a.name, a.kind == "categorical", low ? low->scale : a.scale});
             fields_.push_back(&a);
+            lows_.push_back(low);
+        }
+        // The set's constants: a value of every point.
+        for (const ConstantAttribute& c : info.constants) {
+            const int lidar = lidarIndex(c.name);
+            if (lidar >= 0) {
+                constantLidar_[lidar] = c.value;
+                (lidar == kLidarIntensity ? desc_.hasIntensity : lidar == kLidarClassification ? desc_.hasClassification : desc_.hasReturns) = true;
+            } else if (scalars.wants(c.name)) {
+                desc_.scalars.push_back({c.name, false, 0});
+                constants_.push_back(c.value);
+            } else {
+                desc_.otherScalars.push_back(c.name);
+            }
+        }
+        for (const std::string& name : info.leftOut) desc_.otherScalars.push_back(name);
+        desc_.las = info.las;
+        if (info.las.scale.x > 0) {  // an update's decoded leaves snap to the lattice (InputDescription::latticeScale)
+            desc_.latticeScale = info.las.scale;
+            desc_.latticeOffset = info.las.offset;
         }
     }
 
@@ -67,16 +96,21 @@ public:
                 for (int k = 0; k < 3; ++k) p.color[k] = uint16_t(block_.colors[3 * i + k] * (set_.info().colorBits == 8 ? 257 : 1));
             // Stored as (value - offset) / scale: the value again (the top
             // step's can pass 65535, which a build clamps to the top too).
-            if (intensity_ && !block_.intensity.empty())
-                p.intensity = uint16_t(std::clamp(std::lround(block_.intensity[i] * intensity_->scale + intensity_->offset), 0l, 65535l));
-            if (!block_.classification.empty()) p.classification = block_.classification[i];
-            p.returns = uint8_t((block_.returnNumber.empty() ? 0 : block_.returnNumber[i] & 15) |
-                                (block_.numberOfReturns.empty() ? 0 : block_.numberOfReturns[i] << 4));
+            p.intensity = uint16_t(std::clamp(intensity_ && !block_.intensity.empty()
+                                                  ? std::lround(block_.intensity[i] * intensity_->scale + intensity_->offset)
+                                                  : std::lround(constantLidar_[kLidarIntensity]), 0l, 65535l));
+            p.classification = block_.classification.empty() ? uint8_t(constantLidar_[kLidarClassification]) : block_.classification[i];
+            const int ret = block_.returnNumber.empty() ? int(constantLidar_[kLidarReturnNumber]) : block_.returnNumber[i];
+            const int count = block_.numberOfReturns.empty() ? int(constantLidar_[kLidarNumberOfReturns]) : block_.numberOfReturns[i];
+            p.returns = uint8_t((ret & 15) | count << 4);
             if (!block_.opacity.empty()) p.alpha = block_.opacity[i];
-            for (size_t f = 0; f < fields_.size(); ++f)
-                scalarValues_.push_back(scalarIndex_[f] < 0 ? NAN
-                                                            : block_.scalars[size_t(scalarIndex_[f])].values[i] * fields_[f]->scale +
-                                                                  fields_[f]->offset);
+            for (size_t f = 0; f < fields_.size(); ++f) {
+                const int k = scalarIndex_[f], low = lowIndex_[f];
+                scalarValues_.push_back(k < 0 ? NAN
+                                              : block_.scalars[size_t(k)].values[i] * fields_[f]->scale + fields_[f]->offset +
+                                                    (low < 0 ? 0.0 : block_.scalars[size_t(low)].values[i] * lows_[f]->scale));
+            }
+            scalarValues_.insert(scalarValues_.end(), constants_.begin(), constants_.end());
         }
         return n;
     }
@@ -89,21 +123,27 @@ private:
         block_ = std::move(*block);
         at_ = 0;
         scalarIndex_.assign(fields_.size(), -1);
+        lowIndex_.assign(fields_.size(), -1);
         for (size_t f = 0; f < fields_.size(); ++f)
-            for (size_t k = 0; k < block_.scalars.size(); ++k)
+            for (size_t k = 0; k < block_.scalars.size(); ++k) {
                 if (block_.scalars[k].name == fields_[f]->name) scalarIndex_[f] = int(k);
+                if (lows_[f] && block_.scalars[k].name == lows_[f]->name) lowIndex_[f] = int(k);
+            }
         return {};
     }
 
     TilesetReader set_;
     InputDescription desc_;
     std::vector<size_t> leaves_;                // indices in set_.nodes() of the input-point nodes
-    std::vector<const AttributeInfo*> fields_;  // per desc_.scalars, in set_.info()
+    std::vector<const AttributeInfo*> fields_;  // per stored field of desc_.scalars, in set_.info()
+    std::vector<const AttributeInfo*> lows_;    // per field: its low part, or null
+    std::vector<double> constants_;             // the constant fields' values, after the stored ones in desc_.scalars
+    double constantLidar_[kLidarCount] = {0, 0, 1, 1};  // a LiDAR attribute's value where the set stores none
     const AttributeInfo* intensity_ = nullptr;
     const NodeRecord* node_ = nullptr;
     BlockData block_;
     size_t next_ = 0, at_ = 0;
-    std::vector<int> scalarIndex_;  // per field: its index in block_.scalars, or -1
+    std::vector<int> scalarIndex_, lowIndex_;  // per field: its (low part's) index in block_.scalars, or -1
 };
 
 }  // namespace

@@ -85,8 +85,12 @@ def main():
         "same": {},
     }
     dims = set(o.point_format.dimension_names)
-    if "scan_angle_rank" in dims and len(found):  # whole degrees (formats 0-5) against 0.006-degree units
-        result["scan_angle_error"] = float(np.abs(np.asarray(o.scan_angle_rank)[matched] - np.asarray(e.scan_angle)[found] * 0.006).max())
+    def degrees(points, index):  # whole degrees (formats 0-5) or 0.006-degree units (6-10)
+        if "scan_angle_rank" in points.point_format.dimension_names:
+            return np.asarray(points.scan_angle_rank)[index].astype(np.float64)
+        return np.asarray(points.scan_angle)[index] * 0.006
+    if len(found):
+        result["scan_angle_error"] = float(np.abs(degrees(o, matched) - degrees(e, found)).max())
     for d in ["intensity", "classification", "return_number", "number_of_returns", "user_data", "gps_time", "red", "green", "blue"]:
         if d not in dims or not len(found):
             continue
