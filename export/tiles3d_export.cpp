@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <set>
 #include <unordered_map>
 
@@ -81,8 +83,11 @@ public:
         accessors_[size_t(a)]["bufferView"] = view;
         return a;
     }
-    // A view of opaque bytes an extension decodes (no vertex target).
-    int blobView(const std::vector<uint8_t>& bytes) {
+    // A view of opaque bytes an extension decodes (no vertex target), at a
+    // multiple of `align` bytes (a property table's values align to their
+    // component's size).
+    int blobView(const std::vector<uint8_t>& bytes, size_t align = 4) {
+        bin_.resize((bin_.size() + align - 1) / align * align, 0);
         views_.push_back({{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", bytes.size()}});
         append(bytes);
         return int(views_.size() - 1);
@@ -155,35 +160,168 @@ void put(std::vector<uint8_t>& bytes, size_t at, T value) {
     le::put<T>(bytes.data() + at, value);
 }
 
-// A block's LiDAR attributes, where it has them: the metadata property and
-// the vertex attribute names, and the values, little-endian, `size` bytes each.
-struct LidarColumn {
-    const char *property, *attribute;
+// One attribute of a block as glTF metadata: a property of the class
+// "surfel", its values little-endian, `size` bytes each, as `schema` (the
+// class property) declares them.
+struct MetadataColumn {
+    std::string property;   // the property ID
+    const char* attribute;  // points: the vertex attribute holding it; nullptr: a property table column
+    json schema;
     size_t size;
     std::vector<uint8_t> values;
 };
-std::vector<LidarColumn> lidarColumns(const BlockData& b) {
-    std::vector<LidarColumn> out;
-    const auto add = [&](const char* property, const char* attribute, const auto& values) {
-        if (values.empty()) return;
-        LidarColumn c{property, attribute, sizeof(values[0]), {}};
-        c.values.resize(values.size() * c.size);
-        for (size_t i = 0; i < values.size(); ++i)
-            if (c.size == 2) le::put<uint16_t>(&c.values[2 * i], values[i]);
-            else c.values[i] = uint8_t(values[i]);
-        out.push_back(std::move(c));
+
+// 3D Metadata's integer type of `bytes` bytes, signed or not.
+std::string integerType(bool isSigned, size_t bytes) { return (isSigned ? "INT" : "UINT") + std::to_string(8 * bytes); }
+
+// A column of values v_i (integers), each clamped to the type's range and
+// written in its `bytes` little-endian bytes (two's complement where signed).
+MetadataColumn integerColumn(std::string property, const char* attribute, bool isSigned, size_t bytes, size_t n,
+                             const std::function<double(size_t)>& value) {
+    const double span = std::ldexp(1.0, int(8 * bytes)), lo = isSigned ? -span / 2 : 0, hi = (isSigned ? span / 2 : span) - 1;
+    MetadataColumn c{std::move(property), attribute, {{"type", "SCALAR"}, {"componentType", integerType(isSigned, bytes)}}, bytes, {}};
+    c.values.resize(n * bytes);
+    for (size_t i = 0; i < n; ++i) {
+        const uint64_t v = uint64_t(int64_t(std::clamp(std::round(value(i)), lo, hi)));
+        for (size_t k = 0; k < bytes; ++k) c.values[i * bytes + k] = uint8_t(v >> (8 * k));
+    }
+    return c;
+}
+
+// A column of doubles (FLOAT64), v_i each.
+MetadataColumn float64Column(std::string property, size_t n, const std::function<double(size_t)>& value) {
+    MetadataColumn c{std::move(property), nullptr, {{"type", "SCALAR"}, {"componentType", "FLOAT64"}}, sizeof(double), {}};
+    c.values.resize(n * sizeof(double));
+    for (size_t i = 0; i < n; ++i) le::put<double>(&c.values[i * sizeof(double)], value(i));
+    return c;
+}
+
+// The suffix of a wide scalar field's low part (docs/FORMAT.md, "Scalar
+// attributes"; the build's ScalarQuantization::lowPart).
+constexpr const char* kWideLowSuffix = ":low";
+
+// A property ID (3D Metadata: [A-Za-z_][A-Za-z0-9_]*, unique in its class)
+// for an attribute's name: other characters become '_', and a name taken
+// already gets a number.
+std::string propertyId(const std::string& name, std::set<std::string>& taken) {
+    std::string base = name.empty() || std::isdigit(uint8_t(name[0])) ? "_" + name : name;
+    for (char& ch : base)
+        if (!std::isalnum(uint8_t(ch)) && ch != '_') ch = '_';
+    std::string id = base;
+    for (int k = 2; taken.count(id); ++k) id = base + "_" + std::to_string(k);
+    taken.insert(id);
+    return id;
+}
+
+// A block's LiDAR and scalar attributes as metadata: the values, never the
+// stored codes (value = stored · scale + offset, AttributeInfo).
+// - LiDAR attributes: the value in the LAS type the set keeps them in
+//   (intensity UINT16, the others UINT8), as points' vertex attributes. The
+//   top intensity step's value can pass 65535 by rounding: it clamps, as the
+//   LAS export clamps it.
+// - Categorical scalars: the value, in the narrowest integer type holding
+//   every value the stored bits can give.
+// - Continuous scalars: the stored integer, normalized, with the property's
+//   `offset` and `scale` (3D Metadata allows them on normalized integers:
+//   value = offset + scale · stored / (2^bits − 1)), so the consumer reads
+//   the value the set holds in as few bytes as the set keeps it.
+// - A wide field, stored as a top part and "<name>:low" (more than 32
+//   bits): one FLOAT64 property of the value, stored · scale + offset +
+//   low · low's scale, as the LAS export computes it.
+// Points keep scalars in a property table: a 32-bit integer is no vertex attribute.
+std::vector<MetadataColumn> metadataColumns(const TilesetInfo& info, const BlockData& b) {
+    std::vector<MetadataColumn> out;
+    std::set<std::string> taken;
+    const size_t n = b.size();
+    const auto lidar = [&](const char* property, const char* attribute, const auto& codes) {
+        if (codes.empty()) return;
+        const AttributeInfo* a = info.attribute(property);
+        const double scale = a ? a->scale : 1, offset = a ? a->offset : 0;
+        taken.insert(property);
+        out.push_back(integerColumn(property, attribute, false, sizeof(codes[0]), n, [&](size_t i) { return codes[i] * scale + offset; }));
     };
-    add("intensity", "_INTENSITY", b.intensity);
-    add("classification", "_CLASSIFICATION", b.classification);
-    add("return_number", "_RETURN_NUMBER", b.returnNumber);
-    add("number_of_returns", "_NUMBER_OF_RETURNS", b.numberOfReturns);
+    lidar("intensity", "_INTENSITY", b.intensity);
+    lidar("classification", "_CLASSIFICATION", b.classification);
+    lidar("return_number", "_RETURN_NUMBER", b.returnNumber);
+    lidar("number_of_returns", "_NUMBER_OF_RETURNS", b.numberOfReturns);
+    const auto scalar = [&](const std::string& name) -> const ScalarAttribute* {
+        for (const ScalarAttribute& s : b.scalars)
+            if (s.name == name && s.values.size() == n) return &s;  // decodeBlock fills every listed one
+        return nullptr;
+    };
+    const size_t suffix = std::strlen(kWideLowSuffix);
+    for (const ScalarAttribute& s : b.scalars) {
+        const AttributeInfo* a = info.attribute(s.name);
+        const bool lowPart = s.name.ends_with(kWideLowSuffix) && info.attribute(s.name.substr(0, s.name.size() - suffix));
+        if (!a || s.values.size() != n || lowPart) continue;  // a low part goes with its top part
+        const std::string id = propertyId(s.name, taken);
+        const double top = std::ldexp(1.0, s.bits) - 1;  // the largest stored integer
+        const AttributeInfo* lowInfo = info.attribute(s.name + kWideLowSuffix);
+        if (const ScalarAttribute* low = lowInfo ? scalar(s.name + kWideLowSuffix) : nullptr) {
+            out.push_back(float64Column(id, n, [&](size_t i) { return s.values[i] * a->scale + a->offset + low->values[i] * lowInfo->scale; }));
+        } else if (a->kind == "categorical") {
+            // The values span offset .. offset + scale · top.
+            const double lo = std::min(a->offset, a->offset + a->scale * top), hi = std::max(a->offset, a->offset + a->scale * top);
+            const auto fits = [&](size_t bytes) {
+                const double half = std::ldexp(1.0, int(8 * bytes) - 1);
+                return lo < 0 ? lo >= -half && hi < half : hi < 2 * half;
+            };
+            size_t bytes = 1;
+            while (bytes < 8 && !fits(bytes)) bytes *= 2;
+            out.push_back(integerColumn(id, nullptr, lo < 0, bytes, n, [&](size_t i) { return s.values[i] * a->scale + a->offset; }));
+        } else {
+            MetadataColumn c = integerColumn(id, nullptr, false, size_t(s.bits / 8), n, [&](size_t i) { return double(s.values[i]); });
+            c.schema["normalized"] = true;
+            c.schema["offset"] = a->offset;
+            c.schema["scale"] = a->scale * top;
+            out.push_back(std::move(c));
+        }
+        if (id != s.name) out.back().schema["name"] = s.name;
+    }
     return out;
 }
+
 // EXT_structural_metadata's schema of those columns: the class "surfel".
-json lidarSchema(const std::vector<LidarColumn>& columns) {
+json surfelSchema(const std::vector<MetadataColumn>& columns) {
     json properties;
-    for (const LidarColumn& c : columns) properties[c.property] = {{"type", "SCALAR"}, {"componentType", c.size == 2 ? "UINT16" : "UINT8"}};
+    for (const MetadataColumn& c : columns) properties[c.property] = c.schema;
     return {{"id", "surfcast"}, {"classes", {{"surfel", {{"properties", properties}}}}}};
+}
+
+// The glTF's EXT_structural_metadata for a primitive of n surfels (null
+// without columns): the schema, the columns with a vertex attribute as a
+// property attribute (their accessors added to `attributes`, each in 4-byte
+// slots: glTF aligns every vertex attribute's elements to 4 bytes, and the
+// codec takes the padding out), the others as a property table whose rows
+// are the surfels' implicit feature IDs, their vertex indices
+// (EXT_mesh_features). Sets the primitive's extensions and adds the glTF
+// extensions it uses to `used`.
+json surfelMetadata(GlbBuilder& glb, const std::vector<MetadataColumn>& columns, size_t n, json& primitive, json& attributes,
+                    std::vector<std::string>& used) {
+    if (columns.empty()) return nullptr;
+    json metadata = {{"schema", surfelSchema(columns)}}, attributeProperties, tableProperties;
+    for (const MetadataColumn& c : columns) {
+        if (!c.attribute) {
+            tableProperties[c.property] = {{"values", glb.blobView(c.values, c.size)}};
+            continue;
+        }
+        assert(c.size == 1 || c.size == 2);
+        std::vector<uint8_t> bytes(4 * n, 0);
+        for (size_t i = 0; i < n; ++i) std::memcpy(&bytes[4 * i], &c.values[i * c.size], c.size);
+        attributes[c.attribute] = glb.accessor(glb.view(bytes, n, 4), c.size == 2 ? kUnsignedShort : kUnsignedByte, false, "SCALAR", n);
+        attributeProperties[c.property] = {{"attribute", c.attribute}};
+    }
+    if (!attributeProperties.is_null()) {
+        metadata["propertyAttributes"] = json::array({{{"class", "surfel"}, {"properties", attributeProperties}}});
+        primitive["extensions"]["EXT_structural_metadata"] = {{"propertyAttributes", {0}}};
+    }
+    if (!tableProperties.is_null()) {
+        metadata["propertyTables"] = json::array({{{"class", "surfel"}, {"count", n}, {"properties", tableProperties}}});
+        primitive["extensions"]["EXT_mesh_features"] = {{"featureIds", json::array({{{"featureCount", n}, {"propertyTable", 0}}})}};
+        used.push_back("EXT_mesh_features");
+    }
+    used.push_back("EXT_structural_metadata");
+    return metadata;
 }
 
 // The glTF extensions a point tile's glb uses; all but the unlit material and
@@ -257,27 +395,11 @@ Result<std::vector<uint8_t>> nodeGlb(const TilesetReader& set, const NodeRecord&
         attributes["COLOR_0"] = glb.accessor(glb.view(colors, n, 8), kUnsignedShort, true, "VEC4", n);
     }
 
-    const std::vector<LidarColumn> lidar = lidarColumns(b);
-    json metadata;  // EXT_structural_metadata's schema and property attributes, where LiDAR attributes are
     json primitive = {{"mode", kPoints}, {"material", 0}};
     const std::vector<std::string> required = pointExtensions(compression);
     std::vector<std::string> used = required;
     used.push_back("KHR_materials_unlit");
-    if (!lidar.empty()) {
-        // Each in 4-byte slots: glTF aligns every vertex attribute's elements
-        // to 4 bytes (the codec takes the padding out).
-        json properties;
-        for (const LidarColumn& l : lidar) {
-            std::vector<uint8_t> bytes(4 * n, 0);
-            for (size_t i = 0; i < n; ++i) std::memcpy(&bytes[4 * i], &l.values[i * l.size], l.size);
-            attributes[l.attribute] = glb.accessor(glb.view(bytes, n, 4), l.size == 2 ? kUnsignedShort : kUnsignedByte, false, "SCALAR", n);
-            properties[l.property] = {{"attribute", l.attribute}};
-        }
-        metadata = {{"schema", lidarSchema(lidar)},
-                    {"propertyAttributes", json::array({{{"class", "surfel"}, {"properties", properties}}})}};
-        primitive["extensions"]["EXT_structural_metadata"] = {{"propertyAttributes", {0}}};
-        used.push_back("EXT_structural_metadata");
-    }
+    const json metadata = surfelMetadata(glb, metadataColumns(info, b), n, primitive, attributes, used);
     primitive["attributes"] = attributes;
 
     usedByAll->insert(used.begin(), used.end());
@@ -327,19 +449,12 @@ Result<std::vector<uint8_t>> splatGlb(const TilesetReader& set, const NodeRecord
                          {{"kernel", "ellipse"},
                           {"colorSpace", "srgb_rec709_display"},
                           {"extensions", {{"KHR_gaussian_splatting_compression_spz_2", {{"bufferView", view}}}}}}}}}};
-    // LiDAR attributes as a property table, a row per splat: every attribute
-    // of an SPZ primitive is read from the SPZ (CesiumJS), so the rows are
-    // the splats' implicit feature IDs (their vertex indices, EXT_mesh_features).
+    // The metadata as a property table, a row per splat: every attribute of
+    // an SPZ primitive is read from the SPZ (CesiumJS).
     std::vector<std::string> used = kSplatExtensions;
-    json metadata;
-    if (const std::vector<LidarColumn> lidar = lidarColumns(b); !lidar.empty()) {
-        json properties;
-        for (const LidarColumn& l : lidar) properties[l.property] = {{"values", glb.blobView(l.values)}};
-        metadata = {{"schema", lidarSchema(lidar)},
-                    {"propertyTables", json::array({{{"class", "surfel"}, {"count", n}, {"properties", properties}}})}};
-        primitive["extensions"]["EXT_mesh_features"] = {{"featureIds", json::array({{{"featureCount", n}, {"propertyTable", 0}}})}};
-        used.insert(used.end(), {"EXT_mesh_features", "EXT_structural_metadata"});
-    }
+    std::vector<MetadataColumn> columns = metadataColumns(set.info(), b);
+    for (MetadataColumn& c : columns) c.attribute = nullptr;
+    const json metadata = surfelMetadata(glb, columns, n, primitive, primitive["attributes"], used);
     usedByAll->insert(used.begin(), used.end());
     json gltf = gltfOf(node, translation(toYUp(centre - origin)), primitive, used, kSplatExtensions);  // the Gaussians are y-up already
     if (!metadata.is_null()) gltf["extensions"]["EXT_structural_metadata"] = metadata;
@@ -406,7 +521,7 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
     for (size_t i = 0; i < nodes.size(); ++i) {
         const NodeRecord& n = nodes[i];
         if (n.surfelCount > 0) {
-            auto block = set.readBlock(n);
+            auto block = set.readBlock(n, /*scalars=*/true);
             if (!block) return block.status();
             SC_TRY(checkFiniteSurfels(set, n, *block));
             const Vec3d centre = (boxes[i].min + boxes[i].max) * 0.5;
@@ -479,6 +594,24 @@ Result<Tiles3dReport> writeTiles3d(const TilesetReader& set, const Tiles3dOption
                     {"geometricError", std::max(rootError, 0.0)},
                     {"root", r}};
     if (implicit) tileset["schema"] = implicitTileSchema();
+    if (!info.constants.empty()) {
+        // The set's constants (dimensions of one value over the set, in no
+        // block) as 3D Tiles 1.1 tileset metadata: properties of the schema's
+        // class "set", FLOAT64 (the set keeps a constant as a number without
+        // a type, which FLOAT64 holds as it is).
+        json& schema = tileset["schema"];
+        if (schema.is_null()) schema = {{"id", kTilesetSchemaId}, {"classes", json::object()}};
+        json properties, values;
+        std::set<std::string> taken;
+        for (const ConstantAttribute& c : info.constants) {
+            const std::string id = propertyId(c.name, taken);
+            properties[id] = {{"type", "SCALAR"}, {"componentType", "FLOAT64"}};
+            if (id != c.name) properties[id]["name"] = c.name;
+            values[id] = c.value;
+        }
+        schema["classes"]["set"] = {{"properties", properties}};
+        tileset["metadata"] = {{"class", "set"}, {"properties", values}};
+    }
     // The glTF extensions the content needs, where engines look for them.
     const bool splats = options.as == Tiles3dOptions::As::Splats;
     tileset["extensionsUsed"] = tileset["extensionsRequired"] = {"3DTILES_content_gltf"};

@@ -17,7 +17,8 @@
 // - Points: each surfel a glTF point with NORMAL and COLOR_0 (linear, as
 //   glTF defines it, 16 bits a channel, alpha its opacity), unlit; the
 //   classification, intensity and return numbers, where the set has them,
-//   as EXT_structural_metadata property attributes (class "surfel").
+//   as EXT_structural_metadata property attributes (class "surfel"), the
+//   scalar attributes as a property table of it.
 //   Positions are the block's own integers (KHR_mesh_quantization), and the
 //   vertex data is compressed by meshoptimizer (EXT_meshopt_compression;
 //   KHR_draco_mesh_compression does not allow points): bench/BENCHMARKS.md,
@@ -25,9 +26,14 @@
 // - Splats: each surfel a flat Gaussian (gaussians.h) in
 //   KHR_gaussian_splatting, compressed by SPZ
 //   (KHR_gaussian_splatting_compression_spz_2), which CesiumJS requires of
-//   3D Tiles splats; the LiDAR attributes as a property table with a row
-//   per splat (EXT_mesh_features' implicit feature IDs): CesiumJS reads
-//   every attribute of an SPZ primitive from the SPZ.
+//   3D Tiles splats; the LiDAR and scalar attributes as a property table
+//   with a row per splat (EXT_mesh_features' implicit feature IDs):
+//   CesiumJS reads every attribute of an SPZ primitive from the SPZ.
+// - Metadata holds values, never the set's storage codes (docs/EXPORT.md,
+//   "Metadata"): integers that are the values, a continuous scalar's
+//   stored integer normalized with the property's offset and scale, or a
+//   wide field's value as a double; the set's constants are tileset
+//   metadata (class "set" of tileset.json's schema).
 //
 // Blocks are decoded one node at a time: memory holds one node, whatever
 // the set's size. The folder is written beside the output and swapped in

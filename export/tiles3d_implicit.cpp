@@ -85,7 +85,7 @@ std::vector<uint8_t> subtreeFile(const Subtree& s, int levels) {
 }  // namespace
 
 json implicitTileSchema() {
-    return {{"id", "surfcast_tiles"},
+    return {{"id", kTilesetSchemaId},
             {"classes",
              {{"tile",
                {{"properties",

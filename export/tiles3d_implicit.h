@@ -29,7 +29,10 @@ struct ImplicitTile {
     double geometricError = 0;
 };
 
-// The schema tileset.json declares for the subtrees' tile metadata.
+// The id of the schema tileset.json declares: its class "tile" for the
+// subtrees' tile metadata, "set" for the set's constants (tiles3d_export.h).
+inline constexpr const char* kTilesetSchemaId = "surfcast_tiles";
+// The schema, with its class "tile", for the subtrees' tile metadata.
 nlohmann::json implicitTileSchema();
 
 // The root tile's implicitTiling object for subtrees of `levels` levels

@@ -7,18 +7,20 @@
 // themselves in headless Chromium, from nginx on loopback: CesiumJS drawing
 // the 3D Tiles (points and splats) and Spark drawing the PLY and SPZ files,
 // each against surfcast-view at the same camera. The set is autzen_trim.las
-// from the shared scans (colour, intensity, classification, returns).
+// from the shared scans (colour, intensity, classification, returns, and
+// its scalars); the metadata's values are also checked against a LAS file
+// the test writes, whose every value it knows.
 
 import { after, before, describe, test } from "node:test";
 import assert from "node:assert/strict";
 import { execFileSync } from "node:child_process";
 import { createRequire } from "node:module";
-import { existsSync, mkdtempSync, readdirSync, readFileSync, rmSync, symlinkSync } from "node:fs";
+import { existsSync, mkdtempSync, readdirSync, readFileSync, rmSync, symlinkSync, writeFileSync } from "node:fs";
 import { gunzipSync } from "node:zlib";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { Logger, NodeIO } from "@gltf-transform/core";
-import { EXTMeshoptCompression, KHRMeshQuantization } from "@gltf-transform/extensions";
+import { EXTMeshFeatures, EXTMeshoptCompression, EXTStructuralMetadata, KHRMeshQuantization } from "@gltf-transform/extensions";
 import { MeshoptDecoder } from "meshoptimizer";
 import { ResourceResolvers, TilesetTraverser } from "3d-tiles-tools";
 import validator from "gltf-validator";
@@ -78,6 +80,98 @@ function readSetOnce(dir) {
     }
   }
   return { info, nodes };
+}
+
+// SPZ 2 (Niantic's load-spz.cc): gzip over a header, then positions,
+// opacities, colours, scales and rotations, each a column of bytes.
+function readSpz(bytes) {
+  const spz = gunzipSync(bytes);
+  assert.equal(spz.readUInt32LE(0), 0x5053474e);
+  assert.equal(spz.readUInt32LE(4), 2);
+  const count = spz.readUInt32LE(8), fraction = spz[13];
+  assert.equal(spz.length, 16 + 19 * count);
+  const at = { position: 16, opacity: 16 + 9 * count, color: 16 + 10 * count, scale: 16 + 13 * count, rotation: 16 + 16 * count };
+  return {
+    count, fraction,
+    get(i) {
+      const [x, y, z] = [0, 1, 2].map((a) => (spz[at.rotation + 3 * i + a] - 127.5) / 127.5);
+      return {
+        // 24-bit fixed point with `fraction` bits.
+        position: [0, 1, 2].map((a) => spz.readIntLE(at.position + 9 * i + 3 * a, 3) / 2 ** fraction),
+        opacity: spz[at.opacity + i] / 255,
+        // The DC coefficient at 0.15 * 255 per unit about 127.5.
+        color: [0, 1, 2].map((c) => (spz[at.color + 3 * i + c] - 127.5) / (0.15 * 255) * 0.28209479177387814 + 0.5),
+        // ln s at 16 per unit, offset 10.
+        scales: [0, 1, 2].map((a) => Math.exp(spz[at.scale + 3 * i + a] / 16 - 10)),
+        // x, y, z at 127.5 per unit about 127.5; w >= 0.
+        rotation: [x, y, z, Math.sqrt(Math.max(0, 1 - x * x - y * y - z * z))],
+      };
+    },
+  };
+}
+// glTF-Transform's reader, with the extensions the exports use that it
+// knows: meshoptimizer's decoder (the one CesiumJS uses), the quantized
+// positions and the metadata. Unlit and the Gaussian splats it does not
+// know: it reads the rest of those glbs.
+async function gltfReader() {
+  await MeshoptDecoder.ready;
+  return new NodeIO().setLogger(new Logger(Logger.Verbosity.ERROR))
+    .registerExtensions([EXTMeshoptCompression, KHRMeshQuantization, EXTStructuralMetadata, EXTMeshFeatures])
+    .registerDependencies({ "meshopt.decoder": MeshoptDecoder });
+}
+// A glb read by glTF-Transform; the Gaussian-splatting extensions, which it
+// does not know (their accessors then read as zeros), left out of those required.
+async function readGlb(io, file) {
+  const doc = await io.binaryToJSON(new Uint8Array(readFileSync(file)));
+  doc.json.extensionsRequired = (doc.json.extensionsRequired ?? []).filter((e) => !e.startsWith("KHR_gaussian_splatting"));
+  return io.readJSON(doc);
+}
+
+// A double's unit in the last place at x > 0 (52 bits after the leading one).
+const ulp = (x) => 2 ** (Math.floor(Math.log2(x)) - 52);
+// The largest LAS intensity (a 16-bit field).
+const kLasIntensityTop = 65535;
+
+// A metadata property's value from the number stored, as the 3D Metadata
+// specification defines it ("Normalized values", "Offset and scale"):
+// a normalized unsigned integer divided by its type's largest value, then
+// times `scale` plus `offset` (the instance's own where it gives them).
+function metadataValue(classProperty, instance, stored) {
+  const type = classProperty.getComponentType();
+  assert.match(type, /^UINT|^FLOAT/, "the exports write unsigned integers and floats");
+  const value = classProperty.getNormalized() ? stored / (2 ** Number(type.slice(4)) - 1) : stored;
+  return value * (instance.getScale() ?? classProperty.getScale() ?? 1) + (instance.getOffset() ?? classProperty.getOffset() ?? 0);
+}
+
+// A primitive's metadata as glTF-Transform reads it: every property of its
+// property attributes and of the property table its feature IDs point to
+// (implicit feature IDs: row i is vertex i), as value(i) for vertex i.
+function primitiveMetadata(doc, prim) {
+  const schema = doc.getRoot().getExtension("EXT_structural_metadata").getSchema();
+  const properties = {};
+  for (const attributes of prim.getExtension("EXT_structural_metadata")?.listPropertyAttributes() ?? []) {
+    const cls = schema.getClass(attributes.getClass());
+    for (const key of attributes.listPropertyKeys()) {
+      const instance = attributes.getProperty(key), accessor = prim.getAttribute(instance.getAttribute());
+      properties[key] = (i) => metadataValue(cls.getProperty(key), instance, accessor.getScalar(i));
+    }
+  }
+  for (const id of prim.getExtension("EXT_mesh_features")?.listFeatureIDs() ?? []) {
+    assert.equal(id.getAttribute(), null, "implicit feature IDs");
+    const table = id.getPropertyTable(), cls = schema.getClass(table.getClass());
+    assert.equal(table.getCount(), prim.getAttribute("POSITION").getCount(), "a row per vertex");
+    for (const key of table.listPropertyKeys()) {
+      const instance = table.getProperty(key), classProperty = cls.getProperty(key);
+      const bytes = instance.getValues(), view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+      const type = classProperty.getComponentType(), size = Number(type.replace(/\D/g, "")) / 8;
+      assert.equal(bytes.length, size * table.getCount(), `${key}: a ${type} a row`);
+      const read = { UINT8: (o) => view.getUint8(o), UINT16: (o) => view.getUint16(o, true), UINT32: (o) => view.getUint32(o, true),
+                     UINT64: (o) => Number(view.getBigUint64(o, true)), FLOAT32: (o) => view.getFloat32(o, true),
+                     FLOAT64: (o) => view.getFloat64(o, true) }[type];
+      properties[key] = (i) => metadataValue(classProperty, instance, read(i * size));
+    }
+  }
+  return properties;
 }
 
 describe("exports, as their consumers read them", { skip }, () => {
@@ -233,10 +327,7 @@ describe("exports, as their consumers read them", { skip }, () => {
     const tileset = JSON.parse(readFileSync(join(out, "tileset.json"), "utf8"));
     assert.deepEqual(tileset.extensions["3DTILES_content_gltf"].extensionsRequired, ["KHR_mesh_quantization", "EXT_meshopt_compression"]);
     const origin = tileset.root.transform.slice(12, 15);
-    // The metadata and unlit extensions are read without their definitions: the attributes are the core's.
-    await MeshoptDecoder.ready;
-    const io = new NodeIO().setLogger(new Logger(Logger.Verbosity.ERROR)).registerExtensions([EXTMeshoptCompression, KHRMeshQuantization])
-      .registerDependencies({ "meshopt.decoder": MeshoptDecoder });
+    const io = await gltfReader();
     let compared = 0, worst = 0, worstTurn = 0;
     for (const n of nodes.values()) {
       const doc = await io.readBinary(new Uint8Array(readFileSync(join(out, "tiles", `${n.key}.glb`))));
@@ -257,6 +348,7 @@ describe("exports, as their consumers read them", { skip }, () => {
       assert.equal(position.getCount(), n.surfelCount, `node ${n.key}'s point count`);
       const m = node.getMatrix();
       const edge = format.nodeEdge(info, n.level);
+      const metadata = primitiveMetadata(doc, prim);
       // The block's own integers scaled by the node's matrix: rounding only.
       const tolerance = 1e-9 * edge;
       const step = Math.max(1, Math.floor(n.surfelCount / 40));
@@ -282,9 +374,7 @@ describe("exports, as their consumers read them", { skip }, () => {
         const c = color.getElement(i, []);
         for (let k = 0; k < 3; ++k) assert.equal(Math.round(srgbFromLinear(c[k]) * 255), Math.round(s.color[k] * 255));
         assert.equal(c[3], 1);
-        for (const [name, semantic] of [["classification", "_CLASSIFICATION"], ["intensity", "_INTENSITY"],
-                                        ["return_number", "_RETURN_NUMBER"], ["number_of_returns", "_NUMBER_OF_RETURNS"]])
-          assert.equal(prim.getAttribute(semantic).getScalar(i), s.raw[name], `node ${n.key} surfel ${i}'s ${name}`);
+        expectSetValues(info, metadata, s, i, `node ${n.key} surfel ${i}`);
         ++compared;
       }
     }
@@ -292,6 +382,32 @@ describe("exports, as their consumers read them", { skip }, () => {
     t.diagnostic(`${compared} surfels compared; largest position error ${(worst * 1e9).toFixed(3)} billionths of a node's edge, ` +
                  `normal ${worstTurn.toFixed(4)} rad (bound ${kNormalTurn.toFixed(4)}); glbs ${bytes(out)} bytes, uncompressed ${bytes(outRaw)}`);
   });
+
+  // The metadata of a tile's surfel (primitiveMetadata) against surfel s as
+  // the browser client decodes it: every attribute after the fixed ones
+  // (LiDAR, scalars) but the opacity (COLOR_0's alpha), as its value,
+  // value = stored · scale + offset (docs/FORMAT.md). Intensity is a 16-bit
+  // LAS value: the top step's value can pass 65535 by rounding, which the
+  // export clamps (as the LAS export does). Continuous scalars come through
+  // the metadata's normalized integers, offset and scale in doubles: a few
+  // of a double's ulps of the terms' largest sum.
+  // A wide field's low part, "<name>:low" (docs/FORMAT.md, "Scalar
+  // attributes"), adds low · its scale to its top part's value.
+  function expectSetValues(info, metadata, s, i, what) {
+    const attribute = (name) => info.attributes.find((a) => a.name === name);
+    const names = info.attributes.filter((a) => !format.kFixedAttributes.includes(a.name) && a.name !== "opacity" &&
+                                                !(a.name.endsWith(":low") && attribute(a.name.slice(0, -":low".length))));
+    assert.deepEqual(Object.keys(metadata).sort(), names.map((a) => a.name).sort(), `${what}: every attribute`);
+    for (const a of names) {
+      const low = attribute(`${a.name}:low`);
+      const stored = s.raw[a.name] * a.scale + a.offset + (low ? s.raw[low.name] * low.scale : 0);
+      const value = a.name === "intensity" ? Math.min(kLasIntensityTop, stored) : stored;
+      const rounding = a.kind === "continuous" && a.name !== "intensity"
+        ? 4 * ulp(Math.abs(a.offset) + Math.abs(a.scale) * 2 ** Number(a.type.slice(4))) : 0;
+      assert.ok(Math.abs(metadata[a.name](i) - value) <= rounding,
+                `${what}'s ${a.name}: ${metadata[a.name](i)}, the set's value ${value} (stored ${s.raw[a.name]})`);
+    }
+  }
 
   // A block decoder for node n of the set, as the browser client decodes it.
   async function decoderFor(info) {
@@ -326,33 +442,6 @@ describe("exports, as their consumers read them", { skip }, () => {
     assert.ok(Math.acos(Math.min(1, cos)) <= turn(g), `${what}: the normal off by ${Math.acos(Math.min(1, cos))} rad`);
   }
 
-  // SPZ 2 (Niantic's load-spz.cc): gzip over a header, then positions,
-  // opacities, colours, scales and rotations, each a column of bytes.
-  function readSpz(bytes) {
-    const spz = gunzipSync(bytes);
-    assert.equal(spz.readUInt32LE(0), 0x5053474e);
-    assert.equal(spz.readUInt32LE(4), 2);
-    const count = spz.readUInt32LE(8), fraction = spz[13];
-    assert.equal(spz.length, 16 + 19 * count);
-    const at = { position: 16, opacity: 16 + 9 * count, color: 16 + 10 * count, scale: 16 + 13 * count, rotation: 16 + 16 * count };
-    return {
-      count, fraction,
-      get(i) {
-        const [x, y, z] = [0, 1, 2].map((a) => (spz[at.rotation + 3 * i + a] - 127.5) / 127.5);
-        return {
-          // 24-bit fixed point with `fraction` bits.
-          position: [0, 1, 2].map((a) => spz.readIntLE(at.position + 9 * i + 3 * a, 3) / 2 ** fraction),
-          opacity: spz[at.opacity + i] / 255,
-          // The DC coefficient at 0.15 * 255 per unit about 127.5.
-          color: [0, 1, 2].map((c) => (spz[at.color + 3 * i + c] - 127.5) / (0.15 * 255) * 0.28209479177387814 + 0.5),
-          // ln s at 16 per unit, offset 10.
-          scales: [0, 1, 2].map((a) => Math.exp(spz[at.scale + 3 * i + a] / 16 - 10)),
-          // x, y, z at 127.5 per unit about 127.5; w >= 0.
-          rotation: [x, y, z, Math.sqrt(Math.max(0, 1 - x * x - y * y - z * z))],
-        };
-      },
-    };
-  }
   // SPZ's byte steps: a colour byte is 1 / (0.15 * 255) of the DC coefficient;
   // a scale byte 1/16 of its log; each of x, y, z rounds by up to 1/255 and
   // w = sqrt(1 - x² - y² - z²) by (|x| + |y| + |z|) / (255 w) more, and a
@@ -364,9 +453,10 @@ describe("exports, as their consumers read them", { skip }, () => {
     return 2 * Math.hypot(1 / 255, 1 / 255, 1 / 255, (Math.abs(x) + Math.abs(y) + Math.abs(z)) / (255 * w)) + 1e-3;
   };
 
-  test("round trip: the 3D Tiles splats' SPZ holds the set's surfels as Gaussians, their LiDAR attributes a property table", async (t) => {
+  test("round trip: the 3D Tiles splats' SPZ holds the set's surfels as Gaussians, their attributes' values a property table", async (t) => {
     const { info, nodes } = readSet(set);
     const decode = await decoderFor(info);
+    const io = await gltfReader();
     const tileset = JSON.parse(readFileSync(join(splats, "tileset.json"), "utf8"));
     assert.deepEqual(tileset.extensionsRequired, ["3DTILES_content_gltf"]);
     assert.deepEqual(tileset.extensions["3DTILES_content_gltf"].extensionsRequired,
@@ -388,24 +478,16 @@ describe("exports, as their consumers read them", { skip }, () => {
       assert.equal(gltf.accessors[prim.attributes.POSITION].count, spz.count);
       const m = gltf.nodes[0].matrix;
       const edge = format.nodeEdge(info, n.level);
-      // The LiDAR attributes: a property table whose rows are the splats'
-      // implicit feature IDs, their vertex indices (EXT_mesh_features).
+      // The attributes: a property table whose rows are the splats'
+      // implicit feature IDs, their vertex indices (EXT_mesh_features), as
+      // glTF-Transform reads it.
       assert.deepEqual(prim.extensions.EXT_mesh_features.featureIds, [{ featureCount: spz.count, propertyTable: 0 }]);
-      const metadata = gltf.extensions.EXT_structural_metadata;
-      const table = metadata.propertyTables[0];
-      assert.equal(table.count, spz.count);
-      const column = (name) => {
-        const v = gltf.bufferViews[table.properties[name].values];
-        const type = metadata.schema.classes[table.class].properties[name].componentType;
-        const b = bin.subarray(v.byteOffset, v.byteOffset + v.byteLength);
-        assert.equal(b.length, spz.count * (type === "UINT16" ? 2 : 1));
-        return (i) => (type === "UINT16" ? b.readUInt16LE(2 * i) : b[i]);
-      };
-      const columns = ["classification", "intensity", "return_number", "number_of_returns"].map((name) => [name, column(name)]);
+      const doc = await readGlb(io, join(splats, "tiles", `${n.key}.glb`));
+      const metadata = primitiveMetadata(doc, doc.getRoot().listMeshes()[0].listPrimitives()[0]);
       for (let i = 0; i < spz.count; i += Math.max(1, Math.floor(spz.count / 40))) {
         const g = spz.get(i), surfel = decode(n, i);
         assert.equal(g.opacity, 1, "opaque");
-        for (const [name, value] of columns) assert.equal(value(i), surfel.raw[name], `node ${n.key} splat ${i}'s ${name}`);
+        expectSetValues(info, metadata, surfel, i, `node ${n.key} splat ${i}`);
         const p = fromYUp([0, 1, 2].map((a) => g.position[a] + m[12 + a]));
         g.position = p.map((v, a) => v + origin[a]);
         expectGaussian(g, surfel, info, { near: 2 ** -spz.fraction / 2 + 1e-6 * edge, colorStep: spzColorStep, logStep: 1 / 32 + 1e-6,
@@ -605,4 +687,189 @@ describe("exports, as their consumers read them", { skip }, () => {
       assert.equal(view.state.splats, surfels, `level ${sparkLevel}'s cut`);
       expectLikeSurfcastView(t, `Spark's ${what} file of level ${sparkLevel}`, view, what === "SPZ", sparkLevel, surfels);
     });
+});
+
+// The exports give values, never the set's storage codes (docs/EXPORT.md,
+// "Metadata"), on a LAS file written here, so that every input value is
+// known: a grid of points whose intensities span 1000..60000, GPS times
+// about 4·10^8 s, user data 10..20, two classes, and one return of one, one
+// point source ID and no scan angle or flags throughout. Two sets of it: by
+// default (intensity kept as (value − 1000) / a step of 16, docs/FORMAT.md;
+// the returns the set's constants), and with --attributes all (GPS time
+// kept less its minimum; user data, categorical, less its minimum; the point
+// source ID, scan angle and flags the set's constants).
+describe("3D Tiles metadata holds the input's values, as glTF-Transform reads it", () => {
+  const kSide = 200;            // points per grid row and column
+  const kSpacing = 5;           // grid step in LAS units (0.05 m at the file's 0.01 scale)
+  const kLasScale = 0.01;
+  const kIntensityMin = 1000, kIntensityMax = 60000;
+  const kGpsStart = 4e8, kGpsStep = 0.000617;  // seconds (adjusted standard GPS time)
+  const kPointSourceId = 7;
+  const count = kSide * kSide;
+  // Point i: its grid cell, and values spread over the grid (7919, a prime,
+  // not a factor of the count, visits every value once).
+  const input = [...Array(count).keys()].map((i) => {
+    const spread = (i * 7919) % count;
+    return { ix: i % kSide, iy: Math.floor(i / kSide),
+             intensity: kIntensityMin + Math.round((spread * (kIntensityMax - kIntensityMin)) / (count - 1)),
+             classification: i % 5 === 0 ? 6 : 2, user_data: 10 + (spread % 11), gps_time: kGpsStart + i * kGpsStep,
+             return_number: 1, number_of_returns: 1 };
+  });
+  // The dimensions every point has the same value of.
+  const kOneValue = { return_number: 1, number_of_returns: 1, point_source_id: kPointSourceId, scan_angle: 0, classification_flags: 0,
+                      scan_direction_flag: 0, edge_of_flight_line: 0 };
+  // The sets' build options, the attributes each keeps in its blocks, and
+  // its constants (tileset.json's "constants": one value over the set).
+  const sets = {
+    quantized: { args: [], kept: ["classification", "intensity"], constants: ["number_of_returns", "return_number"] },
+    all: { args: ["--attributes", "all"], kept: ["classification", "gps_time", "intensity", "number_of_returns", "return_number", "user_data"],
+           constants: ["classification_flags", "edge_of_flight_line", "point_source_id", "scan_angle", "scan_direction_flag"] },
+  };
+  const exports = { points: ["--as", "points"], "points-implicit": ["--as", "points", "--tiling", "implicit"], splats: [],
+                    "splats-implicit": ["--tiling", "implicit"] };
+  let work;
+
+  // LAS 1.2, point data record format 1 (ASPRS LAS 1.2: a 227-byte header, no
+  // VLRs, 28-byte records with GPS time); a gently rolling surface.
+  function writeLas(path) {
+    const kHeader = 227, kRecord = 28;
+    const b = Buffer.alloc(kHeader + kRecord * count);
+    b.write("LASF", 0);
+    b.writeUInt16LE(1, 6);  // global encoding: adjusted standard GPS time
+    b[24] = 1, b[25] = 2;
+    b.writeUInt16LE(kHeader, 94);
+    b.writeUInt32LE(kHeader, 96);
+    b[104] = 1;
+    b.writeUInt16LE(kRecord, 105);
+    b.writeUInt32LE(count, 107);
+    b.writeUInt32LE(count, 111);  // all first returns
+    const z = (p) => Math.round(100 * Math.sin(p.ix / 15) * Math.cos(p.iy / 20));
+    for (let a = 0; a < 3; ++a) b.writeDoubleLE(kLasScale, 131 + 8 * a);
+    const extent = kSpacing * (kSide - 1) * kLasScale;
+    for (const [at, v] of [[179, extent], [187, 0], [195, extent], [203, 0], [211, Math.max(...input.map(z)) * kLasScale],
+                           [219, Math.min(...input.map(z)) * kLasScale]])
+      b.writeDoubleLE(v, at);
+    input.forEach((p, i) => {
+      const r = kHeader + kRecord * i;
+      b.writeInt32LE(p.ix * kSpacing, r), b.writeInt32LE(p.iy * kSpacing, r + 4), b.writeInt32LE(z(p), r + 8);
+      b.writeUInt16LE(p.intensity, r + 12);
+      b[r + 14] = 1 | (1 << 3);  // return 1 of 1
+      b[r + 15] = p.classification, b[r + 17] = p.user_data;
+      b.writeUInt16LE(kPointSourceId, r + 18);
+      b.writeDoubleLE(p.gps_time, r + 20);
+    });
+    writeFileSync(path, b);
+  }
+
+  before(() => {
+    work = mkdtempSync(join(tmpdir(), "surfcast-values-"));
+    writeLas(join(work, "values.las"));
+    for (const [name, { args }] of Object.entries(sets)) {
+      const set = join(work, name);
+      execFileSync(bin("surfcast-build"), ["-q", join(work, "values.las"), ...args, "-o", set]);
+      for (const [dir, options] of Object.entries(exports))
+        execFileSync(bin("surfcast-export"), [set, "--format", "3dtiles", "-q", "-o", join(work, `${name}-${dir}`), ...options]);
+    }
+  });
+  after(() => {
+    if (work) rmSync(work, { recursive: true, force: true });
+  });
+
+  // The leaves' tiles, which hold the input points (docs/FORMAT.md), from
+  // an explicit tileset.json: tiles without children.
+  function leafTiles(dir) {
+    const leaves = [];
+    const walk = (tile) => (tile.children ? tile.children.forEach(walk) : leaves.push(tile.content.uri));
+    walk(JSON.parse(readFileSync(join(dir, "tileset.json"), "utf8")).root);
+    return leaves;
+  }
+
+  // The values of every point of a leaf tile of an export: its (x, y) in
+  // the set's coordinates and each metadata property's value.
+  async function leafPoints(dir, leaves) {
+    const io = await gltfReader();
+    const origin = JSON.parse(readFileSync(join(dir, "tileset.json"), "utf8")).root.transform.slice(12, 15);
+    const found = [];
+    for (const uri of leaves) {
+      const doc = await readGlb(io, join(dir, uri));
+      const prim = doc.getRoot().listMeshes()[0].listPrimitives()[0], m = doc.getRoot().listNodes()[0].getMatrix();
+      const metadata = primitiveMetadata(doc, prim);
+      const at = (i, p) => found.push({ xy: fromYUp(p).slice(0, 2).map((v, a) => v + origin[a]),
+                                        values: Object.fromEntries(Object.entries(metadata).map(([k, f]) => [k, f(i)])) });
+      const glb = readFileSync(join(dir, uri)), jsonLength = glb.readUInt32LE(12);
+      const gltf = JSON.parse(glb.subarray(20, 20 + jsonLength).toString());
+      const splats = gltf.meshes[0].primitives[0].extensions?.KHR_gaussian_splatting;
+      if (!splats) {
+        const position = prim.getAttribute("POSITION");
+        for (let i = 0; i < position.getCount(); ++i) {
+          const p = position.getElement(i, []);
+          at(i, [0, 1, 2].map((r) => m[r] * p[0] + m[4 + r] * p[1] + m[8 + r] * p[2] + m[12 + r]));
+        }
+        continue;
+      }
+      // Splats' positions are in their SPZ, which glTF-Transform does not know: read by hand.
+      const view = gltf.bufferViews[splats.extensions.KHR_gaussian_splatting_compression_spz_2.bufferView];
+      const spz = readSpz(glb.subarray(28 + jsonLength + view.byteOffset, 28 + jsonLength + view.byteOffset + view.byteLength));
+      for (let i = 0; i < spz.count; ++i) at(i, spz.get(i).position.map((v, a) => v + m[12 + a]));
+    }
+    return found;
+  }
+
+  for (const [name, { kept }] of Object.entries(sets))
+    for (const dir of Object.keys(exports))
+      test(`${name} set, ${dir}: the leaves' metadata holds every input point's values`, async () => {
+        const info = JSON.parse(readFileSync(join(work, name, "tileset.json"), "utf8"));
+        const attribute = (n) => info.attributes.find((a) => a.name === n);
+        // Intensity as (value − min) / step (docs/FORMAT.md): exact where
+        // value − min is a multiple of the set's step, within half of it
+        // otherwise. The default set's step is more than 1 (the range
+        // passes 12 bits), the minimum not 0: its codes are not its values.
+        const intensity = attribute("intensity");
+        assert.equal(intensity.offset, kIntensityMin);
+        if (name === "quantized") assert.ok(intensity.scale > 1, `a step of ${intensity.scale}`);
+        // GPS time in the set's step, less its minimum: within half a step,
+        // plus the doubles' rounding at 4·10^8 s (two ulps: the metadata's
+        // offset + scale · stored / (2^32 − 1) rounds by half an ulp in the
+        // sum, far less in its other terms).
+        const gps = attribute("gps_time");
+        const gpsBound = gps && gps.scale / 2 + 2 * ulp(kGpsStart + count * kGpsStep);
+        let exact = 0;
+        const seen = new Set();
+        // Each input point found once in the leaves, by its grid cell (its
+        // position, within half the file's 0.01 step, finds it).
+        for (const { xy, values } of await leafPoints(join(work, `${name}-${dir}`), leafTiles(join(work, `${name}-points`)))) {
+          const [ix, iy] = xy.map((v) => Math.round(v / (kSpacing * kLasScale)));
+          const p = input[iy * kSide + ix];
+          assert.ok(p && !seen.has(p), `a point at cell ${ix}, ${iy}, once`);
+          seen.add(p);
+          const what = `the point at cell ${ix}, ${iy}`;
+          assert.deepEqual(Object.keys(values).sort(), kept, `${what}: the attributes the set keeps`);
+          if ((p.intensity - intensity.offset) % intensity.scale === 0) {
+            assert.equal(values.intensity, p.intensity, `${what}'s intensity, kept exactly`);
+            ++exact;
+          } else {
+            assert.ok(Math.abs(values.intensity - p.intensity) <= intensity.scale / 2, `${what}'s intensity ${values.intensity}, not ${p.intensity}`);
+          }
+          for (const k of ["classification", "user_data", "return_number", "number_of_returns"])
+            if (kept.includes(k)) assert.equal(values[k], p[k], `${what}'s ${k}`);
+          if (kept.includes("gps_time"))
+            assert.ok(Math.abs(values.gps_time - p.gps_time) <= gpsBound, `${what}'s GPS time ${values.gps_time}, not ${p.gps_time}`);
+        }
+        assert.equal(seen.size, count, "every input point");
+        if (name === "quantized") assert.ok(exact > 0 && exact < count, `${exact} intensities kept exactly, the others not`);
+      });
+
+  // 3D Tiles 1.1 tileset metadata: a property of the schema's class, and
+  // its value, the input's.
+  for (const [name, { constants }] of Object.entries(sets))
+    for (const dir of Object.keys(exports))
+      test(`${name} set, ${dir}: the set's constants are tileset metadata`, () => {
+        const tileset = JSON.parse(readFileSync(join(work, `${name}-${dir}`, "tileset.json"), "utf8"));
+        const cls = tileset.schema.classes[tileset.metadata.class];
+        assert.deepEqual(Object.keys(tileset.metadata.properties).sort(), constants);
+        for (const c of constants) {
+          assert.deepEqual(cls.properties[c], { type: "SCALAR", componentType: "FLOAT64" }, c);
+          assert.equal(tileset.metadata.properties[c], kOneValue[c], c);
+        }
+      });
 });
