@@ -10,6 +10,7 @@
 #include <arpa/inet.h>
 #include <microhttpd.h>
 #include <netinet/in.h>
+#include <sys/socket.h>
 
 #include <atomic>
 #include <cerrno>
@@ -20,9 +21,11 @@
 #include <deque>
 #include <cstring>
 #include <mutex>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
+#include <utility>
 
 #include "byte_io.h"
 #include "byte_ranges.h"
@@ -54,27 +57,45 @@ std::string hex8(uint32_t v) {
 
 }  // namespace
 
+// One of the server's exportConcurrency places, taken before any other work
+// of an export request (Impl::takeExportSlot) and given back when its owner
+// (the request's reply, then its ExportStream) goes.
+class ExportSlot {
+public:
+    explicit ExportSlot(std::atomic<int>& live) : live_(&live) {}
+    ExportSlot(ExportSlot&& o) noexcept : live_(std::exchange(o.live_, nullptr)) {}
+    ExportSlot& operator=(ExportSlot&&) = delete;
+    ~ExportSlot() {
+        if (live_) --*live_;
+    }
+
+private:
+    std::atomic<int>* live_;
+};
+
 // A LAZ export sent as it is produced (docs/PROTOCOL.md, "Export"): a thread
-// of its own runs the export (laz_export.h) into a queue of at most
-// kExportQueueBytes, from the first time MHD asks for bytes (so a HEAD never
-// starts it); MHD's content reader takes from the queue and suspends the
-// connection while it is empty, and the producer resumes it. Resuming happens
-// under the mutex, and cancel() takes it first: once MHD frees the response
-// no resume touches its connection. The producer checks for cancellation
-// before each leaf it decodes, so joining it (on MHD's thread) is prompt.
-// A stopping server aborts every stream first (abort()): libmicrohttpd must
-// not stop with a connection suspended.
+// of its own opens the set's reader and runs the export (laz_export.h) into
+// a queue of at most kExportQueueBytes, from the first time MHD asks for
+// bytes (so a HEAD never starts it); MHD's content reader takes from the
+// queue and suspends the connection while it is empty, and the producer
+// resumes it. Resuming happens under the mutex, and cancel() takes it first:
+// once MHD frees the response no resume touches its connection. The producer
+// checks for cancellation before each leaf it decodes, so joining it (on
+// MHD's thread) is prompt. Once it has produced everything, the same thread
+// waits for MHD to free the response, and cuts the connection off if that
+// has not happened by the export's deadline (a client too slow to take it,
+// which would otherwise hold its slot). A stopping server aborts every
+// stream first (abort()): libmicrohttpd must not stop with a connection
+// suspended.
 class ExportStream {
 public:
-    ExportStream(std::shared_ptr<const TilesetSnapshot> snapshot, TilesetReader reader, PointFilter filter, MHD_Connection* c,
-                 std::atomic<int>& live)
-        : snapshot_(std::move(snapshot)), reader_(std::move(reader)), filter_(std::move(filter)), connection_(c), live_(live) {
-        ++live_;
+    ExportStream(std::shared_ptr<const TilesetSnapshot> snapshot, PointFilter filter, MHD_Connection* c, ExportSlot slot,
+                 Clock::time_point deadline)
+        : snapshot_(std::move(snapshot)), filter_(std::move(filter)), connection_(c), slot_(std::move(slot)), deadline_(deadline) {
+        const MHD_ConnectionInfo* info = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+        socket_ = info ? info->connect_fd : -1;
     }
-    ~ExportStream() {
-        cancel();
-        --live_;
-    }
+    ~ExportStream() { cancel(); }
 
     // Ends the export at once (the server is stopping): its connection, if
     // suspended, resumes to take the end of its response.
@@ -103,11 +124,11 @@ public:
 private:
     ssize_t take(char* buf, size_t max) {
         std::lock_guard lock(mutex_);
-        if (aborted_) return MHD_CONTENT_READER_END_WITH_ERROR;
+        if (aborted_ || expired_) return MHD_CONTENT_READER_END_WITH_ERROR;
         if (!started_) {
             started_ = true;
             try {
-                producer_ = std::thread([this] { produce(); });
+                producer_ = std::thread([this] { run(); });
             } catch (const std::exception& e) {
                 finished_ = true;
                 error_ = std::string("cannot start the export: ") + e.what();
@@ -136,15 +157,22 @@ private:
         return ssize_t(n);
     }
 
+    // The producer thread: the export, then the watch over its deadline.
+    void run() {
+        produce();
+        std::unique_lock lock(mutex_);
+        if (!space_.wait_until(lock, deadline_, [&] { return cancelled_ || aborted_; })) cutOff();
+    }
+
     void produce() {
         const StopExport stop = [&] {
             std::lock_guard lock(mutex_);
-            return cancelled_ || aborted_;
+            return cancelled_ || aborted_ || Clock::now() >= deadline_;
         };
         auto push = [&](const uint8_t* data, size_t n) -> Status {
             std::unique_lock lock(mutex_);
-            space_.wait(lock, [&] { return cancelled_ || aborted_ || queued_ < kExportQueueBytes; });
-            if (cancelled_ || aborted_) return Status::error("export stopped");
+            space_.wait_until(lock, deadline_, [&] { return cancelled_ || aborted_ || queued_ < kExportQueueBytes; });
+            if (cancelled_ || aborted_ || queued_ >= kExportQueueBytes) return Status::error("export stopped");
             queue_.emplace_back(reinterpret_cast<const char*>(data), n);
             queued_ += n;
             wake();
@@ -152,9 +180,15 @@ private:
         };
         Status status;
         try {
-            auto plan = planLazExport(reader_, filter_, stop);
-            if (!plan) status = plan.status();
-            else status = writeLazExport(reader_, filter_, *plan, push, stop);
+            // Here, not on the event loop: opening copies and parses the hierarchy.
+            auto reader = TilesetReader::open(snapshotSource(snapshot_));
+            if (!reader) {
+                status = reader.status();
+            } else {
+                auto plan = planLazExport(*reader, filter_, stop);
+                if (!plan) status = plan.status();
+                else status = writeLazExport(*reader, filter_, *plan, push, stop);
+            }
         } catch (const std::exception& e) {  // std::bad_alloc: the thread must not take the server down
             status = Status::error(e.what());
         } catch (...) {
@@ -164,6 +198,24 @@ private:
         finished_ = true;
         if (!status.ok()) error_ = status.message();
         wake();
+    }
+
+    // The deadline passed with the response still held (with mutex_ held, so
+    // not cancelled: MHD frees the response before it closes the socket, and
+    // the descriptor is still this connection's). shutdown() makes MHD's next
+    // receive or send on it fail, wherever its buffers stand, and MHD then
+    // closes the connection and frees the response; with SO_LINGER 0 the
+    // close resets it, dropping what the client has not taken.
+    void cutOff() {
+        expired_ = true;
+        std::fprintf(stderr, "surfcast-serve: export of %s cut off at its time limit, %llu bytes sent\n", snapshot_->name.c_str(),
+                     static_cast<unsigned long long>(sent_.load()));
+        if (socket_ >= 0) {
+            const linger reset{1, 0};
+            ::setsockopt(socket_, SOL_SOCKET, SO_LINGER, &reset, sizeof reset);
+            ::shutdown(socket_, SHUT_RDWR);
+        }
+        wake();  // a suspended connection resumes and takes the error (take())
     }
 
     void wake() {  // with mutex_ held
@@ -183,15 +235,16 @@ private:
     }
 
     std::shared_ptr<const TilesetSnapshot> snapshot_;  // keeps the mapped files the reader reads
-    TilesetReader reader_;
     PointFilter filter_;
     MHD_Connection* connection_;
-    std::atomic<int>& live_;  // the server's count of exports in progress
+    int socket_ = -1;  // the connection's, while the response is not freed
+    ExportSlot slot_;
+    Clock::time_point deadline_;  // see ServerConfig::exportSeconds
     std::mutex mutex_;
     std::condition_variable space_;
     std::deque<std::string> queue_;
     size_t queued_ = 0, taken_ = 0;  // bytes in the queue; of its front, those already sent
-    bool started_ = false, finished_ = false, suspended_ = false, cancelled_ = false, aborted_ = false;
+    bool started_ = false, finished_ = false, suspended_ = false, cancelled_ = false, aborted_ = false, expired_ = false;
     std::string error_;
     std::atomic<uint64_t> sent_{0};
     std::thread producer_;
@@ -407,7 +460,7 @@ struct HttpServer::Impl {
         }
         if (path == "/metrics" && !post) {
             st.route = "metrics";
-            return r.text(metrics.text(), "text/plain; version=0.0.4");
+            return r.text(metrics.text(liveExports.load()), "text/plain; version=0.0.4");
         }
         if (path == "/sets" && !post) {
             st.route = "sets";
@@ -484,9 +537,31 @@ struct HttpServer::Impl {
         fail(r, 404, "not_found", "no such resource");
     }
 
+    // One of the exportConcurrency places, or a 503 in `r`. Counted under
+    // the lock that abortExports takes: no two requests take the last place.
+    std::optional<ExportSlot> takeExportSlot(Reply& r) {
+        std::lock_guard lock(exportsMutex);
+        if (exportsClosed) {
+            fail(r, 503, "busy", "the server is stopping");
+            return std::nullopt;
+        }
+        if (liveExports.load() >= config.exportConcurrency) {
+            r.header("Retry-After", "5");
+            fail(r, 503, "busy", std::to_string(config.exportConcurrency) + " exports in progress, this server's most; try again later");
+            return std::nullopt;
+        }
+        ++liveExports;
+        return ExportSlot(liveExports);
+    }
+
     // GET /sets/NAME/export.laz?bbox=X0,Y0,Z0,X1,Y1,Z1&classes=2,6: the input
-    // points inside the box, as LAZ, sent as they are produced.
+    // points inside the box, as LAZ, sent as they are produced. On the event
+    // loop it does no work that grows with the set before it can refuse: the
+    // place first (so a busy server answers 503 at once), then the limit from
+    // the snapshot's node table; the reader opens on the export's own thread.
     void exportLaz(MHD_Connection* c, Reply& r, const std::string& name) {
+        std::optional<ExportSlot> slot = takeExportSlot(r);
+        if (!slot) return;
         auto snap = snapshot(name, r);
         if (!snap) return;
         PointFilter filter;
@@ -502,23 +577,17 @@ struct HttpServer::Impl {
             if (!snap->info.attribute("classification"))
                 return fail(r, 400, "bad_request", "set '" + name + "' stores no classification to choose classes by");
         }
-        auto reader = TilesetReader::open(snapshotSource(snap));
-        if (!reader) return fail(r, 500, "internal", reader.status().message());
-        // The leaves the box reaches bound the export from the hierarchy alone:
-        // a request over the limit costs no decoding.
-        const uint64_t most = exportPointsAtMost(*reader, filter);
+        // The leaves the box reaches bound the export before any decoding.
+        const uint64_t most = leafPointsAtMost(*snap, filter.box, config.exportMaxPoints);
         if (most > config.exportMaxPoints)
-            return fail(r, 413, "too_large", "the box reaches nodes of " + std::to_string(most) + " points, over this server's limit of " +
+            return fail(r, 413, "too_large", "the box reaches nodes of " + std::to_string(most) + " points or more, over this server's limit of " +
                                                  std::to_string(config.exportMaxPoints) + " per export; ask for a smaller box");
-        // Counted and registered under one lock: no two requests take the
-        // last place, and none starts once the server has aborted its exports.
+        const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config.exportSeconds));
+        // Registered under the lock abortExports takes: none starts once the
+        // server has aborted its exports.
         std::lock_guard lock(exportsMutex);
         if (exportsClosed) return fail(r, 503, "busy", "the server is stopping");
-        if (liveExports.load() >= config.exportConcurrency) {
-            r.header("Retry-After", "5");
-            return fail(r, 503, "busy", std::to_string(config.exportConcurrency) + " exports in progress, this server's most; try again later");
-        }
-        r.stream = std::make_shared<ExportStream>(snap, std::move(*reader), std::move(filter), c, liveExports);
+        r.stream = std::make_shared<ExportStream>(snap, std::move(filter), c, std::move(*slot), deadline);
         std::erase_if(exports, [](const std::weak_ptr<ExportStream>& w) { return w.expired(); });
         exports.push_back(r.stream);
         r.header("Content-Type", "application/vnd.laszip");

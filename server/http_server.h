@@ -32,6 +32,11 @@ struct ServerConfig {
     // reaches (more is 413); 0 turns the route off (404).
     uint64_t exportMaxPoints = 20'000'000;
     int exportConcurrency = 2;       // exports at once; more get 503 (each is a thread and a few MiB)
+    // The most seconds an export may take, from its request to its last
+    // byte; a client too slow for it is cut off, so it cannot hold one of
+    // the exportConcurrency places for long. 600 lets the largest export of
+    // the default limit (about 120 MB of LAZ) through at about 200 KB/s.
+    double exportSeconds = 600;
     // The browser viewer, served at / and /NAME (public even with a token:
     // the page holds no data; it sends the token from its URL's fragment).
     // Empty: no viewer, / is 404.

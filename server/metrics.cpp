@@ -19,7 +19,7 @@ void Metrics::error(const std::string& kind) {
     errors_[kind]++;
 }
 
-std::string Metrics::text() const {
+std::string Metrics::text(int exportsInProgress) const {
     std::lock_guard lock(mutex_);
     std::ostringstream o;
     o << "# HELP surfcast_requests_total HTTP requests by route and status.\n"
@@ -39,6 +39,9 @@ std::string Metrics::text() const {
     o << "# HELP surfcast_errors_total Failed requests by kind.\n"
       << "# TYPE surfcast_errors_total counter\n";
     for (const auto& [kind, n] : errors_) o << "surfcast_errors_total{kind=\"" << kind << "\"} " << n << "\n";
+    o << "# HELP surfcast_exports_in_progress LAZ exports holding one of the server's places.\n"
+      << "# TYPE surfcast_exports_in_progress gauge\n"
+      << "surfcast_exports_in_progress " << exportsInProgress << "\n";
     return o.str();
 }
 

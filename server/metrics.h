@@ -1,6 +1,6 @@
 // Request metrics in the Prometheus text exposition format (version 0.0.4):
-// requests by route and status class, bytes sent, a latency histogram and
-// errors by kind. Thread-safe; cheap enough for every request.
+// requests by route and status class, bytes sent, a latency histogram,
+// errors by kind and the exports in progress. Thread-safe; cheap enough for every request.
 #pragma once
 
 #include <array>
@@ -18,7 +18,8 @@ public:
     void record(const std::string& route, int status, uint64_t bytes, double seconds);
     // kind: "not_found", "bad_request", "unauthorized", "range", "stale", "internal".
     void error(const std::string& kind);
-    std::string text() const;
+    // exportsInProgress: the server's export places taken now (a gauge).
+    std::string text(int exportsInProgress) const;
 
 private:
     static constexpr std::array<double, 12> kBuckets = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,

@@ -5,6 +5,7 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -39,6 +40,8 @@ HTTP: the three files with Range support, single node blocks, batches of nodes,
                        GET /sets/NAME/export.laz?bbox=...&classes=... answers 413 where
                        the box reaches nodes of more than N points (default 20000000;
                        0: no export route)
+  --export-seconds S   the most seconds an export may take; a client slower than
+                       that is cut off and its place freed (default 600)
   -h, --help           this text
 )";
 
@@ -106,6 +109,11 @@ int main(int argc, char** argv) {
             char* end = nullptr;
             if (!value(&v) || v.empty() || v[0] == '-' || (config.exportMaxPoints = std::strtoull(v.c_str(), &end, 10), *end))
                 return usageError("--export-max-points needs a count (0: no exports)");
+        } else if (a == "--export-seconds") {
+            char* end = nullptr;
+            if (!value(&v) || v.empty() || (config.exportSeconds = std::strtod(v.c_str(), &end), *end) || !(config.exportSeconds > 0) ||
+                !std::isfinite(config.exportSeconds))
+                return usageError("--export-seconds needs seconds > 0");
         } else if (a == "--timeout") {
             if (!value(&v) || (config.timeoutSeconds = std::atoi(v.c_str())) < 1) return usageError("--timeout needs seconds >= 1");
         } else if (!a.empty() && a[0] == '-') {

@@ -155,6 +155,31 @@ std::shared_ptr<const TilesetSnapshot> TilesetStore::pinned(const std::string& n
     return nullptr;
 }
 
+uint64_t leafPointsAtMost(const TilesetSnapshot& snapshot, const std::optional<Box3d>& box, uint64_t stopAbove) {
+    const TilesetInfo& info = snapshot.info;
+    uint64_t points = 0;
+    std::vector<NodeKey> todo = {NodeKey{}};
+    while (!todo.empty() && points <= stopAbove) {
+        const NodeKey key = todo.back();
+        todo.pop_back();
+        auto it = snapshot.nodes.find(key);
+        if (it == snapshot.nodes.end()) continue;
+        if (box) {
+            // A child's cube lies inside its parent's: a cube the box misses
+            // has no descendant it reaches.
+            Box3d cube;
+            cube.min = nodeMin(info, key);
+            cube.max = cube.min + Vec3d{1, 1, 1} * nodeEdge(info, key.level);
+            if (!box->intersects(cube)) continue;
+        }
+        const NodeRecord& n = it->second;
+        if (n.flags & kFlagInputPoints) points += n.surfelCount;
+        for (int i = 0; i < 8; ++i)
+            if (n.childMask & (1u << i)) todo.push_back(key.child(i));
+    }
+    return points;
+}
+
 std::vector<std::shared_ptr<const TilesetSnapshot>> TilesetStore::list() {
     std::vector<std::string> names;
     // A fresh open file description: concurrent listings must not share a

@@ -12,6 +12,7 @@
 #include <ctime>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -48,6 +49,14 @@ struct TilesetSnapshot {
     ino_t inode = 0;
     timespec modified{};
 };
+
+// The input points the leaves (kFlagInputPoints) reached by `box` hold (all
+// leaves without one): the nodes exportPointsAtMost (laz_export.h) counts,
+// from the snapshot's node table. It walks down from the root only into
+// nodes whose cube meets the box and stops as soon as the sum passes
+// `stopAbove`, so its work is bounded by the box and that limit, never by
+// the set's size (the export route refuses with it on the event loop).
+uint64_t leafPointsAtMost(const TilesetSnapshot& snapshot, const std::optional<Box3d>& box, uint64_t stopAbove);
 
 // The snapshot's mapped files as a TileSource (for a TilesetReader over it:
 // the export route), holding the snapshot while it lives.

@@ -87,6 +87,11 @@ TEST(ServeCli, UsageErrors) {
     EXPECT_EQ(test::run({test::binary("surfcast-serve"), "--help"}).exitCode, 0);
     EXPECT_EQ(test::run({test::binary("surfcast-serve")}).exitCode, 2);
     EXPECT_EQ(test::run({test::binary("surfcast-serve"), "/tmp", "--bind", "nonsense"}).exitCode, 2);
+    for (const char* seconds : {"0", "-1", "ten", "inf", ""}) {
+        auto bad = test::run({test::binary("surfcast-serve"), "/tmp", "--export-seconds", seconds});
+        EXPECT_EQ(bad.exitCode, 2) << seconds;
+        EXPECT_NE(bad.output.find("--export-seconds needs seconds > 0"), std::string::npos) << bad.output;
+    }
     auto missing = test::run({test::binary("surfcast-serve"), "/definitely/not/here"});
     EXPECT_EQ(missing.exitCode, 1);
     EXPECT_NE(missing.output.find("/definitely/not/here"), std::string::npos);

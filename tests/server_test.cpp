@@ -11,6 +11,8 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <chrono>
@@ -21,6 +23,7 @@
 #include "crc32.h"
 #include "http_server.h"
 #include "las_reader.h"
+#include "laz_export.h"
 #include "octree_builder.h"
 #include "test_support.h"
 #include "tileset_reader.h"
@@ -49,10 +52,28 @@ protected:
         fs::create_directories(dir_->file("sets"));
         buildScene(dir_->file("sets/scene"), 40000, 1);
     }
-    static void TearDownTestSuite() { delete dir_; }
+    static void TearDownTestSuite() {
+        delete big_;
+        big_ = nullptr;
+        delete dir_;
+    }
 
-    void start(ServerConfig config = {}) {
-        auto store = TilesetStore::open(dir_->file("sets"));
+    // A root holding "scene" and "big", a set whose whole export (about 5 MB)
+    // is more than loopback's socket buffers hold (about 3 MB here: 4 MiB of
+    // send buffer at most, tcp_wmem): a client that reads nothing keeps its
+    // export, and its place, in progress. Built once, by the tests that need it.
+    static std::string bigRoot() {
+        if (!big_) {
+            big_ = new test::TempDir;
+            fs::create_directories(big_->file("sets"));
+            fs::copy(dir_->file("sets/scene"), big_->file("sets/scene"), fs::copy_options::recursive);
+            buildScene(big_->file("sets/big"), 1200000, 3);
+        }
+        return big_->file("sets");
+    }
+
+    void start(ServerConfig config = {}, const std::string& root = "") {
+        auto store = TilesetStore::open(root.empty() ? dir_->file("sets") : root);
         ASSERT_TRUE(store.ok());
         store_ = std::move(*store);
         config.port = 0;
@@ -100,12 +121,52 @@ protected:
         return out;
     }
 
+    // A GET of `path` from a client that then reads nothing (a small receive
+    // buffer: the bytes wait on the server's side); the connection, once its
+    // status line is read into *status.
+    int requestAndStall(const std::string& path, std::string* status) {
+        int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+        const int small = 4096;
+        ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+        sockaddr_in addr{};
+        addr.sin_family = AF_INET;
+        addr.sin_port = htons(uint16_t(server_->port()));
+        addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+        timeval tv{10, 0};
+        ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+        const std::string request = "GET " + path + " HTTP/1.1\r\nHost: x\r\n\r\n";
+        ::send(fd, request.data(), request.size(), MSG_NOSIGNAL);
+        char head[12] = {};
+        const ssize_t n = ::recv(fd, head, sizeof head, MSG_WAITALL);
+        *status = std::string(head, size_t(std::max<ssize_t>(n, 0)));
+        return fd;
+    }
+
+    // The exports in progress, from /metrics, once they number `want` (the
+    // server frees an export's place when it notices its client gone, a
+    // moment after the client leaves), or what they number after 60 s.
+    int exportsInProgressOnce(int want) {
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+        int now = -1;
+        while (true) {
+            auto m = client().Get("/metrics");
+            const std::string gauge = "\nsurfcast_exports_in_progress ";
+            const size_t at = m ? m->body.find(gauge) : std::string::npos;
+            now = at == std::string::npos ? -1 : std::atoi(m->body.c_str() + at + gauge.size());
+            if (now == want || std::chrono::steady_clock::now() > deadline) return now;
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+    }
+
     static test::TempDir* dir_;
+    static test::TempDir* big_;
     std::unique_ptr<TilesetStore> store_;
     std::unique_ptr<HttpServer> server_;
     std::thread thread_;
 };
 test::TempDir* ServerTest::dir_ = nullptr;
+test::TempDir* ServerTest::big_ = nullptr;
 
 }  // namespace
 
@@ -496,22 +557,170 @@ TEST_F(ServerTest, ExportLimitsBadQueriesAndClientsThatLeave) {
     // next writes to it): room for all six at once.
     config.exportMaxPoints = ServerConfig{}.exportMaxPoints;
     config.exportConcurrency = 6;
-    start(config);
-    // Clients that hang up after the first bytes, between ones that read the
-    // whole export on a connection the server then closes.
+    config.timeoutSeconds = 60;  // the stalled exports below hold their places until closed
+    start(config, bigRoot());
+    // Clients that hang up after the status line (with a small receive
+    // buffer, of a body larger than the socket buffers: the server is still
+    // sending when they go), between ones that read the whole export on a
+    // connection the server then closes.
     for (int i = 0; i < 6; ++i) {
-        const bool leave = i % 2 == 0;
-        const std::string got =
-            raw(std::string("GET /sets/scene/export.laz HTTP/1.1\r\nHost: x\r\n") + (leave ? "" : "Connection: close\r\n") + "\r\n", 3000, leave);
-        EXPECT_EQ(got.rfind("HTTP/1.1 200", 0), 0u) << got.substr(0, 200);
-        if (!leave) {
-            EXPECT_NE(got.find("\r\n0\r\n\r\n"), std::string::npos) << "the chunked body should end";
+        if (i % 2 == 0) {
+            std::string status;
+            ::close(requestAndStall("/sets/big/export.laz", &status));
+            EXPECT_EQ(status, "HTTP/1.1 200");
+            continue;
         }
+        const std::string got = raw("GET /sets/scene/export.laz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+        EXPECT_EQ(got.rfind("HTTP/1.1 200", 0), 0u) << got.substr(0, 200);
+        EXPECT_NE(got.find("\r\n0\r\n\r\n"), std::string::npos) << "the chunked body should end";
     }
+    // Every place comes back: six exports at once then run (each held by a
+    // client that reads nothing of a body larger than the socket buffers),
+    // and a seventh is refused. A place a leaver kept would refuse one of the six.
+    EXPECT_EQ(exportsInProgressOnce(0), 0);
+    std::vector<int> held;
+    for (int i = 0; i < 6; ++i) {
+        std::string status;
+        held.push_back(requestAndStall("/sets/big/export.laz", &status));
+        EXPECT_EQ(status, "HTTP/1.1 200") << "export " << i;
+    }
+    auto seventh = client().Get("/sets/scene/export.laz");
+    ASSERT_TRUE(seventh);
+    EXPECT_EQ(seventh->status, 503);
+    for (int fd : held) ::close(fd);
+    EXPECT_EQ(exportsInProgressOnce(0), 0);
     auto whole = client().Get("/sets/scene/export.laz");
     ASSERT_TRUE(whole);
     EXPECT_EQ(whole->status, 200);
     EXPECT_GT(whole->body.size(), 375u);
+}
+
+// A client reading an export more slowly than the server's time limit lets
+// through is cut off at the limit, its response left without the chunked
+// encoding's last chunk, and its place is free for the next export.
+TEST_F(ServerTest, ExportTooSlowForItsTimeLimitIsCutOff) {
+    ServerConfig config;
+    config.exportConcurrency = 1;
+    config.exportSeconds = 1;
+    start(config, bigRoot());
+    std::string status;
+    int fd = requestAndStall("/sets/big/export.laz", &status);
+    ASSERT_EQ(status, "HTTP/1.1 200");
+    // 4 KiB per 10 ms at most: the 5 MB body would take this reader over 12 s,
+    // and each read lets the server send again (no inactivity timeout).
+    std::string got;
+    char buf[4096];
+    ssize_t n;
+    while ((n = ::recv(fd, buf, sizeof buf, 0)) > 0) {
+        got.append(buf, size_t(n));
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    const int error = n < 0 ? errno : 0;
+    ::close(fd);
+    const bool whole = got.size() >= 7 && got.compare(got.size() - 7, 7, "\r\n0\r\n\r\n") == 0;
+    EXPECT_FALSE(whole) << "the slow reader got the whole export (" << got.size() << " bytes)";
+    EXPECT_TRUE(n == 0 || error == ECONNRESET) << std::strerror(error);
+    // libmicrohttpd frees the response before it closes (and so resets) the
+    // connection: the place is free by now.
+    auto next = client().Get("/sets/scene/export.laz");
+    ASSERT_TRUE(next);
+    EXPECT_EQ(next->status, 200);
+    EXPECT_GT(next->body.size(), 375u);
+}
+
+// Refusals come before any work that grows with the set: with every place
+// taken, 200 exports over the limit are answered 503 (the place is checked
+// first, not the limit, which needs the node table), while tile requests on
+// other connections keep being answered whole. Once the places are free, the
+// same requests get 413, and the limit is the one laz_export counts.
+TEST_F(ServerTest, ExportRefusalsComeFirstWhileTilesServe) {
+    auto set = TilesetReader::open(bigRoot() + "/big");
+    ASSERT_TRUE(set.ok());
+    // A box that leaves out the leaves of the highest x: below the whole set's count.
+    double lastX = -HUGE_VAL;
+    for (const NodeRecord& n : set->nodes())
+        if (n.flags & kFlagInputPoints) lastX = std::max(lastX, nodeMin(set->info(), n.key).x);
+    const Box3d& b = set->info().bounds;
+    PointFilter part;
+    part.box = Box3d{{b.min.x - 1, b.min.y - 1, b.min.z - 1}, {lastX - 1e-6, b.max.y + 1, b.max.z + 1}};
+    const uint64_t partPoints = exportPointsAtMost(*set, part), allPoints = exportPointsAtMost(*set, PointFilter{});
+    ASSERT_LT(partPoints, allPoints);
+    const std::string box = std::to_string(part.box->min.x) + "," + std::to_string(part.box->min.y) + "," + std::to_string(part.box->min.z) +
+                            "," + std::to_string(part.box->max.x) + "," + std::to_string(part.box->max.y) + "," +
+                            std::to_string(part.box->max.z);
+
+    ServerConfig config;
+    config.exportConcurrency = 2;
+    config.exportMaxPoints = partPoints;  // the box's export is allowed, the whole set's is not
+    config.timeoutSeconds = 60;
+    start(config, bigRoot());
+    std::vector<int> held;
+    for (int i = 0; i < config.exportConcurrency; ++i) {
+        std::string status;
+        held.push_back(requestAndStall("/sets/big/export.laz?bbox=" + box, &status));
+        ASSERT_EQ(status, "HTTP/1.1 200") << "export " << i;
+    }
+
+    std::vector<std::pair<std::string, std::string>> tiles;  // path, bytes
+    for (const NodeRecord& n : set->nodes()) {
+        if (tiles.size() == 64) break;
+        tiles.emplace_back("/sets/big/nodes/" + n.key.name(), "");
+    }
+    {
+        auto blocks = test::readFile(bigRoot() + "/big/blocks.bin");
+        for (size_t i = 0; i < tiles.size(); ++i) {
+            const NodeRecord& n = set->nodes()[i];
+            tiles[i].second = blocks.substr(size_t(n.blockOffset), n.blockSize);
+        }
+    }
+    std::atomic<bool> refusing{true};
+    std::atomic<int> tileAnswers{0}, tileWrong{0};
+    std::thread tileClient([&] {
+        auto c = client();
+        for (size_t i = 0; refusing.load() || i < tiles.size(); ++i) {
+            auto r = c.Get(tiles[i % tiles.size()].first);
+            if (r && r->status == 200 && r->body == tiles[i % tiles.size()].second) ++tileAnswers;
+            else ++tileWrong;
+        }
+    });
+    constexpr int kRefused = 200, kSenders = 4;
+    std::vector<std::vector<int>> statuses(kSenders);
+    std::vector<std::thread> senders;
+    for (int t = 0; t < kSenders; ++t)
+        senders.emplace_back([&, t] {
+            auto c = client();
+            for (int i = t; i < kRefused; i += kSenders) {
+                auto r = c.Get("/sets/big/export.laz");
+                statuses[size_t(t)].push_back(r ? r->status : 0);
+            }
+        });
+    for (auto& t : senders) t.join();
+    refusing = false;
+    tileClient.join();
+    int busy = 0;
+    for (const auto& list : statuses)
+        for (int st : list) busy += st == 503;
+    EXPECT_EQ(busy, kRefused) << "every export over the limit, with no place free, is refused as busy";
+    EXPECT_EQ(tileWrong.load(), 0);
+    EXPECT_GE(tileAnswers.load(), int(tiles.size()));
+
+    for (int fd : held) ::close(fd);
+    ASSERT_EQ(exportsInProgressOnce(0), 0);
+    auto over = client().Get("/sets/big/export.laz");
+    ASSERT_TRUE(over);
+    EXPECT_EQ(over->status, 413);
+    EXPECT_NE(over->body.find("over this server's limit of " + std::to_string(partPoints)), std::string::npos) << over->body;
+    auto atLimit = client().Get("/sets/big/export.laz?bbox=" + box);
+    ASSERT_TRUE(atLimit);
+    EXPECT_EQ(atLimit->status, 200);
+    // The bound is exactly laz_export's: one point less refuses the same box.
+    server_->stop();
+    thread_.join();
+    config.exportMaxPoints = partPoints - 1;
+    start(config, bigRoot());
+    auto justOver = client().Get("/sets/big/export.laz?bbox=" + box);
+    ASSERT_TRUE(justOver);
+    EXPECT_EQ(justOver->status, 413);
 }
 
 // A server stopped while an export is under way (here in its first pass,
