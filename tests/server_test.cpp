@@ -525,9 +525,9 @@ TEST_F(ServerTest, ExportSendsWhatSurfcastExportWrites) {
     }
 }
 
-// Limits and bad queries: 413 over the limit with the count, 400 naming what
-// is wrong, 404 with the route off; and a client that leaves mid-export
-// stops its producer without stopping the server.
+// Limits and bad queries: 413 over the limit with a count, 400 naming what
+// is wrong, 404 with the route off; and clients that leave mid-export stop
+// their producers without stopping the server, and give their places back.
 TEST_F(ServerTest, ExportLimitsBadQueriesAndClientsThatLeave) {
     ServerConfig config;
     config.exportMaxPoints = 1000;
