@@ -137,6 +137,11 @@ struct TilesetStatistics {
     bool operator==(const TilesetStatistics&) const = default;
 };
 
+// The name suffix of a wide scalar field's low part: a field exact in more
+// than 32 bits is two attributes, NAME and NAME:low, whose values add up to
+// its value (docs/FORMAT.md, "Scalar attributes").
+inline constexpr const char* kLowPartSuffix = ":low";
+
 // A dimension every input point carries with one value: recorded once in
 // tileset.json instead of per surfel, and given back by every export.
 struct ConstantAttribute {

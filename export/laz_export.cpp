@@ -81,8 +81,6 @@ struct DimSource {
     bool known = false;   // stored or constant
 };
 
-constexpr const char* kLowPartSuffix = ":low";
-
 // A scalar attribute's index among a block's scalars, which blocks list in tileset.json's order.
 int scalarIndexOf(const TilesetInfo& info, const AttributeInfo* a) {
     int k = 0;

@@ -196,9 +196,6 @@ MetadataColumn float64Column(std::string property, size_t n, const std::function
     return c;
 }
 
-// The suffix of a wide scalar field's low part (docs/FORMAT.md, "Scalar
-// attributes"; the build's ScalarQuantization::lowPart).
-constexpr const char* kWideLowSuffix = ":low";
 
 // A property ID (3D Metadata: [A-Za-z_][A-Za-z0-9_]*, unique in its class)
 // for an attribute's name: other characters become '_', and a name taken
@@ -249,15 +246,15 @@ std::vector<MetadataColumn> metadataColumns(const TilesetInfo& info, const Block
             if (s.name == name && s.values.size() == n) return &s;  // decodeBlock fills every listed one
         return nullptr;
     };
-    const size_t suffix = std::strlen(kWideLowSuffix);
+    const size_t suffix = std::strlen(kLowPartSuffix);
     for (const ScalarAttribute& s : b.scalars) {
         const AttributeInfo* a = info.attribute(s.name);
-        const bool lowPart = s.name.ends_with(kWideLowSuffix) && info.attribute(s.name.substr(0, s.name.size() - suffix));
+        const bool lowPart = s.name.ends_with(kLowPartSuffix) && info.attribute(s.name.substr(0, s.name.size() - suffix));
         if (!a || s.values.size() != n || lowPart) continue;  // a low part goes with its top part
         const std::string id = propertyId(s.name, taken);
         const double top = std::ldexp(1.0, s.bits) - 1;  // the largest stored integer
-        const AttributeInfo* lowInfo = info.attribute(s.name + kWideLowSuffix);
-        if (const ScalarAttribute* low = lowInfo ? scalar(s.name + kWideLowSuffix) : nullptr) {
+        const AttributeInfo* lowInfo = info.attribute(s.name + kLowPartSuffix);
+        if (const ScalarAttribute* low = lowInfo ? scalar(s.name + kLowPartSuffix) : nullptr) {
             out.push_back(float64Column(id, n, [&](size_t i) { return s.values[i] * a->scale + a->offset + low->values[i] * lowInfo->scale; }));
         } else if (a->kind == "categorical") {
             // The values span offset .. offset + scale · top.

@@ -324,9 +324,10 @@ Status BuildContext::chooseAttributes() {
     storeOpacity_ = a.translucentPoints > 0;
     if (storeOpacity_) attributeNames_.push_back(kOpacityAttribute);
     // Scalar fields (selected by name or with "all": every one found that
-    // varies is stored): exact where the range fits 32 bits at the file's own
-    // resolution, or for floating-point fields at the finest bit any value
-    // sets; else in the finest power-of-two step that fits.
+    // varies is stored): exact where the range fits a double's significand
+    // at the file's own resolution, or for floating-point fields at the
+    // finest bit any value sets; else in the finest power-of-two step that
+    // fits. Past 32 bits, in two attributes (ScalarQuantization).
     for (const ScalarStats& f : stats_.scalars) {
         // A constant field carries no information per point; stored, it still
         // costs Draco's kd-tree coder: seven constant fields beside the usual
@@ -340,18 +341,16 @@ Status BuildContext::chooseAttributes() {
         ScalarQuantization q;
         q.name = f.field.name;
         q.categorical = f.field.categorical;
-        const double lo = f.min, range = f.max - f.min;
-        const double maxSteps = std::ldexp(1.0, kMaxScalarBits) - 1;
-        q.offset = lo;
-        q.step = f.field.resolution > 0 ? f.field.resolution
-                 : f.finestBit != INT_MAX ? std::ldexp(1.0, f.finestBit)
-                                          : std::exp2(std::ceil(std::log2(range / maxSteps)));
-        // Exact in more bits than one attribute holds, up to a double's 53:
-        // two attributes, the top 32 bits and the rest (ScalarQuantization).
-        const int exactBits = int(std::ceil(std::log2(std::round(range / q.step) + 1)));
-        if (exactBits > kMaxScalarBits && exactBits <= kMaxWideScalarBits) {
-            q.lowBits = exactBits - kMaxScalarBits;
-            q.bits = kMaxScalarBits;
+        const double range = f.max - f.min;
+        const double maxSteps = std::ldexp(1.0, kMaxWideScalarBits) - 1;
+        q.offset = f.min;
+        q.step = f.field.resolution > 0 ? f.field.resolution : f.finestBit != INT_MAX ? std::ldexp(1.0, f.finestBit) : 0;
+        // Steps counted rounded: a range of whole steps of a decimal scale divides to a hair past its count.
+        if (!(q.step > 0) || std::round(range / q.step) > maxSteps) q.step = std::exp2(std::ceil(std::log2(range / maxSteps)));
+        const int bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
+        q.bits = std::min(bits, kMaxScalarBits);
+        if (bits > kMaxScalarBits) {
+            q.lowBits = bits - kMaxScalarBits;
             ScalarQuantization low = q;
             low.name += kLowPartSuffix;
             low.offset = 0;
@@ -360,14 +359,9 @@ Status BuildContext::chooseAttributes() {
             low.lowPart = true;
             q.step = std::ldexp(q.step, q.lowBits);
             stored_.push_back(q);
-            stored_.push_back(low);
             attributeNames_.push_back(q.name);
-            attributeNames_.push_back(low.name);
-            continue;
+            q = low;
         }
-        if (range / q.step > maxSteps) q.step = std::max(q.step, std::exp2(std::ceil(std::log2(range / maxSteps))));
-        while (range / q.step > maxSteps) q.step *= 2;
-        q.bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
         stored_.push_back(q);
         attributeNames_.push_back(q.name);
     }

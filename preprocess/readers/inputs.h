@@ -118,8 +118,7 @@ struct ScalarQuantization {
     // which forEachBatch fills in, not a field of the inputs.
     bool provenance = false;
 };
-// The suffix of a wide field's low part (ScalarQuantization::lowPart).
-inline constexpr const char* kLowPartSuffix = ":low";
+
 
 struct InputStats {
     std::vector<SourceStats> sources;

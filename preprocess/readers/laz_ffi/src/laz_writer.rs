@@ -33,8 +33,10 @@ struct Stream {
     offset: Option<[u8; 8]>,
 }
 
-// SAFETY: used on the thread that calls the sc_laz_writer functions only.
+// SAFETY: used on the thread that calls the sc_laz_writer functions only
+// (the `laz` crate asks for Sync of what it writes to, and shares it with no thread).
 unsafe impl Send for Stream {}
+unsafe impl Sync for Stream {}
 
 impl Stream {
     fn end(&self) -> u64 {

@@ -28,8 +28,10 @@ struct Input {
 
 // SAFETY: the caller's function is called on the thread that calls
 // sc_laz_open or sc_laz_read only (ChunkRange reads before it hands the pool
-// the decoding), one call at a time for a reader.
+// the decoding), one call at a time for a reader; the `laz` crate asks for
+// Sync of what it reads, and shares none of it across threads.
 unsafe impl Send for Input {}
+unsafe impl Sync for Input {}
 
 impl Input {
     fn at(&self, pos: u64) -> Input {
