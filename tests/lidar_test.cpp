@@ -289,6 +289,19 @@ Result<BlockData> readBlockWithScalars(const TilesetReader& set, const NodeRecor
     return decodeBlock(bytes->data(), bytes->size(), e);
 }
 
+// A scalar field's value for surfel i: its attribute's, plus its low part's
+// where the field is wide (docs/FORMAT.md, "Scalar attributes"); NaN where
+// the block lacks it.
+double fieldValue(const TilesetInfo& info, const BlockData& b, const std::string& name, size_t i) {
+    double v = NAN, low = 0;
+    for (const ScalarAttribute& a : b.scalars) {
+        const AttributeInfo* ai = info.attribute(a.name);
+        if (a.name == name) v = a.values[i] * ai->scale + ai->offset;
+        if (a.name == name + kLowPartSuffix) low = a.values[i] * ai->scale + ai->offset;
+    }
+    return v + low;
+}
+
 // One Extra Bytes descriptor (LAS 1.4 R15, table 24): type, options, name,
 // no_data (as 8 bytes), scale and offset.
 std::string extraBytesDescriptor(uint8_t type, uint8_t options, const std::string& name, uint64_t noData = 0,
@@ -404,27 +417,35 @@ TEST(Lidar, ScalarFieldsRoundTripThroughTheLevels) {
         ASSERT_NE(a, nullptr) << name;
         EXPECT_EQ(a->kind, kind) << name;
     }
-    EXPECT_EQ(info.attributes.size(), 4u /* position normal color radius */ + 4 /* LiDAR */ + kinds.size());
+    // gps_time (1000 + i / 10^4: doubles of 42 fraction bits over 11 s) and
+    // "deviation" (sin i: doubles nearer zero than 53 bits of its range
+    // reach) are wide: each a second attribute of its low bits.
+    const std::vector<std::string> wide = {"gps_time", "deviation"};
+    for (const std::string& name : wide) EXPECT_NE(info.attribute(name + kLowPartSuffix), nullptr) << name;
+    EXPECT_EQ(info.attributes.size(), 4u /* position normal color radius */ + 4 /* LiDAR */ + kinds.size() + wide.size());
 
     // The largest error each may have, from its quantization: integers and
-    // scaled integers exact (the files' own steps: 0.006 degree, 0.01); gps_time
-    // to half of 2^-20 s; "deviation" (a double, no step) to half of the power
-    // of two at or above its range (just under 2) over 2^24 - 1, 2^-22; "spare"
-    // exact, its no-data value read as the field's minimum (stored 0).
+    // scaled integers exact (the files' own steps: 0.006 degree, 0.01);
+    // gps_time exact (its two parts add up in a double exactly: 52 bits);
+    // "deviation" (a double, no step) to half of the power of two at or above
+    // its range (just under 2) over 2^53 - 1, 2^-52, plus the sum's rounding
+    // (an ulp of 1); "spare" exact, its no-data value read as the field's
+    // minimum (stored 0).
     const std::map<std::string, double> tolerance = {
-        {"scan_angle", 1e-9}, {"user_data", 0}, {"point_source_id", 0}, {"gps_time", 0x1p-21 + 1e-9},
-        {"nir", 0},           {"amplitude", 1e-9}, {"deviation", 0x1p-23 + 1e-12}, {"spare", 0}};
+        {"scan_angle", 1e-9}, {"user_data", 0}, {"point_source_id", 0}, {"gps_time", 0},
+        {"nir", 0},           {"amplitude", 1e-9}, {"deviation", 0x1p-53 + 0x1p-52}, {"spare", 0}};
     std::map<std::string, size_t> checked, wrong;
     std::set<double> sources;
     for (const NodeRecord& n : set->nodes()) {
         auto block = readBlockWithScalars(*set, n);
         ASSERT_TRUE(block.ok()) << block.status().message();
-        ASSERT_EQ(block->scalars.size(), kinds.size());
+        ASSERT_EQ(block->scalars.size(), kinds.size() + wide.size());
         for (const ScalarAttribute& a : block->scalars) {
             const AttributeInfo* ai = info.attribute(a.name);
             ASSERT_NE(ai, nullptr);
+            if (a.name.ends_with(kLowPartSuffix)) continue;  // in its field's value
             for (size_t i = 0; i < block->size(); ++i) {
-                const double v = a.values[i] * ai->scale + ai->offset;
+                const double v = fieldValue(info, *block, a.name, i);
                 // Categorical fields are resampled by majority: only values the
                 // input holds, never an average (101 between 100 and 102).
                 if (a.name == "point_source_id") sources.insert(v);
@@ -498,7 +519,7 @@ TEST(Lidar, PlyScalarPropertyStoredByName) {
         const int x = i % 100, y = i / 100;
         const std::string confidence = std::to_string((i % 97) / 96.0);  // 6 decimals
         ply += std::to_string(x * 0.01) + " " + std::to_string(y * 0.01) + " 0 " + confidence + " " + std::to_string(i % 5) + " 7\n";
-        want[{x, y}] = {double(std::stof(confidence)), i % 5};  // as a float property reads
+        want[{x, y}] = {std::stod(confidence), i % 5};  // as the reader parses the text
     }
     test::writeFile(dir.file("c.ply"), ply);
     auto r = test::run({test::binary("surfcast-build"), dir.file("c.ply"), "-o", dir.file("set"), "-q", "--attributes",
@@ -519,15 +540,16 @@ TEST(Lidar, PlyScalarPropertyStoredByName) {
         if (!(n.flags & kFlagInputPoints)) continue;
         auto block = readBlockWithScalars(*set, n);
         ASSERT_TRUE(block.ok()) << block.status().message();
-        ASSERT_EQ(block->scalars.size(), 2u);
+        // confidence: the doubles of 6-decimal texts in [0, 1], finer than 53
+        // bits of the range reach: wide, to half of 2^-52 (the power of two
+        // at or above 1 / (2^53 - 1)) plus the sum's rounding (an ulp of 1).
+        ASSERT_EQ(block->scalars.size(), 3u);
         for (size_t i = 0; i < block->size(); ++i) {
             const Vec3d p = surfelPosition(set->info(), n, *block, i);
             auto it = want.find({int(std::lround(p.x * 100)), int(std::lround(p.y * 100))});
             ASSERT_NE(it, want.end());
-            // Floating: to half of the power-of-two step at or above its range (1)
-            // over 2^24 - 1, 2^-23.
-            EXPECT_NEAR(block->scalars[0].values[i] * confidence->scale + confidence->offset, it->second.first, 0x1p-24 + 1e-12);
-            EXPECT_EQ(block->scalars[1].values[i] * band->scale + band->offset, it->second.second);
+            EXPECT_NEAR(fieldValue(set->info(), *block, "confidence", i), it->second.first, 0x1p-53 + 0x1p-52);
+            EXPECT_EQ(fieldValue(set->info(), *block, "band", i), it->second.second);
             ++checked;
         }
     }

@@ -754,13 +754,13 @@ TEST_F(UpdateTest, BadInputLeavesTheSetUntouched) {
         return dir.file(name);
     };
 
-    // A scan the set's layout cannot take: the added cell with intensities
-    // 256 times the set's (0-254 become up to 65,024), whose range no longer
-    // fits the 12 bits the set's blocks store them in at a step of 1.
-    const std::string louder = rewritten("louder.laz", "las.intensity = (las.intensity.astype('uint32') * 256).clip(0, 65535).astype('uint16')\n");
-    r = test::run({test::binary("surfcast-build"), "-q", "--add", louder, "--to", set()});
+    // A scan the set's layout cannot take: the added cell with 16-bit
+    // colour (c·256 + 1: no 8-bit value written either way LAS writers do),
+    // where the set's blocks store 8 bits.
+    const std::string deeper = rewritten("deeper.laz", "for c in ('red', 'green', 'blue'): las[c] = las[c].astype('uint32') * 256 + 1\n");
+    r = test::run({test::binary("surfcast-build"), "-q", "--add", deeper, "--to", set()});
     EXPECT_EQ(r.exitCode, 1) << r.output;
-    EXPECT_NE(r.output.find("beyond the set's 0-4095"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("change the colour depth (8 to 16 bits)"), std::string::npos) << r.output;
     expectUntouched("a scan the set's layout cannot take");
 
     // A scan in another coordinate system: the added cell declaring WGS 84

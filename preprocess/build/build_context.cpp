@@ -347,6 +347,7 @@ Status BuildContext::chooseAttributes() {
         q.step = f.field.resolution > 0 ? f.field.resolution : f.finestBit != INT_MAX ? std::ldexp(1.0, f.finestBit) : 0;
         // Steps counted rounded: a range of whole steps of a decimal scale divides to a hair past its count.
         if (!(q.step > 0) || std::round(range / q.step) > maxSteps) q.step = std::exp2(std::ceil(std::log2(range / maxSteps)));
+        while (std::round(range / q.step) > maxSteps) q.step *= 2;  // log2 of a hair over a power of two rounds down to it
         const int bits = std::max(1, int(std::ceil(std::log2(std::round(range / q.step) + 1))));
         q.bits = std::min(bits, kMaxScalarBits);
         if (bits > kMaxScalarBits) {

@@ -12,8 +12,8 @@ with the box shrunk and grown by T, how many exported points matched, the
 largest position error, the exported classes, the largest GPS time and
 scan angle errors,
 and for each other attribute how many matched points carry the original's
-value (colour compared as 16-bit, 8-bit originals scaled by 257, as LAS
-specifies).
+value (colour as the original stores it: the export gives back 8-bit values
+written in LAS's 16-bit fields as they were).
 """
 import argparse
 import json
@@ -96,8 +96,6 @@ def main():
             continue
         ov = np.asarray(getattr(o, d))[matched].astype(np.float64)
         ev = np.asarray(getattr(e, d))[found].astype(np.float64)
-        if d in ("red", "green", "blue") and np.asarray(getattr(o, d)).max() <= 255:
-            ov = ov * 257
         if d == "gps_time":  # a float the set quantizes: its largest error instead
             result["gps_time_error"] = float(np.abs(ov - ev).max())
         else:

@@ -439,18 +439,22 @@ describe("exports, as their consumers read them", { skip }, () => {
     const nz = axes([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)]);
     const len = Math.hypot(...s.normal);
     const cos = (nz[0] * s.normal[0] + nz[1] * s.normal[1] + nz[2] * s.normal[2]) / len;
-    assert.ok(Math.acos(Math.min(1, cos)) <= turn(g), `${what}: the normal off by ${Math.acos(Math.min(1, cos))} rad`);
+    assert.ok(Math.acos(Math.min(1, cos)) <= turn(g), `${what}: the normal off by ${Math.acos(Math.min(1, cos))} rad (bound ${turn(g)}, rotation ${g.rotation}, normal ${s.normal})`);
   }
 
   // SPZ's byte steps: a colour byte is 1 / (0.15 * 255) of the DC coefficient;
-  // a scale byte 1/16 of its log; each of x, y, z rounds by up to 1/255 and
-  // w = sqrt(1 - x² - y² - z²) by (|x| + |y| + |z|) / (255 w) more, and a
+  // a scale byte 1/16 of its log; each of x, y, z rounds by up to d = 1/255
+  // and w = sqrt(1 - x² - y² - z²) follows: w² moves by at most
+  // s = 2 d (|x| + |y| + |z|) + 3 d², so w by at most s / (w + sqrt(w² - s))
+  // (to first order (|x| + |y| + |z|) d / w, which a small w outgrows); a
   // quaternion off by e turns a vector by at most 2e (plus the block's own
   // normal rounding).
   const spzColorStep = 0.5 / (0.15 * 255) * 0.28209479177387814 + 1e-9;
   const spzTurn = (g) => {
-    const [x, y, z, w] = g.rotation;
-    return 2 * Math.hypot(1 / 255, 1 / 255, 1 / 255, (Math.abs(x) + Math.abs(y) + Math.abs(z)) / (255 * w)) + 1e-3;
+    const [x, y, z, w] = g.rotation, d = 1 / 255;
+    const s = 2 * d * (Math.abs(x) + Math.abs(y) + Math.abs(z)) + 3 * d * d;
+    const dw = w * w > s ? s / (w + Math.sqrt(w * w - s)) : Math.sqrt(w * w + s);
+    return 2 * Math.hypot(d, d, d, dw) + 1e-3;
   };
 
   test("round trip: the 3D Tiles splats' SPZ holds the set's surfels as Gaussians, their attributes' values a property table", async (t) => {
