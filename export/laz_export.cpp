@@ -1,8 +1,10 @@
 #include "laz_export.h"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <ctime>
 #include <sstream>
 
@@ -220,10 +222,14 @@ Status forEachKept(const TilesetReader& set, const PointFilter& filter, const st
     return {};
 }
 
+// A value rounded into T's range (a hostile tileset.json's offset may put it
+// anywhere: a cast of a double out of range is undefined).
 template <class T>
 T clamped(double v) {
+    if (std::isnan(v)) return T(0);
     return T(std::clamp(std::round(v), double(std::numeric_limits<T>::min()), double(std::numeric_limits<T>::max())));
 }
+float clampedFloat(double v) { return std::isnan(v) ? NAN : float(std::clamp(v, -double(FLT_MAX), double(FLT_MAX))); }
 
 // An extra-bytes value as its descriptor stores it: raw = (value - offset) / scale.
 void putExtra(uint8_t* at, const std::vector<uint8_t>& e, double v) {
@@ -237,9 +243,9 @@ void putExtra(uint8_t* at, const std::vector<uint8_t>& e, double v) {
     case 4: le::put<int16_t>(at, clamped<int16_t>(v)); break;
     case 5: le::put<uint32_t>(at, clamped<uint32_t>(v)); break;
     case 6: le::put<int32_t>(at, clamped<int32_t>(v)); break;
-    case 7: le::put<uint64_t>(at, v > 0 ? (v < 0x1p64 ? uint64_t(std::round(v)) : UINT64_MAX) : 0); break;
+    case 7: le::put<uint64_t>(at, v > 0 ? (v < 0x1p64 ? uint64_t(std::round(v)) : UINT64_MAX) : 0); break;  // NaN: 0
     case 8: le::put<int64_t>(at, v > -0x1p63 ? (v < 0x1p63 ? int64_t(std::round(v)) : INT64_MAX) : INT64_MIN); break;
-    case 9: le::put<float>(at, float(v)); break;
+    case 9: le::put<float>(at, clampedFloat(v)); break;
     default: le::put<double>(at, v); break;
     }
 }
@@ -257,15 +263,16 @@ Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info
         le::put<int32_t>(r + 4 * a, q[a]);
     }
     auto value = [&](Dim k) { return valueOf(d.dims[k], b, i); };
-    auto bit = [&](Dim k, int bits) { return uint8_t(int(value(k)) & ((1 << bits) - 1)); };
+    auto bit = [&](Dim k, int bits) { return uint8_t(clamped<uint8_t>(value(k)) & ((1 << bits) - 1)); };
     const int f = plan.pointFormat;
     le::put<uint16_t>(r + 12, clamped<uint16_t>(value(kIntensity)));
     // A point of no known return is its pulse's only one.
-    const int ret = d.has(kReturnNumber) ? int(value(kReturnNumber)) : 1, count = d.has(kNumberOfReturns) ? int(value(kNumberOfReturns)) : 1;
+    const int ret = d.has(kReturnNumber) ? clamped<uint8_t>(value(kReturnNumber)) : 1;
+    const int count = d.has(kNumberOfReturns) ? clamped<uint8_t>(value(kNumberOfReturns)) : 1;
     const uint8_t flags = bit(kClassFlags, 4), direction = bit(kScanDirection, 1), edge = bit(kEdgeOfFlightLine, 1);
     if (f < 6) {
         r[14] = uint8_t((ret & 7) | (count & 7) << 3 | direction << 6 | edge << 7);
-        r[15] = uint8_t((int(value(kClassification)) & 31) | (flags & 7) << 5);
+        r[15] = uint8_t((clamped<uint8_t>(value(kClassification)) & 31) | (flags & 7) << 5);
         r[16] = uint8_t(clamped<int8_t>(value(kScanAngle)));
         r[17] = clamped<uint8_t>(value(kUserData));
         le::put<uint16_t>(r + 18, clamped<uint16_t>(value(kPointSourceId)));
@@ -289,10 +296,10 @@ Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info
         const double offset = value(kWaveOffset);
         le::put<uint64_t>(r + w + 1, offset > 0 ? (offset < 0x1p64 ? uint64_t(std::round(offset)) : UINT64_MAX) : 0);
         le::put<uint32_t>(r + w + 9, clamped<uint32_t>(value(kWaveSize)));
-        le::put<float>(r + w + 13, float(value(kWaveLocation)));
-        le::put<float>(r + w + 17, float(value(kWaveX)));
-        le::put<float>(r + w + 21, float(value(kWaveY)));
-        le::put<float>(r + w + 25, float(value(kWaveZ)));
+        le::put<float>(r + w + 13, clampedFloat(value(kWaveLocation)));
+        le::put<float>(r + w + 17, clampedFloat(value(kWaveX)));
+        le::put<float>(r + w + 21, clampedFloat(value(kWaveY)));
+        le::put<float>(r + w + 25, clampedFloat(value(kWaveZ)));
     }
     size_t at = kFormatBytes[f];
     for (size_t k = 0; k < d.descriptors.size(); ++k) {
@@ -476,13 +483,13 @@ Result<LazExportPlan> planExport(const TilesetReader& set, const PointFilter& fi
     if (whole) {
         for (size_t i : plan.nodes) plan.points += set.nodes()[i].surfelCount;
         if (plan.points) plan.bounds = all;
-        const int only = returns.known ? int(returns.constant) : 1;
+        const int only = returns.known ? clamped<uint8_t>(returns.constant) : 1;
         if (only >= 1 && only <= 15) plan.pointsByReturn[only - 1] = plan.points;
     } else {
         SC_TRY(forEachKept(set, filter, plan.nodes, false, stop, [&](const NodeRecord&, const BlockData& b, size_t i, const Vec3d& p) -> Status {
             plan.bounds.extend(p);
             ++plan.points;
-            const int r = returns.known ? int(valueOf(returns, b, i)) : 1;
+            const int r = returns.known ? clamped<uint8_t>(valueOf(returns, b, i)) : 1;
             if (r >= 1 && r <= 15) ++plan.pointsByReturn[r - 1];
             return {};
         }));
@@ -684,7 +691,7 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
                 gpsMin = std::min(gpsMin, gps);
                 gpsMax = std::max(gpsMax, gps);
             }
-            const int r = d.has(kReturnNumber) ? int(valueOf(d.dims[kReturnNumber], b, i)) : 1;
+            const int r = d.has(kReturnNumber) ? clamped<uint8_t>(valueOf(d.dims[kReturnNumber], b, i)) : 1;
             if (r >= 1 && r <= 15) ++plan.pointsByReturn[r - 1];
             ++report.points;
             return {};

@@ -351,6 +351,67 @@ TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
     EXPECT_NE(huge.status().message().find("1.11111e+70"), std::string::npos) << huge.status().message();
 }
 
+// What a set keeps of its inputs beyond their points (constants, dimensions
+// left out, every point, the LAS headers) round trips; each field's bad
+// value is an error naming it (an Extra Bytes descriptor's type sizes the
+// export's records, its scale divides).
+TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
+    TilesetInfo info;
+    info.rootEdge = 4;
+    info.levels = 1;
+    info.bounds.min = {0, 0, 0};
+    info.bounds.max = {1, 1, 1};
+    info.normalSource = "input";
+    info.weights = "none";
+    info.constants = {{"point_source_id", 7326}, {"classification", 2}};
+    info.leftOut = {"gps_time", "nir"};
+    info.duplicatesKept = true;
+    info.las.present = true;
+    info.las.pointFormat = 8;
+    info.las.gpsTimeType = 1;
+    info.las.systemIdentifier = "LAStools";
+    info.las.generatingSoftware = "las2las";
+    info.las.creationDay = 59;
+    info.las.creationYear = 2014;
+    info.las.scale = {0.01, 0.01, 0.001};
+    info.las.offset = {500000, 4000000, 0};
+    info.las.colorMultiplier = 256;
+    info.las.crsVlrs = {{2112, {'G', 'E', 'O', 'G', 'C', 'S', 0}}};
+    std::vector<uint8_t> descriptor(192, 0);
+    descriptor[2] = 9;  // float32
+    std::memcpy(&descriptor[4], "amplitude", 9);
+    info.las.extraBytes = {descriptor};
+    const std::string text = writeTilesetJson(info);
+    auto back = readTilesetJson(text, "t.json");
+    ASSERT_TRUE(back.ok()) << back.status().message();
+    EXPECT_EQ(*back, info);
+    EXPECT_NE(text.find("\"data\": \"47454f47435300\""), std::string::npos) << text;  // the payload in hex
+
+    const nlohmann::json good = nlohmann::json::parse(text);
+    auto rejected = [&](const std::string& pointer, const nlohmann::json& value, const std::string& named) {
+        nlohmann::json j = good;
+        j[nlohmann::json::json_pointer(pointer)] = value;
+        auto r = readTilesetJson(j.dump(), "t.json");
+        ASSERT_FALSE(r.ok()) << pointer << " = " << value.dump();
+        EXPECT_NE(r.status().message().find(named), std::string::npos) << r.status().message();
+    };
+    rejected("/constants/0/value", "seven", "constants[0].value");
+    rejected("/left_out/1", 3, "left_out[1]");
+    rejected("/duplicates", "some", "duplicates");
+    rejected("/las/point_format", 11, "las.point_format");
+    rejected("/las/gps_time_type", 2, "las.gps_time_type");
+    rejected("/las/color_multiplier", 255, "las.color_multiplier");
+    rejected("/las/crs_vlrs/0/data", "47454g", "las.crs_vlrs[0].data");
+    rejected("/las/crs_vlrs/0/data", "474", "las.crs_vlrs[0].data");
+    rejected("/las/extra_bytes/0", "00", "not a 192-byte descriptor");
+    std::string bad(good["las"]["extra_bytes"][0].get<std::string>());
+    bad.replace(4, 2, "0b");  // data type 11: a deprecated array
+    rejected("/las/extra_bytes/0", bad, "data type 11");
+    std::string unscaled(good["las"]["extra_bytes"][0].get<std::string>());
+    unscaled.replace(6, 2, "08");  // scale given, and 0
+    rejected("/las/extra_bytes/0", unscaled, "scale or offset");
+}
+
 // The hierarchy against tileset.json: size and CRC as declared, and every
 // block inside blocks.bin's declared size (the streaming client once asked for
 // a block 4 GB past the end and retried forever).

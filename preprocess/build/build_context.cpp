@@ -330,9 +330,9 @@ Status BuildContext::chooseAttributes() {
     // fits. Past 32 bits, in two attributes (ScalarQuantization).
     for (const ScalarStats& f : stats_.scalars) {
         // A constant field carries no information per point; stored, it still
-        // costs Draco's kd-tree coder: seven constant fields beside the usual
-        // attributes doubled the bytes of a scan (bench/BENCHMARKS.md). The
-        // set records its value once instead.
+        // costs Draco's kd-tree coder, whose cost grows with the dimensions
+        // (bench/BENCHMARKS.md, "Attribute bytes"). The set records its value
+        // once instead.
         if (!(f.max > f.min)) {
             if (f.points) constants_.push_back({f.field.name, f.min});
             else if (report_) std::fprintf(stderr, "warning: --attributes %s: no valid value across the set; not stored\n", f.field.name.c_str());

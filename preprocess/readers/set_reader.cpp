@@ -1,6 +1,7 @@
 // A tile set's leaves as input points (set_reader.h).
 #include "set_reader.h"
 
+#include <algorithm>
 #include <cstring>
 
 #include <algorithm>
@@ -54,7 +55,8 @@ public:
         for (const ConstantAttribute& c : info.constants) {
             const int lidar = lidarIndex(c.name);
             if (lidar >= 0) {
-                constantLidar_[lidar] = c.value;
+                // Within what the attribute holds (a hostile value would make the casts below undefined).
+                constantLidar_[lidar] = std::clamp(c.value, 0.0, lidar == kLidarIntensity ? 65535.0 : 255.0);
                 (lidar == kLidarIntensity ? desc_.hasIntensity : lidar == kLidarClassification ? desc_.hasClassification : desc_.hasReturns) = true;
             } else if (scalars.wants(c.name)) {
                 desc_.scalars.push_back({c.name, false, 0});
