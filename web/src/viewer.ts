@@ -22,6 +22,9 @@ import { type DrawnNode, type FrameView, kDefaultEdgeTau, type SceneComposite, k
 import { TileSource } from "./source.js";
 import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
 
+// The name suffix of a wide scalar field's low part (docs/FORMAT.md, "Scalar attributes").
+const kLowPartSuffix = ":low";
+
 export type { Box, Camera, ColorBy, RenderMode, TilesetInfo };
 // "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov", as surfcast-view --camera takes and the page's ?camera= keeps it.
 export { formatCamera, parseCamera };
@@ -292,6 +295,12 @@ export class SurfcastViewer extends EventTarget {
     const o = this.streamer.origin;
     const attributes: Record<string, number> = {};
     for (const a of this.info.attributes) if (a.name in s.raw) attributes[a.name] = s.raw[a.name] * a.scale + a.offset;
+    // A wide field is its two attributes' sum (docs/FORMAT.md, "Scalar attributes").
+    for (const name of Object.keys(attributes))
+      if (name.endsWith(kLowPartSuffix) && name.slice(0, -kLowPartSuffix.length) in attributes) {
+        attributes[name.slice(0, -kLowPartSuffix.length)] += attributes[name];
+        delete attributes[name];
+      }
     return { node: this.streamer.selector.nodes[i].key, position: [s.position[0] + o[0], s.position[1] + o[1], s.position[2] + o[2]],
              normal: s.normal, radius: s.radius, color: s.color ? s.color.map((c) => Math.round(c * 255)) as PickResult["color"] : null,
              attributes };

@@ -200,12 +200,15 @@ function rootLayout(dir) {
 
 // A classified, georeferenced PLY (binary, double coordinates, at
 // kOffset): ground (class 2) on a 100 x 100 grid 0.1 apart, a wall (6,
-// building) of 40 x 29 at y = 5.05, and a column (5, high vegetation) of 20 x 30.
+// building) of 40 x 29 at y = 5.05, and a column (5, high vegetation) of 20 x
+// 30; each point's gps_time 4·10^8 s plus a tenth of its index (1,176 s at the
+// doubles' 2^-24 s step there: 35 bits, two attributes, docs/FORMAT.md).
 const kClassCounts = { 2: 10000, 5: 600, 6: 1160 };
 const kOffset = [600000, 4000000, 0];
 const at = (x, y, z) => [x + kOffset[0], y + kOffset[1], z + kOffset[2]];
 // Looking at the ground and the wall from the -y side, above.
 const kClassCamera = [...at(5, -9, 7), ...at(5, 5, 0.5), 0, 0, 1, 45].join(",");
+const kGpsTime = (i) => 4e8 + i * 0.1;
 function writeClassifiedPly(path) {
   const points = [];
   for (let i = 0; i < 100; ++i) for (let j = 0; j < 100; ++j) points.push([...at(i * 0.1, j * 0.1, 0), 2]);
@@ -213,13 +216,14 @@ function writeClassifiedPly(path) {
   for (let i = 0; i < 20; ++i)
     for (let k = 0; k < 30; ++k) points.push([...at(7 + 0.3 * Math.cos(Math.PI * i / 10), 3 + 0.3 * Math.sin(Math.PI * i / 10), 0.05 + k * 0.1), 5]);
   const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${points.length}\nproperty double x\nproperty double y\n` +
-    "property double z\nproperty uchar classification\nend_header\n";
-  const body = Buffer.alloc(points.length * 25);
+    "property double z\nproperty uchar classification\nproperty double gps_time\nend_header\n";
+  const body = Buffer.alloc(points.length * 33);
   points.forEach(([x, y, z, c], i) => {
-    body.writeDoubleLE(x, 25 * i);
-    body.writeDoubleLE(y, 25 * i + 8);
-    body.writeDoubleLE(z, 25 * i + 16);
-    body.writeUInt8(c, 25 * i + 24);
+    body.writeDoubleLE(x, 33 * i);
+    body.writeDoubleLE(y, 33 * i + 8);
+    body.writeDoubleLE(z, 33 * i + 16);
+    body.writeUInt8(c, 33 * i + 24);
+    body.writeDoubleLE(kGpsTime(i), 33 * i + 25);
   });
   writeFileSync(path, Buffer.concat([Buffer.from(header), body]));
 }
@@ -254,7 +258,7 @@ describe("browser viewer", { skip }, () => {
     execFileSync(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--weights", "analytic", "-o",
                                         join(sets, "weighted")]);
     writeClassifiedPly(join(work, "classified.ply"));
-    execFileSync(bin("surfcast-build"), ["-q", join(work, "classified.ply"), "-o", join(sets, "classified")]);
+    execFileSync(bin("surfcast-build"), ["-q", join(work, "classified.ply"), "--attributes", "classification,gps_time", "-o", join(sets, "classified")]);
     // Bad inputs: a block that never passes its CRC, and a damaged hierarchy page.
     for (const name of ["corrupt-block", "broken-hierarchy", "nostats"]) cpSync(join(sets, "scene"), join(sets, name), { recursive: true });
     // A set without statistics (optional in tileset.json): elevation spans the bounds.
@@ -567,6 +571,11 @@ describe("browser viewer", { skip }, () => {
     // position's decimals show that it is carried in double precision.
     const wall = await click(at(4, 5.05, 1.5));
     assert.equal(wall.attributes.classification, 6, JSON.stringify(wall));
+    // A wide field is one value, its two attributes' sum (at a coarse level
+    // a prefilter of the wall's points' times: within theirs).
+    assert.deepEqual(Object.keys(wall.attributes).filter((k) => k.endsWith(":low")), [], JSON.stringify(wall));
+    assert.ok(wall.attributes.gps_time >= kGpsTime(10000) && wall.attributes.gps_time <= kGpsTime(11159), JSON.stringify(wall));
+    assert.match(await page.$eval("#picked", (e) => e.textContent), /gps time40000(10\d\d|11[01]\d)\.\d{7}/);
     assert.ok(Math.abs(wall.position[1] - at(0, 5.05, 0)[1]) < 0.01, `wall y ${wall.position[1]}`);
     assert.ok(Math.abs(wall.position[0] - at(4, 0, 0)[0]) < 0.25 && Math.abs(wall.position[2] - 1.5) < 0.25,
               `the surfel under the cursor: ${wall.position}`);
