@@ -156,7 +156,9 @@ struct LasSourceInfo {
     bool present = false;        // some input was LAS or LAZ
     int pointFormat = -1;        // the inputs' point data record format (0-10); -1 where they differ
     int gpsTimeType = -1;        // global encoding bit 0: 0 GPS week time, 1 adjusted standard GPS time; -1 unknown
-    std::string systemIdentifier, generatingSoftware;  // empty where they differ
+    // Empty where they differ; a LAS export writes the system identifier back
+    // and names itself the generating software (the inputs' is kept for reference).
+    std::string systemIdentifier, generatingSoftware;
     int creationDay = -1, creationYear = -1;            // -1 where they differ
     Vec3d scale, offset;         // the coordinate lattice (scale 0 where they differ)
     // How the inputs wrote a set's 8-bit colour c in LAS's 16-bit fields: c

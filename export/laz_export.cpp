@@ -29,6 +29,8 @@ constexpr size_t kWaveAt[11] = {0, 0, 0, 0, 28, 34, 0, 0, 0, 30, 38};
 // The Extra Bytes VLR (LASF_Spec 4): 192-byte descriptors; data types 1-10
 // are the scalars u8, i8, u16, i16, u32, i32, u64, i64, f32, f64 (table 24).
 constexpr size_t kExtraBytesDescriptor = 192;
+// As many descriptors as a VLR's 16-bit payload size holds.
+constexpr size_t kMaxExtraBytesDescriptors = 65535 / kExtraBytesDescriptor;
 constexpr size_t kExtraTypeBytes[11] = {0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
 constexpr int kExtraF64 = 10;
 constexpr uint16_t kExtraBytesRecord = 4, kWktRecord = 2112;
@@ -98,6 +100,7 @@ struct Dimensions {
     DimSource dims[kDimCount];
     std::vector<DimSource> extra;                    // per extra-bytes descriptor
     std::vector<std::vector<uint8_t>> descriptors;   // the Extra Bytes VLR's, in record order
+    std::vector<std::string> dropped;                // fields no descriptor could hold
     bool scalars = false;                            // some value comes from a scalar attribute
 
     bool has(Dim d) const { return dims[d].known; }
@@ -138,6 +141,10 @@ Dimensions dimensionsOf(const TilesetInfo& info) {
     for (const std::vector<uint8_t>& e : info.las.extraBytes) {
         const DimSource s = sourceOf(info, descriptorName(e));
         if (!s.known || standard(descriptorName(e))) continue;
+        if (d.descriptors.size() == kMaxExtraBytesDescriptors) {
+            d.dropped.push_back(descriptorName(e));
+            continue;
+        }
         d.descriptors.push_back(e);
         d.extra.push_back(s);
     }
@@ -148,7 +155,12 @@ Dimensions dimensionsOf(const TilesetInfo& info) {
     for (const ConstantAttribute& c : info.constants) names.push_back(c.name);
     for (const std::string& name : names) {
         const bool described = std::any_of(d.descriptors.begin(), d.descriptors.end(), [&](const auto& e) { return descriptorName(e) == name; });
-        if (standard(name) || described || name.size() > 32) continue;
+        if (standard(name) || described) continue;
+        // A descriptor names a dimension in 32 bytes; the VLR holds 341 of them.
+        if (name.size() > 32 || d.descriptors.size() == kMaxExtraBytesDescriptors) {
+            d.dropped.push_back(name);
+            continue;
+        }
         std::vector<uint8_t> e(kExtraBytesDescriptor, 0);
         e[2] = kExtraF64;
         std::memcpy(&e[4], name.data(), name.size());
@@ -198,6 +210,7 @@ void describeDimensions(const TilesetInfo& info, const Dimensions& d, LazExportP
     }
     if (info.colorBits) plan->dimensions.push_back("rgb");
     for (const std::vector<uint8_t>& e : d.descriptors) plan->dimensions.push_back(descriptorName(e));
+    for (const std::string& name : d.dropped) plan->leftOut.push_back(name);
     for (const std::string& name : info.leftOut) plan->leftOut.push_back(name);
 }
 

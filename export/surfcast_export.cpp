@@ -99,7 +99,6 @@ int usageError(const std::string& message) {
     return 2;
 }
 
-// Progress on stderr, a line each twentieth of the work: "  DONE of ALL UNIT".
 // The summary's lines on what a LAS export carries and what it leaves out.
 std::string dimensionSummary(const std::vector<std::string>& carried, const std::vector<std::string>& leftOut) {
     auto list = [](const std::vector<std::string>& names) {
@@ -112,6 +111,7 @@ std::string dimensionSummary(const std::vector<std::string>& carried, const std:
     return out;
 }
 
+// Progress on stderr, a line each twentieth of the work: "  DONE of ALL UNIT".
 std::function<void(size_t, size_t)> progressLines(const char* unit) {
     return [unit, last = size_t(0)](size_t done, size_t all) mutable {
         if (done != all && done - last < std::max<size_t>(1, all / 20)) return;

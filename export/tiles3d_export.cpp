@@ -181,8 +181,12 @@ MetadataColumn integerColumn(std::string property, const char* attribute, bool i
     const double span = std::ldexp(1.0, int(8 * bytes)), lo = isSigned ? -span / 2 : 0, hi = (isSigned ? span / 2 : span) - 1;
     MetadataColumn c{std::move(property), attribute, {{"type", "SCALAR"}, {"componentType", integerType(isSigned, bytes)}}, bytes, {}};
     c.values.resize(n * bytes);
+    // The 8-byte types' bounds are not doubles: the largest double below them
+    // (a cast of a double past the type's range is undefined; NaN writes 0).
+    const double below = std::nextafter(hi + 1, 0.0);
     for (size_t i = 0; i < n; ++i) {
-        const uint64_t v = uint64_t(int64_t(std::clamp(std::round(value(i)), lo, hi)));
+        const double r = std::clamp(std::round(value(i)), lo, std::min(hi, below));
+        const uint64_t v = std::isnan(r) ? 0 : isSigned ? uint64_t(int64_t(r)) : uint64_t(r);
         for (size_t k = 0; k < bytes; ++k) c.values[i * bytes + k] = uint8_t(v >> (8 * k));
     }
     return c;

@@ -201,6 +201,53 @@ class RoundTrip(unittest.TestCase):
         laspy.read(las).write(laz)
         self.assertFalse(np.array_equal(records(las)[0], records(laz)[0]))
 
+    def test_an_update_adds_its_points_whole(self):
+        """--add to a set of every attribute: the export holds both files'
+        records, the added file's wide GPS times and repeats of position
+        among them."""
+        a, b = os.path.join(self.dir.name, "a.las"), os.path.join(self.dir.name, "b.las")
+        generated_las(a, 6, seed=60)
+        # The second file: the first's values in another order at other
+        # positions of the same box (an update keeps the set's layout, which
+        # holds the first file's ranges: docs/FORMAT.md, "Updates in place").
+        rng = np.random.default_rng(61)
+        second = laspy.read(a)
+        rec = second.points.array[rng.permutation(POINTS)]
+        for axis in "XYZ":
+            rec[axis] = rng.permutation(second.points.array[axis])
+        second.points = laspy.ScaleAwarePointRecord(rec, second.header.point_format, second.header.scales, second.header.offsets)
+        second.write(b)
+        _, _, set_dir = self.through_set(a, name="grown")
+        run([os.path.join(BUILD, "bin", "surfcast-build"), "-q", "--add", b, "--to", set_dir])
+        laz = os.path.join(self.dir.name, "grown-all.laz")
+        run([os.path.join(BUILD, "bin", "surfcast-export"), set_dir, "--format", "laz", "-o", laz])
+        both = os.path.join(self.dir.name, "both.las")
+        first, second = laspy.read(a), laspy.read(b)
+        first.points = laspy.ScaleAwarePointRecord(np.concatenate([first.points.array, second.points.array]),
+                                                   first.header.point_format, first.header.scales, first.header.offsets)
+        first.write(both)
+        self.assert_same_records(both, laz)
+
+    def test_inputs_of_other_formats_leave_the_lattice_out(self):
+        """A LAS file beside a PLY: the PLY's points lie on no LAS lattice, so
+        the set keeps none and the export's grid holds both."""
+        las, ply = os.path.join(self.dir.name, "l.las"), os.path.join(self.dir.name, "p.ply")
+        generated_las(las, 1, seed=7)
+        with open(ply, "w") as f:
+            f.write("ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\nend_header\n")
+            for k in range(3):
+                f.write(f"{500010.0001234 + k} {4000010.0005678} {110.5}\n")
+        out = os.path.join(self.dir.name, "mixed")
+        run([os.path.join(BUILD, "bin", "surfcast-build"), "-q", las, ply, "--attributes", "all", "-o", out])
+        info = json.load(open(os.path.join(out, "tileset.json")))
+        self.assertNotIn("scale", info["las"])
+        self.assertNotIn("point_format", info["las"])
+        laz = os.path.join(self.dir.name, "mixed.laz")
+        run([os.path.join(BUILD, "bin", "surfcast-export"), out, "--format", "laz", "-o", laz])
+        e = laspy.read(laz)
+        self.assertEqual(len(e.points), POINTS + 3)
+        self.assertEqual(e.header.point_format.id, 6)  # LAS 1.4's, not the LAS file's 1
+
     def require_data(self):
         if not os.path.isdir(DATA):
             if os.environ.get("CI"):

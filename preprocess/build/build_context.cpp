@@ -91,10 +91,23 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
         c->attributeNames_ = set->attributeNames_;
         c->intensityOffset_ = set->intensityOffset_;
         c->intensityStep_ = set->intensityStep_;
+        // The set's constants and its dimensions left out stay; a constant
+        // of the inputs the set neither stores nor holds is left out too (one
+        // that differs from the set's varies: update.cpp refuses the
+        // attribute the set lacks). What the LAS headers agree on is the
+        // inputs' own, old and added.
         c->duplicatesKept_ = set->duplicatesKept_;
+        auto holds = [&](const std::string& name) {
+            const int lidar = lidarIndex(name);
+            return lidar >= 0 ? set->store_[lidar]
+                              : std::any_of(set->stored_.begin(), set->stored_.end(), [&](const ScalarQuantization& q) { return q.name == name; }) ||
+                                    std::any_of(set->constants_.begin(), set->constants_.end(), [&](const ConstantAttribute& o) { return o.name == name; });
+        };
+        for (const ConstantAttribute& k : c->constants_)
+            if (!holds(k.name)) c->leftOut_.push_back(k.name);
         c->constants_ = set->constants_;
-        c->leftOut_ = set->leftOut_;
-        c->las_ = set->las_;
+        for (const std::string& name : set->leftOut_)
+            if (std::find(c->leftOut_.begin(), c->leftOut_.end(), name) == c->leftOut_.end()) c->leftOut_.push_back(name);
         if (provenance) {
             c->stored_.push_back(*provenance);
             c->attributeNames_.push_back(provenance->name);
@@ -126,7 +139,6 @@ std::shared_ptr<const BuildContext> BuildContext::withLayoutOf(const BuildContex
     r->duplicatesKept_ = set.duplicatesKept;
     r->constants_ = set.constants;
     r->leftOut_ = set.leftOut;
-    r->las_ = set.las;
     r->storeOpacity_ = set.attribute(kOpacityAttribute) != nullptr;
     if (r->storeOpacity_) r->attributeNames_.push_back(kOpacityAttribute);
     r->stored_.clear();
@@ -141,10 +153,17 @@ std::shared_ptr<const BuildContext> BuildContext::withLayoutOf(const BuildContex
         q.offset = a.offset;
         q.step = a.scale;
         q.bits = a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32;
-        // A wide field's low part follows its top part (chooseAttributes).
-        if (!r->stored_.empty() && q.name == r->stored_.back().name + kLowPartSuffix) {
-            q.lowPart = true;
-            r->stored_.back().lowBits = q.bits = int(std::lround(std::log2(r->stored_.back().step / q.step)));
+        // A wide field's low part follows its top part (chooseAttributes): a
+        // uint32 top part, the low part's offset 0, and a ratio of steps that
+        // is 2^1 to 2^21 (53 bits in all). Else the two are fields apart.
+        if (!r->stored_.empty() && q.name == r->stored_.back().name + kLowPartSuffix && q.offset == 0 &&
+            r->stored_.back().bits == kMaxScalarBits) {
+            int exponent = 0;
+            const double ratio = std::frexp(r->stored_.back().step / q.step, &exponent);
+            if (ratio == 0.5 && exponent - 1 >= 1 && exponent - 1 <= kMaxWideScalarBits - kMaxScalarBits) {
+                q.lowPart = true;
+                r->stored_.back().lowBits = q.bits = exponent - 1;
+            }
         }
         r->stored_.push_back(q);
         r->attributeNames_.push_back(q.name);
@@ -413,9 +432,13 @@ Status BuildContext::chooseAttributes() {
 // differ is left unknown.
 void BuildContext::chooseLasSource() {
     las_ = {};
+    bool otherInputs = false;
     for (const SourceStats& src : stats_.sources) {
         const LasSourceInfo& l = src.description.las;
-        if (!l.present) continue;
+        if (!l.present) {
+            otherInputs = otherInputs || src.points > 0;
+            continue;
+        }
         const int multiplier = src.colorMax <= 255 ? 1 : src.colorsTimes256 ? 256 : 257;
         if (!las_.present) {
             las_ = l;
@@ -437,6 +460,11 @@ void BuildContext::chooseLasSource() {
             if (std::none_of(las_.extraBytes.begin(), las_.extraBytes.end(), [&](const auto& e) { return name(e) == name(d); }))
                 las_.extraBytes.push_back(d);
         }
+    }
+    // Points of other inputs lie on no LAS lattice, nor in a LAS point format.
+    if (otherInputs) {
+        las_.scale = las_.offset = {};
+        las_.pointFormat = -1;
     }
 }
 

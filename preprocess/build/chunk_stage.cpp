@@ -66,9 +66,15 @@ BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_
             for (int axis = 0; axis < 3; ++axis)
                 if (a.position[axis] != c.position[axis]) return a.position[axis] < c.position[axis];
             const auto ka = stored(a), kc = stored(c);
-            if (ka != kc || fields == 0) return ka < kc;
-            return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
-                                                scalars.row(c.row) + fields);
+            if (ka != kc) return ka < kc;
+            if (fields > 0 && !std::equal(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row)))
+                return std::lexicographical_compare(scalars.row(a.row), scalars.row(a.row) + fields, scalars.row(c.row),
+                                                    scalars.row(c.row) + fields);
+            // A set that keeps every point keeps those two as well: by what
+            // else they carry, so that their order is the input's in no case.
+            if (!ctx.keepsDuplicates()) return false;
+            return std::make_tuple(a.normal.x, a.normal.y, a.normal.z, a.alpha, a.source) <
+                   std::make_tuple(c.normal.x, c.normal.y, c.normal.z, c.alpha, c.source);
         });
         // (A point of an update's set that took an added one in stands for a
         // set point still: another set point at its position stays apart.)

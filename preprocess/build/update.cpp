@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -56,8 +57,15 @@ Status holds(const TilesetInfo& set, const TilesetInfo& all, const InputStats& a
     };
     if (set.colorBits != all.colorBits)
         return refuse("change the colour depth (" + std::to_string(set.colorBits) + " to " + std::to_string(all.colorBits) + " bits)");
+    // A wide field's low part is no attribute of its own: a set that stores
+    // the field narrower (one built before fields went wide) takes the range
+    // check below.
+    auto lowPartOfStored = [&](const std::string& name) {
+        return name.ends_with(kLowPartSuffix) && set.attribute(name.substr(0, name.size() - std::strlen(kLowPartSuffix)));
+    };
     for (const AttributeInfo& a : all.attributes)
-        if (!set.attribute(a.name) && a.name != kProvenanceAttribute) return refuse("bring attribute '" + a.name + "'");
+        if (!set.attribute(a.name) && a.name != kProvenanceAttribute && !lowPartOfStored(a.name))
+            return refuse("bring attribute '" + a.name + "'");
     auto span = [](const AttributeInfo& a, int bits) { return a.offset + a.scale * (std::ldexp(1.0, bits) - 1); };
     auto typeBits = [](const AttributeInfo& a) { return a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32; };
     if (const AttributeInfo* a = set.attribute(kLidarAttributes[kLidarIntensity]); a && added.attributes.intensityPoints > 0) {

@@ -286,11 +286,14 @@ std::string crsOf(const Vlrs& v) {
 }
 
 // The scalar fields of a record: the standard ones of its format, then the
-// Extra Bytes VLR's dimensions, which follow the format's own fields. Errors
-// name the VLR; deprecated array and undocumented dimensions are skipped (their
-// bytes still counted).
-Status scalarFields(const std::string& path, int format, size_t recordLength, const Vlrs& vlrs,
-                    std::vector<std::pair<ScalarField, ScalarLayout>>* out, std::vector<std::vector<uint8_t>>* descriptors) {
+// Extra Bytes VLR's dimensions, which follow the format's own fields, each
+// with its descriptor in `descriptors`. Errors name the VLR; deprecated array,
+// undocumented and unnamed dimensions are skipped (their bytes still counted)
+// and named in `skipped`. `noData`: a dimension's no-data value reads as NaN
+// (no value), else as itself (a set that keeps every attribute gives it back).
+Status scalarFields(const std::string& path, int format, size_t recordLength, const Vlrs& vlrs, bool noData,
+                    std::vector<std::pair<ScalarField, ScalarLayout>>* out, std::vector<std::vector<uint8_t>>* descriptors,
+                    std::vector<std::string>* skipped) {
     auto add = [&](const char* name, bool categorical, double resolution, ScalarLayout::Type type, size_t offset, double scale) {
         ScalarLayout l;
         l.type = type;
@@ -338,7 +341,13 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
         add("y_t", false, 0, ScalarLayout::F32, w + 21, 1);
         add("z_t", false, 0, ScalarLayout::F32, w + 25, 1);
     }
-    if (!vlrs.extraBytes) return {};
+    auto undescribed = [&](size_t from) {
+        if (recordLength > from) skipped->push_back(std::to_string(recordLength - from) + " undescribed bytes of each record");
+    };
+    if (!vlrs.extraBytes) {
+        undescribed(kFormats[format].minLength);
+        return {};
+    }
     const std::vector<uint8_t>& v = *vlrs.extraBytes;
     const std::string where = path + ": VLR " + std::to_string(vlrs.extraBytesIndex) + " (Extra Bytes, LASF_Spec 4)";
     if (v.empty() || v.size() % kExtraBytesDescriptor != 0)
@@ -362,6 +371,7 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
             const bool duplicate = std::any_of(out->begin(), out->end(), [&](const auto& f) { return f.first.name == name; });
             if (duplicate) {
                 std::fprintf(stderr, "warning: %s: a dimension of that name exists; skipped\n", dim.c_str());
+                skipped->push_back("extra bytes " + std::to_string(d) + " ('" + name + "', a second of that name)");
             } else {
                 ScalarLayout l;
                 l.type = ScalarLayout::Type(type - 1);
@@ -371,16 +381,19 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
                 if (!std::isfinite(l.scale) || l.scale == 0 || !std::isfinite(l.add))
                     return Status::error(dim + ": scale or offset is not a finite non-zero number");
                 if (options & 1) l.noData = l.type >= ScalarLayout::F32 ? le::get<double>(e + 40) : rawValue(e + 40, l.type);
-                l.hasNoData = (options & 1) != 0;
+                l.hasNoData = noData && (options & 1) != 0;
                 const bool integral = l.type < ScalarLayout::F32;
                 out->push_back({{name, false, integral ? std::fabs(l.scale) : 0}, l});
                 descriptors->emplace_back(e, e + kExtraBytesDescriptor);
             }
-        } else if (type != 0) {
-            std::fprintf(stderr, "warning: %s: deprecated array type %d; skipped\n", dim.c_str(), type);
+        } else {
+            if (type != 0 && !name.empty()) std::fprintf(stderr, "warning: %s: deprecated array type %d; skipped\n", dim.c_str(), type);
+            skipped->push_back("extra bytes " + std::to_string(d) + (name.empty() ? "" : " ('" + name + "')") +
+                               (type == 0 ? " (undocumented)" : type > 10 ? " (a deprecated array)" : " (unnamed)"));
         }
         offset += size;
     }
+    undescribed(offset);
     return {};
 }
 
@@ -512,7 +525,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
         if (*payload) desc.las.crsVlrs.push_back({record, **payload});
 
     std::vector<std::pair<ScalarField, ScalarLayout>> fields;
-    SC_TRY(scalarFields(path, l.format, l.recordLength, l.vlrs, &fields, &desc.las.extraBytes));
+    SC_TRY(scalarFields(path, l.format, l.recordLength, l.vlrs, !scalars.all, &fields, &desc.las.extraBytes, &desc.otherScalars));
     std::vector<ScalarLayout> layouts;
     for (auto& [field, layout] : fields)
         if (scalars.wants(field.name)) {

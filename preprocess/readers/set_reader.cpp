@@ -2,10 +2,8 @@
 #include "set_reader.h"
 
 #include <algorithm>
-#include <cstring>
-
-#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 
 #include "inputs.h"

@@ -12,7 +12,7 @@ import { classLegend, rampLegend } from "./legend.js";
 import { measure, Measurements, type Tool } from "./measure.js";
 import type { Box } from "./lod_selection.js";
 import { RendererError } from "./renderer.js";
-import { type ColorBy, emptyViewerState, formatBox, kRenderModes, parseBox, type PickResult, type RenderMode, SurfcastViewer,
+import { type ColorBy, emptyViewerState, formatBox, kLowPartSuffix, kRenderModes, parseBox, type PickResult, type RenderMode, SurfcastViewer,
          type ViewerOptions, type ViewerState } from "./viewer.js";
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -272,7 +272,7 @@ function showPicked(table: HTMLTableElement, hit: PickResult | null, v: Surfcast
     if ("return_number" in a) rows.push(["return", `${a.return_number} of ${a.number_of_returns ?? "?"}`]);
     for (const name of ["classification", "return_number", "number_of_returns"]) delete a[name];
     for (const [name, value] of Object.entries(a)) {
-      const step = v.info.attributes.find((x) => x.name === name + ":low" || x.name === name)?.scale ?? 1;  // a wide field's finer step first
+      const step = v.info.attributes.find((x) => x.name === name + kLowPartSuffix || x.name === name)?.scale ?? 1;  // a wide field's finer step first
       rows.push([name.replaceAll("_", " "), value.toFixed(Math.max(0, Math.min(9, Math.ceil(-Math.log10(step)))))]);
     }
     rows.push(["radius", hit.radius.toPrecision(3)]);

@@ -23,7 +23,7 @@ import { TileSource } from "./source.js";
 import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
 
 // The name suffix of a wide scalar field's low part (docs/FORMAT.md, "Scalar attributes").
-const kLowPartSuffix = ":low";
+export const kLowPartSuffix = ":low";
 
 export type { Box, Camera, ColorBy, RenderMode, TilesetInfo };
 // "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov", as surfcast-view --camera takes and the page's ?camera= keeps it.
