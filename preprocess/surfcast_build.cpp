@@ -2,10 +2,7 @@
 // builder (octree_builder.h) and the verifier (tileset_reader.h) together.
 // Weight capture renders, so it runs as its own program (surfcast-weights, next
 // to this one): the build itself needs no Vulkan.
-#include <fcntl.h>
 #include <spawn.h>
-#include <sys/file.h>
-#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -23,6 +20,7 @@
 #include "block_codec.h"
 #include "crc32.h"
 #include "octree_builder.h"
+#include "set_lock.h"
 #include "stages.h"
 #include "update.h"
 #include "work_files.h"
@@ -410,51 +408,14 @@ int fail(const surfcast::Status& status) {
     return 1;
 }
 
-// One writer of a set at a time (a build or --merge over it, an update, a
-// compaction, a weight capture): an exclusive lock on its folder, held from
-// before the writer reads the set until the process ends; another writer
-// fails at once.
-struct SetLock {
-    int fd = -1;
-    ~SetLock() {
-        if (fd >= 0) ::close(fd);
-    }
-};
-// A build or compaction swaps a new folder in for the set's: a lock granted
-// on the folder it replaced guards nothing, so it is taken again on the one
-// the path names, a few times at most.
-constexpr int kLockAttempts = 8;
-surfcast::Status lockSet(const std::string& set, SetLock* lock) {
-    for (int attempt = 0; attempt < kLockAttempts; ++attempt) {
-        if (lock->fd >= 0) ::close(lock->fd);
-        lock->fd = ::open(set.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-        if (lock->fd < 0) return surfcast::Status::error(set + ": cannot open (" + std::strerror(errno) + ")");
-        if (::flock(lock->fd, LOCK_EX | LOCK_NB) != 0)
-            return surfcast::Status::error(set + (errno == EWOULDBLOCK ? std::string(": another build, update or compaction of this set is running")
-                                                                       : ": cannot lock (" + std::string(std::strerror(errno)) + ")"));
-        struct stat held, named;
-        if (::fstat(lock->fd, &held) == 0 && ::stat(set.c_str(), &named) == 0 && held.st_dev == named.st_dev && held.st_ino == named.st_ino)
-            return {};
-    }
-    return surfcast::Status::error(set + ": replaced by other writers again and again while this one waited for its lock");
-}
-
-// The set `output` names, locked where it exists already (a new one has no
-// other writer to wait for; a path that is no folder, TilesetWriter refuses).
-surfcast::Status lockOutput(const std::string& output, SetLock* lock) {
-    const std::string set = std::filesystem::absolute(output).lexically_normal().string();
-    std::error_code ec;
-    return std::filesystem::is_directory(set, ec) ? lockSet(set, lock) : surfcast::Status{};
-}
-
 // Prints what a build wrote and runs the weight capture where asked.
 int finishBuild(const Args& a, const surfcast::BuildSummary& summary) {
     std::printf("wrote %s\n%s", a.opt.output.c_str(), summary.text().c_str());
     if (a.captureWeights) {
         // The capture writes the set again, under the lock of the folder the
         // build swapped in (the build's own is on the one it replaced).
-        SetLock lock;
-        if (auto st = lockOutput(a.opt.output, &lock); !st.ok()) return fail(st);
+        surfcast::SetLock lock;
+        if (auto st = surfcast::lockOutput(a.opt.output, &lock); !st.ok()) return fail(st);
         std::fflush(stdout);
         int status = runWeightCapture(a.opt.output, !a.opt.progress);
         if (status != 0) {
@@ -645,8 +606,8 @@ int runUpdate(const Args& a) {
             return usageError(mode + " takes the set's own build options from its build record, not " + a.kept[i] + " (only --threads and -q)");
     }
     const std::string set = std::filesystem::absolute(a.to).lexically_normal().string();
-    SetLock lock;
-    if (auto st = lockSet(set, &lock); !st.ok()) return fail(st);
+    surfcast::SetLock lock;
+    if (auto st = surfcast::lockSet(set, &lock); !st.ok()) return fail(st);
     surfcast::BuildPlan record;
     Args planned;
     if (auto st = readRecord(set, &record, &planned, "update it"); !st.ok()) return fail(st);
@@ -695,8 +656,8 @@ int runUpdate(const Args& a) {
 // surfcast-build --compact SET: the set written anew without the blocks its
 // updates replaced, its nodes' bytes (and so their ETags) as they were.
 int runCompact(const std::string& dir) {
-    SetLock lock;
-    if (auto st = lockSet(dir, &lock); !st.ok()) return fail(st);
+    surfcast::SetLock lock;
+    if (auto st = surfcast::lockSet(dir, &lock); !st.ok()) return fail(st);
     auto reader = surfcast::TilesetReader::open(dir);
     if (!reader) return fail(reader.status());
     const std::string blocks = dir + "/blocks.bin";
@@ -841,8 +802,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     }
     if (stage == "update-merge") {
         const std::string& set = planned.opt.output;
-        SetLock lock;
-        if (auto st = lockSet(set, &lock); !st.ok()) return fail(st);
+        surfcast::SetLock lock;
+        if (auto st = surfcast::lockSet(set, &lock); !st.ok()) return fail(st);
         auto summary = surfcast::updateMergeStage(planned.opt, *plan, stored, work);
         if (!summary) return fail(summary.status());
         std::error_code ec;
@@ -888,8 +849,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         return 0;
     }
     // merge
-    SetLock lock;
-    if (auto st = lockOutput(planned.opt.output, &lock); !st.ok()) return fail(st);
+    surfcast::SetLock lock;
+    if (auto st = surfcast::lockOutput(planned.opt.output, &lock); !st.ok()) return fail(st);
     c.describe(&summary);
     summary.chunks = layout.chunks().size();
     auto writer = surfcast::TilesetWriter::create(planned.opt.output);
@@ -986,8 +947,8 @@ int main(int argc, char** argv) {
     }
     if (opt.output.empty()) return usageError("no output folder (-o OUT)");
     if (opt.inputs.paths.empty() && !opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
-    SetLock lock;
-    if (auto st = lockOutput(opt.output, &lock); !st.ok()) return fail(st);
+    surfcast::SetLock lock;
+    if (auto st = surfcast::lockOutput(opt.output, &lock); !st.ok()) return fail(st);
     auto paths = surfcast::expandInputPaths(opt.inputs.paths);
     if (!paths) {
         std::fprintf(stderr, "surfcast-build: %s\n", paths.status().message().c_str());
