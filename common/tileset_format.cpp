@@ -1,6 +1,7 @@
 #include "tileset_format.h"
 
 #include "block_codec.h"
+#include "las_format.h"
 
 #include <algorithm>
 #include <cmath>
@@ -365,6 +366,20 @@ const nlohmann::json& object(const nlohmann::json& o, const std::string& parent,
     if (!v.is_object()) fieldError(joined(parent, key), "not an object");
     return v;
 }
+const nlohmann::json& array(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    const nlohmann::json& v = member(o, parent, key);
+    if (!v.is_array()) fieldError(joined(parent, key), "not an array");
+    return v;
+}
+std::vector<std::string> strings(const nlohmann::json& o, const std::string& parent, const std::string& key) {
+    const nlohmann::json& v = array(o, parent, key);
+    std::vector<std::string> out;
+    for (size_t i = 0; i < v.size(); ++i) {
+        if (!v[i].is_string()) fieldError(joined(parent, key) + "[" + std::to_string(i) + "]", "not a string");
+        out.push_back(v[i].get<std::string>());
+    }
+    return out;
+}
 // JSON has one kind of number: 2.0 and 1e2 are the integers 2 and 100 (as in
 // JavaScript, whose reader agrees).
 template <class T>
@@ -412,8 +427,8 @@ std::vector<uint8_t> unhex(const nlohmann::json& v, const std::string& path, siz
     }
     return out;
 }
-// LAS's VLR payloads are at most 65,535 bytes; an Extra Bytes descriptor is 192.
-constexpr size_t kMaxVlrPayload = 65535, kExtraBytesDescriptorBytes = 192;
+// LAS's VLR payloads are at most 65,535 bytes.
+constexpr size_t kMaxVlrPayload = 65535;
 LasSourceInfo readLas(const nlohmann::json& j) {
     LasSourceInfo las;
     las.present = true;
@@ -443,8 +458,7 @@ LasSourceInfo readLas(const nlohmann::json& j) {
         if (!(las.scale.x > 0 && las.scale.y > 0 && las.scale.z > 0)) fieldError("las.scale", "not positive");
     }
     if (j.contains("crs_vlrs")) {
-        const nlohmann::json& vlrs = j["crs_vlrs"];
-        if (!vlrs.is_array()) fieldError("las.crs_vlrs", "not an array");
+        const nlohmann::json& vlrs = array(j, "las", "crs_vlrs");
         for (size_t i = 0; i < vlrs.size(); ++i) {
             const std::string at = "las.crs_vlrs[" + std::to_string(i) + "]";
             if (!vlrs[i].is_object()) fieldError(at, "not an object");
@@ -452,13 +466,13 @@ LasSourceInfo readLas(const nlohmann::json& j) {
         }
     }
     if (j.contains("extra_bytes")) {
-        const nlohmann::json& eb = j["extra_bytes"];
-        if (!eb.is_array() || eb.size() > kMaxVlrPayload / kExtraBytesDescriptorBytes) fieldError("las.extra_bytes", "not an array of at most 341 descriptors");
+        const nlohmann::json& eb = array(j, "las", "extra_bytes");
+        if (eb.size() > kMaxVlrPayload / las::kDescriptorBytes) fieldError("las.extra_bytes", "more than the 341 descriptors a VLR holds");
         for (size_t i = 0; i < eb.size(); ++i) {
             const std::string at = "las.extra_bytes[" + std::to_string(i) + "]";
-            las.extraBytes.push_back(unhex(eb[i], at, kExtraBytesDescriptorBytes));
+            las.extraBytes.push_back(unhex(eb[i], at, las::kDescriptorBytes));
             const std::vector<uint8_t>& d = las.extraBytes.back();
-            if (d.size() != kExtraBytesDescriptorBytes) fieldError(at, "not a 192-byte descriptor");
+            if (d.size() != las::kDescriptorBytes) fieldError(at, "not a 192-byte descriptor");
             // One scalar of data type 1-10 (LAS 1.4 R15, table 24), a finite non-zero scale where it has one.
             double scale = 1, offset = 0;
             std::memcpy(&scale, &d[112], 8);
@@ -502,8 +516,7 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         info.colorBits = integer<int>(j, "", "color_bits");
         if (info.colorBits != 0 && info.colorBits != 8 && info.colorBits != 16)
             fieldError("color_bits", std::to_string(info.colorBits) + ", not 0, 8 or 16");
-        const nlohmann::json& attributes = member(j, "", "attributes");
-        if (!attributes.is_array()) fieldError("attributes", "not an array");
+        const nlohmann::json& attributes = array(j, "", "attributes");
         for (size_t i = 0; i < attributes.size(); ++i) {
             const nlohmann::json& a = attributes[i];
             const std::string at = "attributes[" + std::to_string(i) + "]";
@@ -523,22 +536,14 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
             info.attributes.push_back(std::move(added));
         }
         if (j.contains("constants")) {
-            const nlohmann::json& constants = j["constants"];
-            if (!constants.is_array()) fieldError("constants", "not an array");
+            const nlohmann::json& constants = array(j, "", "constants");
             for (size_t i = 0; i < constants.size(); ++i) {
                 const std::string at = "constants[" + std::to_string(i) + "]";
                 if (!constants[i].is_object()) fieldError(at, "not an object");
                 info.constants.push_back({text(constants[i], at, "name"), number(constants[i], at, "value")});
             }
         }
-        if (j.contains("left_out")) {
-            const nlohmann::json& names = j["left_out"];
-            if (!names.is_array()) fieldError("left_out", "not an array");
-            for (size_t i = 0; i < names.size(); ++i) {
-                if (!names[i].is_string()) fieldError("left_out[" + std::to_string(i) + "]", "not a string");
-                info.leftOut.push_back(names[i].get<std::string>());
-            }
-        }
+        if (j.contains("left_out")) info.leftOut = strings(j, "", "left_out");
         if (j.contains("las")) info.las = readLas(object(j, "", "las"));
         if (j.contains("duplicates")) {
             const std::string d = text(j, "", "duplicates");
@@ -582,14 +587,7 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         info.kernelScale = j.contains("kernel_scale") ? number(j, "", "kernel_scale") : 1.0;
         if (!(info.kernelScale > 0)) fieldError("kernel_scale", "not positive");
         if (j.contains("texture_filter")) info.textureFilter = text(j, "", "texture_filter");
-        if (j.contains("inputs")) {
-            const nlohmann::json& inputs = j["inputs"];
-            if (!inputs.is_array()) fieldError("inputs", "not an array");
-            for (size_t i = 0; i < inputs.size(); ++i) {
-                if (!inputs[i].is_string()) fieldError("inputs[" + std::to_string(i) + "]", "not a string");
-                info.inputs.push_back(inputs[i].get<std::string>());
-            }
-        }
+        if (j.contains("inputs")) info.inputs = strings(j, "", "inputs");
         const nlohmann::json& h = object(j, "", "hierarchy");
         // Absent or "hierarchy.bin" in sets never updated in place.
         if (h.contains("file")) info.hierarchyFile = text(h, "hierarchy", "file");

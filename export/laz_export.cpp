@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "byte_io.h"
+#include "las_format.h"
 #include "surfcast_laz.h"
 
 namespace surfcast {
@@ -19,21 +20,10 @@ namespace {
 constexpr size_t kHeaderBytes = 375, kVlrHeaderBytes = 54;
 // Scan angle's unit in point formats 6-10 (degrees).
 constexpr double kScanAngleUnit = 0.006;
-// Tables 7-17: each point format's record bytes and where its optional
-// fields start (0: the format has none).
-constexpr size_t kFormatBytes[11] = {20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67};
-constexpr size_t kGpsAt[11] = {0, 20, 0, 20, 20, 20, 22, 22, 22, 22, 22};
-constexpr size_t kRgbAt[11] = {0, 0, 20, 28, 0, 28, 0, 30, 30, 0, 30};
-constexpr size_t kNirAt[11] = {0, 0, 0, 0, 0, 0, 0, 0, 36, 0, 36};
-constexpr size_t kWaveAt[11] = {0, 0, 0, 0, 28, 34, 0, 0, 0, 30, 38};
-// The Extra Bytes VLR (LASF_Spec 4): 192-byte descriptors; data types 1-10
-// are the scalars u8, i8, u16, i16, u32, i32, u64, i64, f32, f64 (table 24).
-constexpr size_t kExtraBytesDescriptor = 192;
-// As many descriptors as a VLR's 16-bit payload size holds.
-constexpr size_t kMaxExtraBytesDescriptors = 65535 / kExtraBytesDescriptor;
-constexpr size_t kExtraTypeBytes[11] = {0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
+// As many Extra Bytes descriptors as a VLR's 16-bit payload size holds; a
+// field of the inputs with no descriptor is written as a double.
+constexpr size_t kMaxExtraBytesDescriptors = 65535 / las::kDescriptorBytes;
 constexpr int kExtraF64 = 10;
-constexpr uint16_t kExtraBytesRecord = 4, kWktRecord = 2112;
 
 Box3d nodeBox(const TilesetInfo& info, const NodeKey& key) {
     Box3d b;
@@ -107,9 +97,7 @@ struct Dimensions {
     bool anyWave() const { return has(kWaveIndex) || has(kWaveOffset) || has(kWaveSize) || has(kWaveLocation); }
 };
 
-std::string descriptorName(const std::vector<uint8_t>& d) {
-    return std::string(reinterpret_cast<const char*>(&d[4]), strnlen(reinterpret_cast<const char*>(&d[4]), 32));
-}
+std::string descriptorName(const std::vector<uint8_t>& d) { return las::descriptorName(d.data()); }
 
 DimSource sourceOf(const TilesetInfo& info, const std::string& name) {
     DimSource s;
@@ -161,7 +149,7 @@ Dimensions dimensionsOf(const TilesetInfo& info) {
             d.dropped.push_back(name);
             continue;
         }
-        std::vector<uint8_t> e(kExtraBytesDescriptor, 0);
+        std::vector<uint8_t> e(las::kDescriptorBytes, 0);
         e[2] = kExtraF64;
         std::memcpy(&e[4], name.data(), name.size());
         d.descriptors.push_back(e);
@@ -193,7 +181,10 @@ double valueOf(const DimSource& s, const BlockData& b, size_t i) {
 int pointFormatOf(const TilesetInfo& info, const Dimensions& d, bool copc) {
     const bool rgb = info.colorBits != 0, nir = d.has(kNir), wave = d.anyWave();
     const int own = info.las.pointFormat;
-    if (!copc && own >= 0 && (kRgbAt[own] != 0) == rgb && (kNirAt[own] != 0 || !nir) && (kWaveAt[own] != 0 || !wave)) return own;
+    if (!copc && own >= 0) {
+        const las::FormatLayout& l = las::kFormats[own];
+        if ((l.rgb != 0) == rgb && (l.nir != 0 || !nir) && (l.wave != 0 || !wave)) return own;
+    }
     if (copc) return nir ? 8 : rgb ? 7 : 6;
     return wave ? (rgb || nir ? 10 : 9) : nir ? 8 : rgb ? 7 : 6;
 }
@@ -202,10 +193,10 @@ int pointFormatOf(const TilesetInfo& info, const Dimensions& d, bool copc) {
 // (the export's summary), and what it cannot.
 void describeDimensions(const TilesetInfo& info, const Dimensions& d, LazExportPlan* plan) {
     const int f = plan->pointFormat;
+    const las::FormatLayout& l = las::kFormats[f];
     for (int k = 0; k < kDimCount; ++k) {
         if (!d.has(Dim(k))) continue;
-        const bool held = (k != kGpsTime || kGpsAt[f]) && (k != kNir || kNirAt[f]) && (k != kScanChannel || f >= 6) &&
-                          (k < kWaveIndex || kWaveAt[f]);
+        const bool held = (k != kGpsTime || l.gps) && (k != kNir || l.nir) && (k != kScanChannel || f >= 6) && (k < kWaveIndex || l.wave);
         (held ? plan->dimensions : plan->leftOut).push_back(kDimNames[k]);
     }
     if (info.colorBits) plan->dimensions.push_back("rgb");
@@ -297,14 +288,15 @@ Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info
         le::put<int16_t>(r + 18, clamped<int16_t>(value(kScanAngle) / kScanAngleUnit));
         le::put<uint16_t>(r + 20, clamped<uint16_t>(value(kPointSourceId)));
     }
-    if (kGpsAt[f]) le::put<double>(r + kGpsAt[f], value(kGpsTime));
-    if (kRgbAt[f] && !b.colors.empty())
+    const las::FormatLayout& l = las::kFormats[f];
+    if (l.gps) le::put<double>(r + l.gps, value(kGpsTime));
+    if (l.rgb && !b.colors.empty())
         for (int c = 0; c < 3; ++c) {
             const uint16_t v = b.colors[3 * i + size_t(c)];
-            le::put<uint16_t>(r + kRgbAt[f] + 2 * size_t(c), info.colorBits == 8 ? uint16_t(v * info.las.colorMultiplier) : v);
+            le::put<uint16_t>(r + l.rgb + 2 * size_t(c), info.colorBits == 8 ? uint16_t(v * info.las.colorMultiplier) : v);
         }
-    if (kNirAt[f]) le::put<uint16_t>(r + kNirAt[f], clamped<uint16_t>(value(kNir)));
-    if (const size_t w = kWaveAt[f]) {
+    if (l.nir) le::put<uint16_t>(r + l.nir, clamped<uint16_t>(value(kNir)));
+    if (const size_t w = l.wave) {
         r[w] = clamped<uint8_t>(value(kWaveIndex));
         const double offset = value(kWaveOffset);
         le::put<uint64_t>(r + w + 1, offset > 0 ? (offset < 0x1p64 ? uint64_t(std::round(offset)) : UINT64_MAX) : 0);
@@ -314,10 +306,10 @@ Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info
         le::put<float>(r + w + 21, clampedFloat(value(kWaveY)));
         le::put<float>(r + w + 25, clampedFloat(value(kWaveZ)));
     }
-    size_t at = kFormatBytes[f];
+    size_t at = l.bytes;
     for (size_t k = 0; k < d.descriptors.size(); ++k) {
         putExtra(r + at, d.descriptors[k], valueOf(d.extra[k], b, i));
-        at += kExtraTypeBytes[d.descriptors[k][2]];
+        at += las::kTypeBytes[d.descriptors[k][2]];
     }
     return {};
 }
@@ -337,7 +329,7 @@ std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const LasSourceInfo& l
     bool wkt = false, geoTiff = false;
     for (const auto& [record, payload] : las.crsVlrs) {
         projection.push_back({record, &payload});
-        (record == kWktRecord ? wkt : geoTiff) = true;
+        (record == las::kWktRecord ? wkt : geoTiff) = true;
     }
     std::vector<uint8_t> extraBytes;
     for (const std::vector<uint8_t>& e : plan.extraBytes) extraBytes.insert(extraBytes.end(), e.begin(), e.end());
@@ -355,8 +347,8 @@ std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const LasSourceInfo& l
     };
     if (copcInfo) addVlr("copc", 1, *copcInfo, "COPC info");
     addVlr("laszip encoded", 22204, laszipVlr, "by surfcast-export (laz crate)");
-    for (const auto& [record, payload] : projection) addVlr("LASF_Projection", record, *payload, "coordinate system");
-    if (!extraBytes.empty()) addVlr("LASF_Spec", kExtraBytesRecord, extraBytes, "Extra Bytes");
+    for (const auto& [record, payload] : projection) addVlr(las::kProjectionUser, record, *payload, "coordinate system");
+    if (!extraBytes.empty()) addVlr(las::kSpecUser, las::kExtraBytesRecord, extraBytes, "Extra Bytes");
 
     std::memcpy(h.data(), "LASF", 4);
     // Global encoding: bit 0 the GPS time's type, bit 4 a WKT coordinate
@@ -452,8 +444,8 @@ Result<LazExportPlan> planExport(const TilesetReader& set, const PointFilter& fi
     const Dimensions d = dimensionsOf(info);
     plan.pointFormat = pointFormatOf(info, d, copc);
     plan.extraBytes = d.descriptors;
-    plan.recordBytes = kFormatBytes[plan.pointFormat];
-    for (const std::vector<uint8_t>& e : d.descriptors) plan.recordBytes += kExtraTypeBytes[e[2]];
+    plan.recordBytes = las::kFormats[plan.pointFormat].bytes;
+    for (const std::vector<uint8_t>& e : d.descriptors) plan.recordBytes += las::kTypeBytes[e[2]];
     describeDimensions(info, d, &plan);
     // One grid for every export of a set, whatever its box, so that boxes
     // exported apart merge exactly: the inputs' own LAS lattice where they
@@ -526,7 +518,7 @@ Result<LazExportPlan> planLazExport(const TilesetReader& set, const PointFilter&
 
 Status writeLazExport(const TilesetReader& set, const PointFilter& filter, const LazExportPlan& plan,
                       const std::function<Status(const uint8_t*, size_t)>& out, const StopExport& stop) {
-    const uint16_t extra = uint16_t(plan.recordBytes - kFormatBytes[plan.pointFormat]);
+    const uint16_t extra = uint16_t(plan.recordBytes - las::kFormats[plan.pointFormat].bytes);
     uint8_t vlr[1024];
     size_t vlrBytes = 0;
     if (sc_laz_vlr(uint8_t(plan.pointFormat), extra, 0, vlr, sizeof vlr, &vlrBytes) != 0)
@@ -609,7 +601,7 @@ Result<CopcReport> writeCopcExport(const TilesetReader& set, const PointFilter& 
     LazExportPlan plan = *layout;
     std::sort(plan.nodes.begin(), plan.nodes.end(),
               [&](size_t a, size_t b) { return depthFirstKey(set.nodes()[a].key) < depthFirstKey(set.nodes()[b].key); });
-    const uint16_t extra = uint16_t(plan.recordBytes - kFormatBytes[plan.pointFormat]);
+    const uint16_t extra = uint16_t(plan.recordBytes - las::kFormats[plan.pointFormat].bytes);
     uint8_t vlr[1024];
     size_t vlrBytes = 0;
     if (sc_laz_vlr(uint8_t(plan.pointFormat), extra, 1, vlr, sizeof vlr, &vlrBytes) != 0)

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
-#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -13,6 +12,7 @@
 #include <tuple>
 
 #include "block_codec.h"
+#include "las_format.h"
 #include "set_reader.h"
 
 namespace fs = std::filesystem;
@@ -457,8 +457,8 @@ void BuildContext::chooseLasSource() {
         }
         // Each named dimension's first descriptor (the one whose name, type and scale the export writes).
         for (const std::vector<uint8_t>& d : l.extraBytes) {
-            auto name = [](const std::vector<uint8_t>& e) { return std::string(reinterpret_cast<const char*>(&e[4]), strnlen(reinterpret_cast<const char*>(&e[4]), 32)); };
-            if (std::none_of(las_.extraBytes.begin(), las_.extraBytes.end(), [&](const auto& e) { return name(e) == name(d); }))
+            const std::string name = las::descriptorName(d.data());
+            if (std::none_of(las_.extraBytes.begin(), las_.extraBytes.end(), [&](const auto& e) { return las::descriptorName(e.data()) == name; }))
                 las_.extraBytes.push_back(d);
         }
     }

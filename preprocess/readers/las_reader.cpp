@@ -14,6 +14,7 @@
 
 #include "byte_io.h"
 #include "byte_stream.h"
+#include "las_format.h"
 
 namespace surfcast {
 
@@ -35,17 +36,6 @@ constexpr size_t kLazMaxBatchBytes = 256 << 20;
 constexpr uint64_t kMaxCuts = 1 << 16;
 constexpr char kLaszipUser[] = "laszip encoded";
 constexpr uint16_t kLaszipRecord = 22204;
-constexpr char kSpecUser[] = "LASF_Spec";
-constexpr uint16_t kExtraBytesRecord = 4;
-constexpr size_t kExtraBytesDescriptor = 192;
-constexpr char kProjectionUser[] = "LASF_Projection";
-constexpr uint16_t kWktRecord = 2112, kGeoKeysRecord = 34735, kGeoDoublesRecord = 34736, kGeoAsciiRecord = 34737;
-
-// Bytes each point format needs before any extra bytes, where RGB starts (0
-// when the format has no colour), and where the wave packet starts (0: none).
-struct FormatLayout { size_t minLength; size_t rgbOffset; size_t wavePacket; };
-constexpr FormatLayout kFormats[11] = {{20, 0, 0},  {28, 0, 0},  {26, 20, 0}, {34, 28, 0},  {57, 0, 28}, {63, 28, 34},
-                                       {30, 0, 0},  {36, 30, 0}, {38, 30, 0}, {59, 0, 30}, {67, 30, 38}};
 
 // A per-point scalar field's place in the record and its decoding:
 // value = raw · scale + offset, NaN where raw equals the no-data value.
@@ -59,8 +49,6 @@ struct ScalarLayout {
     int shift = 0, bits = 0;  // bits 0: the whole value
 };
 
-// Bytes per data type of the Extra Bytes VLR (LAS 1.4 R15, table 24).
-constexpr size_t kTypeSize[] = {1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
 
 double rawValue(const uint8_t* p, ScalarLayout::Type t) {
     switch (t) {
@@ -143,7 +131,7 @@ public:
     LasReader(std::unique_ptr<RecordSource> source, InputDescription desc, uint64_t begin, uint64_t end, size_t recordLength,
               int format, const double scale[3], const double offset[3], std::vector<ScalarLayout> scalars)
         : source_(std::move(source)), desc_(std::move(desc)), count_(end), recordLength_(recordLength),
-          rgbOffset_(kFormats[format].rgbOffset), extended_(format >= 6), scalars_(std::move(scalars)), index_(begin) {
+          rgbOffset_(las::kFormats[format].rgb), extended_(format >= 6), scalars_(std::move(scalars)), index_(begin) {
         for (int i = 0; i < 3; ++i) { scale_[i] = scale[i]; offset_[i] = offset[i]; }
     }
 
@@ -227,13 +215,13 @@ Result<Vlrs> readVlrs(ByteStream& in, size_t headerSize, uint32_t vlrCount, uint
             return Status::error(in.path() + ": byte " + std::to_string(at) + ": VLR " + std::to_string(i) + " runs past the point data");
         uint16_t record = le::get<uint16_t>(h + 18), length = le::get<uint16_t>(h + 20);
         auto user = [&](const char* name) { return std::strncmp(reinterpret_cast<const char*>(h + 2), name, 16) == 0; };
-        const bool projection = user(kProjectionUser);
+        const bool projection = user(las::kProjectionUser);
         std::optional<std::vector<uint8_t>>* keep = user(kLaszipUser) && record == kLaszipRecord       ? &out.laszip
-                                                    : user(kSpecUser) && record == kExtraBytesRecord ? &out.extraBytes
-                                                    : projection && record == kWktRecord             ? &out.wkt
-                                                    : projection && record == kGeoKeysRecord         ? &out.geoKeys
-                                                    : projection && record == kGeoDoublesRecord      ? &out.geoDoubles
-                                                    : projection && record == kGeoAsciiRecord        ? &out.geoAscii
+                                                    : user(las::kSpecUser) && record == las::kExtraBytesRecord ? &out.extraBytes
+                                                    : projection && record == las::kWktRecord             ? &out.wkt
+                                                    : projection && record == las::kGeoKeysRecord         ? &out.geoKeys
+                                                    : projection && record == las::kGeoDoublesRecord      ? &out.geoDoubles
+                                                    : projection && record == las::kGeoAsciiRecord        ? &out.geoAscii
                                                                                                      : nullptr;
         if (keep) {
             std::vector<uint8_t> payload(length);  // at most 64 KiB: the field is 16-bit
@@ -268,14 +256,14 @@ std::string crsOf(const Vlrs& v) {
         std::string text = "?";
         if (where == 0) {
             text = std::to_string(value);
-        } else if (where == kGeoDoublesRecord && v.geoDoubles && (size_t(value) + count) * 8 <= v.geoDoubles->size()) {
+        } else if (where == las::kGeoDoublesRecord && v.geoDoubles && (size_t(value) + count) * 8 <= v.geoDoubles->size()) {
             text.clear();
             for (size_t j = 0; j < count; ++j) {
                 char number[32];
                 std::snprintf(number, sizeof number, "%s%.17g", j ? "," : "", le::get<double>(&(*v.geoDoubles)[8 * (value + j)]));
                 text += number;
             }
-        } else if (where == kGeoAsciiRecord && v.geoAscii && size_t(value) + count <= v.geoAscii->size()) {
+        } else if (where == las::kGeoAsciiRecord && v.geoAscii && size_t(value) + count <= v.geoAscii->size()) {
             text.assign(v.geoAscii->begin() + value, v.geoAscii->begin() + value + count);
             while (!text.empty() && (text.back() == '|' || text.back() == 0)) text.pop_back();  // GeoTIFF ends each string with '|'
             text = '"' + text + '"';
@@ -332,7 +320,7 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
         addBits("scan_direction_flag", 15, 6, 1);
         addBits("edge_of_flight_line", 15, 7, 1);
     }
-    if (const size_t w = kFormats[format].wavePacket) {  // tables 12, 16: the wave packet's fields
+    if (const size_t w = las::kFormats[format].wave) {  // tables 12, 16: the wave packet's fields
         add("wavepacket_index", true, 1, ScalarLayout::U8, w, 1);
         add("wavepacket_offset", false, 1, ScalarLayout::U64, w + 1, 1);
         add("wavepacket_size", false, 1, ScalarLayout::U32, w + 9, 1);
@@ -345,24 +333,24 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
         if (recordLength > from) skipped->push_back(std::to_string(recordLength - from) + " undescribed bytes of each record");
     };
     if (!vlrs.extraBytes) {
-        undescribed(kFormats[format].minLength);
+        undescribed(las::kFormats[format].bytes);
         return {};
     }
     const std::vector<uint8_t>& v = *vlrs.extraBytes;
     const std::string where = path + ": VLR " + std::to_string(vlrs.extraBytesIndex) + " (Extra Bytes, LASF_Spec 4)";
-    if (v.empty() || v.size() % kExtraBytesDescriptor != 0)
+    if (v.empty() || v.size() % las::kDescriptorBytes != 0)
         return Status::error(where + ": " + std::to_string(v.size()) + " bytes, not a whole number of 192-byte descriptors");
-    const size_t available = recordLength - kFormats[format].minLength;
-    size_t offset = kFormats[format].minLength;
-    for (size_t d = 0; d < v.size() / kExtraBytesDescriptor; ++d) {
-        const uint8_t* e = v.data() + d * kExtraBytesDescriptor;
+    const size_t available = recordLength - las::kFormats[format].bytes;
+    size_t offset = las::kFormats[format].bytes;
+    for (size_t d = 0; d < v.size() / las::kDescriptorBytes; ++d) {
+        const uint8_t* e = v.data() + d * las::kDescriptorBytes;
         const int type = e[2], options = e[3];
-        std::string name(reinterpret_cast<const char*>(e + 4), strnlen(reinterpret_cast<const char*>(e + 4), 32));
+        const std::string name = las::descriptorName(e);
         const std::string dim = where + ", dimension " + std::to_string(d) + " '" + name + "'";
         if (type > 30) return Status::error(dim + ": unknown data type " + std::to_string(type));
         // Type 0: `options` undocumented bytes; 1-10: one scalar; 11-30: deprecated 2- and 3-element arrays.
         const size_t elements = type == 0 ? 0 : size_t((type - 1) / 10 + 1);
-        const size_t size = type == 0 ? size_t(options) : elements * kTypeSize[(type - 1) % 10];
+        const size_t size = type == 0 ? size_t(options) : elements * las::kTypeBytes[(type - 1) % 10 + 1];
         if (size == 0) return Status::error(dim + ": zero bytes");
         if (offset + size > recordLength)
             return Status::error(dim + ": the dimensions need more than the " + std::to_string(available) +
@@ -384,7 +372,7 @@ Status scalarFields(const std::string& path, int format, size_t recordLength, co
                 l.hasNoData = noData && (options & 1) != 0;
                 const bool integral = l.type < ScalarLayout::F32;
                 out->push_back({{name, false, integral ? std::fabs(l.scale) : 0}, l});
-                descriptors->emplace_back(e, e + kExtraBytesDescriptor);
+                descriptors->emplace_back(e, e + las::kDescriptorBytes);
             }
         } else {
             if (type != 0 && !name.empty()) std::fprintf(stderr, "warning: %s: deprecated array type %d; skipped\n", dim.c_str(), type);
@@ -442,9 +430,9 @@ Result<LasHeader> readLasHeader(ByteStream& in) {
     l.source.creationDay = le::get<uint16_t>(h + 90);
     l.source.creationYear = le::get<uint16_t>(h + 92);
     if (l.format > 10) return Status::error(path + ": byte 104: unknown point data format " + std::to_string(l.format));
-    if (l.recordLength < kFormats[l.format].minLength)
+    if (l.recordLength < las::kFormats[l.format].bytes)
         return Status::error(path + ": byte 105: record length " + std::to_string(l.recordLength) + " is shorter than format " +
-                             std::to_string(l.format) + " needs (" + std::to_string(kFormats[l.format].minLength) + ")");
+                             std::to_string(l.format) + " needs (" + std::to_string(las::kFormats[l.format].bytes) + ")");
     if (minor >= 4 && headerSize >= kLas14HeaderSize) {
         if (!in.readBytes(h + kLegacyHeaderSize, kLas14HeaderSize - kLegacyHeaderSize))
             return Status::error(path + ": LAS 1.4 header truncated");
@@ -507,7 +495,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.path = path;
     desc.format = l.compressed ? "laz" : "las";
     desc.declaredPoints = end - range.begin;
-    desc.hasColors = kFormats[l.format].rgbOffset != 0;
+    desc.hasColors = las::kFormats[l.format].rgb != 0;
     desc.hasIntensity = true;
     desc.hasClassification = true;
     desc.hasReturns = true;
@@ -520,8 +508,8 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     desc.las = l.source;
     desc.las.scale = desc.latticeScale;
     desc.las.offset = desc.latticeOffset;
-    for (const auto& [record, payload] : {std::pair{kWktRecord, &l.vlrs.wkt}, {kGeoKeysRecord, &l.vlrs.geoKeys},
-                                          {kGeoDoublesRecord, &l.vlrs.geoDoubles}, {kGeoAsciiRecord, &l.vlrs.geoAscii}})
+    for (const auto& [record, payload] : {std::pair{las::kWktRecord, &l.vlrs.wkt}, {las::kGeoKeysRecord, &l.vlrs.geoKeys},
+                                          {las::kGeoDoublesRecord, &l.vlrs.geoDoubles}, {las::kGeoAsciiRecord, &l.vlrs.geoAscii}})
         if (*payload) desc.las.crsVlrs.push_back({record, **payload});
 
     std::vector<std::pair<ScalarField, ScalarLayout>> fields;
