@@ -234,6 +234,8 @@ T clamped(double v) {
     return T(std::clamp(std::round(v), double(std::numeric_limits<T>::min()), double(std::numeric_limits<T>::max())));
 }
 float clampedFloat(double v) { return std::isnan(v) ? NAN : float(std::clamp(v, -double(FLT_MAX), double(FLT_MAX))); }
+// uint64's bound is no double: the largest below it is 2^64 - 2048.
+uint64_t clampedU64(double v) { return v > 0 ? (v < 0x1p64 ? uint64_t(std::round(v)) : UINT64_MAX) : 0; }  // NaN: 0
 
 // An extra-bytes value as its descriptor stores it: raw = (value - offset) / scale.
 void putExtra(uint8_t* at, const std::vector<uint8_t>& e, double v) {
@@ -247,7 +249,7 @@ void putExtra(uint8_t* at, const std::vector<uint8_t>& e, double v) {
     case 4: le::put<int16_t>(at, clamped<int16_t>(v)); break;
     case 5: le::put<uint32_t>(at, clamped<uint32_t>(v)); break;
     case 6: le::put<int32_t>(at, clamped<int32_t>(v)); break;
-    case 7: le::put<uint64_t>(at, v > 0 ? (v < 0x1p64 ? uint64_t(std::round(v)) : UINT64_MAX) : 0); break;  // NaN: 0
+    case 7: le::put<uint64_t>(at, clampedU64(v)); break;
     case 8: le::put<int64_t>(at, v > -0x1p63 ? (v < 0x1p63 ? int64_t(std::round(v)) : INT64_MAX) : INT64_MIN); break;
     case 9: le::put<float>(at, clampedFloat(v)); break;
     default: le::put<double>(at, v); break;
@@ -298,8 +300,7 @@ Status fillRecord(uint8_t* r, const LazExportPlan& plan, const TilesetInfo& info
     if (l.nir) le::put<uint16_t>(r + l.nir, clamped<uint16_t>(value(kNir)));
     if (const size_t w = l.wave) {
         r[w] = clamped<uint8_t>(value(kWaveIndex));
-        const double offset = value(kWaveOffset);
-        le::put<uint64_t>(r + w + 1, offset > 0 ? (offset < 0x1p64 ? uint64_t(std::round(offset)) : UINT64_MAX) : 0);
+        le::put<uint64_t>(r + w + 1, clampedU64(value(kWaveOffset)));
         le::put<uint32_t>(r + w + 9, clamped<uint32_t>(value(kWaveSize)));
         le::put<float>(r + w + 13, clampedFloat(value(kWaveLocation)));
         le::put<float>(r + w + 17, clampedFloat(value(kWaveX)));
@@ -325,12 +326,8 @@ void putText(uint8_t* at, const std::string& text, size_t size) {
 // data. The inputs' header fields where the set kept them (LasSourceInfo).
 std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const LasSourceInfo& las, const std::vector<uint8_t>& laszipVlr,
                                const std::vector<uint8_t>* copcInfo = nullptr, uint64_t evlrStart = 0, uint32_t evlrs = 0) {
-    std::vector<std::pair<uint16_t, const std::vector<uint8_t>*>> projection;
     bool wkt = false, geoTiff = false;
-    for (const auto& [record, payload] : las.crsVlrs) {
-        projection.push_back({record, &payload});
-        (record == las::kWktRecord ? wkt : geoTiff) = true;
-    }
+    for (const auto& vlr : las.crsVlrs) (vlr.first == las::kWktRecord ? wkt : geoTiff) = true;
     std::vector<uint8_t> extraBytes;
     for (const std::vector<uint8_t>& e : plan.extraBytes) extraBytes.insert(extraBytes.end(), e.begin(), e.end());
     std::vector<uint8_t> h(kHeaderBytes, 0);
@@ -347,7 +344,7 @@ std::vector<uint8_t> lasHeader(const LazExportPlan& plan, const LasSourceInfo& l
     };
     if (copcInfo) addVlr("copc", 1, *copcInfo, "COPC info");
     addVlr("laszip encoded", 22204, laszipVlr, "by surfcast-export (laz crate)");
-    for (const auto& [record, payload] : projection) addVlr(las::kProjectionUser, record, *payload, "coordinate system");
+    for (const auto& [record, payload] : las.crsVlrs) addVlr(las::kProjectionUser, record, payload, "coordinate system");
     if (!extraBytes.empty()) addVlr(las::kSpecUser, las::kExtraBytesRecord, extraBytes, "Extra Bytes");
 
     std::memcpy(h.data(), "LASF", 4);
