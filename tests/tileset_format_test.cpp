@@ -43,6 +43,20 @@ NodeRecord valid() {
     r.positionBits = 16;
     return r;
 }
+
+// A set of `levels` levels on a root cube of edge 4 around the unit cube:
+// the fields every tileset.json needs, for tests that change the rest.
+TilesetInfo unitSet(int levels) {
+    TilesetInfo info;
+    info.rootEdge = 4;
+    info.levels = levels;
+    info.bounds.min = {0, 0, 0};
+    info.bounds.max = {1, 1, 1};
+    info.normalSource = "input";
+    info.weights = "none";
+    return info;
+}
+
 }  // namespace
 
 TEST(TilesetFormat, RecordGoldenBytes) {
@@ -307,15 +321,9 @@ TEST(TilesetFormat, TilesetJsonRejectsBadInput) {
 // Fields that size shifts and Draco options are range-checked, with the field
 // named: color_bits feeds 1 << bits in the renderer.
 TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
-    TilesetInfo info;
-    info.rootEdge = 4;
-    info.levels = 2;
-    info.bounds.min = {0, 0, 0};
-    info.bounds.max = {1, 1, 1};
+    TilesetInfo info = unitSet(2);
     info.colorBits = 8;
     info.attributes = {{"position", "uint32", 3, 0}, {"normal", "float32", 3, 8}};
-    info.normalSource = "input";
-    info.weights = "none";
     const std::string good = writeTilesetJson(info);
     auto base = readTilesetJson(good, "t.json");
     ASSERT_TRUE(base.ok()) << base.status().message();
@@ -356,13 +364,7 @@ TEST(TilesetFormat, TilesetJsonRejectsOutOfRangeBits) {
 // value is an error naming it (an Extra Bytes descriptor's type sizes the
 // export's records, its scale divides).
 TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
-    TilesetInfo info;
-    info.rootEdge = 4;
-    info.levels = 1;
-    info.bounds.min = {0, 0, 0};
-    info.bounds.max = {1, 1, 1};
-    info.normalSource = "input";
-    info.weights = "none";
+    TilesetInfo info = unitSet(1);
     info.constants = {{"point_source_id", 7326}, {"classification", 2}};
     info.leftOut = {"gps_time", "nir"};
     info.duplicatesKept = true;

@@ -241,6 +241,23 @@ function project(camera, p, w, h) {
   return [w / 2 + (eta * dot(d, right)) / dot(d, forward), h / 2 - (eta * dot(d, upward)) / dot(d, forward)];
 }
 
+// A fresh folder the page's downloads go to.
+async function downloadsOf(page) {
+  const downloads = mkdtempSync(join(work, "downloads-"));
+  await (await page.createCDPSession()).send("Browser.setDownloadBehavior", { behavior: "allow", downloadPath: downloads });
+  return downloads;
+}
+
+// The viewer's "download points" clicked: the file it saved in `downloads`.
+async function download(page, downloads) {
+  await page.click("#download");
+  await page.waitForFunction("window.surfcast.exports === 1 || window.surfcast.errors.length > 0", { timeout: 60000 });
+  assert.deepEqual(await page.evaluate(() => window.surfcast.errors), []);
+  const file = join(downloads, "scene.laz");
+  await waitFor(() => existsSync(file) && readdirSync(downloads).length === 1, "the download", 20000);
+  return file;
+}
+
 describe("browser viewer", { skip }, () => {
   before(async () => {
     work = mkdtempSync(join(tmpdir(), "surfcast-browser-"));
@@ -426,8 +443,7 @@ describe("browser viewer", { skip }, () => {
   test("a clip box set in the panel: the splats inside, as surfcast-view --clip draws them, and their points as LAZ", async (t) => {
     const box = "-2,-3,0,1.5,2,3";
     const { page, problems } = await openPage();
-    const downloads = mkdtempSync(join(work, "downloads-"));
-    await (await page.createCDPSession()).send("Browser.setDownloadBehavior", { behavior: "allow", downloadPath: downloads });
+    const downloads = await downloadsOf(page);
     await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
     const done = "window.surfcast.converged || window.surfcast.errors.length > 0";
     await page.waitForFunction(done, { timeout: 60000 });
@@ -458,11 +474,7 @@ describe("browser viewer", { skip }, () => {
 
     // Downloaded: the bytes surfcast-export writes for the box (the LAS
     // header's creation day and year aside, bytes 90-93).
-    await page.click("#download");
-    await page.waitForFunction("window.surfcast.exports === 1 || window.surfcast.errors.length > 0", { timeout: 60000 });
-    assert.deepEqual(await page.evaluate(() => window.surfcast.errors), []);
-    const file = join(downloads, "scene.laz");
-    await waitFor(() => existsSync(file) && readdirSync(downloads).length === 1, "the download", 20000);
+    const file = await download(page, downloads);
     await page.close();
     const expected = join(work, "box.laz");
     execFileSync(bin("surfcast-export"), [join(work, "sets", "scene"), "--format", "laz", "--bbox", box, "-o", expected]);
@@ -478,17 +490,12 @@ describe("browser viewer", { skip }, () => {
 
   test("no clip box: the download is the whole set, every input point, as surfcast-export writes it without a box", async (t) => {
     const { page, problems } = await openPage();
-    const downloads = mkdtempSync(join(work, "downloads-"));
-    await (await page.createCDPSession()).send("Browser.setDownloadBehavior", { behavior: "allow", downloadPath: downloads });
+    const downloads = await downloadsOf(page);
     const asked = [];
     page.on("request", (r) => r.url().includes("/export.laz") && asked.push(r.url()));
     await page.goto(`${serveUrl}/?set=/sets/scene&camera=${camera}`);
     await page.waitForFunction("window.surfcast.converged || window.surfcast.errors.length > 0", { timeout: 60000 });
-    await page.click("#download");
-    await page.waitForFunction("window.surfcast.exports === 1 || window.surfcast.errors.length > 0", { timeout: 60000 });
-    assert.deepEqual(await page.evaluate(() => window.surfcast.errors), []);
-    const file = join(downloads, "scene.laz");
-    await waitFor(() => existsSync(file) && readdirSync(downloads).length === 1, "the download", 20000);
+    const file = await download(page, downloads);
     await page.close();
     // No box asked for: the set's bounds as a box would cut the leaf points
     // that their quantization puts just outside them.
