@@ -97,6 +97,12 @@ ranges from any host that honours Range (meshes are read from local files).
   --position-fraction F   resampled levels: quantization step = cell / F (default 8)
   --normal-bits N         Draco quantization bits per normal component (default 8)
   --no-radius             no per-surfel radius, even where a node's sampling is irregular
+  --isolation T           isolated surfels (a stray return, a leaf hit by a few points)
+                          are drawn at their level's spacing rho (2 sampling cells), not
+                          as discs reaching their far neighbours: those whose k-th
+                          neighbour (--spacing-k) lies beyond T rho, or beyond rho
+                          among neighbours scattered off a plane (default 6, measured:
+                          see bench/BENCHMARKS.md; 0: off, as --no-radius makes it)
   --kernel-scale K        reconstruction kernel V^r = (K h)^2 I the weights assume
                           (default 0.5, measured: see bench/BENCHMARKS.md)
   --weights MODE          none (default: ewa-pixel, the default renderer mode, reads
@@ -332,6 +338,9 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             opt.normalBits = int(d);
         } else if (a == "--no-radius") {
             opt.radii = false;
+        } else if (a == "--isolation") {
+            if (!number(&d, 0, 1000) || (d > 0 && d < 1)) return usageError("--isolation needs 0 or a value in [1, 1000]");
+            opt.isolation = d;
         } else if (a == "--spacing-k") {
             if (!number(&d, 1, 64)) return usageError("--spacing-k needs a value in [1, 64]");
             opt.spacingK = int(d);

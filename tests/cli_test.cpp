@@ -37,6 +37,10 @@ TEST(Cli, HelpAndUsageErrors) {
     EXPECT_EQ(noOut.exitCode, 2);
     auto badMem = test::run({test::binary("surfcast-build"), "--default-scene", "-o", "/tmp/x", "--memory", "lots"});
     EXPECT_EQ(badMem.exitCode, 2);
+    // Isolation under 1 would draw isolated surfels wider than the rest of their node.
+    auto badIsolation = test::run({test::binary("surfcast-build"), "--default-scene", "-o", "/tmp/x", "--isolation", "0.5"});
+    EXPECT_EQ(badIsolation.exitCode, 2);
+    EXPECT_NE(badIsolation.output.find("--isolation needs 0 or a value in [1, 1000]"), std::string::npos) << badIsolation.output;
 }
 
 TEST(Cli, InfoVerifiesChecksums) {

@@ -253,8 +253,8 @@ TEST_F(ViewCli, ColorByModesRenderAndDiffer) {
 // and the per-surfel radii come from neighbours, and the other set lacks the
 // class-2 ones, so class-1 splats bordering ground grow there. That changes
 // coverage in a band about one splat wide along the class boundary: measured
-// 1,436 pixels against 11,879 that showing class 2 changes (brown ground, and
-// its coverage), of 29,012 covered. The bound is a fifth of the latter.
+// 1,810 pixels against 11,158 that showing class 2 changes (brown ground, and
+// its coverage), of 28,732 covered. The bound is a fifth of the latter.
 // Edge antialiasing is off: it blends that band's border pixels with the
 // background by their differing coverage (3,008 pixels differ with it), and
 // this test is about what hiding draws.

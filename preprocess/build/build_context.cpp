@@ -204,13 +204,16 @@ int BuildContext::positionBits(const NodeKey& key, double cell) const {
     return std::clamp(bits, 1, kMaxPositionBits);
 }
 
-LevelParams BuildContext::levelParams(double fallbackSpacing, int threads) const {
+LevelParams BuildContext::levelParams(int level, double fallbackSpacing, int threads) const {
     LevelParams p;
     p.spacingK = opt_.spacingK;
     p.fetchK = opt_.fetchK;
     p.cutoff = opt_.cutoff;
     p.kernelScale = opt_.kernelScale;
     p.radii = opt_.radii;
+    p.isolation = opt_.isolation;
+    p.levelCell = edge(level) / opt_.grid;
+    p.leafCell = std::max(p.levelCell, edge(level) / std::sqrt(double(opt_.capacity)));
     p.fallbackSpacing = fallbackSpacing;
     p.weights = opt_.weights;
     p.threads = threads;

@@ -125,7 +125,7 @@ public:
     // Quantization bits of a node's positions: `cell` is the cell it was
     // sampled on, 0 for leaves (input points).
     int positionBits(const NodeKey& key, double cell) const;
-    LevelParams levelParams(double fallbackSpacing, int threads) const;
+    LevelParams levelParams(int level, double fallbackSpacing, int threads) const;
 
     // The tile set's description (TilesetInfo) but for what only the writer
     // and the finished tree know (nodes, levels, surfels, bytes).

@@ -264,6 +264,7 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
         std::map<int, std::vector<BuiltNode*>> levels;
         for (auto& n : nodes) {
             n->level.surfels = n->surfels;
+            n->level.cell = n->cell;
             levels[n->key.level].push_back(n.get());
         }
         for (auto& [level, built] : levels) {
@@ -273,7 +274,7 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
             {
                 ScopedTimer t(steps[kStepAttributes]);
                 haloLevel = resampleHalo(context, halo, chunk, margin, level, built);
-                computeLevelAttributes(members, haloLevel, context.levelParams(largestCell(context, level, built), threads));
+                computeLevelAttributes(members, haloLevel, context.levelParams(level, largestCell(context, level, built), threads));
             }
             fits.add(filterLevelTextures(context, built, haloLevel, threads, steps));
         }

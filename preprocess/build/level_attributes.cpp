@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <limits>
 
 #include "cell_grid.h"
 #include "neighbours.h"
@@ -77,8 +78,11 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
     std::vector<Vec3f> queryPoints;
     std::vector<int> nbr;
     std::vector<float> d2;
-    auto kthDistances = [&](const std::vector<uint32_t>& queries) {
+    // Also each query's spread off its tangent plane: the RMS distance of those
+    // k neighbours from it over d_k; +inf where no neighbour faces its side.
+    auto kthDistances = [&](const std::vector<uint32_t>& queries, std::vector<float>* spread) {
         std::vector<float> dk(queries.size(), 0.f);
+        spread->assign(queries.size(), 0.f);
         std::vector<uint32_t> pending(queries.size());
         for (size_t q = 0; q < queries.size(); ++q) pending[q] = uint32_t(q);
         for (int k : {params.spacingK + 1, std::max(params.spacingK, params.fetchK) + 1}) {  // +1: the query itself
@@ -90,14 +94,19 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
             for (size_t q = 0; q < pending.size(); ++q) {
                 const uint32_t self = queries[pending[q]];
                 int seen = 0;
-                float d = 0;
+                float d = 0, off2 = 0;
                 for (size_t j = 1; j < kk && seen < params.spacingK; ++j) {  // j = 0: the query itself
                     int id = nbr[q * kk + j];
                     if (id < 0 || !sameSide(normals[self], normals[size_t(id)])) continue;
                     d = std::sqrt(d2[q * kk + j]);
+                    const float off = dot(points[size_t(id)] - points[self], normals[self]);
+                    off2 += off * off;
                     ++seen;
                 }
                 dk[pending[q]] = d;  // fewer than k neighbours: the farthest one found
+                (*spread)[pending[q]] = seen == 0 ? std::numeric_limits<float>::infinity()
+                                        : d > 0    ? std::sqrt(off2 / float(seen)) / d
+                                                   : 0.f;
                 if (seen < params.spacingK && kk == size_t(k)) again.push_back(pending[q]);
             }
             pending.swap(again);
@@ -108,29 +117,50 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
 
     // h per node from an evenly strided subsample of its surfels (see the
     // header); nodes the sample finds irregular are queried whole, for their
-    // per-surfel radii and an exact h.
+    // per-surfel radii and an exact h. Nodes the sample finds isolated
+    // surfels in are queried whole for their radii too, keeping h.
+    assert((params.isolation == 0 || params.isolation >= 1) && "isolation is off or at least rho");
+    auto isolated = [&](float dk, float spread, float rho) {
+        return std::isinf(spread) || dk > params.isolation * rho || (dk > rho && spread > kScatteredSpread);
+    };
     std::vector<uint32_t> queries;
+    std::vector<float> spread;
     for (size_t i = 0; i < nodes.size(); ++i) {
         LevelNode& node = *nodes[i];
         const size_t n = node.surfels.size();
         const size_t stride = (n + kSpacingSamples - 1) / kSpacingSamples;
         queries.clear();
         for (size_t s = 0; s < n; s += stride) queries.push_back(uint32_t(firstOf[i] + s));
-        std::vector<float> dk = kthDistances(queries);
+        std::vector<float> dk = kthDistances(queries, &spread);
+        const bool isolating = params.radii && params.isolation > 0 && params.levelCell > 0;
+        const float rho = float(kIsolationSpacing * (node.cell > 0 ? std::max(params.levelCell, node.cell) : std::max(params.levelCell, params.leafCell)));
+        bool sparse = false;
+        for (size_t s = 0; s < dk.size() && isolating; ++s) sparse = sparse || isolated(dk[s], spread[s], rho);
         SpacingResult spacing = spacingRule(dk, params.fallbackSpacing);
+        const bool exact = spacing.irregular && (params.radii || stride > 1);
         node.radii.clear();
-        if (spacing.irregular && (params.radii || stride > 1)) {
-            queries.clear();
-            for (size_t s = 0; s < n; ++s) queries.push_back(uint32_t(firstOf[i] + s));
-            std::vector<float> all = kthDistances(queries);
+        if (!exact && !sparse) {
+            node.h = spacing.h;  // isolating, h <= the largest sampled d_k <= isolation * rho (see the header)
+            continue;
+        }
+        queries.clear();
+        for (size_t s = 0; s < n; ++s) queries.push_back(uint32_t(firstOf[i] + s));
+        std::vector<float> all = kthDistances(queries, &spread);
+        if (exact) {
             std::vector<float> sorted = all;
             spacing = spacingRule(sorted, params.fallbackSpacing);
-            if (spacing.irregular && params.radii) {
-                node.radii.resize(n);
-                for (size_t s = 0; s < n; ++s) node.radii[s] = std::clamp(all[s], spacing.minRadius, spacing.h);
-            }
         }
         node.h = spacing.h;
+        const bool own = spacing.irregular && params.radii;
+        std::vector<float> radii(n);
+        bool narrower = false;
+        for (size_t s = 0; s < n; ++s) {
+            float r = own ? std::clamp(all[s], spacing.minRadius, spacing.h) : spacing.h;
+            if (isolating) r = std::min(r, float(isolated(all[s], spread[s], rho) ? rho : params.isolation * rho));
+            narrower = narrower || r < spacing.h;
+            radii[s] = r;
+        }
+        if (own || narrower) node.radii = std::move(radii);
     }
     if (!params.weights) return;
 

@@ -20,6 +20,24 @@
 // r_i = clamp(d_k(i), P5, h), so r_i <= h always and h stays the bound the
 // client's level choice relies on.
 //
+// Isolated surfels (DESIGN.md decision 19; docs/ARCHITECTURE.md, "Isolated
+// surfels"): h is the bound level selection needs, not the size to draw a
+// point with no surface around it. A node's yardstick rho is about the largest
+// 8th-neighbour distance of a surface sampled on its grid: kIsolationSpacing
+// times its cell (the level's cell, or the coarser one it was resampled on;
+// for input points, at least the spacing of a surface that fills a leaf at
+// capacity). rho depends on the level and the options alone, never on which
+// chunk or which other points share the level. A surfel is isolated when no
+// neighbour faces its side, when d_k > isolation * rho, or when d_k > rho and
+// its neighbours spread off its tangent plane (kScatteredSpread): a stray
+// return, a leaf hit by a few points, but also a crease of a sparse surface.
+// It is drawn at rho (at h where that is smaller); every other surfel of its
+// node at most at isolation * rho. A node whose sample finds no isolated
+// surfel draws every surfel at its h, which is at most the largest sampled
+// d_k <= isolation * rho (or the fallback, where no sample has a neighbour
+// at a distance). h itself is what the spacing rule gives with or without
+// isolation. --no-radius (radii = false) turns isolation off with the radii.
+//
 // Weights (Ren et al. 2002, §7.1, analytic form): s_k = 1 / Σ_j g_j(u_j - u_k),
 // summed over surfel k and its neighbours j, with u_j - u_k projected into the
 // tangent plane of k, g_j(u) = exp(-|u|²/(2 ρ_j²)) with each neighbour's own
@@ -41,9 +59,22 @@ inline constexpr double kSpacingPercentile = 0.95;
 inline constexpr double kIrregularPercentile = 0.05;
 inline constexpr double kIrregularRatio = 4.0;
 inline constexpr size_t kSpacingSamples = 2048;
+// The default of LevelParams::isolation (bench/BENCHMARKS.md, "Where real
+// scans fail": the chart it was chosen from).
+inline constexpr double kDefaultIsolation = 6.0;
+// rho over the sampling cell: a plane resampled on a grid has its 8th
+// neighbour within about 2 cells whatever its orientation (1.41 aligned with
+// the grid, 1.73 and about 2 tilted).
+inline constexpr double kIsolationSpacing = 2.0;
+// The RMS distance of a surfel's k neighbours from its tangent plane over
+// d_k beyond which they are scattered, not a surface (0 on a plane; the
+// spread measured on strays, leaves and noise: bench/BENCHMARKS.md, "Where
+// real scans fail").
+inline constexpr double kScatteredSpread = 0.2;
 
 struct LevelNode {
     std::span<const Surfel> surfels;  // input
+    double cell = 0;                  // input: the grid cell it was resampled on; 0 for input points
     float h = 0;                      // outputs
     std::vector<float> weights;       // empty when weights are off
     std::vector<float> radii;         // empty for regular nodes
@@ -55,6 +86,10 @@ struct LevelParams {
     double cutoff = 1.0;       // c of the renderer's kernel cutoff y'y <= 2c
     double kernelScale = 1.0;  // k of the renderer's kernel V^r = (k r)^2 I
     bool radii = true;         // per-surfel radii where a node's sampling is irregular
+    double isolation = kDefaultIsolation;  // 0 (off) or >= 1: see "Isolated surfels" above
+    double levelCell = 0;      // the level's G³ cell, rho's unit for resampled nodes (or their coarser cell); 0: no isolation
+    double leafCell = 0;       // rho's unit for input points: at least levelCell, and the spacing of a
+                               // surface filling a leaf at capacity (node edge / sqrt(capacity))
     double fallbackSpacing = 0;  // h of a node with no neighbours at all: the level's largest sampling cell
     bool weights = true;
     int threads = 1;

@@ -90,6 +90,7 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
                 node->cell = grid.cellSize;
                 node->surfels = resample(gathered[key], grid, true, &upperScalars);
                 node->level.surfels = node->surfels;
+                node->level.cell = node->cell;
                 members.push_back(&node->level);
             }
             gathered.clear();
@@ -98,7 +99,7 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
                 if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
             std::vector<BuiltNode*> built;
             for (auto& [key, node] : current) built.push_back(node.get());
-            computeLevelAttributes(members, neighbours, context.levelParams(largestCell(context, level, built), context.threads()));
+            computeLevelAttributes(members, neighbours, context.levelParams(level, largestCell(context, level, built), context.threads()));
             summary->textureFit.add(filterLevelTextures(context, built, neighbours, context.threads(), steps));
             for (auto& [key, node] : current) {
                 auto encoded = encodeNode(context, *node, upperScalars, steps);

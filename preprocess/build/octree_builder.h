@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "inputs.h"
+#include "level_attributes.h"
 #include "tileset_format.h"
 #include "status.h"
 #include "texture_field.h"
@@ -35,6 +36,7 @@ struct BuildOptions {
     double positionFraction = 8;        // resampled levels: quantization step = cell size / this
     bool weights = false;               // store analytic per-surfel normalization weights (ewa-surfel reads them)
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
+    double isolation = kDefaultIsolation;  // isolated surfels drawn at their level's spacing (level_attributes.h); 0: off
     int normalBits = 8;                 // Draco quantization bits per normal component (bench/BENCHMARKS.md, "Bytes")
     // Attributes to store, each where some input carries it: names from
     // kLidarAttributes, and scalar fields (input_point.h) by name, which
