@@ -33,7 +33,7 @@ constexpr double kS = 0.1;           // lattice spacing, metres
 constexpr int kN = 200;              // lattice points per side: a 20 m plane
 constexpr double kEyeHeight = 12.0;  // top-down, fov 60: the view (18.5 x 13.9 m) inside the plane
 const Vec3f kPlane{0.6f, 0.5f, 0.3f}, kStray{0.1f, 0.2f, 0.9f};
-constexpr int kChanged = 25;  // of 255 in a channel: a pixel counts as changed (the colours differ by 100 and more)
+constexpr int kChanged = 25;  // of 255 in a channel: a pixel counts as changed (the colours differ by 76 or more in every channel)
 
 struct Point {
     double x, y, z;
@@ -153,9 +153,11 @@ TEST_F(ScanDefects, ADensityJumpStaysClosed) {
 
 TEST_F(ScanDefects, AnOcclusionShadowStaysOpenBeyondOneSplat) {
     // A 3 m square with no points (a shadow behind an object) in the middle
-    // of the plane: its border surfels are one-sided, their d_8 at most
-    // 2·s·√2 (a corner's), so splats reach at most sqrt(2c)·k·2·s·√2 = 0.2 m
-    // into it; every pixel beyond that stays background.
+    // of the plane: its border surfels are one-sided, their d_8 2·s (an
+    // edge's, and the hole's corners', which point into the surface), and
+    // they draw at most at that (regular leaves draw at h = s·√2). 2·s·√2
+    // bounds it with a margin: splats reach at most sqrt(2c)·k·2·s·√2 = 0.2 m
+    // into the hole, and every pixel beyond that stays background.
     std::vector<Point> points;
     for (const Point& p : lattice(kS, -1e9, 1e9))
         if (std::fabs(p.x) > 1.5 || std::fabs(p.y) > 1.5) points.push_back(p);

@@ -256,8 +256,8 @@ TEST_F(ViewCli, ColorByModesRenderAndDiffer) {
 // 1,810 pixels against 11,158 that showing class 2 changes (brown ground, and
 // its coverage), of 28,732 covered. The bound is a fifth of the latter.
 // Edge antialiasing is off: it blends that band's border pixels with the
-// background by their differing coverage (3,008 pixels differ with it), and
-// this test is about what hiding draws.
+// background by their differing coverage, and this test is about what hiding
+// draws.
 TEST_F(ViewCli, HiddenClassLeavesWhatAFilteredBuildShows) {
     TempDir out;
     const std::string src = test::readFile(test::dataFile("autzen_trim.las"));

@@ -26,14 +26,14 @@
 // 8th-neighbour distance of a surface sampled on its grid: kIsolationSpacing
 // times its cell (the level's cell, or the coarser one it was resampled on;
 // for input points, at least the spacing of a surface that fills a leaf at
-// capacity). rho depends on the level and the options alone, never on which
-// chunk or which other points share the level. A surfel is isolated when no
+// capacity). rho depends on the node's own grid and the options, never on
+// which chunk built it or which other points share its level. A surfel is isolated when no
 // neighbour faces its side, when d_k > isolation * rho, or when d_k > rho and
 // its neighbours spread off its tangent plane (kScatteredSpread): a stray
 // return, a leaf hit by a few points, but also a crease of a sparse surface.
 // It is drawn at rho (at h where that is smaller); every other surfel of its
-// node at most at isolation * rho. A node whose sample finds no isolated
-// surfel draws every surfel at its h, which is at most the largest sampled
+// node at most at isolation * rho. A regular node whose sample finds no
+// isolated surfel draws every surfel at its h, which is at most the largest sampled
 // d_k <= isolation * rho (or the fallback, where no sample has a neighbour
 // at a distance). h itself is what the spacing rule gives with or without
 // isolation. --no-radius (radii = false) turns isolation off with the radii.
