@@ -223,7 +223,9 @@ def row_rays(camera, width, height):
         yield y, np.repeat(eye[None, :], len(d), axis=0), d
 
 
-def reference(surfaces, camera, width, height):
+def reference(surfaces, camera, width, height, more=None):
+    """more(y, directions, best, colour): other surfaces of image row y, which
+    update the row's nearest hit distances and colours in place."""
     image = np.zeros((height, width, 3))
     for y, o, d in row_rays(camera, width, height):
         best = np.full(len(d), np.inf)
@@ -234,6 +236,8 @@ def reference(surfaces, camera, width, height):
             if hit.any():
                 colour[hit] = s.colour(tuple(p[hit] for p in param))
                 best[hit] = t[hit]
+        if more:
+            more(y, d, best, colour)
         image[y] = colour.reshape(width, SUPERSAMPLE ** 2, 3).mean(axis=1)
     return image
 

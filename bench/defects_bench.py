@@ -205,15 +205,8 @@ def reference(surfaces, camera, width, height):
     x0, x1 = np.floor(px - reach).astype(int), np.ceil(px + reach).astype(int)
     y0, y1 = np.floor(py - reach).astype(int), np.ceil(py + reach).astype(int)
     ss = ab.SUPERSAMPLE ** 2
-    image = np.zeros((height, width, 3))
-    for y, o, dirs in ab.row_rays(camera, width, height):
-        best = np.full(len(dirs), np.inf)
-        colour = np.repeat(ab.BACKGROUND[None, :], len(dirs), axis=0)
-        for s in planes:
-            t, param = s.intersect(o, dirs)
-            hit = t < best
-            colour[hit] = s.colour(tuple(p[hit] for p in param))
-            best[hit] = t[hit]
+
+    def leaves(y, dirs, best, colour):
         for i in np.nonzero((y0 <= y) & (y <= y1) & (z > 0))[0]:
             a, b = max(x0[i], 0) * ss, min(x1[i] + 1, width) * ss
             if a >= b:
@@ -226,8 +219,8 @@ def reference(surfaces, camera, width, height):
             inside = (t > 0) & np.isfinite(t) & (np.sum((hitp - d.c[i]) ** 2, axis=1) <= d.r ** 2) & (t < best[a:b])
             best[a:b][inside] = t[inside]
             colour[a:b][inside] = d.colours[i]
-        image[y] = colour.reshape(width, ss, 3).mean(axis=1)
-    return image
+
+    return ab.reference(planes, camera, width, height, more=leaves)
 
 
 def build(ply, tileset, options, weights=True):
