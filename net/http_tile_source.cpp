@@ -17,6 +17,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "object_store.h"
 #include "sigpipe.h"
 #include "tileset_format.h"
 
@@ -70,12 +71,23 @@ Origin originOf(const std::string& url) {
 // kMaxHostConnections, the rest queued. A calling thread prepares easy handles
 // (from a pool), hands them over together and waits for all of them: the
 // ranges of a batch of nodes are in flight at once.
+// A set in an S3 bucket: what messages call it, and its requests' signature
+// (CURLOPT_AWS_SIGV4, for the set's own origin only; none for a public bucket).
+struct StoreAccess {
+    std::string shown;    // "s3://BUCKET/PREFIX"
+    std::string sigv4;    // "aws:amz:REGION:s3"
+    std::string userpwd;  // "ACCESS_KEY:SECRET_KEY"; empty: unsigned
+};
+
 class HttpSource : public TileSource {
 public:
-    // base: scheme://host[:port]/path without a trailing slash; query: "" or "?...".
-    HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers, CURLM* multi)
-        : base_(std::move(base)), query_(std::move(query)), origin_(originOf(base_)), options_(std::move(options)),
-          headers_(headers), multi_(multi), io_([this] { ioLoop(); }) {}
+    // base: scheme://host[:port]/path without a trailing slash; query: "" or
+    // "?..."; store: where base is an S3 bucket's prefix (file names are then
+    // object keys, percent-encoded in URLs).
+    HttpSource(std::string base, std::string query, HttpOptions options, curl_slist* headers, CURLM* multi,
+               std::optional<StoreAccess> store = std::nullopt)
+        : base_(std::move(base)), query_(std::move(query)), shown_(store ? store->shown : base_), origin_(originOf(base_)),
+          options_(std::move(options)), store_(std::move(store)), headers_(headers), multi_(multi), io_([this] { ioLoop(); }) {}
     ~HttpSource() override {
         {
             std::lock_guard lock(ioMutex_);
@@ -95,7 +107,7 @@ public:
             // Batches ask for this version (?v=), which the server keeps
             // serving after an update until the one after it (docs/PROTOCOL.md,
             // "Versions"); an unreadable file pins none (its reader fails).
-            auto info = readTilesetJson(std::string(r->body.begin(), r->body.end()), base_ + "/tileset.json");
+            auto info = readTilesetJson(std::string(r->body.begin(), r->body.end()), shown_ + "/tileset.json");
             version_ = info ? uint64_t(info->hierarchyCrc) + 1 : 0;
         }
         return std::move(r->body);
@@ -109,10 +121,10 @@ public:
     Result<uint64_t> size(const std::string& name) override {
         auto r = std::move(run({{name, "0-0", nullptr, 1, 206}})[0]);
         if (!r) return r.status();
-        if (!r->total) return Status::error(base_ + "/" + name + ": the host's answer to a range request names no file length");
+        if (!r->total) return Status::error(shown_ + "/" + name + ": the host's answer to a range request names no file length");
         return *r->total;
     }
-    std::string describe() const override { return base_; }
+    std::string describe() const override { return shown_; }
     void cancel() override {
         {
             std::lock_guard lock(ioMutex_);
@@ -151,7 +163,7 @@ private:
         }
         auto r = std::move(run({{"batch", "", &body, expected, 0}})[0]);
         if (!r) return r.status();
-        const std::string url = base_ + "/batch";
+        const std::string url = shown_ + "/batch";
         if (r->status != 200) return httpError(url, r->status);
         // For each key in order: u32 little-endian length, then the blob.
         std::vector<std::vector<uint8_t>> out;
@@ -274,11 +286,20 @@ private:
             curl_easy_setopt(h, CURLOPT_SSL_VERIFYPEER, 0L);
             curl_easy_setopt(h, CURLOPT_SSL_VERIFYHOST, 0L);
         }
+        sign(h, true);
         return h;
     }
     void release(CURL* h) {
+        sign(h, true);  // a redirect may have left it unsigned
         std::lock_guard lock(mutex_);
         idle_.push_back(h);
+    }
+    // Signs the handle's requests (S3), or stops signing them (`on` false: a
+    // redirect to another origin, which never sees the keys).
+    void sign(CURL* h, bool on) const {
+        if (!store_ || store_->userpwd.empty()) return;
+        curl_easy_setopt(h, CURLOPT_AWS_SIGV4, on ? store_->sigv4.c_str() : nullptr);
+        curl_easy_setopt(h, CURLOPT_USERPWD, on ? store_->userpwd.c_str() : nullptr);
     }
 
     // Runs the requests at once on the I/O thread, following redirects
@@ -298,7 +319,7 @@ private:
             if (!h) continue;
             sinks[i] = {h, q.wanted, q.maxBytes, 0, false, &responses[i].body};
             errors[i][0] = 0;
-            std::string url = base_ + "/" + q.name + query_;
+            std::string url = base_ + "/" + (store_ ? s3EncodeKey(q.name) : q.name) + query_;
             if (const uint64_t v = version_; q.post && v > 0) url += (query_.empty() ? "?v=" : "&v=") + std::to_string(v - 1);
             curl_easy_setopt(h, CURLOPT_URL, url.c_str());
             curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
@@ -337,7 +358,7 @@ private:
         std::vector<Result<Response>> out;
         for (size_t i = 0; i < n; ++i) {
             CURL* h = transfers[i].handle;
-            const std::string shown = base_ + "/" + requests[i].name;  // messages never show the query (it may hold a token)
+            const std::string shown = shown_ + "/" + requests[i].name;  // messages never show the query (it may hold a token)
             if (!h) {
                 out.push_back(Status::error(shown + ": cannot start a libcurl transfer"));
                 continue;
@@ -393,7 +414,8 @@ private:
         curl_easy_setopt(h, CURLOPT_URL, target.c_str());
         const bool credentials = to == origin_ || options_.redirectCredentials;
         curl_easy_setopt(h, CURLOPT_HTTPHEADER, credentials ? headers_ : nullptr);
-        t.withoutCredentials |= !credentials && headers_;
+        sign(h, credentials);
+        t.withoutCredentials |= !credentials && (headers_ || (store_ && !store_->userpwd.empty()));
         t.redirected = true;
         return {};
     }
@@ -546,9 +568,10 @@ private:
 
 
     static constexpr int kMaxRedirects = 8;
-    std::string base_, query_;
+    std::string base_, query_, shown_;
     Origin origin_;  // the set's: where the user's headers go
     HttpOptions options_;
+    std::optional<StoreAccess> store_;
     curl_slist* headers_;
     std::atomic<size_t> batchNodes_{0};  // tileset.json's Surfcast-Batch: 0 where it offers none
     std::atomic<uint64_t> version_{0};   // 1 + the hierarchy CRC of the tileset.json read; 0: none
@@ -565,10 +588,47 @@ private:
 
 }  // namespace
 
+namespace {
+
+CURLM* newMulti() {
+    CURLM* multi = curl_multi_init();
+    if (!multi) return nullptr;
+    curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(kMaxHostConnections));
+    // Keep that many alive between requests (libcurl's default cache holds
+    // 4 per easy handle in the multi at the time, and closed the rest).
+    curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, long(kMaxHostConnections));
+    return multi;
+}
+
+// A set (or an input's bucket) at s3://BUCKET/PREFIX, read as the HTTP source
+// of its objects' URLs, every request signed where there are credentials.
+Result<std::unique_ptr<TileSource>> openStoreSource(const std::string& location, const HttpOptions& http) {
+    auto url = parseS3Url(location);
+    if (!url) return url.status();
+    while (!url->key.empty() && url->key.back() == '/') url->key.pop_back();
+    auto env = s3Environment();
+    if (!env) return env.status();
+    curl_slist* headers = curl_slist_append(nullptr, "x-amz-content-sha256: UNSIGNED-PAYLOAD");
+    if (headers && !env->sessionToken.empty()) headers = curl_slist_append(headers, ("x-amz-security-token: " + env->sessionToken).c_str());
+    CURLM* multi = headers ? newMulti() : nullptr;
+    if (!multi) {
+        curl_slist_free_all(headers);
+        return Status::error("libcurl: cannot start a multi handle");
+    }
+    StoreAccess access{"s3://" + url->bucket + (url->key.empty() ? "" : "/" + url->key), "aws:amz:" + env->region + ":s3",
+                       env->accessKey.empty() ? "" : env->accessKey + ":" + env->secretKey};
+    HttpOptions options = http;
+    options.timeoutSeconds = std::max(options.timeoutSeconds, env->timeoutSeconds);
+    return std::unique_ptr<TileSource>(new HttpSource(s3HttpUrl(*env, *url), "", options, headers, multi, std::move(access)));
+}
+
+}  // namespace
+
 Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http) {
-    if (!isUrl(location)) return openFolderSource(location);
+    if (!isUrl(location) && !isS3Url(location)) return openFolderSource(location);
     static const CURLcode init = curl_global_init(CURL_GLOBAL_DEFAULT);  // once, before any thread uses libcurl
     if (init != CURLE_OK) return Status::error(std::string("libcurl: ") + curl_easy_strerror(init));
+    if (isS3Url(location)) return openStoreSource(location, http);
     const size_t scheme = location.find("://") + 3;
     const size_t q = location.find('?');
     std::string base = location.substr(0, q), query = q == std::string::npos ? "" : location.substr(q);
@@ -606,20 +666,16 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
     if (http.insecure)
         std::fprintf(stderr, "warning: --insecure: TLS certificates are NOT verified; anyone on the way to %s can read and change what is fetched\n",
                      base.substr(0, base.find('/', scheme)).c_str());
-    CURLM* multi = curl_multi_init();
+    CURLM* multi = newMulti();
     if (!multi) {
         curl_slist_free_all(headers);
         return Status::error("libcurl: cannot start a multi handle");
     }
-    curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(kMaxHostConnections));
-    // Keep that many alive between requests (libcurl's default cache holds
-    // 4 per easy handle in the multi at the time, and closed the rest).
-    curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, long(kMaxHostConnections));
     return std::unique_ptr<TileSource>(new HttpSource(base, query, http, headers, multi));
 }
 
 Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http) {
-    if (!isUrl(location)) return TilesetReader::open(location);
+    if (!isUrl(location) && !isS3Url(location)) return TilesetReader::open(location);
     auto source = openTileSource(location, http);
     if (!source) return source.status();
     return TilesetReader::open(std::move(*source));

@@ -442,7 +442,7 @@ surfcast::Result<std::vector<std::string>> absoluteInputs(const std::vector<std:
     auto paths = surfcast::expandInputPaths(given);
     if (!paths) return paths.status();
     for (std::string& p : *paths)
-        if (!surfcast::isUrl(p)) p = std::filesystem::absolute(p).lexically_normal().string();
+        if (!surfcast::isRemoteInput(p)) p = std::filesystem::absolute(p).lexically_normal().string();
     return paths;
 }
 
@@ -554,7 +554,7 @@ std::vector<std::string> storedCommandLine(const Args& a) {
 // (made absolute), or its file name where only one input has it; -1 with
 // `error` set otherwise.
 long findInput(const std::vector<std::string>& paths, size_t first, const std::string& name, std::string* error) {
-    std::string absolute = surfcast::isUrl(name) ? name : std::filesystem::absolute(name).lexically_normal().string();
+    std::string absolute = surfcast::isRemoteInput(name) ? name : std::filesystem::absolute(name).lexically_normal().string();
     while (absolute.size() > 1 && absolute.back() == '/') absolute.pop_back();  // a set's folder given as "team_b/"
     long found = -1;
     for (size_t i = 0; i < paths.size(); ++i)

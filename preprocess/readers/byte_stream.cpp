@@ -41,7 +41,7 @@ Result<ByteStream> ByteStream::open(const std::string& path) {
     // No bigger than the file: a build of thousands of small files opens each
     // several times, and a zero-filled 1 MiB per open cost more than decoding
     // them (BENCHMARKS.md, "Small files: a buffer per open").
-    const uint64_t most = isUrl(path) ? kRemoteBufferSize : kBufferSize;
+    const uint64_t most = isRemoteInput(path) ? kRemoteBufferSize : kBufferSize;
     s.buffer_.resize(size_t(s.fileSize_ > 0 ? std::min(s.fileSize_, most) : most));
     return s;
 }

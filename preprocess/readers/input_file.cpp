@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "http_tile_source.h"
+#include "object_store.h"
 
 namespace surfcast {
 
@@ -54,6 +55,8 @@ HttpOptions gHttp;
 // (and its one I/O thread) serve every input from that host.
 std::map<std::string, std::shared_ptr<TileSource>> gSources;
 std::map<std::string, uint64_t> gSizes;  // by URL: a file is asked its size once
+// Presigned URLs by the redacted form every other part of the build sees.
+std::map<std::string, std::string> gSigned;
 
 // A transient failure (a 5xx, a reset connection) is asked again this many
 // times, after 0.5, 1 and 2 s, before it fails the read.
@@ -69,29 +72,49 @@ auto withRetries(F request) {
     return r;
 }
 
-// The source of `url`'s origin and the file's path there.
-Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url) {
-    const size_t scheme = url.find("://") + 3, slash = url.find('/', scheme);
-    // Neither the user information nor the query may show in a message.
-    const size_t at = url.substr(scheme, slash == std::string::npos ? std::string::npos : slash - scheme).rfind('@');
-    const std::string shown = at == std::string::npos ? url : url.substr(0, scheme) + url.substr(scheme + at + 1);
-    if (at != std::string::npos)
-        return Status::error(shown.substr(0, shown.find_first_of("?#")) +
-                             ": an input URL with a user name or password is not taken; give credentials with --header or --token-file");
-    if (url.find_first_of("?#") != std::string::npos)
-        return Status::error(url.substr(0, url.find_first_of("?#")) +
-                             ": an input URL with a query string is not taken (it would show in messages and the work "
-                             "folder's plan); give credentials with --header or --token-file");
-    if (slash == std::string::npos || slash + 1 == url.size() || url.back() == '/') return Status::error(url + ": not the URL of a file");
-    const std::string origin = url.substr(0, slash), name = url.substr(slash + 1);
+// One source per origin (an http(s) host, a bucket), or per folder and
+// query where a URL's query string signs its requests (a presigned URL):
+// `location` as openTileSource takes it.
+Result<std::shared_ptr<TileSource>> source(const std::string& location) {
     std::lock_guard lock(gHttpMutex);
-    auto it = gSources.find(origin);
+    auto it = gSources.find(location);
     if (it == gSources.end()) {
-        auto source = openTileSource(origin, gHttp);
+        auto source = openTileSource(location, gHttp);
         if (!source) return source.status();
-        it = gSources.emplace(origin, std::shared_ptr<TileSource>(std::move(*source))).first;
+        it = gSources.emplace(location, std::shared_ptr<TileSource>(std::move(*source))).first;
     }
-    return std::make_pair(it->second, name);
+    return it->second;
+}
+
+// The source of `url`'s origin (an s3:// URL's bucket) and the file's path
+// (key) there.
+Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url) {
+    std::string location, name;
+    if (isS3Url(url)) {
+        auto object = parseS3Url(url);
+        if (!object) return object.status();
+        if (object->key.empty() || object->key.back() == '/') return Status::error(url + ": not the URL of an object");
+        location = "s3://" + object->bucket;
+        name = object->key;
+    } else {
+        const size_t scheme = url.find("://") + 3, slash = url.find('/', scheme);
+        const size_t at = url.substr(scheme, slash == std::string::npos ? std::string::npos : slash - scheme).rfind('@');
+        if (at != std::string::npos)
+            return Status::error(redactUrl(url) + ": an input URL with a user name or password is not taken; give credentials with --header or --token-file");
+        const size_t end = url.find_first_of("?#");
+        const std::string path = url.substr(0, end);
+        if (slash == std::string::npos || slash + 1 >= path.size() || path.back() == '/') return Status::error(redactUrl(url) + ": not the URL of a file");
+        // A query string (a presigned URL's signature) goes with every
+        // request for the file and shows nowhere: the file's folder with the
+        // query is a source of its own.
+        const size_t last = path.rfind('/');
+        const std::string query = end == std::string::npos || url[end] == '#' ? "" : url.substr(end, url.find('#', end) - end);
+        location = (query.empty() ? url.substr(0, slash) : path.substr(0, last)) + query;
+        name = query.empty() ? path.substr(slash + 1) : path.substr(last + 1);
+    }
+    auto opened = source(location);
+    if (!opened) return opened.status();
+    return std::make_pair(*opened, name);
 }
 
 Result<uint64_t> remoteSize(const std::string& url, TileSource& source, const std::string& name) {
@@ -152,6 +175,16 @@ private:
 
 }  // namespace
 
+std::string redactUrl(const std::string& url) {
+    if (!isUrl(url)) return url;
+    const size_t scheme = url.find("://") + 3, end = url.find_first_of("?#"), slash = url.find('/', scheme);
+    const size_t at = url.substr(scheme, std::min(slash, end) - scheme).rfind('@');
+    std::string shown = at == std::string::npos ? url.substr(0, end) : url.substr(0, scheme) + url.substr(scheme + at + 1, end == std::string::npos ? std::string::npos : end - scheme - at - 1);
+    return end != std::string::npos && url[end] == '?' ? shown + "?…" : shown;
+}
+
+bool isRemoteInput(const std::string& path) { return isUrl(path) || isS3Url(path); }
+
 void setInputHttpOptions(const HttpOptions& options) {
     std::lock_guard lock(gHttpMutex);
     gHttp = options;
@@ -159,13 +192,37 @@ void setInputHttpOptions(const HttpOptions& options) {
     gSizes.clear();
 }
 
+std::string signedInput(const std::string& url) {
+    const std::string shown = redactUrl(url);
+    if (shown == url) return url;
+    std::lock_guard lock(gHttpMutex);
+    gSigned[shown] = url;
+    return shown;
+}
+
+namespace {
+
+// The URL to ask for `path`: a redacted presigned URL's whole self.
+Result<std::string> realUrl(const std::string& path) {
+    if (path.size() < 4 || path.compare(path.size() - 4, 4, "?…") != 0) return path;
+    std::lock_guard lock(gHttpMutex);
+    auto it = gSigned.find(path);
+    if (it == gSigned.end())
+        return Status::error(path + ": a presigned URL's query string is kept in memory only, never stored: give the URL on the command line of this process");
+    return it->second;
+}
+
+}  // namespace
+
 Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path) {
-    if (isUrl(path)) {
-        auto r = remote(path);
+    if (isRemoteInput(path)) {
+        auto url = realUrl(path);
+        if (!url) return url.status();
+        auto r = remote(*url);
         if (!r) return r.status();
         auto size = remoteSize(path, *r->first, r->second);
         if (!size) return size.status();
-        return std::unique_ptr<InputFile>(new RemoteFile(path, std::move(r->first), std::move(r->second), *size));
+        return std::unique_ptr<InputFile>(new RemoteFile(redactUrl(path), std::move(r->first), std::move(r->second), *size));
     }
     const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) return Status::error(path + ": cannot open (" + std::strerror(errno) + ")");
@@ -178,12 +235,14 @@ Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path) {
 }
 
 Result<uint64_t> inputFileSize(const std::string& path) {
-    if (!isUrl(path)) {
+    if (!isRemoteInput(path)) {
         struct stat st{};
         if (::stat(path.c_str(), &st) != 0) return Status::error(path + ": " + std::strerror(errno));
         return uint64_t(st.st_size);
     }
-    auto r = remote(path);
+    auto url = realUrl(path);
+    if (!url) return url.status();
+    auto r = remote(*url);
     if (!r) return r.status();
     return remoteSize(path, *r->first, r->second);
 }

@@ -1,6 +1,6 @@
 // An input file's bytes, read at any offset: a local file, or one at an
-// http(s) URL read by ranges through the project's HTTP client
-// (net/http_tile_source.h), so that workers that do not share a file system
+// http(s) or s3:// URL read by ranges through the project's HTTP client
+// (net/http_tile_source.h, signed for S3), so that workers that do not share a file system
 // with the scans read them from their host. ByteStream and the LAZ decoder
 // read through it.
 #pragma once
@@ -16,8 +16,9 @@ namespace surfcast {
 
 class InputFile {
 public:
-    // A path, or an http(s) URL without a query string (credentials go in
-    // headers: setInputHttpOptions). Fails naming the file.
+    // A path, an http(s) URL (credentials in headers: setInputHttpOptions,
+    // or a presigned URL's query string: signedInput), or an s3:// object
+    // (net/object_store.h). Fails naming the file.
     static Result<std::unique_ptr<InputFile>> open(const std::string& path);
     virtual ~InputFile() = default;
 
@@ -43,6 +44,18 @@ struct FfiInput {
     // The decoder's message, with the read failure behind it where there was one.
     std::string explain(const char* decoder) const { return error.empty() ? std::string(decoder) : std::string(decoder) + " (" + error + ")"; }
 };
+
+// An http(s) URL or an s3:// URL: read by ranges, not from a file system.
+bool isRemoteInput(const std::string& path);
+// `url` as messages, logs and stored records show it: without user
+// information, and with "?…" for its query string (which may hold a
+// signature). Anything but an http(s) URL is returned as it is.
+std::string redactUrl(const std::string& url);
+
+// A presigned URL (its query string signs it) kept in this process's memory
+// under its redacted form, which the function returns: the form plans,
+// records, messages and InputFile::open take. Other paths come back as they are.
+std::string signedInput(const std::string& url);
 
 // How http(s) inputs are reached (--header, --token-file, --ca-file, ...):
 // set by the command line before any input is opened.

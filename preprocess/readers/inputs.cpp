@@ -10,6 +10,8 @@
 #include <thread>
 
 #include "byte_stream.h"
+#include "input_file.h"
+#include "object_store.h"
 #include "set_reader.h"
 #include "e57_reader.h"
 #include "las_reader.h"
@@ -38,7 +40,7 @@ enum class InputKind { Points, Mesh };
 // its header declares faces.
 Result<InputKind> inputKind(const std::string& path, const InputOptions& options) {
     std::error_code ec;
-    if (!isUrl(path) && !std::filesystem::is_regular_file(path, ec)) return Status::error(path + ": no such file");
+    if (!isRemoteInput(path) && !std::filesystem::is_regular_file(path, ec)) return Status::error(path + ": no such file");
     char magic[4] = {};
     {
         auto in = ByteStream::open(path);
@@ -77,7 +79,7 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
     if (!whole && (*kind == InputKind::Mesh || !las))
         return Status::error(path + ": only LAS and LAZ files are read in parts (records " + std::to_string(range.begin) + " to " +
                              (range.end ? std::to_string(range.end) : "the end") + " asked for)");
-    if (*kind == InputKind::Mesh && isUrl(path))
+    if (*kind == InputKind::Mesh && isRemoteInput(path))
         return Status::error(path + ": meshes are read from local files only (point files may be URLs)");
     if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
     if (isSetInput(path)) return openSetReader(path, options.scalars);
@@ -160,9 +162,27 @@ Result<std::vector<std::string>> expandInputPaths(const std::vector<std::string>
                 size_t start = line.find_first_not_of(" \t");
                 if (start == std::string::npos || line[start] == '#') continue;
                 fs::path p(line.substr(start));
-                out.push_back(isUrl(p.string()) || p.is_absolute() ? p.string() : (base / p).string());
+                const std::string entry = p.string();
+                out.push_back(isRemoteInput(entry) ? signedInput(entry) : p.is_absolute() ? entry : (base / p).string());
             }
             if (in.bad()) return Status::error(list + ": read error");
+        } else if (isS3Url(arg) && (arg.back() == '/' || arg.find('/', 5) == std::string::npos)) {
+            // A prefix: every object under it of a readable format, in key order.
+            auto prefix = parseS3Url(arg);
+            if (!prefix) return prefix.status();
+            auto store = ObjectStore::shared();
+            if (!store) return store.status();
+            auto objects = (*store)->list(*prefix);
+            if (!objects) return objects.status();
+            size_t found = 0;
+            for (const ListedObject& o : *objects)
+                if (o.size > 0 && readableExtension(o.key)) {
+                    out.push_back("s3://" + prefix->bucket + "/" + o.key);
+                    ++found;
+                }
+            if (found == 0) return Status::error(arg + ": the prefix holds no object of a readable format");
+        } else if (isRemoteInput(arg)) {
+            out.push_back(signedInput(arg));
         } else if (fs::is_directory(arg, ec) && fs::exists(fs::path(arg) / "tileset.json", ec)) {
             out.push_back((fs::path(arg) / "tileset.json").string());  // a tile set: its points (set_reader.h)
         } else if (fs::is_directory(arg, ec)) {

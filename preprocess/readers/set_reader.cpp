@@ -156,7 +156,7 @@ std::string inputName(const std::string& path) {
 }
 
 Result<std::unique_ptr<PointReader>> openSetReader(const std::string& path, const ScalarSelection& scalars) {
-    if (isUrl(path)) return Status::error(path + ": a tile set is read as an input from a local folder only");
+    if (isRemoteInput(path)) return Status::error(path + ": a tile set is read as an input from a local folder only");
     const std::string folder = std::filesystem::path(path).parent_path().string();
     auto set = TilesetReader::open(folder.empty() ? std::string(".") : folder);
     if (!set) return set.status();
