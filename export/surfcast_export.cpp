@@ -15,6 +15,8 @@
 #include "camera.h"
 #include "http_tile_source.h"
 #include "laz_export.h"
+#include "object_store.h"
+#include "set_publisher.h"
 #include "splat_export.h"
 #include "tiles3d_export.h"
 
@@ -86,7 +88,8 @@ http(s) URL.
                         bounds included)
   --classes LIST        only these ASPRS classes, e.g. 2,6 (the set must store
                         classification)
-  -o, --output FILE     the file (or 3dtiles' folder) to write, replaced atomically
+  -o, --output FILE     the file (or 3dtiles' folder) to write, replaced atomically;
+                        or s3://BUCKET/KEY (a 3dtiles prefix must hold no objects yet)
   --header 'NAME: VALUE', --token-file F, --ca-file F, --insecure,
   --redirect-credentials
                         how to reach a set at a URL, as in surfcast-view
@@ -236,6 +239,45 @@ int main(int argc, char** argv) {
     if (levelGiven && (cut.budget > 0 || cut.camera)) return usageError(cut.camera ? "--level or --camera, not both" : "--level or --splat-budget, not both");
     if (viewGiven && !cut.camera) return usageError("--size and --lod are for --camera");
     if (output.empty()) return usageError("-o FILE is required");
+    // An export to an object store is written in a local folder, then
+    // uploaded: a file as one object (a PUT replaces an object whole, as the
+    // rename replaces a file), a 3D Tiles folder by publishFolder.
+    const std::string publishTo = isS3Url(output) ? output : "";
+    struct Staging {
+        std::string dir;
+        ~Staging() {
+            std::error_code ec;
+            if (!dir.empty()) std::filesystem::remove_all(dir, ec);
+        }
+    } staging;
+    if (!publishTo.empty()) {
+        auto url = parseS3Url(publishTo);
+        if (!url) return usageError(url.status().message());
+        if (url->key.empty() || url->key.back() == '/') return usageError(publishTo + ": name the object (or 3D Tiles prefix) to write");
+        std::error_code ec;
+        staging.dir = (std::filesystem::temp_directory_path(ec) / ("surfcast-export-" + std::to_string(::getpid()))).string();
+        std::filesystem::create_directories(staging.dir, ec);
+        if (ec) return usageError(staging.dir + ": cannot create (" + ec.message() + ")");
+        output = staging.dir + "/" + std::filesystem::path(url->key).filename().string();
+    }
+    // Uploads the finished output where -o named an object store.
+    auto publish = [&]() -> int {
+        if (publishTo.empty()) return 0;
+        Status st;
+        if (format == "3dtiles") {
+            auto report = publishFolder(output, publishTo);
+            if (!report) st = report.status();
+            else if (!quiet) std::fprintf(stderr, "uploaded %s: %llu objects\n", publishTo.c_str(), (unsigned long long)report->objects);
+        } else {
+            auto store = ObjectStore::shared();
+            auto put = store ? (*store)->putFile(*parseS3Url(publishTo), output) : Result<std::optional<ObjectInfo>>(store.status());
+            if (!put) st = put.status();
+            else if (!quiet) std::fprintf(stderr, "uploaded %s\n", publishTo.c_str());
+        }
+        if (st.ok()) return 0;
+        std::fprintf(stderr, "surfcast-export: %s\n", st.message().c_str());
+        return 1;
+    };
 
     auto reader = openTileset(set, http);
     if (!reader) {
@@ -253,7 +295,7 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "wrote %s: %zu tiles (%s tiling), %llu points, %llu bytes (%.2f per point)\n", output.c_str(),
                          report->tiles, report->implicit ? "implicit" : "explicit", (unsigned long long)report->points,
                          (unsigned long long)report->bytes, report->points ? double(report->bytes) / double(report->points) : 0.0);
-        return 0;
+        return publish();
     }
     Result<LazExportPlan> plan = LazExportPlan{};
     if (format == "laz") {
@@ -318,5 +360,5 @@ int main(int argc, char** argv) {
     if (!quiet)
         std::fprintf(stderr, "wrote %s: %llu points, %llu bytes (%.2f per point)\n", output.c_str(), (unsigned long long)plan->points,
                      (unsigned long long)bytes, plan->points ? double(bytes) / double(plan->points) : 0.0);
-    return 0;
+    return publish();
 }

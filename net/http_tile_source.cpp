@@ -435,6 +435,11 @@ private:
             return permanentTransferError(code) ? Status::error(message) : Status::transient(message);
         }
         if (unwanted) {
+            if ((r.status == 401 || r.status == 403) && store_)
+                return Status::error(shown + ": HTTP " + std::to_string(r.status) +
+                                     ": the store refuses the credentials, or they lack permission to read it (docs/STORAGE.md)");
+            if (r.status == 404 && store_)
+                return Status::error(shown + ": HTTP 404: no such object, or no bucket '" + store_->shown.substr(5, store_->shown.find('/', 5) - 5) + "'");
             if (r.status == 401 || r.status == 403)
                 return Status::error(shown + ": HTTP " + std::to_string(r.status) + ": the host refuses access " +
                                      (t.withoutCredentials ? "(a redirect led to another origin, which was not sent the "

@@ -26,6 +26,8 @@
 #include "work_files.h"
 #include "http_tile_source.h"
 #include "input_file.h"
+#include "object_store.h"
+#include "set_publisher.h"
 #include "set_reader.h"
 #include "tileset_reader.h"
 
@@ -38,7 +40,7 @@ const char* kUsage = R"(usage: surfcast-build [options] INPUT... -o OUT      (IN
        surfcast-build --add INPUT... | --remove NAME... | --replace OLD NEW  --to SET
        surfcast-build --compact SET
        surfcast-build --merge SET1 SET2... [options] -o OUT
-       surfcast-build --info SET            (SET: a folder or an http(s) URL)
+       surfcast-build --info SET            (SET: a folder, an http(s) or s3:// URL)
        surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
        surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
        surfcast-build distribute --work W [--part P]
@@ -54,9 +56,15 @@ normals face each scan's scanner), PCD, text columns (.xyz .txt .pts .csv),
 meshes in OBJ/OFF/STL through OpenMesh, and glTF. Several inputs merge into one tile set. A
 folder stands for every readable file under it; @LIST for the paths listed in
 the text file LIST, one per line. A point file may be an http(s) URL, read by
-ranges from any host that honours Range (meshes are read from local files).
+ranges from any host that honours Range (a presigned URL's query string is
+never shown or stored), or an s3:// object; s3://BUCKET/PREFIX/ stands for
+every readable object under the prefix. Meshes are read from local files.
+S3 credentials, region and endpoint come from the standard AWS variables and
+files (docs/STORAGE.md).
 
-  -o, --output DIR        tile set folder to write (replaced atomically)
+  -o, --output DIR        tile set folder to write (replaced atomically), or
+                          s3://BUCKET/PREFIX: a new prefix of an S3 bucket
+                          (built in $TMPDIR, then uploaded; docs/STORAGE.md)
   --default-scene         add the built-in scanned scene (about 1.5 M points)
   --scene-points N        points of the built-in scene (default 1500000)
   --seed N                seed of the built-in scene and mesh sampling (default 1)
@@ -418,8 +426,8 @@ int fail(const surfcast::Status& status) {
 }
 
 // Prints what a build wrote and runs the weight capture where asked.
-int finishBuild(const Args& a, const surfcast::BuildSummary& summary) {
-    std::printf("wrote %s\n%s", a.opt.output.c_str(), summary.text().c_str());
+int finishBuild(const Args& a, const surfcast::BuildSummary& summary, bool staged = false) {
+    std::printf("%s %s\n%s", staged ? "built" : "wrote", a.opt.output.c_str(), summary.text().c_str());
     if (a.captureWeights) {
         // The capture writes the set again, under the lock of the folder the
         // build swapped in (the build's own is on the one it replaced).
@@ -605,6 +613,7 @@ surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record,
 int runUpdate(const Args& a) {
     const std::string& mode = a.update;
     if (a.to.empty()) return usageError(mode + " needs the set to update (--to SET)");
+    if (surfcast::isS3Url(a.to)) return usageError(mode + ": sets in object stores are built anew (-o s3://...), not yet updated in place");
     if (!a.opt.output.empty()) return usageError(mode + " updates the set --to names in place; it takes no -o");
     if (a.opt.inputs.defaultScene || a.opt.inputs.paths.empty())
         return usageError(mode == "--add" ? "--add needs input files to add" : mode == "--remove" ? "--remove needs the inputs to remove" : "--replace needs OLD and NEW");
@@ -700,6 +709,8 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     std::shared_ptr<const surfcast::BuildContext> context;
     if (stage == "scan" || stage == "count" || stage == "plan") {
         if (a.opt.output.empty()) return usageError("no output folder (-o OUT)");
+        if (surfcast::isS3Url(a.opt.output) || surfcast::isS3Url(a.work))
+            return usageError("the staged build writes to folders; build in one process to publish to s3:// (-o s3://...)");
         if (a.opt.inputs.paths.empty() && !a.opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
         if (stage != "plan" && !a.partGiven) return usageError(stage + " needs --part P/N");
         auto paths = absoluteInputs(a.opt.inputs.paths);
@@ -956,6 +967,26 @@ int main(int argc, char** argv) {
     }
     if (opt.output.empty()) return usageError("no output folder (-o OUT)");
     if (opt.inputs.paths.empty() && !opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
+    // A set for an object store is built in a local folder, then published
+    // (set_publisher.h): objects are written whole, never renamed.
+    const std::string publishTo = surfcast::isS3Url(opt.output) ? opt.output : "";
+    std::string staging;
+    if (!publishTo.empty()) {
+        if (auto url = surfcast::parseS3Url(publishTo); !url) return fail(url.status());
+        if (a.work.size() > 0) return usageError("-o s3://... builds in one process; --work is for folders");
+        std::error_code ec;
+        staging = (std::filesystem::temp_directory_path(ec) / ("surfcast-publish-" + std::to_string(::getpid()))).string();
+        std::filesystem::create_directories(staging, ec);
+        if (ec) return fail(surfcast::Status::error(staging + ": cannot create the folder the set is built in before its upload (" + ec.message() + ")"));
+        a.opt.output = staging + "/set";
+    }
+    struct Cleanup {
+        std::string dir;
+        ~Cleanup() {
+            std::error_code ec;
+            if (!dir.empty()) std::filesystem::remove_all(dir, ec);
+        }
+    } cleanup{staging};
     surfcast::SetLock lock;
     if (auto st = surfcast::lockOutput(opt.output, &lock); !st.ok()) return fail(st);
     auto paths = surfcast::expandInputPaths(opt.inputs.paths);
@@ -971,11 +1002,16 @@ int main(int argc, char** argv) {
         auto absolute = absoluteInputs(a.opt.inputs.paths);
         if (!absolute) return fail(absolute.status());
         recorded.opt.inputs.paths = std::move(*absolute);
-        recorded.opt.output = std::filesystem::absolute(a.opt.output).lexically_normal().string();
+        recorded.opt.output = publishTo.empty() ? std::filesystem::absolute(a.opt.output).lexically_normal().string() : publishTo;
         a.opt.commandLine = storedCommandLine(recorded);
     }
 
     auto summary = surfcast::buildTileset(a.opt);
     if (!summary) return fail(summary.status());
-    return finishBuild(a, *summary);
+    if (int status = finishBuild(a, *summary, !publishTo.empty()); status != 0 || publishTo.empty()) return status;
+    auto published = surfcast::publishFolder(a.opt.output, publishTo);
+    if (!published) return fail(published.status());
+    std::printf("wrote %s (%llu objects, %llu bytes, %llu requests)\n", publishTo.c_str(), (unsigned long long)published->objects,
+                (unsigned long long)published->bytes, (unsigned long long)published->requests);
+    return 0;
 }

@@ -7,7 +7,7 @@
 #               (the asan and tsan presets)
 #   --demo      only what the programs and scripts/demo.sh need: no test
 #               packages (Chromium, nginx, Xvfb, GoogleTest, cpp-httplib, the
-#               Python venv), no test or benchmark programs, and the browser
+#               Python venv, SeaweedFS), no test or benchmark programs, and the browser
 #               viewer's build tools without the tests' (npm --omit=dev)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -58,3 +58,5 @@ with_tests=$( ((demo)) && echo OFF || echo ON )
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DSURFCAST_TESTS="$with_tests" \
   -DSURFCAST_BENCH="$with_tests" ${CMAKE_ARGS:-}
 cmake --build build --parallel
+# The object-store tests' real S3 server (a Go build: minutes on a fresh machine).
+((demo)) || scripts/install-seaweedfs.sh

@@ -484,14 +484,16 @@ TEST(Stream, SurfcastServeOverHttpsWithAToken) {
 // parts (the COPC file cut at a chunk and the LAS file at 65,536 records, each
 // part reading its run by ranges), write the same bytes as one build of the
 // same files by path (under TSan: one build by URL, in one process). A
-// missing file, a URL with a query string or a user name, and a mesh by URL
-// each fail with the URL and why.
+// presigned URL (a query string the host checks) is read, and its query shows
+// in no message, plan or record. A missing file, a URL with a user name, and
+// a mesh by URL each fail with the URL and why.
 TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
     REQUIRE_DATA();
     TempDir dir;
     const std::string data = std::filesystem::path(test::dataFile("lion_takanawa.copc.laz")).parent_path().string();
     auto nginx = startNginx(dir.file("nginx"), 1, [&](const std::vector<int>& ports) {
-        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; location /scans/ { alias " + data + "/; } }\n";
+        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; location /scans/ { alias " + data +
+               "/; } location /signed/ { if ($arg_sig != \"secret\") { return 403; } alias " + data + "/; } }\n";
     });
     ASSERT_FALSE(nginx->ports.empty());
     const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/scans/";
@@ -538,10 +540,27 @@ TEST(Inputs, ReadFromUrlsByRangesSameBytesAsLocalFiles) {
         EXPECT_TRUE(test::readFile(dir.file("local/") + f) == test::readFile(dir.file("remote/") + f)) << f;
 #endif
 
+    // A presigned URL: read with its query, which shows nowhere.
+    const std::string signedUrl = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/signed/fragment.pcd";
+    auto presigned = run({binary("surfcast-build"), "-q", signedUrl + "?sig=secret", "-o", dir.file("signed")});
+    ASSERT_EQ(presigned.exitCode, 0) << presigned.output;
+    EXPECT_EQ(presigned.output.find("secret"), std::string::npos) << presigned.output;
+    EXPECT_EQ(test::readFile(dir.file("signed/build.bin")).find("secret"), std::string::npos) << "the build record holds the query";
+    auto planned = run({binary("surfcast-build"), "plan", "--work", dir.file("signed-work"), "-q", signedUrl + "?sig=secret", "-o", dir.file("x")});
+    ASSERT_EQ(planned.exitCode, 0) << planned.output;
+    const std::string plan = test::readFile(dir.file("signed-work/plan.json")) + test::readFile(dir.file("signed-work/plan.bin"));
+    EXPECT_EQ(plan.find("secret"), std::string::npos) << "the plan holds the query";
+    EXPECT_NE(plan.find("/signed/fragment.pcd?"), std::string::npos) << "the plan names the input, its query redacted";
+    // A stage in another process never saw the query: it says so.
+    auto later = run({binary("surfcast-build"), "distribute", "--work", dir.file("signed-work"), "-q", "--part", "0"});
+    EXPECT_EQ(later.exitCode, 1) << later.output;
+    EXPECT_NE(later.output.find("kept in memory only"), std::string::npos) << later.output;
+
     // Clear errors, and no set written.
     const std::pair<std::string, std::string> bad[] = {
         {url + "missing.laz", url + "missing.laz: HTTP 404"},
-        {url + "lone-star.laz?sig=secret", "a query string is not taken"},
+        {url + "missing.laz?sig=secret", url + "missing.laz: HTTP 404"},
+        {signedUrl + "?sig=wrong-secret", "/signed/fragment.pcd: HTTP 403"},
         {"http://user:secret@" + url.substr(7) + "lone-star.laz", "a user name or password is not taken"},
         {url + "fg_spkMgDragon/fg_spkMgDragon.obj", "meshes are read from local files only"},
     };

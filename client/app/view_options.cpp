@@ -91,7 +91,8 @@ reference.
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
   SET may be a URL: http(s)://HOST[:PORT]/sets/NAME (surfcast-serve) or any folder
   URL on a static host, object store or CDN with Range (a query string, such as a
-  shared access signature, is sent with every request). With --lod frames redraw
+  shared access signature, is sent with every request), or s3://BUCKET/PREFIX, its
+  requests signed with the standard AWS credentials (docs/STORAGE.md). With --lod frames redraw
   as blocks arrive, one JSON line per redraw, until converged; without it every
   leaf is fetched first (at most --gpu-budget of them).
   --header 'NAME: VALUE'

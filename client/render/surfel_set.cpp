@@ -7,6 +7,7 @@
 #include "block_codec.h"
 #include "crc32.h"
 #include "http_tile_source.h"
+#include "object_store.h"
 #include "octree_key.h"
 #include "render_settings.h"
 #include "tileset_reader.h"
@@ -195,7 +196,7 @@ Result<SurfelSet> loadSurfelSet(const std::string& dir, const LevelChoice& choic
     SC_TRY(checkChoice(reader->describe(), info, choice, coloring));
     // A URL's set is streamed in whole: refused before any block is fetched
     // when it cannot fit the GPU budget.
-    if (isUrl(dir)) {
+    if (isUrl(dir) || isS3Url(dir)) {
         uint64_t surfels = 0;
         for (const NodeRecord& node : reader->nodes()) surfels += wantedNode(node, choice) ? node.surfelCount : 0;
         const uint64_t budget = gpuBudget ? gpuBudget : uint64_t(1) << 30;

@@ -192,9 +192,18 @@ void setInputHttpOptions(const HttpOptions& options) {
     gSizes.clear();
 }
 
+namespace {
+
+// A presigned URL as redactUrl shows it (expanding inputs twice keeps it).
+bool isRedacted(const std::string& url) { return url.size() >= 4 && url.compare(url.size() - 4, 4, "?…") == 0; }
+
+}  // namespace
+
 std::string signedInput(const std::string& url) {
+    // A URL with user information but no query stays as it is, for
+    // InputFile::open to refuse by name.
+    if (!isUrl(url) || url.find('?') == std::string::npos || isRedacted(url)) return url;
     const std::string shown = redactUrl(url);
-    if (shown == url) return url;
     std::lock_guard lock(gHttpMutex);
     gSigned[shown] = url;
     return shown;
@@ -204,7 +213,7 @@ namespace {
 
 // The URL to ask for `path`: a redacted presigned URL's whole self.
 Result<std::string> realUrl(const std::string& path) {
-    if (path.size() < 4 || path.compare(path.size() - 4, 4, "?…") != 0) return path;
+    if (!isRedacted(path)) return path;
     std::lock_guard lock(gHttpMutex);
     auto it = gSigned.find(path);
     if (it == gSigned.end())

@@ -1,0 +1,139 @@
+// Sets and inputs in a real S3 store (SeaweedFS, tests/store_support.h),
+// through the programs: surfcast-build reads scans from a bucket and
+// publishes a set to it, surfcast-build --info and surfcast-export read that
+// set with signed requests, and the objects are the bytes a build into a
+// folder writes. Refusals (a taken prefix, bad credentials, a missing bucket)
+// fail at once, leave nothing behind and never show the secret.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "object_store.h"
+#include "store_support.h"
+#include "test_support.h"
+
+using namespace surfcast;
+using namespace surfcast::test;
+
+namespace {
+
+const std::vector<std::string> kScans = {"autzen_trim.las", "lion_takanawa.copc.laz"};
+
+std::string get(ObjectStore& store, const std::string& key) {
+    auto bytes = store.get({SeaweedFs::kBucket, key}, 1u << 30);
+    EXPECT_TRUE(bytes.ok()) << key << ": " << (bytes.ok() ? "" : bytes.status().message());
+    return bytes.ok() ? std::string(bytes->begin(), bytes->end()) : std::string();
+}
+
+std::vector<std::string> keys(ObjectStore& store, const std::string& prefix) {
+    auto listed = store.list({SeaweedFs::kBucket, prefix});
+    EXPECT_TRUE(listed.ok());
+    std::vector<std::string> out;
+    if (listed.ok())
+        for (const auto& o : *listed) out.push_back(o.key.substr(prefix.size()));
+    return out;
+}
+
+class Store : public ::testing::Test {
+protected:
+    void SetUp() override {
+        REQUIRE_DATA();
+        s3_ = &SeaweedFs::shared();
+        s3_->exportEnvironment();
+        store_ = s3_->store();
+    }
+    SeaweedFs* s3_ = nullptr;
+    std::shared_ptr<ObjectStore> store_;
+};
+
+TEST_F(Store, BuildFromAndIntoABucketWritesTheBytesOfAFolderBuild) {
+    TempDir dir;
+    for (const auto& scan : kScans) {
+        auto put = store_->putFile({SeaweedFs::kBucket, "scans/" + scan}, dataFile(scan));
+        ASSERT_TRUE(put.ok()) << put.status().message();
+    }
+    const std::vector<std::string> options = {"-q", "--capacity", "4000"};
+    std::vector<std::string> local = {binary("surfcast-build")};
+    local.insert(local.end(), options.begin(), options.end());
+    for (const auto& scan : kScans) local.push_back(dataFile(scan));
+    local.insert(local.end(), {"-o", dir.file("local")});
+    auto one = run(local);
+    ASSERT_EQ(one.exitCode, 0) << one.output;
+
+    // The prefix stands for both scans, in key order (the order given above).
+    std::vector<std::string> remote = {binary("surfcast-build")};
+    remote.insert(remote.end(), options.begin(), options.end());
+    remote.insert(remote.end(), {"s3://surfcast/scans/", "-o", "s3://surfcast/sets/two"});
+    auto built = run(remote);
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    EXPECT_NE(built.output.find("wrote s3://surfcast/sets/two (4 objects"), std::string::npos) << built.output;
+
+    // The same objects as the folder's files; the build record differs only
+    // in what it records of the inputs' and output's names.
+    std::vector<std::string> files;
+    for (const auto& e : std::filesystem::directory_iterator(dir.file("local"))) files.push_back(e.path().filename().string());
+    std::sort(files.begin(), files.end());
+    EXPECT_EQ(keys(*store_, "sets/two/"), files);
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(get(*store_, std::string("sets/two/") + f) == readFile(dir.file("local/") + f)) << f;
+    EXPECT_NE(get(*store_, "sets/two/build.bin").find("s3://surfcast/scans/autzen_trim.las"), std::string::npos);
+
+    // Read back with signed requests: --info checks every page and block's CRC.
+    auto info = run({binary("surfcast-build"), "--info", "s3://surfcast/sets/two"});
+    ASSERT_EQ(info.exitCode, 0) << info.output;
+    auto localInfo = run({binary("surfcast-build"), "--info", dir.file("local")});
+    EXPECT_EQ(info.output.substr(info.output.find('\n')), localInfo.output.substr(localInfo.output.find('\n')));
+
+    // An export reads every leaf from the store and writes its file there.
+    auto exported = run({binary("surfcast-export"), "-q", "s3://surfcast/sets/two", "--format", "laz", "-o", "s3://surfcast/exports/two.laz"});
+    ASSERT_EQ(exported.exitCode, 0) << exported.output;
+    auto exportedLocal = run({binary("surfcast-export"), "-q", dir.file("local"), "--format", "laz", "-o", dir.file("two.laz")});
+    ASSERT_EQ(exportedLocal.exitCode, 0) << exportedLocal.output;
+    EXPECT_TRUE(get(*store_, "exports/two.laz") == readFile(dir.file("two.laz")));
+
+    // A set is never rewritten where it stands: a second build to the prefix
+    // is refused before it builds, and the set keeps its objects.
+    const std::string blocks = get(*store_, "sets/two/blocks.bin");
+    remote.back() = "s3://surfcast/sets/two";
+    remote[remote.size() - 3] = "s3://surfcast/scans/lion_takanawa.copc.laz";
+    auto again = run(remote);
+    EXPECT_EQ(again.exitCode, 1) << again.output;
+    EXPECT_NE(again.output.find("s3://surfcast/sets/two/: the prefix holds 4 object(s) already"), std::string::npos) << again.output;
+    EXPECT_TRUE(get(*store_, "sets/two/blocks.bin") == blocks);
+}
+
+TEST_F(Store, RefusalsFailAtOnceAndLeaveNothing) {
+    auto put = store_->putFile({SeaweedFs::kBucket, "refusals/autzen_trim.las"}, dataFile("autzen_trim.las"));
+    ASSERT_TRUE(put.ok()) << put.status().message();
+    TempDir dir;
+    struct Case {
+        std::vector<std::string> environment;  // NAME=VALUE set for the run
+        std::string input, message;
+    };
+    const std::vector<Case> cases = {
+        {{"AWS_SECRET_ACCESS_KEY=wrong-secret-value"}, "s3://surfcast/refusals/autzen_trim.las", "s3://surfcast/refusals/autzen_trim.las: HTTP 403"},
+        {{}, "s3://no-such-bucket/a.las", "s3://no-such-bucket/a.las: HTTP 404"},
+        {{}, "s3://surfcast/refusals/absent.las", "s3://surfcast/refusals/absent.las: HTTP 404"},
+        {{}, "s3://surfcast/refusals/empty/", "s3://surfcast/refusals/empty/: the prefix holds no object of a readable format"},
+        {{"AWS_ACCESS_KEY_ID=", "AWS_SECRET_ACCESS_KEY=only-half"}, "s3://surfcast/refusals/autzen_trim.las", "one is set without the other"},
+    };
+    for (const auto& c : cases) {
+        std::vector<std::string> args = {"/usr/bin/env"};
+        args.insert(args.end(), c.environment.begin(), c.environment.end());
+        args.insert(args.end(), {binary("surfcast-build"), "-q", c.input, "-o", "s3://surfcast/sets/refused"});
+        const auto start = std::chrono::steady_clock::now();
+        auto r = run(args);
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        EXPECT_EQ(r.exitCode, 1) << c.input << ": " << r.output;
+        EXPECT_NE(r.output.find(c.message), std::string::npos) << c.input << ": " << r.output;
+        EXPECT_EQ(r.output.find("secret-value"), std::string::npos) << r.output;
+        EXPECT_EQ(r.output.find(SeaweedFs::kSecret), std::string::npos) << r.output;
+        EXPECT_EQ(r.output.find("only-half"), std::string::npos) << r.output;
+        // Not retried: a refusal is final (the retries of a transient fault
+        // would take seconds of backoff).
+        EXPECT_LT(seconds, 20) << c.input;
+    }
+    EXPECT_TRUE(keys(*store_, "sets/refused/").empty()) << "a failed build leaves no object";
+}
+
+}  // namespace
