@@ -386,8 +386,12 @@ struct ObjectStore::Impl {
         return response;
     }
 
-    // A request with its retries; a response of any status but a transient one.
-    Result<Response> send(const S3Url& object, const Request& r) {
+    // A request with its retries; a response of any status but a transient
+    // one. `applied`: set where a failed try may have taken effect at the
+    // store all the same (a reset or timeout, a 500, 502 or 504: not a 503
+    // SlowDown or 429, which S3 sends before it acts), so that a write's
+    // later "412" may be its own earlier try.
+    Result<Response> send(const S3Url& object, const Request& r, bool* applied = nullptr) {
         thread_local std::minstd_rand random(std::random_device{}());
         for (int attempt = 0;; ++attempt) {
             Response response = once(object, r);
@@ -399,6 +403,7 @@ struct ObjectStore::Impl {
             else if (transientStatus(response.status))
                 fault = "HTTP " + std::to_string(response.status) + describe(response);
             if (fault.empty()) return response;
+            if (applied && response.status != 503 && response.status != 429) *applied = true;
             if (attempt == kStoreRetries)
                 return Status::transient(object.str() + ": " + fault + " (" + std::to_string(kStoreRetries + 1) + " tries)");
             retries += 1;
@@ -518,9 +523,17 @@ Result<std::optional<ObjectInfo>> ObjectStore::put(const S3Url& object, const st
     r.body = bytes.data();
     r.bodySize = bytes.size();
     r.hasBody = true;
-    auto response = impl_->send(object, r);
+    bool applied = false;
+    auto response = impl_->send(object, r, &applied);
     if (!response) return response.status();
-    if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) return std::optional<ObjectInfo>();
+    if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) {
+        // Lost to another writer, or to this one's own earlier try.
+        if (applied) {
+            auto now = get(object, bytes.size());
+            if (now && *now == bytes) return head(object);
+        }
+        return std::optional<ObjectInfo>();
+    }
     if (response->status != 200) return Impl::failure(object, *response, "PUT");
     return std::optional(ObjectInfo{bytes.size(), response->etag});
 }
@@ -539,9 +552,17 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
         r.method = "PUT";
         r.headers = conditionHeaders(condition);
         r.bodySize = size;
-        auto response = impl_->send(object, r);
+        bool applied = false;
+        auto response = impl_->send(object, r, &applied);
         if (!response) return response.status();
-        if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) return std::optional<ObjectInfo>();
+        if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) {
+            if (applied) {
+                auto same = sameAsFile(object, file.get(), size);
+                if (!same) return same.status();
+                if (*same) return head(object);
+            }
+            return std::optional<ObjectInfo>();
+        }
         if (response->status != 200) return Impl::failure(object, *response, "PUT");
         return std::optional(ObjectInfo{size, response->etag});
     }
@@ -589,8 +610,17 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
     c.bodySize = complete.size();
     c.hasBody = true;
     c.maxBytes = kMaxListPage;
-    auto done = impl_->send(object, c);
+    bool applied = false;
+    auto done = impl_->send(object, c, &applied);
     if (!done) return abort(done.status());
+    // A completion retried after it took effect finds the upload gone
+    // (NoSuchUpload) or, conditional, the object there: its own, where the
+    // object holds the file's bytes.
+    if (applied && (done->status == 404 || conditionFailed(done->status))) {
+        auto same = sameAsFile(object, file.get(), size);
+        if (!same) return abort(same.status());
+        if (*same) return head(object);
+    }
     if (conditionFailed(done->status) && (condition.ifAbsent || !condition.ifMatch.empty())) {
         (void)abort(Status());
         return std::optional<ObjectInfo>();
@@ -601,6 +631,24 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
         return abort(Impl::failure(object, *done, "complete a multipart upload"));
     const auto etag = xmlTag(answer, "ETag");
     return std::optional(ObjectInfo{size, etag ? *etag : std::string()});
+}
+
+Result<bool> ObjectStore::sameAsFile(const S3Url& object, std::FILE* file, uint64_t size) {
+    auto info = head(object);
+    if (!info) return info.status();
+    if (!info->has_value() || (*info)->size != size) return false;
+    constexpr uint64_t kSpan = 8 << 20;
+    std::vector<uint8_t> local;
+    for (uint64_t at = 0; at < size; at += kSpan) {
+        const uint64_t n = std::min(kSpan, size - at);
+        auto remote = getRange(object, at, n);
+        if (!remote) return remote.status();
+        local.resize(n);
+        if (std::fseek(file, long(at), SEEK_SET) != 0 || std::fread(local.data(), 1, n, file) != n)
+            return Status::error(object.str() + ": cannot read back the file it was written from");
+        if (local != *remote) return false;
+    }
+    return true;
 }
 
 Status ObjectStore::remove(const S3Url& object) {

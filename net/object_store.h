@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <optional>
 #include <string>
@@ -86,7 +87,10 @@ public:
     // nullopt where there is no such object (an error where the bucket is missing).
     Result<std::optional<ObjectInfo>> head(const S3Url& object);
     // Writes an object whole. nullopt where the condition failed (412, or 409
-    // for a concurrent conditional write); the object is then untouched.
+    // for a concurrent conditional write); the object is then untouched. A
+    // write whose earlier try may have taken effect (its answer lost) and
+    // that then finds the condition failed reads the object back: holding
+    // these bytes, it was this write's own.
     Result<std::optional<ObjectInfo>> put(const S3Url& object, const std::vector<uint8_t>& bytes, const WriteCondition& condition = {});
     // The file at `path` as an object: one PUT up to kMultipartThreshold,
     // else a multipart upload (aborted where it fails).
@@ -108,6 +112,8 @@ public:
     static constexpr uint64_t kPartBytes = 32ull << 20;
 
 private:
+    // Whether the object holds exactly the `size` bytes of `file`.
+    Result<bool> sameAsFile(const S3Url& object, std::FILE* file, uint64_t size);
     struct Impl;
     explicit ObjectStore(std::unique_ptr<Impl> impl);
     std::unique_ptr<Impl> impl_;

@@ -141,6 +141,37 @@ TEST(ObjectStore, ConditionalWritesLetOneWriterWin) {
     EXPECT_EQ(*now, std::vector<uint8_t>{'3'});
 }
 
+// Through a proxy that fails a third of the requests: every write succeeds
+// once, including conditional ones whose first try took effect at the store
+// while its answer was lost (a 500 or a reset after the store acted), which
+// the retry then finds refused by its own condition.
+TEST(ObjectStore, ConditionalWritesSurviveLostAnswers) {
+    SeaweedFs& s3 = SeaweedFs::shared();
+    FaultProxy proxy(0.34, 3);
+    S3Environment e = s3.environment();
+    e.endpoint = proxy.endpoint();
+    auto opened = ObjectStore::open(e);
+    ASSERT_TRUE(opened.ok());
+    auto store = *opened;
+    TempDir dir;
+    writeFile(dir.file("f.bin"), "file bytes");
+    for (int i = 0; i < 20; ++i) {
+        const std::vector<uint8_t> bytes = randomBytes(1000, uint32_t(i));
+        auto put = store->put(object("lost/" + std::to_string(i)), bytes, {true, ""});
+        ASSERT_TRUE(put.ok()) << i << ": " << put.status().message();
+        EXPECT_TRUE(put->has_value()) << i << ": a write refused by its own earlier try";
+        auto file = store->putFile(object("lost/f" + std::to_string(i)), dir.file("f.bin"), {true, ""});
+        ASSERT_TRUE(file.ok()) << i << ": " << file.status().message();
+        EXPECT_TRUE(file->has_value()) << i << ": a file refused by its own earlier try";
+    }
+    const auto faults = proxy.counts();
+    EXPECT_GE(faults["error"].get<int>() + faults["reset"].get<int>(), 5) << faults.dump();
+    // And another writer's object still wins over the condition.
+    auto taken = store->put(object("lost/0"), {1}, {true, ""});
+    ASSERT_TRUE(taken.ok()) << taken.status().message();
+    EXPECT_FALSE(taken->has_value());
+}
+
 TEST(ObjectStore, UploadsLargeFilesInParts) {
     SeaweedFs& s3 = SeaweedFs::shared();
     auto store = s3.store();

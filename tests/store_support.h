@@ -124,4 +124,29 @@ private:
     pid_t pid_ = -1;
 };
 
+// tests/tools/s3_fault_proxy.py in front of the shared store: a share of
+// the requests fail (503 SlowDown before the store acts, 500 or a reset
+// after it has), drawn from `seed`, so a client that sends one request at a
+// time meets the same faults every run.
+class FaultProxy {
+public:
+    static constexpr int kPort = 18334;
+    FaultProxy(double share, int seed) {
+        child_ = spawn({SURFCAST_TEST_PYTHON, std::string(SURFCAST_TEST_TOOLS) + "/s3_fault_proxy.py", std::to_string(kPort),
+                        std::to_string(SeaweedFs::kPort), std::to_string(share), std::to_string(seed), dir_.file("faults.json")});
+        EXPECT_TRUE(child_.waitFor("listening")) << child_.log;
+    }
+    ~FaultProxy() {
+        ::kill(child_.pid, SIGTERM);
+        exitCode(child_.pid);
+    }
+    std::string endpoint() const { return "http://127.0.0.1:" + std::to_string(kPort); }
+    // Faults made so far by kind ("slowdown", "error", "reset"), and "forwarded".
+    nlohmann::json counts() const { return nlohmann::json::parse(readFile(dir_.file("faults.json"))); }
+
+private:
+    TempDir dir_;
+    Child child_;
+};
+
 }  // namespace surfcast::test

@@ -102,6 +102,32 @@ TEST_F(Store, BuildFromAndIntoABucketWritesTheBytesOfAFolderBuild) {
     EXPECT_TRUE(get(*store_, "sets/two/blocks.bin") == blocks);
 }
 
+// A proxy answers a tenth of the requests with 503 SlowDown (before the
+// store acts), 500 or a reset connection (after it has): the inputs are read
+// and the set published all the same, byte for byte, including the writes
+// whose success was lost on the way back.
+TEST_F(Store, TransientFaultsGiveTheSameBytes) {
+    TempDir dir;
+    for (const auto& scan : kScans) ASSERT_TRUE(store_->putFile({SeaweedFs::kBucket, "faults/in/" + scan}, dataFile(scan)).ok());
+    const std::vector<std::string> options = {"-q", "--capacity", "4000", "s3://surfcast/faults/in/"};
+    std::vector<std::string> direct = {binary("surfcast-build")};
+    direct.insert(direct.end(), options.begin(), options.end());
+    direct.insert(direct.end(), {"-o", "s3://surfcast/faults/direct"});
+    auto clean = run(direct);
+    ASSERT_EQ(clean.exitCode, 0) << clean.output;
+
+    FaultProxy proxy(0.1, 7);
+    std::vector<std::string> faulty = {"/usr/bin/env", "AWS_ENDPOINT_URL=" + proxy.endpoint(), binary("surfcast-build")};
+    faulty.insert(faulty.end(), options.begin(), options.end());
+    faulty.insert(faulty.end(), {"-o", "s3://surfcast/faults/through-proxy"});
+    auto r = run(faulty);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const auto faults = proxy.counts();
+    for (const char* kind : {"slowdown", "error", "reset"}) EXPECT_GE(faults[kind].get<int>(), 1) << kind << ": " << faults.dump();
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(get(*store_, std::string("faults/direct/") + f) == get(*store_, std::string("faults/through-proxy/") + f)) << f;
+}
+
 TEST_F(Store, RefusalsFailAtOnceAndLeaveNothing) {
     auto put = store_->putFile({SeaweedFs::kBucket, "refusals/autzen_trim.las"}, dataFile("autzen_trim.las"));
     ASSERT_TRUE(put.ok()) << put.status().message();
