@@ -13,6 +13,12 @@
 
 namespace surfcast {
 
+Result<std::vector<uint8_t>> TileSource::blocks(uint64_t offset, uint64_t size) {
+    auto place = layout_.place(offset, size);
+    if (!place) return Status::error(describe() + ": " + place.status().message());
+    return range(place->file, place->offset, size);
+}
+
 Result<std::vector<std::vector<uint8_t>>> TileSource::blobs(const std::vector<NodeRecord>& nodes) {
     std::vector<std::vector<uint8_t>> out;
     for (const NodeRecord& n : nodes) {

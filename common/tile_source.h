@@ -22,7 +22,12 @@ public:
     // Bytes [offset, offset + size) of a file of the set ("blocks.bin", or a
     // page of "hierarchy.bin"); never more is kept. Thread-safe.
     virtual Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) = 0;
-    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size) { return range("blocks.bin", offset, size); }
+    // The files the set's blocks lie in (tileset.json's, blocksPartsOf):
+    // set once, by whoever reads tileset.json, before blocks() and blobs().
+    void setBlocksLayout(BlocksLayout layout) { layout_ = std::move(layout); }
+    const BlocksLayout& blocksLayout() const { return layout_; }
+    // Bytes [offset, offset + size) of the blocks' space, from the part that holds them.
+    Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size);
     // A file's size in bytes (an input read by ranges: preprocess/readers/input_file.h).
     virtual Result<uint64_t> size(const std::string& name) = 0;
     // Several nodes' blobs, in order: POST {set}/batch requests of up to N
@@ -35,6 +40,9 @@ public:
     // later one: so that a reader closes at once while its host stalls,
     // rather than after the timeout. Thread-safe; for shutting down.
     virtual void cancel() {}
+
+private:
+    BlocksLayout layout_{{BlocksPart{"blocks.bin", ~uint64_t(0)}}};  // until tileset.json says
 };
 
 // tileset.json is a few kilobytes; this bounds what a broken host can make a

@@ -4,6 +4,7 @@
 #include "las_format.h"
 
 #include <algorithm>
+#include <set>
 #include <cmath>
 #include <limits>
 #include <cstdio>
@@ -286,7 +287,7 @@ nlohmann::ordered_json lasJson(const LasSourceInfo& las) {
 std::string writeTilesetJson(const TilesetInfo& info) {
     ordered_json j;
     j["format"] = "surfcast-tileset";
-    j["version"] = kFormatVersion;
+    j["version"] = info.blocksParts.empty() ? kFormatVersion : kPartsFormatVersion;
     j["generator"] = info.generator;
     j["input_points"] = info.inputPoints;
     j["surfels"] = info.surfels;
@@ -333,7 +334,13 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     if (!info.inputs.empty()) j["inputs"] = info.inputs;
     j["hierarchy"] = {{"file", info.hierarchyFile}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
-    j["blocks"] = {{"file", "blocks.bin"}, {"bytes", info.blocksBytes}, {"codec", "draco"}};
+    j["blocks"] = {{"file", info.blocksParts.empty() ? std::string("blocks.bin") : info.blocksParts[0].file}, {"bytes", info.blocksBytes},
+                   {"codec", "draco"}};
+    if (!info.blocksParts.empty()) {
+        ordered_json parts = ordered_json::array();
+        for (const BlocksPart& p : info.blocksParts) parts.push_back({{"file", p.file}, {"bytes", p.bytes}});
+        j["blocks"]["parts"] = parts;
+    }
     return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
@@ -494,9 +501,9 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         if (text(j, "", "format") != "surfcast-tileset") fieldError("format", "not \"surfcast-tileset\"");
         TilesetInfo info;
         info.version = integer<int>(j, "", "version");
-        if (info.version < kOldestFormatVersion || info.version > kFormatVersion)
+        if (info.version < kOldestFormatVersion || info.version > kPartsFormatVersion)
             fieldError("version", "unsupported version " + std::to_string(info.version) + " (this reader takes " +
-                                      std::to_string(kOldestFormatVersion) + " to " + std::to_string(kFormatVersion) + ")");
+                                      std::to_string(kOldestFormatVersion) + " to " + std::to_string(kPartsFormatVersion) + ")");
         info.generator = text(j, "", "generator");
         info.inputPoints = integer<uint64_t>(j, "", "input_points");
         info.surfels = integer<uint64_t>(j, "", "surfels");
@@ -600,6 +607,28 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         const nlohmann::json& blocks = object(j, "", "blocks");
         info.blocksBytes = integer<uint64_t>(blocks, "blocks", "bytes");
         if (text(blocks, "blocks", "codec") != "draco") fieldError("blocks.codec", "not \"draco\"");
+        if (blocks.contains("parts") != (info.version >= kPartsFormatVersion))
+            fieldError("blocks.parts", info.version >= kPartsFormatVersion ? "missing (version 3 lists the blocks' files)"
+                                                                           : "only in version 3");
+        if (blocks.contains("parts")) {
+            const nlohmann::json& parts = array(blocks, "blocks", "parts");
+            if (parts.empty() || parts.size() > kMaxBlocksParts)
+                fieldError("blocks.parts", std::to_string(parts.size()) + " files, not 1 to " + std::to_string(kMaxBlocksParts));
+            uint64_t sum = 0;
+            std::set<std::string> files;
+            for (size_t i = 0; i < parts.size(); ++i) {
+                const std::string at = "blocks.parts[" + std::to_string(i) + "]";
+                if (!parts[i].is_object()) fieldError(at, "not an object");
+                BlocksPart part{text(parts[i], at, "file"), integer<uint64_t>(parts[i], at, "bytes")};
+                if (!validBlocksFile(part.file)) fieldError(at + ".file", "'" + part.file + "' is not blocks.bin or blocks-XXXXXXXX.bin");
+                if (!files.insert(part.file).second) fieldError(at + ".file", "'" + part.file + "' listed twice");
+                if (part.bytes == 0 || part.bytes > ~uint64_t(0) - sum) fieldError(at + ".bytes", "0, or past 2^64 in all");
+                sum += part.bytes;
+                info.blocksParts.push_back(std::move(part));
+            }
+            if (sum != info.blocksBytes)
+                fieldError("blocks.parts", "the files' bytes add up to " + std::to_string(sum) + ", not blocks.bytes " + std::to_string(info.blocksBytes));
+        }
         return info;
     } catch (const FieldError& e) {
         return Status::error(what + ": " + e.what());
@@ -622,6 +651,39 @@ std::string versionedHierarchyFile(uint32_t crc) {
 
 std::string buildRecordFile(const std::string& hierarchyFile) {
     return "build" + hierarchyFile.substr(std::string("hierarchy").size());
+}
+
+std::string versionedBlocksFile(uint32_t crc) {
+    char name[32];
+    std::snprintf(name, sizeof name, "blocks-%08x.bin", crc);
+    return name;
+}
+
+bool validBlocksFile(const std::string& name) {
+    if (name == "blocks.bin") return true;
+    if (name.size() != 19 || name.compare(0, 7, "blocks-") != 0 || name.compare(15, 4, ".bin") != 0) return false;
+    return std::all_of(name.begin() + 7, name.begin() + 15, [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+}
+
+std::vector<BlocksPart> blocksPartsOf(const TilesetInfo& info) {
+    if (!info.blocksParts.empty()) return info.blocksParts;
+    return {BlocksPart{"blocks.bin", info.blocksBytes}};
+}
+
+BlocksLayout::BlocksLayout(std::vector<BlocksPart> parts) : parts_(std::move(parts)) {
+    uint64_t end = 0;
+    for (const BlocksPart& p : parts_) ends_.push_back(end += p.bytes);
+}
+
+Result<BlockPlace> BlocksLayout::place(uint64_t offset, uint64_t size) const {
+    // The first part that ends after `offset`.
+    const auto it = std::upper_bound(ends_.begin(), ends_.end(), offset);
+    if (it == ends_.end())
+        return Status::error(std::to_string(size) + " bytes at " + std::to_string(offset) + " lie past the blocks' " +
+                             std::to_string(ends_.empty() ? 0 : ends_.back()) + " bytes");
+    const size_t i = size_t(it - ends_.begin());
+    if (size > *it - offset) return Status::error(std::to_string(size) + " bytes at " + std::to_string(offset) + " cross the end of " + parts_[i].file);
+    return BlockPlace{i, parts_[i].file, offset - (*it - parts_[i].bytes)};
 }
 
 bool validHierarchyFile(const std::string& name) {

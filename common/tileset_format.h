@@ -18,9 +18,22 @@ namespace surfcast {
 
 // Version 2 adds the LiDAR attributes (intensity, classification, returns) and
 // `statistics`; a version-1 reader would reject their blocks' extra attributes.
-// Readers take versions 1 and 2.
+// hierarchy.bin's readers take versions 1 and 2, tileset.json's 1 to 3.
 inline constexpr int kFormatVersion = 2;
 inline constexpr int kOldestFormatVersion = 1;
+// tileset.json of a set whose blocks lie in several files (blocks.parts):
+// written only by such sets, so that readers of version 2 refuse them whole.
+inline constexpr int kPartsFormatVersion = 3;
+// The most files a set's blocks may lie in (a bound on what tileset.json may ask a reader to open).
+inline constexpr size_t kMaxBlocksParts = 65536;
+
+// A file of the set's blocks: the blocks' byte space is the concatenation of
+// the parts in order, and a node's block offset is into that space (docs/FORMAT.md, "blocks.bin").
+struct BlocksPart {
+    std::string file;  // "blocks.bin" or "blocks-XXXXXXXX.bin" (the part's CRC-32)
+    uint64_t bytes = 0;
+    bool operator==(const BlocksPart&) const = default;
+};
 inline constexpr char kHierarchyMagic[4] = {'S', 'C', 'H', 'Y'};
 inline constexpr uint32_t kHierarchyHeaderSize = 32;
 inline constexpr uint32_t kPageEntrySize = 16;
@@ -210,8 +223,11 @@ struct TilesetInfo {
     uint32_t hierarchyPages = 0;
     uint32_t hierarchyCrc = 0;  // CRC-32 of the whole hierarchy.bin
     uint64_t blocksBytes = 0;
+    // The files the blocks lie in, where more than blocks.bin (an update in
+    // place adds one a version); empty: blocks.bin alone, of blocksBytes.
+    std::vector<BlocksPart> blocksParts;
     uint32_t pageDepth = kDefaultPageDepth;
-    int version = kFormatVersion;  // as read; writers write kFormatVersion
+    int version = kFormatVersion;  // as read; writers write kFormatVersion, or kPartsFormatVersion with blocksParts
 
     bool operator==(const TilesetInfo&) const = default;
     const AttributeInfo* attribute(const std::string& name) const {
@@ -231,6 +247,35 @@ struct TilesetInfo {
 // path: tileset.json is untrusted).
 std::string versionedHierarchyFile(uint32_t crc);
 bool validHierarchyFile(const std::string& name);
+// The same for the files of the blocks: "blocks-XXXXXXXX.bin", and blocks.bin.
+std::string versionedBlocksFile(uint32_t crc);
+bool validBlocksFile(const std::string& name);
+// The set's block files in order: info.blocksParts, or blocks.bin alone.
+std::vector<BlocksPart> blocksPartsOf(const TilesetInfo& info);
+
+// Where bytes of the blocks' space lie: part `part`, from `offset` in its file.
+struct BlockPlace {
+    size_t part = 0;
+    std::string file;
+    uint64_t offset = 0;
+};
+// The blocks' space over its files (docs/FORMAT.md, "blocks.bin"), the one
+// place every reader finds a node's block: the server, the tile sources,
+// compaction and updates.
+class BlocksLayout {
+public:
+    BlocksLayout() = default;  // no files: every place fails
+    explicit BlocksLayout(std::vector<BlocksPart> parts);
+    const std::vector<BlocksPart>& parts() const { return parts_; }
+    // The file holding bytes [offset, offset + size), which must start
+    // before the space's end and lie inside one file; else an error. A
+    // binary search: tileset.json may list 65,536 files.
+    Result<BlockPlace> place(uint64_t offset, uint64_t size) const;
+
+private:
+    std::vector<BlocksPart> parts_;
+    std::vector<uint64_t> ends_;  // running sums of the parts' bytes
+};
 // The build record beside a hierarchy file (docs/FORMAT.md, "Updates in
 // place"): build.bin beside hierarchy.bin, build-XXXXXXXX.bin beside
 // hierarchy-XXXXXXXX.bin. Readers of the set never read it.

@@ -20,6 +20,7 @@ Result<TilesetReader> TilesetReader::open(std::unique_ptr<TileSource> source) {
     auto info = readTilesetJson(std::string(json->begin(), json->end()), where + "/tileset.json");
     if (!info) return info.status();
     r.info_ = *info;
+    r.source_->setBlocksLayout(BlocksLayout(blocksPartsOf(r.info_)));
     auto hierarchy = r.source_->file(r.info_.hierarchyFile, r.info_.hierarchyBytes);
     if (!hierarchy) return hierarchy.status();
     auto nodes = readHierarchyOf(r.info_, *hierarchy, where + "/" + r.info_.hierarchyFile);
@@ -32,17 +33,17 @@ Result<TilesetReader> TilesetReader::open(const std::string& folder) {
     if (isUrl(folder)) return Status::error(folder + ": a URL, where a local folder is wanted");
     auto r = open(openFolderSource(folder));
     if (!r) return r;
-    // A folder's blocks.bin must hold what tileset.json says (a URL's ranges
-    // are checked as they arrive). It may hold more: an update in place
-    // appends its blocks before it switches tileset.json (docs/FORMAT.md,
-    // "Updates in place").
-    std::error_code error;
-    const std::string blocksPath = folder + "/blocks.bin";
-    const uint64_t size = std::filesystem::file_size(blocksPath, error);
-    if (error) return Status::error(blocksPath + ": " + error.message());
-    if (size < r->info().blocksBytes)
-        return Status::error(blocksPath + ": " + std::to_string(size) + " bytes, tileset.json says " +
-                             std::to_string(r->info().blocksBytes));
+    // A folder's block files must hold what tileset.json says (a URL's
+    // ranges are checked as they arrive). blocks.bin may hold more: bytes an
+    // update killed before version 3 appended (docs/FORMAT.md, "Updates in place").
+    for (const BlocksPart& part : blocksPartsOf(r->info())) {
+        std::error_code error;
+        const std::string path = folder + "/" + part.file;
+        const uint64_t size = std::filesystem::file_size(path, error);
+        if (error) return Status::error(path + ": " + error.message());
+        if (size < part.bytes)
+            return Status::error(path + ": " + std::to_string(size) + " bytes, tileset.json says " + std::to_string(part.bytes));
+    }
     return r;
 }
 
@@ -66,9 +67,9 @@ BlockExpectation TilesetReader::expectation(const NodeRecord& node) const { retu
 
 Result<std::vector<uint8_t>> TilesetReader::readBlockBytes(const NodeRecord& node) const {
     auto bytes = source_->blocks(node.blockOffset, node.blockSize);
-    if (!bytes) return bytes.status();
+    if (!bytes) return Status::error("node " + node.key.name() + ": " + bytes.status().message());
     if (crc32(bytes->data(), bytes->size()) != node.blockCrc)
-        return Status::error(describe() + "/blocks.bin: node " + node.key.name() + " at byte " +
+        return Status::error(describe() + ": node " + node.key.name() + " at byte " +
                              std::to_string(node.blockOffset) + ": CRC mismatch");
     return bytes;
 }
@@ -79,9 +80,9 @@ Result<BlockData> TilesetReader::readBlock(const NodeRecord& node, bool scalars)
     BlockExpectation e = expectation(node);
     e.scalars = scalars;
     auto block = decodeBlock(bytes->data(), bytes->size(), e);
-    if (!block) return Status::error(describe() + "/blocks.bin: node " + node.key.name() + ": " + block.status().message());
+    if (!block) return Status::error(describe() + ": node " + node.key.name() + ": " + block.status().message());
     if (block->size() != node.surfelCount)
-        return Status::error(describe() + "/blocks.bin: node " + node.key.name() + " decodes to " +
+        return Status::error(describe() + ": node " + node.key.name() + " decodes to " +
                              std::to_string(block->size()) + " surfels, hierarchy says " + std::to_string(node.surfelCount));
     return block;
 }

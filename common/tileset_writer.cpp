@@ -84,7 +84,7 @@ Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
     std::lock_guard lock(mutex_);
     for (const NodeRecord& r : records) {
         if (set_.empty() || r.blockOffset > current_.blocksBytes || r.blockSize > current_.blocksBytes - r.blockOffset)
-            return Status::error("node " + r.key.name() + ": kept, but its block is not in the set's blocks.bin");
+            return Status::error("node " + r.key.name() + ": kept, but its block is not in the set's block files");
         records_.push_back(r);
         sources_.push_back(kKept);
         blocksBytes_ += r.blockSize;
@@ -182,6 +182,7 @@ Status TilesetWriter::finish(TilesetInfo& info) {
     info.hierarchyCrc = crc32(hierarchy.data(), hierarchy.size());
     info.hierarchyPages = le::get<uint32_t>(hierarchy.data() + 12);  // page count, header byte 12
     info.blocksBytes = blocksBytes_;
+    info.blocksParts.clear();  // a new set: blocks.bin alone
     SC_TRY(writeFileSynced(partial_ + "/hierarchy.bin", hierarchy.data(), hierarchy.size()));
     if (!record_.empty()) {
         fs::rename(record_, fs::path(partial_) / buildRecordFile(info.hierarchyFile), ec);
@@ -228,25 +229,29 @@ Status syncFolder(const std::string& dir) {
 }  // namespace
 
 Status TilesetWriter::finishUpdate(TilesetInfo& info) {
-    // The set must be the version the update read: cutting and appending to
-    // another's blocks.bin would tear it.
+    // The set must be the version the update read: its files are the ones
+    // the kept nodes point into.
     SC_TRY(sameVersion(set_, current_));
-    // The new blobs, in hierarchy order, after the current set's last byte (a
-    // killed update's bytes beyond it are cut first: no reader reads them).
-    const std::string blocksPath = set_ + "/blocks.bin";
-    const int out = ::open(blocksPath.c_str(), O_RDWR | O_CLOEXEC);
-    if (out < 0) return Status::error(blocksPath + ": cannot open for writing (" + std::strerror(errno) + ")");
+    // The new blobs, in hierarchy order, into a file of their own: the next
+    // part of the blocks' space after the current set's last byte. No file
+    // of the set is written to (a static host or store keeps each file's
+    // ETag), as an object store wants.
+    const std::vector<BlocksPart> currentParts = blocksPartsOf(current_);
+    const BlocksLayout currentLayout(currentParts);
+    const std::string newPath = partial_ + "/blocks.new";
+    const int out = ::open(newPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (out < 0) return Status::error(newPath + ": cannot create (" + std::strerror(errno) + ")");
     struct Closer {
         int fd;
         ~Closer() { ::close(fd); }
     } closer{out};
-    if (::ftruncate(out, off_t(current_.blocksBytes)) != 0)
-        return Status::error(blocksPath + ": cannot cut to " + std::to_string(current_.blocksBytes) + " bytes (" + std::strerror(errno) + ")");
     std::map<NodeKey, size_t> index;
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     std::map<uint32_t, int> open;
+    std::map<std::string, int> partFiles;  // the current parts, opened as a blob built again is compared
     std::vector<uint8_t> blob, was;
     uint64_t offset = current_.blocksBytes;
+    uint32_t crc = 0;
     Status failed;
     for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
         const size_t i = index.at(key);
@@ -256,24 +261,46 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
         // Built again to the same bytes: it keeps its place (and its ETag).
         if (auto it = currentNodes_.find(key); it != currentNodes_.end() && it->second.blockSize == blob.size() &&
                                                it->second.blockCrc == records_[i].blockCrc) {
+            auto place = currentLayout.place(it->second.blockOffset, blob.size());
+            int fd = -1;
+            if (place) {
+                auto [at, added] = partFiles.emplace(place->file, -1);
+                if (added) at->second = ::open((set_ + "/" + place->file).c_str(), O_RDONLY | O_CLOEXEC);
+                fd = at->second;
+            }
             was.resize(blob.size());
-            if (::pread(out, was.data(), was.size(), off_t(it->second.blockOffset)) == ssize_t(was.size()) && was == blob) {
+            if (fd >= 0 && ::pread(fd, was.data(), was.size(), off_t(place->offset)) == ssize_t(was.size()) && was == blob) {
                 records_[i].blockOffset = it->second.blockOffset;
                 continue;
             }
         }
-        if (::pwrite(out, blob.data(), blob.size(), off_t(offset)) != ssize_t(blob.size())) {
-            failed = Status::error(blocksPath + ": write failed (disk full?)");
+        if (::write(out, blob.data(), blob.size()) != ssize_t(blob.size())) {
+            failed = Status::error(newPath + ": write failed (disk full?)");
             break;
         }
+        crc = crc32(blob.data(), blob.size(), crc);
         records_[i].blockOffset = offset;
         offset += records_[i].blockSize;
     }
     for (auto [source, fd] : open) ::close(fd);
+    for (auto [name, fd] : partFiles)
+        if (fd >= 0) ::close(fd);
     SC_TRY(failed);
-    if (::fsync(out) != 0) return Status::error(blocksPath + ": cannot flush to disk (" + std::strerror(errno) + ")");
+    if (::fsync(out) != 0) return Status::error(newPath + ": cannot flush to disk (" + std::strerror(errno) + ")");
     std::fclose(blocks_);
     blocks_ = nullptr;
+    info.blocksParts = current_.blocksParts;
+    if (offset > current_.blocksBytes) {
+        const std::string name = versionedBlocksFile(crc);
+        for (const BlocksPart& p : currentParts)
+            if (p.file == name)
+                return Status::error(set_ + "/" + name + ": the new blocks' CRC-32 names a file the set holds already; "
+                                     "compact the set (--compact) and update it again");
+        if (::rename(newPath.c_str(), (set_ + "/" + name).c_str()) != 0)
+            return Status::error(set_ + "/" + name + ": cannot move into the set (" + std::strerror(errno) + ")");
+        info.blocksParts = currentParts;
+        info.blocksParts.push_back({name, offset - current_.blocksBytes});
+    }
 
     std::vector<uint8_t> hierarchy = writeHierarchy(records_, info.pageDepth);
     info.nodes = records_.size();
@@ -294,11 +321,14 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     SC_TRY(replaceFile(set_ + "/tileset.json", json.data(), json.size()));
     SC_TRY(syncFolder(set_));
     // The previous version stays for readers that opened it; older ones go.
-    const std::set<std::string> keep = {info.hierarchyFile, current_.hierarchyFile, buildRecordFile(info.hierarchyFile),
-                                        buildRecordFile(current_.hierarchyFile)};
+    std::set<std::string> keep = {info.hierarchyFile, current_.hierarchyFile, buildRecordFile(info.hierarchyFile),
+                                  buildRecordFile(current_.hierarchyFile), "blocks.bin"};
+    for (const BlocksPart& p : blocksPartsOf(info)) keep.insert(p.file);
+    for (const BlocksPart& p : currentParts) keep.insert(p.file);
     for (const auto& e : fs::directory_iterator(set_, ec)) {
         const std::string name = e.path().filename().string();
-        const bool versioned = validHierarchyFile(name) || (name.rfind("build", 0) == 0 && validHierarchyFile("hierarchy" + name.substr(5)));
+        const bool versioned = validHierarchyFile(name) || validBlocksFile(name) ||
+                               (name.rfind("build", 0) == 0 && validHierarchyFile("hierarchy" + name.substr(5)));
         const bool partial = name.size() > 8 && name.compare(name.size() - 8, 8, ".partial") == 0;  // a killed update's
         if ((versioned && !keep.count(name)) || partial) fs::remove(e.path(), ec);
     }

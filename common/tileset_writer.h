@@ -31,14 +31,15 @@ public:
 
     // An update in place of the set in folder `set`, whose tileset.json says
     // `current` (docs/FORMAT.md, "Updates in place"): nodes added with
-    // addKeptNodes keep their blocks where they lie in its blocks.bin; every
-    // other blob is appended after current.blocksBytes; finish() writes the
-    // hierarchy as versionedHierarchyFile(its CRC) and then switches
+    // addKeptNodes keep their blocks where they lie in its block files; every
+    // other blob goes into a new file, versionedBlocksFile(its CRC), the next
+    // part of the blocks' space (no file of the set is written to); finish()
+    // writes the hierarchy as versionedHierarchyFile(its CRC) and then switches
     // tileset.json with one rename, so a reader sees the old set or the new
     // one. The previous version's hierarchy stays for clients that opened it;
     // older ones go. finish() fails before it writes, naming the set, where
     // the set's tileset.json no longer names `current`'s hierarchy and
-    // blocks.bin bytes (another writer replaced the set meanwhile).
+    // blocks' bytes (another writer replaced the set meanwhile).
     // A blob built again with the same bytes as the current node of its key
     // (`currentNodes`) keeps that node's place too.
     static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,

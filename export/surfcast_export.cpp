@@ -243,22 +243,18 @@ int main(int argc, char** argv) {
     // uploaded: a file as one object (a PUT replaces an object whole, as the
     // rename replaces a file), a 3D Tiles folder by publishFolder.
     const std::string publishTo = isS3Url(output) ? output : "";
-    struct Staging {
-        std::string dir;
-        ~Staging() {
-            std::error_code ec;
-            if (!dir.empty()) std::filesystem::remove_all(dir, ec);
-        }
-    } staging;
+    std::unique_ptr<PublishStaging> staging;
     if (!publishTo.empty()) {
         auto url = parseS3Url(publishTo);
         if (!url) return usageError(url.status().message());
         if (url->key.empty() || url->key.back() == '/') return usageError(publishTo + ": name the object (or 3D Tiles prefix) to write");
-        std::error_code ec;
-        staging.dir = (std::filesystem::temp_directory_path(ec) / ("surfcast-export-" + std::to_string(::getpid()))).string();
-        std::filesystem::create_directories(staging.dir, ec);
-        if (ec) return usageError(staging.dir + ": cannot create (" + ec.message() + ")");
-        output = staging.dir + "/" + std::filesystem::path(url->key).filename().string();
+        auto created = PublishStaging::create();
+        if (!created) {
+            std::fprintf(stderr, "surfcast-export: %s\n", created.status().message().c_str());
+            return 1;
+        }
+        staging = std::move(*created);
+        output = staging->dir() + "/" + std::filesystem::path(url->key).filename().string();
     }
     // Uploads the finished output where -o named an object store.
     auto publish = [&]() -> int {

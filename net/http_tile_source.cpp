@@ -20,6 +20,7 @@
 #include "object_store.h"
 #include "sigpipe.h"
 #include "tileset_format.h"
+#include "transfer_errors.h"
 
 namespace surfcast {
 namespace {
@@ -113,7 +114,7 @@ public:
         return std::move(r->body);
     }
     Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
-        auto r = ranges(name, {{offset, size}});
+        auto r = ranges({{name, offset, size}});
         if (!r) return r.status();
         return std::move((*r)[0]);
     }
@@ -139,9 +140,13 @@ public:
     Result<std::vector<std::vector<uint8_t>>> blobs(const std::vector<NodeRecord>& nodes) override {
         const size_t most = batchNodes_;
         if (nodes.size() < 2 || most < 2) {
-            std::vector<std::pair<uint64_t, uint64_t>> spans;
-            for (const NodeRecord& n : nodes) spans.push_back({n.blockOffset, n.blockSize});
-            return ranges("blocks.bin", spans);
+            std::vector<Span> spans;
+            for (const NodeRecord& n : nodes) {
+                auto place = blocksLayout().place(n.blockOffset, n.blockSize);
+                if (!place) return Status::error(describe() + ": node " + n.key.name() + ": " + place.status().message());
+                spans.push_back({place->file, place->offset, n.blockSize});
+            }
+            return ranges(spans);
         }
         std::vector<std::vector<uint8_t>> out;
         for (size_t at = 0; at < nodes.size(); at += most) {
@@ -209,13 +214,16 @@ private:
         std::optional<uint64_t> total;  // a range's answer: the file's length, where Content-Range names it
     };
 
-    // Byte ranges (offset, size) of one file, all requested at once; all or nothing.
-    Result<std::vector<std::vector<uint8_t>>> ranges(const std::string& name,
-                                                     const std::vector<std::pair<uint64_t, uint64_t>>& spans) {
+    // Byte ranges of files of the set, all requested at once; all or nothing.
+    struct Span {
+        std::string name;
+        uint64_t offset, size;
+    };
+    Result<std::vector<std::vector<uint8_t>>> ranges(const std::vector<Span>& spans) {
         std::vector<Request> requests;
         std::vector<size_t> asked;  // indices into spans: empty ranges are not asked for
         for (size_t i = 0; i < spans.size(); ++i) {
-            const auto [offset, size] = spans[i];
+            const auto& [name, offset, size] = spans[i];
             if (size == 0) continue;
             requests.push_back({name, std::to_string(offset) + "-" + std::to_string(offset + size - 1), nullptr, size, 206});
             asked.push_back(i);
@@ -224,7 +232,7 @@ private:
         auto answers = run(requests);
         for (size_t k = 0; k < asked.size(); ++k) {
             if (!answers[k]) return answers[k].status();
-            const auto [offset, size] = spans[asked[k]];
+            const auto& [name, offset, size] = spans[asked[k]];
             if (answers[k]->body.size() != size)  // cut short: a connection that closed early
                 return Status::transient(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
                                          std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
@@ -412,7 +420,9 @@ private:
         if (at.scheme == "https" && to.scheme == "http")
             return Status::error("redirected to " + shown + ", which is not followed: https never gives way to plain http");
         curl_easy_setopt(h, CURLOPT_URL, target.c_str());
-        const bool credentials = to == origin_ || options_.redirectCredentials;
+        // A store's signature and keys never leave its endpoint, whatever
+        // --redirect-credentials says.
+        const bool credentials = to == origin_ || (options_.redirectCredentials && !store_);
         curl_easy_setopt(h, CURLOPT_HTTPHEADER, credentials ? headers_ : nullptr);
         sign(h, credentials);
         t.withoutCredentials |= !credentials && (headers_ || (store_ && !store_->userpwd.empty()));
@@ -435,7 +445,7 @@ private:
             return permanentTransferError(code) ? Status::error(message) : Status::transient(message);
         }
         if (unwanted) {
-            if ((r.status == 401 || r.status == 403) && store_)
+            if ((r.status == 401 || r.status == 403) && store_ && !t.withoutCredentials)
                 return Status::error(shown + ": HTTP " + std::to_string(r.status) +
                                      ": the store refuses the credentials, or they lack permission to read it (docs/STORAGE.md)");
             if (r.status == 404 && store_)
@@ -483,24 +493,10 @@ private:
     }
 
     // An HTTP status that is not the answer wanted: transient where asking
-    // again may succeed (408, 429, 5xx), else permanent.
+    // again may succeed (transfer_errors.h), else permanent.
     static Status httpError(const std::string& shown, long status) {
         const std::string message = shown + ": HTTP " + std::to_string(status);
-        return status == 408 || status == 429 || status >= 500 ? Status::transient(message) : Status::error(message);
-    }
-
-    // Transfer errors that asking again cannot clear: the URL, the protocol,
-    // the host's certificate. Everything else (refused or reset connections,
-    // timeouts, name lookups) may pass, as when a server restarts.
-    static bool permanentTransferError(CURLcode code) {
-        switch (code) {
-        case CURLE_UNSUPPORTED_PROTOCOL:
-        case CURLE_URL_MALFORMAT:
-        case CURLE_PEER_FAILED_VERIFICATION:
-        case CURLE_SSL_CACERT_BADFILE:
-        case CURLE_SSL_CERTPROBLEM: return true;
-        default: return false;
-        }
+        return transientHttpStatus(status) ? Status::transient(message) : Status::error(message);
     }
 
     std::string transferError(CURLcode code, const char* detail) const {

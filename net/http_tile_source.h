@@ -20,11 +20,14 @@ namespace surfcast {
 // An http(s) URL opens an HTTP source (all requests run on one libcurl multi
 // handle driven by one I/O thread: one multiplexed connection over HTTP/2, up
 // to 6 keep-alive connections over HTTP/1.1; a query string, such as a shared
-// access signature, is kept on every request and left out of messages);
-// anything else is a local folder (openFolderSource).
+// access signature, is kept on every request and left out of messages); an
+// s3://BUCKET/PREFIX URL the same source on the store's endpoint, its file
+// names object keys, every request signed with SigV4 where the AWS chain
+// gives credentials (object_store.h); anything else is a local folder
+// (openFolderSource).
 Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http = {});
 
-// A reader of the set at a folder or an http(s) URL.
+// A reader of the set at a folder, an http(s) URL or an s3:// URL.
 Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http = {});
 
 // The command-line options that say how to reach a URL (--header 'N: V',

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -15,13 +16,15 @@
 #include <thread>
 
 #include "sigpipe.h"
+#include "transfer_errors.h"
 
 namespace surfcast {
 namespace {
 
 // Tries of one request: the first and up to this many more where a fault is
-// transient, after a random wait of up to 0.1, 0.2, 0.4, ... s (AWS's "full
-// jitter"), so a store that sheds load (503 SlowDown) gets a spread of retries.
+// transient (transfer_errors.h), after a random wait between a quarter of
+// and the whole of 0.1, 0.2, 0.4, ... s, so a store that sheds load (503
+// SlowDown) gets a spread of retries.
 constexpr int kStoreRetries = 6;
 constexpr int kFirstBackoffMs = 100;
 // An error response's body is kept up to this much (S3's XML is ~300 bytes).
@@ -30,6 +33,8 @@ constexpr size_t kMaxErrorBody = 64 << 10;
 constexpr uint64_t kMaxListPage = 16 << 20;
 // S3 allows at most this many parts per upload.
 constexpr uint64_t kMaxParts = 10000;
+// ... and parts of at least this much, but the last.
+constexpr uint64_t kMinPartBytes = 5 << 20;
 constexpr int kStoreConnectTimeoutSeconds = 10;
 
 std::string env(const char* name) {
@@ -211,8 +216,6 @@ size_t readHeader(char* data, size_t size, size_t n, void* user) {
     }
     return size * n;
 }
-
-bool transientStatus(long status) { return status == 429 || status == 500 || status == 502 || status == 503 || status == 504; }
 
 }  // namespace
 
@@ -398,10 +401,12 @@ struct ObjectStore::Impl {
             std::string fault;
             if (response.tooLong && response.status < 300)
                 return Status::error(object.str() + ": longer than the " + std::to_string(r.maxBytes) + " bytes expected");
-            if (response.code != CURLE_OK && !(response.tooLong && response.status >= 300))
+            if (response.code != CURLE_OK && !(response.tooLong && response.status >= 300)) {
+                if (permanentTransferError(response.code)) return Status::error(object.str() + ": " + response.curlError);
                 fault = response.curlError;
-            else if (transientStatus(response.status))
+            } else if (transientHttpStatus(response.status)) {
                 fault = "HTTP " + std::to_string(response.status) + describe(response);
+            }
             if (fault.empty()) return response;
             if (applied && response.status != 503 && response.status != 429) *applied = true;
             if (attempt == kStoreRetries)
@@ -538,7 +543,8 @@ Result<std::optional<ObjectInfo>> ObjectStore::put(const S3Url& object, const st
     return std::optional(ObjectInfo{bytes.size(), response->etag});
 }
 
-Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, const std::string& path, const WriteCondition& condition) {
+Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, const std::string& path, const WriteCondition& condition,
+                                                      Multipart multipart) {
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
     if (!file) return Status::error(path + ": cannot open (" + std::strerror(errno) + ")");
     if (std::fseek(file.get(), 0, SEEK_END) != 0) return Status::error(path + ": cannot seek");
@@ -548,7 +554,7 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
     Request r;
     r.file = file.get();
     r.hasBody = true;
-    if (size <= kMultipartThreshold) {
+    if (size <= multipart.threshold) {
         r.method = "PUT";
         r.headers = conditionHeaders(condition);
         r.bodySize = size;
@@ -588,7 +594,7 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
         return why;
     };
 
-    const uint64_t partBytes = std::max(kPartBytes, (size + kMaxParts - 1) / kMaxParts);
+    const uint64_t partBytes = std::max(std::max(multipart.partBytes, kMinPartBytes), (size + kMaxParts - 1) / kMaxParts);
     std::string complete = "<CompleteMultipartUpload>";
     for (uint64_t part = 1, offset = 0; offset < size; ++part, offset += partBytes) {
         Request p = r;
@@ -631,6 +637,15 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
         return abort(Impl::failure(object, *done, "complete a multipart upload"));
     const auto etag = xmlTag(answer, "ETag");
     return std::optional(ObjectInfo{size, etag ? *etag : std::string()});
+}
+
+Result<bool> ObjectStore::holdsFile(const S3Url& object, const std::string& path) {
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
+    if (!file) return Status::error(path + ": cannot open (" + std::strerror(errno) + ")");
+    std::error_code ec;
+    const uint64_t size = std::filesystem::file_size(path, ec);
+    if (ec) return Status::error(path + ": " + ec.message());
+    return sameAsFile(object, file.get(), size);
 }
 
 Result<bool> ObjectStore::sameAsFile(const S3Url& object, std::FILE* file, uint64_t size) {
@@ -680,8 +695,10 @@ Result<std::vector<ListedObject>> ObjectStore::list(const S3Url& prefix) {
             out.push_back({*key, std::strtoull(size->c_str(), nullptr, 10), etag ? *etag : std::string()});
         }
         const auto truncated = xmlTag(xml, "IsTruncated");
+        const std::string last = token;
         token = truncated && *truncated == "true" ? xmlTag(xml, "NextContinuationToken").value_or("") : "";
-        if (truncated && *truncated == "true" && token.empty()) return Status::error(prefix.str() + ": LIST: truncated without a continuation token");
+        if (truncated && *truncated == "true" && (token.empty() || token == last))
+            return Status::error(prefix.str() + ": LIST: truncated, without a new continuation token (a broken store would list forever)");
     } while (!token.empty());
     std::sort(out.begin(), out.end(), [](const ListedObject& a, const ListedObject& b) { return a.key < b.key; });
     return out;

@@ -73,6 +73,11 @@ struct WriteCondition {
 // (403, NoSuchBucket, ...) fails at once, naming the bucket and key.
 class ObjectStore {
 public:
+    // Objects larger than this go up in parts of kPartBytes (or more, for
+    // objects of more than 10,000 such parts): bench/BENCHMARKS.md, "Object storage".
+    static constexpr uint64_t kMultipartThreshold = 64ull << 20;
+    static constexpr uint64_t kPartBytes = 32ull << 20;
+
     static Result<std::shared_ptr<ObjectStore>> open(S3Environment environment);
     // The process's store, opened from s3Environment() on first use.
     static Result<std::shared_ptr<ObjectStore>> shared();
@@ -92,9 +97,18 @@ public:
     // that then finds the condition failed reads the object back: holding
     // these bytes, it was this write's own.
     Result<std::optional<ObjectInfo>> put(const S3Url& object, const std::vector<uint8_t>& bytes, const WriteCondition& condition = {});
-    // The file at `path` as an object: one PUT up to kMultipartThreshold,
-    // else a multipart upload (aborted where it fails).
-    Result<std::optional<ObjectInfo>> putFile(const S3Url& object, const std::string& path, const WriteCondition& condition = {});
+    // The file at `path` as an object: one PUT up to `threshold`, else a
+    // multipart upload in parts of `partBytes` (aborted where it fails).
+    struct Multipart {
+        uint64_t threshold, partBytes;
+    };
+    Result<std::optional<ObjectInfo>> putFile(const S3Url& object, const std::string& path, const WriteCondition& condition,
+                                              Multipart multipart);
+    Result<std::optional<ObjectInfo>> putFile(const S3Url& object, const std::string& path, const WriteCondition& condition = {}) {
+        return putFile(object, path, condition, {kMultipartThreshold, kPartBytes});
+    }
+    // Whether the object exists and holds exactly the bytes of the file at `path`.
+    Result<bool> holdsFile(const S3Url& object, const std::string& path);
     // Deletes an object; deleting one that is absent succeeds.
     Status remove(const S3Url& object);
     // Every object whose key starts with prefix.key, in key order.
@@ -105,11 +119,6 @@ public:
         uint64_t requests = 0, bytesIn = 0, bytesOut = 0, retries = 0;
     };
     Counts counts() const;
-
-    // Objects larger than this go up in parts of kPartBytes (or more, for
-    // objects of more than 10,000 such parts): bench/BENCHMARKS.md, "Object storage".
-    static constexpr uint64_t kMultipartThreshold = 64ull << 20;
-    static constexpr uint64_t kPartBytes = 32ull << 20;
 
 private:
     // Whether the object holds exactly the `size` bytes of `file`.

@@ -1,6 +1,11 @@
 #include "set_publisher.h"
 
+#include <signal.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstdlib>
 #include <filesystem>
 #include <vector>
 
@@ -39,24 +44,72 @@ Result<PublishReport> publishFolder(const std::string& folder, const std::string
     else return Status::error(folder + ": no " + last + " to publish last");
 
     PublishReport report;
-    std::vector<S3Url> written;
+    const S3Url json{target->bucket, prefix + last};
+    std::vector<S3Url> written;  // objects holding this publisher's bytes
+    // After a failure: a tileset.json whose answer was lost may stand all the
+    // same, in which case nothing may go; else what this publisher wrote
+    // goes. (Another publisher of the very same bytes, racing for the same
+    // prefix and meeting lost answers, could take one of these for its own:
+    // the one case where a set could lose a file.)
     auto undo = [&](Status why) -> Status {
-        for (auto it = written.rbegin(); it != written.rend(); ++it) (void)(*store)->remove(*it);  // best effort
-        return why;
+        auto stands = (*store)->head(json);
+        if (!stands)
+            return Status::error(why.message() + "; whether " + json.str() + " stands could not be asked (" + stands.status().message() +
+                                 "): the objects written stay");
+        if (stands->has_value()) return why;  // a set stands there (another publisher's): its files bear these names
+        std::string left;
+        for (auto it = written.rbegin(); it != written.rend(); ++it)
+            if (!(*store)->remove(*it).ok()) left += (left.empty() ? "" : ", ") + it->str();
+        return left.empty() ? why : Status::error(why.message() + "; these could not be deleted: " + left);
     };
     for (const std::string& file : files) {
         const S3Url object{target->bucket, prefix + file};
-        auto put = (*store)->putFile(object, folder + "/" + file, WriteCondition{true, ""});
+        const std::string path = folder + "/" + file;
+        auto put = (*store)->putFile(object, path, WriteCondition{true, ""});
+        if (!put) {
+            // Its answer lost on every try (a 500 or a reset after the store
+            // acted): it may stand all the same. The set's last file standing
+            // is the set published; any other goes with the rest.
+            auto mine = (*store)->holdsFile(object, path);
+            if (mine && *mine && file == last)
+                put = Result<std::optional<ObjectInfo>>(std::optional(ObjectInfo{std::filesystem::file_size(path), ""}));
+            else if (mine && *mine)
+                written.push_back(object);
+        }
         if (!put) return undo(put.status());
         if (!put->has_value())
-            return undo(Status::error(object.str() + ": written meanwhile by another publisher (the store refused If-None-Match: *); "
-                                      "this one wrote nothing that stays"));
+            return undo(Status::error(object.str() + ": written meanwhile by another publisher (the store refused If-None-Match: *)"));
         written.push_back(object);
         report.objects += 1;
         report.bytes += (*put)->size;
     }
     report.requests = (*store)->counts().requests - requestsBefore;
     return report;
+}
+
+Result<std::unique_ptr<PublishStaging>> PublishStaging::create() {
+    namespace fs = std::filesystem;
+    constexpr const char* kPrefix = "surfcast-publish-";
+    std::error_code ec;
+    const fs::path temp = fs::temp_directory_path(ec);
+    if (ec) return Status::error("no folder for temporary files ($TMPDIR): " + ec.message());
+    for (const auto& e : fs::directory_iterator(temp, ec)) {
+        const std::string name = e.path().filename().string();
+        if (name.rfind(kPrefix, 0) != 0) continue;
+        const long pid = std::strtol(name.c_str() + std::char_traits<char>::length(kPrefix), nullptr, 10);
+        std::error_code ignored;
+        if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ignored);
+    }
+    auto staging = std::unique_ptr<PublishStaging>(new PublishStaging);
+    staging->dir_ = (temp / (kPrefix + std::to_string(::getpid()))).string();
+    fs::create_directories(staging->dir_, ec);
+    if (ec) return Status::error(staging->dir_ + ": cannot create the folder written before the upload (" + ec.message() + ")");
+    return staging;
+}
+
+PublishStaging::~PublishStaging() {
+    std::error_code ec;
+    if (!dir_.empty()) std::filesystem::remove_all(dir_, ec);
 }
 
 }  // namespace surfcast

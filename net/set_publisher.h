@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "status.h"
@@ -22,8 +23,23 @@ struct PublishReport {
 // prefix that holds objects already is refused: a set's objects are never
 // rewritten in place (a reader may be streaming them). Every object is
 // written with If-None-Match: *, so of two publishers racing for one prefix
-// at most one wins; the other, and any publish that fails, deletes what it
-// wrote and fails naming the object and the store's answer.
+// at most one wins. A publish that fails names the object and the store's
+// answer, and deletes what it wrote, unless a tileset.json stands at the
+// prefix by then (its own, whose answer was lost, or a racing publisher's,
+// whose set bears the same names) or the store cannot say whether one does.
 Result<PublishReport> publishFolder(const std::string& folder, const std::string& url, const std::string& last = "tileset.json");
+
+// The local folder a set or an export is written in before its upload:
+// $TMPDIR/surfcast-publish-PID, removed with this object. Those of killed
+// processes (whose PID no process has) are removed first.
+class PublishStaging {
+public:
+    static Result<std::unique_ptr<PublishStaging>> create();
+    ~PublishStaging();
+    const std::string& dir() const { return dir_; }
+
+private:
+    std::string dir_;
+};
 
 }  // namespace surfcast

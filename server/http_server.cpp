@@ -481,9 +481,10 @@ struct HttpServer::Impl {
         if (!post && isViewerPath(path)) return viewer(c, st, r);
         std::string name, rest;
         if (!splitSetPath(path, &name, &rest)) return fail(r, 404, "not_found", "no such resource");
-        if (!post && (rest == "tileset.json" || rest == "blocks.bin" || validHierarchyFile(rest))) {
+        if (!post && (rest == "tileset.json" || validBlocksFile(rest) || validHierarchyFile(rest))) {
             const bool hierarchy = rest[0] == 'h';
-            st.route = hierarchy ? "hierarchy.bin" : rest;
+            // One metrics label a kind of file, whatever its name (names come from clients).
+            st.route = hierarchy ? "hierarchy.bin" : rest[0] == 'b' ? "blocks.bin" : rest;
             auto snap = snapshot(name, r);
             if (!snap) return;
             if (hierarchy && rest != snap->info.hierarchyFile) {
@@ -499,15 +500,20 @@ struct HttpServer::Impl {
                 return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + tag + "\"",
                                   kRevalidate, file);
             }
-            const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *snap->blocks;
+            uint64_t declared = 0;
+            const MappedFile* part = rest[0] == 'b' ? snap->partFile(rest, &declared) : nullptr;
+            if (rest[0] == 'b' && !part) return fail(r, 404, "not_found", "no such resource");
+            const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *part;
             // Clients batch only where tileset.json's answer offers it
             // (docs/PROTOCOL.md, "Batch"); a static host never does.
             if (rest == "tileset.json") r.header("Surfcast-Batch", std::to_string(config.maxBatch));
-            // The JSON's CRC changes whenever any byte of the set does.
-            std::string etag = "\"" + std::string(1, rest[0] == 't' ? 'j' : rest[0]) + "-" + hex8(snap->version) + "\"";
-            // blocks.bin: only what this version declares (an update appends
-            // before its switch, and the next one may cut a killed one's tail).
-            const uint64_t size = rest == "blocks.bin" ? std::min<uint64_t>(m.size(), snap->info.blocksBytes) : m.size();
+            // The JSON's CRC changes whenever any byte of the set does; a
+            // blocks-XXXXXXXX.bin's name is its own CRC.
+            std::string etag = rest.size() == 19 && rest[0] == 'b' ? "\"p-" + rest.substr(7, 8) + "\""
+                                                                    : "\"" + std::string(1, rest[0] == 't' ? 'j' : rest[0]) + "-" + hex8(snap->version) + "\"";
+            // A block file: only what this version declares (blocks.bin of a
+            // set updated before version 3 may hold a killed update's tail).
+            const uint64_t size = part ? std::min<uint64_t>(m.size(), declared) : m.size();
             return serveBytes(c, r, snap, m.data(), size, rest == "tileset.json" ? "application/json" : "application/octet-stream",
                               etag, kRevalidate);
         }
@@ -523,7 +529,7 @@ struct HttpServer::Impl {
             if (it == snap->nodes.end()) return fail(r, 404, "not_found", "no node " + key.name());
             const NodeRecord& n = it->second;
             std::string etag = "\"n-" + hex8(n.blockCrc) + "-" + std::to_string(n.blockSize) + "\"";
-            return serveBytes(c, r, snap, snap->blocks->data() + n.blockOffset, n.blockSize, "application/octet-stream", etag,
+            return serveBytes(c, r, snap, snap->block(n), n.blockSize, "application/octet-stream", etag,
                               pinned ? kImmutable : kRevalidate);
         }
         if (post && rest == "batch") {
@@ -648,7 +654,7 @@ struct HttpServer::Impl {
             le::put<uint32_t>(reinterpret_cast<uint8_t*>(len.data()), n->blockSize);
             texts.push_back(len);
             r.piece(texts.back().data(), 4);
-            r.piece(snap->blocks->data() + n->blockOffset, n->blockSize);
+            r.piece(snap->block(*n), n->blockSize);
         }
         r.header("Content-Type", "application/x-surfcast-batch");
         r.header("Cache-Control", "no-store");

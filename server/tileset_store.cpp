@@ -77,25 +77,31 @@ Result<std::shared_ptr<TilesetSnapshot>> TilesetStore::load(const std::string& n
     if (!info) return info.status();
     auto hierarchy = MappedFile::openAt(dir.fd, info->hierarchyFile, where + info->hierarchyFile);
     if (!hierarchy) return hierarchy.status();
-    auto blocks = MappedFile::openAt(dir.fd, "blocks.bin", where + "blocks.bin");
-    if (!blocks) return blocks.status();
-
     auto snap = std::make_shared<TilesetSnapshot>();
     snap->name = name;
     snap->info = *info;
+    snap->layout = BlocksLayout(blocksPartsOf(*info));
+    for (const BlocksPart& part : snap->layout.parts()) {
+        auto file = MappedFile::openAt(dir.fd, part.file, where + part.file);
+        if (!file) return file.status();
+        // blocks.bin of a set updated before version 3 may be longer: bytes a
+        // killed update appended, which no version names.
+        if ((*file)->size() < part.bytes)
+            return Status::error(where + part.file + ": " + std::to_string((*file)->size()) + " bytes, tileset.json says " +
+                                 std::to_string(part.bytes) + " (a build in progress?)");
+        snap->partFiles.push_back(std::move(*file));
+    }
     const auto& h = **hierarchy;
-    // An update in place appends to blocks.bin before it switches
-    // tileset.json: a longer file is the old set's, whole.
-    if ((*blocks)->size() < info->blocksBytes)
-        return Status::error(where + "blocks.bin: " + std::to_string((*blocks)->size()) + " bytes, tileset.json says " +
-                             std::to_string(info->blocksBytes) + " (a build in progress?)");
     auto nodes = readHierarchyOf(*info, std::vector<uint8_t>(h.data(), h.data() + h.size()), where + info->hierarchyFile);
     if (!nodes) return nodes.status();
-    for (const NodeRecord& n : *nodes) snap->nodes[n.key] = n;
+    for (const NodeRecord& n : *nodes) {
+        if (auto place = snap->layout.place(n.blockOffset, n.blockSize); !place)
+            return Status::error(where + info->hierarchyFile + ": node " + n.key.name() + ": " + place.status().message());
+        snap->nodes[n.key] = n;
+    }
     snap->version = crc32(j.data(), j.size());
     snap->json = std::move(*json);
     snap->hierarchy = std::move(*hierarchy);
-    snap->blocks = std::move(*blocks);
     struct stat st{};
     if (::fstatat(dir.fd, "tileset.json", &st, AT_SYMLINK_NOFOLLOW) == 0) {
         snap->device = st.st_dev;
@@ -138,8 +144,8 @@ std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name
         return nullptr;
     }
     std::shared_ptr<const TilesetSnapshot> snap = std::move(*loaded);
-    // Its mappings stay valid: an update in place only appends to blocks.bin
-    // and a rebuild replaces the files, whose old inodes the mappings hold.
+    // Its mappings stay valid: an update in place writes new files only, and
+    // a rebuild replaces the files, whose old inodes the mappings hold.
     auto& current = sets_[name];
     if (current && current->info.hierarchyCrc != snap->info.hierarchyCrc) previous_[name] = current;
     current = snap;
@@ -228,13 +234,30 @@ private:
     Result<const MappedFile*> mapped(const std::string& name) const {
         if (name == "tileset.json") return s_->json.get();
         if (name == s_->info.hierarchyFile) return s_->hierarchy.get();
-        if (name == "blocks.bin") return s_->blocks.get();
+        uint64_t declared = 0;
+        if (const MappedFile* part = s_->partFile(name, &declared)) return part;
         return Status::error(describe() + ": no file " + name);
     }
     std::shared_ptr<const TilesetSnapshot> s_;
 };
 
 }  // namespace
+
+const uint8_t* TilesetSnapshot::block(const NodeRecord& node) const {
+    auto place = layout.place(node.blockOffset, node.blockSize);
+    assert(place.ok() && "a node's block outside the parts (load checks every one)");
+    return partFiles[place->part]->data() + place->offset;
+}
+
+const MappedFile* TilesetSnapshot::partFile(const std::string& file, uint64_t* declaredBytes) const {
+    const auto& parts = layout.parts();
+    for (size_t i = 0; i < parts.size(); ++i)
+        if (parts[i].file == file) {
+            *declaredBytes = parts[i].bytes;
+            return partFiles[i].get();
+        }
+    return nullptr;
+}
 
 std::unique_ptr<TileSource> snapshotSource(std::shared_ptr<const TilesetSnapshot> snapshot) {
     return std::make_unique<SnapshotSource>(std::move(snapshot));

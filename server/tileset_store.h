@@ -41,7 +41,14 @@ private:
 struct TilesetSnapshot {
     std::string name;
     TilesetInfo info;
-    std::shared_ptr<MappedFile> json, hierarchy, blocks;
+    std::shared_ptr<MappedFile> json, hierarchy;
+    // The files of the blocks (blocksPartsOf(info)), mapped, in order; each
+    // node's block lies inside one part's declared bytes (checked at load).
+    BlocksLayout layout;
+    std::vector<std::shared_ptr<MappedFile>> partFiles;
+    const uint8_t* block(const NodeRecord& node) const;
+    // The mapped file of part `file`, or null where this version has none of that name.
+    const MappedFile* partFile(const std::string& file, uint64_t* declaredBytes) const;
     std::unordered_map<NodeKey, NodeRecord, NodeKeyHash> nodes;
     uint32_t version = 0;  // CRC-32 of tileset.json: it covers every block through the hierarchy CRC
     // Identity of the tileset.json it was loaded from.

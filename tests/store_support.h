@@ -131,9 +131,12 @@ private:
 class FaultProxy {
 public:
     static constexpr int kPort = 18334;
-    FaultProxy(double share, int seed) {
-        child_ = spawn({SURFCAST_TEST_PYTHON, std::string(SURFCAST_TEST_TOOLS) + "/s3_fault_proxy.py", std::to_string(kPort),
-                        std::to_string(SeaweedFs::kPort), std::to_string(share), std::to_string(seed), dir_.file("faults.json")});
+    // `methods`: those whose requests may fail ("PUT,POST"); empty: all.
+    FaultProxy(double share, int seed, const std::string& methods = "") {
+        std::vector<std::string> args = {SURFCAST_TEST_PYTHON, std::string(SURFCAST_TEST_TOOLS) + "/s3_fault_proxy.py", std::to_string(kPort),
+                                         std::to_string(SeaweedFs::kPort), std::to_string(share), std::to_string(seed), dir_.file("faults.json")};
+        if (!methods.empty()) args.push_back(methods);
+        child_ = spawn(args);
         EXPECT_TRUE(child_.waitFor("listening")) << child_.log;
     }
     ~FaultProxy() {

@@ -304,10 +304,47 @@ TEST(TilesetFormat, TilesetJsonReadsVersionOne) {
     EXPECT_EQ(back->statistics.elevationMin, -3);
     EXPECT_EQ(back->statistics.elevationMax, 5);
     EXPECT_FALSE(back->statistics.intensity);
-    j["version"] = 3;
-    auto future = readTilesetJson(j.dump(), "v3.json");
+    j["version"] = 4;
+    auto future = readTilesetJson(j.dump(), "v4.json");
     ASSERT_FALSE(future.ok());
-    EXPECT_NE(future.status().message().find("unsupported version 3"), std::string::npos);
+    EXPECT_NE(future.status().message().find("unsupported version 4"), std::string::npos);
+}
+
+// Version 3: blocks in several files. Written only where there are parts,
+// read back as written; a node's block is found in the part that holds it
+// and never across two.
+TEST(TilesetFormat, BlocksInSeveralFiles) {
+    TilesetInfo info;
+    info.rootEdge = 8;
+    info.levels = 1;
+    info.normalSource = "input";
+    info.weights = "none";
+    info.bounds.min = {0, 0, 0};
+    info.bounds.max = {1, 1, 1};
+    info.blocksBytes = 300;
+    EXPECT_EQ(nlohmann::json::parse(writeTilesetJson(info))["version"], kFormatVersion) << "a set of one block file stays version 2";
+    info.blocksParts = {{"blocks.bin", 100}, {versionedBlocksFile(0xdeadbeef), 200}};
+    const auto j = nlohmann::json::parse(writeTilesetJson(info));
+    EXPECT_EQ(j["version"], kPartsFormatVersion);
+    EXPECT_EQ(j["blocks"]["parts"][1]["file"], "blocks-deadbeef.bin");
+    auto back = readTilesetJson(j.dump(), "v3.json");
+    ASSERT_TRUE(back.ok()) << back.status().message();
+    EXPECT_EQ(back->blocksParts, info.blocksParts);
+    const BlocksLayout layout(back->blocksParts);
+    auto inFirst = layout.place(40, 60);
+    ASSERT_TRUE(inFirst.ok());
+    EXPECT_EQ(inFirst->file, "blocks.bin");
+    EXPECT_EQ(inFirst->offset, 40u);
+    auto inSecond = layout.place(100, 200);
+    ASSERT_TRUE(inSecond.ok());
+    EXPECT_EQ(inSecond->file, "blocks-deadbeef.bin");
+    EXPECT_EQ(inSecond->offset, 0u);
+    EXPECT_EQ(inSecond->part, 1u);
+    EXPECT_EQ(layout.place(299, 1)->offset, 199u);
+    EXPECT_FALSE(layout.place(90, 20).ok()) << "a block across two files";
+    EXPECT_FALSE(layout.place(300, 1).ok()) << "a block past the end";
+    EXPECT_TRUE(validBlocksFile("blocks.bin") && validBlocksFile("blocks-0123abcd.bin"));
+    EXPECT_FALSE(validBlocksFile("blocks-0123ABCD.bin") || validBlocksFile("../blocks.bin") || validBlocksFile("blocks-123.bin"));
 }
 
 TEST(TilesetFormat, TilesetJsonRejectsBadInput) {
@@ -622,6 +659,11 @@ TEST(FormatConformance, TilesetJsonCases) {
             else if (field == "weights") EXPECT_EQ(info->weights, want.get<std::string>());
             else if (field == "blocks_bytes") EXPECT_EQ(info->blocksBytes, want.get<uint64_t>());
             else if (field == "hierarchy_file") EXPECT_EQ(info->hierarchyFile, want.get<std::string>());
+            else if (field == "blocks_parts") {
+                std::vector<std::string> parts;
+                for (const BlocksPart& part : blocksPartsOf(*info)) parts.push_back(part.file + ":" + std::to_string(part.bytes));
+                EXPECT_EQ(parts, want.get<std::vector<std::string>>());
+            }
             else if (field == "hierarchy_bytes") EXPECT_EQ(info->hierarchyBytes, want.get<uint64_t>());
             else if (field == "hierarchy_pages") EXPECT_EQ(info->hierarchyPages, want.get<uint32_t>());
             else if (field == "hierarchy_crc") EXPECT_EQ(info->hierarchyCrc, want.get<uint32_t>());

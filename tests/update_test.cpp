@@ -21,6 +21,7 @@
 #include <tuple>
 
 #include "block_codec.h"
+#include "crc32.h"
 #include "test_support.h"
 #include "tileset_reader.h"
 #include "update_support.h"
@@ -67,11 +68,18 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     ASSERT_NO_FATAL_FAILURE(leafPoints(dir.file("fresh"), &step, &expected));
     ASSERT_NO_FATAL_FAILURE(expectSamePoints(expected, updated, step));
 
-    // Blocks the update kept lie where they lay, byte for byte; the rest was
-    // appended after them.
-    const std::string blocksAfter = test::readFile(set() + "/blocks.bin");
-    ASSERT_GT(blocksAfter.size(), blocksBefore.size());
-    EXPECT_TRUE(blocksAfter.compare(0, blocksBefore.size(), blocksBefore) == 0) << "the update rewrote bytes of blocks.bin";
+    // Blocks the update kept lie where they lay, byte for byte, in a
+    // blocks.bin no byte of which changed; the rest went into a file of their
+    // own, named by its CRC: the next part of the blocks' space (version 3).
+    EXPECT_TRUE(test::readFile(set() + "/blocks.bin") == blocksBefore) << "the update wrote to blocks.bin";
+    const auto& parts = after->info().blocksParts;
+    ASSERT_EQ(parts.size(), 2u);
+    EXPECT_EQ(after->info().version, kPartsFormatVersion);
+    EXPECT_EQ(parts[0], (BlocksPart{"blocks.bin", blocksBefore.size()}));
+    const std::string added = test::readFile(set() + "/" + parts[1].file);
+    EXPECT_EQ(added.size(), parts[1].bytes);
+    EXPECT_EQ(parts[1].file, versionedBlocksFile(surfcast::crc32(added.data(), added.size())));
+    const std::string blocksAfter = blocksBefore + added;
     size_t kept = 0, rebuilt = 0;
     for (const NodeRecord& n : after->nodes()) {
         if (n.blockOffset >= blocksBefore.size()) {
@@ -93,8 +101,15 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     EXPECT_TRUE(fs::exists(set() + "/hierarchy.bin"));
     EXPECT_TRUE(fs::exists(set() + "/" + after->info().hierarchyFile));
     EXPECT_TRUE(fs::exists(set() + "/" + buildRecordFile(after->info().hierarchyFile)));
-    for (const auto& e : fs::directory_iterator(set()))
-        EXPECT_NE(e.path().filename().string().rfind(".update-", 0), 0u) << "left behind: " << e.path();
+    auto finished = TilesetReader::open(set());
+    ASSERT_TRUE(finished) << finished.status().message();
+    std::set<std::string> named;
+    for (const BlocksPart& p : blocksPartsOf(finished->info())) named.insert(p.file);
+    for (const auto& e : fs::directory_iterator(set())) {
+        const std::string name = e.path().filename().string();
+        EXPECT_NE(name.rfind(".update-", 0), 0u) << "left behind: " << e.path();
+        if (validBlocksFile(name)) EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
+    }
 }
 
 // A scan whose points repeat the set's exactly (one file added twice,
@@ -369,7 +384,8 @@ TEST_F(UpdateTest, RemovingTheAddedScanGivesBackTheSetBefore) {
     std::map<NodeKey, std::pair<uint32_t, uint32_t>> blocks;
     uint64_t live = 0;
     for (const NodeRecord& n : updated->nodes()) blocks[n.key] = {n.blockCrc, n.blockSize}, live += n.blockSize;
-    ASSERT_GT(fs::file_size(set() + "/blocks.bin"), live) << "two updates left no replaced blocks to reclaim";
+    ASSERT_GT(updated->info().blocksBytes, live) << "two updates left no replaced blocks to reclaim";
+    ASSERT_EQ(updated->info().blocksParts.size(), 3u) << "each update adds a block file";
     r = test::run({test::binary("surfcast-build"), "--compact", set()});
     ASSERT_EQ(r.exitCode, 0) << r.output;
     auto compacted = TilesetReader::open(set());
@@ -710,8 +726,9 @@ TEST_F(UpdateTest, KillAnywhereLeavesTheOldSetOrTheNewOne) {
         EXPECT_TRUE(verified) << "killed after " << at << " s: " << verified.status().message();
     }
     for (const auto& [what, n] : outcomes) std::printf("%s: %d\n", what.c_str(), n);
-    // An update after one killed half way (which leaves its folder and
-    // bytes past blocks.bytes) finishes, and leaves nothing of the other's.
+    // An update after one killed half way (which may leave its folder, and a
+    // block file and hierarchy that no version names) finishes, and leaves
+    // nothing of the other's.
     restore();
     test::Child child = test::spawn(update);
     std::this_thread::sleep_for(std::chrono::duration<double>(0.5 * seconds));
@@ -722,8 +739,15 @@ TEST_F(UpdateTest, KillAnywhereLeavesTheOldSetOrTheNewOne) {
     r = test::run(update);
     EXPECT_EQ(test::readFile(set() + "/tileset.json"), newJson);
     EXPECT_EQ(r.exitCode, 0) << r.output;
-    for (const auto& e : fs::directory_iterator(set()))
-        EXPECT_NE(e.path().filename().string().rfind(".update-", 0), 0u) << "left behind: " << e.path();
+    auto finished = TilesetReader::open(set());
+    ASSERT_TRUE(finished) << finished.status().message();
+    std::set<std::string> named;
+    for (const BlocksPart& p : blocksPartsOf(finished->info())) named.insert(p.file);
+    for (const auto& e : fs::directory_iterator(set())) {
+        const std::string name = e.path().filename().string();
+        EXPECT_NE(name.rfind(".update-", 0), 0u) << "left behind: " << e.path();
+        if (validBlocksFile(name)) EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
+    }
 }
 
 // Bad input during an update: the set's files stay as they were, and the

@@ -33,6 +33,7 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     if (!info) return info.status();
     s->tilesetJson_ = std::move(*json);
     s->info_ = *info;
+    s->source_->setBlocksLayout(BlocksLayout(blocksPartsOf(s->info_)));
     // hierarchy.bin's header and page table, then page 0.
     const std::string what = location + "/" + s->info_.hierarchyFile;
     const uint64_t indexBytes = kHierarchyHeaderSize + uint64_t(kPageEntrySize) * s->info_.hierarchyPages;

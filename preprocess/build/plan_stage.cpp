@@ -294,7 +294,8 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
     std::vector<double> weight;
     if (scene) weight.push_back(32.0 * double(inputs.scene.targetPoints));
     for (const std::string& path : inputs.paths) {
-        // A URL's asks its host; a tile set weighs as its blocks (set_reader.h).
+        // A URL's asks its host; a tile set weighs as its blocks.bin (set_reader.h;
+        // an updated set's other block files left out: the weight only balances parts).
         auto bytes = inputFileSize(isSetInput(path) ? (std::filesystem::path(path).parent_path() / "blocks.bin").string() : path);
         weight.push_back(bytes ? double(*bytes) + 1 : 1.0);  // unreadable: its reader names the error
     }

@@ -161,7 +161,7 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
 // it), builds the levels above the chunks and finishes `writer`. Fills the
 // summary's counts, steps, texture fit and phases "upper" and "write".
 // `kept`: an update's chunks taken as the set holds them (ChunkOutput's
-// records, placed in the set's blocks.bin, and its root decoded), by chunk
+// records, placed in the set's block files, and its root decoded), by chunk
 // index; the writer keeps their blocks in place (TilesetWriter::update).
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
                   TilesetWriter& writer, Progress& progress, BuildSummary* summary,

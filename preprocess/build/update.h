@@ -2,8 +2,8 @@
 // removed from a published set, rebuilding only the chunks the added or
 // removed points reach (their own points and their halos) and the levels
 // above the chunks. Every other node
-// keeps its block, its byte range and so its ETag; the new blocks are appended
-// to blocks.bin and the new hierarchy switched in with tileset.json.
+// keeps its block, its byte range and so its ETag; the new blocks go into a
+// block file of their own and the new hierarchy is switched in with tileset.json.
 #pragma once
 
 #include <string>

@@ -13,7 +13,9 @@
 namespace surfcast {
 
 std::string lowerExtension(const std::string& path) {
-    std::string ext = std::filesystem::path(path).extension().string();
+    // A URL's query (a presigned URL's, shown as "?…") is not the file's name.
+    const bool url = path.find("://") != std::string::npos;
+    std::string ext = std::filesystem::path(url ? path.substr(0, path.find_first_of("?#")) : path).extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
     return ext;
 }

@@ -151,7 +151,8 @@ private:
 bool isSetInput(const std::string& path) { return std::filesystem::path(path).filename() == "tileset.json"; }
 
 std::string inputName(const std::string& path) {
-    const std::filesystem::path p(path);
+    const bool url = path.find("://") != std::string::npos;  // its query is not the file's name
+    const std::filesystem::path p(url ? path.substr(0, path.find_first_of("?#")) : path);
     return (isSetInput(path) ? p.parent_path().filename() : p.filename()).string();
 }
 

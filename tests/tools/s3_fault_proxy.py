@@ -2,7 +2,7 @@
 """A proxy in front of an S3 store that fails a share of the requests, for the
 object-store fault tests (tests/store_test.cpp).
 
-Usage: s3_fault_proxy.py PORT UPSTREAM_PORT SHARE SEED COUNTS_FILE
+Usage: s3_fault_proxy.py PORT UPSTREAM_PORT SHARE SEED COUNTS_FILE [METHODS]
 
 Listens on loopback PORT and says "listening" on stderr when it does. Each
 request is, with probability SHARE, answered with one fault, drawn evenly:
@@ -10,12 +10,15 @@ request is, with probability SHARE, answered with one fault, drawn evenly:
   error     500 InternalError, after the store has answered it (applied);
   reset     the connection reset, after the store has answered it (applied).
 Every other request goes to the store unchanged (its Host header included,
-which the signature covers) and its answer comes back. COUNTS_FILE gets one
-line per fault kind with how many were made, rewritten after each.
+which the signature covers) and its answer comes back, as do requests of
+methods not in METHODS (a comma-separated list; default: every method).
+COUNTS_FILE gets the count of each fault kind and of the requests forwarded,
+as JSON, rewritten after each request.
 """
 import http.client
 import http.server
 import json
+import os
 import random
 import socket
 import socketserver
@@ -28,23 +31,30 @@ UPSTREAM = int(sys.argv[2])
 SHARE = float(sys.argv[3])
 RANDOM = random.Random(int(sys.argv[4]))
 COUNTS_FILE = sys.argv[5]
+METHODS = set(sys.argv[6].split(",")) if len(sys.argv) > 6 else None
 COUNTS = {"slowdown": 0, "error": 0, "reset": 0, "forwarded": 0}
 LOCK = threading.Lock()
 HOP = {"connection", "keep-alive", "transfer-encoding", "te", "trailer", "upgrade", "proxy-connection"}
 ERROR = b'<?xml version="1.0" encoding="UTF-8"?><Error><Code>%s</Code><Message>injected by the fault proxy</Message></Error>'
 
 
-def draw():
+def draw(method):
     with LOCK:
-        if RANDOM.random() >= SHARE:
+        if (METHODS is not None and method not in METHODS) or RANDOM.random() >= SHARE:
             COUNTS["forwarded"] += 1
             kind = None
         else:
             kind = RANDOM.choice(["slowdown", "error", "reset"])
             COUNTS[kind] += 1
-        with open(COUNTS_FILE, "w") as f:
-            json.dump(COUNTS, f)
+        save()
     return kind
+
+
+def save():
+    """Rewrites COUNTS_FILE whole (a reader never sees half of it)."""
+    with open(COUNTS_FILE + ".partial", "w") as f:
+        json.dump(COUNTS, f)
+    os.replace(COUNTS_FILE + ".partial", COUNTS_FILE)
 
 
 class Handler(http.server.BaseHTTPRequestHandler):
@@ -66,7 +76,7 @@ class Handler(http.server.BaseHTTPRequestHandler):
     def forward(self):
         length = int(self.headers.get("Content-Length", 0) or 0)
         body = self.rfile.read(length) if length else None
-        kind = draw()
+        kind = draw(self.command)
         if kind == "slowdown":
             self.answer(503, ERROR % b"SlowDown", [("Content-Type", "application/xml")])
             return
@@ -94,5 +104,6 @@ class Server(socketserver.ThreadingMixIn, http.server.HTTPServer):
 
 
 server = Server(("127.0.0.1", PORT), Handler)
+save()
 print("listening", file=sys.stderr, flush=True)
 server.serve_forever()

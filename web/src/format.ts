@@ -38,6 +38,9 @@ export interface TilesetInfo {
   hierarchyPages: number;
   hierarchyCrc: number;
   blocksBytes: number;
+  // The files the blocks lie in, in order: a node's block offset is into
+  // their concatenation (FORMAT.md, "blocks.bin"); blocks.bin alone before version 3.
+  blocksParts: { file: string; bytes: number }[];
   statistics: {
     elevationMin: number;
     elevationMax: number;
@@ -56,7 +59,8 @@ export const kMaxTilesetJsonBytes = 16 << 20;
 export const kMaxBlockPoints = 4_194_304;
 export const kMaxLevel = 20;
 export const kMaxPositionBits = 30; // common/tileset_format.h
-const kOldestFormatVersion = 1, kFormatVersion = 2;
+const kOldestFormatVersion = 1, kFormatVersion = 3;
+const kMaxBlocksParts = 65536; // common/tileset_format.h
 
 export class FormatError extends Error {}
 
@@ -215,8 +219,47 @@ function readFields(j: Json): TilesetInfo {
   const blocks = object(j, "", "blocks");
   const blocksBytes = integer(blocks, "blocks", "bytes", 0, kU64);
   if (text(blocks, "blocks", "codec") !== "draco") throw new FormatError(`blocks.codec: not "draco"`);
+  if (Object.hasOwn(blocks, "parts") !== (version >= 3))
+    throw new FormatError(version >= 3 ? "blocks.parts: missing (version 3 lists the blocks' files)" : "blocks.parts: only in version 3");
+  let blocksParts = [{ file: "blocks.bin", bytes: blocksBytes }];
+  if (version >= 3) {
+    const parts = blocks.parts;
+    if (!Array.isArray(parts)) throw new FormatError("blocks.parts: not an array");
+    if (parts.length === 0 || parts.length > kMaxBlocksParts)
+      throw new FormatError(`blocks.parts: ${parts.length} files, not 1 to ${kMaxBlocksParts}`);
+    blocksParts = [];
+    const files = new Set<string>();
+    let sum = 0;
+    parts.forEach((p: unknown, i: number) => {
+      const at = `blocks.parts[${i}]`;
+      if (!isObject(p)) throw new FormatError(`${at}: not an object`);
+      const part = p as Json;
+      const file = text(part, at, "file");
+      const bytes = integer(part, at, "bytes", 0, kU64);
+      if (!/^blocks(-[0-9a-f]{8})?\.bin$/.test(file)) throw new FormatError(`${at}.file: '${file}' is not blocks.bin or blocks-XXXXXXXX.bin`);
+      if (files.has(file)) throw new FormatError(`${at}.file: '${file}' listed twice`);
+      files.add(file);
+      if (bytes === 0) throw new FormatError(`${at}.bytes: 0, or past 2^64 in all`);
+      sum += bytes;
+      blocksParts.push({ file, bytes });
+    });
+    if (sum !== blocksBytes) throw new FormatError(`blocks.parts: the files' bytes add up to ${sum}, not blocks.bytes ${blocksBytes}`);
+  }
   return { version, rootMin, rootEdge, boundsMin, boundsMax, levels, grid, nodes, surfels, colorBits, attributes, weights,
-           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, statistics };
+           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, blocksParts, statistics };
+}
+
+// The file holding a node's block and the offset there (common/tileset_format.h's placeBlock).
+export function placeBlock(parts: { file: string; bytes: number }[], offset: number, size: number): { file: string; offset: number } {
+  let start = 0;
+  for (const p of parts) {
+    if (offset < start + p.bytes) {
+      if (size > start + p.bytes - offset) throw new FormatError(`${size} bytes at ${offset} cross the end of ${p.file}`);
+      return { file: p.file, offset: offset - start };
+    }
+    start += p.bytes;
+  }
+  throw new FormatError(`${size} bytes at ${offset} lie past the blocks' ${start} bytes`);
 }
 
 export function attribute(info: TilesetInfo, name: string): AttributeInfo | undefined {

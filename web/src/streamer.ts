@@ -18,7 +18,7 @@
 import type { Camera } from "./camera.js";
 import type { ColoringSpec, DecodeJob, DecodeResult, PickedSurfel } from "./block_decode.js";
 import { attribute, FormatError, indexBytes, kFixedAttributes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
-         type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, readHierarchyIndex, readHierarchyPage,
+         type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, placeBlock, readHierarchyIndex, readHierarchyPage,
          type TilesetInfo, type Vec3 } from "./format.js";
 import { emptyStats, type LodParams, LodSelector, type LodStats, residentBytes, type SelectedNode } from "./lod_selection.js";
 import { HttpError, TileSource } from "./source.js";
@@ -243,6 +243,12 @@ export class Streamer<T> {
     this.stats.keptBytes = kept;
   }
 
+  // A node's block, from the file of the set that holds it.
+  private async blockRange(n: NodeRecord): Promise<Uint8Array> {
+    const place = placeBlock(this.info.blocksParts, n.blockOffset, n.blockSize);
+    return this.source.range(place.file, place.offset, n.blockSize);
+  }
+
   private fetchPage(node: number) {
     const record = this.selector.nodes[node];
     const page = record.childPage;
@@ -283,7 +289,7 @@ export class Streamer<T> {
       ++this.requestsInFlight;
       const records = group.map((i) => this.selector.nodes[i]);
       const request = group.length > 1 ? this.source.blobs(records)
-        : this.source.range("blocks.bin", records[0].blockOffset, records[0].blockSize).then((b) => [b]);
+        : this.blockRange(records[0]).then((b) => [b]);
       // The connection is free once the bytes are in; decoding goes on in the workers.
       let open = true;
       const release = () => {
@@ -419,7 +425,7 @@ export class Streamer<T> {
       if (group.length === 0) continue;
       const records = group.map((i) => this.selector.nodes[i]);
       const attempt = () => group.length > 1 ? this.source.blobs(records)
-        : this.source.range("blocks.bin", records[0].blockOffset, records[0].blockSize).then((b) => [b]);
+        : this.blockRange(records[0]).then((b) => [b]);
       ++this.requestsInFlight;
       withRetries(this.options.maxTries, attempt, () => this.stats.gaveUp)
         .then((blobs) => {
@@ -467,7 +473,7 @@ export class Streamer<T> {
     const r = this.resident.get(i);
     if (!r || this.recoloring.has(i)) return null;
     const n = this.selector.nodes[i];
-    const block = r.block ?? await this.source.range("blocks.bin", n.blockOffset, n.blockSize);
+    const block = r.block ?? await this.blockRange(n);
     const result = await this.decoders.decode({ ...this.job(i, block), pick: k });
     if (result.error) throw new Error(`node ${n.key}: ${result.error}`);
     return result.picked ?? null;

@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""Object storage: build_bench's 10 M-point LAS built into an S3 store against
+into a folder, side by side in one run, with the requests and bytes each way.
+
+A real S3 server, SeaweedFS (`weed mini`, scripts/install-seaweedfs.sh), runs
+on loopback in a scratch folder. Three ways, alternated `--reps` times:
+
+  folder  the LAS from the local disk, the set into a folder (the anchor);
+  put     the LAS from the local disk, the set published to s3://bench/...;
+  s3      the LAS read from the bucket by ranges, the set published to it.
+
+The requests of the s3 way are counted by tests/tools/s3_fault_proxy.py with
+no faults, in a run of their own (the proxy is Python: it is not timed).
+Prints Markdown for bench/BENCHMARKS.md, "Object storage".
+
+Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/store_bench.py [--reps 2] [--threads N]
+"""
+import argparse
+import json
+import os
+import platform
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from build_bench import ROOT, DATA, BIN, tiled_las  # noqa: E402
+
+WEED = os.path.join(ROOT, "build", "seaweedfs", "weed")
+PORT, PROXY = 18433, 18434
+KEY, SECRET = "benchkey", "benchsecret"
+
+
+def start_store(work):
+    config = os.path.join(work, "s3.json")
+    with open(config, "w") as f:
+        json.dump({"identities": [{"name": "bench", "credentials": [{"accessKey": KEY, "secretKey": SECRET}],
+                                   "actions": ["Admin", "Read", "Write", "List"]}]}, f)
+    os.makedirs(os.path.join(work, "data"))
+    ports = {"-s3.port": PORT, "-s3.port.iceberg": 18481, "-master.port": 19433, "-volume.port": 18480, "-filer.port": 18488,
+             "-admin.port": 18446, "-webdav.port": 18400, "-debug.port": 18460, "-s3.metricsPort": 19401}
+    cmd = [WEED, "mini", "-dir=" + os.path.join(work, "data"), "-ip=127.0.0.1", "-ip.bind=127.0.0.1", "-s3.config=" + config,
+           "-bucket=bench", "-admin.port.legacy=0"] + [f"{k}={v}" for k, v in ports.items()]
+    log = open(os.path.join(work, "weed.log"), "w")
+    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+    for _ in range(300):
+        try:
+            urllib.request.urlopen(f"http://127.0.0.1:{PORT}/", timeout=1)
+        except urllib.error.HTTPError:
+            break  # an answer (403 to an unsigned request): it is up
+        except OSError:
+            time.sleep(0.1)
+    time.sleep(2)  # the filer behind the S3 port
+    return proc
+
+
+def build(args, env, log):
+    t0 = time.time()
+    out = subprocess.run([os.path.join(BIN, "surfcast-build"), "-q", *args], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    wall = time.time() - t0
+    if out.returncode != 0:
+        sys.exit(f"surfcast-build {' '.join(args)} failed:\n{out.stdout[-3000:]}")
+    log.append(out.stdout)
+    return wall, out.stdout
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--reps", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=os.cpu_count())
+    a = ap.parse_args()
+    if not os.path.exists(WEED):
+        sys.exit(f"{WEED} is missing: scripts/install-seaweedfs.sh builds it")
+    with tempfile.TemporaryDirectory(prefix="store-bench-") as work:
+        las = os.path.join(work, "lion_6x5.las")
+        points = tiled_las(os.path.join(DATA, "lion_takanawa.copc.laz"), 6, 5, las)
+        weed = start_store(work)
+        env = dict(os.environ, AWS_ENDPOINT_URL=f"http://127.0.0.1:{PORT}", AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=SECRET,
+                   AWS_REGION="us-east-1")
+        try:
+            log = []
+            common = ["--threads", str(a.threads), "--memory", "2G"]
+            # The input in the bucket: uploaded once, by a tiny export-free path
+            # (a build's publisher would need a set): curl's own SigV4.
+            subprocess.run(["curl", "-sf", "--aws-sigv4", "aws:amz:us-east-1:s3", "--user", f"{KEY}:{SECRET}",
+                            "-H", "x-amz-content-sha256: UNSIGNED-PAYLOAD", "-T", las,
+                            f"http://127.0.0.1:{PORT}/bench/in/lion_6x5.las"], check=True)
+            times = {"folder": [], "put": [], "s3": []}
+            published = {}
+            for rep in range(a.reps):
+                for way in times:
+                    out = os.path.join(work, f"set-{way}-{rep}")
+                    source = f"s3://bench/in/lion_6x5.las" if way == "s3" else las
+                    target = out if way == "folder" else f"s3://bench/sets/{way}-{rep}"
+                    wall, stdout = build([source, "-o", target, *common], env, log)
+                    times[way].append(wall)
+                    m = re.search(r"wrote s3://\S+ \((\d+) objects, (\d+) bytes, (\d+) requests\)", stdout)
+                    if m:
+                        published[way] = tuple(int(g) for g in m.groups())
+            # The s3 way's requests, through the counting proxy.
+            counts = os.path.join(work, "counts.json")
+            proxy = subprocess.Popen([sys.executable, os.path.join(ROOT, "tests", "tools", "s3_fault_proxy.py"), str(PROXY), str(PORT),
+                                      "0", "1", counts], stderr=subprocess.PIPE, text=True)
+            proxy.stderr.readline()
+            build(["s3://bench/in/lion_6x5.las", "-o", "s3://bench/sets/counted", *common],
+                  dict(env, AWS_ENDPOINT_URL=f"http://127.0.0.1:{PROXY}"), log)
+            proxy.terminate()
+            proxy.wait()
+            requests = json.load(open(counts))["forwarded"]
+        finally:
+            weed.terminate()
+            weed.wait()
+    best = {way: min(t) for way, t in times.items()}
+    las_bytes = points * 36  # LAS 1.4 format 7: 36 bytes a record
+    objects, set_bytes, publish_requests = published["s3"]
+    print(f"Machine: {platform.node()}, {os.cpu_count()} cores; {points:,} points; {a.reps} runs of each way, alternated; best of each.\n")
+    print("| way | best s | runs (s) | speed vs folder |")
+    print("|---|---|---|---|")
+    for way, label in (("folder", "LAS from disk → folder (anchor)"), ("put", "LAS from disk → s3:// set"),
+                       ("s3", "LAS from s3:// → s3:// set")):
+        print(f"| {label} | {best[way]:.1f} | {', '.join(f'{t:.1f}' for t in times[way])} | {best['folder'] / best[way]:.2f}× |")
+    print(f"\nRequests of the s3 way: {requests} in all, {publish_requests} of them publishing {objects} objects "
+          f"({set_bytes:,} bytes); reading the {las_bytes / 2**20:.0f} MiB LAS took the other {requests - publish_requests}.")
+
+
+if __name__ == "__main__":
+    main()
