@@ -534,7 +534,9 @@ Result<std::optional<ObjectInfo>> ObjectStore::put(const S3Url& object, const st
     if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) {
         // Lost to another writer, or to this one's own earlier try.
         if (applied) {
+            // Longer than these bytes, or gone: not this write's.
             auto now = get(object, bytes.size());
+            if (!now && now.status().isTransient()) return now.status();
             if (now && *now == bytes) return head(object);
         }
         return std::optional<ObjectInfo>();

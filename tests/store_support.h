@@ -6,7 +6,7 @@
 #pragma once
 
 #include <signal.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <fcntl.h>
 #include <unistd.h>
@@ -89,13 +89,20 @@ private:
         std::vector<char*> argv;
         for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
         argv.push_back(nullptr);
-        posix_spawn_file_actions_t actions;
-        posix_spawn_file_actions_init(&actions);
-        posix_spawn_file_actions_addopen(&actions, 1, logPath_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        posix_spawn_file_actions_adddup2(&actions, 1, 2);
-        const int rc = posix_spawn(&pid_, weed.c_str(), &actions, nullptr, argv.data(), environ);
-        posix_spawn_file_actions_destroy(&actions);
-        ASSERT_EQ(rc, 0) << "cannot start " << weed;
+        const int log = ::open(logPath_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        ASSERT_GE(log, 0) << logPath_;
+        pid_ = ::fork();
+        if (pid_ == 0) {
+            // It dies with the test program, however that ends: a store left
+            // running would hold the ports the next test program needs.
+            ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+            ::dup2(log, 1);
+            ::dup2(log, 2);
+            ::execv(weed.c_str(), argv.data());
+            ::_exit(127);
+        }
+        ::close(log);
+        ASSERT_GT(pid_, 0) << "cannot start " << weed;
         // Ready when the bucket answers a listing (the S3 port opens before
         // the filer behind it is up).
         auto s = store();

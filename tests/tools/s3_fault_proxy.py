@@ -15,6 +15,7 @@ methods not in METHODS (a comma-separated list; default: every method).
 COUNTS_FILE gets the count of each fault kind and of the requests forwarded,
 as JSON, rewritten after each request.
 """
+import ctypes
 import http.client
 import http.server
 import json
@@ -103,6 +104,9 @@ class Server(socketserver.ThreadingMixIn, http.server.HTTPServer):
     daemon_threads = True
 
 
+# It dies with the test that started it (PR_SET_PDEATHSIG, SIGKILL), however
+# that ends: a proxy left running would hold the port the next test needs.
+ctypes.CDLL("libc.so.6").prctl(1, 9)
 server = Server(("127.0.0.1", PORT), Handler)
 save()
 print("listening", file=sys.stderr, flush=True)
