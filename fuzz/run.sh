@@ -42,7 +42,7 @@ fi
 build/test-venv/bin/python fuzz/make_seeds.py "$data" "$work/sets" "$work/seeds"
 export SURFCAST_FUZZ_SETS="$PWD/$work/sets"
 
-targets=(read_ply read_las read_laz read_e57 read_pcd read_xyz read_obj read_gltf read_glb tileset block range http_request client_response)
+targets=(read_ply read_las read_laz read_e57 read_pcd read_xyz read_obj read_gltf read_glb tileset block range http_request client_response s3_xml)
 corpora() {  # the seed folders a target reads, existing ones only
   for d in "$work/seeds/$1" "fuzz/seeds/$1" "fuzz/regressions/$1"; do [ -d "$d" ] && echo "$d"; done
 }

@@ -15,6 +15,7 @@
 #include <random>
 #include <thread>
 
+#include "s3_xml.h"
 #include "sigpipe.h"
 #include "transfer_errors.h"
 
@@ -86,43 +87,6 @@ std::string uriEncode(const std::string& s, bool keepSlash) {
             out += hex[c >> 4];
             out += hex[c & 15];
         }
-    }
-    return out;
-}
-
-// The text of the first <tag>…</tag> at or after `from`, XML entities
-// decoded unless `raw` (an element holding others); nullopt where there is
-// none. `from` moves past it.
-std::optional<std::string> xmlTag(const std::string& xml, const std::string& tag, size_t* from = nullptr, bool raw = false) {
-    const std::string open = "<" + tag + ">", close = "</" + tag + ">";
-    const size_t start = xml.find(open, from ? *from : 0);
-    if (start == std::string::npos) return std::nullopt;
-    const size_t end = xml.find(close, start + open.size());
-    if (end == std::string::npos) return std::nullopt;
-    if (from) *from = end + close.size();
-    const std::string text = xml.substr(start + open.size(), end - start - open.size());
-    if (raw) return text;
-    std::string out;
-    for (size_t i = 0; i < text.size(); ++i) {
-        if (text[i] != '&') {
-            out += text[i];
-            continue;
-        }
-        const size_t semi = text.find(';', i);
-        if (semi == std::string::npos) return std::nullopt;
-        const std::string entity = text.substr(i + 1, semi - i - 1);
-        static const std::map<std::string, char> named = {{"amp", '&'}, {"lt", '<'}, {"gt", '>'}, {"quot", '"'}, {"apos", '\''}};
-        if (auto it = named.find(entity); it != named.end()) {
-            out += it->second;
-        } else if (entity.size() > 1 && entity[0] == '#') {
-            const bool isHex = entity[1] == 'x';
-            const unsigned long code = std::strtoul(entity.c_str() + (isHex ? 2 : 1), nullptr, isHex ? 16 : 10);
-            if (code == 0 || code > 0x7f) return std::nullopt;  // S3 escapes control characters only
-            out += char(code);
-        } else {
-            return std::nullopt;
-        }
-        i = semi;
     }
     return out;
 }
@@ -420,7 +384,7 @@ struct ObjectStore::Impl {
     // " NoSuchBucket (The specified bucket does not exist)" from an error body.
     static std::string describe(const Response& response) {
         const std::string xml(response.body.begin(), response.body.end());
-        const auto code = xmlTag(xml, "Code"), message = xmlTag(xml, "Message");
+        const auto code = xmlElement(xml, "Code"), message = xmlElement(xml, "Message");
         std::string out;
         if (code) out += " " + *code;
         if (message && !message->empty()) out += " (" + *message + ")";
@@ -585,7 +549,7 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
     auto started = impl_->send(object, start);
     if (!started) return started.status();
     if (started->status != 200) return Impl::failure(object, *started, "start a multipart upload");
-    const auto uploadId = xmlTag(std::string(started->body.begin(), started->body.end()), "UploadId");
+    const auto uploadId = xmlElement(std::string(started->body.begin(), started->body.end()), "UploadId");
     if (!uploadId || uploadId->empty()) return Status::error(object.str() + ": the store's answer to a multipart upload has no UploadId");
     const std::string id = uriEncode(*uploadId, false);
     auto abort = [&](Status why) -> Status {
@@ -637,7 +601,7 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
     const std::string answer(done->body.begin(), done->body.end());
     if (done->status != 200 || answer.find("<Error>") != std::string::npos)
         return abort(Impl::failure(object, *done, "complete a multipart upload"));
-    const auto etag = xmlTag(answer, "ETag");
+    const auto etag = xmlElement(answer, "ETag");
     return std::optional(ObjectInfo{size, etag ? *etag : std::string()});
 }
 
@@ -689,18 +653,12 @@ Result<std::vector<ListedObject>> ObjectStore::list(const S3Url& prefix) {
         auto response = impl_->send(bucket, r);
         if (!response) return response.status();
         if (response->status != 200) return Impl::failure(prefix, *response, "LIST");
-        const std::string xml(response->body.begin(), response->body.end());
-        size_t at = 0;
-        while (auto contents = xmlTag(xml, "Contents", &at, true)) {
-            const auto key = xmlTag(*contents, "Key"), size = xmlTag(*contents, "Size"), etag = xmlTag(*contents, "ETag");
-            if (!key || !size) return Status::error(prefix.str() + ": LIST: an entry without Key or Size");
-            out.push_back({*key, std::strtoull(size->c_str(), nullptr, 10), etag ? *etag : std::string()});
-        }
-        const auto truncated = xmlTag(xml, "IsTruncated");
-        const std::string last = token;
-        token = truncated && *truncated == "true" ? xmlTag(xml, "NextContinuationToken").value_or("") : "";
-        if (truncated && *truncated == "true" && (token.empty() || token == last))
+        auto page = parseListPage(std::string(response->body.begin(), response->body.end()));
+        if (!page) return Status::error(prefix.str() + ": LIST: " + page.status().message());
+        out.insert(out.end(), page->objects.begin(), page->objects.end());
+        if (page->truncated && (page->next.empty() || page->next == token))
             return Status::error(prefix.str() + ": LIST: truncated, without a new continuation token (a broken store would list forever)");
+        token = page->truncated ? page->next : "";
     } while (!token.empty());
     std::sort(out.begin(), out.end(), [](const ListedObject& a, const ListedObject& b) { return a.key < b.key; });
     return out;

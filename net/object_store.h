@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "s3_xml.h"
 #include "status.h"
 
 namespace surfcast {
@@ -52,11 +53,6 @@ std::string s3EncodeKey(const std::string& key);
 struct ObjectInfo {
     uint64_t size = 0;
     std::string etag;  // as the store quotes it, "\"…\""
-};
-struct ListedObject {
-    std::string key;
-    uint64_t size = 0;
-    std::string etag;
 };
 
 // A write's precondition (If-None-Match: * or If-Match: ETAG): stores that

@@ -231,6 +231,25 @@ TEST(ObjectStore, RefusalsFailAtOnceNamingBucketAndKeyNeverTheSecret) {
     EXPECT_EQ(store->counts().retries, 0u);
 }
 
+// A listing page as S3 writes it: entities decoded, sizes checked, the next
+// page's token; and pages a broken store might send, refused.
+TEST(ObjectStore, ListPagesAreReadStrictly) {
+    auto page = parseListPage("<ListBucketResult><IsTruncated>true</IsTruncated><NextContinuationToken>t1</NextContinuationToken>"
+                              "<Contents><Key>a&amp;b&#x3C;.bin</Key><ETag>&quot;x&quot;</ETag><Size>18446744073709551615</Size></Contents>"
+                              "<Contents><Key>c</Key><Size>0</Size></Contents></ListBucketResult>");
+    ASSERT_TRUE(page.ok()) << page.status().message();
+    ASSERT_EQ(page->objects.size(), 2u);
+    EXPECT_EQ(page->objects[0].key, "a&b<.bin");
+    EXPECT_EQ(page->objects[0].etag, "\"x\"");
+    EXPECT_EQ(page->objects[0].size, 18446744073709551615ull);
+    EXPECT_TRUE(page->truncated);
+    EXPECT_EQ(page->next, "t1");
+    for (const char* bad : {"<Contents><Size>1</Size></Contents>", "<Contents><Key>k</Key><Size>-1</Size></Contents>",
+                            "<Contents><Key>k</Key><Size>18446744073709551616</Size></Contents>",
+                            "<Contents><Key>k&bogus;</Key><Size>1</Size></Contents>", "<Contents><Key>k&#300;</Key><Size>1</Size></Contents>"})
+        EXPECT_FALSE(parseListPage(bad).ok()) << bad;
+}
+
 TEST(ObjectStore, UrlsAreParsedStrictly) {
     auto ok = parseS3Url("s3://my.bucket-1/sets/a b/");
     ASSERT_TRUE(ok.ok());
