@@ -353,12 +353,8 @@ struct ObjectStore::Impl {
         return response;
     }
 
-    // A request with its retries; a response of any status but a transient
-    // one. `applied`: set where a failed try may have taken effect at the
-    // store all the same (a reset or timeout, a 500, 502 or 504: not a 503
-    // SlowDown or 429, which S3 sends before it acts), so that a write's
-    // later "412" may be its own earlier try.
-    Result<Response> send(const S3Url& object, const Request& r, bool* applied = nullptr) {
+    // A request with its retries; a response of any status but a transient one.
+    Result<Response> send(const S3Url& object, const Request& r) {
         thread_local std::minstd_rand random(std::random_device{}());
         for (int attempt = 0;; ++attempt) {
             Response response = once(object, r);
@@ -372,7 +368,6 @@ struct ObjectStore::Impl {
                 fault = "HTTP " + std::to_string(response.status) + describe(response);
             }
             if (fault.empty()) return response;
-            if (applied && response.status != 503 && response.status != 429) *applied = true;
             if (attempt == kStoreRetries)
                 return Status::transient(object.str() + ": " + fault + " (" + std::to_string(kStoreRetries + 1) + " tries)");
             retries += 1;
@@ -492,17 +487,18 @@ Result<std::optional<ObjectInfo>> ObjectStore::put(const S3Url& object, const st
     r.body = bytes.data();
     r.bodySize = bytes.size();
     r.hasBody = true;
-    bool applied = false;
-    auto response = impl_->send(object, r, &applied);
+    auto response = impl_->send(object, r);
     if (!response) return response.status();
     if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) {
-        // Lost to another writer, or to this one's own earlier try.
-        if (applied) {
-            // Longer than these bytes, or gone: not this write's.
-            auto now = get(object, bytes.size());
-            if (!now && now.status().isTransient()) return now.status();
-            if (now && *now == bytes) return head(object);
-        }
+        // Lost to another writer, or to this one's own earlier try: one this
+        // client saw fail, or one libcurl sent again unseen (a reused
+        // connection that died before the answer). Longer than these bytes,
+        // or gone: not this write's.
+        auto now = get(object, bytes.size());
+        if (now && *now == bytes) return head(object);
+        const std::string why = now ? std::string() : now.status().message();
+        if (!now && (now.status().isTransient() || (why.find("longer than") == std::string::npos && why.find("HTTP 404") == std::string::npos)))
+            return now.status();
         return std::optional<ObjectInfo>();
     }
     if (response->status != 200) return Impl::failure(object, *response, "PUT");
@@ -524,15 +520,13 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
         r.method = "PUT";
         r.headers = conditionHeaders(condition);
         r.bodySize = size;
-        bool applied = false;
-        auto response = impl_->send(object, r, &applied);
+        auto response = impl_->send(object, r);
         if (!response) return response.status();
         if (conditionFailed(response->status) && (condition.ifAbsent || !condition.ifMatch.empty())) {
-            if (applied) {
-                auto same = sameAsFile(object, file.get(), size);
-                if (!same) return same.status();
-                if (*same) return head(object);
-            }
+            // As in put(): this write's own earlier try, seen or not?
+            auto same = sameAsFile(object, file.get(), size);
+            if (!same) return same.status();
+            if (*same) return head(object);
             return std::optional<ObjectInfo>();
         }
         if (response->status != 200) return Impl::failure(object, *response, "PUT");
@@ -582,13 +576,12 @@ Result<std::optional<ObjectInfo>> ObjectStore::putFile(const S3Url& object, cons
     c.bodySize = complete.size();
     c.hasBody = true;
     c.maxBytes = kMaxListPage;
-    bool applied = false;
-    auto done = impl_->send(object, c, &applied);
+    auto done = impl_->send(object, c);
     if (!done) return abort(done.status());
-    // A completion retried after it took effect finds the upload gone
-    // (NoSuchUpload) or, conditional, the object there: its own, where the
-    // object holds the file's bytes.
-    if (applied && (done->status == 404 || conditionFailed(done->status))) {
+    // A completion tried again after it took effect (by this client, or by
+    // libcurl unseen) finds the upload gone (NoSuchUpload) or, conditional,
+    // the object there: its own, where the object holds the file's bytes.
+    if (done->status == 404 || conditionFailed(done->status)) {
         auto same = sameAsFile(object, file.get(), size);
         if (!same) return abort(same.status());
         if (*same) return head(object);

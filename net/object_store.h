@@ -89,9 +89,10 @@ public:
     Result<std::optional<ObjectInfo>> head(const S3Url& object);
     // Writes an object whole. nullopt where the condition failed (412, or 409
     // for a concurrent conditional write); the object is then untouched. A
-    // write whose earlier try may have taken effect (its answer lost) and
-    // that then finds the condition failed reads the object back: holding
-    // these bytes, it was this write's own.
+    // write refused by its condition reads the object back first: an earlier
+    // try of its own may have taken effect with its answer lost (a reset, a
+    // 500, or libcurl's own unseen resend on a reused connection), and an
+    // object holding these bytes is taken as this write's.
     Result<std::optional<ObjectInfo>> put(const S3Url& object, const std::vector<uint8_t>& bytes, const WriteCondition& condition = {});
     // The file at `path` as an object: one PUT up to `threshold`, else a
     // multipart upload in parts of `partBytes` (aborted where it fails).

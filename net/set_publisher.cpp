@@ -1,11 +1,13 @@
 #include "set_publisher.h"
 
-#include <signal.h>
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <vector>
 
@@ -51,7 +53,10 @@ Result<PublishReport> publishFolder(const std::string& folder, const std::string
     // goes. (Another publisher of the very same bytes, racing for the same
     // prefix and meeting lost answers, could take one of these for its own:
     // the one case where a set could lose a file.)
+    bool lastInDoubt = false;  // tileset.json's PUT failed in a way the store may still take it
     auto undo = [&](Status why) -> Status {
+        if (lastInDoubt)
+            return Status::error(why.message() + "; the store may take " + json.str() + " yet (an answer lost in flight): the objects written stay");
         auto stands = (*store)->head(json);
         if (!stands)
             return Status::error(why.message() + "; whether " + json.str() + " stands could not be asked (" + stands.status().message() +
@@ -75,6 +80,8 @@ Result<PublishReport> publishFolder(const std::string& folder, const std::string
                 put = Result<std::optional<ObjectInfo>>(std::optional(ObjectInfo{std::filesystem::file_size(path), ""}));
             else if (mine && *mine)
                 written.push_back(object);
+            else if (file == last && put.status().isTransient())
+                lastInDoubt = true;  // a refusal (403) is final; a fault may have reached the store
         }
         if (!put) return undo(put.status());
         if (!put->has_value())
@@ -94,22 +101,27 @@ Result<std::unique_ptr<PublishStaging>> PublishStaging::create() {
     const fs::path temp = fs::temp_directory_path(ec);
     if (ec) return Status::error("no folder for temporary files ($TMPDIR): " + ec.message());
     for (const auto& e : fs::directory_iterator(temp, ec)) {
-        const std::string name = e.path().filename().string();
-        if (name.rfind(kPrefix, 0) != 0) continue;
-        const long pid = std::strtol(name.c_str() + std::char_traits<char>::length(kPrefix), nullptr, 10);
+        if (e.path().filename().string().rfind(kPrefix, 0) != 0) continue;
+        const int fd = ::open(e.path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC | O_NOFOLLOW);
+        if (fd < 0) continue;
         std::error_code ignored;
-        if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ignored);
+        if (::flock(fd, LOCK_EX | LOCK_NB) == 0) fs::remove_all(e.path(), ignored);  // its process is gone
+        ::close(fd);
     }
+    std::string pattern = (temp / (std::string(kPrefix) + "XXXXXX")).string();
+    if (!::mkdtemp(pattern.data())) return Status::error(pattern + ": cannot create the folder written before the upload (" + std::strerror(errno) + ")");
     auto staging = std::unique_ptr<PublishStaging>(new PublishStaging);
-    staging->dir_ = (temp / (kPrefix + std::to_string(::getpid()))).string();
-    fs::create_directories(staging->dir_, ec);
-    if (ec) return Status::error(staging->dir_ + ": cannot create the folder written before the upload (" + ec.message() + ")");
+    staging->dir_ = pattern;
+    staging->lock_ = ::open(pattern.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (staging->lock_ < 0 || ::flock(staging->lock_, LOCK_EX | LOCK_NB) != 0)
+        return Status::error(pattern + ": cannot lock (" + std::strerror(errno) + ")");
     return staging;
 }
 
 PublishStaging::~PublishStaging() {
     std::error_code ec;
     if (!dir_.empty()) std::filesystem::remove_all(dir_, ec);
+    if (lock_ >= 0) ::close(lock_);
 }
 
 }  // namespace surfcast

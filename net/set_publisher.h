@@ -26,12 +26,14 @@ struct PublishReport {
 // at most one wins. A publish that fails names the object and the store's
 // answer, and deletes what it wrote, unless a tileset.json stands at the
 // prefix by then (its own, whose answer was lost, or a racing publisher's,
-// whose set bears the same names) or the store cannot say whether one does.
+// whose set bears the same names), the store cannot say whether one does, or
+// its own tileset.json's upload failed in a way the store may yet take it.
 Result<PublishReport> publishFolder(const std::string& folder, const std::string& url, const std::string& last = "tileset.json");
 
-// The local folder a set or an export is written in before its upload:
-// $TMPDIR/surfcast-publish-PID, removed with this object. Those of killed
-// processes (whose PID no process has) are removed first.
+// The local folder a set or an export is written in before its upload: a
+// new $TMPDIR/surfcast-publish-XXXXXX, locked (flock) while this object
+// lives and removed with it. Those of killed processes, whose lock nobody
+// holds, are removed first.
 class PublishStaging {
 public:
     static Result<std::unique_ptr<PublishStaging>> create();
@@ -40,6 +42,7 @@ public:
 
 private:
     std::string dir_;
+    int lock_ = -1;
 };
 
 }  // namespace surfcast

@@ -124,10 +124,14 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             *o = args[++i];
             return true;
         };
+        // How to reach URL inputs is never in the plan: the stages that read
+        // inputs take it on their own command line.
+        const bool reach = a == "--header" || a == "--token-file" || a == "--ca-file" || a == "--insecure" || a == "--redirect-credentials";
         if (later && a != "--threads" && a != "-q" && a != "--quiet" && a != "--work" && a != "-h" && a != "--help" &&
-            !(stage == "distribute" && a == "--part") &&
+            !(stage == "distribute" && (a == "--part" || reach)) &&
             !(stage == "chunk" && !a.empty() && a[0] != '-'))
-            return usageError(stage + " takes --work DIR, --threads N and -q" + (stage == "chunk" ? std::string(" and chunk numbers") : "") +
+            return usageError(stage + " takes --work DIR, --threads N and -q" +
+                              (stage == "chunk" ? std::string(" and chunk numbers") : stage == "distribute" ? std::string(", --part P and how to reach URL inputs (--header, ...)") : "") +
                               "; the other options come from the plan (not " + a + ")");
         auto number = [&](double* out, double lo, double hi) {
             std::string v;

@@ -10,7 +10,7 @@ inline constexpr const char* kBuildUsage = R"(usage: surfcast-build [options] IN
        surfcast-build --info SET            (SET: a folder, an http(s) or s3:// URL)
        surfcast-build scan|count --work W --part P/N [options] INPUT... -o OUT
        surfcast-build plan --work W [--parts N] [options] INPUT... -o OUT
-       surfcast-build distribute --work W [--part P]
+       surfcast-build distribute --work W [--part P] [--header ...]
        surfcast-build chunk --work W I...
        surfcast-build merge --work W        (a build in stages: see below)
        surfcast-build update-plan --work W --add INPUT... | --remove NAME... | --replace OLD NEW  --to SET
@@ -127,7 +127,9 @@ and any grouping; merge writes the set at plan's -o, then removes the parts'
 and chunks' files from W. plan scans and counts the inputs itself, or, with
 --parts N, reduces what scan and count wrote for parts 0/N to N-1/N (runs of
 consecutive inputs of about equal bytes; count runs once every scan is done);
-distribute --part P then reads part P alone.
+distribute --part P then reads part P alone. How to reach URL inputs
+(--header, --token-file, --ca-file, --insecure) is never stored in the plan:
+give it to each stage that reads inputs (scan, count, plan, distribute).
 
 An update in stages: update-plan does all that precedes the chunks' builds
 (the scan and count of the added inputs, the removed points found, the set's

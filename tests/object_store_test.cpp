@@ -193,10 +193,18 @@ TEST(ObjectStore, UploadsLargeFilesInParts) {
     ASSERT_TRUE(tail.ok()) << tail.status().message();
     EXPECT_TRUE(std::equal(tail->begin(), tail->end(), bytes.end() - 5000));
     EXPECT_EQ(store->counts().requests, before + 2);
-    // The condition holds for a multipart upload too: it is checked on completion.
-    auto again = store->putFile(object("big/blocks.bin"), dir.file("big.bin"), {true, ""});
-    ASSERT_TRUE(again.ok()) << again.status().message();
-    EXPECT_FALSE(again->has_value());
+    // The condition holds for a multipart upload too: it is checked on
+    // completion. Other bytes lose; the same bytes are taken as this
+    // writer's own (a write whose answer was lost, tried again).
+    auto other = bytes;
+    other[12345] ^= 1;
+    writeFile(dir.file("other.bin"), std::string(other.begin(), other.end()));
+    auto lost = store->putFile(object("big/blocks.bin"), dir.file("other.bin"), {true, ""});
+    ASSERT_TRUE(lost.ok()) << lost.status().message();
+    EXPECT_FALSE(lost->has_value());
+    auto same = store->putFile(object("big/blocks.bin"), dir.file("big.bin"), {true, ""});
+    ASSERT_TRUE(same.ok()) << same.status().message();
+    EXPECT_TRUE(same->has_value());
 }
 
 TEST(ObjectStore, RefusalsFailAtOnceNamingBucketAndKeyNeverTheSecret) {

@@ -106,7 +106,8 @@ private:
         // Ready when the bucket answers a listing (the S3 port opens before
         // the filer behind it is up).
         auto s = store();
-        for (int i = 0; i < 300; ++i) {
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+        while (std::chrono::steady_clock::now() < deadline) {  // each listing has retries of its own
             if (auto listed = s->list({kBucket, "none/"}); listed.ok()) return;
             int status = 0;
             ASSERT_EQ(waitpid(pid_, &status, WNOHANG), 0) << "SeaweedFS ended at start; its log: " << logPath_;

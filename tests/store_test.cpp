@@ -216,10 +216,10 @@ TEST_F(Store, APublishThatFailsHalfWayLeavesNothing) {
     auto r = run({"/usr/bin/env", "AWS_ENDPOINT_URL=" + proxy.endpoint(), binary("surfcast-build"), "-q", "--default-scene",
                   "--scene-points", "20000", "-o", "s3://surfcast/halfway/scene"});
     const auto faults = proxy.counts();
-    // The seed's draw: the listing and at least one upload got through before
-    // a request failed past its retries (else this case tests nothing).
+    // The seed's draw: at least one upload got through before one failed
+    // past its retries (else this case tests nothing).
     ASSERT_EQ(r.exitCode, 1) << r.output;
-    ASSERT_GE(faults["forwarded"].get<int>(), 3) << faults.dump();
+    ASSERT_GE(faults.value("forwarded PUT", 0), 1) << faults.dump();
     EXPECT_TRUE(keys(*store_, "halfway/").empty()) << r.output;
 }
 

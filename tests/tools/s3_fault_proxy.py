@@ -43,6 +43,7 @@ def draw(method):
     with LOCK:
         if (METHODS is not None and method not in METHODS) or RANDOM.random() >= SHARE:
             COUNTS["forwarded"] += 1
+            COUNTS["forwarded " + method] = COUNTS.get("forwarded " + method, 0) + 1
             kind = None
         else:
             kind = RANDOM.choice(["slowdown", "error", "reset"])
