@@ -32,6 +32,24 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// An update's folder in `set` is gone, and every block file there is one the
+// current version names.
+void expectNothingLeftBehind(const std::string& set) {
+    auto finished = TilesetReader::open(set);
+    ASSERT_TRUE(finished) << finished.status().message();
+    std::set<std::string> named;
+    for (const BlocksPart& p : blocksPartsOf(finished->info())) named.insert(p.file);
+    for (const auto& e : fs::directory_iterator(set)) {
+        const std::string name = e.path().filename().string();
+        EXPECT_NE(name.rfind(".update-", 0), 0u) << "left behind: " << e.path();
+        if (validBlocksFile(name)) EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
+    }
+}
+
+}  // namespace
+
+namespace {
+
 TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     auto before = TilesetReader::open(set());
     ASSERT_TRUE(before) << before.status().message();
@@ -101,15 +119,7 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     EXPECT_TRUE(fs::exists(set() + "/hierarchy.bin"));
     EXPECT_TRUE(fs::exists(set() + "/" + after->info().hierarchyFile));
     EXPECT_TRUE(fs::exists(set() + "/" + buildRecordFile(after->info().hierarchyFile)));
-    auto finished = TilesetReader::open(set());
-    ASSERT_TRUE(finished) << finished.status().message();
-    std::set<std::string> named;
-    for (const BlocksPart& p : blocksPartsOf(finished->info())) named.insert(p.file);
-    for (const auto& e : fs::directory_iterator(set())) {
-        const std::string name = e.path().filename().string();
-        EXPECT_NE(name.rfind(".update-", 0), 0u) << "left behind: " << e.path();
-        if (validBlocksFile(name)) EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
-    }
+    ASSERT_NO_FATAL_FAILURE(expectNothingLeftBehind(set()));
 }
 
 // A scan whose points repeat the set's exactly (one file added twice,
@@ -739,15 +749,7 @@ TEST_F(UpdateTest, KillAnywhereLeavesTheOldSetOrTheNewOne) {
     r = test::run(update);
     EXPECT_EQ(test::readFile(set() + "/tileset.json"), newJson);
     EXPECT_EQ(r.exitCode, 0) << r.output;
-    auto finished = TilesetReader::open(set());
-    ASSERT_TRUE(finished) << finished.status().message();
-    std::set<std::string> named;
-    for (const BlocksPart& p : blocksPartsOf(finished->info())) named.insert(p.file);
-    for (const auto& e : fs::directory_iterator(set())) {
-        const std::string name = e.path().filename().string();
-        EXPECT_NE(name.rfind(".update-", 0), 0u) << "left behind: " << e.path();
-        if (validBlocksFile(name)) EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
-    }
+    ASSERT_NO_FATAL_FAILURE(expectNothingLeftBehind(set()));
 }
 
 // Bad input during an update: the set's files stay as they were, and the
