@@ -653,6 +653,16 @@ std::string buildRecordFile(const std::string& hierarchyFile) {
     return "build" + hierarchyFile.substr(std::string("hierarchy").size());
 }
 
+std::vector<std::string> versionFiles(const TilesetInfo& info) {
+    std::vector<std::string> files = {info.hierarchyFile, buildRecordFile(info.hierarchyFile)};
+    for (const BlocksPart& p : blocksPartsOf(info)) files.push_back(p.file);
+    return files;
+}
+
+bool versionFileName(const std::string& name) {
+    return validHierarchyFile(name) || validBlocksFile(name) || (name.rfind("build", 0) == 0 && validHierarchyFile("hierarchy" + name.substr(5)));
+}
+
 std::string versionedBlocksFile(uint32_t crc) {
     char name[32];
     std::snprintf(name, sizeof name, "blocks-%08x.bin", crc);

@@ -280,6 +280,13 @@ private:
 // place"): build.bin beside hierarchy.bin, build-XXXXXXXX.bin beside
 // hierarchy-XXXXXXXX.bin. Readers of the set never read it.
 std::string buildRecordFile(const std::string& hierarchyFile);
+// The files one version of a set names besides tileset.json: its hierarchy,
+// the build record beside it, and its block files.
+std::vector<std::string> versionFiles(const TilesetInfo& info);
+// Whether `name` is one some version of a set may name (a hierarchy, build
+// record or block file's): what an update may delete once no kept version
+// names it, where nothing else of a set's folder or prefix is ever deleted.
+bool versionFileName(const std::string& name);
 
 std::string writeTilesetJson(const TilesetInfo& info);
 Result<TilesetInfo> readTilesetJson(const std::string& text, const std::string& what);

@@ -93,10 +93,11 @@ Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
 }
 
 Result<std::unique_ptr<TilesetWriter>> TilesetWriter::update(const std::string& set, const TilesetInfo& current,
-                                                            const std::vector<NodeRecord>& currentNodes) {
+                                                            const std::vector<NodeRecord>& currentNodes, CurrentBlob currentBlob) {
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
     w->set_ = set;
     w->current_ = current;
+    w->currentBlob_ = std::move(currentBlob);
     for (const NodeRecord& r : currentNodes) w->currentNodes_[r.key] = r;
     // A hidden folder inside the set for the new blobs and the build's work
     // (readers and surfcast-serve never open it); a killed update's is
@@ -237,7 +238,6 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     // of the set is written to (a static host or store keeps each file's
     // ETag), as an object store wants.
     const std::vector<BlocksPart> currentParts = blocksPartsOf(current_);
-    const BlocksLayout currentLayout(currentParts);
     const std::string newPath = partial_ + "/blocks.new";
     const int out = ::open(newPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (out < 0) return Status::error(newPath + ": cannot create (" + std::strerror(errno) + ")");
@@ -248,8 +248,7 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     std::map<NodeKey, size_t> index;
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     std::map<uint32_t, int> open;
-    std::map<std::string, int> partFiles;  // the current parts, opened as a blob built again is compared
-    std::vector<uint8_t> blob, was;
+    std::vector<uint8_t> blob;
     uint64_t offset = current_.blocksBytes;
     uint32_t crc = 0;
     Status failed;
@@ -261,15 +260,12 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
         // Built again to the same bytes: it keeps its place (and its ETag).
         if (auto it = currentNodes_.find(key); it != currentNodes_.end() && it->second.blockSize == blob.size() &&
                                                it->second.blockCrc == records_[i].blockCrc) {
-            auto place = currentLayout.place(it->second.blockOffset, blob.size());
-            int fd = -1;
-            if (place) {
-                auto [at, added] = partFiles.emplace(place->file, -1);
-                if (added) at->second = ::open((set_ + "/" + place->file).c_str(), O_RDONLY | O_CLOEXEC);
-                fd = at->second;
+            auto was = currentBlob_(it->second);
+            if (!was) {
+                failed = was.status();
+                break;
             }
-            was.resize(blob.size());
-            if (fd >= 0 && ::pread(fd, was.data(), was.size(), off_t(place->offset)) == ssize_t(was.size()) && was == blob) {
+            if (*was == blob) {
                 records_[i].blockOffset = it->second.blockOffset;
                 continue;
             }
@@ -283,8 +279,6 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
         offset += records_[i].blockSize;
     }
     for (auto [source, fd] : open) ::close(fd);
-    for (auto [name, fd] : partFiles)
-        if (fd >= 0) ::close(fd);
     SC_TRY(failed);
     if (::fsync(out) != 0) return Status::error(newPath + ": cannot flush to disk (" + std::strerror(errno) + ")");
     std::fclose(blocks_);
@@ -321,14 +315,12 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     SC_TRY(replaceFile(set_ + "/tileset.json", json.data(), json.size()));
     SC_TRY(syncFolder(set_));
     // The previous version stays for readers that opened it; older ones go.
-    std::set<std::string> keep = {info.hierarchyFile, current_.hierarchyFile, buildRecordFile(info.hierarchyFile),
-                                  buildRecordFile(current_.hierarchyFile), "blocks.bin"};
-    for (const BlocksPart& p : blocksPartsOf(info)) keep.insert(p.file);
-    for (const BlocksPart& p : currentParts) keep.insert(p.file);
+    std::set<std::string> keep = {"blocks.bin"};
+    for (const TilesetInfo* version : {&info, &current_})
+        for (const std::string& file : versionFiles(*version)) keep.insert(file);
     for (const auto& e : fs::directory_iterator(set_, ec)) {
         const std::string name = e.path().filename().string();
-        const bool versioned = validHierarchyFile(name) || validBlocksFile(name) ||
-                               (name.rfind("build", 0) == 0 && validHierarchyFile("hierarchy" + name.substr(5)));
+        const bool versioned = versionFileName(name);
         const bool partial = name.size() > 8 && name.compare(name.size() - 8, 8, ".partial") == 0;  // a killed update's
         if ((versioned && !keep.count(name)) || partial) fs::remove(e.path(), ec);
     }

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdio>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -41,9 +42,12 @@ public:
     // the set's tileset.json no longer names `current`'s hierarchy and
     // blocks' bytes (another writer replaced the set meanwhile).
     // A blob built again with the same bytes as the current node of its key
-    // (`currentNodes`) keeps that node's place too.
+    // (`currentNodes`, whose blobs `currentBlob` reads: from the folder, or
+    // from the store a folder of the set's metadata mirrors) keeps that
+    // node's place too.
+    using CurrentBlob = std::function<Result<std::vector<uint8_t>>(const NodeRecord&)>;
     static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,
-                                                         const std::vector<NodeRecord>& currentNodes);
+                                                         const std::vector<NodeRecord>& currentNodes, CurrentBlob currentBlob);
 
     // Thread-safe: appends a node's blob to a temporary file and keeps the
     // record with its size and CRC.
@@ -86,6 +90,7 @@ private:
     std::string set_;          // an update's set folder; empty for a new set
     TilesetInfo current_;      // an update's tileset.json before it
     std::map<NodeKey, NodeRecord> currentNodes_;  // and its nodes
+    CurrentBlob currentBlob_;                     // which reads their blobs
     std::string record_;       // the build record to publish, if any
     std::mutex mutex_;
 };

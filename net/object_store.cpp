@@ -98,6 +98,7 @@ struct Response {
     std::vector<uint8_t> body;
     std::string etag;
     int64_t contentLength = -1;  // the last response's header, where it has one
+    int64_t modified = -1;       // Last-Modified, seconds since 1970
     bool tooLong = false;
 };
 
@@ -167,6 +168,7 @@ size_t readHeader(char* data, size_t size, size_t n, void* user) {
     if (line.rfind("HTTP/", 0) == 0) {  // a new response (after a 100 Continue): forget the last one's
         sink->response->etag.clear();
         sink->response->contentLength = -1;
+        sink->response->modified = -1;
         const size_t sp = line.find(' ');
         if (sp != std::string::npos) sink->response->status = std::strtol(line.c_str() + sp + 1, nullptr, 10);
     }
@@ -177,6 +179,7 @@ size_t readHeader(char* data, size_t size, size_t n, void* user) {
         const std::string value = trim(line.substr(colon + 1, line.find_last_not_of("\r\n") - colon));
         if (name == "etag") sink->response->etag = value;
         if (name == "content-length") sink->response->contentLength = std::strtoll(value.c_str(), nullptr, 10);
+        if (name == "last-modified") sink->response->modified = int64_t(curl_getdate(value.c_str(), nullptr));  // -1 where it does not parse
     }
     return size * n;
 }
@@ -422,12 +425,13 @@ ObjectStore::Counts ObjectStore::counts() const {
     return {impl_->requests.load(), impl_->bytesIn.load(), impl_->bytesOut.load(), impl_->retries.load()};
 }
 
-Result<std::vector<uint8_t>> ObjectStore::get(const S3Url& object, uint64_t maxBytes) {
+Result<std::vector<uint8_t>> ObjectStore::get(const S3Url& object, uint64_t maxBytes, ObjectInfo* info) {
     Request r;
     r.maxBytes = maxBytes;
     auto response = impl_->send(object, r);
     if (!response) return response.status();
     if (response->status != 200) return Impl::failure(object, *response, "GET");
+    if (info) *info = ObjectInfo{response->body.size(), response->etag, response->modified};
     return std::move(response->body);
 }
 
@@ -462,7 +466,7 @@ Result<std::optional<ObjectInfo>> ObjectStore::head(const S3Url& object) {
     }
     if (response->status != 200) return Impl::failure(object, *response, "HEAD");
     if (response->contentLength < 0) return Status::error(object.str() + ": HEAD: the store gave no Content-Length");
-    return std::optional(ObjectInfo{uint64_t(response->contentLength), response->etag});
+    return std::optional(ObjectInfo{uint64_t(response->contentLength), response->etag, response->modified});
 }
 
 namespace {

@@ -52,7 +52,8 @@ std::string s3EncodeKey(const std::string& key);
 
 struct ObjectInfo {
     uint64_t size = 0;
-    std::string etag;  // as the store quotes it, "\"…\""
+    std::string etag;       // as the store quotes it, "\"…\""
+    int64_t modified = -1;  // Last-Modified, seconds since 1970 (UTC); -1 where not known
 };
 
 // A write's precondition (If-None-Match: * or If-Match: ETAG): stores that
@@ -81,8 +82,9 @@ public:
     ObjectStore(const ObjectStore&) = delete;
     ObjectStore& operator=(const ObjectStore&) = delete;
 
-    // A whole object, failing where it is longer than maxBytes.
-    Result<std::vector<uint8_t>> get(const S3Url& object, uint64_t maxBytes);
+    // A whole object, failing where it is longer than maxBytes; `info`, where
+    // given, gets the ETag and Last-Modified of the bytes returned.
+    Result<std::vector<uint8_t>> get(const S3Url& object, uint64_t maxBytes, ObjectInfo* info = nullptr);
     // Exactly bytes [offset, offset + size) of an object, or an error.
     Result<std::vector<uint8_t>> getRange(const S3Url& object, uint64_t offset, uint64_t size);
     // nullopt where there is no such object (an error where the bucket is missing).

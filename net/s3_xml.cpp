@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cerrno>
 #include <cstdlib>
+#include <ctime>
 #include <map>
 
 namespace surfcast {
@@ -47,6 +48,28 @@ std::optional<std::string> xmlElement(const std::string& xml, const std::string&
     return out;
 }
 
+std::optional<int64_t> parseIsoTime(const std::string& text) {
+    // YYYY-MM-DDTHH:MM:SS, then an optional .fraction, then Z.
+    static const char kShape[] = "dddd-dd-ddTdd:dd:dd";
+    if (text.size() < 20) return std::nullopt;
+    for (size_t i = 0; i + 1 < sizeof kShape; ++i)
+        if (kShape[i] == 'd' ? !std::isdigit(static_cast<unsigned char>(text[i])) : text[i] != kShape[i]) return std::nullopt;
+    size_t end = 19;
+    if (text[end] == '.')
+        for (++end; end < text.size() && std::isdigit(static_cast<unsigned char>(text[end]));) ++end;
+    if (end + 1 != text.size() || text[end] != 'Z') return std::nullopt;
+    auto number = [&](size_t at, size_t digits) { return std::stoi(text.substr(at, digits)); };
+    std::tm t{};
+    t.tm_year = number(0, 4) - 1900;
+    t.tm_mon = number(5, 2) - 1;
+    t.tm_mday = number(8, 2);
+    t.tm_hour = number(11, 2);
+    t.tm_min = number(14, 2);
+    t.tm_sec = number(17, 2);
+    if (t.tm_mon > 11 || t.tm_mday < 1 || t.tm_mday > 31 || t.tm_hour > 23 || t.tm_min > 59 || t.tm_sec > 60) return std::nullopt;
+    return int64_t(timegm(&t));
+}
+
 Result<ListPage> parseListPage(const std::string& xml) {
     ListPage page;
     size_t at = 0;
@@ -59,7 +82,8 @@ Result<ListPage> parseListPage(const std::string& xml) {
         errno = 0;
         const unsigned long long n = std::strtoull(size->c_str(), nullptr, 10);
         if (errno != 0) return Status::error("the entry " + *key + " has a Size past 2^64");
-        page.objects.push_back({*key, n, etag.value_or("")});
+        const auto modified = xmlElement(*contents, "LastModified");
+        page.objects.push_back({*key, n, etag.value_or(""), modified ? parseIsoTime(*modified).value_or(-1) : -1});
     }
     page.truncated = xmlElement(xml, "IsTruncated").value_or("") == "true";
     if (page.truncated) page.next = xmlElement(xml, "NextContinuationToken").value_or("");

@@ -9,20 +9,38 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <set>
 #include <vector>
 
+#include "folder_publish.h"
 #include "object_store.h"
+#include "tile_source.h"
 
 namespace surfcast {
 
-Result<PublishReport> publishFolder(const std::string& folder, const std::string& url, const std::string& last) {
-    namespace fs = std::filesystem;
+namespace {
+
+// s3://BUCKET/PREFIX as its bucket and "PREFIX/"; a whole bucket is refused.
+Result<S3Url> setPrefix(const std::string& url) {
     auto target = parseS3Url(url);
     if (!target) return target.status();
-    std::string prefix = target->key;
-    while (!prefix.empty() && prefix.back() == '/') prefix.pop_back();
-    if (prefix.empty()) return Status::error(url + ": give the set a prefix of its own (s3://BUCKET/PREFIX), not a whole bucket");
-    prefix += '/';
+    while (!target->key.empty() && target->key.back() == '/') target->key.pop_back();
+    if (target->key.empty()) return Status::error(url + ": give the set a prefix of its own (s3://BUCKET/PREFIX), not a whole bucket");
+    target->key += '/';
+    return target;
+}
+
+// A build record is a plan (stages.h): a few kilobytes per input.
+constexpr uint64_t kMaxBuildRecordBytes = 256u << 20;
+
+}  // namespace
+
+Result<PublishReport> publishFolder(const std::string& folder, const std::string& url, const std::string& last) {
+    namespace fs = std::filesystem;
+    auto target = setPrefix(url);
+    if (!target) return target.status();
+    const std::string& prefix = target->key;
     auto store = ObjectStore::shared();
     if (!store) return store.status();
     const uint64_t requestsBefore = (*store)->counts().requests;
@@ -89,6 +107,105 @@ Result<PublishReport> publishFolder(const std::string& folder, const std::string
         written.push_back(object);
         report.objects += 1;
         report.bytes += (*put)->size;
+    }
+    report.requests = (*store)->counts().requests - requestsBefore;
+    return report;
+}
+
+Result<StoredVersion> mirrorSetMetadata(const std::string& url, const std::string& folder) {
+    auto set = setPrefix(url);
+    if (!set) return set.status();
+    auto store = ObjectStore::shared();
+    if (!store) return store.status();
+    StoredVersion version;
+    version.url = set->str();
+    const S3Url json{set->bucket, set->key + "tileset.json"};
+    ObjectInfo read;
+    auto text = (*store)->get(json, kMaxTilesetJsonBytes, &read);
+    if (!text) {
+        if (text.status().message().find("HTTP 404") != std::string::npos && text.status().message().find("NoSuchBucket") == std::string::npos)
+            return Status::error(version.url + ": not a tile set (no tileset.json)");
+        return text.status();
+    }
+    if (read.etag.empty() || read.modified < 0)
+        return Status::error(json.str() + ": the store gave no ETag or Last-Modified, which updates in place need (docs/STORAGE.md)");
+    version.etag = read.etag;
+    version.modified = read.modified;
+    auto info = readTilesetJson(std::string(text->begin(), text->end()), json.str());
+    if (!info) return info.status();
+    version.info = *info;
+    SC_TRY(writeFileSynced(folder + "/tileset.json", text->data(), text->size()));
+    const std::string recordName = buildRecordFile(info->hierarchyFile);
+    const S3Url record{set->bucket, set->key + recordName};
+    auto kept = (*store)->head(record);
+    if (!kept) return kept.status();
+    if (kept->has_value()) {
+        auto bytes = (*store)->get(record, kMaxBuildRecordBytes);
+        if (!bytes) return bytes.status();
+        SC_TRY(writeFileSynced(folder + "/" + recordName, bytes->data(), bytes->size()));
+    }
+    return version;
+}
+
+Result<PublishReport> publishVersion(const std::string& folder, const StoredVersion& base) {
+    auto set = setPrefix(base.url);
+    if (!set) return set.status();
+    auto store = ObjectStore::shared();
+    if (!store) return store.status();
+    const uint64_t requestsBefore = (*store)->counts().requests;
+    std::string text;
+    {
+        std::ifstream in(folder + "/tileset.json", std::ios::binary);
+        if (!in) return Status::error(folder + "/tileset.json: cannot read the version to publish");
+        text.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    auto info = readTilesetJson(text, folder + "/tileset.json");
+    if (!info) return info.status();
+    const std::vector<std::string> baseFiles = versionFiles(base.info), files = versionFiles(*info);
+    std::set<std::string> named(baseFiles.begin(), baseFiles.end());
+    named.insert(files.begin(), files.end());
+    std::vector<std::string> added;
+    for (const std::string& file : files)
+        if (std::find(baseFiles.begin(), baseFiles.end(), file) == baseFiles.end() && std::filesystem::exists(folder + "/" + file))
+            added.push_back(file);
+
+    PublishReport report;
+    // 1. The new files.
+    for (const std::string& file : added) {
+        const S3Url object{set->bucket, set->key + file};
+        const std::string path = folder + "/" + file;
+        auto there = (*store)->head(object);
+        if (!there) return there.status();
+        WriteCondition condition{true, ""};
+        if (there->has_value() && (*there)->modified >= 0 && (*there)->modified < base.modified)
+            condition = {};  // an older version's, unnamed since: written again, its age now this version's
+        auto put = (*store)->putFile(object, path, condition);
+        if (!put) return put.status();
+        if (!put->has_value())
+            return Status::error(object.str() + ": written meanwhile with other bytes (another update of " + base.url +
+                                 " racing this one); the set stays as it is: run the update again");
+        report.objects += 1;
+        report.bytes += (*put)->size;
+    }
+    // 2. The switch.
+    const S3Url json{set->bucket, set->key + "tileset.json"};
+    auto switched = (*store)->put(json, std::vector<uint8_t>(text.begin(), text.end()), WriteCondition{false, base.etag});
+    if (!switched) return switched.status();
+    if (!switched->has_value())
+        return Status::error(base.url + ": changed since this update read it (another update or compaction wrote it first); "
+                             "the set stays as that one wrote it: run the update again");
+    report.objects += 1;
+    report.bytes += text.size();
+    // 3. What neither version names, made before base.
+    auto listed = (*store)->list(*set);
+    if (!listed) return Status::error("published " + base.url + ", but listing it for unused objects failed: " + listed.status().message());
+    for (const ListedObject& o : *listed) {
+        const std::string name = o.key.substr(set->key.size());
+        if (name.find('/') != std::string::npos || !versionFileName(name) || named.count(name) || o.modified < 0 || o.modified >= base.modified)
+            continue;
+        if (auto st = (*store)->remove({set->bucket, o.key}); !st.ok())
+            return Status::error("published " + base.url + ", but deleting an unused object failed: " + st.message());
+        report.removed += 1;
     }
     report.requests = (*store)->counts().requests - requestsBefore;
     return report;

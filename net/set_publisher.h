@@ -9,12 +9,14 @@
 #include <string>
 
 #include "status.h"
+#include "tileset_format.h"
 
 namespace surfcast {
 
 struct PublishReport {
     uint64_t objects = 0, bytes = 0;
     uint64_t requests = 0;  // to the store, retries included
+    uint64_t removed = 0;   // objects no kept version names (publishVersion)
 };
 
 // Uploads every file under `folder` to s3://BUCKET/PREFIX/ (its path below
@@ -29,6 +31,36 @@ struct PublishReport {
 // whose set bears the same names), the store cannot say whether one does, or
 // its own tileset.json's upload failed in a way the store may yet take it.
 Result<PublishReport> publishFolder(const std::string& folder, const std::string& url, const std::string& last = "tileset.json");
+
+// One version of a set in a store, as an update or a compaction read it.
+struct StoredVersion {
+    std::string url;        // the set: s3://BUCKET/PREFIX/
+    std::string etag;       // of its tileset.json
+    int64_t modified = -1;  // its tileset.json's Last-Modified (seconds since 1970)
+    TilesetInfo info;
+};
+
+// Copies the tileset.json of the set at s3://BUCKET/PREFIX, and its build
+// record where it keeps one, into `folder` (which must exist): the metadata
+// an update reads and rewrites locally (update.h, UpdateRequest::store).
+Result<StoredVersion> mirrorSetMetadata(const std::string& url, const std::string& folder);
+
+// Publishes the version an update or a compaction wrote into `folder` (its
+// tileset.json, and the files it names that base's does not) as the set's
+// next version, after `base` (docs/STORAGE.md, "Updates"):
+//  1. the new files, with If-None-Match: * (one of an older, unnamed
+//     version's that holds the same name is written again, so that its age
+//     tells step 3 it is in use);
+//  2. tileset.json with If-Match: base's ETag, so that of two updates of one
+//     version exactly one wins; the other fails here, naming the set, which
+//     stays as the winner wrote it;
+//  3. the objects of the set (versionFileName) that neither version names
+//     and that the store made before base's tileset.json go: earlier
+//     versions', and those of updates that lost or failed. An object made
+//     since may be an upload of an update of this very version, and stays.
+// A failed publish deletes nothing (an update of the same bytes racing it
+// may share its objects' names): step 3 of the next update removes them.
+Result<PublishReport> publishVersion(const std::string& folder, const StoredVersion& base);
 
 // The local folder a set or an export is written in before its upload: a
 // new $TMPDIR/surfcast-publish-XXXXXX, locked (flock) while this object

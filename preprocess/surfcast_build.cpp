@@ -12,12 +12,14 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "block_codec.h"
+#include "compact.h"
 #include "crc32.h"
 #include "octree_builder.h"
 #include "set_lock.h"
@@ -462,11 +464,12 @@ long findInput(const std::vector<std::string>& paths, size_t first, const std::s
 // the error where the set keeps none; with `found`, a set without a record is
 // no error (*found says whether it had one).
 surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record, Args* planned, const std::string& purpose,
-                            bool* found = nullptr) {
+                            bool* found = nullptr, const std::string& name = {}) {
+    const std::string& shown = name.empty() ? set : name;  // a set in a store, whose metadata `set` mirrors
     std::string json;
     {
         std::ifstream in(set + "/tileset.json", std::ios::binary);
-        if (!in) return surfcast::Status::error(set + ": not a tile set (no tileset.json)");
+        if (!in) return surfcast::Status::error(shown + ": not a tile set (no tileset.json)");
         json.assign(std::istreambuf_iterator<char>(in), {});
     }
     auto info = surfcast::readTilesetJson(json, set + "/tileset.json");
@@ -475,7 +478,7 @@ surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record,
     if (found) *found = std::filesystem::exists(recordPath);
     if (found && !*found) return {};
     if (!std::filesystem::exists(recordPath))
-        return surfcast::Status::error(set + ": keeps no build record (" + surfcast::buildRecordFile(info->hierarchyFile) +
+        return surfcast::Status::error(shown + ": keeps no build record (" + surfcast::buildRecordFile(info->hierarchyFile) +
                                        "): it was built before updates existed; build it anew to " + purpose);
     std::vector<std::string> stored;
     auto read = surfcast::readPlan(recordPath, &stored, true);
@@ -491,7 +494,6 @@ surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record,
 int runUpdate(const Args& a) {
     const std::string& mode = a.update;
     if (a.to.empty()) return usageError(mode + " needs the set to update (--to SET)");
-    if (surfcast::isS3Url(a.to)) return usageError(mode + ": sets in object stores are built anew (-o s3://...), not yet updated in place");
     if (!a.opt.output.empty()) return usageError(mode + " updates the set --to names in place; it takes no -o");
     if (a.opt.inputs.defaultScene || a.opt.inputs.paths.empty())
         return usageError(mode == "--add" ? "--add needs input files to add" : mode == "--remove" ? "--remove needs the inputs to remove" : "--replace needs OLD and NEW");
@@ -501,17 +503,41 @@ int runUpdate(const Args& a) {
         else if (a.kept[i] != "-q" && a.kept[i] != "--quiet")
             return usageError(mode + " takes the set's own build options from its build record, not " + a.kept[i] + " (only --threads and -q)");
     }
-    const std::string set = std::filesystem::absolute(a.to).lexically_normal().string();
+    // A set in a store is updated in a local folder holding its metadata,
+    // then published as its next version (set_publisher.h): the store's
+    // conditional write, not a lock, keeps two updaters apart.
+    const bool stored = surfcast::isS3Url(a.to);
+    if (stored && !a.work.empty())
+        return usageError("update-plan writes to folders; update a set in a store in one process (--to s3://... without stages)");
+    std::unique_ptr<surfcast::PublishStaging> staging;
+    std::optional<surfcast::StoredVersion> base;
+    std::string set;
     surfcast::SetLock lock;
-    if (auto st = surfcast::lockSet(set, &lock); !st.ok()) return fail(st);
+    if (stored) {
+        auto created = surfcast::PublishStaging::create();
+        if (!created) return fail(created.status());
+        staging = std::move(*created);
+        set = staging->dir() + "/set";
+        std::error_code ec;
+        std::filesystem::create_directories(set, ec);
+        if (ec) return fail(surfcast::Status::error(set + ": cannot create (" + ec.message() + ")"));
+        auto mirrored = surfcast::mirrorSetMetadata(a.to, set);
+        if (!mirrored) return fail(mirrored.status());
+        base = std::move(*mirrored);
+    } else {
+        set = std::filesystem::absolute(a.to).lexically_normal().string();
+        if (auto st = surfcast::lockSet(set, &lock); !st.ok()) return fail(st);
+    }
+    const std::string shown = stored ? base->url : set;
     surfcast::BuildPlan record;
     Args planned;
-    if (auto st = readRecord(set, &record, &planned, "update it"); !st.ok()) return fail(st);
+    if (auto st = readRecord(set, &record, &planned, "update it", nullptr, shown); !st.ok()) return fail(st);
     planned.opt.threads = a.opt.threads;
     planned.opt.progress = a.opt.progress;
-    planned.opt.output = set;
+    if (!stored) planned.opt.output = set;  // (a set in a store keeps the URL it was built to)
 
     surfcast::UpdateRequest request;
+    if (stored) request.store = base->url;
     std::vector<std::string> toAdd, toRemove;
     if (mode == "--add") toAdd = a.opt.inputs.paths;
     else if (mode == "--remove") toRemove = a.opt.inputs.paths;
@@ -520,7 +546,7 @@ int runUpdate(const Args& a) {
     for (const std::string& name : toRemove) {
         std::string error;
         const long k = findInput(planned.opt.inputs.paths, first, name, &error);
-        if (k < 0) return fail(surfcast::Status::error(set + ": " + error));
+        if (k < 0) return fail(surfcast::Status::error(shown + ": " + error));
         request.removed.push_back(uint32_t(k));
     }
     if (!toAdd.empty()) {
@@ -544,49 +570,43 @@ int runUpdate(const Args& a) {
     }
     auto summary = surfcast::updateTileset(planned.opt, request, set, record, storedCommandLine(planned));
     if (!summary) return fail(summary.status());
-    std::printf("updated %s (%zu inputs added, %zu removed; %zu chunks built again)\n%s", set.c_str(), request.added,
+    if (stored) {
+        auto published = surfcast::publishVersion(set, *base);
+        if (!published) return fail(published.status());
+        std::printf("published %s: %llu objects, %llu bytes, %llu requests; %llu objects no kept version names deleted\n",
+                    shown.c_str(), (unsigned long long)published->objects, (unsigned long long)published->bytes,
+                    (unsigned long long)published->requests, (unsigned long long)published->removed);
+    }
+    std::printf("updated %s (%zu inputs added, %zu removed; %zu chunks built again)\n%s", shown.c_str(), request.added,
                 request.removed.size(), summary->chunks, summary->text().c_str());
     return 0;
 }
 
 // surfcast-build --compact SET: the set written anew without the blocks its
 // updates replaced, its nodes' bytes (and so their ETags) as they were.
-int runCompact(const std::string& dir) {
-    surfcast::SetLock lock;
-    if (auto st = surfcast::lockSet(dir, &lock); !st.ok()) return fail(st);
-    auto reader = surfcast::TilesetReader::open(dir);
-    if (!reader) return fail(reader.status());
-    std::error_code ec;
-    auto writer = surfcast::TilesetWriter::create(dir);
-    if (!writer) return fail(writer.status());
-    const std::string record = dir + "/" + surfcast::buildRecordFile(reader->info().hierarchyFile);
-    if (std::filesystem::exists(record)) {
-        const std::string copy = (*writer)->partialDir() + "/build.record";
-        std::filesystem::copy_file(record, copy, ec);
-        if (ec) return fail(surfcast::Status::error(record + ": cannot copy (" + ec.message() + ")"));
-        (*writer)->setBuildRecord(copy);
+int runCompact(const std::string& set) {
+    surfcast::Result<surfcast::CompactReport> report = surfcast::Status::error("");
+    std::unique_ptr<surfcast::PublishStaging> staging;
+    if (surfcast::isS3Url(set)) {
+        auto created = surfcast::PublishStaging::create();
+        if (!created) return fail(created.status());
+        staging = std::move(*created);
+        report = surfcast::compactStored(set, staging->dir());
+    } else {
+        surfcast::SetLock lock;
+        if (auto st = surfcast::lockSet(set, &lock); !st.ok()) return fail(st);
+        report = surfcast::compactFolder(set);
     }
-    // Each block file's nodes, placed where they lie in it.
-    const surfcast::BlocksLayout layout(surfcast::blocksPartsOf(reader->info()));
-    std::vector<std::vector<surfcast::NodeRecord>> placed(layout.parts().size());
-    for (surfcast::NodeRecord n : reader->nodes()) {
-        auto place = layout.place(n.blockOffset, n.blockSize);
-        if (!place) return fail(surfcast::Status::error(dir + ": node " + n.key.name() + ": " + place.status().message()));
-        n.blockOffset = place->offset;
-        placed[place->part].push_back(n);
+    if (!report) return fail(report.status());
+    if (report->already) {
+        std::printf("%s is compact already: its one block file holds every node's bytes and no others\n", set.c_str());
+        return 0;
     }
-    uint64_t before = 0;
-    for (size_t i = 0; i < placed.size(); ++i) {
-        const std::string path = dir + "/" + layout.parts()[i].file;
-        const uint64_t size = std::filesystem::file_size(path, ec);
-        if (ec) return fail(surfcast::Status::error(path + ": " + ec.message()));
-        if (auto st = (*writer)->addPlacedNodes(path, size, placed[i]); !st.ok()) return fail(st);
-        before += size;
-    }
-    surfcast::TilesetInfo info = reader->info();
-    if (auto st = (*writer)->finish(info); !st.ok()) return fail(st);
-    std::printf("compacted %s: blocks.bin %llu bytes, was %llu in its block files\n", dir.c_str(), (unsigned long long)info.blocksBytes,
-                (unsigned long long)before);
+    std::printf("compacted %s: blocks %llu bytes, was %llu in its block files\n", set.c_str(), (unsigned long long)report->blocksBytes,
+                (unsigned long long)report->before);
+    if (staging)
+        std::printf("(%llu requests; %llu objects no kept version names deleted)\n", (unsigned long long)report->requests,
+                    (unsigned long long)report->removed);
     return 0;
 }
 
@@ -813,7 +833,12 @@ int main(int argc, char** argv) {
         if (a.opt.output.empty()) return usageError("--merge needs the folder to write the joined set to (-o OUT)");
         if (a.opt.inputs.paths.size() < 2) return usageError("--merge joins two or more tile sets");
         std::vector<std::string> sets;
-        for (const std::string& set : a.opt.inputs.paths) {
+        for (std::string set : a.opt.inputs.paths) {
+            if (surfcast::isS3Url(set)) {  // a set in a store (set_reader.h), checked as it is read
+                while (set.back() == '/') set.pop_back();
+                sets.push_back(set + "/tileset.json");
+                continue;
+            }
             const std::filesystem::path json = std::filesystem::path(set) / "tileset.json";
             if (!std::filesystem::is_regular_file(json)) return fail(surfcast::Status::error(set + ": not a tile set (no tileset.json)"));
             sets.push_back(json.string());
@@ -821,7 +846,17 @@ int main(int argc, char** argv) {
         surfcast::BuildPlan record;
         Args first;
         bool found = false;
-        if (auto st = readRecord(a.opt.inputs.paths[0], &record, &first, "merge it", &found); !st.ok()) return fail(st);
+        std::string firstSet = a.opt.inputs.paths[0];
+        std::unique_ptr<surfcast::PublishStaging> mirror;  // the first set's metadata, where it lies in a store
+        if (surfcast::isS3Url(firstSet)) {
+            auto created = surfcast::PublishStaging::create();
+            if (!created) return fail(created.status());
+            mirror = std::move(*created);
+            auto mirrored = surfcast::mirrorSetMetadata(firstSet, mirror->dir());
+            if (!mirrored) return fail(mirrored.status());
+            firstSet = mirror->dir();
+        }
+        if (auto st = readRecord(firstSet, &record, &first, "merge it", &found, a.opt.inputs.paths[0]); !st.ok()) return fail(st);
         // Options of how the first set read its inputs act on the sets'
         // points no more: they hold the result (--opacity would scale their
         // alpha twice, --default-scene add the scene again).

@@ -41,7 +41,10 @@ files (docs/STORAGE.md).
                           blocks are appended and tileset.json switched last, so
                           readers see the old set or the new one (README, "Updating
                           a set"). The options are the set's own (its build record);
-                          only --threads and -q may be given
+                          only --threads and -q may be given. SET may be
+                          s3://BUCKET/PREFIX: the new version is uploaded, then
+                          tileset.json switched only if no other update did first
+                          (docs/STORAGE.md, "Updates")
   --remove NAME... --to SET
                           remove the points of the set's inputs NAME (a path, or a
                           file name only one input has), in place alike
@@ -53,10 +56,12 @@ files (docs/STORAGE.md).
                           colours, attributes), with SET1's build options (its
                           build record) and then the command line's; each set is
                           one input of the joined set (--remove takes it out
-                          again). A tile set's folder is an input anywhere
+                          again). A tile set's folder (or s3:// prefix) is an
+                          input anywhere
   --compact SET           write the set anew without the blocks its updates
                           replaced (replaced atomically, as a rebuild is: byte
-                          ranges change, node ETags do not)
+                          ranges change, node ETags do not); a set in a bucket
+                          gets the compacted blocks as its next version
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how

@@ -18,6 +18,7 @@
 #include "built_node.h"
 #include "set_points.h"
 #include "crc32.h"
+#include "http_tile_source.h"
 #include "tileset_reader.h"
 #include "tileset_writer.h"
 
@@ -257,7 +258,9 @@ public:
 
 private:
     // The set and its context, from its record; the record must be its own.
-    Status open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record);
+    // `store`: where the set's blocks are read where `set` is a folder of its
+    // metadata only (UpdateRequest::store).
+    Status open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record, const std::string& store = {});
     std::vector<uint16_t> rulesOf(const BlockData& block) const;
     // A block of the set as the builder holds it (appendSurfels), its leaves'
     // points on their inputs' lattices where latticeOf gives one.
@@ -289,6 +292,7 @@ private:
     BuildOptions opt_;
     UpdateRequest request_;
     std::string set_;
+    std::string name_;  // the set as messages name it: its folder, or its store URL
     uint32_t version_ = 0;
     std::optional<TilesetReader> reader_;
     BuildPlan record_;
@@ -313,22 +317,30 @@ private:
     std::vector<bool> touched_;  // per chunk: built again
 };
 
-Status Update::open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record) {
+Status Update::open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record, const std::string& store) {
     opt_ = normalizeOptions(options);
     request_.added = added;
     set_ = set;
+    name_ = store.empty() ? set : store;
     record_ = record;
-    auto version = setVersion(set);
-    if (!version) return version.status();
-    version_ = *version;
-    auto reader = TilesetReader::open(set);
+    auto json = tilesetText(set);
+    if (!json) return json.status();
+    version_ = crc32(json->data(), json->size());
+    auto reader = store.empty() ? TilesetReader::open(set) : openTileset(store);
     if (!reader) return reader.status();
     reader_ = std::move(*reader);
     const TilesetInfo& info = reader_->info();
+    if (!store.empty()) {
+        // The version whose metadata `set` holds, or the update stops.
+        auto mirrored = readTilesetJson(*json, set + "/tileset.json");
+        if (!mirrored) return mirrored.status();
+        if (versionFiles(*mirrored) != versionFiles(info) || mirrored->hierarchyCrc != info.hierarchyCrc)
+            return Status::error(store + ": changed while this update read it (another update wrote it); run the update again");
+    }
     if (!info.textureFilter.empty())
-        return Status::error(set + ": built from textured meshes, whose texture fields an update does not rebuild yet; build it anew");
+        return Status::error(name_ + ": built from textured meshes, whose texture fields an update does not rebuild yet; build it anew");
     if (info.weights == "captured")
-        return Status::error(set + ": its weights were captured by rendering; an update cannot keep them; build it anew");
+        return Status::error(name_ + ": its weights were captured by rendering; an update cannot keep them; build it anew");
     BuildOptions setOptions = opt_;
     setOptions.inputs.paths.resize(opt_.inputs.paths.size() - added);
     auto derivedOld = BuildContext::derive(setOptions, record.stats, false);
@@ -374,22 +386,22 @@ std::vector<uint16_t> Update::rulesOf(const BlockData& block) const {
 Status Update::plan(const BuildOptions& options, const UpdateRequest& request, const std::string& set, const BuildPlan& record,
                     Progress& progress, BuildSummary* summary) {
     const size_t added = request.added;
-    SC_TRY(open(options, added, set, record));
+    SC_TRY(open(options, added, set, record, request.store));
     request_ = request;
     const BuildOptions& opt = opt_;
     const TilesetInfo& info = reader_->info();
     // A set of one input keeps no provenance: its one input is all of it.
     if (!request.removed.empty() && !info.attribute(kProvenanceAttribute))
-        return Status::error(set + ": a set of one input, whose points carry no input to remove; build the set anew from the "
+        return Status::error(name_ + ": a set of one input, whose points carry no input to remove; build the set anew from the "
                              "inputs it should hold");
     for (uint32_t k : request.removed) {
         uint64_t points = 0;
         for (size_t i = 0; i < oldInputs_.size(); ++i) points += oldInputs_[i] == k ? record.stats.sources[i].points : 0;
-        if (points == 0) return Status::error(set + ": input " + std::to_string(k) + " has no points in the set (removed before?)");
+        if (points == 0) return Status::error(name_ + ": input " + std::to_string(k) + " has no points in the set (removed before?)");
     }
     for (const SourceStats& src : record.stats.sources)
         if (src.description.scanOrigins.size() > 1)
-            return Status::error(set + ": " + src.description.path +
+            return Status::error(name_ + ": " + src.description.path +
                                  " holds several scans, whose points' scans the set does not keep; build it anew");
 
     // The added inputs: scanned; all of them together must keep the set's
@@ -447,7 +459,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         SC_TRY(holds(rootInfo, (*all)->tilesetInfo(), addedStats, set));
         addsProvenance_ = !info.attribute(kProvenanceAttribute) && (*all)->tilesetInfo().attribute(kProvenanceAttribute);
         if (!std::equal(oldRules_.begin(), oldRules_.end(), (*all)->sourceIds().begin()))
-            return Status::error(set + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
+            return Status::error(name_ + ": the added inputs change how the set's normals are oriented; build it anew from all its inputs");
     }
 
     // The removed inputs' points: in the leaves their sources' bounds reach.
@@ -506,7 +518,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     // provenance takes memory per point.)
     if ((plan_.maxChunkPoints == 0) != (record.maxChunkPoints == 0) ||
         (!addsProvenance_ && plan_.maxChunkPoints != record.maxChunkPoints))
-        return Status::error(set + ": the update changes whether the set's points fit one chunk; build it anew from all its inputs");
+        return Status::error(name_ + ": the update changes whether the set's points fit one chunk; build it anew from all its inputs");
     addedPart_.first = all.last - added;
     addedPart_.last = all.last;
     addedPart_.firstSource = oldSources;
@@ -740,7 +752,7 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFol
 Result<std::unique_ptr<TilesetWriter>> Update::writer() const {
     std::vector<NodeRecord> nodes = reader_->nodes();
     for (NodeRecord& n : nodes) n.key = grow_.key(n.key);
-    return TilesetWriter::update(set_, reader_->info(), nodes);
+    return TilesetWriter::update(set_, reader_->info(), nodes, [this](const NodeRecord& n) { return reader_->readBlockBytes(n); });
 }
 
 Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const {

@@ -6,7 +6,10 @@
 #include <cstring>
 #include <filesystem>
 
+#include "http_tile_source.h"
+#include "input_file.h"
 #include "inputs.h"
+#include "object_store.h"
 #include "tileset_reader.h"
 
 namespace surfcast {
@@ -157,7 +160,12 @@ std::string inputName(const std::string& path) {
 }
 
 Result<std::unique_ptr<PointReader>> openSetReader(const std::string& path, const ScalarSelection& scalars) {
-    if (isRemoteInput(path)) return Status::error(path + ": a tile set is read as an input from a local folder only");
+    if (isS3Url(path)) {  // the set's prefix, through the store's tile source
+        auto set = openTileset(path.substr(0, path.size() - std::string("/tileset.json").size()));
+        if (!set) return set.status();
+        return std::unique_ptr<PointReader>(std::make_unique<SetReader>(std::move(*set), path, scalars));
+    }
+    if (isRemoteInput(path)) return Status::error(path + ": a tile set is read as an input from a local folder or an s3:// prefix only");
     const std::string folder = std::filesystem::path(path).parent_path().string();
     auto set = TilesetReader::open(folder.empty() ? std::string(".") : folder);
     if (!set) return set.status();

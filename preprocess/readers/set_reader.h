@@ -3,7 +3,7 @@
 // kFlagInputPoints), decoded in hierarchy order, with their normals, colours,
 // LiDAR attributes, opacity and the scalar fields `scalars` selects. The
 // set's own provenance attribute is not a field: the build that reads the set
-// gives its points their own. A local folder only.
+// gives its points their own. A local folder, or a prefix in an object store.
 #pragma once
 
 #include <memory>
@@ -13,7 +13,7 @@
 
 namespace surfcast {
 
-// `path`: the set's tileset.json. Its points' normals are the set's (as if
+// `path`: the set's tileset.json (FOLDER/tileset.json, s3://BUCKET/PREFIX/tileset.json). Its points' normals are the set's (as if
 // the input carried them); their precision, the coarsest step its leaves'
 // positions are quantized to (at most its inputs' own step).
 Result<std::unique_ptr<PointReader>> openSetReader(const std::string& path, const ScalarSelection& scalars = {});
