@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <ctime>
 #include <fstream>
 #include <random>
 
@@ -60,6 +61,8 @@ TEST(ObjectStore, WritesReadsListsAndDeletes) {
     ASSERT_TRUE(head->has_value());
     EXPECT_EQ((*head)->size, bytes.size());
     EXPECT_EQ((*head)->etag, (**put).etag);
+    // Last-Modified within a minute of this machine's clock (the store runs on it).
+    EXPECT_LT(std::abs((*head)->modified - int64_t(std::time(nullptr))), 60) << (*head)->modified;
 
     auto whole = store->get(object("set/a.bin"), bytes.size());
     ASSERT_TRUE(whole.ok()) << whole.status().message();
@@ -82,6 +85,7 @@ TEST(ObjectStore, WritesReadsListsAndDeletes) {
     }
     auto listed = store->list(object("set/"));
     ASSERT_TRUE(listed.ok()) << listed.status().message();
+    for (const auto& o : *listed) EXPECT_LT(std::abs(o.modified - int64_t(std::time(nullptr))), 60) << o.key;
     std::vector<std::string> names;
     for (const auto& o : *listed) names.push_back(o.key);
     EXPECT_EQ(names, (std::vector<std::string>{"set/a.bin", "set/b c.bin", "set/ü+x=1&y.bin"}));
@@ -256,6 +260,15 @@ TEST(ObjectStore, ListPagesAreReadStrictly) {
                             "<Contents><Key>k</Key><Size>18446744073709551616</Size></Contents>",
                             "<Contents><Key>k&bogus;</Key><Size>1</Size></Contents>", "<Contents><Key>k&#300;</Key><Size>1</Size></Contents>"})
         EXPECT_FALSE(parseListPage(bad).ok()) << bad;
+    // LastModified: whole seconds since 1970 (Python's calendar.timegm((2026, 12, 7, 1, 2, 3)));
+    // anything else leaves it unknown, which no deletion takes for old.
+    auto dated = parseListPage("<Contents><Key>k</Key><Size>1</Size><LastModified>2026-12-07T01:02:03.000Z</LastModified></Contents>");
+    ASSERT_TRUE(dated.ok()) << dated.status().message();
+    EXPECT_EQ(dated->objects[0].modified, 1796605323);
+    EXPECT_EQ(parseIsoTime("2026-12-07T01:02:03Z"), std::optional<int64_t>(1796605323));
+    for (const char* bad : {"2026-12-07 01:02:03Z", "2026-12-07T01:02:03", "2026-13-07T01:02:03Z", "2026-12-07T01:02:03.Zx", "x026-12-07T01:02:03Z", ""})
+        EXPECT_FALSE(parseIsoTime(bad).has_value()) << bad;
+    EXPECT_EQ(page->objects[0].modified, -1);
 }
 
 TEST(ObjectStore, UrlsAreParsedStrictly) {
