@@ -13,7 +13,12 @@ The requests of the s3 way are counted by tests/tools/s3_fault_proxy.py with
 no faults, in a run of their own (the proxy is Python: it is not timed).
 Prints Markdown for bench/BENCHMARKS.md, "Object storage".
 
-Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/store_bench.py [--reps 2] [--threads N]
+With --stream: stream_bench's four views of the built-in scene streamed by
+surfcast-view --headless through surfcast-serve, the set served from a folder
+and from the bucket (surfcast-serve s3://..., a fresh server each run), side
+by side: time to the first image and to convergence per view.
+
+Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/store_bench.py [--reps 2] [--threads N] [--stream [--points N]]
 """
 import argparse
 import json
@@ -69,13 +74,80 @@ def build(args, env, log):
     return wall, out.stdout
 
 
+def put_folder(folder, prefix):
+    """A folder's files as objects under `prefix` (what `aws s3 sync` does), by curl's own SigV4."""
+    for f in sorted(os.listdir(folder)):
+        subprocess.run(["curl", "-sf", "--aws-sigv4", "aws:amz:us-east-1:s3", "--user", f"{KEY}:{SECRET}",
+                        "-H", "x-amz-content-sha256: UNSIGNED-PAYLOAD", "-T", os.path.join(folder, f),
+                        f"http://127.0.0.1:{PORT}/bench/{prefix}/{f}"], check=True)
+
+
+def streaming(a):
+    """stream_bench's four views streamed by surfcast-view through surfcast-serve,
+    the set served from a folder and from the bucket (a fresh server each run:
+    its cache cold), alternated; per view, time to the first image and to
+    convergence, best of the runs."""
+    from stream_bench import BIN as SBIN, bounds_of, camera_path, json_lines, serve
+    import math
+    with tempfile.TemporaryDirectory(prefix="store-stream-") as work:
+        sets = os.path.join(work, "sets")
+        scene = os.path.join(sets, "scene")
+        subprocess.run([os.path.join(SBIN, "surfcast-build"), "-q", "--default-scene", "--scene-points", str(a.points), "-o", scene],
+                       check=True)
+        lo, hi = bounds_of(scene)
+        path = os.path.join(work, "path.json")
+        json.dump(camera_path(lo, hi, 4, 0.5, 0.9, math.pi), open(path, "w"))
+        weed = start_store(work)
+        env = dict(os.environ, AWS_ENDPOINT_URL=f"http://127.0.0.1:{PORT}", AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=SECRET,
+                   AWS_REGION="us-east-1")
+        os.environ.update({k: env[k] for k in ("AWS_ENDPOINT_URL", "AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY", "AWS_REGION")})
+        times = {"folder": [], "bucket": []}
+        try:
+            put_folder(scene, "sets/scene")
+            for rep in range(a.reps):
+                for way in times:
+                    proc, origin = serve(sets if way == "folder" else "s3://bench/sets")
+                    try:
+                        text = subprocess.run([os.path.join(SBIN, "surfcast-view"), "--headless", f"{origin}/sets/scene", "--lod", "1",
+                                               "--size", "960x540", "--camera-path", path, "--out", os.path.join(work, f"{way}.png")],
+                                              check=True, capture_output=True, text=True).stdout
+                    finally:
+                        proc.terminate()
+                        proc.wait()
+                    lines = json_lines(text)
+                    views = []
+                    for f in range(4):
+                        mine = [l for l in lines if l["frame"] == f]
+                        start = 0 if f == 0 else mine[0]["time_s"]
+                        first = next((l for l in mine if l["splats"] > 0), mine[-1])
+                        views.append((first["time_s"] - start, mine[-1]["time_s"] - start, mine[-1]["bytes_downloaded"]))
+                    times[way].append(views)
+        finally:
+            weed.terminate()
+            weed.wait()
+    print(f"Machine: {platform.node()}, {os.cpu_count()} cores; the built-in scene at {a.points:,} points; "
+          f"{a.reps} runs each way, alternated; best of each.\n")
+    print("| view | first image, folder (s) | first image, bucket (s) | ratio | converged, folder (s) | converged, bucket (s) | ratio |")
+    print("|---|---|---|---|---|---|---|")
+    for f in range(4):
+        ff = min(r[f][0] for r in times["folder"])
+        fb = min(r[f][0] for r in times["bucket"])
+        cf = min(r[f][1] for r in times["folder"])
+        cb = min(r[f][1] for r in times["bucket"])
+        print(f"| {f} | {ff:.2f} | {fb:.2f} | {fb / ff:.2f}× | {cf:.2f} | {cb:.2f} | {cb / cf:.2f}× |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reps", type=int, default=2)
     ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--stream", action="store_true", help="streaming through surfcast-serve from the bucket against from a folder")
+    ap.add_argument("--points", type=int, default=4_000_000, help="--stream: the built-in scene's points")
     a = ap.parse_args()
     if not os.path.exists(WEED):
         sys.exit(f"{WEED} is missing: scripts/install-seaweedfs.sh builds it")
+    if a.stream:
+        return streaming(a)
     with tempfile.TemporaryDirectory(prefix="store-bench-") as work:
         las = os.path.join(work, "lion_6x5.las")
         points = tiled_las(os.path.join(DATA, "lion_takanawa.copc.laz"), 6, 5, las)

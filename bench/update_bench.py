@@ -23,13 +23,17 @@ compacted (--compact): blocks.bin's bytes, the live blocks' bytes (what a
 client streaming the whole set downloads), time, and the images of four
 views at --lod 1 against the fresh build's (mean FLIP, flip-evaluator).
 
+With --store: the same update of the base set uploaded to an S3 store
+(SeaweedFS on loopback), against the folder update and a rebuild published
+to the store: time, bytes written, requests.
+
 With --dask N: the same update of a copy of the base set in one process and
 through scripts/surfcast-dask on a local cluster of N workers (the update's
 stages as tasks), side by side: wall time, and whether every file of the two
 sets is the same bytes (no rebuild).
 
 Usage: bench/.venv/bin/python bench/update_bench.py [--tiles 18x17] [--cells 10x10x1]
-       [--work DIR] [--threads N] [--memory 2G] [--repeated N | --dask N]
+       [--work DIR] [--threads N] [--memory 2G] [--repeated N | --dask N | --store]
 Prints Markdown for bench/BENCHMARKS.md ("Updates in place").
 """
 import argparse
@@ -168,6 +172,49 @@ def dask_update(a, base_set, upd, added, t_update):
     shutil.rmtree(one, ignore_errors=True)
 
 
+def store_update(a, base_set, added, all_list, t_update):
+    """The same update of the base set in an S3 store (SeaweedFS on loopback,
+    as bench/store_bench.py runs it): the set uploaded as `aws s3 sync`
+    would, then `--add CELL --to s3://...` and a rebuild published to the
+    store, side by side with the folder update just made: time, bytes
+    written and requests."""
+    import re
+    from store_bench import start_store, put_folder, PORT, KEY, SECRET
+    env = dict(os.environ, AWS_ENDPOINT_URL=f"http://127.0.0.1:{PORT}", AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=SECRET,
+               AWS_REGION="us-east-1")
+    store_dir = os.path.join(a.work, "store")
+    shutil.rmtree(store_dir, ignore_errors=True)
+    os.makedirs(store_dir)
+    weed = start_store(store_dir)
+
+    def timed(args):
+        start = time.monotonic()
+        r = subprocess.run(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        if r.returncode != 0:
+            sys.exit(f"{' '.join(args[:3])}...: exit {r.returncode}\n{r.stdout[-3000:]}")
+        return time.monotonic() - start, r.stdout
+
+    try:
+        put_folder(base_set, "sets/base")
+        t_store, out = timed([BUILD, "-q", "--threads", a.threads, "--add", added, "--to", "s3://bench/sets/base"])
+        m = re.search(r"published \S+: (\d+) objects, (\d+) bytes, (\d+) requests; (\d+) objects", out)
+        objects, written, requests, removed = (int(g) for g in m.groups())
+        t_rebuild, out = timed([BUILD, "-q", "--threads", a.threads, "--memory", a.memory, "@" + all_list, "-o", "s3://bench/sets/rebuild"])
+        m = re.search(r"wrote s3://\S+ \((\d+) objects, (\d+) bytes, (\d+) requests\)", out)
+        r_objects, r_written, r_requests = (int(g) for g in m.groups())
+    finally:
+        weed.terminate()
+        weed.wait()
+    print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
+    print("| | time (s) | bytes written | objects written | requests |")
+    print("|---|---|---|---|---|")
+    print(f"| update of the folder set (anchor) | {t_update:.1f} | | | |")
+    print(f"| update of the set in the store | {t_store:.1f} | {written:,} | {objects} (+{removed} deleted) | {requests} publishing |")
+    print(f"| rebuild into the store | {t_rebuild:.1f} | {r_written:,} | {r_objects} | {r_requests} publishing |")
+    print(f"\nThe store update: {100 * t_store / t_rebuild:.1f} % of the rebuild's time, {100 * written / r_written:.1f} % of its bytes; "
+          f"{t_update / t_store:.2f}x the speed of the folder update.")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tiles", default="18x17")
@@ -177,6 +224,7 @@ def main():
     ap.add_argument("--memory", default="2G")
     ap.add_argument("--repeated", type=int, default=0, help="appends of one 0.1 %% cell each (the drift case)")
     ap.add_argument("--dask", type=int, default=0, help="the update in one process against surfcast-dask on N local workers")
+    ap.add_argument("--store", action="store_true", help="the update of the set in an S3 store (SeaweedFS) against in a folder")
     a = ap.parse_args()
     if a.repeated:
         return repeated(a)
@@ -209,6 +257,8 @@ def main():
     t_update, out_update = run([BUILD, "-q", "--threads", a.threads, "--add", added, "--to", upd])
     if a.dask:
         return dask_update(a, base_set, upd, added, t_update)
+    if a.store:
+        return store_update(a, base_set, added, os.path.join(a.work, "all.list"), t_update)
     shutil.rmtree(fresh, ignore_errors=True)
     t_rebuild, _ = run([BUILD, *common, "@" + os.path.join(a.work, "all.list"), "-o", fresh])
 

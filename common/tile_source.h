@@ -1,6 +1,6 @@
 // Where a tile set's bytes come from: a local folder here, or an http(s)
 // folder URL through net/http_tile_source.h (libcurl), which the clients and
-// surfcast-build link and surfcast-serve does not: common/ has no HTTP.
+// surfcast-build link: common/ has no HTTP.
 #pragma once
 
 #include <cstdint>

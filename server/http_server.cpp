@@ -19,12 +19,14 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
+#include <functional>
 #include <cstring>
 #include <mutex>
 #include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
+#include <unordered_map>
 #include <utility>
 
 #include "byte_io.h"
@@ -41,6 +43,9 @@ using Clock = std::chrono::steady_clock;
 constexpr const char* kImmutable = "public, max-age=31536000, immutable";
 constexpr const char* kRevalidate = "no-cache";
 constexpr size_t kMaxBatchBody = 64 * 1024;
+// A request for a block file's bytes of a set in a bucket is fetched whole
+// before it is sent: viewers ask for nodes' blocks (kilobytes to a few MB).
+constexpr uint64_t kMaxBucketBytes = 64ull << 20;
 // Per-connection buffer for the request line and headers: bounds header size.
 constexpr size_t kConnectionMemory = 32 * 1024;
 // Connections one client address may hold: one client cannot take them all.
@@ -260,6 +265,13 @@ struct RequestState {
     uint64_t bytes = 0;
     bool bodyTooLarge = false;
     std::shared_ptr<ExportStream> exportStream;  // an export's body, which counts its own bytes
+    // A set in a bucket: the snapshot the request began with, and the block
+    // bytes fetched for it (by BucketBlocks::Range::id) while it waited,
+    // suspended (Impl::fetchThenRespond).
+    std::shared_ptr<const TilesetSnapshot> held;
+    std::unordered_map<std::string, BucketBlocks::Buffer> fetched;
+    std::string fetchError;
+    int fetchRounds = 0;
 };
 
 // What a response body points into, released with the response.
@@ -268,12 +280,17 @@ struct BodyOwner {
     std::shared_ptr<const MappedFile> file;  // an earlier hierarchy file, outside the snapshot
     std::vector<std::string> texts;  // multipart framing, batch length prefixes
     std::string owned;               // a body built in memory (JSON, metrics)
+    std::vector<BucketBlocks::Buffer> buffers;  // block bytes from a bucket
 };
 
 void releaseBody(void* cls) { delete static_cast<BodyOwner*>(cls); }
 
 struct Reply {
+    RequestState* request = nullptr;
     int status = 200;
+    // Block bytes of a set in a bucket that neither the cache nor the
+    // request held: fetched, then the request is routed again.
+    std::vector<BucketBlocks::Range> missing;
     std::shared_ptr<ExportStream> stream;  // a body produced as it is sent
     std::vector<std::pair<std::string, std::string>> headers;
     // Body: owned text, or iovecs into the owner's snapshot and texts.
@@ -353,6 +370,57 @@ struct HttpServer::Impl {
         exports.clear();
     }
 
+    // Requests suspended while their bytes are fetched from a bucket; the
+    // fetch resumes its connection under fetchMutex, and abortFetches
+    // resumes them all (with an error) before the daemon stops, after which
+    // a fetch that ends touches no connection.
+    struct PendingFetch {
+        MHD_Connection* connection;
+        RequestState* request;
+        bool finished = false;
+    };
+    std::mutex fetchMutex;
+    std::vector<std::shared_ptr<PendingFetch>> pendingFetches;
+    bool fetchesClosed = false;
+
+    MHD_Result fetchThenRespond(MHD_Connection* c, RequestState& st, std::vector<BucketBlocks::Range> ranges) {
+        auto pending = std::make_shared<PendingFetch>(PendingFetch{c, &st});
+        {
+            std::lock_guard lock(fetchMutex);
+            if (fetchesClosed) {
+                st.fetchError = "the server is stopping";
+                return respond(c, st);
+            }
+            pendingFetches.push_back(pending);
+        }
+        MHD_suspend_connection(c);
+        std::vector<std::string> ids;
+        for (const auto& range : ranges) ids.push_back(range.id());
+        store.bucket()->fetch(std::move(ranges), [this, pending, ids](Result<std::vector<BucketBlocks::Buffer>> got) {
+            std::lock_guard lock(fetchMutex);
+            if (pending->finished) return;
+            if (got)
+                for (size_t i = 0; i < ids.size(); ++i) pending->request->fetched[ids[i]] = (*got)[i];
+            else
+                pending->request->fetchError = got.status().message();
+            pending->finished = true;
+            std::erase(pendingFetches, pending);
+            MHD_resume_connection(pending->connection);
+        });
+        return MHD_YES;
+    }
+
+    void abortFetches() {
+        std::lock_guard lock(fetchMutex);
+        fetchesClosed = true;
+        for (auto& pending : pendingFetches) {
+            pending->request->fetchError = "the server is stopping";
+            pending->finished = true;
+            MHD_resume_connection(pending->connection);
+        }
+        pendingFetches.clear();
+    }
+
     Impl(TilesetStore& s, ServerConfig c) : store(s), config(std::move(c)) {}
 
     void fail(Reply& r, int status, const std::string& kind, const std::string& message) {
@@ -367,10 +435,41 @@ struct HttpServer::Impl {
     }
 
     std::shared_ptr<const TilesetSnapshot> snapshot(const std::string& name, Reply& r) {
+        // A request routed again after a fetch sees the version it began with.
+        if (r.request->held && r.request->held->name == name) return r.request->held;
         std::string error;
         auto snap = store.get(name, &error);
         if (!snap) fail(r, TilesetStore::validName(name) ? 404 : 400, "not_found", error);
+        if (snap && snap->bucket) r.request->held = snap;
         return snap;
+    }
+
+    // Bytes [offset, offset + size) of block file `file` of `snap`: its
+    // mapping, or for a set in a bucket the request's fetched bytes or the
+    // cache's (held by the reply until sent). Null where neither has them:
+    // noted in r.missing, for respond() to fetch.
+    const uint8_t* blockBytes(Reply& r, const TilesetSnapshot& snap, const std::string& file, uint64_t offset, uint64_t size,
+                              std::optional<uint32_t> crc = {}) {
+        if (!snap.bucket) {
+            uint64_t declared = 0;
+            return snap.partFile(file, &declared)->data() + offset;
+        }
+        BucketBlocks::Range range = snap.range(file, offset, size, crc);
+        const std::string id = range.id();
+        BucketBlocks::Buffer bytes;
+        if (auto it = r.request->fetched.find(id); it != r.request->fetched.end()) bytes = it->second;
+        else if ((bytes = snap.bucket->cached(range))) r.request->fetched[id] = bytes;  // kept for a later round too
+        if (!bytes) {
+            r.missing.push_back(std::move(range));
+            return nullptr;
+        }
+        r.owner->buffers.push_back(bytes);
+        return bytes->data();
+    }
+    const uint8_t* nodeBytes(Reply& r, const TilesetSnapshot& snap, const NodeRecord& n) {
+        if (!snap.bucket) return snap.block(n);
+        auto place = snap.layout.place(n.blockOffset, n.blockSize);  // load checked every node's
+        return blockBytes(r, snap, place->file, place->offset, n.blockSize, n.blockCrc);
     }
 
     // Clients that pin a version (?v=, tileset.json's hierarchy.crc32) get
@@ -395,10 +494,19 @@ struct HttpServer::Impl {
         return true;
     }
 
-    // Bytes of a mapped file with ETag, conditional requests and Range.
-    void serveBytes(MHD_Connection* c, Reply& r, std::shared_ptr<const TilesetSnapshot> snap, const uint8_t* data,
+    // Where bytes [first, first + length) of what serveBytes serves lie
+    // (null: not at hand yet, blockBytes).
+    using Bytes = std::function<const uint8_t*(uint64_t first, uint64_t length)>;
+    static Bytes at(const uint8_t* data) {
+        return [data](uint64_t first, uint64_t) { return data + first; };
+    }
+
+    // Bytes of a file with ETag, conditional requests and Range; `most`: the
+    // most bytes one request may take (a block file of a set in a bucket,
+    // which the server fetches before it sends).
+    void serveBytes(MHD_Connection* c, Reply& r, std::shared_ptr<const TilesetSnapshot> snap, const Bytes& data,
                     uint64_t size, const std::string& type, const std::string& etag, const char* cacheControl,
-                    std::shared_ptr<const MappedFile> file = nullptr) {
+                    std::shared_ptr<const MappedFile> file = nullptr, uint64_t most = ~uint64_t(0)) {
         r.header("ETag", etag);
         r.header("Cache-Control", cacheControl);
         r.header("Accept-Ranges", "bytes");
@@ -407,10 +515,15 @@ struct HttpServer::Impl {
             return;
         }
         RangeRequest rr = parseRange(header(c, "Range"), size, config.maxRanges);
+        uint64_t asked = rr.kind == RangeRequest::Kind::Whole ? size : 0;
+        for (const ByteRange& b : rr.ranges) asked += b.length();
+        if (rr.kind != RangeRequest::Kind::Unsatisfiable && rr.kind != RangeRequest::Kind::TooMany && asked > most)
+            return fail(r, 413, "too_large", std::to_string(asked) + " bytes asked of a set in a bucket, whose block files this server "
+                                                 "sends by ranges of at most " + std::to_string(most) + " bytes a request");
         switch (rr.kind) {
             case RangeRequest::Kind::Whole:
                 r.header("Content-Type", type);
-                r.piece(data, size_t(size));
+                r.piece(data(0, size), size_t(size));
                 break;
             case RangeRequest::Kind::Unsatisfiable:
                 r.header("Content-Range", "bytes */" + std::to_string(size));
@@ -424,7 +537,7 @@ struct HttpServer::Impl {
                     r.header("Content-Type", type);
                     r.header("Content-Range", "bytes " + std::to_string(b.first) + "-" + std::to_string(b.last) + "/" +
                                                   std::to_string(size));
-                    r.piece(data + b.first, size_t(b.length()));
+                    r.piece(data(b.first, b.length()), size_t(b.length()));
                 } else {
                     const std::string boundary = "surfcast-" + etag.substr(1, etag.size() - 2);
                     auto& texts = r.owner->texts;
@@ -434,7 +547,7 @@ struct HttpServer::Impl {
                                         std::to_string(b.first) + "-" + std::to_string(b.last) + "/" + std::to_string(size) +
                                         "\r\n\r\n");
                         r.piece(texts.back().data(), texts.back().size());
-                        r.piece(data + b.first, size_t(b.length()));
+                        r.piece(data(b.first, b.length()), size_t(b.length()));
                     }
                     texts.push_back("\r\n--" + boundary + "--\r\n");
                     r.piece(texts.back().data(), texts.back().size());
@@ -460,7 +573,19 @@ struct HttpServer::Impl {
         }
         if (path == "/metrics" && !post) {
             st.route = "metrics";
-            return r.text(metrics.text(liveExports.load()), "text/plain; version=0.0.4");
+            std::string text = metrics.text(liveExports.load());
+            if (const auto& bucket = store.bucket()) {
+                const BucketBlocks::Counts k = bucket->counts();
+                text += "# HELP surfcast_bucket_cache_hits_total Block ranges of sets in a bucket found in the cache.\n"
+                        "# TYPE surfcast_bucket_cache_hits_total counter\nsurfcast_bucket_cache_hits_total " + std::to_string(k.hits) +
+                        "\n# HELP surfcast_bucket_cache_misses_total Block ranges the cache did not hold.\n"
+                        "# TYPE surfcast_bucket_cache_misses_total counter\nsurfcast_bucket_cache_misses_total " + std::to_string(k.misses) +
+                        "\n# HELP surfcast_bucket_fetched_bytes_total Bytes fetched from the store.\n"
+                        "# TYPE surfcast_bucket_fetched_bytes_total counter\nsurfcast_bucket_fetched_bytes_total " + std::to_string(k.bytesFetched) +
+                        "\n# HELP surfcast_bucket_cached_bytes Bytes the cache holds.\n"
+                        "# TYPE surfcast_bucket_cached_bytes gauge\nsurfcast_bucket_cached_bytes " + std::to_string(k.cachedBytes) + "\n";
+            }
+            return r.text(std::move(text), "text/plain; version=0.0.4");
         }
         if (path == "/sets" && !post) {
             st.route = "sets";
@@ -497,13 +622,11 @@ struct HttpServer::Impl {
                 // hierarchy-XXXXXXXX.bin names its CRC; hierarchy.bin's CRC is
                 // computed (a compaction or rebuild writes it anew).
                 const std::string tag = rest == "hierarchy.bin" ? hex8(crc32(file->data(), size_t(file->size()))) : rest.substr(10, 8);
-                return serveBytes(c, r, snap, file->data(), file->size(), "application/octet-stream", "\"h-" + tag + "\"",
+                return serveBytes(c, r, snap, at(file->data()), file->size(), "application/octet-stream", "\"h-" + tag + "\"",
                                   kRevalidate, file);
             }
-            uint64_t declared = 0;
-            const MappedFile* part = rest[0] == 'b' ? snap->partFile(rest, &declared) : nullptr;
-            if (rest[0] == 'b' && !part) return fail(r, 404, "not_found", "no such resource");
-            const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *part;
+            const std::optional<uint64_t> declared = rest[0] == 'b' ? snap->partBytes(rest) : std::nullopt;
+            if (rest[0] == 'b' && !declared) return fail(r, 404, "not_found", "no such resource");
             // Clients batch only where tileset.json's answer offers it
             // (docs/PROTOCOL.md, "Batch"); a static host never does.
             if (rest == "tileset.json") r.header("Surfcast-Batch", std::to_string(config.maxBatch));
@@ -511,11 +634,18 @@ struct HttpServer::Impl {
             // blocks-XXXXXXXX.bin's name is its own CRC.
             std::string etag = rest.size() == 19 && rest[0] == 'b' ? "\"p-" + rest.substr(7, 8) + "\""
                                                                     : "\"" + std::string(1, rest[0] == 't' ? 'j' : rest[0]) + "-" + hex8(snap->version) + "\"";
+            const char* type = rest == "tileset.json" ? "application/json" : "application/octet-stream";
+            if (rest[0] == 'b' && snap->bucket) {
+                const TilesetSnapshot& s = *snap;
+                return serveBytes(c, r, snap, [&](uint64_t first, uint64_t length) { return blockBytes(r, s, rest, first, length); },
+                                  *declared, type, etag, kRevalidate, nullptr, kMaxBucketBytes);
+            }
+            uint64_t mapped = 0;
+            const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *snap->partFile(rest, &mapped);
             // A block file: only what this version declares (blocks.bin of a
             // set updated before version 3 may hold a killed update's tail).
-            const uint64_t size = part ? std::min<uint64_t>(m.size(), declared) : m.size();
-            return serveBytes(c, r, snap, m.data(), size, rest == "tileset.json" ? "application/json" : "application/octet-stream",
-                              etag, kRevalidate);
+            const uint64_t size = declared ? std::min<uint64_t>(m.size(), *declared) : m.size();
+            return serveBytes(c, r, snap, at(m.data()), size, type, etag, kRevalidate);
         }
         if (!post && rest.rfind("nodes/", 0) == 0) {
             st.route = "nodes";
@@ -529,8 +659,11 @@ struct HttpServer::Impl {
             if (it == snap->nodes.end()) return fail(r, 404, "not_found", "no node " + key.name());
             const NodeRecord& n = it->second;
             std::string etag = "\"n-" + hex8(n.blockCrc) + "-" + std::to_string(n.blockSize) + "\"";
-            return serveBytes(c, r, snap, snap->block(n), n.blockSize, "application/octet-stream", etag,
-                              pinned ? kImmutable : kRevalidate);
+            const TilesetSnapshot& s = *snap;
+            return serveBytes(c, r, snap, [&](uint64_t first, uint64_t) {
+                const uint8_t* block = nodeBytes(r, s, n);
+                return block ? block + first : nullptr;
+            }, n.blockSize, "application/octet-stream", etag, pinned ? kImmutable : kRevalidate);
         }
         if (post && rest == "batch") {
             st.route = "batch";
@@ -654,7 +787,7 @@ struct HttpServer::Impl {
             le::put<uint32_t>(reinterpret_cast<uint8_t*>(len.data()), n->blockSize);
             texts.push_back(len);
             r.piece(texts.back().data(), 4);
-            r.piece(snap->block(*n), n->blockSize);
+            r.piece(nodeBytes(r, *snap, *n), n->blockSize);
         }
         r.header("Content-Type", "application/x-surfcast-batch");
         r.header("Cache-Control", "no-store");
@@ -675,7 +808,10 @@ struct HttpServer::Impl {
 
     MHD_Result respond(MHD_Connection* c, RequestState& st) {
         Reply r;
-        if (st.method != "GET" && st.method != "HEAD" && st.method != "POST" && st.method != "OPTIONS") {
+        r.request = &st;
+        if (!st.fetchError.empty()) {
+            fail(r, 502, "store", "the store: " + st.fetchError);
+        } else if (st.method != "GET" && st.method != "HEAD" && st.method != "POST" && st.method != "OPTIONS") {
             fail(r, 405, "bad_request", "read-only server: " + st.method + " is not allowed");
             r.header("Allow", "GET, HEAD, POST, OPTIONS");
         } else if (!authorized(c, st)) {
@@ -683,6 +819,14 @@ struct HttpServer::Impl {
             r.header("WWW-Authenticate", "Bearer realm=\"surfcast\"");
         } else {
             route(c, st, r);
+            // Bytes of a set in a bucket to fetch first: the connection waits,
+            // off the event loop, and the request is routed again with them.
+            // (Again at most twice: a request whose bytes leave the cache
+            // before it is sent is sent from its own.)
+            if (!r.missing.empty() && r.status < 400) {
+                if (++st.fetchRounds <= 3) return fetchThenRespond(c, st, std::move(r.missing));
+                fail(r, 503, "busy", "the store's bytes for this request could not be gathered; try again");
+            }
         }
         if (!config.corsOrigin.empty()) {
             r.header("Access-Control-Allow-Origin", config.corsOrigin);
@@ -791,6 +935,7 @@ HttpServer::HttpServer(TilesetStore& store, ServerConfig config) : impl_(new Imp
 HttpServer::~HttpServer() {
     if (impl_->daemon) {
         impl_->abortExports();
+        impl_->abortFetches();
         MHD_stop_daemon(impl_->daemon);
     }
 }
@@ -852,6 +997,7 @@ void HttpServer::run() {
         lock.lock();
     }
     impl_->abortExports();
+    impl_->abortFetches();
     MHD_stop_daemon(impl_->daemon);
     impl_->daemon = nullptr;
 }

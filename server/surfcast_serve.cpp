@@ -19,10 +19,18 @@
 namespace {
 
 const char* kUsage = R"(usage: surfcast-serve DIR [options]
+       surfcast-serve s3://BUCKET/PREFIX [options]
 
 Serves every tile set under DIR (its sub-folders holding tileset.json) over
 HTTP: the three files with Range support, single node blocks, batches of nodes,
 /sets, /healthz and /metrics. Read-only; a set rebuilt in place is picked up.
+Or the sets under an S3 prefix (PREFIX/NAME/tileset.json), with the standard
+AWS credentials (docs/STORAGE.md), which browsers and CDNs never see: block
+bytes are fetched as clients ask for them and kept in a bounded cache.
+
+  --store-cache SIZE   bytes of the bucket's blocks kept, e.g. 512M, 2G (default 256M)
+  --store-poll S       seconds between listings of the prefix, which find new,
+                       updated and deleted sets (default 5)
 
   --bind HOST:PORT     address to listen on (default 127.0.0.1:8080; port 0 picks one)
   --threads N          event-loop threads, each serving many connections (default: one per core)
@@ -56,6 +64,8 @@ int main(int argc, char** argv) {
     surfcast::ServerConfig config;
     std::string dir, web;
     bool noWeb = false;
+    uint64_t storeCache = 256ull << 20;
+    double storePoll = 5;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         auto value = [&](std::string* out) {
@@ -114,6 +124,18 @@ int main(int argc, char** argv) {
             if (!value(&v) || v.empty() || (config.exportSeconds = std::strtod(v.c_str(), &end), *end) || !(config.exportSeconds > 0) ||
                 !std::isfinite(config.exportSeconds))
                 return usageError("--export-seconds needs seconds > 0");
+        } else if (a == "--store-cache") {
+            char* end = nullptr;
+            double n = value(&v) && !v.empty() && v[0] != '-' ? std::strtod(v.c_str(), &end) : -1;
+            const std::string unit = end ? end : "";
+            const double scale = unit == "" ? 1 : unit == "K" ? 1024.0 : unit == "M" ? 1048576.0 : unit == "G" ? 1073741824.0 : -1;
+            if (!(n >= 0) || scale < 0 || !std::isfinite(n * scale) || n * scale > 1e15)
+                return usageError("--store-cache needs a size, e.g. 512M or 2G (0: keep nothing)");
+            storeCache = uint64_t(n * scale);
+        } else if (a == "--store-poll") {
+            char* end = nullptr;
+            if (!value(&v) || v.empty() || (storePoll = std::strtod(v.c_str(), &end), *end) || !(storePoll >= 0.1) || !std::isfinite(storePoll))
+                return usageError("--store-poll needs seconds >= 0.1");
         } else if (a == "--timeout") {
             if (!value(&v) || (config.timeoutSeconds = std::atoi(v.c_str())) < 1) return usageError("--timeout needs seconds >= 1");
         } else if (!a.empty() && a[0] == '-') {
@@ -135,7 +157,7 @@ int main(int argc, char** argv) {
         else if (!web.empty()) return usageError(files.status().message());
     }
 
-    auto store = surfcast::TilesetStore::open(dir);
+    auto store = dir.rfind("s3://", 0) == 0 ? surfcast::TilesetStore::openBucket(dir, storeCache, storePoll) : surfcast::TilesetStore::open(dir);
     if (!store) {
         std::fprintf(stderr, "surfcast-serve: %s\n", store.status().message().c_str());
         return 1;

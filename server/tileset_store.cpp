@@ -8,10 +8,14 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
+#include <cstdio>
 #include <cstring>
+#include <map>
 #include <vector>
 
 #include "crc32.h"
+#include "object_store.h"
 
 namespace surfcast {
 
@@ -45,8 +49,16 @@ Result<std::shared_ptr<MappedFile>> MappedFile::openAt(int dirFd, const std::str
     return m;
 }
 
+std::shared_ptr<MappedFile> MappedFile::fromBytes(std::vector<uint8_t> bytes) {
+    std::shared_ptr<MappedFile> m(new MappedFile);
+    m->held_ = std::move(bytes);
+    m->data_ = m->held_.data();
+    m->size_ = m->held_.size();
+    return m;
+}
+
 MappedFile::~MappedFile() {
-    if (data_) ::munmap(const_cast<uint8_t*>(data_), size_);
+    if (data_ && held_.empty()) ::munmap(const_cast<uint8_t*>(data_), size_);
 }
 
 Result<std::unique_ptr<TilesetStore>> TilesetStore::open(const std::string& root) {
@@ -55,6 +67,125 @@ Result<std::unique_ptr<TilesetStore>> TilesetStore::open(const std::string& root
     s->rootFd_ = ::open(root.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (s->rootFd_ < 0) return Status::error(root + ": cannot open folder (" + std::strerror(errno) + ")");
     return s;
+}
+
+Result<std::unique_ptr<TilesetStore>> TilesetStore::openBucket(const std::string& url, uint64_t cacheBytes, double pollSeconds) {
+    auto where = parseS3Url(url);
+    if (!where) return where.status();
+    auto objects = ObjectStore::shared();
+    if (!objects) return objects.status();
+    std::unique_ptr<TilesetStore> s(new TilesetStore);
+    s->prefix_ = where->key;
+    while (!s->prefix_.empty() && s->prefix_.back() == '/') s->prefix_.pop_back();
+    if (!s->prefix_.empty()) s->prefix_ += '/';
+    s->root_ = "s3://" + where->bucket + "/" + s->prefix_;
+    // Fetches at once: enough to keep a store's latency hidden behind a few
+    // viewers' requests (each of which waits for all of its own).
+    s->bucket_ = std::make_shared<BucketBlocks>(*objects, where->bucket, cacheBytes, 16);
+    s->pollSeconds_ = pollSeconds;
+    SC_TRY(s->refresh());
+    TilesetStore* self = s.get();
+    s->poller_ = std::thread([self] {
+        std::unique_lock lock(self->mutex_);
+        for (;;) {
+            self->pollWake_.wait_for(lock, std::chrono::duration<double>(self->pollSeconds_), [&] { return self->stopping_; });
+            if (self->stopping_) return;
+            lock.unlock();
+            Status st = self->refresh();
+            if (!st.ok()) std::fprintf(stderr, "surfcast-serve: %s (the sets stay as they were)\n", st.message().c_str());
+            lock.lock();
+        }
+    });
+    return s;
+}
+
+TilesetStore::~TilesetStore() {
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+    }
+    pollWake_.notify_all();
+    if (poller_.joinable()) poller_.join();
+    if (rootFd_ >= 0) ::close(rootFd_);
+}
+
+Status TilesetStore::refresh() {
+    auto listed = bucket_->store().list({bucket_->bucket(), prefix_});
+    if (!listed) return listed.status();
+    std::map<std::string, std::string> etags;  // set name: its tileset.json's ETag
+    for (const ListedObject& o : *listed) {
+        const std::string rest = o.key.substr(prefix_.size());
+        const size_t slash = rest.find('/');
+        if (slash != std::string::npos && rest.compare(slash, std::string::npos, "/tileset.json") == 0 && validName(rest.substr(0, slash)))
+            etags[rest.substr(0, slash)] = o.etag;
+    }
+    for (const auto& [name, etag] : etags) {
+        {
+            std::lock_guard lock(mutex_);
+            auto it = sets_.find(name);
+            if (it != sets_.end() && it->second->jsonEtag == etag) continue;
+        }
+        auto loaded = loadFromBucket(name);
+        if (!loaded) {
+            // A set that fails to load keeps its last snapshot; said once.
+            std::lock_guard lock(mutex_);
+            if (loadErrors_[name] != loaded.status().message())
+                std::fprintf(stderr, "surfcast-serve: %s\n", loaded.status().message().c_str());
+            loadErrors_[name] = loaded.status().message();
+            continue;
+        }
+        (*loaded)->jsonEtag = etag;
+        install(std::move(*loaded));
+        std::lock_guard lock(mutex_);
+        loadErrors_.erase(name);
+    }
+    std::lock_guard lock(mutex_);
+    for (auto it = sets_.begin(); it != sets_.end();) {
+        if (etags.count(it->first)) {
+            ++it;
+            continue;
+        }
+        previous_.erase(it->first);
+        it = sets_.erase(it);
+    }
+    return {};
+}
+
+Result<std::shared_ptr<TilesetSnapshot>> TilesetStore::loadFromBucket(const std::string& name) {
+    ObjectStore& objects = bucket_->store();
+    const std::string where = prefix_ + name + "/";
+    const S3Url jsonUrl{bucket_->bucket(), where + "tileset.json"};
+    auto json = objects.get(jsonUrl, kMaxTilesetJsonBytes);
+    if (!json) return json.status();
+    auto info = readTilesetJson(std::string(json->begin(), json->end()), jsonUrl.str());
+    if (!info) return info.status();
+    const S3Url hierarchyUrl{bucket_->bucket(), where + info->hierarchyFile};
+    auto hierarchy = objects.get(hierarchyUrl, info->hierarchyBytes);
+    if (!hierarchy) return hierarchy.status();
+    auto snap = std::make_shared<TilesetSnapshot>();
+    snap->name = name;
+    snap->info = *info;
+    snap->layout = BlocksLayout(blocksPartsOf(*info));
+    auto nodes = readHierarchyOf(*info, *hierarchy, hierarchyUrl.str());
+    if (!nodes) return nodes.status();
+    for (const NodeRecord& n : *nodes) {
+        if (auto place = snap->layout.place(n.blockOffset, n.blockSize); !place)
+            return Status::error(hierarchyUrl.str() + ": node " + n.key.name() + ": " + place.status().message());
+        snap->nodes[n.key] = n;
+    }
+    snap->version = crc32(json->data(), json->size());
+    snap->json = MappedFile::fromBytes(std::move(*json));
+    snap->hierarchy = MappedFile::fromBytes(std::move(*hierarchy));
+    snap->bucket = bucket_;
+    snap->keyPrefix = where;
+    return snap;
+}
+
+void TilesetStore::install(std::shared_ptr<const TilesetSnapshot> snap) {
+    std::lock_guard lock(mutex_);
+    auto& current = sets_[snap->name];
+    if (current && current->info.hierarchyCrc != snap->info.hierarchyCrc) previous_[snap->name] = current;
+    current = std::move(snap);
 }
 
 bool TilesetStore::validName(const std::string& name) {
@@ -113,6 +244,12 @@ Result<std::shared_ptr<TilesetSnapshot>> TilesetStore::load(const std::string& n
 
 Result<std::shared_ptr<MappedFile>> TilesetStore::hierarchyFile(const std::string& name, const std::string& file) {
     if (!validName(name) || !validHierarchyFile(file)) return Status::error("no such file");
+    if (bucket_) {  // the version before the current one, in memory
+        std::lock_guard lock(mutex_);
+        auto it = previous_.find(name);
+        if (it == previous_.end() || it->second->info.hierarchyFile != file) return Status::error("no such file");
+        return it->second->hierarchy;
+    }
     Fd dir{::openat(rootFd_, name.c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC)};
     if (dir.fd < 0) return Status::error("no tile set named '" + name + "'");
     return MappedFile::openAt(dir.fd, file, root_ + "/" + name + "/" + file);
@@ -121,6 +258,13 @@ Result<std::shared_ptr<MappedFile>> TilesetStore::hierarchyFile(const std::strin
 std::shared_ptr<const TilesetSnapshot> TilesetStore::get(const std::string& name, std::string* error) {
     if (!validName(name)) {
         *error = "invalid tile set name";
+        return nullptr;
+    }
+    if (bucket_) {  // as the last listing left it (refresh)
+        std::lock_guard lock(mutex_);
+        auto it = sets_.find(name);
+        if (it != sets_.end()) return it->second;
+        *error = "no tile set named '" + name + "'";
         return nullptr;
     }
     struct stat st{};
@@ -187,6 +331,13 @@ uint64_t leafPointsAtMost(const TilesetSnapshot& snapshot, const std::optional<B
 }
 
 std::vector<std::shared_ptr<const TilesetSnapshot>> TilesetStore::list() {
+    if (bucket_) {
+        std::lock_guard lock(mutex_);
+        std::vector<std::shared_ptr<const TilesetSnapshot>> out;
+        for (const auto& [name, snap] : sets_) out.push_back(snap);
+        std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a->name < b->name; });
+        return out;
+    }
     std::vector<std::string> names;
     // A fresh open file description: concurrent listings must not share a
     // directory offset (dup() would).
@@ -216,6 +367,14 @@ public:
         return std::vector<uint8_t>((*m)->data(), (*m)->data() + (*m)->size());
     }
     Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
+        if (s_->bucket && name != "tileset.json" && name != s_->info.hierarchyFile) {
+            const std::optional<uint64_t> declared = s_->partBytes(name);
+            if (!declared) return Status::error(describe() + ": no file " + name);
+            if (offset > *declared || size > *declared - offset)
+                return Status::error(describe() + "/" + name + ": bytes " + std::to_string(offset) + "+" + std::to_string(size) +
+                                     " outside its " + std::to_string(*declared));
+            return s_->bucket->read(s_->range(name, offset, size));
+        }
         auto m = mapped(name);
         if (!m) return m.status();
         if (offset > (*m)->size() || size > (*m)->size() - offset)
@@ -249,9 +408,15 @@ const uint8_t* TilesetSnapshot::block(const NodeRecord& node) const {
     return partFiles[place->part]->data() + place->offset;
 }
 
+std::optional<uint64_t> TilesetSnapshot::partBytes(const std::string& file) const {
+    for (const BlocksPart& part : layout.parts())
+        if (part.file == file) return part.bytes;
+    return std::nullopt;
+}
+
 const MappedFile* TilesetSnapshot::partFile(const std::string& file, uint64_t* declaredBytes) const {
     const auto& parts = layout.parts();
-    for (size_t i = 0; i < parts.size(); ++i)
+    for (size_t i = 0; i < parts.size() && !bucket; ++i)
         if (parts[i].file == file) {
             *declaredBytes = parts[i].bytes;
             return partFiles[i].get();

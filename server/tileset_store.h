@@ -1,4 +1,5 @@
-// The tile sets under one folder, memory-mapped, as immutable snapshots. A
+// The tile sets under one folder, memory-mapped, as immutable snapshots (or
+// under an S3 prefix: openBucket). A
 // request takes the current snapshot of its set and serves every byte of its
 // response from it; a set rebuilt and renamed over the old one is noticed on
 // the next request (the inode of its tileset.json changes) and loaded as a new
@@ -9,14 +10,17 @@
 #include <sys/types.h>
 
 #include <cstdint>
+#include <condition_variable>
 #include <ctime>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 #include <unordered_map>
 #include <vector>
 
+#include "bucket_blocks.h"
 #include "octree_key.h"
 #include "status.h"
 #include "tile_source.h"
@@ -24,10 +28,12 @@
 
 namespace surfcast {
 
-// A read-only mapping of a whole file; empty files map to nothing.
+// A read-only mapping of a whole file; empty files map to nothing. Or, for
+// a set in a bucket, bytes read from the store, held in memory.
 class MappedFile {
 public:
     static Result<std::shared_ptr<MappedFile>> openAt(int dirFd, const std::string& name, const std::string& what);
+    static std::shared_ptr<MappedFile> fromBytes(std::vector<uint8_t> bytes);
     ~MappedFile();
     const uint8_t* data() const { return data_; }
     uint64_t size() const { return size_; }
@@ -36,6 +42,7 @@ private:
     MappedFile() = default;
     const uint8_t* data_ = nullptr;
     uint64_t size_ = 0;
+    std::vector<uint8_t> held_;  // fromBytes's; empty: data_ is a mapping
 };
 
 struct TilesetSnapshot {
@@ -47,10 +54,21 @@ struct TilesetSnapshot {
     BlocksLayout layout;
     std::vector<std::shared_ptr<MappedFile>> partFiles;
     const uint8_t* block(const NodeRecord& node) const;
-    // The mapped file of part `file`, or null where this version has none of that name.
+    // The mapped file of part `file`, or null where this version has none of
+    // that name (or the set is in a bucket).
     const MappedFile* partFile(const std::string& file, uint64_t* declaredBytes) const;
+    // The bytes this version declares for part `file`; nullopt where it has none of that name.
+    std::optional<uint64_t> partBytes(const std::string& file) const;
     std::unordered_map<NodeKey, NodeRecord, NodeKeyHash> nodes;
     uint32_t version = 0;  // CRC-32 of tileset.json: it covers every block through the hierarchy CRC
+    // A set in a bucket: tileset.json and the hierarchy in memory, no part
+    // mapped (partFiles empty, block() not to be called); its block files'
+    // bytes come from `bucket`, under keyPrefix + the file's name.
+    std::shared_ptr<BucketBlocks> bucket;
+    std::string keyPrefix, jsonEtag;
+    BucketBlocks::Range range(const std::string& file, uint64_t offset, uint64_t size, std::optional<uint32_t> crc = {}) const {
+        return {std::to_string(version), keyPrefix + file, offset, size, crc};
+    }
     // Identity of the tileset.json it was loaded from.
     dev_t device = 0;
     ino_t inode = 0;
@@ -73,6 +91,15 @@ class TilesetStore {
 public:
     // `root` must exist; sets are its direct sub-folders holding tileset.json.
     static Result<std::unique_ptr<TilesetStore>> open(const std::string& root);
+    // The sets under s3://BUCKET/PREFIX (each PREFIX/NAME/tileset.json), as
+    // the AWS chain reaches them (object_store.h), listed at once (an error
+    // where the store refuses) and then every `pollSeconds`: a set whose
+    // tileset.json's ETag changed is loaded again, a new one appears, a
+    // deleted one goes. Block bytes go through a cache of `cacheBytes`.
+    static Result<std::unique_ptr<TilesetStore>> openBucket(const std::string& url, uint64_t cacheBytes, double pollSeconds);
+    ~TilesetStore();
+    // A bucket's blocks (null for a folder).
+    const std::shared_ptr<BucketBlocks>& bucket() const { return bucket_; }
 
     // Set names: 1-128 of [A-Za-z0-9._-], not starting with '.'. Anything else
     // (traversal, encoded or not, hidden folders) is refused before any disk access.
@@ -99,12 +126,28 @@ public:
 private:
     TilesetStore() = default;
     Result<std::shared_ptr<TilesetSnapshot>> load(const std::string& name);
+    Result<std::shared_ptr<TilesetSnapshot>> loadFromBucket(const std::string& name);
+    // Lists the bucket's prefix and loads what changed; an error where the
+    // listing fails (a set that fails to load keeps its last snapshot, and
+    // says so on stderr).
+    Status refresh();
+    // Makes `snap` the current snapshot of its set.
+    void install(std::shared_ptr<const TilesetSnapshot> snap);
 
     std::string root_;
     int rootFd_ = -1;
     std::mutex mutex_;
     std::unordered_map<std::string, std::shared_ptr<const TilesetSnapshot>> sets_;
     std::unordered_map<std::string, std::shared_ptr<const TilesetSnapshot>> previous_;  // what each set's current one replaced
+    // A bucket's: the sets' prefix ("PREFIX/", or empty), and the thread
+    // that lists it every pollSeconds_ until the store is destroyed.
+    std::shared_ptr<BucketBlocks> bucket_;
+    std::string prefix_;
+    double pollSeconds_ = 0;
+    std::thread poller_;
+    std::condition_variable pollWake_;
+    bool stopping_ = false;  // under mutex_
+    std::unordered_map<std::string, std::string> loadErrors_;  // per set: the last one said on stderr
 };
 
 }  // namespace surfcast
