@@ -5,8 +5,12 @@ process and with two, the work folder's bytes (the shuffle), each task's peak
 RSS, and whether the sets are the same bytes. Prints markdown for
 bench/BENCHMARKS.md ("A build across processes").
 
+With --store: two workers whose work, inputs and set live in an S3 store
+(SeaweedFS on loopback, --work s3://...) against two on a shared folder.
+
 usage: bench/dask_bench.py INPUT... [--memory 2G] [--workers 1,2] [--label NAME]
        bench/dask_bench.py --default-scene --scene-points 300000000 --workers 2
+       bench/dask_bench.py INPUT... --store [--reps 2]
 """
 import argparse
 import json
@@ -38,6 +42,50 @@ def same(a, b):
     return all(read(os.path.join(a, n)) == read(os.path.join(b, n)) for n in ("tileset.json", "hierarchy.bin", "blocks.bin"))
 
 
+def store_runs(args, options, scratch):
+    """Two local workers on a shared work folder against two whose work,
+    inputs and set live in an S3 store (SeaweedFS on loopback, --work
+    s3://...), alternated: wall time and whether the sets are the same bytes."""
+    sys.path.insert(0, os.path.join(REPO, "tests", "tools"))
+    from seaweedfs import SeaweedFs
+    os.makedirs(os.path.join(scratch, "store"))
+    store = SeaweedFs(os.path.join(scratch, "store"), 18433, "bench")
+    env = dict(os.environ, **store.environment())
+    try:
+        remote = []
+        for o in options:
+            if os.path.isfile(o):
+                store.put("in/" + os.path.basename(o), o)
+                remote.append("s3://bench/in/" + os.path.basename(o))
+            else:
+                remote.append(o)
+        times = {"folder": [], "store": []}
+        identical = True
+        for rep in range(args.reps):
+            for way in times:
+                folder = way == "folder"
+                work = os.path.join(scratch, f"w{rep}") if folder else f"s3://bench/work/{rep}"
+                out = os.path.join(scratch, f"set{rep}") if folder else f"s3://bench/sets/{rep}"
+                start = time.monotonic()
+                r = subprocess.run([DRIVER, "--local", "2", "-q", "--work", work] + (options if folder else remote) + ["-o", out],
+                                   capture_output=True, text=True, env=env)
+                if r.returncode:
+                    sys.exit(r.stderr)
+                times[way].append(time.monotonic() - start)
+            for name in ("tileset.json", "hierarchy.bin", "blocks.bin"):
+                with open(os.path.join(scratch, f"set{rep}", name), "rb") as f:
+                    identical = identical and store.get(f"sets/{rep}/{name}") == f.read()
+    finally:
+        store.stop()
+    best = {way: min(t) for way, t in times.items()}
+    print("| work | best s | runs (s) | speed vs shared folder |")
+    print("|---|---|---|---|")
+    for way, label in (("folder", "2 workers, shared folder (anchor)"), ("store", "2 workers sharing nothing but the store")):
+        print(f"| {label} | {best[way]:.1f} | {', '.join(f'{t:.1f}' for t in times[way])} | {best['folder'] / best[way]:.2f}× |")
+    print(f"\nSets: {'the same bytes' if identical else 'DIFFERENT'} (tileset.json, hierarchy.bin, blocks.bin).")
+    print(f"\n- command: `bench/dask_bench.py {' '.join(sys.argv[1:])}`")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("inputs", nargs="*")
@@ -48,10 +96,18 @@ def main():
     ap.add_argument("--no-single", action="store_true", help="skip the one-process build")
     ap.add_argument("--label", default="")
     ap.add_argument("--work", default=None, help="scratch folder (default: a temporary one)")
+    ap.add_argument("--store", action="store_true",
+                    help="two workers sharing nothing but an S3 store (SeaweedFS) against two on a shared folder")
+    ap.add_argument("--reps", type=int, default=2, help="--store: runs of each way, alternated")
     args = ap.parse_args()
     inputs = list(args.inputs) + (["--default-scene", "--scene-points", args.scene_points] if args.default_scene else [])
     options = inputs + ["--memory", args.memory]
     scratch = tempfile.mkdtemp(prefix="surfcast-dask-bench-", dir=args.work)
+    if args.store:
+        try:
+            return store_runs(args, options, scratch)
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)
     try:
         print(f"- machine: {cpu()}, {os.cpu_count()} cores; {args.label or ' '.join(inputs)}, `--memory {args.memory}`\n")
         rows = []

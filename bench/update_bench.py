@@ -179,13 +179,13 @@ def store_update(a, base_set, added, all_list, t_update):
     store, side by side with the folder update just made: time, bytes
     written and requests."""
     import re
-    from store_bench import start_store, put_folder, PORT, KEY, SECRET
-    env = dict(os.environ, AWS_ENDPOINT_URL=f"http://127.0.0.1:{PORT}", AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=SECRET,
-               AWS_REGION="us-east-1")
+    sys.path.insert(0, os.path.join(ROOT, "tests", "tools"))
+    from seaweedfs import SeaweedFs
     store_dir = os.path.join(a.work, "store")
     shutil.rmtree(store_dir, ignore_errors=True)
     os.makedirs(store_dir)
-    weed = start_store(store_dir)
+    weed = SeaweedFs(store_dir, 18433, "bench")
+    env = dict(os.environ, **weed.environment())
 
     def timed(args):
         start = time.monotonic()
@@ -195,7 +195,7 @@ def store_update(a, base_set, added, all_list, t_update):
         return time.monotonic() - start, r.stdout
 
     try:
-        put_folder(base_set, "sets/base")
+        weed.put_folder(base_set, "sets/base")
         t_store, out = timed([BUILD, "-q", "--threads", a.threads, "--add", added, "--to", "s3://bench/sets/base"])
         m = re.search(r"published \S+: (\d+) objects, (\d+) bytes, (\d+) requests; (\d+) objects", out)
         objects, written, requests, removed = (int(g) for g in m.groups())
@@ -203,8 +203,7 @@ def store_update(a, base_set, added, all_list, t_update):
         m = re.search(r"wrote s3://\S+ \((\d+) objects, (\d+) bytes, (\d+) requests\)", out)
         r_objects, r_written, r_requests = (int(g) for g in m.groups())
     finally:
-        weed.terminate()
-        weed.wait()
+        weed.stop()
     print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
     print("| | time (s) | bytes written | objects written | requests |")
     print("|---|---|---|---|---|")

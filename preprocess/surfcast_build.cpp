@@ -24,6 +24,7 @@
 #include "octree_builder.h"
 #include "set_lock.h"
 #include "stages.h"
+#include "store_work.h"
 #include "update.h"
 #include "work_files.h"
 #include "http_tile_source.h"
@@ -610,23 +611,46 @@ int runCompact(const std::string& set) {
     return 0;
 }
 
+int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& work);
+
+// A stage: on the work folder --work names, or on a local copy of the files
+// it reads from a work prefix in a store, whose outputs it then uploads
+// (store_work.h).
 int runStage(const std::string& stage, const std::vector<std::string>& own) {
     Args a;
     if (int status = parseArgs(own, stage, &a); status >= 0) return status;
-    if (a.work.empty()) return usageError(stage + " needs --work DIR, a folder every stage's process sees");
-    const surfcast::WorkFolder work{a.work};
+    if (a.work.empty()) return usageError(stage + " needs --work DIR, a folder every stage's process sees (or s3://BUCKET/PREFIX)");
+    if (!surfcast::isS3Url(a.work)) return runStageOn(stage, a, surfcast::WorkFolder{a.work});
+    if (stage == "update-merge") return usageError("an update in stages works in a folder; --work s3://... is for builds");
+    auto staging = surfcast::PublishStaging::create();
+    if (!staging) return fail(staging.status());
+    auto storeWork = surfcast::StoreWork::open(a.work, stage, a.chunks, (*staging)->dir() + "/work");
+    if (!storeWork) return fail(storeWork.status());
+    const surfcast::StoreWork& w = **storeWork;
+    // A new plan makes the earlier one's later outputs stale (as it removes
+    // them from a folder); a merged set leaves only the plan, a record.
+    if (stage == "plan")
+        if (auto st = w.remove({"chunks/", "nodes/", "update.bin"}); !st.ok()) return fail(st);
+    const int status = runStageOn(stage, a, surfcast::WorkFolder{w.dir()});
+    if (status != 0) return status;
+    if (auto st = w.upload(); !st.ok()) return fail(st);
+    if (stage == "merge")
+        if (auto st = w.remove({"scan/", "count/", "chunks/", "nodes/"}); !st.ok()) return fail(st);
+    return 0;
+}
+
+int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& work) {
     surfcast::BuildSummary summary;
     std::shared_ptr<const surfcast::BuildContext> context;
     if (stage == "scan" || stage == "count" || stage == "plan") {
         if (a.opt.output.empty()) return usageError("no output folder (-o OUT)");
-        if (surfcast::isS3Url(a.opt.output) || surfcast::isS3Url(a.work))
-            return usageError("the staged build writes to folders; build in one process to publish to s3:// (-o s3://...)");
         if (a.opt.inputs.paths.empty() && !a.opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
         if (stage != "plan" && !a.partGiven) return usageError(stage + " needs --part P/N");
         auto paths = absoluteInputs(a.opt.inputs.paths);
         if (!paths) return fail(paths.status());
         a.opt.inputs.paths = *paths;
-        a.opt.output = std::filesystem::absolute(a.opt.output).lexically_normal().string();
+        if (!surfcast::isS3Url(a.opt.output)) a.opt.output = std::filesystem::absolute(a.opt.output).lexically_normal().string();
+        else if (auto url = surfcast::parseS3Url(a.opt.output); !url) return fail(url.status());
         std::error_code ec;
         std::filesystem::create_directories(work.dir + "/" + (stage == "plan" ? "" : stage), ec);
         if (ec) return fail(surfcast::Status::error(work.dir + ": cannot create (" + ec.message() + ")"));
@@ -778,7 +802,27 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
         progress.end();
         return 0;
     }
-    // merge
+    // merge: into the set's folder, or for a set in a store into a local
+    // one, then published (set_publisher.h).
+    const std::string publishTo = surfcast::isS3Url(planned.opt.output) ? planned.opt.output : "";
+    std::unique_ptr<surfcast::PublishStaging> staging;
+    if (!publishTo.empty()) {
+        auto created = surfcast::PublishStaging::create();
+        if (!created) return fail(created.status());
+        staging = std::move(*created);
+        // A merge run again after its set was published (its worker lost
+        // before it said so): the set at the prefix keeps this plan as its
+        // build record, and is done.
+        if (auto there = surfcast::mirrorSetMetadata(publishTo, staging->dir()); there) {
+            std::ifstream record(staging->dir() + "/" + surfcast::buildRecordFile(there->info.hierarchyFile), std::ios::binary),
+                mine(work.plan(), std::ios::binary);
+            if (record && mine && std::string{std::istreambuf_iterator<char>(record), {}} == std::string{std::istreambuf_iterator<char>(mine), {}}) {
+                std::printf("%s holds this build already (its build record is its plan)\n", publishTo.c_str());
+                return 0;
+            }
+        }
+        planned.opt.output = staging->dir() + "/set";
+    }
     surfcast::SetLock lock;
     if (auto st = surfcast::lockOutput(planned.opt.output, &lock); !st.ok()) return fail(st);
     c.describe(&summary);
@@ -795,7 +839,12 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     // plan.json stay, a record of the build).
     std::error_code ec;
     for (const char* folder : {"scan", "count", "chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
-    return finishBuild(planned, summary);
+    if (int status = finishBuild(planned, summary, !publishTo.empty()); status != 0 || publishTo.empty()) return status;
+    auto published = surfcast::publishFolder(planned.opt.output, publishTo);
+    if (!published) return fail(published.status());
+    std::printf("wrote %s (%llu objects, %llu bytes, %llu requests)\n", publishTo.c_str(), (unsigned long long)published->objects,
+                (unsigned long long)published->bytes, (unsigned long long)published->requests);
+    return 0;
 }
 
 }  // namespace

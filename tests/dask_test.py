@@ -87,20 +87,25 @@ def wait_for(condition, seconds, what):
 
 
 class Cluster:
-    """A scheduler and two single-threaded worker processes, each under a nanny."""
+    """A scheduler and two single-threaded worker processes, each under a nanny.
+    With `alone`, each worker starts in an empty folder of its own (its
+    working and local directory) with the environment `env`: machines that
+    share no path."""
 
-    def __init__(self, tmp):
+    def __init__(self, tmp, env=None, alone=False):
         dask = os.path.join(VENV, "bin", "dask")
         self.file = os.path.join(tmp, "scheduler.json")
-        quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env)
         self.procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                         "--scheduler-file", self.file], **quiet)]
         wait_for(lambda: os.path.exists(self.file), 60, "the scheduler's file")
         with open(self.file) as f:
             self.address = json.load(f)["address"]
-        for _ in range(2):
+        for i in range(2):
+            own = os.path.join(tmp, f"worker-{i}") if alone else tmp
+            os.makedirs(own, exist_ok=True)
             self.procs.append(subprocess.Popen([dask, "worker", self.address, "--nthreads", "1", "--no-dashboard",
-                                                "--local-directory", tmp], **quiet))
+                                                "--local-directory", own], cwd=own, **quiet))
         wait_for(lambda: self.workers() == 2, 60, "two workers")
 
     def workers(self):
@@ -296,6 +301,79 @@ class DaskBuild(unittest.TestCase):
         self.assertIn(bad + ": LAZ: the chunk table offset", r.stderr)
         self.assertIn("file of", r.stderr)
         self.assertEqual(read(os.path.join(out, "blocks.bin")), old)
+
+
+class ShareNothing(unittest.TestCase):
+    """Workers that share nothing but an S3 store (SeaweedFS, tests/tools/seaweedfs.py):
+    each starts in an empty folder of its own, and every input, work file and
+    the set live in the store (--work s3://...)."""
+
+    @classmethod
+    def setUpClass(cls):
+        r = subprocess.run([DRIVER, "--help"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        cls.tmp = tempfile.mkdtemp(prefix="surfcast-dask-store-test-")
+        sys.path.insert(0, os.path.join(REPO, "tests", "tools"))
+        from seaweedfs import SeaweedFs
+        os.makedirs(os.path.join(cls.tmp, "store"))
+        cls.store = SeaweedFs(os.path.join(cls.tmp, "store"), 18533, "surfcast")
+        cls.env = dict(os.environ, **cls.store.environment())
+        os.makedirs(os.path.join(cls.tmp, "cluster"))
+        cls.cluster = Cluster(os.path.join(cls.tmp, "cluster"), cls.env, alone=True)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.cluster.close()
+        cls.store.stop()
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(dir=self.tmp)
+
+    def same_as(self, folder, prefix):
+        return all(self.store.get(f"{prefix}/{f}") == read(os.path.join(folder, f)) for f in ("tileset.json", "hierarchy.bin", "blocks.bin"))
+
+    def driver(self, options, out, *extra):
+        # The driver runs in a folder of its own too.
+        return subprocess.run([DRIVER, "--scheduler", self.cluster.address, *extra] + options + ["-o", out],
+                              capture_output=True, text=True, env=self.env, cwd=self.dir)
+
+    def test_same_bytes_as_one_process(self):
+        require_data(self)
+        # A COPC file in the bucket, cut into three parts at its LAZ chunks.
+        copc = os.path.join(DATA, "lion_takanawa.copc.laz")
+        self.store.put("in/lion_takanawa.copc.laz", copc)
+        options = ["--memory", "128M", "--capacity", "2000"]
+        one_process([copc] + options, os.path.join(self.dir, "one"))
+        r = self.driver(["s3://surfcast/in/lion_takanawa.copc.laz"] + options, "s3://surfcast/sets/copc",
+                        "--work", "s3://surfcast/work/copc", "--parts", "3")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertTrue(self.same_as(os.path.join(self.dir, "one"), "sets/copc"))
+        self.assertEqual(self.store.keys("work/copc/"), [], "work files left in the store")
+        for worker in ("worker-0", "worker-1"):
+            left = [f for f in os.listdir(os.path.join(self.tmp, "cluster", worker)) if not f.startswith("dask-scratch")]
+            self.assertEqual(left, [], f"{worker} kept files of its own: {left}")
+
+    def test_worker_killed_mid_chunk_and_driver_started_again(self):
+        one_process(LONGER, os.path.join(self.dir, "one"))
+        work = "s3://surfcast/work/longer"
+        driver = subprocess.Popen([DRIVER, "--scheduler", self.cluster.address, "-q", "--work", work, "--keep-work"] + LONGER +
+                                  ["-o", "s3://surfcast/sets/longer"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                  env=self.env, cwd=self.dir)
+        # SIGKILL the worker process that runs the first chunk task seen.
+        chunk = wait_for(lambda: stage_processes("chunk", work), 120, "a chunk task")[0]
+        os.kill(parent_of(chunk), signal.SIGKILL)
+        # Then the driver, once a chunk's output is in the store.
+        wait_for(lambda: [k for k in self.store.keys("work/longer/nodes/") if k.endswith(".nodes")], 120, "a finished chunk")
+        driver.kill()
+        driver.wait()
+        wait_for(lambda: not stage_processes("chunk", work), 120, "the chunk tasks to end")
+        wait_for(lambda: self.cluster.workers() == 2, 60, "the nanny's new worker")
+        self.assertIsNone(self.store.get("sets/longer/tileset.json"), "a set appeared before the merge")
+        r = self.driver(LONGER, "s3://surfcast/sets/longer", "--work", work)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("resuming: plan done", r.stderr)
+        self.assertTrue(self.same_as(os.path.join(self.dir, "one"), "sets/longer"))
 
 
 if __name__ == "__main__":

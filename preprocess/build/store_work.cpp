@@ -1,0 +1,106 @@
+#include "store_work.h"
+
+#include <algorithm>
+#include <filesystem>
+
+#include "folder_publish.h"
+#include "object_store.h"
+
+namespace surfcast {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Whether `name` (a path below the work) is a file the stage reads.
+bool readBy(const std::string& stage, const std::vector<size_t>& chunks, const std::string& name) {
+    auto under = [&](const char* prefix) { return name.rfind(prefix, 0) == 0; };
+    if (stage == "count") return under("scan/");
+    if (stage == "plan") return under("scan/") || under("count/");
+    if (stage == "distribute") return name == "plan.bin";
+    if (stage == "merge") return name == "plan.bin" || under("nodes/");
+    if (stage == "chunk") {
+        if (name == "plan.bin") return true;
+        if (!under("chunks/")) return false;
+        const std::string file = fs::path(name).filename().string();
+        if (file == "distribution.bin") return true;
+        // chunk-I.bin, chunk-I.halo, chunk-I.scalars (chunker.h, ChunkWriter::files)
+        for (size_t i : chunks)
+            if (file.rfind("chunk-" + std::to_string(i) + ".", 0) == 0) return true;
+    }
+    return false;
+}
+
+// Files that mark an output whole go after the rest of it.
+int uploadOrder(const std::string& name) {
+    const std::string file = fs::path(name).filename().string();
+    if (file == "plan.json") return 2;
+    if (file == "distribution.bin" || file == "plan.bin" || fs::path(name).extension() == ".nodes") return 1;
+    return 0;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<StoreWork>> StoreWork::open(const std::string& url, const std::string& stage, const std::vector<size_t>& chunks,
+                                                   const std::string& local) {
+    auto where = parseS3Url(url);
+    if (!where) return where.status();
+    auto store = ObjectStore::shared();
+    if (!store) return store.status();
+    std::unique_ptr<StoreWork> w(new StoreWork);
+    w->bucket_ = where->bucket;
+    w->prefix_ = where->key;
+    while (!w->prefix_.empty() && w->prefix_.back() == '/') w->prefix_.pop_back();
+    if (w->prefix_.empty()) return Status::error(url + ": give the work a prefix of its own (s3://BUCKET/PREFIX), not a whole bucket");
+    w->prefix_ += '/';
+    w->local_ = local;
+    std::error_code ec;
+    fs::create_directories(local, ec);
+    if (ec) return Status::error(local + ": cannot create (" + ec.message() + ")");
+    auto listed = (*store)->list({w->bucket_, w->prefix_});
+    if (!listed) return listed.status();
+    for (const ListedObject& o : *listed) {
+        const std::string name = o.key.substr(w->prefix_.size());
+        if (!readBy(stage, chunks, name)) continue;
+        if (name.find("..") != std::string::npos) return Status::error("s3://" + w->bucket_ + "/" + o.key + ": not a work file's name");
+        auto bytes = (*store)->get({w->bucket_, o.key}, o.size);
+        if (!bytes) return bytes.status();
+        const fs::path path = fs::path(local) / name;
+        fs::create_directories(path.parent_path(), ec);
+        SC_TRY(writeFileSynced(path.string(), bytes->data(), bytes->size()));
+        w->copied_.insert(name);
+    }
+    return w;
+}
+
+Status StoreWork::upload() const {
+    auto store = ObjectStore::shared();
+    if (!store) return store.status();
+    std::vector<std::string> files;
+    std::error_code ec;
+    for (fs::recursive_directory_iterator it(local_, ec), end; !ec && it != end; it.increment(ec))
+        if (it->is_regular_file(ec)) {
+            const std::string name = fs::relative(it->path(), local_, ec).generic_string();
+            if (!copied_.count(name)) files.push_back(name);
+        }
+    if (ec) return Status::error(local_ + ": cannot list (" + ec.message() + ")");
+    std::stable_sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) { return uploadOrder(a) < uploadOrder(b); });
+    for (const std::string& name : files) {
+        auto put = (*store)->putFile({bucket_, prefix_ + name}, local_ + "/" + name);
+        if (!put) return put.status();
+    }
+    return {};
+}
+
+Status StoreWork::remove(const std::vector<std::string>& prefixes) const {
+    auto store = ObjectStore::shared();
+    if (!store) return store.status();
+    for (const std::string& p : prefixes) {
+        auto listed = (*store)->list({bucket_, prefix_ + p});
+        if (!listed) return listed.status();
+        for (const ListedObject& o : *listed) SC_TRY((*store)->remove({bucket_, o.key}));
+    }
+    return {};
+}
+
+}  // namespace surfcast
