@@ -74,6 +74,16 @@ Result<std::vector<uint8_t>> TilesetReader::readBlockBytes(const NodeRecord& nod
     return bytes;
 }
 
+Result<std::vector<std::vector<uint8_t>>> TilesetReader::readBlocksBytes(const std::vector<NodeRecord>& nodes) const {
+    auto blobs = source_->blobs(nodes);
+    if (!blobs) return blobs.status();
+    for (size_t i = 0; i < nodes.size(); ++i)
+        if ((*blobs)[i].size() != nodes[i].blockSize || crc32((*blobs)[i].data(), (*blobs)[i].size()) != nodes[i].blockCrc)
+            return Status::error(describe() + ": node " + nodes[i].key.name() + " at byte " + std::to_string(nodes[i].blockOffset) +
+                                 ": CRC mismatch");
+    return blobs;
+}
+
 Result<BlockData> TilesetReader::readBlock(const NodeRecord& node, bool scalars) const {
     auto bytes = readBlockBytes(node);
     if (!bytes) return bytes.status();

@@ -26,6 +26,8 @@ public:
 
     // The node's raw blob, checked against its CRC.
     Result<std::vector<uint8_t>> readBlockBytes(const NodeRecord& node) const;
+    // Several nodes' raw blobs, all asked at once (TileSource::blobs), each checked against its CRC.
+    Result<std::vector<std::vector<uint8_t>>> readBlocksBytes(const std::vector<NodeRecord>& nodes) const;
     // The node's block decoded (with its scalar attributes where `scalars`),
     // checked against the hierarchy's surfel count; errors name the node.
     Result<BlockData> readBlock(const NodeRecord& node, bool scalars = false) const;

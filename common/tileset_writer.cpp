@@ -93,11 +93,11 @@ Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
 }
 
 Result<std::unique_ptr<TilesetWriter>> TilesetWriter::update(const std::string& set, const TilesetInfo& current,
-                                                            const std::vector<NodeRecord>& currentNodes, CurrentBlob currentBlob) {
+                                                            const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs) {
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
     w->set_ = set;
     w->current_ = current;
-    w->currentBlob_ = std::move(currentBlob);
+    w->currentBlobs_ = std::move(currentBlobs);
     for (const NodeRecord& r : currentNodes) w->currentNodes_[r.key] = r;
     // A hidden folder inside the set for the new blobs and the build's work
     // (readers and surfcast-serve never open it); a killed update's is
@@ -249,27 +249,49 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     std::map<uint32_t, int> open;
     std::vector<uint8_t> blob;
+    // Built again to the same bytes: it keeps its place (and its ETag). The
+    // current blobs of the same size and CRC are read in batches of up to
+    // 64 MiB (from a store, all of a batch at once) and compared.
+    const std::vector<NodeKey> order = hierarchyOrder(records_, info.pageDepth);
+    std::vector<bool> same(records_.size(), false);
+    std::vector<size_t> batch;
+    std::vector<NodeRecord> was;
+    uint64_t batchBytes = 0;
+    auto compare = [&]() -> Status {
+        if (batch.empty()) return {};
+        auto current = currentBlobs_(was);
+        for (size_t k = 0; current && k < batch.size(); ++k) {
+            SC_TRY(readBlob(batch[k], open, blob));
+            same[batch[k]] = (*current)[k] == blob;
+        }
+        batch.clear();
+        was.clear();
+        batchBytes = 0;
+        return {};
+    };
+    for (const NodeKey& key : order) {
+        const size_t i = index.at(key);
+        auto it = currentNodes_.find(key);
+        if (sources_[i] == kKept || it == currentNodes_.end() || it->second.blockSize != records_[i].blockSize ||
+            it->second.blockCrc != records_[i].blockCrc)
+            continue;
+        batch.push_back(i);
+        was.push_back(it->second);
+        if ((batchBytes += records_[i].blockSize) >= (64u << 20)) SC_TRY(compare());
+    }
+    SC_TRY(compare());
     uint64_t offset = current_.blocksBytes;
     uint32_t crc = 0;
     Status failed;
-    for (const NodeKey& key : hierarchyOrder(records_, info.pageDepth)) {
+    for (const NodeKey& key : order) {
         const size_t i = index.at(key);
         if (sources_[i] == kKept) continue;
+        if (same[i]) {
+            records_[i].blockOffset = currentNodes_.at(key).blockOffset;
+            continue;
+        }
         failed = readBlob(i, open, blob);
         if (!failed.ok()) break;
-        // Built again to the same bytes: it keeps its place (and its ETag).
-        if (auto it = currentNodes_.find(key); it != currentNodes_.end() && it->second.blockSize == blob.size() &&
-                                               it->second.blockCrc == records_[i].blockCrc) {
-            auto was = currentBlob_(it->second);
-            if (!was) {
-                failed = was.status();
-                break;
-            }
-            if (*was == blob) {
-                records_[i].blockOffset = it->second.blockOffset;
-                continue;
-            }
-        }
         if (::write(out, blob.data(), blob.size()) != ssize_t(blob.size())) {
             failed = Status::error(newPath + ": write failed (disk full?)");
             break;

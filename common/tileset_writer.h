@@ -42,12 +42,13 @@ public:
     // the set's tileset.json no longer names `current`'s hierarchy and
     // blocks' bytes (another writer replaced the set meanwhile).
     // A blob built again with the same bytes as the current node of its key
-    // (`currentNodes`, whose blobs `currentBlob` reads: from the folder, or
-    // from the store a folder of the set's metadata mirrors) keeps that
-    // node's place too.
-    using CurrentBlob = std::function<Result<std::vector<uint8_t>>(const NodeRecord&)>;
+    // (`currentNodes`, whose blobs `currentBlobs` reads, several at once:
+    // from the folder, or from the store a folder of the set's metadata
+    // mirrors) keeps that node's place too; where they cannot be read, the
+    // blob is written anew.
+    using CurrentBlobs = std::function<Result<std::vector<std::vector<uint8_t>>>(const std::vector<NodeRecord>&)>;
     static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,
-                                                         const std::vector<NodeRecord>& currentNodes, CurrentBlob currentBlob);
+                                                         const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs);
 
     // Thread-safe: appends a node's blob to a temporary file and keeps the
     // record with its size and CRC.
@@ -90,7 +91,7 @@ private:
     std::string set_;          // an update's set folder; empty for a new set
     TilesetInfo current_;      // an update's tileset.json before it
     std::map<NodeKey, NodeRecord> currentNodes_;  // and its nodes
-    CurrentBlob currentBlob_;                     // which reads their blobs
+    CurrentBlobs currentBlobs_;                   // which reads their blobs
     std::string record_;       // the build record to publish, if any
     std::mutex mutex_;
 };

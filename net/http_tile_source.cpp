@@ -13,6 +13,7 @@
 #include <cstring>
 #include <mutex>
 #include <optional>
+#include <chrono>
 #include <thread>
 #include <unordered_map>
 #include <utility>
@@ -311,8 +312,26 @@ private:
     }
 
     // Runs the requests at once on the I/O thread, following redirects
-    // (redirect() says which); an answer or an error each.
+    // (redirect() says which); an answer or an error each. Those that fail
+    // transiently are asked again, options_.retries times after 0.5, 1,
+    // 2 ... s (none for the streamer, which schedules its own).
     std::vector<Result<Response>> run(const std::vector<Request>& requests) {
+        std::vector<Result<Response>> out = runOnce(requests);
+        for (int attempt = 0; attempt < options_.retries; ++attempt) {
+            std::vector<size_t> again;
+            for (size_t i = 0; i < out.size(); ++i)
+                if (!out[i] && out[i].status().isTransient()) again.push_back(i);
+            if (again.empty()) break;
+            std::this_thread::sleep_for(std::chrono::milliseconds(500 << attempt));
+            std::vector<Request> retried;
+            for (size_t i : again) retried.push_back(requests[i]);
+            std::vector<Result<Response>> answers = runOnce(retried);
+            for (size_t k = 0; k < again.size(); ++k) out[again[k]] = std::move(answers[k]);
+        }
+        return out;
+    }
+
+    std::vector<Result<Response>> runOnce(const std::vector<Request>& requests) {
         const size_t n = requests.size();
         std::vector<Response> responses(n);
         std::vector<Sink> sinks(n);
@@ -677,7 +696,10 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
 
 Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http) {
     if (!isUrl(location) && !isS3Url(location)) return TilesetReader::open(location);
-    auto source = openTileSource(location, http);
+    // A reader reads each byte once, in one go: a fault is asked again.
+    HttpOptions options = http;
+    options.retries = std::max(options.retries, 3);
+    auto source = openTileSource(location, options);
     if (!source) return source.status();
     return TilesetReader::open(std::move(*source));
 }

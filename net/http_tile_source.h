@@ -27,7 +27,8 @@ namespace surfcast {
 // (openFolderSource).
 Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, const HttpOptions& http = {});
 
-// A reader of the set at a folder, an http(s) URL or an s3:// URL.
+// A reader of the set at a folder, an http(s) URL or an s3:// URL; a
+// transient fault of a request is asked again (HttpOptions::retries, at least 3).
 Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http = {});
 
 // The command-line options that say how to reach a URL (--header 'N: V',

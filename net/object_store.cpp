@@ -1,6 +1,7 @@
 #include "object_store.h"
 
 #include <curl/curl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -448,6 +449,20 @@ Result<std::vector<uint8_t>> ObjectStore::getRange(const S3Url& object, uint64_t
         return Status::error(object.str() + ": bytes " + std::to_string(offset) + "+" + std::to_string(size) + ": the store sent " +
                              std::to_string(response->body.size()) + " (the object is shorter)");
     return std::move(response->body);
+}
+
+Status ObjectStore::getToFile(const S3Url& object, uint64_t size, const std::string& path, uint64_t piece) {
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
+    if (!file) return Status::error(path + ": cannot create (" + std::strerror(errno) + ")");
+    for (uint64_t at = 0; at < size; at += piece) {
+        auto bytes = getRange(object, at, std::min(piece, size - at));
+        if (!bytes) return bytes.status();
+        if (std::fwrite(bytes->data(), 1, bytes->size(), file.get()) != bytes->size())
+            return Status::error(path + ": cannot write a copy of " + object.str() + " (disk full?)");
+    }
+    if (std::fflush(file.get()) != 0 || ::fsync(::fileno(file.get())) != 0)
+        return Status::error(path + ": cannot flush a copy of " + object.str() + " to disk (disk full?)");
+    return {};
 }
 
 Result<std::optional<ObjectInfo>> ObjectStore::head(const S3Url& object) {

@@ -87,6 +87,10 @@ public:
     Result<std::vector<uint8_t>> get(const S3Url& object, uint64_t maxBytes, ObjectInfo* info = nullptr);
     // Exactly bytes [offset, offset + size) of an object, or an error.
     Result<std::vector<uint8_t>> getRange(const S3Url& object, uint64_t offset, uint64_t size);
+    // The first `size` bytes of an object (its size, from a listing or a
+    // HEAD) into a new file at `path`, by ranges of `piece` bytes: the
+    // memory it takes is one piece, however large the object.
+    Status getToFile(const S3Url& object, uint64_t size, const std::string& path, uint64_t piece = 16ull << 20);
     // nullopt where there is no such object (an error where the bucket is missing).
     Result<std::optional<ObjectInfo>> head(const S3Url& object);
     // Writes an object whole. nullopt where the condition failed (412, or 409

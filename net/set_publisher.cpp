@@ -165,20 +165,28 @@ Result<PublishReport> publishVersion(const std::string& folder, const StoredVers
     std::set<std::string> named(baseFiles.begin(), baseFiles.end());
     named.insert(files.begin(), files.end());
     std::vector<std::string> added;
-    for (const std::string& file : files)
-        if (std::find(baseFiles.begin(), baseFiles.end(), file) == baseFiles.end() && std::filesystem::exists(folder + "/" + file))
-            added.push_back(file);
+    for (const std::string& file : files) {
+        if (std::find(baseFiles.begin(), baseFiles.end(), file) != baseFiles.end()) continue;
+        if (!std::filesystem::exists(folder + "/" + file)) {
+            if (file == buildRecordFile(info->hierarchyFile)) continue;  // (a set that keeps none)
+            return Status::error(folder + "/" + file + ": missing, though the version's tileset.json names it");
+        }
+        added.push_back(file);
+    }
 
     PublishReport report;
     // 1. The new files.
+    std::vector<std::string> rewritten;  // older versions' objects written again
     for (const std::string& file : added) {
         const S3Url object{set->bucket, set->key + file};
         const std::string path = folder + "/" + file;
         auto there = (*store)->head(object);
         if (!there) return there.status();
         WriteCondition condition{true, ""};
-        if (there->has_value() && (*there)->modified >= 0 && (*there)->modified < base.modified)
+        if (there->has_value() && (*there)->modified >= 0 && (*there)->modified < base.modified) {
             condition = {};  // an older version's, unnamed since: written again, its age now this version's
+            rewritten.push_back(file);
+        }
         auto put = (*store)->putFile(object, path, condition);
         if (!put) return put.status();
         if (!put->has_value())
@@ -196,15 +204,32 @@ Result<PublishReport> publishVersion(const std::string& folder, const StoredVers
                              "the set stays as that one wrote it: run the update again");
     report.objects += 1;
     report.bytes += text.size();
-    // 3. What neither version names, made before base.
+    // An object written again in step 1 that another update's step 3 had
+    // listed as old may have been deleted after it: written once more.
+    for (const std::string& file : rewritten) {
+        const S3Url object{set->bucket, set->key + file};
+        auto there = (*store)->head(object);
+        if (there && !there->has_value()) {
+            auto put = (*store)->putFile(object, folder + "/" + file);
+            if (!put) report.warning = object.str() + ": gone after it was written, and writing it again failed: " + put.status().message();
+        }
+    }
+    // 3. What neither version names, made before base; each asked again
+    // just before it goes, as step 1 of an update racing this one may
+    // have written it again meanwhile. The version is published: a failure
+    // here leaves objects for the next update, and is a warning.
     auto listed = (*store)->list(*set);
-    if (!listed) return Status::error("published " + base.url + ", but listing it for unused objects failed: " + listed.status().message());
-    for (const ListedObject& o : *listed) {
+    if (!listed) report.warning = "listing " + base.url + " for objects no kept version names failed: " + listed.status().message();
+    for (const ListedObject& o : listed ? *listed : std::vector<ListedObject>()) {
         const std::string name = o.key.substr(set->key.size());
         if (name.find('/') != std::string::npos || !versionFileName(name) || named.count(name) || o.modified < 0 || o.modified >= base.modified)
             continue;
-        if (auto st = (*store)->remove({set->bucket, o.key}); !st.ok())
-            return Status::error("published " + base.url + ", but deleting an unused object failed: " + st.message());
+        auto now = (*store)->head({set->bucket, o.key});
+        if (!now || !now->has_value() || (*now)->modified < 0 || (*now)->modified >= base.modified) continue;
+        if (auto st = (*store)->remove({set->bucket, o.key}); !st.ok()) {
+            report.warning = "deleting an object no kept version names failed: " + st.message();
+            break;
+        }
         report.removed += 1;
     }
     report.requests = (*store)->counts().requests - requestsBefore;

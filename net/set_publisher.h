@@ -17,6 +17,7 @@ struct PublishReport {
     uint64_t objects = 0, bytes = 0;
     uint64_t requests = 0;  // to the store, retries included
     uint64_t removed = 0;   // objects no kept version names (publishVersion)
+    std::string warning;    // publishVersion: what went wrong after the switch (the version stands)
 };
 
 // Uploads every file under `folder` to s3://BUCKET/PREFIX/ (its path below
@@ -57,7 +58,12 @@ Result<StoredVersion> mirrorSetMetadata(const std::string& url, const std::strin
 //  3. the objects of the set (versionFileName) that neither version names
 //     and that the store made before base's tileset.json go: earlier
 //     versions', and those of updates that lost or failed. An object made
-//     since may be an upload of an update of this very version, and stays.
+//     since may be an upload of an update of this very version, and stays;
+//     each is asked again (HEAD) just before its DELETE, and an object of
+//     step 1 that a racing step 3 deleted anyway is written once more
+//     after the switch. (A DELETE landing between that HEAD and a racing
+//     re-write is the window left.) A failure in step 3 is a warning: the
+//     version stands.
 // A failed publish deletes nothing (an update of the same bytes racing it
 // may share its objects' names): step 3 of the next update removes them.
 Result<PublishReport> publishVersion(const std::string& folder, const StoredVersion& base);

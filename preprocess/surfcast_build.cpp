@@ -574,6 +574,7 @@ int runUpdate(const Args& a) {
     if (stored) {
         auto published = surfcast::publishVersion(set, *base);
         if (!published) return fail(published.status());
+        if (!published->warning.empty()) std::fprintf(stderr, "surfcast-build: warning: %s\n", published->warning.c_str());
         std::printf("published %s: %llu objects, %llu bytes, %llu requests; %llu objects no kept version names deleted\n",
                     shown.c_str(), (unsigned long long)published->objects, (unsigned long long)published->bytes,
                     (unsigned long long)published->requests, (unsigned long long)published->removed);

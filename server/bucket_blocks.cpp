@@ -7,11 +7,11 @@
 namespace surfcast {
 
 std::string BucketBlocks::Range::id() const {
-    return version + '\n' + key + '\n' + std::to_string(offset) + '\n' + std::to_string(size);
+    return version + '\n' + key + '\n' + std::to_string(offset) + '\n' + std::to_string(size) + '\n' + (crc ? std::to_string(*crc) : "-");
 }
 
-BucketBlocks::BucketBlocks(std::shared_ptr<ObjectStore> store, std::string bucket, uint64_t cacheBytes, int threads)
-    : store_(std::move(store)), bucket_(std::move(bucket)), cacheBytes_(cacheBytes) {
+BucketBlocks::BucketBlocks(std::shared_ptr<ObjectStore> store, std::string bucket, uint64_t cacheBytes, int threads, uint64_t inFlightBytes)
+    : store_(std::move(store)), bucket_(std::move(bucket)), cacheBytes_(cacheBytes), inFlightBudget_(inFlightBytes) {
     for (int i = 0; i < std::max(threads, 1); ++i) threads_.emplace_back([this] { work(); });
 }
 
@@ -82,7 +82,7 @@ Result<std::vector<uint8_t>> BucketBlocks::read(const Range& range) {
     return **fetched;
 }
 
-void BucketBlocks::fetch(std::vector<Range> ranges, std::function<void(Result<std::vector<Buffer>>)> done) {
+bool BucketBlocks::fetch(std::vector<Range> ranges, std::function<void(Result<std::vector<Buffer>>)> done) {
     struct Job {
         std::vector<Range> ranges;
         std::vector<Buffer> buffers;
@@ -96,11 +96,14 @@ void BucketBlocks::fetch(std::vector<Range> ranges, std::function<void(Result<st
     job->buffers.resize(job->ranges.size());
     job->done = std::move(done);
     job->left = job->ranges.size();
-    if (job->ranges.empty()) return job->done(std::vector<Buffer>());
+    uint64_t bytes = 0;
+    for (const Range& r : job->ranges) bytes += r.size;
     {
         std::lock_guard lock(mutex_);
+        if (inFlight_ + bytes > inFlightBudget_ && inFlight_ > 0) return false;  // (one request alone always goes)
+        inFlight_ += bytes;
         for (size_t i = 0; i < job->ranges.size(); ++i)
-            tasks_.push_back([this, job, i] {
+            tasks_.push_back([this, job, i, bytes] {
                 auto got = get(job->ranges[i]);
                 {
                     std::lock_guard lock(job->mutex);
@@ -108,11 +111,16 @@ void BucketBlocks::fetch(std::vector<Range> ranges, std::function<void(Result<st
                     else if (job->error.ok()) job->error = got.status();
                 }
                 if (job->left.fetch_sub(1) != 1) return;
+                {
+                    std::lock_guard lock(mutex_);
+                    inFlight_ -= bytes;
+                }
                 if (!job->error.ok()) job->done(job->error);
                 else job->done(std::move(job->buffers));
             });
     }
     wake_.notify_all();
+    return true;
 }
 
 BucketBlocks::Counts BucketBlocks::counts() const {

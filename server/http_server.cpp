@@ -12,6 +12,7 @@
 #include <netinet/in.h>
 #include <sys/socket.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdlib>
@@ -46,6 +47,9 @@ constexpr size_t kMaxBatchBody = 64 * 1024;
 // A request for a block file's bytes of a set in a bucket is fetched whole
 // before it is sent: viewers ask for nodes' blocks (kilobytes to a few MB).
 constexpr uint64_t kMaxBucketBytes = 64ull << 20;
+// RequestState::fetchError of a request the store's budget of bytes in
+// flight refused (BucketBlocks::fetch): a 503, not a 502.
+constexpr const char* kBusy = "\x01busy";
 // Per-connection buffer for the request line and headers: bounds header size.
 constexpr size_t kConnectionMemory = 32 * 1024;
 // Connections one client address may hold: one client cannot take them all.
@@ -285,6 +289,21 @@ struct BodyOwner {
 
 void releaseBody(void* cls) { delete static_cast<BodyOwner*>(cls); }
 
+// Requests suspended while their bytes are fetched from a bucket. A fetch
+// resumes its connection under the gate's mutex, unless abortFetches resumed
+// it already (with an error) before the daemon stops; the gate outlives the
+// server, since the store's pool (which outlives it too) may end a fetch later.
+struct PendingFetch {
+    MHD_Connection* connection;
+    RequestState* request;
+    bool finished = false;
+};
+struct FetchGate {
+    std::mutex mutex;
+    std::vector<std::shared_ptr<PendingFetch>> pending;
+    bool closed = false;
+};
+
 struct Reply {
     RequestState* request = nullptr;
     int status = 200;
@@ -370,55 +389,61 @@ struct HttpServer::Impl {
         exports.clear();
     }
 
-    // Requests suspended while their bytes are fetched from a bucket; the
-    // fetch resumes its connection under fetchMutex, and abortFetches
-    // resumes them all (with an error) before the daemon stops, after which
-    // a fetch that ends touches no connection.
-    struct PendingFetch {
-        MHD_Connection* connection;
-        RequestState* request;
-        bool finished = false;
-    };
-    std::mutex fetchMutex;
-    std::vector<std::shared_ptr<PendingFetch>> pendingFetches;
-    bool fetchesClosed = false;
+    // Requests suspended while their bytes are fetched (FetchGate).
+    std::shared_ptr<FetchGate> fetches = std::make_shared<FetchGate>();
 
     MHD_Result fetchThenRespond(MHD_Connection* c, RequestState& st, std::vector<BucketBlocks::Range> ranges) {
+        // One fetch a range, however often the request names it.
+        std::sort(ranges.begin(), ranges.end(), [](const auto& a, const auto& b) { return a.id() < b.id(); });
+        ranges.erase(std::unique(ranges.begin(), ranges.end(), [](const auto& a, const auto& b) { return a.id() == b.id(); }), ranges.end());
         auto pending = std::make_shared<PendingFetch>(PendingFetch{c, &st});
         {
-            std::lock_guard lock(fetchMutex);
-            if (fetchesClosed) {
+            // Suspended and registered at once: abortFetches resumes only
+            // what is suspended.
+            std::lock_guard lock(fetches->mutex);
+            if (fetches->closed) {
                 st.fetchError = "the server is stopping";
-                return respond(c, st);
+                pending = nullptr;
+            } else {
+                MHD_suspend_connection(c);
+                fetches->pending.push_back(pending);
             }
-            pendingFetches.push_back(pending);
         }
-        MHD_suspend_connection(c);
+        if (!pending) return respond(c, st);
         std::vector<std::string> ids;
         for (const auto& range : ranges) ids.push_back(range.id());
-        store.bucket()->fetch(std::move(ranges), [this, pending, ids](Result<std::vector<BucketBlocks::Buffer>> got) {
-            std::lock_guard lock(fetchMutex);
+        const bool queued = store.bucket()->fetch(std::move(ranges), [gate = fetches, pending, ids](Result<std::vector<BucketBlocks::Buffer>> got) {
+            std::lock_guard lock(gate->mutex);
             if (pending->finished) return;
             if (got)
                 for (size_t i = 0; i < ids.size(); ++i) pending->request->fetched[ids[i]] = (*got)[i];
             else
                 pending->request->fetchError = got.status().message();
             pending->finished = true;
-            std::erase(pendingFetches, pending);
+            std::erase(gate->pending, pending);
             MHD_resume_connection(pending->connection);
         });
+        if (!queued) {  // the store's bytes in flight at their most: 503, at once
+            std::lock_guard lock(fetches->mutex);
+            if (!pending->finished) {
+                st.fetchError = kBusy;
+                pending->finished = true;
+                std::erase(fetches->pending, pending);
+                MHD_resume_connection(c);
+            }
+        }
         return MHD_YES;
     }
 
     void abortFetches() {
-        std::lock_guard lock(fetchMutex);
-        fetchesClosed = true;
-        for (auto& pending : pendingFetches) {
+        std::lock_guard lock(fetches->mutex);
+        fetches->closed = true;
+        for (auto& pending : fetches->pending) {
             pending->request->fetchError = "the server is stopping";
             pending->finished = true;
             MHD_resume_connection(pending->connection);
         }
-        pendingFetches.clear();
+        fetches->pending.clear();
     }
 
     Impl(TilesetStore& s, ServerConfig c) : store(s), config(std::move(c)) {}
@@ -638,7 +663,7 @@ struct HttpServer::Impl {
             if (rest[0] == 'b' && snap->bucket) {
                 const TilesetSnapshot& s = *snap;
                 return serveBytes(c, r, snap, [&](uint64_t first, uint64_t length) { return blockBytes(r, s, rest, first, length); },
-                                  *declared, type, etag, kRevalidate, nullptr, kMaxBucketBytes);
+                                  declared.value_or(0), type, etag, kRevalidate, nullptr, kMaxBucketBytes);
             }
             uint64_t mapped = 0;
             const MappedFile& m = rest == "tileset.json" ? *snap->json : hierarchy ? *snap->hierarchy : *snap->partFile(rest, &mapped);
@@ -809,7 +834,10 @@ struct HttpServer::Impl {
     MHD_Result respond(MHD_Connection* c, RequestState& st) {
         Reply r;
         r.request = &st;
-        if (!st.fetchError.empty()) {
+        if (st.fetchError == kBusy) {
+            r.header("Retry-After", "1");
+            fail(r, 503, "busy", "this server is fetching as many bytes from the store as it may at once; try again");
+        } else if (!st.fetchError.empty()) {
             fail(r, 502, "store", "the store: " + st.fetchError);
         } else if (st.method != "GET" && st.method != "HEAD" && st.method != "POST" && st.method != "OPTIONS") {
             fail(r, 405, "bad_request", "read-only server: " + st.method + " is not allowed");
@@ -820,9 +848,9 @@ struct HttpServer::Impl {
         } else {
             route(c, st, r);
             // Bytes of a set in a bucket to fetch first: the connection waits,
-            // off the event loop, and the request is routed again with them.
-            // (Again at most twice: a request whose bytes leave the cache
-            // before it is sent is sent from its own.)
+            // off the event loop, and the request is routed again with them
+            // (in at most three rounds: what a round found is the request's
+            // own, and a later round fetches only what the cache lost since).
             if (!r.missing.empty() && r.status < 400) {
                 if (++st.fetchRounds <= 3) return fetchThenRespond(c, st, std::move(r.missing));
                 fail(r, 503, "busy", "the store's bytes for this request could not be gathered; try again");

@@ -157,18 +157,19 @@ int main(int argc, char** argv) {
         else if (!web.empty()) return usageError(files.status().message());
     }
 
-    auto store = dir.rfind("s3://", 0) == 0 ? surfcast::TilesetStore::openBucket(dir, storeCache, storePoll) : surfcast::TilesetStore::open(dir);
-    if (!store) {
-        std::fprintf(stderr, "surfcast-serve: %s\n", store.status().message().c_str());
-        return 1;
-    }
-    // Block the stop signals in every thread; one thread waits for them.
+    // Block the stop signals in every thread, those a bucket's store starts
+    // included (so before it opens); one thread waits for them.
     sigset_t signals;
     sigemptyset(&signals);
     sigaddset(&signals, SIGINT);
     sigaddset(&signals, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &signals, nullptr);
     signal(SIGPIPE, SIG_IGN);
+    auto store = dir.rfind("s3://", 0) == 0 ? surfcast::TilesetStore::openBucket(dir, storeCache, storePoll) : surfcast::TilesetStore::open(dir);
+    if (!store) {
+        std::fprintf(stderr, "surfcast-serve: %s\n", store.status().message().c_str());
+        return 1;
+    }
 
     surfcast::HttpServer server(**store, config);
     surfcast::Status st = server.bind();

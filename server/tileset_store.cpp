@@ -81,7 +81,10 @@ Result<std::unique_ptr<TilesetStore>> TilesetStore::openBucket(const std::string
     s->root_ = "s3://" + where->bucket + "/" + s->prefix_;
     // Fetches at once: enough to keep a store's latency hidden behind a few
     // viewers' requests (each of which waits for all of its own).
-    s->bucket_ = std::make_shared<BucketBlocks>(*objects, where->bucket, cacheBytes, 16);
+    // Bytes being fetched at once: at most 256 MiB (what 4 requests for
+    // 64 MiB of a block file take), so that clients cannot make the server
+    // hold more than its cache and this.
+    s->bucket_ = std::make_shared<BucketBlocks>(*objects, where->bucket, cacheBytes, 16, 256ull << 20);
     s->pollSeconds_ = pollSeconds;
     SC_TRY(s->refresh());
     TilesetStore* self = s.get();

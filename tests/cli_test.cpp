@@ -169,7 +169,7 @@ TEST(Cli, AnUpdateWhoseSetWasReplacedUnderItFailsAndLeavesTheNewerSet) {
 
     auto reader = TilesetReader::open(set);
     ASSERT_TRUE(reader) << reader.status().message();
-    auto writer = TilesetWriter::update(set, reader->info(), reader->nodes(), [&](const NodeRecord& n) { return reader->readBlockBytes(n); });
+    auto writer = TilesetWriter::update(set, reader->info(), reader->nodes(), [&](const std::vector<NodeRecord>& n) { return reader->readBlocksBytes(n); });
     ASSERT_TRUE(writer) << writer.status().message();
     // Every node kept but the root, whose blob comes again, one byte changed
     // (so that it is appended).

@@ -95,17 +95,19 @@ class Cluster:
     def __init__(self, tmp, env=None, alone=False):
         dask = os.path.join(VENV, "bin", "dask")
         self.file = os.path.join(tmp, "scheduler.json")
-        quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env)
+        quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         self.procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-                                        "--scheduler-file", self.file], **quiet)]
+                                        "--scheduler-file", self.file], env=env, **quiet)]
         wait_for(lambda: os.path.exists(self.file), 60, "the scheduler's file")
         with open(self.file) as f:
             self.address = json.load(f)["address"]
         for i in range(2):
             own = os.path.join(tmp, f"worker-{i}") if alone else tmp
             os.makedirs(own, exist_ok=True)
+            # Alone, its temporary files (the stages' copies of the work) go in its folder too.
+            mine = dict(env or os.environ, TMPDIR=own) if alone else env
             self.procs.append(subprocess.Popen([dask, "worker", self.address, "--nthreads", "1", "--no-dashboard",
-                                                "--local-directory", own], cwd=own, **quiet))
+                                                "--local-directory", own], cwd=own, env=mine, **quiet))
         wait_for(lambda: self.workers() == 2, 60, "two workers")
 
     def workers(self):
@@ -370,7 +372,11 @@ class ShareNothing(unittest.TestCase):
         wait_for(lambda: not stage_processes("chunk", work), 120, "the chunk tasks to end")
         wait_for(lambda: self.cluster.workers() == 2, 60, "the nanny's new worker")
         self.assertIsNone(self.store.get("sets/longer/tileset.json"), "a set appeared before the merge")
-        r = self.driver(LONGER, "s3://surfcast/sets/longer", "--work", work)
+        # Started again from another folder (the work in a store holds no path).
+        elsewhere = os.path.join(self.dir, "elsewhere")
+        os.makedirs(elsewhere)
+        r = subprocess.run([DRIVER, "--scheduler", self.cluster.address, "--work", work] + LONGER + ["-o", "s3://surfcast/sets/longer"],
+                           capture_output=True, text=True, env=self.env, cwd=elsewhere)
         self.assertEqual(r.returncode, 0, r.stderr)
         self.assertIn("resuming: plan done", r.stderr)
         self.assertTrue(self.same_as(os.path.join(self.dir, "one"), "sets/longer"))

@@ -42,7 +42,9 @@ void expectNothingLeftBehind(const std::string& set) {
     for (const auto& e : fs::directory_iterator(set)) {
         const std::string name = e.path().filename().string();
         EXPECT_NE(name.rfind(".update-", 0), 0u) << "left behind: " << e.path();
-        if (validBlocksFile(name)) EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
+        if (validBlocksFile(name)) {
+            EXPECT_TRUE(named.count(name)) << "a block file no version names: " << name;
+        }
     }
 }
 

@@ -1,5 +1,6 @@
 #include "compact.h"
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <vector>
@@ -49,21 +50,6 @@ Status compactInto(const TilesetReader& reader, const std::string& parts, const 
     TilesetInfo info = reader.info();
     SC_TRY(writer.finish(info));
     report->blocksBytes = info.blocksBytes;
-    return {};
-}
-
-// An object copied to a file in pieces of bounded size (a block file may be
-// larger than memory).
-Status download(ObjectStore& store, const S3Url& object, uint64_t size, const std::string& path) {
-    constexpr uint64_t kPiece = 64ull << 20;
-    std::ofstream out(path, std::ios::binary);
-    for (uint64_t at = 0; at < size && out; at += kPiece) {
-        auto piece = store.getRange(object, at, std::min(kPiece, size - at));
-        if (!piece) return piece.status();
-        out.write(reinterpret_cast<const char*>(piece->data()), std::streamsize(piece->size()));
-    }
-    out.close();
-    if (!out) return Status::error(path + ": cannot write a copy of " + object.str() + " (disk full?)");
     return {};
 }
 
@@ -118,7 +104,7 @@ Result<CompactReport> compactStored(const std::string& url, const std::string& s
     auto prefix = parseS3Url(base->url);
     if (!prefix) return prefix.status();
     for (const BlocksPart& part : parts)
-        SC_TRY(download(**store, {prefix->bucket, prefix->key + part.file}, part.bytes, mirror + "/" + part.file));
+        SC_TRY((*store)->getToFile({prefix->bucket, prefix->key + part.file}, part.bytes, mirror + "/" + part.file, 64ull << 20));
     {
         auto writer = TilesetWriter::create(compacted);
         if (!writer) return writer.status();
@@ -145,6 +131,7 @@ Result<CompactReport> compactStored(const std::string& url, const std::string& s
     SC_TRY(writeFileSynced(compacted + "/tileset.json", json.data(), json.size()));
     auto published = publishVersion(compacted, *base);
     if (!published) return published.status();
+    if (!published->warning.empty()) std::fprintf(stderr, "surfcast-build: warning: %s\n", published->warning.c_str());
     report.removed = published->removed;
     report.requests = (*store)->counts().requests - requestsBefore;
     return report;

@@ -1,9 +1,12 @@
 #include "store_work.h"
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
+#include <functional>
+#include <mutex>
+#include <thread>
 
-#include "folder_publish.h"
 #include "object_store.h"
 
 namespace surfcast {
@@ -11,6 +14,30 @@ namespace surfcast {
 namespace fs = std::filesystem;
 
 namespace {
+
+// Transfers at once: a task's work files are many small objects (a chunk's
+// pieces from every part), whose requests' latency parallel ones hide.
+constexpr size_t kTransfers = 8;
+
+// Runs job(i) for i in [0, n) on up to kTransfers threads; the first error.
+Status inParallel(size_t n, const std::function<Status(size_t)>& job) {
+    std::atomic<size_t> next{0};
+    std::mutex mutex;
+    Status first;
+    auto work = [&] {
+        for (size_t i; (i = next++) < n;) {
+            Status st = job(i);
+            std::lock_guard lock(mutex);
+            if (!st.ok() && first.ok()) first = st;
+            if (!first.ok()) return;
+        }
+    };
+    std::vector<std::thread> threads;
+    for (size_t t = 1; t < std::min(n, kTransfers); ++t) threads.emplace_back(work);
+    work();
+    for (std::thread& t : threads) t.join();
+    return first;
+}
 
 // Whether `name` (a path below the work) is a file the stage reads.
 bool readBy(const std::string& stage, const std::vector<size_t>& chunks, const std::string& name) {
@@ -59,17 +86,18 @@ Result<std::unique_ptr<StoreWork>> StoreWork::open(const std::string& url, const
     if (ec) return Status::error(local + ": cannot create (" + ec.message() + ")");
     auto listed = (*store)->list({w->bucket_, w->prefix_});
     if (!listed) return listed.status();
+    std::vector<ListedObject> wanted;
     for (const ListedObject& o : *listed) {
         const std::string name = o.key.substr(w->prefix_.size());
         if (!readBy(stage, chunks, name)) continue;
         if (name.find("..") != std::string::npos) return Status::error("s3://" + w->bucket_ + "/" + o.key + ": not a work file's name");
-        auto bytes = (*store)->get({w->bucket_, o.key}, o.size);
-        if (!bytes) return bytes.status();
-        const fs::path path = fs::path(local) / name;
-        fs::create_directories(path.parent_path(), ec);
-        SC_TRY(writeFileSynced(path.string(), bytes->data(), bytes->size()));
+        wanted.push_back(o);
         w->copied_.insert(name);
+        fs::create_directories((fs::path(local) / name).parent_path(), ec);
     }
+    SC_TRY(inParallel(wanted.size(), [&](size_t i) {
+        return (*store)->getToFile({w->bucket_, wanted[i].key}, wanted[i].size, (fs::path(local) / wanted[i].key.substr(w->prefix_.size())).string());
+    }));
     return w;
 }
 
@@ -84,10 +112,17 @@ Status StoreWork::upload() const {
             if (!copied_.count(name)) files.push_back(name);
         }
     if (ec) return Status::error(local_ + ": cannot list (" + ec.message() + ")");
+    // Each rank after the one before it, whole: the files that mark an
+    // output whole go up after the rest of it.
     std::stable_sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) { return uploadOrder(a) < uploadOrder(b); });
-    for (const std::string& name : files) {
-        auto put = (*store)->putFile({bucket_, prefix_ + name}, local_ + "/" + name);
-        if (!put) return put.status();
+    for (auto from = files.begin(); from != files.end();) {
+        auto to = std::find_if(from, files.end(), [&](const std::string& f) { return uploadOrder(f) != uploadOrder(*from); });
+        SC_TRY(inParallel(size_t(to - from), [&](size_t i) -> Status {
+            const std::string& name = *(from + long(i));
+            auto put = (*store)->putFile({bucket_, prefix_ + name}, local_ + "/" + name);
+            return put ? Status() : put.status();
+        }));
+        from = to;
     }
     return {};
 }
@@ -98,7 +133,7 @@ Status StoreWork::remove(const std::vector<std::string>& prefixes) const {
     for (const std::string& p : prefixes) {
         auto listed = (*store)->list({bucket_, prefix_ + p});
         if (!listed) return listed.status();
-        for (const ListedObject& o : *listed) SC_TRY((*store)->remove({bucket_, o.key}));
+        SC_TRY(inParallel(listed->size(), [&](size_t i) { return (*store)->remove({bucket_, (*listed)[i].key}); }));
     }
     return {};
 }

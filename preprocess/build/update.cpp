@@ -752,7 +752,7 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFol
 Result<std::unique_ptr<TilesetWriter>> Update::writer() const {
     std::vector<NodeRecord> nodes = reader_->nodes();
     for (NodeRecord& n : nodes) n.key = grow_.key(n.key);
-    return TilesetWriter::update(set_, reader_->info(), nodes, [this](const NodeRecord& n) { return reader_->readBlockBytes(n); });
+    return TilesetWriter::update(set_, reader_->info(), nodes, [this](const std::vector<NodeRecord>& n) { return reader_->readBlocksBytes(n); });
 }
 
 Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const {

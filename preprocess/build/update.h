@@ -22,7 +22,7 @@ struct UpdateRequest {
     size_t added = 0;
     std::vector<uint32_t> removed;
     // The set's s3:// URL, where the set folder an update is given is a local
-    // copy of its tileset.json and build record (set_versions.h): the blocks
+    // copy of its tileset.json and build record (set_publisher.h): the blocks
     // are read from the store, and the update writes its version to the
     // folder, for the caller to publish. Empty: the folder is the set.
     std::string store;
