@@ -60,9 +60,10 @@ struct HttpOptions {
     // Send `headers` and the token to whatever origin a redirect leads to, too;
     // by default only the set's own origin gets them.
     bool redirectCredentials = false;
-    // Requests that fail transiently (a reset, a timeout, 408, 429, 5xx) are
-    // asked again this many times, after 0.5, 1, 2 ... s: the readers of
-    // openTileset take 3; the streamer 0, as it schedules its own.
+    // Reads that fail transiently (a reset, a timeout, 408, 429, 5xx, an
+    // answer cut short) are asked again this many times, after 0.5, 1, 2 ...
+    // s: the readers of openTileset take 3; the streamer 0, as it schedules
+    // its own.
     int retries = 0;
 };
 

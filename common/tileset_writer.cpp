@@ -248,10 +248,18 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     std::map<NodeKey, size_t> index;
     for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     std::map<uint32_t, int> open;
+    struct CloseAll {
+        std::map<uint32_t, int>& fds;
+        ~CloseAll() {
+            for (auto [source, fd] : fds) ::close(fd);
+        }
+    } closeAll{open};
     std::vector<uint8_t> blob;
     // Built again to the same bytes: it keeps its place (and its ETag). The
-    // current blobs of the same size and CRC are read in batches of up to
-    // 64 MiB (from a store, all of a batch at once) and compared.
+    // current blobs of the same size and CRC are read in batches of about
+    // 64 MiB (from a store, all of a batch at once) and compared. One that
+    // cannot be read fails the update (written anew, its bytes would differ
+    // from the same update's where it could).
     const std::vector<NodeKey> order = hierarchyOrder(records_, info.pageDepth);
     std::vector<bool> same(records_.size(), false);
     std::vector<size_t> batch;
@@ -260,7 +268,8 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
     auto compare = [&]() -> Status {
         if (batch.empty()) return {};
         auto current = currentBlobs_(was);
-        for (size_t k = 0; current && k < batch.size(); ++k) {
+        if (!current) return Status::error(set_ + ": reading the blocks built again to compare them: " + current.status().message());
+        for (size_t k = 0; k < batch.size(); ++k) {
             SC_TRY(readBlob(batch[k], open, blob));
             same[batch[k]] = (*current)[k] == blob;
         }
@@ -300,7 +309,6 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
         records_[i].blockOffset = offset;
         offset += records_[i].blockSize;
     }
-    for (auto [source, fd] : open) ::close(fd);
     SC_TRY(failed);
     if (::fsync(out) != 0) return Status::error(newPath + ": cannot flush to disk (" + std::strerror(errno) + ")");
     std::fclose(blocks_);

@@ -44,8 +44,8 @@ public:
     // A blob built again with the same bytes as the current node of its key
     // (`currentNodes`, whose blobs `currentBlobs` reads, several at once:
     // from the folder, or from the store a folder of the set's metadata
-    // mirrors) keeps that node's place too; where they cannot be read, the
-    // blob is written anew.
+    // mirrors) keeps that node's place too; where they cannot be read,
+    // finish() fails.
     using CurrentBlobs = std::function<Result<std::vector<std::vector<uint8_t>>>(const std::vector<NodeRecord>&)>;
     static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,
                                                          const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs);

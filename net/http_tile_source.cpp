@@ -15,6 +15,7 @@
 #include <optional>
 #include <chrono>
 #include <thread>
+#include <type_traits>
 #include <unordered_map>
 #include <utility>
 
@@ -102,6 +103,43 @@ public:
         curl_slist_free_all(headers_);
     }
     Result<std::vector<uint8_t>> file(const std::string& name, uint64_t maxBytes) override {
+        return withRetries([&] { return fileOnce(name, maxBytes); });
+    }
+    Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
+        auto r = ranges({{name, offset, size}});
+        if (!r) return r.status();
+        return std::move((*r)[0]);
+    }
+    Result<uint64_t> size(const std::string& name) override { return withRetries([&] { return sizeOnce(name); }); }
+    std::string describe() const override { return shown_; }
+    void cancel() override {
+        {
+            std::lock_guard lock(ioMutex_);
+            cancelled_ = true;
+        }
+        curl_multi_wakeup(multi_);
+    }
+
+private:
+    // A request that fails transiently (a reset, a timeout, 408, 429, 5xx,
+    // an answer cut short) is asked again, options_.retries times after
+    // 0.5, 1, 2 ... s; never once the source is cancelled. Each request on
+    // its own: of many ranges in flight, only those that failed.
+    bool waitToRetry(int attempt) {
+        {
+            std::lock_guard lock(ioMutex_);
+            if (cancelled_) return false;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(500 << std::min(attempt, 6)));
+        return true;
+    }
+    template <class F>
+    std::invoke_result_t<F&> withRetries(F request) {
+        auto r = request();
+        for (int attempt = 0; attempt < options_.retries && !r && r.status().isTransient() && waitToRetry(attempt); ++attempt) r = request();
+        return r;
+    }
+    Result<std::vector<uint8_t>> fileOnce(const std::string& name, uint64_t maxBytes) {
         auto r = std::move(run({{name, "", nullptr, maxBytes, 200}})[0]);
         if (!r) return r.status();
         if (name == "tileset.json") {
@@ -114,27 +152,13 @@ public:
         }
         return std::move(r->body);
     }
-    Result<std::vector<uint8_t>> range(const std::string& name, uint64_t offset, uint64_t size) override {
-        auto r = ranges({{name, offset, size}});
-        if (!r) return r.status();
-        return std::move((*r)[0]);
-    }
     // A one-byte range: its Content-Range answer names the file's length.
-    Result<uint64_t> size(const std::string& name) override {
+    Result<uint64_t> sizeOnce(const std::string& name) {
         auto r = std::move(run({{name, "0-0", nullptr, 1, 206}})[0]);
         if (!r) return r.status();
         if (!r->total) return Status::error(shown_ + "/" + name + ": the host's answer to a range request names no file length");
         return *r->total;
     }
-    std::string describe() const override { return shown_; }
-    void cancel() override {
-        {
-            std::lock_guard lock(ioMutex_);
-            cancelled_ = true;
-        }
-        curl_multi_wakeup(multi_);
-    }
-
     // The server's POST {set}/batch where tileset.json's answer offered it
     // (Surfcast-Batch: up to N keys a request), else the ranges, all in
     // flight at once.
@@ -151,14 +175,14 @@ public:
         }
         std::vector<std::vector<uint8_t>> out;
         for (size_t at = 0; at < nodes.size(); at += most) {
-            auto part = batch(std::vector<NodeRecord>(nodes.begin() + long(at), nodes.begin() + long(std::min(nodes.size(), at + most))));
+            const std::vector<NodeRecord> some(nodes.begin() + long(at), nodes.begin() + long(std::min(nodes.size(), at + most)));
+            auto part = withRetries([&] { return batch(some); });
             if (!part) return part.status();
             for (auto& b : *part) out.push_back(std::move(b));
         }
         return out;
     }
 
-private:
     // One POST {set}/batch of `nodes`: their blobs in order.
     Result<std::vector<std::vector<uint8_t>>> batch(const std::vector<NodeRecord>& nodes) {
         std::string body;
@@ -230,13 +254,30 @@ private:
             asked.push_back(i);
         }
         std::vector<std::vector<uint8_t>> out(spans.size());
-        auto answers = run(requests);
+        std::vector<Result<Response>> answers = run(requests);
+        // An answer cut short (a connection that closed early) fails as a fault does.
+        auto check = [&](size_t k) {
+            const auto& [name, offset, size] = spans[asked[k]];
+            if (answers[k] && answers[k]->body.size() != size)
+                answers[k] = Status::transient(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
+                                               std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
+        };
+        for (size_t k = 0; k < asked.size(); ++k) check(k);
+        for (int attempt = 0; attempt < options_.retries; ++attempt) {
+            std::vector<size_t> again;
+            for (size_t k = 0; k < asked.size(); ++k)
+                if (!answers[k] && answers[k].status().isTransient()) again.push_back(k);
+            if (again.empty() || !waitToRetry(attempt)) break;
+            std::vector<Request> retried;
+            for (size_t k : again) retried.push_back(requests[k]);
+            std::vector<Result<Response>> second = run(retried);
+            for (size_t j = 0; j < again.size(); ++j) {
+                answers[again[j]] = std::move(second[j]);
+                check(again[j]);
+            }
+        }
         for (size_t k = 0; k < asked.size(); ++k) {
             if (!answers[k]) return answers[k].status();
-            const auto& [name, offset, size] = spans[asked[k]];
-            if (answers[k]->body.size() != size)  // cut short: a connection that closed early
-                return Status::transient(describe() + "/" + name + ": asked for " + std::to_string(size) + " bytes at " +
-                                         std::to_string(offset) + ", got " + std::to_string(answers[k]->body.size()));
             out[asked[k]] = std::move(answers[k]->body);
         }
         return out;
@@ -312,26 +353,8 @@ private:
     }
 
     // Runs the requests at once on the I/O thread, following redirects
-    // (redirect() says which); an answer or an error each. Those that fail
-    // transiently are asked again, options_.retries times after 0.5, 1,
-    // 2 ... s (none for the streamer, which schedules its own).
+    // (redirect() says which); an answer or an error each.
     std::vector<Result<Response>> run(const std::vector<Request>& requests) {
-        std::vector<Result<Response>> out = runOnce(requests);
-        for (int attempt = 0; attempt < options_.retries; ++attempt) {
-            std::vector<size_t> again;
-            for (size_t i = 0; i < out.size(); ++i)
-                if (!out[i] && out[i].status().isTransient()) again.push_back(i);
-            if (again.empty()) break;
-            std::this_thread::sleep_for(std::chrono::milliseconds(500 << attempt));
-            std::vector<Request> retried;
-            for (size_t i : again) retried.push_back(requests[i]);
-            std::vector<Result<Response>> answers = runOnce(retried);
-            for (size_t k = 0; k < again.size(); ++k) out[again[k]] = std::move(answers[k]);
-        }
-        return out;
-    }
-
-    std::vector<Result<Response>> runOnce(const std::vector<Request>& requests) {
         const size_t n = requests.size();
         std::vector<Response> responses(n);
         std::vector<Sink> sinks(n);

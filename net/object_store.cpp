@@ -452,17 +452,23 @@ Result<std::vector<uint8_t>> ObjectStore::getRange(const S3Url& object, uint64_t
 }
 
 Status ObjectStore::getToFile(const S3Url& object, uint64_t size, const std::string& path, uint64_t piece) {
+    piece = std::max<uint64_t>(piece, 1);
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
     if (!file) return Status::error(path + ": cannot create (" + std::strerror(errno) + ")");
-    for (uint64_t at = 0; at < size; at += piece) {
+    Status failed;
+    for (uint64_t at = 0; at < size && failed.ok(); at += piece) {
         auto bytes = getRange(object, at, std::min(piece, size - at));
-        if (!bytes) return bytes.status();
-        if (std::fwrite(bytes->data(), 1, bytes->size(), file.get()) != bytes->size())
-            return Status::error(path + ": cannot write a copy of " + object.str() + " (disk full?)");
+        if (!bytes) failed = bytes.status();
+        else if (std::fwrite(bytes->data(), 1, bytes->size(), file.get()) != bytes->size())
+            failed = Status::error(path + ": cannot write a copy of " + object.str() + " (disk full?)");
     }
-    if (std::fflush(file.get()) != 0 || ::fsync(::fileno(file.get())) != 0)
-        return Status::error(path + ": cannot flush a copy of " + object.str() + " to disk (disk full?)");
-    return {};
+    if (failed.ok() && (std::fflush(file.get()) != 0 || ::fsync(::fileno(file.get())) != 0))
+        failed = Status::error(path + ": cannot flush a copy of " + object.str() + " to disk (disk full?)");
+    if (!failed.ok()) {  // no half copy left behind
+        file.reset();
+        std::remove(path.c_str());
+    }
+    return failed;
 }
 
 Result<std::optional<ObjectInfo>> ObjectStore::head(const S3Url& object) {

@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -205,21 +206,24 @@ Result<PublishReport> publishVersion(const std::string& folder, const StoredVers
     report.objects += 1;
     report.bytes += text.size();
     // An object written again in step 1 that another update's step 3 had
-    // listed as old may have been deleted after it: written once more.
+    // listed as old may have been deleted after it: written once more. One
+    // that cannot be is an error: the version names it.
     for (const std::string& file : rewritten) {
         const S3Url object{set->bucket, set->key + file};
         auto there = (*store)->head(object);
-        if (there && !there->has_value()) {
-            auto put = (*store)->putFile(object, folder + "/" + file);
-            if (!put) report.warning = object.str() + ": gone after it was written, and writing it again failed: " + put.status().message();
-        }
+        if (there && there->has_value()) continue;
+        auto put = there ? (*store)->putFile(object, folder + "/" + file) : Result<std::optional<ObjectInfo>>(there.status());
+        if (!put)
+            return Status::error("published " + base.url + ", whose new version names " + object.str() +
+                                 ", which another update's clean-up may have deleted and which could not be checked or written again (" +
+                                 put.status().message() + "): run the update again, or upload " + folder + "/" + file + " there");
     }
     // 3. What neither version names, made before base; each asked again
     // just before it goes, as step 1 of an update racing this one may
     // have written it again meanwhile. The version is published: a failure
     // here leaves objects for the next update, and is a warning.
     auto listed = (*store)->list(*set);
-    if (!listed) report.warning = "listing " + base.url + " for objects no kept version names failed: " + listed.status().message();
+    if (!listed) report.warning = "listing " + base.url + " for objects no kept version names failed (they stay for the next update): " + listed.status().message();
     for (const ListedObject& o : listed ? *listed : std::vector<ListedObject>()) {
         const std::string name = o.key.substr(set->key.size());
         if (name.find('/') != std::string::npos || !versionFileName(name) || named.count(name) || o.modified < 0 || o.modified >= base.modified)
@@ -227,7 +231,7 @@ Result<PublishReport> publishVersion(const std::string& folder, const StoredVers
         auto now = (*store)->head({set->bucket, o.key});
         if (!now || !now->has_value() || (*now)->modified < 0 || (*now)->modified >= base.modified) continue;
         if (auto st = (*store)->remove({set->bucket, o.key}); !st.ok()) {
-            report.warning = "deleting an object no kept version names failed: " + st.message();
+            report.warning = "deleting an object no kept version names failed (the rest stay for the next update): " + st.message();
             break;
         }
         report.removed += 1;
@@ -250,14 +254,25 @@ Result<std::unique_ptr<PublishStaging>> PublishStaging::create() {
         if (::flock(fd, LOCK_EX | LOCK_NB) == 0) fs::remove_all(e.path(), ignored);  // its process is gone
         ::close(fd);
     }
-    std::string pattern = (temp / (std::string(kPrefix) + "XXXXXX")).string();
-    if (!::mkdtemp(pattern.data())) return Status::error(pattern + ": cannot create the folder written before the upload (" + std::strerror(errno) + ")");
-    auto staging = std::unique_ptr<PublishStaging>(new PublishStaging);
-    staging->dir_ = pattern;
-    staging->lock_ = ::open(pattern.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (staging->lock_ < 0 || ::flock(staging->lock_, LOCK_EX | LOCK_NB) != 0)
-        return Status::error(pattern + ": cannot lock (" + std::strerror(errno) + ")");
-    return staging;
+    // Another process clearing its predecessors' folders may take this one
+    // for theirs between its creation and its lock (several stages start on
+    // one machine at once): it is made again until, locked, it is still
+    // there.
+    for (int attempt = 0; attempt < 16; ++attempt) {
+        std::string pattern = (temp / (std::string(kPrefix) + "XXXXXX")).string();
+        if (!::mkdtemp(pattern.data()))
+            return Status::error(pattern + ": cannot create the folder written before the upload (" + std::strerror(errno) + ")");
+        auto staging = std::unique_ptr<PublishStaging>(new PublishStaging);
+        staging->lock_ = ::open(pattern.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (staging->lock_ < 0) continue;  // removed already
+        if (::flock(staging->lock_, LOCK_EX) != 0) return Status::error(pattern + ": cannot lock (" + std::strerror(errno) + ")");
+        struct stat held{}, now{};
+        if (::fstat(staging->lock_, &held) != 0 || ::stat(pattern.c_str(), &now) != 0 || held.st_ino != now.st_ino || held.st_dev != now.st_dev)
+            continue;  // removed before the lock (its fd closes with `staging`)
+        staging->dir_ = pattern;
+        return staging;
+    }
+    return Status::error(temp.string() + ": cannot keep a folder of its own there (another process keeps removing them)");
 }
 
 PublishStaging::~PublishStaging() {

@@ -96,6 +96,10 @@ bool BucketBlocks::fetch(std::vector<Range> ranges, std::function<void(Result<st
     job->buffers.resize(job->ranges.size());
     job->done = std::move(done);
     job->left = job->ranges.size();
+    if (job->ranges.empty()) {
+        job->done(std::vector<Buffer>());
+        return true;
+    }
     uint64_t bytes = 0;
     for (const Range& r : job->ranges) bytes += r.size;
     {

@@ -5,6 +5,7 @@
 
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -158,16 +159,36 @@ int main(int argc, char** argv) {
     }
 
     // Block the stop signals in every thread, those a bucket's store starts
-    // included (so before it opens); one thread waits for them.
+    // included (so before it opens); one thread waits for them, from the
+    // start: a stop before the server runs (a store slow to answer) ends
+    // the process at once.
     sigset_t signals;
     sigemptyset(&signals);
     sigaddset(&signals, SIGINT);
     sigaddset(&signals, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &signals, nullptr);
     signal(SIGPIPE, SIG_IGN);
+    std::atomic<surfcast::HttpServer*> running{nullptr};
+    std::atomic<bool> done{false};
+    std::thread waiter([&] {
+        int sig = 0;
+        sigwait(&signals, &sig);
+        if (done) return;  // woken by main at the end
+        surfcast::HttpServer* server = running.load();
+        std::fprintf(stderr, "surfcast-serve: %s, %s\n", sig == SIGINT ? "SIGINT" : "SIGTERM",
+                     server ? "finishing requests in flight" : "stopped before serving");
+        if (!server) std::_Exit(0);
+        server->stop();
+    });
+    auto stopWaiter = [&] {
+        done = true;
+        pthread_kill(waiter.native_handle(), SIGTERM);
+        waiter.join();
+    };
     auto store = dir.rfind("s3://", 0) == 0 ? surfcast::TilesetStore::openBucket(dir, storeCache, storePoll) : surfcast::TilesetStore::open(dir);
     if (!store) {
         std::fprintf(stderr, "surfcast-serve: %s\n", store.status().message().c_str());
+        stopWaiter();
         return 1;
     }
 
@@ -175,23 +196,18 @@ int main(int argc, char** argv) {
     surfcast::Status st = server.bind();
     if (!st.ok()) {
         std::fprintf(stderr, "surfcast-serve: %s\n", st.message().c_str());
+        stopWaiter();
         return 1;
     }
+    running = &server;
     std::fprintf(stderr, "surfcast-serve: serving %s on %s://%s:%d (%zu tile sets)\n", dir.c_str(),
                  config.tlsCertificate.empty() ? "http" : "https", config.host.c_str(), server.port(), (*store)->list().size());
     if (!config.web.empty())
         std::fprintf(stderr, "surfcast-serve: viewer at %s://%s:%d/?set=/sets/NAME\n", config.tlsCertificate.empty() ? "http" : "https",
                      config.host.c_str(), server.port());
-    std::thread waiter([&] {
-        int sig = 0;
-        sigwait(&signals, &sig);
-        std::fprintf(stderr, "surfcast-serve: %s, finishing requests in flight\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
-        server.stop();
-    });
     server.run();
     // run() also returns when listening fails; wake the waiter either way.
-    pthread_kill(waiter.native_handle(), SIGTERM);
-    waiter.join();
+    stopWaiter();
     std::fprintf(stderr, "surfcast-serve: stopped\n");
     return 0;
 }

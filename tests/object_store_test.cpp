@@ -7,8 +7,11 @@
 #include <ctime>
 #include <fstream>
 #include <random>
+#include <thread>
+#include <atomic>
 
 #include "object_store.h"
+#include "set_publisher.h"
 #include "store_support.h"
 #include "test_support.h"
 
@@ -269,6 +272,32 @@ TEST(ObjectStore, ListPagesAreReadStrictly) {
     for (const char* bad : {"2026-12-07 01:02:03Z", "2026-12-07T01:02:03", "2026-13-07T01:02:03Z", "2026-12-07T01:02:03.Zx", "x026-12-07T01:02:03Z", ""})
         EXPECT_FALSE(parseIsoTime(bad).has_value()) << bad;
     EXPECT_EQ(page->objects[0].modified, -1);
+}
+
+// Stages starting at once on one machine each make a staging folder while
+// clearing those of processes gone (whose lock nobody holds): none may take
+// another's new folder, made but not yet locked, for such a one. Threads
+// stand for the processes (flock locks belong to each open of the folder).
+TEST(ObjectStore, StagingFoldersMadeAtOnceAreEachTheirOwn) {
+    TempDir tmp;
+    const char* before = std::getenv("TMPDIR");
+    const std::string saved = before ? before : "";
+    setenv("TMPDIR", tmp.path().c_str(), 1);
+    std::atomic<int> failures{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 8; ++t)
+        threads.emplace_back([&] {
+            for (int i = 0; i < 40; ++i) {
+                auto staging = PublishStaging::create();
+                if (!staging || !std::filesystem::is_directory((*staging)->dir())) ++failures;
+                else writeFile((*staging)->dir() + "/file", "x");
+            }
+        });
+    for (auto& t : threads) t.join();
+    if (before) setenv("TMPDIR", saved.c_str(), 1);
+    else unsetenv("TMPDIR");
+    EXPECT_EQ(failures.load(), 0);
+    EXPECT_TRUE(std::filesystem::is_empty(tmp.path())) << "staging folders left behind";
 }
 
 TEST(ObjectStore, UrlsAreParsedStrictly) {

@@ -211,7 +211,7 @@ TEST_F(StoreUpdate, CompactionWritesTheBlocksOfAFolderCompaction) {
     EXPECT_EQ(r.exitCode, 0) << r.output;
 }
 
-// An update through a proxy that fails a tenth of the requests (503
+// An update through a proxy that fails 1 % of the requests (503
 // SlowDown before the store acts, 500 or a reset after it has) writes the
 // objects of the same update made directly, the conditional switch
 // included, whose answers may be lost on the way back.
@@ -220,7 +220,7 @@ TEST_F(StoreUpdate, TransientFaultsGiveTheSameObjects) {
     ASSERT_NO_FATAL_FAILURE(upload(set(), "living/faults/"));
     auto r = run({binary("surfcast-build"), "-q", "--add", added[0], "--to", "s3://surfcast/living/direct"});
     ASSERT_EQ(r.exitCode, 0) << r.output;
-    FaultProxy proxy(0.1, 11);
+    FaultProxy proxy(0.01, 11);
     r = run({"/usr/bin/env", "AWS_ENDPOINT_URL=" + proxy.endpoint(), binary("surfcast-build"), "-q", "--add", added[0], "--to",
              "s3://surfcast/living/faults"});
     ASSERT_EQ(r.exitCode, 0) << r.output;
