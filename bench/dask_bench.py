@@ -75,6 +75,10 @@ def store_runs(args, options, scratch):
             for name in ("tileset.json", "hierarchy.bin", "blocks.bin"):
                 with open(os.path.join(scratch, f"set{rep}", name), "rb") as f:
                     identical = identical and store.get(f"sets/{rep}/{name}") == f.read()
+        # The store's own CPU time: on one machine it shares the workers' cores.
+        with open(f"/proc/{store.proc.pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        store_cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
     finally:
         store.stop()
     best = {way: min(t) for way, t in times.items()}
@@ -83,6 +87,8 @@ def store_runs(args, options, scratch):
     for way, label in (("folder", "2 workers, shared folder (anchor)"), ("store", "2 workers sharing nothing but the store")):
         print(f"| {label} | {best[way]:.1f} | {', '.join(f'{t:.1f}' for t in times[way])} | {best['folder'] / best[way]:.2f}× |")
     print(f"\nSets: {'the same bytes' if identical else 'DIFFERENT'} (tileset.json, hierarchy.bin, blocks.bin).")
+    print(f"\nThe store (SeaweedFS, on the same cores) took {store_cpu:.1f} CPU-s over the {args.reps} store runs "
+          f"({store_cpu / args.reps:.1f} a run).")
     print(f"\n- command: `bench/dask_bench.py {' '.join(sys.argv[1:])}`")
 
 
