@@ -203,6 +203,16 @@ Result<S3Url> parseS3Url(const std::string& url) {
     return u;
 }
 
+Result<S3Url> parseS3Prefix(const std::string& url, const std::string& what) {
+    auto where = parseS3Url(url);
+    if (!where) return where.status();
+    while (!where->key.empty() && where->key.back() == '/') where->key.pop_back();
+    if (where->key.empty() && !what.empty())
+        return Status::error(url + ": give the " + what + " a prefix of its own (s3://BUCKET/PREFIX), not a whole bucket");
+    if (!where->key.empty()) where->key += '/';
+    return where;
+}
+
 Result<S3Environment> s3Environment() {
     S3Environment e;
     const std::string home = env("HOME");

@@ -27,6 +27,10 @@ struct S3Url {
 bool isS3Url(const std::string& location);
 // Fails naming the URL where the bucket name is not one S3 takes.
 Result<S3Url> parseS3Url(const std::string& url);
+// s3://BUCKET/PREFIX as a prefix: the key ends in exactly one '/', or is empty
+// for a whole bucket. `what` names the thing that must not take a whole bucket
+// ("set", "work"); empty lets a whole bucket through.
+Result<S3Url> parseS3Prefix(const std::string& url, const std::string& what = {});
 
 // Where the store is and who asks it. Never printed.
 struct S3Environment {

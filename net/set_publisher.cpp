@@ -22,16 +22,6 @@ namespace surfcast {
 
 namespace {
 
-// s3://BUCKET/PREFIX as its bucket and "PREFIX/"; a whole bucket is refused.
-Result<S3Url> setPrefix(const std::string& url) {
-    auto target = parseS3Url(url);
-    if (!target) return target.status();
-    while (!target->key.empty() && target->key.back() == '/') target->key.pop_back();
-    if (target->key.empty()) return Status::error(url + ": give the set a prefix of its own (s3://BUCKET/PREFIX), not a whole bucket");
-    target->key += '/';
-    return target;
-}
-
 // A build record is a plan (stages.h): a few kilobytes per input.
 constexpr uint64_t kMaxBuildRecordBytes = 256u << 20;
 
@@ -39,7 +29,7 @@ constexpr uint64_t kMaxBuildRecordBytes = 256u << 20;
 
 Result<PublishReport> publishFolder(const std::string& folder, const std::string& url, const std::string& last) {
     namespace fs = std::filesystem;
-    auto target = setPrefix(url);
+    auto target = parseS3Prefix(url, "set");
     if (!target) return target.status();
     const std::string& prefix = target->key;
     auto store = ObjectStore::shared();
@@ -114,7 +104,7 @@ Result<PublishReport> publishFolder(const std::string& folder, const std::string
 }
 
 Result<StoredVersion> mirrorSetMetadata(const std::string& url, const std::string& folder) {
-    auto set = setPrefix(url);
+    auto set = parseS3Prefix(url, "set");
     if (!set) return set.status();
     auto store = ObjectStore::shared();
     if (!store) return store.status();
@@ -149,7 +139,7 @@ Result<StoredVersion> mirrorSetMetadata(const std::string& url, const std::strin
 }
 
 Result<PublishReport> publishVersion(const std::string& folder, const StoredVersion& base) {
-    auto set = setPrefix(base.url);
+    auto set = parseS3Prefix(base.url, "set");
     if (!set) return set.status();
     auto store = ObjectStore::shared();
     if (!store) return store.status();

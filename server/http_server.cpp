@@ -1,11 +1,9 @@
 // HTTP front on GNU libmicrohttpd: an epoll event loop per core, like nginx,
 // instead of a thread per connection. cpp-httplib (thread per keep-alive
 // connection) reached 0.62x nginx's requests/s here, below the 0.8x target;
-// see bench/BENCHMARKS.md. This is the only file that includes microhttpd.h.
+// see bench/BENCHMARKS.md. This file and export_stream.cpp are the only ones
+// that include microhttpd.h.
 #include "http_server.h"
-
-#include "crc32.h"
-
 
 #include <arpa/inet.h>
 #include <microhttpd.h>
@@ -33,6 +31,8 @@
 #include "byte_io.h"
 #include "byte_ranges.h"
 #include "camera.h"
+#include "crc32.h"
+#include "export_stream.h"
 #include "laz_export.h"
 
 namespace surfcast {
@@ -55,211 +55,12 @@ constexpr size_t kConnectionMemory = 32 * 1024;
 // Connections one client address may hold: one client cannot take them all.
 constexpr unsigned kPerAddressConnections = 256;
 constexpr unsigned kMaxConnections = 4096;
-// An export's bytes produced ahead of what its client has taken, at most.
-constexpr size_t kExportQueueBytes = 4u << 20;
 
 std::string hex8(uint32_t v) {
     char b[16];
     std::snprintf(b, sizeof b, "%08x", v);
     return b;
 }
-
-}  // namespace
-
-// One of the server's exportConcurrency places, taken before any other work
-// of an export request (Impl::takeExportSlot) and given back when its owner
-// (the request's reply, then its ExportStream) goes.
-class ExportSlot {
-public:
-    explicit ExportSlot(std::atomic<int>& live) : live_(&live) {}
-    ExportSlot(ExportSlot&& o) noexcept : live_(std::exchange(o.live_, nullptr)) {}
-    ExportSlot& operator=(ExportSlot&&) = delete;
-    ~ExportSlot() {
-        if (live_) --*live_;
-    }
-
-private:
-    std::atomic<int>* live_;
-};
-
-// A LAZ export sent as it is produced (docs/PROTOCOL.md, "Export"): a thread
-// of its own opens the set's reader and runs the export (laz_export.h) into
-// a queue of at most kExportQueueBytes, from the first time MHD asks for
-// bytes (so a HEAD never starts it); MHD's content reader takes from the
-// queue and suspends the connection while it is empty, and the producer
-// resumes it. Resuming happens under the mutex, and cancel() takes it first:
-// once MHD frees the response no resume touches its connection. The producer
-// checks for cancellation before each leaf it decodes, so joining it (on
-// MHD's thread) is prompt. Once it has produced everything, the same thread
-// waits for MHD to free the response, and cuts the connection off if that
-// has not happened by the export's deadline (a client too slow to take it,
-// which would otherwise hold its slot). A stopping server aborts every
-// stream first (abort()): libmicrohttpd must not stop with a connection
-// suspended.
-class ExportStream {
-public:
-    ExportStream(std::shared_ptr<const TilesetSnapshot> snapshot, PointFilter filter, MHD_Connection* c, ExportSlot slot,
-                 Clock::time_point deadline)
-        : snapshot_(std::move(snapshot)), filter_(std::move(filter)), connection_(c), slot_(std::move(slot)), deadline_(deadline) {
-        const MHD_ConnectionInfo* info = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
-        socket_ = info ? info->connect_fd : -1;
-    }
-    ~ExportStream() { cancel(); }
-
-    // Ends the export at once (the server is stopping): its connection, if
-    // suspended, resumes to take the end of its response.
-    void abort() {
-        std::lock_guard lock(mutex_);
-        aborted_ = true;
-        if (suspended_ && !cancelled_) {
-            suspended_ = false;
-            MHD_resume_connection(connection_);
-        }
-        space_.notify_all();
-    }
-
-    // MHD's callbacks, whose `cls` is a std::shared_ptr<ExportStream> the response owns.
-    static ssize_t read(void* cls, uint64_t, char* buf, size_t max) {
-        return (*static_cast<std::shared_ptr<ExportStream>*>(cls))->take(buf, max);
-    }
-    // MHD is done with the response (sent, or the client left): the producer stops.
-    static void release(void* cls) {
-        auto* held = static_cast<std::shared_ptr<ExportStream>*>(cls);
-        (*held)->cancel();
-        delete held;
-    }
-    uint64_t sent() const { return sent_.load(); }
-
-private:
-    ssize_t take(char* buf, size_t max) {
-        std::lock_guard lock(mutex_);
-        if (aborted_ || expired_) return MHD_CONTENT_READER_END_WITH_ERROR;
-        if (!started_) {
-            started_ = true;
-            try {
-                producer_ = std::thread([this] { run(); });
-            } catch (const std::exception& e) {
-                finished_ = true;
-                error_ = std::string("cannot start the export: ") + e.what();
-            }
-        }
-        if (queue_.empty()) {
-            if (finished_) {
-                if (!error_.empty()) std::fprintf(stderr, "surfcast-serve: export of %s failed: %s\n", snapshot_->name.c_str(), error_.c_str());
-                return error_.empty() ? MHD_CONTENT_READER_END_OF_STREAM : MHD_CONTENT_READER_END_WITH_ERROR;
-            }
-            suspended_ = true;
-            MHD_suspend_connection(connection_);
-            return 0;
-        }
-        std::string& front = queue_.front();
-        const size_t n = std::min(max, front.size() - taken_);
-        std::memcpy(buf, front.data() + taken_, n);
-        taken_ += n;
-        queued_ -= n;
-        if (taken_ == front.size()) {
-            queue_.pop_front();
-            taken_ = 0;
-        }
-        sent_ += n;
-        space_.notify_all();
-        return ssize_t(n);
-    }
-
-    // The producer thread: the export, then the watch over its deadline.
-    void run() {
-        produce();
-        std::unique_lock lock(mutex_);
-        if (!space_.wait_until(lock, deadline_, [&] { return cancelled_ || aborted_; })) cutOff();
-    }
-
-    void produce() {
-        const StopExport stop = [&] {
-            std::lock_guard lock(mutex_);
-            return cancelled_ || aborted_ || Clock::now() >= deadline_;
-        };
-        auto push = [&](const uint8_t* data, size_t n) -> Status {
-            std::unique_lock lock(mutex_);
-            space_.wait_until(lock, deadline_, [&] { return cancelled_ || aborted_ || queued_ < kExportQueueBytes; });
-            if (cancelled_ || aborted_ || queued_ >= kExportQueueBytes) return Status::error("export stopped");
-            queue_.emplace_back(reinterpret_cast<const char*>(data), n);
-            queued_ += n;
-            wake();
-            return {};
-        };
-        Status status;
-        try {
-            // Here, not on the event loop: opening copies and parses the hierarchy.
-            auto reader = TilesetReader::open(snapshotSource(snapshot_));
-            if (!reader) {
-                status = reader.status();
-            } else {
-                auto plan = planLazExport(*reader, filter_, stop);
-                if (!plan) status = plan.status();
-                else status = writeLazExport(*reader, filter_, *plan, push, stop);
-            }
-        } catch (const std::exception& e) {  // std::bad_alloc: the thread must not take the server down
-            status = Status::error(e.what());
-        } catch (...) {
-            status = Status::error("the export failed");
-        }
-        std::lock_guard lock(mutex_);
-        finished_ = true;
-        if (!status.ok()) error_ = status.message();
-        wake();
-    }
-
-    // The deadline passed with the response still held (with mutex_ held, so
-    // not cancelled: MHD frees the response before it closes the socket, and
-    // the descriptor is still this connection's). shutdown() makes MHD's next
-    // receive or send on it fail, wherever its buffers stand, and MHD then
-    // closes the connection and frees the response; with SO_LINGER 0 the
-    // close resets it, dropping what the client has not taken.
-    void cutOff() {
-        expired_ = true;
-        std::fprintf(stderr, "surfcast-serve: export of %s cut off at its time limit, %llu bytes sent\n", snapshot_->name.c_str(),
-                     static_cast<unsigned long long>(sent_.load()));
-        if (socket_ >= 0) {
-            const linger reset{1, 0};
-            ::setsockopt(socket_, SOL_SOCKET, SO_LINGER, &reset, sizeof reset);
-            ::shutdown(socket_, SHUT_RDWR);
-        }
-        wake();  // a suspended connection resumes and takes the error (take())
-    }
-
-    void wake() {  // with mutex_ held
-        if (suspended_ && !cancelled_) {
-            suspended_ = false;
-            MHD_resume_connection(connection_);
-        }
-    }
-
-    void cancel() {
-        {
-            std::lock_guard lock(mutex_);
-            cancelled_ = true;
-        }
-        space_.notify_all();
-        if (producer_.joinable()) producer_.join();
-    }
-
-    std::shared_ptr<const TilesetSnapshot> snapshot_;  // keeps the mapped files the reader reads
-    PointFilter filter_;
-    MHD_Connection* connection_;
-    int socket_ = -1;  // the connection's, while the response is not freed
-    ExportSlot slot_;
-    Clock::time_point deadline_;  // see ServerConfig::exportSeconds
-    std::mutex mutex_;
-    std::condition_variable space_;
-    std::deque<std::string> queue_;
-    size_t queued_ = 0, taken_ = 0;  // bytes in the queue; of its front, those already sent
-    bool started_ = false, finished_ = false, suspended_ = false, cancelled_ = false, aborted_ = false, expired_ = false;
-    std::string error_;
-    std::atomic<uint64_t> sent_{0};
-    std::thread producer_;
-};
-
-namespace {
 
 // State of one request, from its first byte to the completion callback.
 struct RequestState {

@@ -70,14 +70,12 @@ Result<std::unique_ptr<TilesetStore>> TilesetStore::open(const std::string& root
 }
 
 Result<std::unique_ptr<TilesetStore>> TilesetStore::openBucket(const std::string& url, uint64_t cacheBytes, double pollSeconds) {
-    auto where = parseS3Url(url);
+    auto where = parseS3Prefix(url);
     if (!where) return where.status();
     auto objects = ObjectStore::shared();
     if (!objects) return objects.status();
     std::unique_ptr<TilesetStore> s(new TilesetStore);
     s->prefix_ = where->key;
-    while (!s->prefix_.empty() && s->prefix_.back() == '/') s->prefix_.pop_back();
-    if (!s->prefix_.empty()) s->prefix_ += '/';
     s->root_ = "s3://" + where->bucket + "/" + s->prefix_;
     // Fetches at once: enough to keep a store's latency hidden behind a few
     // viewers' requests (each of which waits for all of its own).

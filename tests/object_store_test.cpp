@@ -310,6 +310,13 @@ TEST(ObjectStore, UrlsAreParsedStrictly) {
     EXPECT_FALSE(parseS3Url("s3://bucket/a//b").ok());
     EXPECT_FALSE(parseS3Url("s3://bucket/../b").ok());
     EXPECT_FALSE(parseS3Url("http://bucket/b").ok());
+    // Prefixes end in exactly one '/'; a whole bucket is "" unless refused.
+    EXPECT_EQ(parseS3Prefix("s3://bkt/sets/a")->key, "sets/a/");
+    EXPECT_EQ(parseS3Prefix("s3://bkt/sets/a/")->key, "sets/a/");
+    EXPECT_EQ(parseS3Prefix("s3://bkt/")->key, "");
+    auto whole = parseS3Prefix("s3://bkt/", "set");
+    ASSERT_FALSE(whole.ok());
+    EXPECT_NE(whole.status().message().find("give the set a prefix of its own"), std::string::npos);
     S3Environment e;
     e.endpoint = "http://127.0.0.1:9000";
     e.pathStyle = true;

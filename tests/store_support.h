@@ -132,6 +132,14 @@ private:
     pid_t pid_ = -1;
 };
 
+// The folder's files as objects under `prefix` (what `aws s3 sync` does).
+inline void uploadFolder(ObjectStore& store, const std::string& folder, const std::string& prefix) {
+    for (const auto& e : std::filesystem::directory_iterator(folder)) {
+        auto put = store.putFile({SeaweedFs::kBucket, prefix + e.path().filename().string()}, e.path().string());
+        ASSERT_TRUE(put.ok()) << put.status().message();
+    }
+}
+
 // tests/tools/s3_fault_proxy.py in front of the shared store: a share of
 // the requests fail (503 SlowDown before the store acts, 500 or a reset
 // after it has), drawn from `seed`, so a client that sends one request at a

@@ -61,13 +61,7 @@ protected:
         s3_->exportEnvironment();
         store_ = s3_->store();
     }
-    // The folder's files as objects under `prefix` (what `aws s3 sync` does).
-    void upload(const std::string& folder, const std::string& prefix) {
-        for (const auto& e : fs::directory_iterator(folder)) {
-            auto put = store_->putFile({SeaweedFs::kBucket, prefix + e.path().filename().string()}, e.path().string());
-            ASSERT_TRUE(put.ok()) << put.status().message();
-        }
-    }
+    void upload(const std::string& folder, const std::string& prefix) { uploadFolder(*store_, folder, prefix); }
     SeaweedFs* s3_ = nullptr;
     std::shared_ptr<ObjectStore> store_;
 };

@@ -70,16 +70,13 @@ int uploadOrder(const std::string& name) {
 
 Result<std::unique_ptr<StoreWork>> StoreWork::open(const std::string& url, const std::string& stage, const std::vector<size_t>& chunks,
                                                    const std::string& local) {
-    auto where = parseS3Url(url);
+    auto where = parseS3Prefix(url, "work");
     if (!where) return where.status();
     auto store = ObjectStore::shared();
     if (!store) return store.status();
     std::unique_ptr<StoreWork> w(new StoreWork);
     w->bucket_ = where->bucket;
     w->prefix_ = where->key;
-    while (!w->prefix_.empty() && w->prefix_.back() == '/') w->prefix_.pop_back();
-    if (w->prefix_.empty()) return Status::error(url + ": give the work a prefix of its own (s3://BUCKET/PREFIX), not a whole bucket");
-    w->prefix_ += '/';
     w->local_ = local;
     std::error_code ec;
     fs::create_directories(local, ec);
