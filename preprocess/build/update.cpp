@@ -188,7 +188,7 @@ void removeFromStats(InputStats& stats, std::span<const uint32_t> inputOfSource,
     }
 }
 
-constexpr char kUpdateMagic[9] = "SCUPDT01";
+constexpr char kUpdateMagic[9] = "SCUPDT02";
 
 Result<std::string> tilesetText(const std::string& set) {
     std::ifstream in(set + "/tileset.json", std::ios::binary);
@@ -315,7 +315,33 @@ private:
     BuildPlan plan_;
     ChunkLayout layout_;
     std::vector<bool> touched_;  // per chunk: built again
+    // What no change reaches (keepsCurrent): the box of the added and removed
+    // points, and how far a node's values look (the widest halo margin of the
+    // rebuilt chunks); none where every node may have changed.
+    bool keepsFar_ = false;
+    Box3d changed_;
+    double reach_ = 0;
+    bool keepsCurrent(const NodeRecord& built, const NodeRecord& current) const;
 };
+
+// A node built again keeps the set's node of its key where its box, widened
+// by reach_ (or, above the chunks, a halo's kHaloCells cells of its level),
+// misses every added and removed point: its points are the same, and so are
+// those its normals, h, radii and weights were computed from (a build looks
+// no further than a halo), so built again it would differ only by being
+// computed from decoded points (bench/BENCHMARKS.md, "Updates in place").
+// Its children and surfel count must agree too.
+bool Update::keepsCurrent(const NodeRecord& built, const NodeRecord& current) const {
+    if (!keepsFar_ || built.childMask != current.childMask || built.surfelCount != current.surfelCount) return false;
+    if (changed_.empty()) return true;
+    const BuildContext& c = *context_;
+    const double reach = std::max(reach_, kHaloCells * c.edge(built.key.level) / c.options().grid);
+    const Vec3d lo = c.nodeMinRel(built.key) - Vec3d{reach, reach, reach};
+    const double e = c.edge(built.key.level) + 2 * reach;
+    for (int a = 0; a < 3; ++a)
+        if (lo[a] > changed_.max[a] || lo[a] + e < changed_.min[a]) return true;
+    return false;
+}
 
 Status Update::open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record, const std::string& store) {
     opt_ = normalizeOptions(options);
@@ -558,6 +584,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
         }
     };
     touch(gone_);
+    for (const Surfel& s : gone_) changed_.extend(s.position);
     // A removed point's cell may be empty now, and so in no chunk: the chunk
     // that held it is rebuilt where the layout keeps it.
     std::map<NodeKey, size_t> chunkIndex;
@@ -568,8 +595,14 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
     if (added > 0)
         SC_TRY(forEachAdded({}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
             touch(batch);
+            for (const Surfel& s : batch) changed_.extend(s.position);
             return Status{};
         }));
+    // Where the set gains provenance every block changes; where the root
+    // grows, nodes move to deeper keys (the rule keeps to the simple case).
+    keepsFar_ = !addsProvenance_ && grow_.levels == 0;
+    for (size_t i = 0; i < touched_.size(); ++i)
+        if (touched_[i]) reach_ = std::max(reach_, layout_.margin(int(i)));
     return {};
 }
 
@@ -698,6 +731,9 @@ Status Update::write(const std::string& path) const {
     const std::vector<size_t> which = rebuilt();
     w.put(uint64_t(which.size()));
     for (size_t i : which) w.put(uint64_t(i));
+    w.put(uint8_t(keepsFar_));
+    for (int a = 0; a < 3; ++a) w.put(changed_.min[a]), w.put(changed_.max[a]);
+    w.put(reach_);
     return writeWorkFile(path, kUpdateMagic, w);
 }
 
@@ -715,6 +751,9 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFol
     const uint64_t count = r.getCount(8);
     std::vector<uint64_t> which(count);
     for (uint64_t& i : which) i = r.get<uint64_t>();
+    keepsFar_ = r.get<uint8_t>() != 0;
+    for (int a = 0; a < 3; ++a) changed_.min[a] = r.get<double>(), changed_.max[a] = r.get<double>();
+    reach_ = r.get<double>();
     if (!r.ok() || r.left() != 0 || added > options.inputs.paths.size() || levels > uint32_t(kMaxLevel)) return corrupt;
     grow_.levels = int(levels);
     for (int a = 0; a < 3; ++a)
@@ -752,7 +791,9 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFol
 Result<std::unique_ptr<TilesetWriter>> Update::writer() const {
     std::vector<NodeRecord> nodes = reader_->nodes();
     for (NodeRecord& n : nodes) n.key = grow_.key(n.key);
-    return TilesetWriter::update(set_, reader_->info(), nodes, [this](const std::vector<NodeRecord>& n) { return reader_->readBlocksBytes(n); });
+    return TilesetWriter::update(
+        set_, reader_->info(), nodes, [this](const std::vector<NodeRecord>& n) { return reader_->readBlocksBytes(n); },
+        [this](const NodeRecord& built, const NodeRecord& current) { return keepsCurrent(built, current); });
 }
 
 Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const {
