@@ -87,9 +87,34 @@ Result<std::vector<std::vector<uint8_t>>> TilesetReader::readBlocksBytes(const s
 Result<BlockData> TilesetReader::readBlock(const NodeRecord& node, bool scalars) const {
     auto bytes = readBlockBytes(node);
     if (!bytes) return bytes.status();
+    return decoded(node, *bytes, scalars);
+}
+
+Status TilesetReader::forEachBlock(const std::vector<NodeRecord>& nodes, bool scalars,
+                                   const std::function<Status(const NodeRecord&, BlockData&)>& visit) const {
+    constexpr uint64_t kBatchBytes = 64ull << 20;
+    for (size_t first = 0; first < nodes.size();) {
+        size_t end = first;
+        for (uint64_t bytes = 0; end < nodes.size() && (end == first || bytes + nodes[end].blockSize <= kBatchBytes); ++end)
+            bytes += nodes[end].blockSize;
+        const std::vector<NodeRecord> batch(nodes.begin() + long(first), nodes.begin() + long(end));
+        auto blobs = readBlocksBytes(batch);
+        if (!blobs) return blobs.status();
+        for (size_t i = 0; i < batch.size(); ++i) {
+            auto block = decoded(batch[i], (*blobs)[i], scalars);
+            if (!block) return block.status();
+            std::vector<uint8_t>().swap((*blobs)[i]);
+            SC_TRY(visit(batch[i], *block));
+        }
+        first = end;
+    }
+    return {};
+}
+
+Result<BlockData> TilesetReader::decoded(const NodeRecord& node, const std::vector<uint8_t>& bytes, bool scalars) const {
     BlockExpectation e = expectation(node);
     e.scalars = scalars;
-    auto block = decodeBlock(bytes->data(), bytes->size(), e);
+    auto block = decodeBlock(bytes.data(), bytes.size(), e);
     if (!block) return Status::error(describe() + ": node " + node.key.name() + ": " + block.status().message());
     if (block->size() != node.surfelCount)
         return Status::error(describe() + ": node " + node.key.name() + " decodes to " +

@@ -4,6 +4,7 @@
 // `surfcast-view` without `--lod`, the weight capture, the bench tools and the tests.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -31,6 +32,12 @@ public:
     // The node's block decoded (with its scalar attributes where `scalars`),
     // checked against the hierarchy's surfel count; errors name the node.
     Result<BlockData> readBlock(const NodeRecord& node, bool scalars = false) const;
+    // Each of `nodes` decoded as readBlock decodes it, in their order, to
+    // `visit`; their blobs are asked for in batches of about 64 MiB at once
+    // (from a store, one batch's ranges together rather than one at a time).
+    // Stops at the first error, the visitor's own included.
+    Status forEachBlock(const std::vector<NodeRecord>& nodes, bool scalars,
+                        const std::function<Status(const NodeRecord&, BlockData&)>& visit) const;
     // World-space position of quantized surfel i of a decoded block.
     Vec3d position(const NodeRecord& node, const BlockData& block, size_t i) const;
 
@@ -38,6 +45,7 @@ public:
     std::string describe() const { return source_->describe(); }
 
 private:
+    Result<BlockData> decoded(const NodeRecord& node, const std::vector<uint8_t>& bytes, bool scalars) const;
     TilesetInfo info_;
     std::vector<NodeRecord> nodes_;
     std::shared_ptr<TileSource> source_;

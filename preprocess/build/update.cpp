@@ -495,17 +495,18 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
             removedBoxes.push_back(record.stats.sources[i].bounds);
     if (!request.removed.empty()) {
         progress.begin("find removed", 0);
-        for (const NodeRecord& n : reader_->nodes()) {
-            if (!(n.flags & kFlagInputPoints) || !reaches(info, n, removedBoxes, Vec3d{})) continue;
-            auto block = reader_->readBlock(n, true);
-            if (!block) return block.status();
+        std::vector<NodeRecord> leaves;
+        for (const NodeRecord& n : reader_->nodes())
+            if ((n.flags & kFlagInputPoints) && reaches(info, n, removedBoxes, Vec3d{})) leaves.push_back(n);
+        SC_TRY(reader_->forEachBlock(leaves, true, [&](const NodeRecord& n, BlockData& block) {
             std::vector<Surfel> points;
-            decode(*root_, n, *block, &points, nullptr);
-            const std::vector<uint32_t> of = inputsOf(*block);
+            decode(*root_, n, block, &points, nullptr);
+            const std::vector<uint32_t> of = inputsOf(block);
             for (size_t i = 0; i < points.size(); ++i)
                 if (std::find(request.removed.begin(), request.removed.end(), of[i]) != request.removed.end()) gone_.push_back(points[i]);
             progress.advance(points.size());
-        }
+            return Status{};
+        }));
         summary->phaseSeconds.push_back({"find removed", progress.end()});
         removeFromStats(stats, oldInputs_, request.removed, gone_);
     }
@@ -675,15 +676,15 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
     if (ec) return Status::error(work.chunks(0) + ": cannot create (" + ec.message() + ")");
     progress.begin("distribute", 0);
     ChunkWriter chunkWriter(layout_, work.chunks(0), c.scalars().size());
-    for (const NodeRecord& n : reader_->nodes()) {
+    std::vector<NodeRecord> leaves;
+    for (const NodeRecord& n : reader_->nodes())
         // (Every chunk built again where the set gains provenance: every leaf.)
-        if (!(n.flags & kFlagInputPoints) || (!addsProvenance_ && !reaches(info, n, boxes, c.rootMin()))) continue;
-        auto block = reader_->readBlock(n, true);
-        if (!block) return block.status();
+        if ((n.flags & kFlagInputPoints) && (addsProvenance_ || reaches(info, n, boxes, c.rootMin()))) leaves.push_back(n);
+    SC_TRY(reader_->forEachBlock(leaves, true, [&](const NodeRecord& n, BlockData& block) {
         std::vector<Surfel> points;
         ScalarTable table = c.emptyTable();
-        decode(c, n, *block, &points, &table);
-        const std::vector<uint32_t> of = inputsOf(*block);
+        decode(c, n, block, &points, &table);
+        const std::vector<uint32_t> of = inputsOf(block);
         for (size_t i = 0; i < points.size(); ++i)
             if (of[i] < estimated.size() && estimated[of[i]] && (addsProvenance_ || nearChange(points[i].position)))
                 points[i].normal = Vec3f{};  // (every chunk built again: every normal, as a fresh build estimates them)
@@ -700,7 +701,8 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         }
         SC_TRY(chunkWriter.add(points, table.values));
         progress.advance(points.size());
-    }
+        return Status{};
+    }));
     if (added > 0)
         SC_TRY(forEachAdded(c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
             progress.advance(batch.size());
@@ -804,6 +806,8 @@ Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& pr
     for (size_t i = 0; i < layout_.chunks().size(); ++i)
         if (!touched_[i]) kept[i].plan = plan_.id;
     const std::vector<NodeRecord>& nodes = reader_->nodes();
+    std::vector<NodeRecord> roots;
+    std::vector<ChunkOutput*> rootOf;
     for (const NodeRecord& n : nodes) {
         const NodeKey key = grow_.key(n.key);
         for (auto& [i, out] : kept) {
@@ -813,16 +817,21 @@ Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& pr
             moved.key = key;
             out.records.push_back(moved);
             if (key == chunk && !(chunk == NodeKey{})) {
-                auto block = reader_->readBlock(n, true);
-                if (!block) return block.status();
-                out.root = std::make_unique<BuiltNode>();
-                out.root->key = chunk;
-                out.rootScalars = c.emptyTable();
-                decode(c, n, *block, &out.root->surfels, &out.rootScalars);
+                roots.push_back(n);
+                rootOf.push_back(&out);
             }
             break;
         }
     }
+    size_t next = 0;
+    SC_TRY(reader_->forEachBlock(roots, true, [&](const NodeRecord& n, BlockData& block) {
+        ChunkOutput& out = *rootOf[next++];
+        out.root = std::make_unique<BuiltNode>();
+        out.root->key = grow_.key(n.key);
+        out.rootScalars = c.emptyTable();
+        decode(c, n, block, &out.root->surfels, &out.rootScalars);
+        return Status{};
+    }));
     return mergeStage(c, plan_, layout_, work, writer, progress, summary, &kept);
 }
 
