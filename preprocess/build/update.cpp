@@ -329,8 +329,8 @@ private:
 // misses every added and removed point: its points are the same, and so are
 // those its normals, h, radii and weights were computed from (a build looks
 // no further than a halo), so built again it would differ only by being
-// computed from decoded points (bench/BENCHMARKS.md, "Updates in place").
-// Its children and surfel count must agree too.
+// computed from decoded points (bench/BENCHMARKS.md, "Nodes the change
+// cannot reach keep their blocks"). Its children and surfel count must agree too.
 bool Update::keepsCurrent(const NodeRecord& built, const NodeRecord& current) const {
     if (!keepsFar_ || built.childMask != current.childMask || built.surfelCount != current.surfelCount) return false;
     if (changed_.empty()) return true;
