@@ -223,6 +223,78 @@ TEST_F(Store, APublishThatFailsHalfWayLeavesNothing) {
     EXPECT_TRUE(keys(*store_, "halfway/").empty()) << r.output;
 }
 
+// The stages on work in the store, one process each as Dask workers run
+// them: the shuffle's pieces are stored as LZ4 frames (chunks/P/NAME.lz4,
+// the markers as they are), the set is the bytes of a one-process build,
+// and a damaged piece fails its chunk task naming the object.
+TEST_F(Store, StagesOnWorkInTheStorePackTheShuffle) {
+    TempDir dir;
+    const std::vector<std::string> scene = {"--default-scene", "--scene-points", "100000", "--memory", "64M", "--capacity", "1000"};
+    auto stage = [&](std::vector<std::string> args, const std::string& work) {
+        args.insert(args.begin(), {binary("surfcast-build")});
+        args.insert(args.begin() + 2, {"-q", "--work", work});
+        return run(args);
+    };
+    auto stages = [&](const std::string& work, const std::string& out) {
+        for (const char* s : {"scan", "count"}) {
+            std::vector<std::string> args = {s, "--part", "0/1"};
+            args.insert(args.end(), scene.begin(), scene.end());
+            args.insert(args.end(), {"-o", out});
+            auto r = stage(args, work);
+            ASSERT_EQ(r.exitCode, 0) << s << ": " << r.output;
+        }
+        std::vector<std::string> plan = {"plan"};
+        plan.insert(plan.end(), scene.begin(), scene.end());
+        plan.insert(plan.end(), {"-o", out});
+        auto r = stage(plan, work);
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        r = stage({"distribute", "--part", "0"}, work);
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+    };
+    const std::string work = "s3://surfcast/stages/work";
+    ASSERT_NO_FATAL_FAILURE(stages(work, dir.file("set")));
+    size_t pieces = 0;
+    for (const std::string& k : keys(*store_, "stages/work/chunks/")) {
+        if (k.ends_with("/distribution.bin")) continue;
+        EXPECT_TRUE(k.ends_with(".lz4")) << k << ": a piece stored as it is";
+        ++pieces;
+    }
+    EXPECT_GT(pieces, 2u) << "the case needs a shuffle of several chunks";
+    // Every chunk (plan.json names how many), then the merge.
+    const nlohmann::json plan = nlohmann::json::parse(get(*store_, "stages/work/plan.json"));
+    std::vector<std::string> chunk = {"chunk"};
+    for (size_t i = 0; i < plan["chunks"].get<size_t>(); ++i) chunk.push_back(std::to_string(i));
+    auto r = stage(chunk, work);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    r = stage({"merge"}, work);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::vector<std::string> one = {binary("surfcast-build"), "-q"};
+    one.insert(one.end(), scene.begin(), scene.end());
+    one.insert(one.end(), {"-o", dir.file("one")});
+    r = run(one);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin"})
+        EXPECT_TRUE(readFile(dir.file(std::string("set/") + f)) == readFile(dir.file(std::string("one/") + f))) << f;
+
+    // A damaged piece: its chunk task fails, naming the object.
+    const std::string damaged = "s3://surfcast/stages/damaged";
+    ASSERT_NO_FATAL_FAILURE(stages(damaged, dir.file("set2")));
+    std::string victim;
+    for (const std::string& k : keys(*store_, "stages/damaged/chunks/"))
+        if (k.ends_with(".bin.lz4")) victim = "stages/damaged/chunks/" + k;
+    ASSERT_FALSE(victim.empty());
+    std::string bytes = get(*store_, victim);
+    ASSERT_GT(bytes.size(), 64u);
+    bytes.resize(bytes.size() / 2);
+    auto put = store_->put({SeaweedFs::kBucket, victim}, std::vector<uint8_t>(bytes.begin(), bytes.end()));
+    ASSERT_TRUE(put.ok()) << put.status().message();
+    const std::string file = victim.substr(victim.rfind('/') + 1);
+    const std::string index = file.substr(6, file.find('.') - 6);  // chunk-I.bin.lz4
+    r = stage({"chunk", index}, damaged);
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("s3://surfcast/" + victim + ": its LZ4 frame ends early"), std::string::npos) << r.output;
+}
+
 TEST_F(Store, RefusalsFailAtOnceAndLeaveNothing) {
     auto put = store_->putFile({SeaweedFs::kBucket, "refusals/autzen_trim.las"}, dataFile("autzen_trim.las"));
     ASSERT_TRUE(put.ok()) << put.status().message();

@@ -1,7 +1,8 @@
 // A staged build's work folder in an object store (--work s3://BUCKET/PREFIX):
 // each stage's process copies the work files it reads into a folder of its
-// own, runs on that folder as on a shared one, and uploads what it wrote,
-// so that the machines of a cluster share nothing but the store
+// own, runs on that folder as on a shared one, and uploads what it wrote
+// (the shuffle's pieces as LZ4 frames, NAME.lz4), so that the machines of a
+// cluster share nothing but the store
 // (docs/STORAGE.md, "Builds across machines"). The work files are
 // deterministic: a task run again writes the same bytes, and a PUT replaces
 // an object whole, so a worker killed during its upload leaves either
