@@ -682,7 +682,11 @@ describe("browser viewer", { skip }, () => {
     }), false);
     await page.waitForFunction(done, { timeout: 60000 });
     const after = await seen();
-    assert.equal(after.state.requests, before.state.requests, "recoloured from the kept blocks");
+    // Recoloured from the kept blocks: a request only for blocks whose kept
+    // copy went (the kept budget, streamer.ts recolor), and few of those.
+    const requests = after.state.requests - before.state.requests, refetched = after.state.refetched - before.state.refetched;
+    assert.ok(requests <= refetched && refetched <= before.state.resident / 4,
+              `recoloured from the kept blocks: ${requests} requests, ${refetched} of ${before.state.resident} blocks fetched again`);
     assert.match(after.status, /, converged$/);
     await page.close();
     assert.deepEqual(problems, []);
