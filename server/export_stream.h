@@ -24,7 +24,7 @@ struct MHD_Connection;
 namespace surfcast {
 
 // One of the server's exportConcurrency places, taken before any other work
-// of an export request (HttpServer's takeExportSlot) and given back when its
+// of an export request (the server's takeExportSlot, http_server.cpp) and given back when its
 // owner (the request's reply, then its ExportStream) goes.
 class ExportSlot {
 public:

@@ -311,9 +311,12 @@ TEST(ObjectStore, UrlsAreParsedStrictly) {
     EXPECT_FALSE(parseS3Url("s3://bucket/../b").ok());
     EXPECT_FALSE(parseS3Url("http://bucket/b").ok());
     // Prefixes end in exactly one '/'; a whole bucket is "" unless refused.
-    EXPECT_EQ(parseS3Prefix("s3://bkt/sets/a")->key, "sets/a/");
-    EXPECT_EQ(parseS3Prefix("s3://bkt/sets/a/")->key, "sets/a/");
-    EXPECT_EQ(parseS3Prefix("s3://bkt/")->key, "");
+    for (const auto& [url, key] : std::vector<std::pair<std::string, std::string>>{
+             {"s3://bkt/sets/a", "sets/a/"}, {"s3://bkt/sets/a/", "sets/a/"}, {"s3://bkt/", ""}}) {
+        auto prefix = parseS3Prefix(url);
+        ASSERT_TRUE(prefix.ok()) << url << ": " << prefix.status().message();
+        EXPECT_EQ(prefix->key, key) << url;
+    }
     auto whole = parseS3Prefix("s3://bkt/", "set");
     ASSERT_FALSE(whole.ok());
     EXPECT_NE(whole.status().message().find("give the set a prefix of its own"), std::string::npos);

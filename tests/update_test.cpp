@@ -129,10 +129,11 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
 // though the chunk that holds it is built again from decoded points (whose
 // values, computed again, differ in rounding: isolated surfels' radii
 // flipped in about 1 % of surfels, rewriting far nodes). Reach, from what a
-// build looks at (docs/ARCHITECTURE.md): a chunk's halo, at most one counting
-// cell (root edge / 128), or above the chunks kHaloCells = 4 cells of the
-// node's level (edge / grid); a node whose box widened by that misses the
-// added scan's bounds (its LAS header's) is one the change cannot reach.
+// build looks at (docs/ARCHITECTURE.md, "Updates in place"): a chunk's halo,
+// at most one counting cell (root edge / 128), and two node edges of the
+// node's level (the neighbouring nodes whose h its weights take); a node
+// whose box widened by the larger misses the added scan's bounds (its LAS
+// header's) is one the change cannot reach.
 TEST_F(UpdateTest, NodesTheChangeCannotReachKeepTheirBlocks) {
     auto before = TilesetReader::open(set());
     ASSERT_TRUE(before) << before.status().message();
@@ -153,7 +154,7 @@ TEST_F(UpdateTest, NodesTheChangeCannotReachKeepTheirBlocks) {
     std::string which;
     for (const NodeRecord& n : after->nodes()) {
         const double edge = nodeEdge(info, n.key.level);
-        const double reach = std::max(info.rootEdge / 128, 4 * edge / info.grid);
+        const double reach = std::max(info.rootEdge / 128, 2 * edge);
         const Vec3d lo = nodeMin(info, n.key);
         bool misses = false;
         for (int a = 0; a < 3; ++a)

@@ -58,16 +58,30 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 
 // `from` into `to` as an LZ4 frame (pack) or back (unpack), in pieces of
 // 1 MiB: the buffers are fixed, whatever the bytes say. A frame that ends
-// early or does not decode is an error naming `what`.
+// early, does not decode or has bytes after it is an error naming `what`;
+// on any error `to` is removed.
+Status lz4Frames(std::FILE* in, std::FILE* out, const std::string& from, const std::string& to, bool pack, const std::string& what);
+
 Status lz4File(const std::string& from, const std::string& to, bool pack, const std::string& what) {
-    File in(std::fopen(from.c_str(), "rb")), out(std::fopen(to.c_str(), "wb"));
+    File in(std::fopen(from.c_str(), "rb"));
     if (!in) return Status::error(from + ": cannot open");
+    File out(std::fopen(to.c_str(), "wb"));
     if (!out) return Status::error(to + ": cannot create");
+    Status st = lz4Frames(in.get(), out.get(), from, to, pack, what);
+    if (st.ok() && std::fclose(out.release()) != 0) st = Status::error(to + ": write failed (disk full?)");
+    if (!st.ok()) {
+        std::error_code gone;
+        fs::remove(to, gone);
+    }
+    return st;
+}
+
+Status lz4Frames(std::FILE* inFile, std::FILE* outFile, const std::string& from, const std::string& to, bool pack, const std::string& what) {
     constexpr size_t kPiece = 1u << 20;
     std::vector<char> input(kPiece);
     std::vector<char> output;
     auto put = [&](const char* data, size_t n) {
-        return n == 0 || std::fwrite(data, 1, n, out.get()) == n ? Status{} : Status::error(to + ": write failed (disk full?)");
+        return n == 0 || std::fwrite(data, 1, n, outFile) == n ? Status{} : Status::error(to + ": write failed (disk full?)");
     };
     if (pack) {
         LZ4F_cctx* context = nullptr;
@@ -79,12 +93,12 @@ Status lz4File(const std::string& from, const std::string& to, bool pack, const 
         size_t n = LZ4F_compressBegin(context, output.data(), output.size(), &prefs);
         if (LZ4F_isError(n)) return Status::error("LZ4: " + std::string(LZ4F_getErrorName(n)));
         SC_TRY(put(output.data(), n));
-        for (size_t got; (got = std::fread(input.data(), 1, kPiece, in.get())) > 0;) {
+        for (size_t got; (got = std::fread(input.data(), 1, kPiece, inFile)) > 0;) {
             n = LZ4F_compressUpdate(context, output.data(), output.size(), input.data(), got, nullptr);
             if (LZ4F_isError(n)) return Status::error("LZ4: " + std::string(LZ4F_getErrorName(n)));
             SC_TRY(put(output.data(), n));
         }
-        if (std::ferror(in.get())) return Status::error(from + ": read failed");
+        if (std::ferror(inFile)) return Status::error(from + ": read failed");
         n = LZ4F_compressEnd(context, output.data(), output.size(), nullptr);
         if (LZ4F_isError(n)) return Status::error("LZ4: " + std::string(LZ4F_getErrorName(n)));
         SC_TRY(put(output.data(), n));
@@ -94,18 +108,23 @@ Status lz4File(const std::string& from, const std::string& to, bool pack, const 
         std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> owned(context, &LZ4F_freeDecompressionContext);
         output.resize(kPiece);
         size_t hint = 1;  // 0 once the frame is whole
-        for (size_t got; hint != 0 && (got = std::fread(input.data(), 1, kPiece, in.get())) > 0;) {
-            for (size_t at = 0; at < got && hint != 0;) {
+        bool trailing = false;
+        for (size_t got; !trailing && (got = std::fread(input.data(), 1, kPiece, inFile)) > 0;) {
+            size_t at = 0;
+            while (at < got && hint != 0) {
                 size_t outSize = output.size(), inSize = got - at;
                 hint = LZ4F_decompress(context, output.data(), &outSize, input.data() + at, &inSize, nullptr);
                 if (LZ4F_isError(hint)) return Status::error(what + ": not an LZ4 frame of a work file (" + LZ4F_getErrorName(hint) + ")");
                 SC_TRY(put(output.data(), outSize));
                 at += inSize;
             }
+            trailing = hint == 0 && at < got;
         }
+        if (std::ferror(inFile)) return Status::error(from + ": read failed");
         if (hint != 0) return Status::error(what + ": its LZ4 frame ends early");
+        if (trailing || std::fgetc(inFile) != EOF) return Status::error(what + ": bytes after its LZ4 frame");
     }
-    if (std::fflush(out.get()) != 0) return Status::error(to + ": write failed (disk full?)");
+    if (std::fflush(outFile) != 0) return Status::error(to + ": write failed (disk full?)");
     return {};
 }
 
@@ -159,8 +178,10 @@ Result<std::unique_ptr<StoreWork>> StoreWork::open(const std::string& url, const
         std::string name = o.key.substr(w->prefix_.size());
         const bool lz4 = name.size() > 4 && name.compare(name.size() - 4, 4, kPacked) == 0;
         if (lz4) name.resize(name.size() - 4);
-        if (lz4 != packed(name) || !readBy(stage, chunks, name)) continue;
-        if (name.find("..") != std::string::npos) return Status::error("s3://" + w->bucket_ + "/" + o.key + ": not a work file's name");
+        if (!readBy(stage, chunks, name)) continue;
+        if (name.find("..") != std::string::npos || lz4 != packed(name))
+            return Status::error("s3://" + w->bucket_ + "/" + o.key + ": not a work file's name (" +
+                                 (lz4 ? "only the shuffle's pieces are LZ4 frames" : "the shuffle's pieces are NAME.lz4") + ")");
         wanted.push_back(o);
         names.push_back(name);
         w->copied_.insert(name);

@@ -325,17 +325,19 @@ private:
 };
 
 // A node built again keeps the set's node of its key where its box, widened
-// by reach_ (or, above the chunks, a halo's kHaloCells cells of its level),
-// misses every added and removed point: its points are the same, and so are
-// those its normals, h, radii and weights were computed from (a build looks
-// no further than a halo), so built again it would differ only by being
-// computed from decoded points (bench/BENCHMARKS.md, "Nodes the change
-// cannot reach keep their blocks"). Its children and surfel count must agree too.
+// by the larger of reach_ and two node edges of its level, misses every
+// added and removed point, and its children and surfel count agree: its
+// points are the same, and so are those its values came from. A chunk's
+// build looks no further than its halo; a node's weights take its
+// neighbouring nodes' h, and d_k of a sparse surfel reaches a few of its
+// cells, which two edges of the node hold. Built again it would differ only
+// by being computed from decoded points (bench/BENCHMARKS.md, "Nodes the
+// change cannot reach keep their blocks").
 bool Update::keepsCurrent(const NodeRecord& built, const NodeRecord& current) const {
     if (!keepsFar_ || built.childMask != current.childMask || built.surfelCount != current.surfelCount) return false;
     if (changed_.empty()) return true;
     const BuildContext& c = *context_;
-    const double reach = std::max(reach_, kHaloCells * c.edge(built.key.level) / c.options().grid);
+    const double reach = std::max(reach_, 2 * c.edge(built.key.level));
     const Vec3d lo = c.nodeMinRel(built.key) - Vec3d{reach, reach, reach};
     const double e = c.edge(built.key.level) + 2 * reach;
     for (int a = 0; a < 3; ++a)
@@ -721,8 +723,9 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
 
 // update.bin: the plan's id, the set's version, the added inputs' count, the
 // growth of the root (levels and the old root's offset: the new root follows
-// from the set) and the chunks built again; the rest a stage derives again
-// from the plan and the set.
+// from the set), the chunks built again, and what keepsCurrent needs (whether
+// it applies, the changed points' box, the reach); the rest a stage derives
+// again from the plan and the set.
 Status Update::write(const std::string& path) const {
     ByteWriter w;
     w.put(plan_.id);
@@ -756,6 +759,7 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFol
     keepsFar_ = r.get<uint8_t>() != 0;
     for (int a = 0; a < 3; ++a) changed_.min[a] = r.get<double>(), changed_.max[a] = r.get<double>();
     reach_ = r.get<double>();
+    if (!(reach_ >= 0 && reach_ < HUGE_VAL)) return corrupt;
     if (!r.ok() || r.left() != 0 || added > options.inputs.paths.size() || levels > uint32_t(kMaxLevel)) return corrupt;
     grow_.levels = int(levels);
     for (int a = 0; a < 3; ++a)
