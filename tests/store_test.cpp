@@ -293,6 +293,20 @@ TEST_F(Store, StagesOnWorkInTheStorePackTheShuffle) {
     r = stage({"chunk", index}, damaged);
     EXPECT_EQ(r.exitCode, 1) << r.output;
     EXPECT_NE(r.output.find("s3://surfcast/" + victim + ": its LZ4 frame ends early"), std::string::npos) << r.output;
+    // A whole frame with a byte after it, and a piece stored as it is.
+    ASSERT_NO_FATAL_FAILURE(stages(damaged, dir.file("set3")));  // the plan removes the pieces; distribute puts them again
+    std::string whole = get(*store_, victim) + "x";
+    put = store_->put({SeaweedFs::kBucket, victim}, std::vector<uint8_t>(whole.begin(), whole.end()));
+    ASSERT_TRUE(put.ok()) << put.status().message();
+    r = stage({"chunk", index}, damaged);
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("s3://surfcast/" + victim + ": bytes after its LZ4 frame"), std::string::npos) << r.output;
+    const std::string plain = victim.substr(0, victim.size() - 4);
+    put = store_->put({SeaweedFs::kBucket, plain}, std::vector<uint8_t>{1, 2, 3});
+    ASSERT_TRUE(put.ok()) << put.status().message();
+    r = stage({"chunk", index}, damaged);
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+    EXPECT_NE(r.output.find("s3://surfcast/" + plain + ": not a work file's name"), std::string::npos) << r.output;
 }
 
 TEST_F(Store, RefusalsFailAtOnceAndLeaveNothing) {

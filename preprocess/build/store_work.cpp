@@ -70,6 +70,7 @@ Status lz4File(const std::string& from, const std::string& to, bool pack, const 
     Status st = lz4Frames(in.get(), out.get(), from, to, pack, what);
     if (st.ok() && std::fclose(out.release()) != 0) st = Status::error(to + ": write failed (disk full?)");
     if (!st.ok()) {
+        out.reset();
         std::error_code gone;
         fs::remove(to, gone);
     }
@@ -179,7 +180,8 @@ Result<std::unique_ptr<StoreWork>> StoreWork::open(const std::string& url, const
         const bool lz4 = name.size() > 4 && name.compare(name.size() - 4, 4, kPacked) == 0;
         if (lz4) name.resize(name.size() - 4);
         if (!readBy(stage, chunks, name)) continue;
-        if (name.find("..") != std::string::npos || lz4 != packed(name))
+        if (name.find("..") != std::string::npos) return Status::error("s3://" + w->bucket_ + "/" + o.key + ": not a work file's name");
+        if (lz4 != packed(name))
             return Status::error("s3://" + w->bucket_ + "/" + o.key + ": not a work file's name (" +
                                  (lz4 ? "only the shuffle's pieces are LZ4 frames" : "the shuffle's pieces are NAME.lz4") + ")");
         wanted.push_back(o);

@@ -327,12 +327,15 @@ private:
 // A node built again keeps the set's node of its key where its box, widened
 // by the larger of reach_ and two node edges of its level, misses every
 // added and removed point, and its children and surfel count agree: its
-// points are the same, and so are those its values came from. A chunk's
-// build looks no further than its halo; a node's weights take its
+// points are the same, and so are the neighbours its values came from. A
+// chunk's build looks no further than its halo; a node's weights take its
 // neighbouring nodes' h, and d_k of a sparse surfel reaches a few of its
-// cells, which two edges of the node hold. Built again it would differ only
-// by being computed from decoded points (bench/BENCHMARKS.md, "Nodes the
-// change cannot reach keep their blocks").
+// cells, which two edges of the node hold. (The weights' search grid takes
+// its cell from the whole level's h, which a change far away can move; that
+// changes which sparse neighbours past a surfel's own reach count, and the
+// rule keeps the node anyway.) Built again it would differ by being computed
+// from decoded points (bench/BENCHMARKS.md, "Nodes the change cannot reach
+// keep their blocks").
 bool Update::keepsCurrent(const NodeRecord& built, const NodeRecord& current) const {
     if (!keepsFar_ || built.childMask != current.childMask || built.surfelCount != current.surfelCount) return false;
     if (changed_.empty()) return true;
