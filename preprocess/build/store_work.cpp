@@ -51,11 +51,6 @@ Status inParallel(size_t n, const std::function<Status(size_t)>& job) {
 constexpr const char* kPacked = ".lz4";
 bool packed(const std::string& name) { return name.rfind("chunks/", 0) == 0 && fs::path(name).filename() != "distribution.bin"; }
 
-struct FileCloser {
-    void operator()(std::FILE* f) const { std::fclose(f); }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
-
 // `from` into `to` as an LZ4 frame (pack) or back (unpack), in pieces of
 // 1 MiB: the buffers are fixed, whatever the bytes say. A frame that ends
 // early, does not decode or has bytes after it is an error naming `what`;
@@ -63,9 +58,9 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 Status lz4Frames(std::FILE* in, std::FILE* out, const std::string& from, const std::string& to, bool pack, const std::string& what);
 
 Status lz4File(const std::string& from, const std::string& to, bool pack, const std::string& what) {
-    File in(std::fopen(from.c_str(), "rb"));
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> in(std::fopen(from.c_str(), "rb"), &std::fclose);
     if (!in) return Status::error(from + ": cannot open");
-    File out(std::fopen(to.c_str(), "wb"));
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> out(std::fopen(to.c_str(), "wb"), &std::fclose);
     if (!out) return Status::error(to + ": cannot create");
     Status st = lz4Frames(in.get(), out.get(), from, to, pack, what);
     if (st.ok() && std::fclose(out.release()) != 0) st = Status::error(to + ": write failed (disk full?)");
