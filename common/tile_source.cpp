@@ -11,6 +11,8 @@
 #include <unordered_map>
 #include <utility>
 
+#include "crc32.h"
+
 namespace surfcast {
 
 Result<std::vector<uint8_t>> TileSource::blocks(uint64_t offset, uint64_t size) {
@@ -27,6 +29,16 @@ Result<std::vector<std::vector<uint8_t>>> TileSource::blobs(const std::vector<No
         out.push_back(std::move(*bytes));
     }
     return out;
+}
+
+Result<std::optional<std::vector<uint8_t>>> TileSource::changedFile(const std::string& name, uint64_t maxBytes,
+                                                                    std::string* tag) {
+    auto bytes = file(name, maxBytes);
+    if (!bytes) return bytes.status();
+    const std::string crc = "crc-" + std::to_string(crc32(bytes->data(), bytes->size()));
+    if (crc == *tag) return std::optional<std::vector<uint8_t>>();
+    *tag = crc;
+    return std::optional(std::move(*bytes));
 }
 
 namespace {

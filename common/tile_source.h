@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -28,6 +29,13 @@ public:
     const BlocksLayout& blocksLayout() const { return layout_; }
     // Bytes [offset, offset + size) of the blocks' space, from the part that holds them.
     Result<std::vector<uint8_t>> blocks(uint64_t offset, uint64_t size);
+    // A whole file again unless it is unchanged since the last read through
+    // this call, whose validator `tag` keeps (empty: never read): nullopt
+    // then. The base reads the file and compares its CRC-32; an http(s)
+    // source asks with If-None-Match and takes 304 as unchanged. Unlike
+    // file(), it leaves what the source pinned at its tileset.json read
+    // (batches' version) as it was: a follower polls with it.
+    virtual Result<std::optional<std::vector<uint8_t>>> changedFile(const std::string& name, uint64_t maxBytes, std::string* tag);
     // A file's size in bytes (an input read by ranges: preprocess/readers/input_file.h).
     virtual Result<uint64_t> size(const std::string& name) = 0;
     // Several nodes' blobs, in order: POST {set}/batch requests of up to N

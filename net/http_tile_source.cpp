@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <chrono>
@@ -19,6 +20,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "crc32.h"
 #include "object_store.h"
 #include "sigpipe.h"
 #include "tileset_format.h"
@@ -111,6 +113,25 @@ public:
         return std::move((*r)[0]);
     }
     Result<uint64_t> size(const std::string& name) override { return withRetries([&] { return sizeOnce(name); }); }
+    // If-None-Match with the ETag of the last answer (304: unchanged); a host
+    // that gives no ETag is compared by the bytes' CRC-32, as a folder is.
+    Result<std::optional<std::vector<uint8_t>>> changedFile(const std::string& name, uint64_t maxBytes,
+                                                           std::string* tag) override {
+        Request q{name, "", nullptr, maxBytes, 0};
+        if (tag->rfind("etag:", 0) == 0) q.ifNoneMatch = tag->substr(5);
+        auto r = withRetries([&] { return std::move(run({q})[0]); });
+        if (!r) return r.status();
+        if (r->status == 304 && !q.ifNoneMatch.empty()) return std::optional<std::vector<uint8_t>>();
+        if (r->status != 200) return httpError(shown_ + "/" + name, r->status);
+        if (r->etag.empty()) {
+            const std::string crc = "crc-" + std::to_string(crc32(r->body.data(), r->body.size()));
+            if (crc == *tag) return std::optional<std::vector<uint8_t>>();
+            *tag = crc;
+        } else {
+            *tag = "etag:" + r->etag;
+        }
+        return std::optional(std::move(r->body));
+    }
     std::string describe() const override { return shown_; }
     void cancel() override {
         {
@@ -222,12 +243,14 @@ private:
 
     // One GET of `name` (of byte range `range`, if not empty), or POST of
     // `post` to it. `wanted`: the status whose body is kept (any other is an
-    // error), 0 for any.
+    // error), 0 for any (a body is kept for 200 only). `ifNoneMatch`: an
+    // ETag to send as If-None-Match.
     struct Request {
         std::string name, range;
         const std::string* post;
         uint64_t maxBytes;
         long wanted;
+        std::string ifNoneMatch = {};
     };
     // One request's answer: the status, the body, kept up to a bound, and
     // its Surfcast-Batch header (0 where absent, not a count up to
@@ -237,6 +260,7 @@ private:
         std::vector<uint8_t> body;
         size_t batchNodes = 0;
         std::optional<uint64_t> total;  // a range's answer: the file's length, where Content-Range names it
+        std::string etag;               // as the host quoted it; empty where it gave none
     };
 
     // Byte ranges of files of the set, all requested at once; all or nothing.
@@ -361,6 +385,9 @@ private:
         std::vector<Transfer> transfers(n);
         std::vector<std::array<char, CURL_ERROR_SIZE>> errors(n);
         std::vector<std::optional<Status>> refused(n);  // a redirect not followed, and why
+        // The headers of a conditional request: the source's and If-None-Match
+        // (a redirect sends the source's only, or none).
+        std::vector<std::unique_ptr<curl_slist, decltype(&curl_slist_free_all)>> conditional;
         std::vector<Transfer*> round;
         for (size_t i = 0; i < n; ++i) {
             const Request& q = requests[i];
@@ -372,7 +399,15 @@ private:
             std::string url = base_ + "/" + (store_ ? s3EncodeKey(q.name) : q.name) + query_;
             if (const uint64_t v = version_; q.post && v > 0) url += (query_.empty() ? "?v=" : "&v=") + std::to_string(v - 1);
             curl_easy_setopt(h, CURLOPT_URL, url.c_str());
-            curl_easy_setopt(h, CURLOPT_HTTPHEADER, headers_);
+            curl_slist* requestHeaders = headers_;
+            if (!q.ifNoneMatch.empty()) {
+                curl_slist* list = nullptr;
+                for (curl_slist* l = headers_; l; l = l->next) list = curl_slist_append(list, l->data);
+                list = curl_slist_append(list, ("If-None-Match: " + q.ifNoneMatch).c_str());
+                conditional.emplace_back(list, &curl_slist_free_all);
+                requestHeaders = list;
+            }
+            curl_easy_setopt(h, CURLOPT_HTTPHEADER, requestHeaders);
             curl_easy_setopt(h, CURLOPT_WRITEDATA, &sinks[i]);
             curl_easy_setopt(h, CURLOPT_ERRORBUFFER, errors[i].data());
             curl_easy_setopt(h, CURLOPT_RANGE, q.range.empty() ? nullptr : q.range.c_str());
@@ -522,6 +557,8 @@ private:
                 if (errno == 0 && *end == '\0') r.total = uint64_t(n);
             }
         }
+        curl_header* etag = nullptr;
+        if (curl_easy_header(h, "ETag", 0, CURLH_HEADER, -1, &etag) == CURLHE_OK) r.etag = etag->value;
         // Batches go to the set's own URL (a POST is not redirected): one
         // offered at a redirect's target is not taken.
         curl_header* offered = nullptr;

@@ -29,62 +29,8 @@ using test::binary;
 using test::expectStreamsLikeLocal;
 using test::run;
 using test::TempDir;
-
-// A free loopback port (bound and released: a server started right after gets it).
-int freePort() {
-    int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t size = sizeof a;
-    int port = ::bind(fd, reinterpret_cast<sockaddr*>(&a), size) == 0 &&
-                       ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &size) == 0
-                   ? ntohs(a.sin_port)
-                   : -1;
-    ::close(fd);
-    return port;
-}
-
-// Debian's nginx (scripts/setup.sh installs nginx-light) in `prefix`, with
-// the server blocks `servers(ports)` makes for `count` free loopback ports;
-// stopped when the returned object goes. nginx cannot report an ephemeral
-// port, so it gets free ones; another process may take one first, and then
-// nginx exits and other ports are tried.
-struct Nginx {
-    test::Child child;
-    std::vector<int> ports;
-    ~Nginx() {
-        if (child.pid > 0) {
-            ::kill(child.pid, SIGTERM);
-            test::exitCode(child.pid);
-        }
-    }
-};
-std::unique_ptr<Nginx> startNginx(const std::string& prefix, int count,
-                                  const std::function<std::string(const std::vector<int>&)>& servers) {
-    EXPECT_TRUE(std::filesystem::exists("/usr/sbin/nginx")) << "nginx is missing: run scripts/setup.sh";
-    std::filesystem::create_directories(prefix);
-    auto n = std::make_unique<Nginx>();
-    for (int attempt = 0; attempt < 5 && n->ports.empty(); ++attempt) {
-        std::vector<int> candidates;
-        for (int i = 0; i < count; ++i) candidates.push_back(freePort());
-        test::writeFile(prefix + "/nginx.conf",
-                        "daemon off; master_process off; worker_processes 1; pid " + prefix + "/nginx.pid;\n"
-                        "error_log stderr notice;\n"
-                        "events { worker_connections 64; }\n"
-                        "http {\n access_log off;\n client_body_temp_path " + prefix + "/body;\n"
-                        " proxy_temp_path " + prefix + "/proxy;\n fastcgi_temp_path " + prefix + "/fastcgi;\n"
-                        " uwsgi_temp_path " + prefix + "/uwsgi;\n scgi_temp_path " + prefix + "/scgi;\n" +
-                        servers(candidates) + "}\n");
-        n->child = test::spawn({"/usr/sbin/nginx", "-e", "stderr", "-p", prefix, "-c", prefix + "/nginx.conf"});
-        // It binds, then logs its limits (getrlimit); when a port is taken
-        // it logs bind() errors and exits instead.
-        if (n->child.waitFor("getrlimit(")) n->ports = candidates;
-        else test::exitCode(n->child.pid), n->child.pid = -1;
-    }
-    EXPECT_FALSE(n->ports.empty()) << "nginx did not start: " << n->child.log;
-    return n;
-}
+using test::freePort;
+using test::startNginx;
 
 TEST(Stream, FromNginxConvergesToTheLocalImage) {
     // nginx serving the same folder as static files: Range requests only

@@ -1,11 +1,20 @@
-// Helpers shared by the streaming tests (stream_test.cpp) and the remote-host
-// tests (remote_host_test.cpp): starting surfcast-serve, streaming a set
-// headless and comparing the converged image with the local folder's.
+// Helpers shared by the streaming tests (stream_test.cpp, follow_test.cpp)
+// and the remote-host tests (remote_host_test.cpp): starting surfcast-serve
+// and nginx, streaming a set headless and comparing the converged image with
+// the local folder's.
 #pragma once
 
 #include <gtest/gtest.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
+#include <filesystem>
+#include <functional>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -27,6 +36,62 @@ inline std::string startServer(Child* server, const std::string& sets, const std
     if (at == std::string::npos) return "";
     const size_t begin = server->log.rfind(' ', at) + 1;
     return server->log.substr(begin, server->log.find_first_of(" \n", at) - begin);
+}
+
+// A free loopback port (bound and released: a server started right after gets it).
+inline int freePort() {
+    int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t size = sizeof a;
+    int port = ::bind(fd, reinterpret_cast<sockaddr*>(&a), size) == 0 &&
+                       ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &size) == 0
+                   ? ntohs(a.sin_port)
+                   : -1;
+    ::close(fd);
+    return port;
+}
+
+// Debian's nginx (scripts/setup.sh installs nginx-light) in `prefix`, with
+// the server blocks `servers(ports)` makes for `count` free loopback ports;
+// stopped when the returned object goes. nginx cannot report an ephemeral
+// port, so it gets free ones; another process may take one first, and then
+// nginx exits and other ports are tried.
+struct Nginx {
+    Child child;
+    std::vector<int> ports;
+    ~Nginx() {
+        if (child.pid > 0) {
+            ::kill(child.pid, SIGTERM);
+            exitCode(child.pid);
+        }
+    }
+};
+inline std::unique_ptr<Nginx> startNginx(const std::string& prefix, int count,
+                                         const std::function<std::string(const std::vector<int>&)>& servers) {
+    EXPECT_TRUE(std::filesystem::exists("/usr/sbin/nginx")) << "nginx is missing: run scripts/setup.sh";
+    std::filesystem::create_directories(prefix);
+    auto n = std::make_unique<Nginx>();
+    for (int attempt = 0; attempt < 5 && n->ports.empty(); ++attempt) {
+        std::vector<int> candidates;
+        for (int i = 0; i < count; ++i) candidates.push_back(freePort());
+        writeFile(prefix + "/nginx.conf",
+                  "daemon off; master_process off; worker_processes 1; pid " + prefix + "/nginx.pid;\n"
+                  "error_log stderr notice;\n"
+                  "events { worker_connections 64; }\n"
+                  "http {\n access_log off;\n client_body_temp_path " + prefix + "/body;\n"
+                  " proxy_temp_path " + prefix + "/proxy;\n fastcgi_temp_path " + prefix + "/fastcgi;\n"
+                  " uwsgi_temp_path " + prefix + "/uwsgi;\n scgi_temp_path " + prefix + "/scgi;\n" +
+                  servers(candidates) + "}\n");
+        n->child = spawn({"/usr/sbin/nginx", "-e", "stderr", "-p", prefix, "-c", prefix + "/nginx.conf"});
+        // It binds, then logs its limits (getrlimit); when a port is taken
+        // it logs bind() errors and exits instead.
+        if (n->child.waitFor("getrlimit(")) n->ports = candidates;
+        else exitCode(n->child.pid), n->child.pid = -1;
+    }
+    EXPECT_FALSE(n->ports.empty()) << "nginx did not start: " << n->child.log;
+    return n;
 }
 
 inline nlohmann::json lastLine(const std::string& output) {

@@ -131,13 +131,29 @@ int runHeadlessLod(const ViewOptions& o) {
         }
         for (size_t f = 0; f < cameras.size() && status == 0; ++f) {
             // Progressive: draw what is resident, until nothing more is wanted
-            // for this view (converged) or --max-wait runs out.
+            // for this view (converged) or --max-wait runs out. Following, the
+            // last frame goes on until --max-wait, printing the redraws that
+            // changed something.
             const double frameStart = seconds();
+            const bool following = o.client.followSeconds > 0 && f + 1 == cameras.size();
+            size_t shownVersion = 0;
+            bool wasConverged = false;
             Image image;
             for (int iteration = 0; status == 0; ++iteration) {
                 const double updateStart = seconds();
                 auto frame = client.value()->update(cameras[f], o.width, o.height);
                 const double updateMs = (seconds() - updateStart) * 1e3;
+                bool timedOut = seconds() - frameStart > o.maxWait;
+                if (frame && following) {
+                    const bool changed = iteration == 0 || frame->uploaded || frame->evicted ||
+                                         frame->version != shownVersion || frame->converged != wasConverged || timedOut;
+                    shownVersion = frame->version;
+                    wasConverged = frame->converged;
+                    if (!changed) {
+                        std::this_thread::sleep_for(std::chrono::milliseconds(kStreamPollMs));
+                        continue;
+                    }
+                }
                 GpuFrameStats gpuStats;
                 auto rendered = frame ? client.value()->renderImage(settings, &gpuStats) : Result<Image>(frame.status());
                 if (!rendered) {
@@ -146,7 +162,6 @@ int runHeadlessLod(const ViewOptions& o) {
                 }
                 image = std::move(*rendered);
                 const ClientFrame& cf = *frame;
-                bool timedOut = seconds() - frameStart > o.maxWait;
                 nlohmann::ordered_json line;
                 line["frame"] = f;
                 line["iteration"] = iteration;
@@ -178,6 +193,13 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["update_ms"] = updateMs;
                 line["gpu_ms"] = gpuStats.totalMs;
                 line["converged"] = cf.converged;
+                if (o.client.followSeconds > 0) {
+                    line["version"] = cf.version;
+                    line["loading_version"] = cf.loadingVersion;
+                    line["adopted"] = cf.stream.adopted;
+                    line["next_bytes_downloaded"] = cf.next.bytesDownloaded;
+                    if (!cf.followError.empty()) line["follow_error"] = cf.followError;
+                }
                 if (o.saveRedraws) {
                     std::string path = framePath(o.out, f, cameras.size());
                     char suffix[32];
@@ -191,7 +213,8 @@ int runHeadlessLod(const ViewOptions& o) {
                 }
                 std::printf("%s\n", line.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
                 std::fflush(stdout);
-                if (cf.converged) break;
+                if (cf.converged && !following) break;
+                if (timedOut && following) break;
                 if (timedOut) {
                     std::fprintf(stderr, "surfcast-view: frame %zu not converged after --max-wait %.0f s\n", f, o.maxWait);
                     break;

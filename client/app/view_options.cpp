@@ -89,6 +89,12 @@ reference.
   --save-redraws        with --lod, headless: also write every redraw before
                         convergence, as OUT_rNNN.png (progressive streaming studies)
   --max-wait S          with --lod: stop streaming a frame after S seconds (default 120)
+  --follow S            with --lod: follow SET as it changes (surfcast-build --add,
+                        --replace, a rebuild), polling its tileset.json every S seconds
+                        (2 is a good choice), and switch to each new version once it is
+                        loaded for the view: only changed nodes are fetched. Headless,
+                        the last frame follows until --max-wait, one JSON line per
+                        redraw; half of --gpu-budget holds the version loading
   SET may be a URL: http(s)://HOST[:PORT]/sets/NAME (surfcast-serve) or any folder
   URL on a static host, object store or CDN with Range (a query string, such as a
   shared access signature, is sent with every request), or s3://BUCKET/PREFIX, its
@@ -334,6 +340,10 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
             float mib = 0;
             if (!positive(&mib, "--block-cache")) return false;
             o->client.blockCache = size_t(double(mib) * (1 << 20));
+        } else if (a == "--follow") {
+            float s = 0;
+            if (!positive(&s, "--follow")) return false;
+            o->client.followSeconds = s;
         } else if (a == "--save-redraws") {
             o->saveRedraws = true;
         } else if (std::string error; parseHttpOption(a, [&](std::string* out) { return value() && (*out = v, true); }, o->client.http, &error)) {
@@ -355,6 +365,8 @@ bool parseViewOptions(int argc, char** argv, ViewOptions* o, int* exitCode) {
     }
     if (positional.size() != 1)
         return (*exitCode = usageError(positional.empty() ? "no tile set given" : "more than one tile set given")), false;
+    if (o->client.followSeconds > 0 && !o->lod)
+        return (*exitCode = usageError("--follow streams the set: it needs --lod")), false;
     o->set = positional[0];
     return true;
 }

@@ -91,6 +91,12 @@ public:
     std::vector<SelectedNode> select(const Camera& camera, int width, int height, const LodParams& params,
                                      const std::function<bool(uint32_t)>& resident, LodStats* stats = nullptr) const;
 
+    // The index of the node with this key, if it is known.
+    std::optional<uint32_t> find(const NodeKey& key) const {
+        auto it = index_.find(key);
+        return it == index_.end() ? std::nullopt : std::optional(uint32_t(it->second));
+    }
+
     // World box of node i (its octree cell, without the splat extent).
     Box3d box(uint32_t i) const;
 

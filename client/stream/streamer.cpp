@@ -277,6 +277,21 @@ bool StreamingSet::refetchForRecolor(std::unique_lock<std::mutex>& lock) {
     return true;
 }
 
+void StreamingSet::adopt(const StreamingSet* donor) {
+    std::lock_guard lock(mutex_);
+    donor_ = donor;
+}
+
+StreamingSet::Block StreamingSet::keptBlock(const NodeRecord& record) const {
+    std::lock_guard lock(mutex_);
+    const std::optional<uint32_t> index = selector_->find(record.key);
+    if (!index) return nullptr;
+    const NodeRecord& mine = nodes()[*index];
+    if (mine.blockCrc != record.blockCrc || mine.blockSize != record.blockSize) return nullptr;
+    auto it = kept_.find(*index);
+    return it == kept_.end() ? nullptr : it->second;
+}
+
 void StreamingSet::keep(uint32_t node, Block bytes) {
     auto [it, added] = kept_.emplace(node, bytes);
     if (added) keptBytes_ += bytes->size();
@@ -406,9 +421,10 @@ void StreamingSet::fetchLoop() {
         // The highest-priority wanted nodes that are neither pending nor
         // backing off, as many as one batch takes and the budget admits
         // (every node fits it alone: checkFitsBudget).
+        // Nodes the donor holds unchanged go to the decoders at once.
         std::vector<NodeRecord> batch;
         std::vector<uint32_t> indices;
-        size_t batchBytes = 0;
+        size_t batchBytes = 0, adopted = 0;
         double t = now(), wait = 0.5;
         for (size_t k = wanted_.size(); k-- > 0 && batch.size() < kMaxBatchNodes && batchBytes < options_.batchBytes;) {
             uint32_t candidate = wanted_[k].first;
@@ -423,11 +439,19 @@ void StreamingSet::fetchLoop() {
             wanted_.erase(wanted_.begin() + long(k));
             pending_[candidate] = 1;
             pendingBytes_ += cost;
+            if (Block kept = donor_ ? donor_->keptBlock(nodes()[candidate]) : nullptr) {
+                fetched_.push_back({candidate, std::move(kept), false, false, true});
+                ++stats_.adopted;
+                ++adopted;
+                continue;
+            }
             batch.push_back(nodes()[candidate]);
             indices.push_back(candidate);
             batchBytes += batch.back().blockSize;
         }
         if (!refetch_.empty()) wait = std::min(wait, refetchFailed_.second - t);  // its backoff
+        if (adopted) wakeDecode_.notify_all();
+        if (batch.empty() && adopted) continue;
         if (batch.empty()) {
             wakeFetch_.wait_for(lock, std::chrono::duration<double>(std::max(wait, 0.01)));
             continue;
@@ -515,7 +539,7 @@ void StreamingSet::decodeLoop() {
         keep(job.node, job.bytes);
         pending_.erase(job.node);
         failed_.erase(job.node);
-        ++stats_.nodesFetched;
+        if (!job.adopted) ++stats_.nodesFetched;
         stats_.decodeMs = (t1 - t0) * 1e3;
         arrived_.push_back({job.node, std::move(surfels)});
     }

@@ -29,6 +29,10 @@
 // is resident without fetching: the recoloured nodes arrive again like
 // fetched ones, replacing the old. Beyond the budget the least recently used
 // resident nodes' blocks go, and a recolour fetches those again.
+//
+// A newer version of the set (a follower's: surfcast_client.h) streams as a
+// set of its own that adopts the older one's kept blocks: a node with the
+// same key, block CRC and size is decoded from them, not fetched.
 #pragma once
 
 #include <condition_variable>
@@ -76,6 +80,7 @@ struct StreamStats {
     size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
     size_t keptBytes = 0;      // compressed blocks kept for recolouring (at most keptBudget after an update)
     size_t refetched = 0;      // blocks fetched again to recolour nodes whose kept blocks had gone
+    size_t adopted = 0;        // nodes decoded from an older version's kept blocks (adopt()), not fetched
     size_t recoloring = 0;     // resident nodes still to be re-decoded for the latest setColoring
     double fetchMs = 0, decodeMs = 0;  // of the last request and the last block
     std::string lastError;
@@ -129,6 +134,18 @@ public:
     void setColoring(const Coloring& coloring);
     // Bytes a node occupies when resident (whole granules of 32-byte surfels).
     size_t residentCost(uint32_t index) const;
+    // tileset.json as opened: the version this stream shows.
+    const std::vector<uint8_t>& tilesetJson() const { return tilesetJson_; }
+
+    using Block = std::shared_ptr<const std::vector<uint8_t>>;
+    // Decode the nodes `donor` (another version of this set) holds unchanged
+    // from its kept blocks rather than fetch them; nullptr: no longer. The
+    // donor must outlive this call's effect: call adopt(nullptr) before
+    // destroying it.
+    void adopt(const StreamingSet* donor);
+    // The kept block of this set's node with the record's key, if its block
+    // has the record's CRC and size; else null. Thread-safe.
+    Block keptBlock(const NodeRecord& record) const;
 
 private:
     StreamingSet() = default;
@@ -150,7 +167,6 @@ private:
     // (larger than memoryBudget).
     Status checkFitsBudget(const std::vector<NodeRecord>& records) const;
     void checkForRebuild(std::unique_lock<std::mutex>& lock);
-    using Block = std::shared_ptr<const std::vector<uint8_t>>;
     void keep(uint32_t node, Block bytes);  // with mutex_ held
     void unkeep(uint32_t node);             // with mutex_ held
     // Fetches blocks of resident nodes a recolour needs again, if any are
@@ -173,6 +189,7 @@ private:
         Block bytes;
         bool recolor = false;    // a resident node's block, to decode with the new coloring
         bool refetched = false;  // fetched again for that (its kept copy had gone)
+        bool adopted = false;    // the donor's kept block, not fetched
     };
 
     mutable std::mutex mutex_;
@@ -208,6 +225,7 @@ private:
     std::string permanent_;
     double permanentAt_ = 0;
     bool stopping_ = false;
+    const StreamingSet* donor_ = nullptr;  // adopt()
     std::vector<std::thread> fetchers_, decoders_;
 };
 

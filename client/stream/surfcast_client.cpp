@@ -1,6 +1,7 @@
 #include "surfcast_client.h"
 
 #include <algorithm>
+#include <chrono>
 
 #include "crc32.h"
 
@@ -16,6 +17,8 @@ size_t defaultGpuBudget(gpu::Context& ctx) {
         if (memory.memoryHeaps[i].flags & VK_MEMORY_HEAP_DEVICE_LOCAL_BIT) heap = std::max(heap, memory.memoryHeaps[i].size);
     return std::min<size_t>(size_t(1) << 30, heap ? heap / 4 : size_t(1) << 30);
 }
+double steadySeconds() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+uint32_t poolId(int slot, uint32_t index) { return index * 2 + uint32_t(slot); }
 }  // namespace
 
 Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, const std::string& location,
@@ -26,7 +29,8 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     stream.connections = options.connections;
     stream.http = options.http;
     stream.decoders = options.decoders;
-    stream.memoryBudget = options.gpuBudget ? options.gpuBudget : defaultGpuBudget(ctx);
+    const size_t gpuBudget = options.gpuBudget ? options.gpuBudget : defaultGpuBudget(ctx);
+    stream.memoryBudget = options.followSeconds > 0 ? gpuBudget / 2 : gpuBudget;
     stream.granule = SurfelPool::kPageSurfels;
     if (options.blockCache) stream.keptBudget = options.blockCache;
     stream.coloring = options.coloring;
@@ -35,7 +39,9 @@ Result<std::unique_ptr<SurfcastClient>> SurfcastClient::open(gpu::Context& ctx, 
     c->stream_ = std::move(*opened);
     if (auto by = resolveColorBy(options.coloring.by, c->stream_->info()); !by)
         return Status::error(location + ": " + by.status().message());
-    auto pool = SurfelPool::create(ctx, stream.memoryBudget);
+    if (options.followSeconds > 0)
+        c->watcher_ = std::make_unique<VersionWatcher>(location, stream, c->stream_->tilesetJson(), options.followSeconds);
+    auto pool = SurfelPool::create(ctx, gpuBudget);
     if (!pool) return pool.status();
     c->pool_ = std::move(*pool);
     auto renderer = SplatRenderer::create(ctx, options.renderer);
@@ -56,19 +62,65 @@ Status SurfcastClient::setColoring(const Coloring& coloring) {
     if (auto by = resolveColorBy(coloring.by, info()); !by) return by.status();
     options_.coloring = coloring;
     stream_->setColoring(coloring);
+    if (next_) next_->setColoring(coloring);
     return {};
+}
+
+Status SurfcastClient::apply(int slot, const StreamUpdate& u) {
+    for (uint32_t i : u.evicted) {
+        pool_->release(poolId(slot, i));
+        inPool_[slot].erase(poolId(slot, i));
+    }
+    std::vector<std::pair<uint32_t, const SurfelSet*>> uploads;
+    for (const ArrivedNode& a : u.arrived) {
+        pool_->release(poolId(slot, a.index));  // a recoloured node replaces its old surfels
+        uploads.push_back({poolId(slot, a.index), a.surfels.get()});
+        inPool_[slot].insert(poolId(slot, a.index));
+    }
+    return pool_->upload(uploads);
+}
+
+void SurfcastClient::switchVersion() {
+    for (uint32_t id : inPool_[slot_]) pool_->release(id);
+    inPool_[slot_].clear();
+    next_->adopt(nullptr);  // before the donor goes
+    stream_ = std::move(next_);
+    slot_ = 1 - slot_;
+    ++versions_;
+    origin_ = emptySurfelSet(stream_->info()).origin;
+    const Box3d& b = stream_->info().bounds;
+    diagonal_ = b.empty() ? 0 : length(b.max - b.min);
 }
 
 Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int height) {
     ClientFrame frame;
-    StreamUpdate u = stream_->update(camera, width, height, options_.lod);
-    for (uint32_t i : u.evicted) pool_->release(i);
-    std::vector<std::pair<uint32_t, const SurfelSet*>> uploads;
-    for (const ArrivedNode& a : u.arrived) {
-        pool_->release(a.index);  // a recoloured node replaces its old surfels
-        uploads.push_back({a.index, a.surfels.get()});
+    if (watcher_ && !next_) {
+        next_ = watcher_->take();
+        if (next_) {
+            next_->setColoring(options_.coloring);  // as changed since the watcher opened it
+            next_->adopt(stream_.get());
+            nextSince_ = steadySeconds();
+        }
     }
-    SC_TRY(pool_->upload(uploads));
+    StreamUpdate u = stream_->update(camera, width, height, options_.lod);
+    SC_TRY(apply(slot_, u));
+    size_t uploaded = u.arrived.size(), evicted = u.evicted.size();
+    if (next_) {
+        StreamUpdate n = next_->update(camera, width, height, options_.lod);
+        SC_TRY(apply(1 - slot_, n));
+        uploaded += n.arrived.size();
+        evicted += n.evicted.size();
+        const StreamStats shown = stream_->stats(), loading = next_->stats();
+        if (loading.gaveUp || loading.setChanged) {  // drawn as before; the watcher opens the newest again
+            for (uint32_t id : inPool_[1 - slot_]) pool_->release(id);
+            inPool_[1 - slot_].clear();
+            next_.reset();
+            watcher_->showing(stream_->tilesetJson());
+        } else if (n.converged || shown.gaveUp || shown.setChanged || steadySeconds() - nextSince_ > kMaxSwitchSeconds) {
+            switchVersion();
+            u = std::move(n);
+        }
+    }
     // Drawn in key order: the image depends neither on the order nodes
     // arrived in nor on the indices pages got (their arrival order, and the
     // set's page depth).
@@ -76,7 +128,9 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     for (const SelectedNode& s : u.draw) drawn.push_back(s.index);
     const std::vector<NodeRecord>& nodes = stream_->nodes();
     std::sort(drawn.begin(), drawn.end(), [&](uint32_t a, uint32_t b) { return nodes[a].key < nodes[b].key; });
-    renderer_->setDraws(pool_->buffer(), pool_->ranges(drawn), diagonal_);
+    std::vector<uint32_t> ids;
+    for (uint32_t i : drawn) ids.push_back(poolId(slot_, i));
+    renderer_->setDraws(pool_->buffer(), pool_->ranges(ids), diagonal_);
     SC_TRY(renderer_->resize(uint32_t(width), uint32_t(height)));
     camera_ = camera;
     width_ = width;
@@ -89,12 +143,17 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     }
     frame.nodesCrc = crc32(names.data(), names.size());
     frame.splats = renderer_->splatCount();
-    frame.uploaded = u.arrived.size();
-    frame.evicted = u.evicted.size();
-    frame.converged = u.converged;
+    frame.uploaded = uploaded;
+    frame.evicted = evicted;
+    frame.converged = u.converged && !next_;  // a version loading is wanted too
     frame.lod = std::move(u.lod);
     frame.stream = stream_->stats();
-    if (frame.stream.setChanged || frame.stream.gaveUp) return Status::error(frame.stream.lastError);
+    frame.version = versions_;
+    frame.loadingVersion = next_ != nullptr;
+    if (next_) frame.next = next_->stats();
+    if (watcher_) frame.followError = watcher_->lastError();
+    // A follower shows the version it has until the watcher finds the new one.
+    if ((frame.stream.setChanged && !watcher_) || (frame.stream.gaveUp && !next_)) return Status::error(frame.stream.lastError);
     return frame;
 }
 

@@ -3,15 +3,23 @@
 // streaming), and draw: record into the host's command buffer, or render to
 // an offscreen image. surfcast-view's window and headless streaming use it;
 // docs/CLIENT.md has a minimal example.
+//
+// A following client (ClientOptions::followSeconds) switches to a set's new
+// versions as they are published: the new version streams beside the one
+// drawn, adopting its unchanged nodes' kept blocks (only changed nodes are
+// fetched), and replaces it in one frame once it has converged for the view
+// (or after kMaxSwitchSeconds): no frame mixes two versions.
 #pragma once
 
 #include <memory>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "splat_renderer.h"
 #include "streamer.h"
 #include "surfel_pool.h"
+#include "version_watcher.h"
 
 namespace surfcast {
 
@@ -30,6 +38,10 @@ struct ClientOptions {
     // Colour by an attribute, hide classes: applied as blocks are decoded;
     // setColoring() changes it from the kept blocks (docs/CLIENT.md).
     Coloring coloring;
+    // Follow the set: poll its tileset.json this often (seconds) and switch
+    // to each new version (VersionWatcher); 0: show the version opened. A
+    // follower splits gpuBudget in half: the version drawn, the one loading.
+    double followSeconds = 0;
 };
 
 struct ClientFrame {
@@ -41,7 +53,13 @@ struct ClientFrame {
     size_t uploaded = 0, evicted = 0;  // nodes, this update
     bool converged = false;      // nothing the view needs is missing
     LodStats lod;
-    StreamStats stream;
+    StreamStats stream;          // of the version drawn
+    // Following: the versions switched to since open(), and whether a newer
+    // one is loading (its stream's stats in `next`).
+    size_t version = 0;
+    bool loadingVersion = false;
+    StreamStats next;
+    std::string followError;  // the last poll's or new version's failure, "" once one succeeds
 };
 
 class SurfcastClient {
@@ -67,10 +85,11 @@ public:
 
     // Chooses the nodes for this view, uploads what arrived and frees what
     // the stream evicted (GPU memory stays within gpuBudget). An error when
-    // the set was rebuilt on the server since open() (open it again) or the
-    // stream stopped (StreamStats::gaveUp: a permanent failure, a node
-    // larger than gpuBudget), each time after this frame's uploads and
-    // evictions are applied.
+    // the set was rebuilt on the server since open() (open it again; a
+    // follower switches to the new version instead) or the stream stopped
+    // (StreamStats::gaveUp: a permanent failure, a node larger than
+    // gpuBudget; a follower loading a newer version switches to it), each
+    // time after this frame's uploads and evictions are applied.
     Result<ClientFrame> update(const Camera& camera, int width, int height);
     // Records the frame of the last update into `cmd`; output() is then in
     // TRANSFER_SRC_OPTIMAL for the host to blit or copy.
@@ -81,9 +100,25 @@ public:
     // GPU times of the last recorded frame, once it has completed.
     GpuFrameStats timings() const { return renderer_->timings(); }
 
+    // A following client switches to a loaded version after this long even
+    // if it has not converged (the camera kept moving): the new version is
+    // drawn coarser meanwhile, never mixed with the old.
+    static constexpr double kMaxSwitchSeconds = 5;
+
 private:
     SurfcastClient() = default;
-    std::unique_ptr<StreamingSet> stream_;
+    // Applies a stream's evictions and arrivals to the pool, as slot `slot`'s.
+    Status apply(int slot, const StreamUpdate& u);
+    void switchVersion();  // to next_, freeing the version drawn
+    std::unique_ptr<StreamingSet> stream_;  // the version drawn; destroyed after next_, which may adopt from it
+    std::unique_ptr<VersionWatcher> watcher_;
+    // Following: the newer version loading, its pool slot is 1 - slot_; when
+    // it started loading (steady seconds).
+    std::unique_ptr<StreamingSet> next_;
+    double nextSince_ = 0;
+    int slot_ = 0;  // pool ids: a node's index times two, plus its version's slot
+    std::unordered_set<uint32_t> inPool_[2];  // pool ids of each slot
+    size_t versions_ = 0;
     std::unique_ptr<SurfelPool> pool_;
     std::unique_ptr<SplatRenderer> renderer_;
     ClientOptions options_;

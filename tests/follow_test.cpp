@@ -1,0 +1,245 @@
+// Viewers that follow a set (ClientOptions::followSeconds, VersionWatcher):
+// an --add on a set a client has open shows without reopening it; only the
+// nodes the update changed are fetched (the rest decode from the blocks the
+// old version kept); no frame mixes versions; the last frame equals a fresh
+// open of the updated set, pixel for pixel. From a folder, from nginx as a
+// static host and from surfcast-serve, both polled with If-None-Match. A torn
+// tileset.json and a version whose files are gone are retried, never shown.
+
+#include <gtest/gtest.h>
+#include <httplib.h>
+#include <signal.h>
+
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <set>
+#include <thread>
+#include <tuple>
+
+#include "context.h"
+#include "http_tile_source.h"
+#include "stream_support.h"
+#include "surfcast_client.h"
+#include "test_support.h"
+#include "tileset_reader.h"
+#include "update_support.h"
+
+namespace surfcast {
+namespace {
+
+namespace fs = std::filesystem;
+using update_test::UpdateTest;
+
+constexpr int kWidth = 200, kHeight = 150;
+
+// Pixel for pixel, and not both empty (a failed render).
+bool same(const Image& a, const Image& b) {
+    return !a.rgba.empty() && a.width == b.width && a.height == b.height && a.rgba == b.rgba;
+}
+
+// The base set of autzen's cells but the inner one (UpdateTest), with one
+// Vulkan context for the program (validation on: zero errors after each case).
+class FollowTest : public UpdateTest {
+protected:
+    static void SetUpTestSuite() {
+        UpdateTest::SetUpTestSuite();
+        auto ctx = gpu::createContext({"", true, {}, false});
+        if (ctx) context_ = std::move(*ctx);
+        else contextError_ = ctx.status().message();
+    }
+    static void TearDownTestSuite() {
+        if (context_) gpu::destroyContext(context_);
+        UpdateTest::TearDownTestSuite();
+    }
+    void SetUp() override {
+        UpdateTest::SetUp();
+        ASSERT_TRUE(context_) << contextError_;
+    }
+    void TearDown() override {
+        if (context_) {
+            EXPECT_EQ(context_->validationErrors.load(), 0) << "Vulkan validation errors (see stderr)";
+        }
+    }
+
+    std::unique_ptr<SurfcastClient> open(const std::string& location, double followSeconds) {
+        ClientOptions options;
+        options.followSeconds = followSeconds;
+        options.lod.targetPixels = 1;
+        auto client = SurfcastClient::open(*context_, location, options);
+        EXPECT_TRUE(client) << client.status().message();
+        return client ? std::move(*client) : nullptr;
+    }
+
+    // Updates `client` until `done(frame)` (60 s at most); every frame on the way.
+    std::vector<ClientFrame> follow(SurfcastClient& client, const Camera& camera,
+                                    const std::function<bool(const ClientFrame&)>& done) {
+        std::vector<ClientFrame> frames;
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+        while (std::chrono::steady_clock::now() < deadline) {
+            auto frame = client.update(camera, kWidth, kHeight);
+            EXPECT_TRUE(frame) << frame.status().message();
+            if (!frame) return frames;
+            frames.push_back(*frame);
+            if (done(*frame)) return frames;
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+        ADD_FAILURE() << "not done after 60 s";
+        return frames;
+    }
+
+    Image image(SurfcastClient& client) {
+        auto rendered = client.renderImage(client.defaultSettings());
+        EXPECT_TRUE(rendered) << rendered.status().message();
+        return rendered ? *rendered : Image{};
+    }
+
+    // The image a fresh client converges to on `location`.
+    Image freshImage(const std::string& location, const Camera& camera) {
+        auto client = this->open(location, 0);
+        if (!client) return {};
+        follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
+        return image(*client);
+    }
+
+    // Opens `location` following, converges on the base set, adds the inner
+    // cell to the set's folder and follows until the new version converged.
+    // Checks that no frame before the switch drew anything but the base
+    // set's converged nodes, that the last image equals a fresh open's, and
+    // that the follower fetched only changed nodes (hierarchies compared).
+    void expectFollowsTheAdd(const std::string& location) {
+        auto client = this->open(location, 0.2);
+        ASSERT_TRUE(client);
+        const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
+        auto before = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
+        ASSERT_FALSE(before.empty());
+        ASSERT_TRUE(before.back().converged);
+        const uint32_t baseNodes = before.back().nodesCrc;
+        auto old = openTileset(set());
+        ASSERT_TRUE(old) << old.status().message();
+
+        auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+        ASSERT_EQ(update.exitCode, 0) << update.output;
+        auto after = follow(*client, camera, [](const ClientFrame& f) { return f.version == 1 && f.converged; });
+        ASSERT_FALSE(after.empty());
+        ASSERT_EQ(after.back().version, 1u);
+        bool loaded = false;
+        for (const ClientFrame& f : after) {
+            loaded |= f.loadingVersion;
+            if (f.version == 0) {
+                EXPECT_EQ(f.nodesCrc, baseNodes) << "a frame before the switch drew other nodes";
+            }
+        }
+        EXPECT_TRUE(loaded) << "the new version should load beside the one drawn";
+
+        auto updated = openTileset(set());
+        ASSERT_TRUE(updated) << updated.status().message();
+        std::set<std::tuple<NodeKey, uint32_t, uint32_t>> kept;
+        for (const NodeRecord& n : old->nodes()) kept.insert({n.key, n.blockCrc, n.blockSize});
+        size_t changed = 0;
+        uint64_t changedBytes = 0;
+        for (const NodeRecord& n : updated->nodes())
+            if (!kept.count({n.key, n.blockCrc, n.blockSize})) {
+                ++changed;
+                changedBytes += n.blockSize;
+            }
+        const StreamStats& s = after.back().stream;
+        EXPECT_GT(changed, 0u);
+        EXPECT_GT(s.nodesFetched, 0u);
+        EXPECT_LE(s.nodesFetched, changed) << "fetched nodes the update did not change";
+        EXPECT_LE(s.bytesDownloaded, changedBytes);
+        EXPECT_GT(s.adopted, 0u) << "unchanged nodes should come from the old version's blocks";
+        EXPECT_EQ(s.failures, 0u) << s.lastError;
+        EXPECT_TRUE(same(image(*client), freshImage(set(), camera))) << "the followed image differs from a fresh open's";
+    }
+
+private:
+    static inline std::unique_ptr<gpu::Context> context_;
+    static inline std::string contextError_;
+};
+
+TEST_F(FollowTest, AnAddedScanShowsFetchingOnlyTheChangedNodes) { expectFollowsTheAdd(set()); }
+
+TEST_F(FollowTest, StaticHostAndServerArePolledWithETags) {
+    // nginx serves the sets' folder as static files, surfcast-serve the
+    // same folder; a follower of each sees the one --add. Each poll after the
+    // first asks with If-None-Match and is answered 304 while nothing changed.
+    test::Child server;
+    const std::string origin = test::startServer(&server, dir.file("sets"));
+    ASSERT_FALSE(origin.empty()) << server.log;
+    struct Stop {  // the server, whichever way the case ends
+        int pid;
+        ~Stop() {
+            ::kill(pid, SIGTERM);
+            test::exitCode(pid);
+        }
+    } stop{server.pid};
+    auto nginx = test::startNginx(dir.file("nginx"), 1, [&](const std::vector<int>& ports) {
+        return " server { listen 127.0.0.1:" + std::to_string(ports[0]) + "; root " + dir.path() + ";\n"
+               "  access_log " + dir.file("nginx/access.log") + "; }\n";
+    });
+    ASSERT_FALSE(nginx->ports.empty());
+    const std::string url = "http://127.0.0.1:" + std::to_string(nginx->ports[0]) + "/sets/s";
+
+    auto served = this->open(origin + "/sets/s", 0.2);
+    ASSERT_TRUE(served);
+    const Camera camera = frameBox(served->info().bounds, double(kWidth) / kHeight);
+    follow(*served, camera, [](const ClientFrame& f) { return f.converged; });
+    // The static host's follower goes through the whole add; the server's
+    // watcher sees it meanwhile, and its client is updated after.
+    expectFollowsTheAdd(url);
+    auto frames = follow(*served, camera, [](const ClientFrame& f) { return f.version == 1 && f.converged; });
+    ASSERT_FALSE(frames.empty());
+    EXPECT_TRUE(same(image(*served), freshImage(set(), camera))) << "surfcast-serve's follower differs from a fresh open";
+
+    const std::string log = test::readFile(dir.file("nginx/access.log"));
+    EXPECT_NE(log.find("\"GET /sets/s/tileset.json HTTP/1.1\" 304"), std::string::npos) << log.substr(0, 2000);
+    httplib::Client metrics(origin);
+    auto m = metrics.Get("/metrics");
+    ASSERT_TRUE(m && m->status == 200);
+    EXPECT_NE(m->body.find("surfcast_requests_total{route=\"tileset.json\",status=\"304\"}"), std::string::npos) << m->body;
+}
+
+TEST_F(FollowTest, TornAndVanishedVersionsAreRetriedNeverShown) {
+    // tileset.json replaced by a torn copy, then by one that names a
+    // hierarchy file that is not there: the follower reports each
+    // (followError), keeps drawing the version it has, and takes the next
+    // good version when it comes.
+    auto client = this->open(set(), 0.1);
+    ASSERT_TRUE(client);
+    const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
+    auto frames = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
+    ASSERT_FALSE(frames.empty());
+    const uint32_t baseNodes = frames.back().nodesCrc;
+    const Image base = image(*client);
+    const std::string json = test::readFile(set() + "/tileset.json");
+    auto replace = [&](const std::string& bytes) {  // as writers do: whole, by rename
+        test::writeFile(set() + "/tileset.json.next", bytes);
+        fs::rename(set() + "/tileset.json.next", set() + "/tileset.json");
+    };
+    const size_t named = json.find("\"hierarchy.bin\"");
+    ASSERT_NE(named, std::string::npos);
+    std::string vanished = json;
+    vanished.replace(named, 15, "\"hierarchy-0badf00d.bin\"");
+    for (const std::string& bad : {json.substr(0, json.size() / 2), vanished}) {
+        replace(bad);
+        frames = follow(*client, camera, [](const ClientFrame& f) { return !f.followError.empty(); });
+        ASSERT_FALSE(frames.empty());
+        for (const ClientFrame& f : frames) {
+            EXPECT_EQ(f.version, 0u);
+            EXPECT_EQ(f.nodesCrc, baseNodes);
+        }
+        EXPECT_FALSE(frames.back().followError.empty());
+    }
+    EXPECT_TRUE(same(image(*client), base));
+    replace(json);
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    frames = follow(*client, camera, [](const ClientFrame& f) { return f.version == 1 && f.converged; });
+    ASSERT_FALSE(frames.empty());
+    EXPECT_TRUE(frames.back().followError.empty()) << frames.back().followError;
+    EXPECT_TRUE(same(image(*client), freshImage(set(), camera)));
+}
+
+}  // namespace
+}  // namespace surfcast
