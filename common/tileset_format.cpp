@@ -709,4 +709,17 @@ Vec3d nodeMin(const TilesetInfo& info, const NodeKey& key) {
     return info.rootMin + Vec3d{key.x * e, key.y * e, key.z * e};
 }
 
+bool normalsOriented(const std::string& normalSource) {
+    if (normalSource.empty()) return false;
+    size_t begin = 0;
+    while (begin <= normalSource.size()) {
+        size_t end = normalSource.find('+', begin);
+        if (end == std::string::npos) end = normalSource.size();
+        const std::string part = normalSource.substr(begin, end - begin);
+        if (part != "input" && part != "estimated-scan-origin") return false;
+        begin = end + 1;
+    }
+    return true;
+}
+
 }  // namespace surfcast

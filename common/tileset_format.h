@@ -242,6 +242,13 @@ struct TilesetInfo {
     }
 };
 
+// Whether a set's normals point out of its surfaces, from tileset.json's
+// normal_source: normals read from the inputs (meshes, oriented scans) or
+// turned towards the scanner that saw each point. Not those turned up or away
+// from the centre, which hold for ground and closed objects only: splats
+// are drawn two-sided and nodes are not culled by their cones there.
+bool normalsOriented(const std::string& normalSource);
+
 // The hierarchy file name of an updated set whose hierarchy has CRC `crc`;
 // and whether `name` is a hierarchy file name a reader may open (never a
 // path: tileset.json is untrusted).

@@ -281,6 +281,40 @@ TEST_F(Lod, ConesCullTheFarSideOfASphere) {
     EXPECT_LE(differing, 200u * 150 / 2000) << "backface culling changed " << differing << " pixels";
 }
 
+TEST_F(Lod, ConesCullNothingWhereNormalsAreNotOriented) {
+    // Ground and a wall as bare XYZ: their estimated normals point away from
+    // the centre (estimated-outward), the ground's down and the wall's to
+    // either side, while their splats are drawn two-sided. A cone that faces
+    // away from the eye says nothing about what the eye sees there, so
+    // culling by cones would take visible ground and wall away (it did: 330
+    // of 7,691 covered pixels were left from above); frustum culling alone
+    // leaves the image as it is.
+    TempDir out;
+    std::string xyz;
+    char line[64];
+    for (int i = 0; i < 200; ++i)
+        for (int j = 0; j < 200; ++j) xyz += (std::snprintf(line, sizeof line, "%.2f %.2f 0\n", i * 0.05, j * 0.05), line);
+    for (int i = 0; i < 80; ++i)
+        for (int k = 1; k < 60; ++k) xyz += (std::snprintf(line, sizeof line, "%.2f 5 %.2f\n", 2 + i * 0.05, k * 0.05), line);
+    test::writeFile(out.file("wall.xyz"), xyz);
+    auto b = run({binary("surfcast-build"), "-q", out.file("wall.xyz"), "--capacity", "800", "-o", out.file("wall")});
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto reader = TilesetReader::open(out.file("wall"));
+    ASSERT_TRUE(reader);
+    ASSERT_EQ(reader->info().normalSource, "estimated-outward");
+    for (const char* camera : {"--camera=5,-9,7,5,5,0.5,0,0,1,45", "--camera=5,19,7,5,5,0.5,0,0,1,45"}) {
+        auto on = run({binary("surfcast-view"), "--headless", out.file("wall"), camera, "--lod", "1", "--size", "200x150",
+                       "--out", out.file("on.png")});
+        auto off = run({binary("surfcast-view"), "--headless", out.file("wall"), camera, "--lod", "1", "--no-culling",
+                        "--size", "200x150", "--out", out.file("off.png")});
+        ASSERT_EQ(on.exitCode, 0) << on.output;
+        ASSERT_EQ(off.exitCode, 0) << off.output;
+        // The bound of CullingNeverChangesTheImage: float rounding only.
+        size_t differing = differingPixels(out.file("on.png"), out.file("off.png"));
+        EXPECT_LE(differing, 200u * 150 / 2000) << camera << ": culling changed " << differing << " pixels";
+    }
+}
+
 // The conformance case both clients' selections run (tests/conformance/
 // lod_order.json, which derives its answer): nodes of equal priority are
 // refined smaller key first, so that a budget cuts the same nodes in both.

@@ -267,8 +267,11 @@ int runWindow(const ViewOptions& o, const SurfelSet& set, const TilesetInfo& set
                                      renderModeName(state.mode), o.color ? "--color" : colorByName(shownBy ? *shownBy : coloring.by),
                                      coloring.hidden[2] ? ", ground hidden" : "", seconds * 1e3, t.totalMs, t.splats);
             if (client)
-                std::snprintf(title + used, sizeof(title) - size_t(used), " - %zu nodes, %.1f MB%s", streamed.nodes,
-                              double(streamed.stream.bytesDownloaded) / 1e6, converged ? "" : ", streaming");
+                used += std::snprintf(title + used, sizeof(title) - size_t(used), " - %zu nodes, %.1f MB%s", streamed.nodes,
+                                      double(streamed.stream.bytesDownloaded) / 1e6, converged ? "" : ", streaming");
+            if (client && o.client.followSeconds > 0 && used > 0 && size_t(used) < sizeof(title))
+                std::snprintf(title + used, sizeof(title) - size_t(used), " - version %zu%s", streamed.version,
+                              streamed.loadingVersion ? ", loading the next" : "");
             glfwSetWindowTitle(window, title);
             if (converged) ++frame;  // --frames counts converged frames
             bool lastFrame = o.frames > 0 && frame >= o.frames;

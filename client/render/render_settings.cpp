@@ -86,19 +86,6 @@ Vec3f shadePixel(Shading shading, const Vec3f& color, const Vec3f& normal, const
     return {std::fmin(out.x, 1.f), std::fmin(out.y, 1.f), std::fmin(out.z, 1.f)};
 }
 
-bool normalsOriented(const std::string& normalSource) {
-    if (normalSource.empty()) return false;
-    size_t begin = 0;
-    while (begin <= normalSource.size()) {
-        size_t end = normalSource.find('+', begin);
-        if (end == std::string::npos) end = normalSource.size();
-        const std::string part = normalSource.substr(begin, end - begin);
-        if (part != "input" && part != "estimated-scan-origin") return false;
-        begin = end + 1;
-    }
-    return true;
-}
-
 RenderSettings settingsForSet(double kernelScale, bool hasColor, bool oriented, bool translucent) {
     RenderSettings s;
     s.translucent = translucent;

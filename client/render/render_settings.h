@@ -114,12 +114,6 @@ inline bool translucentFrame(const RenderSettings& s) { return s.translucent || 
 // relative to `view.origin`.
 gpu_types::FrameParams makeFrameParams(const ViewTransform& view, const RenderSettings& settings, float nearPlane);
 
-// Whether a set's normals point out of its surfaces, from tileset.json's
-// normal_source: normals read from the inputs (meshes, oriented scans) or
-// turned towards the scanner that saw each point. Not those turned up or away
-// from the centre, which hold for ground and closed objects only.
-bool normalsOriented(const std::string& normalSource);
-
 // The settings a tile set is drawn with unless told otherwise: the kernel
 // scale its weights assume (tileset.json kernel_scale), unlit when it has
 // colours, else Lambert; backface culling where its normals are oriented;

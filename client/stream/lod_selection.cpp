@@ -109,6 +109,7 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
     const Frame f = frameOf(camera, width, height);
     // Boxes closer than this count as touching the eye: refine them.
     const double nearDistance = 1e-9 * std::fmax(1.0, info_.rootEdge);
+    const bool cones = params.backfaceCulling && normalsOriented(info_.normalSource);
 
     // Whether node i is drawn (or reached by refinement) at all.
     auto culled = [&](uint32_t i, Box3d* grown) {
@@ -123,7 +124,7 @@ std::vector<SelectedNode> LodSelector::select(const Camera& camera, int width, i
             ++st.frustumCulled;
             return true;
         }
-        if (params.backfaceCulling && backfacing(nodes_[i], *grown, f.eye)) {
+        if (cones && backfacing(nodes_[i], *grown, f.eye)) {
             ++st.backfaceCulled;
             return true;
         }

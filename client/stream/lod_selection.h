@@ -13,6 +13,8 @@
 // part (hierarchy pages fetched as traversal reaches them): a node whose
 // children are in a page not yet added is drawn meanwhile, and the page is
 // reported missing like a node.
+// Cones cull only where the set's normals are oriented (normalsOriented):
+// elsewhere a cone may point away from a surface the eye sees.
 // Pure CPU, no Vulkan, no I/O: the streaming client and surfcast-view use it.
 #pragma once
 
@@ -31,7 +33,7 @@ namespace surfcast {
 struct LodParams {
     double targetPixels = 1.0;  // refine while the projected spacing exceeds this
     bool frustumCulling = true;
-    bool backfaceCulling = true;
+    bool backfaceCulling = true;  // by the nodes' visibility cones, where the normals are oriented
     // Nodes whose box misses the clip box (world coordinates) are culled:
     // none of their surfels would be drawn (RenderSettings::clip; up to the
     // float rounding of a surfel on the node's face).

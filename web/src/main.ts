@@ -1,7 +1,7 @@
 // The viewer page, a thin client of the component (viewer.ts): reads the set,
 // camera and settings from the URL (?set=URL&camera=ex,ey,ez,tx,ty,tz,ux,uy,uz,fov
 // &lod=PX&mode=M&splats=N&color=A&hide=C,..&opacity=A&layers=L&clip=X0,Y0,Z0,X1,Y1,Z1
-// &gpu-budget=MIB&block-cache=MIB&edge-aa=off&panel=0 and #token=T; docs/WEB.md),
+// &gpu-budget=MIB&block-cache=MIB&edge-aa=off&panel=0&follow=S and #token=T; docs/WEB.md),
 // wires the panel and its legends to the component, shows its errors and
 // notices, and keeps the URL current. window.surfcast holds the state tests
 // and scripts read.
@@ -96,6 +96,7 @@ function options(): ViewerOptions {
     layers,
     edgeAA: params.get("edge-aa") !== "off",
     forbidFloatBlend: params.get("floatblend") === "off",
+    follow: number("follow", 0.1),
   };
 }
 
@@ -316,9 +317,10 @@ async function main() {
   const progress = () => {
     const s = v.state;
     $("progress").textContent = `${s.nodes} nodes, ${s.splats.toLocaleString()} splats, ` +
-      `${(s.bytes / 1e6).toFixed(1)} MB in ${s.requests} requests` + (s.converged ? ", converged" : `, ${s.inFlight} in flight`);
+      `${(s.bytes / 1e6).toFixed(1)} MB in ${s.requests} requests` + (s.converged ? ", converged" : `, ${s.inFlight} in flight`) +
+      (opts.follow ? `; version ${s.version}${s.loadingVersion ? ", loading the next" : ""}` : "");
   };
-  for (const type of ["change", "converged"]) v.addEventListener(type, progress);
+  for (const type of ["change", "converged", "version"]) v.addEventListener(type, progress);
   wirePanel(v, setUrl);
   // For benchmarks (bench/browser_bench.mjs).
   Object.assign(window, { surfcastTimeFrames: (n: number) => v.timeFrames(n), surfcastPick: (x: number, y: number) => v.pick(x, y) });

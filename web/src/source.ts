@@ -61,13 +61,31 @@ export class TileSource {
     return this.options.token ? { ...extra, Authorization: `Bearer ${this.options.token}` } : extra;
   }
 
-  private async send(url: string, init: RequestInit, what: string): Promise<Response> {
+  // tileset.json (or another small file) again unless it is unchanged since
+  // the last call: null then. Asked with If-None-Match where the host gave
+  // an ETag (a 304 costs a few hundred bytes), else compared whole. A
+  // follower polls with it (viewer.ts, ViewerOptions.follow).
+  private validator = "";
+  private lastText: string | null = null;
+  async changedText(name: string, limit: number): Promise<string | null> {
+    const url = `${this.base}/${name}`;
+    const r = await this.send(url, { headers: this.headers(this.validator ? { "If-None-Match": this.validator } : {}) }, url, true);
+    if (r.status === 304) return null;
+    const text = new TextDecoder().decode(await this.body(r, limit, url));
+    this.validator = r.headers.get("ETag") ?? "";
+    if (text === this.lastText) return null;
+    this.lastText = text;
+    return text;
+  }
+
+  // `notModified`: a 304 is an answer too (a conditional request's).
+  private async send(url: string, init: RequestInit, what: string, notModified = false): Promise<Response> {
     const controller = new AbortController();
     const timer = setTimeout(() => controller.abort(), this.options.timeoutMs ?? 30000);
     ++this.requests;
     try {
       const r = await fetch(url, { ...init, signal: controller.signal, cache: "no-cache" });
-      if (r.ok) return r;
+      if (r.ok || (notModified && r.status === 304)) return r;
       const transient = r.status === 408 || r.status === 429 || r.status >= 500;
       const why = r.status === 401 ? " (the host wants a token: add #token=... to the page's URL)" : r.status === 404 ? " (not found)" : "";
       throw new HttpError(`${what}: HTTP ${r.status}${why}`, transient);

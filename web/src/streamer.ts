@@ -13,7 +13,9 @@
 // does not use are evicted. Resident nodes keep their compressed blocks up to
 // keptBudget bytes, so that recolor() decodes them again without fetching;
 // beyond it the least recently used nodes' blocks go, and a recolour fetches
-// those again (as the C++ stream does).
+// those again (as the C++ stream does). A newer version of the set (a
+// follower's: viewer.ts) adopts an older one's kept blocks: a node with the
+// same key, block CRC and size is decoded from them, not fetched.
 
 import type { Camera } from "./camera.js";
 import type { ColoringSpec, DecodeJob, DecodeResult, PickedSurfel } from "./block_decode.js";
@@ -119,6 +121,7 @@ export interface StreamStats {
   residentBytes: number;
   keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within keptBudget)
   refetched: number; // blocks fetched again to recolour nodes whose kept blocks had gone
+  adopted: number; // nodes decoded from an older version's kept blocks (adopt()), not fetched
   evictions: number;
   failures: number;
   lastError: string;
@@ -142,13 +145,15 @@ export class Streamer<T> {
   private recoloring = new Set<number>(); // resident nodes being decoded again with a new colouring
   private refetchQueue: number[] = []; // of those, the ones whose blocks are to be fetched again
   private extra: string[];
+  private donor: Streamer<T> | null = null;
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
-                                  residentBytes: 0, keptBytes: 0, refetched: 0, evictions: 0, failures: 0, lastError: "",
+                                  residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, evictions: 0, failures: 0, lastError: "",
                                   gaveUp: false };
   onChange: () => void = () => {};
 
-  private constructor(readonly source: TileSource, info: TilesetInfo, origin: Vec3, index: HierarchyIndex,
+  // `json`: tileset.json as opened (the version this stream shows).
+  private constructor(readonly source: TileSource, readonly json: string, info: TilesetInfo, origin: Vec3, index: HierarchyIndex,
                       page0: NodeRecord[], private uploader: Uploader<T>, workerUrl: URL, coloring: ColoringSpec,
                       readonly options: StreamOptions) {
     this.info = info;
@@ -178,10 +183,39 @@ export class Streamer<T> {
     const bytes = await withRetries(options.maxTries, () => source.range(info.hierarchyFile, p0.offset, p0.records * 64), stop);
     const page0 = readHierarchyPage(index, 0, bytes, "0-0-0-0", info.blocksBytes, what);
     const origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
-    return new Streamer(source, info, origin, index, page0, uploader, workerUrl, coloring(info, origin), options);
+    return new Streamer(source, json, info, origin, index, page0, uploader, workerUrl, coloring(info, origin), options);
   }
 
   isResident = (i: number) => this.resident.has(i);
+
+  // Decode the nodes `donor` (another version of this set) holds unchanged
+  // from its kept blocks rather than fetch them; null: no longer.
+  adopt(donor: Streamer<T> | null) {
+    this.donor = donor;
+  }
+  // The kept block of this set's node with the record's key, if its block
+  // has the record's CRC and size; else null.
+  keptBlock(n: NodeRecord): Uint8Array | null {
+    const i = this.selector.find(n.key);
+    if (i === undefined) return null;
+    const mine = this.selector.nodes[i];
+    if (mine.blockCrc !== n.blockCrc || mine.blockSize !== n.blockSize) return null;
+    return this.resident.get(i)?.block ?? null;
+  }
+  // The wanted nodes the donor holds unchanged go to the decoders at once;
+  // the rest are to be fetched.
+  private adoptKept(wanted: number[]): number[] {
+    const donor = this.donor;
+    if (!donor) return wanted;
+    return wanted.filter((i) => {
+      const block = donor.keptBlock(this.selector.nodes[i]);
+      if (!block) return true;
+      this.inFlight.add(i);
+      ++this.stats.adopted;
+      this.decodeNode(i, block, false, false, true).catch((e) => this.noteFailure(i, e as Error));
+      return false;
+    });
+  }
 
   private fail(message: string) {
     if (this.stats.gaveUp) return;
@@ -204,7 +238,7 @@ export class Streamer<T> {
       for (const [node] of lod.missingPages.sort((a, b) => b[1] - a[1])) this.fetchPage(node);
       const wanted = lod.missing.filter(([i]) => !this.inFlight.has(i)).sort((a, b) => b[1] - a[1]).map(([i]) => i);
       this.pumpRefetches();  // recolourings first: those nodes are on screen
-      this.fetchNodes(wanted);
+      this.fetchNodes(this.adoptKept(wanted));
     }
     this.stats.inFlight = this.inFlight.size + this.pagesInFlight.size + this.recoloring.size;
     this.stats.requests = this.source.requests;
@@ -324,7 +358,7 @@ export class Streamer<T> {
     };
   }
 
-  private async decodeNode(i: number, blob: Uint8Array, recolor = false, refetched = false) {
+  private async decodeNode(i: number, blob: Uint8Array, recolor = false, refetched = false, adopted = false) {
     const generation = this.generation;
     const n = this.selector.nodes[i];
     // The worker takes a copy (transferred); the block stays here, its own
@@ -341,7 +375,7 @@ export class Streamer<T> {
     }
     const old = this.resident.get(i);
     if (!this.stats.gaveUp && generation !== this.generation && (!recolor || old)) {
-      await this.decodeNode(i, block, recolor, refetched);  // recoloured meanwhile: its surfels would show the old colouring
+      await this.decodeNode(i, block, recolor, refetched, adopted);  // recoloured meanwhile: its surfels would show the old colouring
       return;
     }
     // A recolouring owns only its place in `recoloring`: the node may be
@@ -356,7 +390,7 @@ export class Streamer<T> {
       if (old) this.uploader.release(old.gpu);
       this.resident.set(i, { gpu: this.uploader.upload(result.surfels), count: result.count ?? 0,
                              lastUsed: old?.lastUsed ?? this.clock, block });
-      if (!recolor) ++this.stats.nodesFetched;
+      if (!recolor && !adopted) ++this.stats.nodesFetched;
     }
     this.onChange();
   }

@@ -10,12 +10,18 @@
 // takes about a second for half a million splats) spends its time decoding,
 // not redrawing. `state.converged` turns true once the frame that needs
 // nothing more is done, and false from the moment the view changes.
+//
+// Following (ViewerOptions.follow), tileset.json is polled with If-None-Match;
+// a new version streams beside the one drawn, adopting its unchanged nodes'
+// blocks (only changed nodes are fetched), and replaces it in one frame once
+// it has converged for the view, or after kMaxSwitchMs: no frame mixes two
+// versions (the C++ client's SurfcastClient does the same).
 
 import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
 import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
 import { Controls } from "./controls.js";
 import { crc32 } from "./crc32.js";
-import { attribute, type TilesetInfo } from "./format.js";
+import { attribute, kMaxTilesetJsonBytes, type TilesetInfo } from "./format.js";
 import { type Box, emptyStats } from "./lod_selection.js";
 import { type DrawnNode, type FrameView, kDefaultEdgeTau, type SceneComposite, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
          type RenderMode, type RenderSettings, SplatRenderer } from "./renderer.js";
@@ -51,7 +57,15 @@ export interface ViewerOptions {
   loop?: boolean;
   forbidFloatBlend?: boolean; // behave as a browser without float blending (tests)
   workerUrl?: URL; // the decode worker (default: decode_worker.js beside this module)
+  // Follow the set as it changes: poll its tileset.json every this many
+  // seconds and switch to each new version (0 or absent: never). The GPU
+  // budget is then split in half: the version drawn, the one loading.
+  follow?: number;
 }
+
+// A following viewer switches to a loaded version after this long even if it
+// has not converged (the camera kept moving): coarser meanwhile, never mixed.
+export const kMaxSwitchMs = 5000;
 
 // What the viewer has done, updated every frame (the "change" event).
 export interface ViewerState {
@@ -72,11 +86,17 @@ export interface ViewerState {
   residentBytes: number; // the resident nodes' surfels, 32 bytes each in whole granules (lod_selection.ts)
   keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within blockCacheMiB)
   refetched: number; // blocks fetched again for a recolouring (their kept copies had gone)
+  adopted: number; // nodes of the version drawn decoded from the previous version's blocks, not fetched
   evictions: number;
   inFlight: number; // requests under way
   frames: number;
   frameMs: number; // the last frame's time on the GPU, from its draw to its fence
   camera: string; // as ?camera= and surfcast-view --camera take it
+  // Following: the versions switched to since open, whether a newer one is
+  // loading, and the last poll's or new version's failure ("" once one succeeds).
+  version: number;
+  loadingVersion: boolean;
+  followError: string;
 }
 
 // A surfel under the cursor (SurfcastViewer.pick).
@@ -94,13 +114,14 @@ export interface PickResult {
 
 // Events (CustomEvent, `detail` as said): "change" (ViewerState) after every
 // selection or frame; "converged" (ViewerState) when a converged frame is
-// done; "camera" (Camera) when the camera moves; "error" (string) when the
+// done; "camera" (Camera) when the camera moves; "version" (ViewerState)
+// when a following viewer switches to a new version; "error" (string) when the
 // stream stops or an export fails; "notice" (string) for what the browser
 // cannot draw as asked; with loop: false, "redraw" (null) when the view
 // needs drawing again (blocks arrived, a setting changed).
 export class SurfcastViewer extends EventTarget {
   readonly state: ViewerState = emptyViewerState();
-  readonly info: TilesetInfo;
+  info: TilesetInfo; // of the version drawn
   private settings: RenderSettings;
   private cam: Camera;
   private colorMode: ColorBy;
@@ -125,6 +146,13 @@ export class SurfcastViewer extends EventTarget {
   private drawn: { gpu: DrawnNode[]; indices: number[]; view: FrameView; settings: RenderSettings } | null = null;
   private width = 1;
   private height = 1;
+  // Following: the version loading and since when; the newest tileset.json
+  // polled; the poll's own source and timer.
+  private next: { streamer: Streamer<DrawnNode>; since: number } | null = null;
+  private opening = false;
+  private latest = "";
+  private watch: TileSource | null = null;
+  private pollTimer: ReturnType<typeof setTimeout> | undefined;
 
   // Opens the set whose tileset.json is at `setUrl`/tileset.json. Throws an
   // Error naming what is wrong: no WebGL2, the set unreachable or malformed,
@@ -143,19 +171,20 @@ export class SurfcastViewer extends EventTarget {
     const source = new TileSource(setUrl, { token: options.token });
     let colorBy = options.colorBy ?? "auto";
     const hidden = [...(options.hiddenClasses ?? [])];
+    if (!((options.follow ?? 0) >= 0)) throw new Error("follow is a number of seconds, at least 0");
     const streamer = await Streamer.open(source, renderer, options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
       (info, origin) => {
         const by = resolveColorBy(colorBy, info);
         if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
         colorBy = by as ColorBy;
         return coloringFor(info, origin, colorBy, hidden);
-      }, { ...kDefaultStreamOptions, memoryBudget: (options.gpuBudgetMiB ?? 512) * 2 ** 20,
-           keptBudget: (options.blockCacheMiB ?? 256) * 2 ** 20 });
-    return new SurfcastViewer(canvas, renderer, source, streamer, colorBy, hidden, options);
+      }, streamOptions(options));
+    return new SurfcastViewer(canvas, renderer, source, streamer, colorBy, hidden, setUrl, options);
   }
 
   private constructor(readonly canvas: HTMLCanvasElement, private renderer: SplatRenderer, private source: TileSource,
-                      private streamer: Streamer<DrawnNode>, colorBy: ColorBy, hidden: number[], options: ViewerOptions) {
+                      private streamer: Streamer<DrawnNode>, colorBy: ColorBy, hidden: number[], private setUrl: string,
+                      private options: ViewerOptions) {
     super();
     const info = this.info = streamer.info;
     this.colorMode = colorBy;
@@ -182,13 +211,50 @@ export class SurfcastViewer extends EventTarget {
     this.cam = options.camera ?? frameBox(info.boundsMin, info.boundsMax, this.width / this.height);
     this.state.camera = formatCamera(this.cam);
     this.noteMode();
-    streamer.onChange = () => {
-      this.dirty = true;
-      if (!this.loop) this.emit("redraw", null);  // the host draws again
-    };
+    streamer.onChange = this.onStreamChange;
     if (options.controls ?? true) this.controls = new Controls(canvas, () => this.cam, (c) => this.setCamera(c));
     this.loop = options.loop ?? true;
     if (this.loop) this.animation = requestAnimationFrame((t) => this.frame(t));
+    this.latest = streamer.json;
+    if (options.follow) {
+      this.watch = new TileSource(setUrl, { token: options.token });
+      this.pollTimer = setTimeout(() => this.poll(), options.follow * 1000);
+    }
+  }
+
+  private onStreamChange = () => {
+    this.dirty = true;
+    if (!this.loop) this.emit("redraw", null);  // the host draws again
+  };
+
+  // One poll of tileset.json; a new version opens beside the one drawn. A
+  // failure (a host gone, a torn answer, a version whose files are gone) is
+  // kept in state.followError and tried again at the next poll.
+  private async poll() {
+    try {
+      const text = await this.watch!.changedText("tileset.json", kMaxTilesetJsonBytes);
+      if (text !== null) this.latest = text;
+      if (this.latest !== this.streamer.json && !this.next && !this.opening && !this.disposed) {
+        this.opening = true;
+        const next = await Streamer.open(new TileSource(this.setUrl, { token: this.options.token }), this.renderer,
+          this.options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
+          (info, origin) => coloringFor(info, origin, this.colorMode, this.hidden), streamOptions(this.options));
+        if (this.disposed) next.close();
+        else if (next.json !== this.streamer.json) {
+          next.adopt(this.streamer);
+          next.onChange = this.onStreamChange;
+          this.next = { streamer: next, since: performance.now() };
+          this.latest = next.json;
+          this.onStreamChange();
+        } else next.close();
+      }
+      this.state.followError = "";
+    } catch (e) {
+      this.state.followError = (e as Error).message;
+    } finally {
+      this.opening = false;
+      if (!this.disposed) this.pollTimer = setTimeout(() => this.poll(), this.options.follow! * 1000);
+    }
   }
 
   // For hosts that draw (loop: false): selects the nodes for `camera` at the
@@ -327,9 +393,12 @@ export class SurfcastViewer extends EventTarget {
   dispose() {
     this.disposed = true;
     cancelAnimationFrame(this.animation);
+    clearTimeout(this.pollTimer);
     this.controls?.dispose();
     this.streamer.onChange = () => {};
     this.streamer.close();
+    this.next?.streamer.close();
+    this.next = null;
     if (this.fence) this.renderer.gl.deleteSync(this.fence);
     this.renderer.dispose();
     this.drawn = this.selection = null;
@@ -346,6 +415,8 @@ export class SurfcastViewer extends EventTarget {
   private recolor() {
     this.changed();
     this.streamer.recolor(coloringFor(this.info, this.streamer.origin, this.colorMode, this.hidden));
+    const next = this.next?.streamer;
+    next?.recolor(coloringFor(next.info, next.origin, this.colorMode, this.hidden));
   }
   private notice(message: string) {
     if (this.state.notices.includes(message)) return;
@@ -373,10 +444,32 @@ export class SurfcastViewer extends EventTarget {
 
   // A new selection, which also queues the fetches the view needs.
   private select() {
-    const lod = emptyStats(), streamer = this.streamer;
-    const selected = streamer.update(this.cam, this.width, this.height, { targetPixels: this.detailPx, frustumCulling: true,
-      backfaceCulling: this.settings.backfaceCull, splatBudget: this.budget, memoryBudget: Infinity, clip: this.settings.clip },
-      lod);
+    const params = { targetPixels: this.detailPx, frustumCulling: true, backfaceCulling: this.settings.backfaceCull,
+                     splatBudget: this.budget, memoryBudget: Infinity, clip: this.settings.clip };
+    let lod = emptyStats();
+    let selected = this.streamer.update(this.cam, this.width, this.height, params, lod);
+    if (this.next) {
+      const next = this.next.streamer, nextLod = emptyStats();
+      const nextSelected = next.update(this.cam, this.width, this.height, params, nextLod);
+      if (next.stats.gaveUp) {  // drawn as before; the next poll opens the newest again
+        this.state.followError = next.stats.lastError;
+        next.onChange = () => {};
+        next.close();
+        this.next = null;
+      } else if (converged(next, nextLod) || this.streamer.stats.gaveUp || performance.now() - this.next.since > kMaxSwitchMs) {
+        next.adopt(null);
+        this.streamer.onChange = () => {};
+        this.streamer.close();
+        this.streamer = next;
+        this.next = null;
+        this.info = next.info;
+        this.settings.kernelScale = next.info.kernelScale;
+        [selected, lod] = [nextSelected, nextLod];
+        ++this.state.version;
+        this.emit("version", this.state);
+      }
+    }
+    const streamer = this.streamer;
     // Drawn in key order, as the Vulkan client draws them. Every selected
     // node is resident until the next update (eviction spares what a view uses).
     const nodes = streamer.selector.nodes;
@@ -396,11 +489,13 @@ export class SurfcastViewer extends EventTarget {
       splats += r.count;
     }
     const st = streamer.stats;
-    const converged = !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
-    if (st.gaveUp) this.error(st.lastError);
+    // A version loading is wanted too.
+    const done = converged(streamer, lod) && !this.next;
+    if (st.gaveUp && !this.next) this.error(st.lastError);
     Object.assign(this.state, { bytes: st.bytes, requests: st.requests, resident: st.resident, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
-                                refetched: st.refetched, evictions: st.evictions, inFlight: st.inFlight });
-    return { gpu, indices, splats, converged, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
+                                refetched: st.refetched, adopted: st.adopted, evictions: st.evictions, inFlight: st.inFlight,
+                                loadingVersion: this.next !== null });
+    return { gpu, indices, splats, converged: done, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
   }
 
   // Each animation frame: a new selection whenever something changed, and a
@@ -470,6 +565,19 @@ export class SurfcastViewer extends EventTarget {
   }
 }
 
+// Nothing the view needs is missing from `streamer` or on its way.
+function converged(streamer: Streamer<DrawnNode>, lod: ReturnType<typeof emptyStats>): boolean {
+  const st = streamer.stats;
+  return !st.gaveUp && lod.missing.length === 0 && lod.missingPages.length === 0 && st.inFlight === 0;
+}
+
+// The stream's budgets: a follower's GPU budget is split between two versions.
+function streamOptions(options: ViewerOptions) {
+  const gpu = (options.gpuBudgetMiB ?? 512) * 2 ** 20;
+  return { ...kDefaultStreamOptions, memoryBudget: options.follow ? gpu / 2 : gpu,
+           keptBudget: (options.blockCacheMiB ?? 256) * 2 ** 20 };
+}
+
 // The checks open() and the setters make.
 function checkMode(mode: RenderMode) {
   if (!kRenderModes.includes(mode)) throw new Error(`mode ${mode}: expected ${kRenderModes.join(", ")}`);
@@ -504,8 +612,8 @@ export const formatBox = (b: Box) => [...b.min, ...b.max].join(",");
 // A viewer's state before anything is drawn.
 export function emptyViewerState(): ViewerState {
   return { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
-           firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, evictions: 0,
-           inFlight: 0, frames: 0, frameMs: 0, camera: "" };
+           firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, evictions: 0,
+           inFlight: 0, frames: 0, frameMs: 0, camera: "", version: 0, loadingVersion: false, followError: "" };
 }
 
 function normalsOriented(source: string): boolean {

@@ -14,6 +14,7 @@ import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { PNG } from "pngjs";
 import puppeteer from "puppeteer-core";
+import { loadModule } from "./load_module.mjs";
 
 const build = process.env.SURFCAST_BUILD ?? join(import.meta.dirname ?? ".", "..", "..", "build");
 const bin = (name) => join(build, "bin", name);
@@ -121,14 +122,14 @@ async function openPage() {
   return { page, problems };
 }
 
-// surfcast-view's converged frame of `url` with `extra`, rendered once per
-// run for each (tests compare several pages against one view).
+// surfcast-view's converged frame of `url` with `extra` from `view`, rendered
+// once per run for each (tests compare several pages against one view).
 const references = new Map();
-function reference(url, extra = []) {
-  const key = JSON.stringify([url, extra]);
+function reference(url, extra = [], view = camera) {
+  const key = JSON.stringify([url, extra, view]);
   if (!references.has(key)) {
     const out = join(work, `ref-${Math.random().toString(36).slice(2)}.png`);
-    const lines = execFileSync(bin("surfcast-view"), ["--headless", url, "--lod", "1", "--camera", camera, "--size",
+    const lines = execFileSync(bin("surfcast-view"), ["--headless", url, "--lod", "1", "--camera", view, "--size",
       `${size.width}x${size.height}`, "--out", out, ...extra], { encoding: "utf8" }).trim().split("\n");
     references.set(key, { json: JSON.parse(lines[lines.length - 1]), png: PNG.sync.read(readFileSync(out)) });
   }
@@ -169,8 +170,8 @@ const kMeanLimit = 1.0, kFarLimit = 0.01;
 
 // The converged view against surfcast-view's at `refUrl`: the same splats
 // and an image within the limits derived above.
-function expectLikeReference(state, png, refUrl, extra = []) {
-  const ref = reference(refUrl, extra);
+function expectLikeReference(state, png, refUrl, extra = [], view = camera) {
+  const ref = reference(refUrl, extra, view);
   assert.equal(ref.json.converged, true);
   assert.equal(state.splats, ref.json.splats, "the same splats at convergence");
   const d = compare(png, ref.png);
@@ -213,8 +214,17 @@ function writeClassifiedPly(path) {
   const points = [];
   for (let i = 0; i < 100; ++i) for (let j = 0; j < 100; ++j) points.push([...at(i * 0.1, j * 0.1, 0), 2]);
   for (let i = 0; i < 40; ++i) for (let k = 1; k < 30; ++k) points.push([...at(2 + i * 0.1, 5.05, k * 0.1), 6]);
+  points.push(...column(7, 3));
+  writePly(path, points);
+}
+// A column (class 5) of 20 x 30 points around (x, y).
+function column(x, y) {
+  const points = [];
   for (let i = 0; i < 20; ++i)
-    for (let k = 0; k < 30; ++k) points.push([...at(7 + 0.3 * Math.cos(Math.PI * i / 10), 3 + 0.3 * Math.sin(Math.PI * i / 10), 0.05 + k * 0.1), 5]);
+    for (let k = 0; k < 30; ++k) points.push([...at(x + 0.3 * Math.cos(Math.PI * i / 10), y + 0.3 * Math.sin(Math.PI * i / 10), 0.05 + k * 0.1), 5]);
+  return points;
+}
+function writePly(path, points) {
   const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${points.length}\nproperty double x\nproperty double y\n` +
     "property double z\nproperty uchar classification\nproperty double gps_time\nend_header\n";
   const body = Buffer.alloc(points.length * 33);
@@ -226,6 +236,26 @@ function writeClassifiedPly(path) {
     body.writeDoubleLE(kGpsTime(i), 33 * i + 25);
   });
   writeFileSync(path, Buffer.concat([Buffer.from(header), body]));
+}
+
+// Every node record of the set in folder `dir`, by key (web/src/format.ts's reader).
+async function nodeRecords(dir) {
+  const format = await loadModule("src/format.ts");
+  const info = format.parseTileset(readFileSync(join(dir, "tileset.json"), "utf8"), dir);
+  const file = readFileSync(join(dir, info.hierarchyFile));
+  const bytes = new Uint8Array(file.buffer, file.byteOffset, file.byteLength);
+  const index = format.readHierarchyIndex(bytes.subarray(0, 32 + 16 * info.hierarchyPages), info.hierarchyBytes, dir);
+  const records = new Map();
+  const pages = [[0, "0-0-0-0"]];
+  while (pages.length) {
+    const [page, root] = pages.pop();
+    const e = index.pages[page];
+    for (const r of format.readHierarchyPage(index, page, bytes.subarray(e.offset, e.offset + 64 * e.records), root, info.blocksBytes, dir)) {
+      records.set(r.key, r);
+      if (r.flags & format.kFlagChildrenInPage) pages.push([r.childPage, r.key]);
+    }
+  }
+  return records;
 }
 
 // Where world point p shows in a w x h view from `camera` (as ?camera= takes
@@ -787,6 +817,47 @@ describe("browser viewer", { skip }, () => {
     assert.equal(state.nodes, ref.json.nodes);
     assert.equal(state.nodesCrc, ref.json.nodes_crc, "the same nodes as surfcast-view --splat-budget 50000");
     assert.equal(state.splats, ref.json.splats);
+  });
+
+  test("following: an --add shows without reopening, fetching only changed nodes, as a fresh open draws it", async (t) => {
+    // The classified scan, then a second column added to it in place while
+    // the page follows it (?follow=0.3) through surfcast-serve.
+    const set = join(work, "sets", "living");
+    execFileSync(bin("surfcast-build"), ["-q", join(work, "classified.ply"), "--attributes", "classification,gps_time",
+                                        "--capacity", "300", "-o", set]);
+    writePly(join(work, "added.ply"), column(3, 2));
+    const { page, problems } = await openPage();
+    await page.goto(`${serveUrl}/?set=/sets/living&camera=${kClassCamera}&follow=0.3`);
+    await page.waitForFunction("window.surfcast.converged || window.surfcast.errors.length > 0", { timeout: 60000 });
+    const before = await page.evaluate(() => window.surfcast);
+    assert.deepEqual(before.errors, []);
+    assert.equal(before.version, 0);
+    const old = await nodeRecords(set);
+    execFileSync(bin("surfcast-build"), ["-q", "--add", join(work, "added.ply"), "--to", set]);
+    await page.waitForFunction("(window.surfcast.version === 1 && window.surfcast.converged) || window.surfcast.errors.length > 0",
+                               { timeout: 60000 });
+    const after = await page.evaluate(() => window.surfcast);
+    assert.deepEqual(after.errors, []);
+    assert.equal(after.followError, "");
+    // Only changed nodes: the new version's source carried its tileset.json,
+    // hierarchy and the blocks it fetched, within twice the changed nodes' bytes.
+    let changed = 0;
+    for (const [key, r] of await nodeRecords(set)) {
+      const o = old.get(key);
+      if (!o || o.blockCrc !== r.blockCrc || o.blockSize !== r.blockSize) changed += r.blockSize;
+    }
+    let total = 0;
+    for (const r of (await nodeRecords(set)).values()) total += r.blockSize;
+    t.diagnostic(`changed ${changed} of ${total} bytes; adopted ${after.adopted} nodes`);
+    assert.ok(changed > 0);
+    assert.ok(after.bytes <= 2 * changed, `${after.bytes} bytes fetched for ${changed} bytes of changed nodes`);
+    await page.evaluate(() => document.body.classList.add("capture"));
+    const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+    const { ref, d } = expectLikeReference(after, png, set, [], kClassCamera);
+    assert.equal(after.nodesCrc, ref.json.nodes_crc, "the nodes a fresh open draws");
+    assert.deepEqual(problems, []);
+    t.diagnostic(`followed: ${after.bytes} bytes for ${changed} bytes of changed nodes; mean abs ${d.mean.toFixed(3)}`);
+    await page.close();
   });
 
   test("a browser without WebGL2 is told so", async () => {
