@@ -820,12 +820,15 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("following: an --add shows without reopening, fetching only changed nodes, as a fresh open draws it", async (t) => {
-    // The classified scan, then a second column added to it in place while
-    // the page follows it (?follow=0.3) through surfcast-serve.
+    // The classified scan and a column beside it, then a third input, a
+    // column, added in place while the page follows the set (?follow=0.3)
+    // through surfcast-serve. (Two inputs to start with: a set that gains its
+    // second input gains provenance, which changes every node.)
     const set = join(work, "sets", "living");
-    execFileSync(bin("surfcast-build"), ["-q", join(work, "classified.ply"), "--attributes", "classification,gps_time",
-                                        "--capacity", "300", "-o", set]);
+    writePly(join(work, "beside.ply"), column(8, 8));
     writePly(join(work, "added.ply"), column(3, 2));
+    execFileSync(bin("surfcast-build"), ["-q", join(work, "classified.ply"), join(work, "beside.ply"), "--attributes",
+                                        "classification,gps_time", "--capacity", "300", "-o", set]);
     const { page, problems } = await openPage();
     await page.goto(`${serveUrl}/?set=/sets/living&camera=${kClassCamera}&follow=0.3`);
     await page.waitForFunction("window.surfcast.converged || window.surfcast.errors.length > 0", { timeout: 60000 });
@@ -849,7 +852,8 @@ describe("browser viewer", { skip }, () => {
     let total = 0;
     for (const r of (await nodeRecords(set)).values()) total += r.blockSize;
     t.diagnostic(`changed ${changed} of ${total} bytes; adopted ${after.adopted} nodes`);
-    assert.ok(changed > 0);
+    assert.ok(changed > 0 && changed < total);
+    assert.ok(after.adopted > 0, "nodes the update kept come from the version drawn before");
     assert.ok(after.bytes <= 2 * changed, `${after.bytes} bytes fetched for ${changed} bytes of changed nodes`);
     await page.evaluate(() => document.body.classList.add("capture"));
     const png = PNG.sync.read(await page.screenshot({ type: "png" }));
