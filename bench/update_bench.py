@@ -32,8 +32,15 @@ through scripts/surfcast-dask on a local cluster of N workers (the update's
 stages as tasks), side by side: wall time, and whether every file of the two
 sets is the same bytes (no rebuild).
 
+With --follow S: a copy of the base set served by surfcast-serve, a
+headless viewer following it (surfcast-view --lod 1 --follow S, the set
+framed at 640x360) converged on it, then the same --add: the time from the
+update's end to the follower's first converged frame of the new version, the
+bytes the follower fetched for it against the changed nodes' bytes and a
+fresh open's, and whether its last image is a fresh open's, byte for byte.
+
 Usage: bench/.venv/bin/python bench/update_bench.py [--tiles 18x17] [--cells 10x10x1]
-       [--work DIR] [--threads N] [--memory 2G] [--repeated N | --dask N | --store]
+       [--work DIR] [--threads N] [--memory 2G] [--repeated N | --dask N | --store | --follow S]
 Prints Markdown for bench/BENCHMARKS.md ("Updates in place").
 """
 import argparse
@@ -214,6 +221,68 @@ def store_update(a, base_set, added, all_list, t_update):
           f"{t_update / t_store:.2f}x the speed of the folder update.")
 
 
+def follow_update(a, base_set, added):
+    """A headless follower of the served set through the --add (--follow)."""
+    import queue
+    import re
+    import threading
+    view = os.path.join(ROOT, "build", "bin", "surfcast-view")
+    sets = os.path.join(a.work, "follow")
+    served = os.path.join(sets, "site")
+    shutil.rmtree(sets, ignore_errors=True)
+    os.makedirs(sets)
+    shutil.copytree(base_set, served)
+    server = subprocess.Popen([os.path.join(ROOT, "build", "bin", "surfcast-serve"), sets, "--bind", "127.0.0.1:0"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        origin = None
+        while origin is None:
+            line = server.stderr.readline()
+            if not line:
+                sys.exit("surfcast-serve did not start")
+            m = re.search(r"(http://127\.0\.0\.1:\d+)", line)
+            origin = m.group(1) if m else None
+        url = origin + "/sets/site"
+        follower = subprocess.Popen([view, "--headless", url, "--lod", "1", "--size", "640x360", "--follow", str(a.follow),
+                                     "--max-wait", "600", "--save-redraws", "--out", os.path.join(a.work, "follow.png")],
+                                    stdout=subprocess.PIPE, text=True)
+        lines = queue.Queue()
+        threading.Thread(target=lambda: [lines.put((time.monotonic(), json.loads(l))) for l in follower.stdout],
+                         daemon=True).start()
+
+        def until(done):
+            while True:
+                t, line = lines.get(timeout=600)
+                if done(line):
+                    return t, line
+        until(lambda l: l["converged"])
+        old, _, _ = records(served)
+        t_update, _ = run([BUILD, "-q", "--threads", a.threads, "--add", added, "--to", served])
+        switched = time.monotonic()
+        t_seen, seen = until(lambda l: l["version"] == 1 and l["converged"])
+        follower.terminate()
+        follower.wait()
+        new, hierarchy_bytes, _ = records(served)
+        changed = sum(s for k, (o, s, c) in new.items() if k not in old or old[k][1:] != (s, c))
+        fresh_png = os.path.join(a.work, "fresh.png")
+        _, out = run([view, "--headless", url, "--lod", "1", "--size", "640x360", "--out", fresh_png])
+        fresh = json.loads(out.strip().splitlines()[-1])
+        same = open(seen["redraw"], "rb").read() == open(fresh_png, "rb").read()
+    finally:
+        server.terminate()
+        server.wait()
+    print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
+    print("| | seconds / bytes |\n|---|---|")
+    print(f"| the update (--add, in place) | {t_update:.1f} s |")
+    print(f"| its end to the follower's converged frame of the new version | {t_seen - switched:.2f} s "
+          f"(polling every {a.follow} s) |")
+    print(f"| blocks the follower fetched for the new version | {seen['bytes_downloaded']:,} "
+          f"({seen['adopted']:,} nodes decoded from the old version's blocks) |")
+    print(f"| blocks of every node the update changed | {changed:,} |")
+    print(f"| blocks a fresh open of the new version fetches for the same view | {fresh['bytes_downloaded']:,} |")
+    print(f"| the follower's last image is a fresh open's, byte for byte | {'yes' if same else 'no'} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tiles", default="18x17")
@@ -224,6 +293,7 @@ def main():
     ap.add_argument("--repeated", type=int, default=0, help="appends of one 0.1 %% cell each (the drift case)")
     ap.add_argument("--dask", type=int, default=0, help="the update in one process against surfcast-dask on N local workers")
     ap.add_argument("--store", action="store_true", help="the update of the set in an S3 store (SeaweedFS) against in a folder")
+    ap.add_argument("--follow", type=float, default=0, help="a headless viewer polling every S seconds follows the update")
     a = ap.parse_args()
     if a.repeated:
         return repeated(a)
@@ -249,6 +319,8 @@ def main():
     if not os.path.exists(os.path.join(base_set, "tileset.json")):
         t, _ = run([BUILD, *common, "@" + os.path.join(a.work, "base.list"), "-o", base_set])
         print(f"base set built in {t:.1f} s", file=sys.stderr)
+    if a.follow:
+        return follow_update(a, base_set, added)
     old, _, old_info = records(base_set)
     shutil.rmtree(upd, ignore_errors=True)
     shutil.copytree(base_set, upd)

@@ -241,5 +241,47 @@ TEST_F(FollowTest, TornAndVanishedVersionsAreRetriedNeverShown) {
     EXPECT_TRUE(same(image(*client), freshImage(set(), camera)));
 }
 
+TEST_F(FollowTest, ANewVersionThatFailsIsOpenedAgainOnceItReads) {
+    // The update's new block file damaged before the follower fetches from it:
+    // the version loading gives up (its blocks fail their CRCs) and is
+    // dropped, the version drawn stays; once the file reads again, the next
+    // poll opens that version anew, although its tileset.json never changed.
+    auto client = this->open(set(), 0.1);
+    ASSERT_TRUE(client);
+    const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
+    auto frames = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
+    ASSERT_FALSE(frames.empty());
+    const uint32_t baseNodes = frames.back().nodesCrc;
+    std::set<std::string> before;
+    for (const auto& e : fs::directory_iterator(set())) before.insert(e.path().filename().string());
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    std::string blocks;
+    for (const auto& e : fs::directory_iterator(set()))
+        if (e.path().filename().string().rfind("blocks-", 0) == 0 && !before.count(e.path().filename().string()))
+            blocks = e.path().string();
+    ASSERT_FALSE(blocks.empty()) << "the update wrote no block file";
+    const std::string good = test::readFile(blocks);
+    std::string bad = good;
+    for (char& c : bad) c = char(~c);
+    auto replace = [&](const std::string& bytes) {
+        test::writeFile(blocks + ".next", bytes);
+        fs::rename(blocks + ".next", blocks);
+    };
+    replace(bad);
+    frames = follow(*client, camera, [](const ClientFrame& f) { return !f.followError.empty() && !f.loadingVersion; });
+    ASSERT_FALSE(frames.empty());
+    for (const ClientFrame& f : frames) {
+        EXPECT_EQ(f.version, 0u);
+        EXPECT_EQ(f.nodesCrc, baseNodes);
+    }
+    EXPECT_NE(frames.back().followError.find("CRC"), std::string::npos) << frames.back().followError;
+    replace(good);
+    frames = follow(*client, camera, [](const ClientFrame& f) { return f.version == 1 && f.converged; });
+    ASSERT_FALSE(frames.empty());
+    EXPECT_EQ(frames.back().version, 1u);
+    EXPECT_TRUE(same(image(*client), freshImage(set(), camera)));
+}
+
 }  // namespace
 }  // namespace surfcast

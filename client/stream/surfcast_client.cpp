@@ -87,6 +87,7 @@ void SurfcastClient::switchVersion() {
     stream_ = std::move(next_);
     slot_ = 1 - slot_;
     ++versions_;
+    nextError_.clear();
     origin_ = emptySurfelSet(stream_->info()).origin;
     const Box3d& b = stream_->info().bounds;
     diagonal_ = b.empty() ? 0 : length(b.max - b.min);
@@ -116,7 +117,9 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
             inPool_[1 - slot_].clear();
             next_.reset();
             watcher_->showing(stream_->tilesetJson());
-        } else if (n.converged || shown.gaveUp || shown.setChanged || steadySeconds() - nextSince_ > kMaxSwitchSeconds) {
+            nextError_ = loading.lastError;
+        } else if (n.converged || shown.gaveUp || shown.setChanged ||
+                   (!u.converged && steadySeconds() - nextSince_ > kMaxSwitchSeconds)) {
             switchVersion();
             u = std::move(n);
         }
@@ -152,6 +155,7 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     frame.loadingVersion = next_ != nullptr;
     if (next_) frame.next = next_->stats();
     if (watcher_) frame.followError = watcher_->lastError();
+    if (frame.followError.empty()) frame.followError = nextError_;
     // A follower shows the version it has until the watcher finds the new one.
     if ((frame.stream.setChanged && !watcher_) || (frame.stream.gaveUp && !next_)) return Status::error(frame.stream.lastError);
     return frame;

@@ -8,7 +8,8 @@
 // versions as they are published: the new version streams beside the one
 // drawn, adopting its unchanged nodes' kept blocks (only changed nodes are
 // fetched), and replaces it in one frame once it has converged for the view
-// (or after kMaxSwitchSeconds): no frame mixes two versions.
+// (or after kMaxSwitchSeconds while the camera moves): no frame mixes two
+// versions.
 #pragma once
 
 #include <memory>
@@ -59,7 +60,9 @@ struct ClientFrame {
     size_t version = 0;
     bool loadingVersion = false;
     StreamStats next;
-    std::string followError;  // the last poll's or new version's failure, "" once one succeeds
+    // The last poll's failure, else why the last new version was dropped
+    // (its stream gave up); "" once a poll succeeds and a version is switched to.
+    std::string followError;
 };
 
 class SurfcastClient {
@@ -100,9 +103,11 @@ public:
     // GPU times of the last recorded frame, once it has completed.
     GpuFrameStats timings() const { return renderer_->timings(); }
 
-    // A following client switches to a loaded version after this long even
-    // if it has not converged (the camera kept moving): the new version is
-    // drawn coarser meanwhile, never mixed with the old.
+    // A following client switches to a version loading after this long even
+    // if it has not converged, where the version drawn has not converged
+    // either (the camera keeps moving): the new version is drawn coarser
+    // meanwhile, never mixed with the old. Under a still camera it waits for
+    // the new version to converge, adopting the old one's blocks until then.
     static constexpr double kMaxSwitchSeconds = 5;
 
 private:
@@ -116,6 +121,7 @@ private:
     // it started loading (steady seconds).
     std::unique_ptr<StreamingSet> next_;
     double nextSince_ = 0;
+    std::string nextError_;  // why the last version loading was dropped; "" since a switch
     int slot_ = 0;  // pool ids: a node's index times two, plus its version's slot
     std::unordered_set<uint32_t> inPool_[2];  // pool ids of each slot
     size_t versions_ = 0;

@@ -1,6 +1,7 @@
 #include "version_watcher.h"
 
 #include <chrono>
+#include <utility>
 
 #include "http_tile_source.h"
 
@@ -28,6 +29,7 @@ void VersionWatcher::showing(std::vector<uint8_t> shown) {
     std::lock_guard lock(mutex_);
     shown_ = std::move(shown);
     ready_.reset();
+    reread_ = true;
 }
 
 size_t VersionWatcher::polls() const {
@@ -48,6 +50,7 @@ void VersionWatcher::loop() {
     std::unique_lock lock(mutex_);
     while (!wake_.wait_for(lock, std::chrono::duration<double>(interval_), [&] { return stopping_; })) {
         ++polls_;
+        if (std::exchange(reread_, false)) tag.clear();  // unchanged on the host, yet no longer shown
         lock.unlock();
         Status status;
         std::unique_ptr<StreamingSet> opened;

@@ -48,6 +48,7 @@ private:
     std::condition_variable wake_;
     std::vector<uint8_t> shown_;  // the newest version opened (or shown)
     std::unique_ptr<StreamingSet> ready_;
+    bool reread_ = false;  // showing(): read tileset.json whole at the next poll
     size_t polls_ = 0;
     std::string lastError_;
     bool stopping_ = false;

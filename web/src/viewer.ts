@@ -14,8 +14,9 @@
 // Following (ViewerOptions.follow), tileset.json is polled with If-None-Match;
 // a new version streams beside the one drawn, adopting its unchanged nodes'
 // blocks (only changed nodes are fetched), and replaces it in one frame once
-// it has converged for the view, or after kMaxSwitchMs: no frame mixes two
-// versions (the C++ client's SurfcastClient does the same).
+// it has converged for the view, or after kMaxSwitchMs while the camera
+// moves: no frame mixes two versions (the C++ client's SurfcastClient does
+// the same).
 
 import { type Camera, formatCamera, frameBox, parseCamera, viewportScale, viewRows } from "./camera.js";
 import { type ColorBy, kColorByOrder, resolveColorBy } from "./coloring.js";
@@ -63,8 +64,9 @@ export interface ViewerOptions {
   follow?: number;
 }
 
-// A following viewer switches to a loaded version after this long even if it
-// has not converged (the camera kept moving): coarser meanwhile, never mixed.
+// A following viewer switches to a version loading after this long even if it
+// has not converged, where the version drawn has not either (the camera keeps
+// moving): coarser meanwhile, never mixed. Under a still camera it waits.
 export const kMaxSwitchMs = 5000;
 
 // What the viewer has done, updated every frame (the "change" event).
@@ -456,7 +458,8 @@ export class SurfcastViewer extends EventTarget {
         next.onChange = () => {};
         next.close();
         this.next = null;
-      } else if (converged(next, nextLod) || this.streamer.stats.gaveUp || performance.now() - this.next.since > kMaxSwitchMs) {
+      } else if (converged(next, nextLod) || this.streamer.stats.gaveUp ||
+                 (!converged(this.streamer, lod) && performance.now() - this.next.since > kMaxSwitchMs)) {
         next.adopt(null);
         this.streamer.onChange = () => {};
         this.streamer.close();
