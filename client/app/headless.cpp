@@ -132,11 +132,12 @@ int runHeadlessLod(const ViewOptions& o) {
         for (size_t f = 0; f < cameras.size() && status == 0; ++f) {
             // Progressive: draw what is resident, until nothing more is wanted
             // for this view (converged) or --max-wait runs out. Following, the
-            // last frame goes on until --max-wait, printing the redraws that
-            // changed something.
+            // last frame goes on until --max-wait, drawing and printing only
+            // where the nodes drawn changed (not for a version loading beside).
             const double frameStart = seconds();
             const bool following = o.client.followSeconds > 0 && f + 1 == cameras.size();
             size_t shownVersion = 0;
+            uint32_t shownNodes = 0;
             bool wasConverged = false;
             Image image;
             for (int iteration = 0; status == 0; ++iteration) {
@@ -145,9 +146,10 @@ int runHeadlessLod(const ViewOptions& o) {
                 const double updateMs = (seconds() - updateStart) * 1e3;
                 bool timedOut = seconds() - frameStart > o.maxWait;
                 if (frame && following) {
-                    const bool changed = iteration == 0 || frame->uploaded || frame->evicted ||
-                                         frame->version != shownVersion || frame->converged != wasConverged || timedOut;
+                    const bool changed = iteration == 0 || frame->nodesCrc != shownNodes || frame->version != shownVersion ||
+                                         frame->converged != wasConverged || timedOut;
                     shownVersion = frame->version;
+                    shownNodes = frame->nodesCrc;
                     wasConverged = frame->converged;
                     if (!changed) {
                         std::this_thread::sleep_for(std::chrono::milliseconds(kStreamPollMs));

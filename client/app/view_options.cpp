@@ -94,7 +94,8 @@ reference.
                         (2 is a good choice), and switch to each new version once it is
                         loaded for the view: only changed nodes are fetched. Headless,
                         the last frame follows until --max-wait, one JSON line per
-                        redraw; half of --gpu-budget holds the version loading
+                        redraw of other nodes; half of --gpu-budget holds the
+                        version loading
   SET may be a URL: http(s)://HOST[:PORT]/sets/NAME (surfcast-serve) or any folder
   URL on a static host, object store or CDN with Range (a query string, such as a
   shared access signature, is sent with every request), or s3://BUCKET/PREFIX, its
