@@ -62,9 +62,10 @@ protected:
         }
     }
 
-    std::unique_ptr<SurfcastClient> open(const std::string& location, double followSeconds) {
+    std::unique_ptr<SurfcastClient> open(const std::string& location, double followSeconds, ColorBy by = ColorBy::Auto) {
         ClientOptions options;
         options.followSeconds = followSeconds;
+        options.coloring.by = by;
         options.lod.targetPixels = 1;
         auto client = SurfcastClient::open(*context_, location, options);
         EXPECT_TRUE(client) << client.status().message();
@@ -95,8 +96,8 @@ protected:
     }
 
     // The image a fresh client converges to on `location`.
-    Image freshImage(const std::string& location, const Camera& camera) {
-        auto client = this->open(location, 0);
+    Image freshImage(const std::string& location, const Camera& camera, ColorBy by = ColorBy::Auto) {
+        auto client = this->open(location, 0, by);
         if (!client) return {};
         follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
         return image(*client);
@@ -107,8 +108,9 @@ protected:
     // Checks that no frame before the switch drew anything but the base
     // set's converged nodes, that the last image equals a fresh open's, and
     // that the follower fetched only changed nodes (hierarchies compared).
-    void expectFollowsTheAdd(const std::string& location) {
-        auto client = this->open(location, 0.2);
+    // `stats`: the follower's stream stats of the new version.
+    void expectFollowsTheAdd(const std::string& location, ColorBy by = ColorBy::Auto, StreamStats* stats = nullptr) {
+        auto client = this->open(location, 0.2, by);
         ASSERT_TRUE(client);
         const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
         auto before = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
@@ -150,7 +152,8 @@ protected:
         EXPECT_LE(s.bytesDownloaded, changedBytes);
         EXPECT_GT(s.adopted, 0u) << "unchanged nodes should come from the old version's blocks";
         EXPECT_EQ(s.failures, 0u) << s.lastError;
-        EXPECT_TRUE(same(image(*client), freshImage(set(), camera))) << "the followed image differs from a fresh open's";
+        EXPECT_TRUE(same(image(*client), freshImage(set(), camera, by))) << "the followed image differs from a fresh open's";
+        if (stats) *stats = s;
     }
 
 private:
@@ -158,7 +161,64 @@ private:
     static inline std::string contextError_;
 };
 
-TEST_F(FollowTest, AnAddedScanShowsFetchingOnlyTheChangedNodes) { expectFollowsTheAdd(set()); }
+TEST_F(FollowTest, AnAddedScanShowsFetchingOnlyTheChangedNodes) {
+    // Coloured by RGB, which the update leaves alone: the nodes that did
+    // not change are drawn from the old version's GPU copies, not decoded.
+    StreamStats s;
+    expectFollowsTheAdd(set(), ColorBy::Auto, &s);
+    EXPECT_GT(s.shared, 0u);
+}
+
+TEST_F(FollowTest, EqualDecodingKeysDecodeToEqualSurfels) {
+    // What lets a follower draw an old version's copy of a node for the new
+    // version (decodingKey): a node of the base set decoded under its
+    // tileset.json and under changed ones that an update may bring. Where
+    // the surfels differ, the keys must differ (else a follower would draw
+    // wrong surfels); where the change leaves the surfels alone, the keys
+    // should agree (else nothing is shared).
+    auto reader = TilesetReader::open(set());
+    ASSERT_TRUE(reader) << reader.status().message();
+    const NodeRecord* node = &reader->nodes()[0];
+    for (const NodeRecord& n : reader->nodes())
+        if (n.surfelCount > node->surfelCount) node = &n;
+    auto block = reader->readBlock(*node);
+    ASSERT_TRUE(block) << block.status().message();
+    auto surfels = [&](const TilesetInfo& info, const Coloring& coloring) {
+        SurfelSet s = emptySurfelSet(info, coloring);
+        appendNode(s, info, *node, *block);
+        std::string bytes(reinterpret_cast<const char*>(s.surfels.data()), s.surfels.size() * sizeof(s.surfels[0]));
+        return bytes;
+    };
+    const TilesetInfo base = reader->info();
+    struct Change {
+        const char* what;
+        std::function<void(TilesetInfo&)> apply;
+    };
+    const std::vector<Change> changes = {
+        {"intensity range", [](TilesetInfo& i) { i.statistics.intensityP98 += 100; }},
+        {"elevation range", [](TilesetInfo& i) { i.statistics.elevationMax += 10; }},
+        {"bounds (the origin)", [](TilesetInfo& i) { i.bounds.max.x += 10; }},
+        {"class counts", [](TilesetInfo& i) { i.statistics.classCounts.push_back({40, 1000}); }},
+    };
+    size_t agreed = 0, differed = 0;
+    for (ColorBy by : {ColorBy::Rgb, ColorBy::Intensity, ColorBy::Elevation, ColorBy::Classification}) {
+        Coloring coloring;
+        coloring.by = by;
+        for (const Change& c : changes) {
+            TilesetInfo changed = base;
+            c.apply(changed);
+            const bool sameSurfels = surfels(base, coloring) == surfels(changed, coloring);
+            const bool sameKey = decodingKey(base, coloring) == decodingKey(changed, coloring);
+            EXPECT_EQ(sameKey, sameSurfels) << colorByName(by) << ", " << c.what;
+            (sameSurfels ? agreed : differed) += 1;
+        }
+        Coloring hidden = coloring;
+        hidden.hidden[2] = true;
+        EXPECT_NE(decodingKey(base, coloring), decodingKey(base, hidden)) << "hidden classes";
+    }
+    EXPECT_GT(agreed, 0u);
+    EXPECT_GT(differed, 0u);
+}
 
 TEST_F(FollowTest, StaticHostAndServerArePolledWithETags) {
     // nginx serves the sets' folder as static files, surfcast-serve the

@@ -199,6 +199,7 @@ int runHeadlessLod(const ViewOptions& o) {
                     line["version"] = cf.version;
                     line["loading_version"] = cf.loadingVersion;
                     line["adopted"] = cf.stream.adopted;
+                    line["shared"] = cf.stream.shared;
                     line["next_bytes_downloaded"] = cf.next.bytesDownloaded;
                     if (!cf.followError.empty()) line["follow_error"] = cf.followError;
                 }

@@ -39,7 +39,7 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
         return Status::error("the GPU surfel pool is full: " + std::to_string(pagesNeeded) + " pages needed, " +
                              std::to_string(freePages()) + " of " + std::to_string(pageCount_) + " free");
     if (bytes == 0) {
-        for (const auto& [index, set] : nodes) nodes_[index] = {};
+        for (const auto& [index, set] : nodes) nodes_[index] = std::make_shared<const Node>();
         return {};
     }
     if (staging_.size < bytes) {
@@ -64,7 +64,7 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
             copies.push_back({at + done * sizeof(GpuSurfel), page * kPageBytes, size});
         }
         at += node.surfels * sizeof(GpuSurfel);
-        nodes_[index] = std::move(node);
+        nodes_[index] = std::make_shared<const Node>(std::move(node));
     }
     return gpu::submitAndWait(ctx_, [&](VkCommandBuffer cmd) {
         // Frames submitted earlier may still read pages freed since: their
@@ -78,10 +78,17 @@ Status SurfelPool::upload(const std::vector<std::pair<uint32_t, const SurfelSet*
     });
 }
 
+bool SurfelPool::share(uint32_t node, uint32_t from) {
+    auto it = nodes_.find(from);
+    if (it == nodes_.end() || nodes_.count(node)) return false;
+    nodes_[node] = it->second;
+    return true;
+}
+
 void SurfelPool::release(uint32_t index) {
     auto it = nodes_.find(index);
     if (it == nodes_.end()) return;
-    free_.insert(it->second.pages.begin(), it->second.pages.end());
+    if (it->second.use_count() == 1) free_.insert(it->second->pages.begin(), it->second->pages.end());
     nodes_.erase(it);
 }
 
@@ -90,7 +97,7 @@ std::vector<DrawRange> SurfelPool::ranges(const std::vector<uint32_t>& indices) 
     for (uint32_t index : indices) {
         auto it = nodes_.find(index);
         if (it == nodes_.end()) continue;
-        const Node& n = it->second;
+        const Node& n = *it->second;
         for (size_t k = 0; k < n.pages.size(); ++k) {
             uint32_t first = n.pages[k] * kPageSurfels;
             uint32_t count = std::min<uint32_t>(kPageSurfels, n.surfels - uint32_t(k) * kPageSurfels);

@@ -36,6 +36,10 @@ public:
     // Copies each node's surfels into free pages and waits for the copy.
     // Fails, uploading nothing, when the pool cannot hold them.
     Status upload(const std::vector<std::pair<uint32_t, const SurfelSet*>>& nodes);
+    // `node` draws `from`'s pages too (a follower's node that two versions
+    // share); false where `from` is not here or `node` is. A page is free
+    // once every node that draws it is released.
+    bool share(uint32_t node, uint32_t from);
     void release(uint32_t node);
     bool contains(uint32_t node) const { return nodes_.count(node) != 0; }
     // The draw ranges of these nodes, in order.
@@ -55,7 +59,7 @@ private:
     gpu::Buffer buffer_, staging_;
     size_t pageCount_ = 0;
     std::set<uint32_t> free_;  // lowest first: loads tend to take adjacent pages
-    std::unordered_map<uint32_t, Node> nodes_;
+    std::unordered_map<uint32_t, std::shared_ptr<const Node>> nodes_;
 };
 
 }  // namespace surfcast

@@ -127,6 +127,33 @@ SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring) {
     return set;
 }
 
+std::string decodingKey(const TilesetInfo& info, const Coloring& coloring) {
+    const SurfelSet set = emptySurfelSet(info, coloring);
+    std::string key;
+    auto add = [&](double v) { key.append(reinterpret_cast<const char*>(&v), sizeof v); };
+    for (double v : {set.origin.x, set.origin.y, set.origin.z, info.rootMin.x, info.rootMin.y, info.rootMin.z, info.rootEdge,
+                     double(info.colorBits), double(set.coloring.by)})
+        add(v);
+    for (bool hidden : set.coloring.hidden) key += hidden ? '1' : '0';
+    if (set.coloring.by == ColorBy::Intensity) {
+        const AttributeInfo* intensity = info.attribute("intensity");
+        for (double v : {intensity ? intensity->scale : 0, intensity ? intensity->offset : 0, info.statistics.intensityP2,
+                         info.statistics.intensityP98})
+            add(v);
+    }
+    if (set.coloring.by == ColorBy::Elevation) {
+        add(info.statistics.elevationMin);
+        add(info.statistics.elevationMax);
+    }
+    return key;
+}
+
+bool sameDecoding(const NodeRecord& a, const NodeRecord& b) {
+    return a.key == b.key && a.blockCrc == b.blockCrc && a.blockSize == b.blockSize && a.surfelCount == b.surfelCount &&
+           a.spacing == b.spacing && a.positionBits == b.positionBits &&
+           ((a.flags ^ b.flags) & (kFlagHasRadius | kFlagEdgeWeights)) == 0;
+}
+
 void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& b) {
     const int colorBits = info.colorBits;
     const float colorScale = colorBits > 0 ? 1.f / float((1u << colorBits) - 1) : 0.f;

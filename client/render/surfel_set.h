@@ -49,6 +49,15 @@ Result<SurfelSet> loadSurfelSet(const std::string& tilesetDir, const LevelChoice
 // it first with resolveColorBy).
 SurfelSet emptySurfelSet(const TilesetInfo& info, const Coloring& coloring = {});
 void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node, const BlockData& block);
+// What appendNode's surfels depend on besides the node's record and block:
+// two versions of a set with equal keys decode a node with equal records and
+// blocks to the same surfels (a follower then draws the old copy:
+// surfcast_client.h). The origin, the root cube, the colour bits and the
+// colouring with what it reads (the intensity's scale and 2-98 % range, the
+// elevation range).
+std::string decodingKey(const TilesetInfo& info, const Coloring& coloring);
+// The record fields appendNode and the block's decoding read, equal.
+bool sameDecoding(const NodeRecord& a, const NodeRecord& b);
 
 // Append one surfel given in world coordinates (origin must be set first).
 // Colour components and opacity in [0, 1]; an opacity under 1 marks the set

@@ -33,6 +33,7 @@ Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& loca
     if (!info) return info.status();
     s->tilesetJson_ = std::move(*json);
     s->info_ = *info;
+    s->decodingKey_ = decodingKey(s->info_, s->options_.coloring);
     s->source_->setBlocksLayout(BlocksLayout(blocksPartsOf(s->info_)));
     // hierarchy.bin's header and page table, then page 0.
     const std::string what = location + "/" + s->info_.hierarchyFile;
@@ -193,6 +194,7 @@ void StreamingSet::setColoring(const Coloring& coloring) {
     {
         std::lock_guard lock(mutex_);
         options_.coloring = coloring;
+        decodingKey_ = decodingKey(info_, coloring);
         ++coloringVersion_;
         // Recolour jobs still queued are superseded by the ones queued here;
         // those being fetched or decoded are dropped when they finish.
@@ -282,14 +284,26 @@ void StreamingSet::adopt(const StreamingSet* donor) {
     donor_ = donor;
 }
 
-StreamingSet::Block StreamingSet::keptBlock(const NodeRecord& record) const {
+std::optional<StreamingSet::Kept> StreamingSet::kept(const NodeRecord& record, const std::string& key) const {
     std::lock_guard lock(mutex_);
     const std::optional<uint32_t> index = selector_->find(record.key);
-    if (!index) return nullptr;
+    if (!index) return std::nullopt;
     const NodeRecord& mine = nodes()[*index];
-    if (mine.blockCrc != record.blockCrc || mine.blockSize != record.blockSize) return nullptr;
+    if (mine.blockCrc != record.blockCrc || mine.blockSize != record.blockSize) return std::nullopt;
     auto it = kept_.find(*index);
-    return it == kept_.end() ? nullptr : it->second;
+    if (it == kept_.end()) return std::nullopt;
+    // Resident: handed over in an earlier update(), and not being recoloured.
+    const bool drawn = resident_.count(*index) && recolors_ == 0 && sameDecoding(mine, record) && key == decodingKey_;
+    return Kept{*index, it->second, drawn};
+}
+
+void StreamingSet::forget(uint32_t index) {
+    std::lock_guard lock(mutex_);
+    auto it = resident_.find(index);
+    if (it == resident_.end()) return;
+    residentBytes_ -= it->second.bytes;
+    resident_.erase(it);
+    unkeep(index);
 }
 
 void StreamingSet::keep(uint32_t node, Block bytes) {
@@ -439,10 +453,18 @@ void StreamingSet::fetchLoop() {
             wanted_.erase(wanted_.begin() + long(k));
             pending_[candidate] = 1;
             pendingBytes_ += cost;
-            if (Block kept = donor_ ? donor_->keptBlock(nodes()[candidate]) : nullptr) {
-                fetched_.push_back({candidate, std::move(kept), false, false, true});
+            if (auto had = donor_ ? donor_->kept(nodes()[candidate], decodingKey_) : std::nullopt) {
                 ++stats_.adopted;
-                ++adopted;
+                if (!had->sameSurfels) {
+                    fetched_.push_back({candidate, std::move(had->block), false, false, true});
+                    ++adopted;
+                    continue;
+                }
+                ++stats_.shared;
+                keep(candidate, std::move(had->block));  // as a decoded node's (recolouring)
+                pending_.erase(candidate);
+                failed_.erase(candidate);
+                arrived_.push_back({candidate, nullptr, had->index});
                 continue;
             }
             batch.push_back(nodes()[candidate]);

@@ -32,7 +32,10 @@
 //
 // A newer version of the set (a follower's: surfcast_client.h) streams as a
 // set of its own that adopts the older one's kept blocks: a node with the
-// same key, block CRC and size is decoded from them, not fetched.
+// same key, block CRC and size is decoded from them, not fetched; where
+// decoding would give the very surfels the older one has resident (equal
+// records and decodingKey), it arrives as that node's (ArrivedNode::sameAs),
+// not decoded at all.
 #pragma once
 
 #include <condition_variable>
@@ -80,7 +83,8 @@ struct StreamStats {
     size_t residentBytes = 0;  // inFlight: nodes being fetched or decoded
     size_t keptBytes = 0;      // compressed blocks kept for recolouring (at most keptBudget after an update)
     size_t refetched = 0;      // blocks fetched again to recolour nodes whose kept blocks had gone
-    size_t adopted = 0;        // nodes decoded from an older version's kept blocks (adopt()), not fetched
+    size_t adopted = 0;        // nodes an older version had (adopt()), not fetched: decoded from its kept block, or
+    size_t shared = 0;         // drawn as it draws them (ArrivedNode::sameAs), not decoded
     size_t recoloring = 0;     // resident nodes still to be re-decoded for the latest setColoring
     double fetchMs = 0, decodeMs = 0;  // of the last request and the last block
     std::string lastError;
@@ -100,6 +104,10 @@ struct StreamStats {
 struct ArrivedNode {
     uint32_t index;
     std::shared_ptr<const SurfelSet> surfels;
+    // Null surfels: the donor's node of this index (adopt()) as it has them
+    // resident, which the consumer draws for this one too; or, where it has
+    // let that go since, hands back with forget().
+    std::optional<uint32_t> sameAs = std::nullopt;
 };
 
 struct StreamUpdate {
@@ -138,14 +146,23 @@ public:
     const std::vector<uint8_t>& tilesetJson() const { return tilesetJson_; }
 
     using Block = std::shared_ptr<const std::vector<uint8_t>>;
-    // Decode the nodes `donor` (another version of this set) holds unchanged
-    // from its kept blocks rather than fetch them; nullptr: no longer. The
-    // donor must outlive this call's effect: call adopt(nullptr) before
-    // destroying it.
+    // Take the nodes `donor` (another version of this set) holds unchanged
+    // from it rather than fetch them; nullptr: no longer. The donor must
+    // outlive this call's effect: call adopt(nullptr) before destroying it.
     void adopt(const StreamingSet* donor);
-    // The kept block of this set's node with the record's key, if its block
-    // has the record's CRC and size; else null. Thread-safe.
-    Block keptBlock(const NodeRecord& record) const;
+    // This set's node with the record's key, where its block has the
+    // record's CRC and size and is kept: its index, the block, and whether
+    // it is resident with the very surfels a set of decoding key `key`
+    // would decode for the record (sameDecoding). Thread-safe.
+    struct Kept {
+        uint32_t index;
+        Block block;
+        bool sameSurfels;
+    };
+    std::optional<Kept> kept(const NodeRecord& record, const std::string& key) const;
+    // A node handed over as sameAs whose donor copy the consumer no longer
+    // has: no longer resident, so that a later update() asks for it again.
+    void forget(uint32_t index);
 
 private:
     StreamingSet() = default;
@@ -226,6 +243,7 @@ private:
     double permanentAt_ = 0;
     bool stopping_ = false;
     const StreamingSet* donor_ = nullptr;  // adopt()
+    std::string decodingKey_;              // of info_ and the colouring (surfel_set.h)
     std::vector<std::thread> fetchers_, decoders_;
 };
 

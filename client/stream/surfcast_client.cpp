@@ -66,17 +66,27 @@ Status SurfcastClient::setColoring(const Coloring& coloring) {
     return {};
 }
 
-Status SurfcastClient::apply(int slot, const StreamUpdate& u) {
+Status SurfcastClient::apply(int slot, StreamingSet& stream, StreamUpdate& u) {
     for (uint32_t i : u.evicted) {
         pool_->release(poolId(slot, i));
         inPool_[slot].erase(poolId(slot, i));
     }
     std::vector<std::pair<uint32_t, const SurfelSet*>> uploads;
+    std::vector<uint32_t> forgotten;
     for (const ArrivedNode& a : u.arrived) {
         pool_->release(poolId(slot, a.index));  // a recoloured node replaces its old surfels
+        if (!a.surfels) {  // the other version's copy, unless it went since (asked for again)
+            if (a.sameAs && pool_->share(poolId(slot, a.index), poolId(1 - slot, *a.sameAs))) inPool_[slot].insert(poolId(slot, a.index));
+            else forgotten.push_back(a.index);
+            continue;
+        }
         uploads.push_back({poolId(slot, a.index), a.surfels.get()});
         inPool_[slot].insert(poolId(slot, a.index));
     }
+    for (uint32_t i : forgotten) stream.forget(i);
+    // Not drawn this frame (it is not resident any more), and wanted again.
+    std::erase_if(u.draw, [&](const SelectedNode& s) { return std::find(forgotten.begin(), forgotten.end(), s.index) != forgotten.end(); });
+    if (!forgotten.empty()) u.converged = false;
     return pool_->upload(uploads);
 }
 
@@ -104,11 +114,11 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
         }
     }
     StreamUpdate u = stream_->update(camera, width, height, options_.lod);
-    SC_TRY(apply(slot_, u));
+    SC_TRY(apply(slot_, *stream_, u));
     size_t uploaded = u.arrived.size(), evicted = u.evicted.size();
     if (next_) {
         StreamUpdate n = next_->update(camera, width, height, options_.lod);
-        SC_TRY(apply(1 - slot_, n));
+        SC_TRY(apply(1 - slot_, *next_, n));
         uploaded += n.arrived.size();
         evicted += n.evicted.size();
         const StreamStats shown = stream_->stats(), loading = next_->stats();

@@ -112,8 +112,9 @@ public:
 
 private:
     SurfcastClient() = default;
-    // Applies a stream's evictions and arrivals to the pool, as slot `slot`'s.
-    Status apply(int slot, const StreamUpdate& u);
+    // Applies a stream's evictions and arrivals to the pool, as slot `slot`'s
+    // (a node arriving as the other slot's shares its pages).
+    Status apply(int slot, StreamingSet& stream, StreamUpdate& u);
     void switchVersion();  // to next_, freeing the version drawn
     std::unique_ptr<StreamingSet> stream_;  // the version drawn; destroyed after next_, which may adopt from it
     std::unique_ptr<VersionWatcher> watcher_;
