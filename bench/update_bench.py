@@ -250,9 +250,12 @@ def follow_update(a, base_set, added):
         threading.Thread(target=lambda: [lines.put((time.monotonic(), json.loads(l))) for l in follower.stdout],
                          daemon=True).start()
 
+        log = open(os.path.join(a.work, "follow.jsonl"), "w")
+
         def until(done):
             while True:
                 t, line = lines.get(timeout=600)
+                log.write(json.dumps(line) + "\n")
                 if done(line):
                     return t, line
         until(lambda l: l["converged"])
@@ -277,7 +280,7 @@ def follow_update(a, base_set, added):
     print(f"| its end to the follower's converged frame of the new version | {t_seen - switched:.2f} s "
           f"(polling every {a.follow} s) |")
     print(f"| blocks the follower fetched for the new version | {seen['bytes_downloaded']:,} "
-          f"({seen['adopted']:,} nodes decoded from the old version's blocks) |")
+          f"({seen['adopted']:,} nodes taken from the old version, {seen['shared']:,} of them drawn from its GPU copies) |")
     print(f"| blocks of every node the update changed | {changed:,} |")
     print(f"| blocks a fresh open of the new version fetches for the same view | {fresh['bytes_downloaded']:,} |")
     print(f"| the follower's last image is a fresh open's, byte for byte | {'yes' if same else 'no'} |")

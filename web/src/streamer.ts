@@ -15,7 +15,9 @@
 // beyond it the least recently used nodes' blocks go, and a recolour fetches
 // those again (as the C++ stream does). A newer version of the set (a
 // follower's: viewer.ts) adopts an older one's kept blocks: a node with the
-// same key, block CRC and size is decoded from them, not fetched.
+// same key, block CRC and size is decoded from them, not fetched; where
+// decoding would give the surfels the older one has resident (equal records
+// and decodingKey), their GPU copy is shared (Uploader.retain), not decoded.
 
 import type { Camera } from "./camera.js";
 import type { ColoringSpec, DecodeJob, DecodeResult, PickedSurfel } from "./block_decode.js";
@@ -52,10 +54,13 @@ export interface Resident<T> {
   block: Uint8Array | null; // compressed, as fetched: recolor() decodes it again (null: gone, beyond keptBudget)
 }
 
-// What the GPU side does with arriving and evicted nodes.
+// What the GPU side does with arriving and evicted nodes. A copy a second
+// version's node shares (retain) is freed once released as often as retained
+// and uploaded.
 export interface Uploader<T> {
   upload(surfels: ArrayBuffer): T;
   release(gpu: T): void;
+  retain?(gpu: T): void;
 }
 
 async function withRetries<R>(tries: number, attempt: () => Promise<R>, stopped: () => boolean): Promise<R> {
@@ -121,7 +126,8 @@ export interface StreamStats {
   residentBytes: number;
   keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within keptBudget)
   refetched: number; // blocks fetched again to recolour nodes whose kept blocks had gone
-  adopted: number; // nodes decoded from an older version's kept blocks (adopt()), not fetched
+  adopted: number; // nodes an older version had (adopt()), not fetched: decoded from its kept block, or
+  shared: number; // drawn from its GPU copy (Uploader.retain), not decoded
   evictions: number;
   failures: number;
   lastError: string;
@@ -148,7 +154,7 @@ export class Streamer<T> {
   private donor: Streamer<T> | null = null;
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
-                                  residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, evictions: 0, failures: 0, lastError: "",
+                                  residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, shared: 0, evictions: 0, failures: 0, lastError: "",
                                   gaveUp: false };
   onChange: () => void = () => {};
 
@@ -193,26 +199,47 @@ export class Streamer<T> {
   adopt(donor: Streamer<T> | null) {
     this.donor = donor;
   }
-  // The kept block of this set's node with the record's key, if its block
-  // has the record's CRC and size; else null.
-  keptBlock(n: NodeRecord): Uint8Array | null {
+  // What decoding a node gives besides its record and block: the origin,
+  // the root cube, the colour bits, the attributes and the colouring with
+  // what it reads (the C++ client's decodingKey, surfel_set.h).
+  get decodingKey(): string {
+    const i = this.info, c = this.coloring;
+    const reads = c.by === "intensity" ? [c.intensityScale, c.intensityOffset, c.intensityP2, c.intensityP98]
+      : c.by === "elevation" ? [c.originZ, c.elevationMin, c.elevationMax] : [];
+    return JSON.stringify([this.origin, i.rootMin, i.rootEdge, i.colorBits, i.weights, this.extra, c.by, c.hiddenClasses, reads]);
+  }
+  // This set's resident node with the record's key, if its block has the
+  // record's CRC and size and is kept: the block, and the GPU copy where it
+  // holds the surfels a set of decoding key `key` decodes for the record.
+  kept(n: NodeRecord, key: string): { block: Uint8Array; resident: Resident<T> | null } | null {
     const i = this.selector.find(n.key);
     if (i === undefined) return null;
-    const mine = this.selector.nodes[i];
-    if (mine.blockCrc !== n.blockCrc || mine.blockSize !== n.blockSize) return null;
-    return this.resident.get(i)?.block ?? null;
+    const mine = this.selector.nodes[i], r = this.resident.get(i);
+    if (mine.blockCrc !== n.blockCrc || mine.blockSize !== n.blockSize || !r?.block) return null;
+    const decoding = kFlagHasRadius | kFlagEdgeWeights;
+    const same = this.recoloring.size === 0 && key === this.decodingKey && mine.surfelCount === n.surfelCount &&
+      mine.spacing === n.spacing && mine.positionBits === n.positionBits && ((mine.flags ^ n.flags) & decoding) === 0;
+    return { block: r.block, resident: same ? r : null };
   }
-  // The wanted nodes the donor holds unchanged go to the decoders at once;
-  // the rest are to be fetched.
+  // The wanted nodes the donor holds unchanged: their GPU copies shared, or
+  // their kept blocks decoded at once; the rest are to be fetched.
   private adoptKept(wanted: number[]): number[] {
-    const donor = this.donor;
+    const donor = this.donor, retain = this.uploader.retain?.bind(this.uploader);
     if (!donor) return wanted;
+    const key = this.decodingKey;
     return wanted.filter((i) => {
-      const block = donor.keptBlock(this.selector.nodes[i]);
-      if (!block) return true;
-      this.inFlight.add(i);
+      const had = donor.kept(this.selector.nodes[i], key);
+      if (!had) return true;
       ++this.stats.adopted;
-      this.decodeNode(i, block, false, false, true).catch((e) => this.noteFailure(i, e as Error));
+      if (had.resident && retain) {
+        retain(had.resident.gpu);
+        this.resident.set(i, { gpu: had.resident.gpu, count: had.resident.count, lastUsed: this.clock, block: had.block });
+        ++this.stats.shared;
+        this.onChange();
+        return false;
+      }
+      this.inFlight.add(i);
+      this.decodeNode(i, had.block, false, false, true).catch((e) => this.noteFailure(i, e as Error));
       return false;
     });
   }

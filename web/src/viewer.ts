@@ -88,7 +88,8 @@ export interface ViewerState {
   residentBytes: number; // the resident nodes' surfels, 32 bytes each in whole granules (lod_selection.ts)
   keptBytes: number; // the resident nodes' compressed blocks, kept for recolouring (within blockCacheMiB)
   refetched: number; // blocks fetched again for a recolouring (their kept copies had gone)
-  adopted: number; // nodes of the version drawn decoded from the previous version's blocks, not fetched
+  adopted: number; // nodes of the version drawn taken from the previous version, not fetched:
+  shared: number; // of those, drawn from its GPU copies (the rest decoded from its kept blocks)
   evictions: number;
   inFlight: number; // requests under way
   frames: number;
@@ -170,21 +171,23 @@ export class SurfcastViewer extends EventTarget {
     if (!((options.gpuBudgetMiB ?? 1) >= 1) || !((options.blockCacheMiB ?? 0) >= 0))
       throw new Error("gpuBudgetMiB is at least 1 and blockCacheMiB at least 0");
     const renderer = new SplatRenderer(canvas, { forbidFloatBlend: options.forbidFloatBlend, shared: options.loop === false });
+    const uploads = new SharedUploads(renderer);
     const source = new TileSource(setUrl, { token: options.token });
     let colorBy = options.colorBy ?? "auto";
     const hidden = [...(options.hiddenClasses ?? [])];
     if (!((options.follow ?? 0) >= 0)) throw new Error("follow is a number of seconds, at least 0");
-    const streamer = await Streamer.open(source, renderer, options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
+    const streamer = await Streamer.open(source, uploads, options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
       (info, origin) => {
         const by = resolveColorBy(colorBy, info);
         if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
         colorBy = by as ColorBy;
         return coloringFor(info, origin, colorBy, hidden);
       }, streamOptions(options));
-    return new SurfcastViewer(canvas, renderer, source, streamer, colorBy, hidden, setUrl, options);
+    return new SurfcastViewer(canvas, renderer, uploads, source, streamer, colorBy, hidden, setUrl, options);
   }
 
-  private constructor(readonly canvas: HTMLCanvasElement, private renderer: SplatRenderer, private source: TileSource,
+  private constructor(readonly canvas: HTMLCanvasElement, private renderer: SplatRenderer, private uploads: SharedUploads,
+                      private source: TileSource,
                       private streamer: Streamer<DrawnNode>, colorBy: ColorBy, hidden: number[], private setUrl: string,
                       private options: ViewerOptions) {
     super();
@@ -238,7 +241,7 @@ export class SurfcastViewer extends EventTarget {
       if (text !== null) this.latest = text;
       if (this.latest !== this.streamer.json && !this.next && !this.opening && !this.disposed) {
         this.opening = true;
-        const next = await Streamer.open(new TileSource(this.setUrl, { token: this.options.token }), this.renderer,
+        const next = await Streamer.open(new TileSource(this.setUrl, { token: this.options.token }), this.uploads,
           this.options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
           (info, origin) => coloringFor(info, origin, this.colorMode, this.hidden), streamOptions(this.options));
         if (this.disposed) next.close();
@@ -496,7 +499,7 @@ export class SurfcastViewer extends EventTarget {
     const done = converged(streamer, lod) && !this.next;
     if (st.gaveUp && !this.next) this.error(st.lastError);
     Object.assign(this.state, { bytes: st.bytes, requests: st.requests, resident: st.resident, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
-                                refetched: st.refetched, adopted: st.adopted, evictions: st.evictions, inFlight: st.inFlight,
+                                refetched: st.refetched, adopted: st.adopted, shared: st.shared, evictions: st.evictions, inFlight: st.inFlight,
                                 loadingVersion: this.next !== null });
     return { gpu, indices, splats, converged: done, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
   }
@@ -568,6 +571,29 @@ export class SurfcastViewer extends EventTarget {
   }
 }
 
+// The renderer's node copies, each freed once released as often as uploaded
+// and retained: a following viewer's two versions share the unchanged ones.
+class SharedUploads {
+  private refs = new Map<DrawnNode, number>();
+  constructor(private renderer: SplatRenderer) {}
+  upload(surfels: ArrayBuffer): DrawnNode {
+    const node = this.renderer.upload(surfels);
+    this.refs.set(node, 1);
+    return node;
+  }
+  retain(node: DrawnNode) {
+    this.refs.set(node, (this.refs.get(node) ?? 0) + 1);
+  }
+  release(node: DrawnNode) {
+    const left = (this.refs.get(node) ?? 1) - 1;
+    if (left > 0) this.refs.set(node, left);
+    else {
+      this.refs.delete(node);
+      this.renderer.release(node);
+    }
+  }
+}
+
 // Nothing the view needs is missing from `streamer` or on its way.
 function converged(streamer: Streamer<DrawnNode>, lod: ReturnType<typeof emptyStats>): boolean {
   const st = streamer.stats;
@@ -615,7 +641,7 @@ export const formatBox = (b: Box) => [...b.min, ...b.max].join(",");
 // A viewer's state before anything is drawn.
 export function emptyViewerState(): ViewerState {
   return { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
-           firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, evictions: 0,
+           firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, shared: 0, evictions: 0,
            inFlight: 0, frames: 0, frameMs: 0, camera: "", version: 0, loadingVersion: false, followError: "" };
 }
 

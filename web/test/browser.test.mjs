@@ -851,9 +851,12 @@ describe("browser viewer", { skip }, () => {
     }
     let total = 0;
     for (const r of (await nodeRecords(set)).values()) total += r.blockSize;
-    t.diagnostic(`changed ${changed} of ${total} bytes; adopted ${after.adopted} nodes`);
+    t.diagnostic(`changed ${changed} of ${total} bytes; adopted ${after.adopted} nodes, ${after.shared} of them shared`);
     assert.ok(changed > 0 && changed < total);
     assert.ok(after.adopted > 0, "nodes the update kept come from the version drawn before");
+    // Coloured by elevation, whose range the column leaves as it was: the
+    // unchanged nodes are drawn from their GPU copies, not decoded again.
+    assert.ok(after.shared > 0, "unchanged nodes share the GPU copies of the version drawn before");
     assert.ok(after.bytes <= 2 * changed, `${after.bytes} bytes fetched for ${changed} bytes of changed nodes`);
     await page.evaluate(() => document.body.classList.add("capture"));
     const png = PNG.sync.read(await page.screenshot({ type: "png" }));
