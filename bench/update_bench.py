@@ -277,8 +277,10 @@ def follow_update(a, base_set, added):
     print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
     print("| | seconds / bytes |\n|---|---|")
     print(f"| the update (--add, in place) | {t_update:.1f} s |")
-    print(f"| its end to the follower's converged frame of the new version | {t_seen - switched:.2f} s "
+    render = seen["gpu_ms"] / 1e3
+    print(f"| its end to the follower's switch to the new version, converged | {t_seen - switched - render:.2f} s "
           f"(polling every {a.follow} s) |")
+    print(f"| the same to that frame's image (lavapipe's render of it: {render:.2f} s) | {t_seen - switched:.2f} s |")
     print(f"| blocks the follower fetched for the new version | {seen['bytes_downloaded']:,} "
           f"({seen['adopted']:,} nodes taken from the old version, {seen['shared']:,} of them drawn from its GPU copies) |")
     print(f"| blocks of every node the update changed | {changed:,} |")

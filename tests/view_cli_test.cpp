@@ -146,6 +146,8 @@ TEST_F(ViewCli, BadArgumentsAndInputsGiveClearErrors) {
         {{"--headless", set(), "--clip", "0,0,0,1,1"}, 2, "six numbers"},
         {{"--headless", set(), "--clip", "0,0,0,1,nan,1"}, 2, "'nan' is not a number"},
         {{"--headless", set(), "--clip", "0,2,0,1,1,1"}, 2, "maximum on axis y"},
+        {{"--headless", set(), "--follow", "2"}, 2, "it needs --lod"},
+        {{"--headless", set(), "--lod", "1", "--follow", "0"}, 2, "--follow wants a positive number"},
     };
     for (const auto& c : cases) {
         std::vector<std::string> args = {binary("surfcast-view")};

@@ -133,12 +133,12 @@ int runHeadlessLod(const ViewOptions& o) {
             // Progressive: draw what is resident, until nothing more is wanted
             // for this view (converged) or --max-wait runs out. Following, the
             // last frame goes on until --max-wait, drawing and printing only
-            // where the nodes drawn changed (not for a version loading beside).
+            // where other nodes or another version are drawn (not for a
+            // version loading beside: the image is the same).
             const double frameStart = seconds();
             const bool following = o.client.followSeconds > 0 && f + 1 == cameras.size();
             size_t shownVersion = 0;
             uint32_t shownNodes = 0;
-            bool wasConverged = false;
             Image image;
             for (int iteration = 0; status == 0; ++iteration) {
                 const double updateStart = seconds();
@@ -146,11 +146,9 @@ int runHeadlessLod(const ViewOptions& o) {
                 const double updateMs = (seconds() - updateStart) * 1e3;
                 bool timedOut = seconds() - frameStart > o.maxWait;
                 if (frame && following) {
-                    const bool changed = iteration == 0 || frame->nodesCrc != shownNodes || frame->version != shownVersion ||
-                                         frame->converged != wasConverged || timedOut;
+                    const bool changed = iteration == 0 || frame->nodesCrc != shownNodes || frame->version != shownVersion || timedOut;
                     shownVersion = frame->version;
                     shownNodes = frame->nodesCrc;
-                    wasConverged = frame->converged;
                     if (!changed) {
                         std::this_thread::sleep_for(std::chrono::milliseconds(kStreamPollMs));
                         continue;
