@@ -239,6 +239,7 @@ private:
         bool redirected = false;  // pointed at a redirect's target, to run again
         bool withoutCredentials = false;  // a redirect left the user's headers behind
         bool moved = false;               // answered at a redirect's target
+        curl_slist* headers = nullptr;    // the request's own (the source's, or with If-None-Match)
     };
 
     // One GET of `name` (of byte range `range`, if not empty), or POST of
@@ -408,6 +409,7 @@ private:
                 requestHeaders = list;
             }
             curl_easy_setopt(h, CURLOPT_HTTPHEADER, requestHeaders);
+            transfers[i].headers = requestHeaders;
             curl_easy_setopt(h, CURLOPT_WRITEDATA, &sinks[i]);
             curl_easy_setopt(h, CURLOPT_ERRORBUFFER, errors[i].data());
             curl_easy_setopt(h, CURLOPT_RANGE, q.range.empty() ? nullptr : q.range.c_str());
@@ -500,7 +502,7 @@ private:
         // A store's signature and keys never leave its endpoint, whatever
         // --redirect-credentials says.
         const bool credentials = to == origin_ || (options_.redirectCredentials && !store_);
-        curl_easy_setopt(h, CURLOPT_HTTPHEADER, credentials ? headers_ : nullptr);
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, credentials ? t.headers : nullptr);
         sign(h, credentials);
         t.withoutCredentials |= !credentials && (headers_ || (store_ && !store_->userpwd.empty()));
         t.redirected = true;

@@ -124,6 +124,7 @@ int runHeadlessLod(const ViewOptions& o) {
         auto client = SurfcastClient::open(*ctx, o.set, options);
         if (!client) status = viewError(client.status().message());
         RenderSettings settings = o.settings;
+        size_t settingsVersion = 0;  // the version `settings` are the defaults of (a follower switches)
         std::vector<Camera> cameras = o.cameras;
         if (client) {
             settings = effectiveSettings(o, client.value()->defaultSettings());
@@ -132,35 +133,47 @@ int runHeadlessLod(const ViewOptions& o) {
         for (size_t f = 0; f < cameras.size() && status == 0; ++f) {
             // Progressive: draw what is resident, until nothing more is wanted
             // for this view (converged) or --max-wait runs out. Following, the
-            // last frame goes on until --max-wait, drawing and printing only
-            // where other nodes or another version are drawn (not for a
-            // version loading beside: the image is the same).
+            // last frame goes on until --max-wait, printing a line where the
+            // state changes and drawing only where other nodes or another
+            // version are drawn (a version loading beside leaves the image).
             const double frameStart = seconds();
             const bool following = o.client.followSeconds > 0 && f + 1 == cameras.size();
             size_t shownVersion = 0;
             uint32_t shownNodes = 0;
+            bool shownConverged = false, shownLoading = false;
             Image image;
+            GpuFrameStats gpuStats;
             for (int iteration = 0; status == 0; ++iteration) {
                 const double updateStart = seconds();
                 auto frame = client.value()->update(cameras[f], o.width, o.height);
                 const double updateMs = (seconds() - updateStart) * 1e3;
                 bool timedOut = seconds() - frameStart > o.maxWait;
+                if (frame && frame->version != settingsVersion) {
+                    settings = effectiveSettings(o, client.value()->defaultSettings());
+                    settingsVersion = frame->version;
+                }
+                bool redraw = true;
                 if (frame && following) {
-                    const bool changed = iteration == 0 || frame->nodesCrc != shownNodes || frame->version != shownVersion || timedOut;
+                    redraw = iteration == 0 || frame->nodesCrc != shownNodes || frame->version != shownVersion;
+                    const bool changed = redraw || timedOut || frame->converged != shownConverged ||
+                                         frame->loadingVersion != shownLoading;
                     shownVersion = frame->version;
                     shownNodes = frame->nodesCrc;
+                    shownConverged = frame->converged;
+                    shownLoading = frame->loadingVersion;
                     if (!changed) {
                         std::this_thread::sleep_for(std::chrono::milliseconds(kStreamPollMs));
                         continue;
                     }
                 }
-                GpuFrameStats gpuStats;
-                auto rendered = frame ? client.value()->renderImage(settings, &gpuStats) : Result<Image>(frame.status());
-                if (!rendered) {
-                    status = viewError("frame " + std::to_string(f) + ": " + rendered.status().message());
-                    break;
+                if (redraw) {
+                    auto rendered = frame ? client.value()->renderImage(settings, &gpuStats) : Result<Image>(frame.status());
+                    if (!rendered) {
+                        status = viewError("frame " + std::to_string(f) + ": " + rendered.status().message());
+                        break;
+                    }
+                    image = std::move(*rendered);
                 }
-                image = std::move(*rendered);
                 const ClientFrame& cf = *frame;
                 nlohmann::ordered_json line;
                 line["frame"] = f;

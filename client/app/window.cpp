@@ -164,6 +164,7 @@ int runWindow(const ViewOptions& o, const SurfelSet& set, const TilesetInfo& set
         Coloring coloring = o.client.coloring;
         RenderSettings base = o.settings;
         Box3d bounds = set.bounds;
+        size_t shownVersion = 0;  // of a following client: `base` and `info` are its
         Status s = swapchain ? Status{} : swapchain.status();
         if (s && o.lod) {
             ClientOptions options = o.client;
@@ -242,6 +243,14 @@ int runWindow(const ViewOptions& o, const SurfelSet& set, const TilesetInfo& set
                 }
                 streamed = *fr;
                 converged = streamed.converged;
+                if (streamed.version != shownVersion) {  // a follower switched: the new version's defaults and keys
+                    shownVersion = streamed.version;
+                    base = effectiveSettings(o, client->defaultSettings());
+                    info = client->info();
+                    settings = base;
+                    settings.mode = state.mode;
+                    settings.shading = state.shading;
+                }
                 record = [&](VkCommandBuffer cmd) { client->record(cmd, settings); };
                 source = client->output().image;
             } else {

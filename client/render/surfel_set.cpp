@@ -135,6 +135,9 @@ std::string decodingKey(const TilesetInfo& info, const Coloring& coloring) {
                      double(info.colorBits), double(set.coloring.by)})
         add(v);
     for (bool hidden : set.coloring.hidden) key += hidden ? '1' : '0';
+    // What the block's decoding expects besides the record (blockExpectation).
+    key += info.weights + '\n';
+    for (const AttributeInfo& a : info.attributes) key += a.name + ',' + a.type + '\n';
     if (set.coloring.by == ColorBy::Intensity) {
         const AttributeInfo* intensity = info.attribute("intensity");
         for (double v : {intensity ? intensity->scale : 0, intensity ? intensity->offset : 0, info.statistics.intensityP2,

@@ -52,9 +52,9 @@ void appendNode(SurfelSet& set, const TilesetInfo& info, const NodeRecord& node,
 // What appendNode's surfels depend on besides the node's record and block:
 // two versions of a set with equal keys decode a node with equal records and
 // blocks to the same surfels (a follower then draws the old copy:
-// surfcast_client.h). The origin, the root cube, the colour bits and the
-// colouring with what it reads (the intensity's scale and 2-98 % range, the
-// elevation range).
+// surfcast_client.h). The origin, the root cube, the colour bits, the
+// weights and attributes a block holds, and the colouring with what it reads
+// (the intensity's scale and 2-98 % range, the elevation range).
 std::string decodingKey(const TilesetInfo& info, const Coloring& coloring);
 // The record fields appendNode and the block's decoding read, equal.
 bool sameDecoding(const NodeRecord& a, const NodeRecord& b);

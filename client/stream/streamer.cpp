@@ -21,12 +21,17 @@ constexpr size_t kMaxBatchNodes = 32;
 }  // namespace
 
 Result<std::unique_ptr<StreamingSet>> StreamingSet::open(const std::string& location, const StreamOptions& options) {
+    auto source = openTileSource(location, options.http);
+    if (!source) return source.status();
+    return open(std::shared_ptr<TileSource>(std::move(*source)), location, options);
+}
+
+Result<std::unique_ptr<StreamingSet>> StreamingSet::open(std::shared_ptr<TileSource> source, const std::string& location,
+                                                         const StreamOptions& options) {
     std::unique_ptr<StreamingSet> s(new StreamingSet);
     s->options_ = options;
     s->options_.granule = std::max<size_t>(1, options.granule);
-    auto source = openTileSource(location, options.http);
-    if (!source) return source.status();
-    s->source_ = std::move(*source);
+    s->source_ = std::move(source);
     auto json = s->source_->file("tileset.json", kMaxTilesetJsonBytes);
     if (!json) return json.status();
     auto info = readTilesetJson(std::string(json->begin(), json->end()), location + "/tileset.json");
@@ -209,7 +214,7 @@ void StreamingSet::setColoring(const Coloring& coloring) {
                 continue;
             }
             pending_[a.index] = 1;
-            fetched_.push_back({a.index, kept_.at(a.index)});
+            fetched_.push_back({a.index, kept_.at(a.index), false, false, a.sameAs.has_value()});
         }
         arrived_.clear();
         // Blocks that went are fetched again, most recently used last (the
@@ -280,8 +285,23 @@ bool StreamingSet::refetchForRecolor(std::unique_lock<std::mutex>& lock) {
 }
 
 void StreamingSet::adopt(const StreamingSet* donor) {
-    std::lock_guard lock(mutex_);
-    donor_ = donor;
+    {
+        std::lock_guard lock(mutex_);
+        donor_ = donor;
+        if (donor) return;
+        // Nodes not yet handed over as the donor's copies are decoded from
+        // their kept blocks instead: the donor's copies are going.
+        for (auto it = arrived_.begin(); it != arrived_.end();) {
+            if (it->surfels || resident_.count(it->index)) {
+                ++it;
+                continue;
+            }
+            pending_[it->index] = 1;
+            fetched_.push_back({it->index, kept_.at(it->index), false, false, true});
+            it = arrived_.erase(it);
+        }
+    }
+    wakeDecode_.notify_all();
 }
 
 std::optional<StreamingSet::Kept> StreamingSet::kept(const NodeRecord& record, const std::string& key) const {

@@ -122,6 +122,10 @@ struct StreamUpdate {
 class StreamingSet {
 public:
     static Result<std::unique_ptr<StreamingSet>> open(const std::string& location, const StreamOptions& options = {});
+    // The same through `source` (openTileSource(location)), which the caller
+    // may cancel() from another thread to end the opening at once.
+    static Result<std::unique_ptr<StreamingSet>> open(std::shared_ptr<TileSource> source, const std::string& location,
+                                                      const StreamOptions& options = {});
     ~StreamingSet();
 
     const TilesetInfo& info() const { return info_; }
@@ -190,7 +194,7 @@ private:
     // due; with mutex_ held (released while fetching).
     bool refetchForRecolor(std::unique_lock<std::mutex>& lock);
 
-    std::unique_ptr<TileSource> source_;
+    std::shared_ptr<TileSource> source_;
     std::vector<uint8_t> tilesetJson_;  // as opened
     TilesetInfo info_;
     StreamOptions options_;

@@ -90,6 +90,14 @@ Status SurfcastClient::apply(int slot, StreamingSet& stream, StreamUpdate& u) {
     return pool_->upload(uploads);
 }
 
+void SurfcastClient::dropNext(const std::string& why) {
+    for (uint32_t id : inPool_[1 - slot_]) pool_->release(id);
+    inPool_[1 - slot_].clear();
+    next_.reset();
+    watcher_->showing(stream_->tilesetJson());
+    nextError_ = why;
+}
+
 void SurfcastClient::switchVersion() {
     for (uint32_t id : inPool_[slot_]) pool_->release(id);
     inPool_[slot_].clear();
@@ -118,18 +126,16 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
     size_t uploaded = u.arrived.size(), evicted = u.evicted.size();
     if (next_) {
         StreamUpdate n = next_->update(camera, width, height, options_.lod);
-        SC_TRY(apply(1 - slot_, *next_, n));
+        const Status applied = apply(1 - slot_, *next_, n);
         uploaded += n.arrived.size();
         evicted += n.evicted.size();
-        const StreamStats shown = stream_->stats(), loading = next_->stats();
-        if (loading.gaveUp || loading.setChanged) {  // drawn as before; the watcher opens the newest again
-            for (uint32_t id : inPool_[1 - slot_]) pool_->release(id);
-            inPool_[1 - slot_].clear();
-            next_.reset();
-            watcher_->showing(stream_->tilesetJson());
-            nextError_ = loading.lastError;
-        } else if (n.converged || shown.gaveUp || shown.setChanged ||
-                   (!u.converged && steadySeconds() - nextSince_ > kMaxSwitchSeconds)) {
+        const StreamStats loading = next_->stats();
+        if (!applied.ok() || loading.gaveUp || loading.setChanged) {
+            // Drawn as before; the watcher opens the newest version again.
+            dropNext(applied.ok() ? loading.lastError : applied.message());
+        } else if (n.converged || (!u.converged && steadySeconds() - nextSince_ > kMaxSwitchSeconds)) {
+            // (A drawn version that stopped, a rebuild found after a fault,
+            // keeps its resident nodes until then.)
             switchVersion();
             u = std::move(n);
         }

@@ -116,6 +116,7 @@ private:
     // (a node arriving as the other slot's shares its pages).
     Status apply(int slot, StreamingSet& stream, StreamUpdate& u);
     void switchVersion();  // to next_, freeing the version drawn
+    void dropNext(const std::string& why);  // the version loading failed: drawn as before
     std::unique_ptr<StreamingSet> stream_;  // the version drawn; destroyed after next_, which may adopt from it
     std::unique_ptr<VersionWatcher> watcher_;
     // Following: the newer version loading, its pool slot is 1 - slot_; when

@@ -15,6 +15,8 @@ VersionWatcher::~VersionWatcher() {
     {
         std::lock_guard lock(mutex_);
         stopping_ = true;
+        for (const auto& source : {polling_, opening_})
+            if (source) source->cancel();
     }
     wake_.notify_all();
     thread_.join();
@@ -28,7 +30,6 @@ std::unique_ptr<StreamingSet> VersionWatcher::take() {
 void VersionWatcher::showing(std::vector<uint8_t> shown) {
     std::lock_guard lock(mutex_);
     shown_ = std::move(shown);
-    ready_.reset();
     reread_ = true;
 }
 
@@ -45,7 +46,7 @@ std::string VersionWatcher::lastError() const {
 void VersionWatcher::loop() {
     // A source of its own, so that polling leaves the shown stream's source
     // (and the version its batches ask for) alone.
-    std::unique_ptr<TileSource> source;
+    std::shared_ptr<TileSource> source;
     std::string tag;
     std::unique_lock lock(mutex_);
     while (!wake_.wait_for(lock, std::chrono::duration<double>(interval_), [&] { return stopping_; })) {
@@ -58,6 +59,10 @@ void VersionWatcher::loop() {
             auto s = openTileSource(location_, options_.http);
             if (s) source = std::move(*s);
             else status = s.status();
+            lock.lock();
+            polling_ = source;
+            if (stopping_ && source) source->cancel();
+            lock.unlock();
         }
         std::optional<std::vector<uint8_t>> changed;
         if (source) {
@@ -70,9 +75,22 @@ void VersionWatcher::loop() {
         lock.unlock();
         if (differs) {
             // The version opened is whatever tileset.json names by then.
-            auto s = StreamingSet::open(location_, options_);
-            if (s) opened = std::move(*s);
-            else status = s.status();
+            auto s = openTileSource(location_, options_.http);
+            if (s) {
+                std::shared_ptr<TileSource> reading = std::move(*s);
+                lock.lock();
+                opening_ = reading;
+                if (stopping_) reading->cancel();
+                lock.unlock();
+                auto set = StreamingSet::open(reading, location_, options_);
+                if (set) opened = std::move(*set);
+                else status = set.status();
+                lock.lock();
+                opening_.reset();
+                lock.unlock();
+            } else {
+                status = s.status();
+            }
         }
         lock.lock();
         if (!status.ok()) {

@@ -5,6 +5,8 @@
 // StreamingSet in the background, ready for take(). A poll or an open that
 // fails (a host gone, a torn answer, a version whose files a later update
 // already deleted) is a transient fault: tried again at the next poll.
+// Destroying the watcher cancels the requests in flight: it never waits for
+// a stalled host.
 #pragma once
 
 #include <condition_variable>
@@ -32,7 +34,7 @@ public:
     std::unique_ptr<StreamingSet> take();
     // The version taken could not be shown after all (its stream gave up):
     // the watcher takes `shown` as the version shown again, and opens the
-    // newest version anew at its next poll.
+    // newest version anew at its next poll (unless a newer one is ready).
     void showing(std::vector<uint8_t> shown);
     // Polls so far, and the last poll's or open's error ("" after a success).
     size_t polls() const;
@@ -52,6 +54,9 @@ private:
     size_t polls_ = 0;
     std::string lastError_;
     bool stopping_ = false;
+    // The sources the poll and the opening of a new version read through,
+    // for the destructor to cancel.
+    std::shared_ptr<TileSource> polling_, opening_;
     std::thread thread_;  // last: starts once the rest is ready
 };
 

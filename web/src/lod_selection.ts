@@ -156,12 +156,12 @@ export class LodSelector {
     this.addNodes(nodes);
   }
 
-  // A further page's records (without its proxy): they take the next indices.
   // The index of the node with this key, if it is known.
   find(key: string): number | undefined {
     return this.index.get(key);
   }
 
+  // A further page's records (without its proxy): they take the next indices.
   addNodes(nodes: NodeRecord[]) {
     const first = this.nodes.length;
     for (const n of nodes) {

@@ -152,6 +152,10 @@ export class SurfcastViewer extends EventTarget {
   // Following: the version loading and since when; the newest tileset.json
   // polled; the poll's own source and timer.
   private next: { streamer: Streamer<DrawnNode>; since: number } | null = null;
+  // Why the last poll failed, and why the last version loading was dropped
+  // (kept until a switch): state.followError is the first that is set.
+  private pollError = "";
+  private nextError = "";
   private opening = false;
   private latest = "";
   private watch: TileSource | null = null;
@@ -253,10 +257,11 @@ export class SurfcastViewer extends EventTarget {
           this.onStreamChange();
         } else next.close();
       }
-      this.state.followError = "";
+      this.pollError = "";
     } catch (e) {
-      this.state.followError = (e as Error).message;
+      this.pollError = (e as Error).message;
     } finally {
+      this.state.followError = this.pollError || this.nextError;
       this.opening = false;
       if (!this.disposed) this.pollTimer = setTimeout(() => this.poll(), this.options.follow! * 1000);
     }
@@ -457,19 +462,25 @@ export class SurfcastViewer extends EventTarget {
       const next = this.next.streamer, nextLod = emptyStats();
       const nextSelected = next.update(this.cam, this.width, this.height, params, nextLod);
       if (next.stats.gaveUp) {  // drawn as before; the next poll opens the newest again
-        this.state.followError = next.stats.lastError;
+        this.nextError = next.stats.lastError;
+        this.state.followError = this.pollError || this.nextError;
         next.onChange = () => {};
         next.close();
         this.next = null;
-      } else if (converged(next, nextLod) || this.streamer.stats.gaveUp ||
-                 (!converged(this.streamer, lod) && performance.now() - this.next.since > kMaxSwitchMs)) {
+      } else if (converged(next, nextLod) || (!converged(this.streamer, lod) && performance.now() - this.next.since > kMaxSwitchMs)) {
         next.adopt(null);
         this.streamer.onChange = () => {};
         this.streamer.close();
         this.streamer = next;
         this.next = null;
+        this.nextError = "";
+        this.state.followError = this.pollError;
+        // The new version's defaults (the user's mode, colouring and clip stay).
         this.info = next.info;
         this.settings.kernelScale = next.info.kernelScale;
+        this.settings.backfaceCull = normalsOriented(next.info.normalSource);
+        this.settings.translucent = attribute(next.info, "opacity") !== undefined;
+        this.noteMode();
         [selected, lod] = [nextSelected, nextLod];
         ++this.state.version;
         this.emit("version", this.state);
