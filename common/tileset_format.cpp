@@ -317,6 +317,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     if (!info.leftOut.empty()) j["left_out"] = info.leftOut;
     if (info.las.present) j["las"] = lasJson(info.las);
     if (info.duplicatesKept) j["duplicates"] = "kept";
+    if (info.previewStride) j["preview"] = {{"stride", info.previewStride}};
     const TilesetStatistics& st = info.statistics;
     ordered_json stats = {{"elevation", {{"min", st.elevationMin}, {"max", st.elevationMax}}}};
     if (st.intensity)
@@ -552,6 +553,10 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         }
         if (j.contains("left_out")) info.leftOut = strings(j, "", "left_out");
         if (j.contains("las")) info.las = readLas(object(j, "", "las"));
+        if (j.contains("preview")) {
+            info.previewStride = integer<uint32_t>(object(j, "", "preview"), "preview", "stride");
+            if (info.previewStride == 0) fieldError("preview.stride", "0 is not a stride");
+        }
         if (j.contains("duplicates")) {
             const std::string d = text(j, "", "duplicates");
             if (d != "kept" && d != "merged") fieldError("duplicates", "'" + d + "' is not kept or merged");

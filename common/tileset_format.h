@@ -207,6 +207,9 @@ struct TilesetInfo {
     // Leaves hold every input point (a set built with --attributes all: an
     // archive of its inputs), not one of each exact duplicate position.
     bool duplicatesKept = false;
+    // A preview (surfcast-build --preview): built from every previewStride-th
+    // input point while the set itself is built; 0: a set.
+    uint32_t previewStride = 0;
     TilesetStatistics statistics;
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none

@@ -22,6 +22,7 @@
 #include "compact.h"
 #include "crc32.h"
 #include "octree_builder.h"
+#include "preview.h"
 #include "set_lock.h"
 #include "stages.h"
 #include "store_work.h"
@@ -38,7 +39,6 @@
 extern char** environ;
 
 namespace {
-
 
 bool parseSize(const std::string& s, uint64_t* out) {
     char* end = nullptr;
@@ -106,6 +106,8 @@ struct Args {
     std::string to;
     std::string compact;  // --compact SET
     bool merge = false;   // --merge SET...: the positional arguments are tile sets
+    bool preview = false;  // --preview: a preview of the build published to -o first
+    uint64_t previewPoints = 200'000;  // --preview-points: about this many points make it
 };
 
 // Parses `args` into `out`; returns -1, or the exit status (after --help, or a
@@ -154,6 +156,14 @@ int parseArgs(const std::vector<std::string>& args, const std::string& stage, Ar
             continue;
         } else if (a == "--merge" && stage.empty()) {
             out->merge = true;
+            continue;
+        } else if (a == "--preview" && stage.empty()) {
+            out->preview = true;
+            continue;
+        } else if (a == "--preview-points" && stage.empty()) {
+            if (!number(&d, 1000, 1e9)) return usageError("--preview-points needs a count in [1000, 10^9]");
+            out->preview = true;
+            out->previewPoints = uint64_t(d);
             continue;
         } else if (a == "--compact" && stage.empty()) {
             if (!value(&out->compact)) return usageError("--compact needs a tile set folder");
@@ -873,6 +883,7 @@ int main(int argc, char** argv) {
     }
     if (!a.update.empty() || !a.to.empty()) {
         if (a.update.empty()) return usageError("--to names the set that --add, --remove or --replace updates");
+        if (a.preview) return usageError("--preview is for builds: viewers that follow a set see an update when it is done");
         return runUpdate(a);
     }
     if (a.merge) {
@@ -925,6 +936,8 @@ int main(int argc, char** argv) {
         args.insert(args.end(), sets.begin(), sets.end());
         Args merged;
         if (int status = parseArgs(args, "", &merged); status >= 0) return status;
+        merged.preview = a.preview;
+        merged.previewPoints = a.previewPoints;
         a = std::move(merged);
     }
     const surfcast::BuildOptions& opt = a.opt;
@@ -947,6 +960,7 @@ int main(int argc, char** argv) {
     const std::string publishTo = surfcast::isS3Url(opt.output) ? opt.output : "";
     std::unique_ptr<surfcast::PublishStaging> staging;
     if (!publishTo.empty()) {
+        if (a.preview) return usageError("--preview publishes to a folder (-o DIR); a set in a store is published whole");
         if (auto url = surfcast::parseS3Url(publishTo); !url) return fail(url.status());
         if (a.work.size() > 0) return usageError("-o s3://... builds in one process; --work is for folders");
         auto created = surfcast::PublishStaging::create();
@@ -973,6 +987,8 @@ int main(int argc, char** argv) {
         a.opt.commandLine = storedCommandLine(recorded);
     }
 
+    if (a.preview)
+        if (auto st = surfcast::publishPreview(a.opt, a.previewPoints); !st.ok()) return fail(st);
     auto summary = surfcast::buildTileset(a.opt);
     if (!summary) return fail(summary.status());
     if (int status = finishBuild(a, *summary, !publishTo.empty()); status != 0 || publishTo.empty()) return status;

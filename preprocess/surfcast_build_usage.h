@@ -62,6 +62,14 @@ files (docs/STORAGE.md).
                           replaced (replaced atomically, as a rebuild is: byte
                           ranges change, node ETags do not); a set in a bucket
                           gets the compacted blocks as its next version
+  --preview               first publish a preview to OUT, unless OUT holds a set
+                          (whose viewers keep it until the build replaces it): a set
+                          of every Nth point of each input, about 200,000 points,
+                          marked "preview" in its tileset.json, for viewers to open
+                          and follow (surfcast-view --follow, ?follow=) while the
+                          build goes on; the build then replaces it. The build's
+                          own bytes are those it writes without --preview
+  --preview-points N      --preview of about N points (default 200000)
   --info SET              print a tile set's summary and verify every checksum; with
                           a URL, --header 'NAME: VALUE' (repeatable), --token-file F,
                           --redirect-credentials, --ca-file F and --insecure say how

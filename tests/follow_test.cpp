@@ -345,5 +345,98 @@ TEST_F(FollowTest, ANewVersionThatFailsIsOpenedAgainOnceItReads) {
     EXPECT_TRUE(same(image(*client), freshImage(set(), camera)));
 }
 
+// surfcast-build --preview of every cell into `out`, started: its process,
+// stopped (SIGSTOP) as soon as the preview is there; -1 (and a failure) if
+// no preview appeared, or the build had already replaced it.
+int startPreviewedBuild(const std::vector<std::string>& cells, const std::string& out, int* previewStride) {
+    std::vector<std::string> args = {test::binary("surfcast-build"), "-q", "--threads", "1", "--memory", "64M", "--capacity", "1000",
+                                     "--preview-points", "5000", "-o", out};
+    args.insert(args.end(), cells.begin(), cells.end());
+    test::Child build = test::spawn(args);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!fs::exists(out + "/tileset.json") && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    ::kill(build.pid, SIGSTOP);
+    auto reader = TilesetReader::open(out);
+    *previewStride = reader ? int(reader->info().previewStride) : 0;
+    EXPECT_GT(*previewStride, 1) << "no preview seen before the build ended: " << (reader ? "" : reader.status().message());
+    return build.pid;
+}
+
+TEST_F(FollowTest, APreviewComesFirstAndTheBuildReplacesItWithItsOwnBytes) {
+    // The build with --preview, held still once its preview is published: a
+    // follower shows the preview; let go, the build replaces it with the set
+    // a build without --preview writes, byte for byte (the same -o: the build
+    // record keeps it), and the follower switches to that set as a fresh open
+    // of it draws it.
+    std::vector<std::string> cells = base;
+    cells.insert(cells.end(), added.begin(), added.end());
+    const std::string out = dir.file("sets/previewed");
+    std::vector<std::string> plain = {test::binary("surfcast-build"), "-q", "--threads", "1", "--memory", "64M", "--capacity", "1000",
+                                      "-o", out};
+    plain.insert(plain.end(), cells.begin(), cells.end());
+    auto built = test::run(plain);
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    fs::rename(out, dir.file("plain"));
+
+    int stride = 0;
+    const int pid = startPreviewedBuild(cells, out, &stride);
+    ASSERT_GT(pid, 0);
+    auto client = this->open(out, 0.1);
+    ASSERT_TRUE(client);
+    EXPECT_EQ(client->info().previewStride, uint32_t(stride));
+    const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
+    auto frames = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
+    ASSERT_FALSE(frames.empty());
+    EXPECT_GT(frames.back().nodes, 0u) << "the preview draws";
+    EXPECT_EQ(frames.back().version, 0u);
+    ::kill(pid, SIGCONT);
+    EXPECT_EQ(test::exitCode(pid), 0);
+    frames = follow(*client, camera, [](const ClientFrame& f) { return f.version >= 1 && f.converged; });
+    ASSERT_FALSE(frames.empty());
+    EXPECT_EQ(client->info().previewStride, 0u);
+    EXPECT_TRUE(same(image(*client), freshImage(out, camera)));
+    EXPECT_EQ(update_test::folderFiles(out), update_test::folderFiles(dir.file("plain")))
+        << "the build with --preview wrote other bytes than without";
+}
+
+TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
+    // Killed after its preview, a build leaves the preview, whole and
+    // readable. Over a set that is there already no preview is written, and a
+    // killed build leaves that set.
+    std::vector<std::string> cells = base;
+    const std::string out = dir.file("sets/killed");
+    int stride = 0;
+    const int pid = startPreviewedBuild(cells, out, &stride);
+    ASSERT_GT(pid, 0);
+    ::kill(pid, SIGKILL);
+    test::exitCode(pid);
+    auto reader = TilesetReader::open(out);
+    ASSERT_TRUE(reader) << reader.status().message();
+    EXPECT_GT(reader->info().previewStride, 1u);
+    auto verified = verifyTileset(*reader);
+    EXPECT_TRUE(verified) << verified.status().message();
+
+    const std::map<std::string, std::string> before = update_test::folderFiles(set());
+    std::vector<std::string> args = {test::binary("surfcast-build"), "--preview", "--threads", "1", "-o", set()};
+    args.insert(args.end(), cells.begin(), cells.end());
+    test::Child build = test::spawn(args);
+    EXPECT_TRUE(build.waitFor("none written")) << build.log;
+    ::kill(build.pid, SIGKILL);
+    test::exitCode(build.pid);
+    EXPECT_EQ(update_test::folderFiles(set()), before) << "the set there should stay as it was";
+}
+
+TEST_F(FollowTest, PreviewsAreForBuildsIntoFolders) {
+    for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+             {"--preview", base[0], "-o", "s3://bucket/set"}, {"--preview", "--add", added[0], "--to", set()}}) {
+        std::vector<std::string> command = {test::binary("surfcast-build")};
+        command.insert(command.end(), args.begin(), args.end());
+        auto r = test::run(command);
+        EXPECT_EQ(r.exitCode, 2) << r.output;
+        EXPECT_NE(r.output.find("--preview"), std::string::npos) << r.output;
+    }
+}
+
 }  // namespace
 }  // namespace surfcast

@@ -223,6 +223,7 @@ LevelParams BuildContext::levelParams(int level, double fallbackSpacing, int thr
 TilesetInfo BuildContext::tilesetInfo() const {
     TilesetInfo info;
     info.generator = "surfcast-build 0.1.0";
+    info.previewStride = opt_.preview;
     info.inputPoints = stats_.points;
     info.grid = opt_.grid;
     info.pageDepth = opt_.pageDepth;

@@ -49,6 +49,9 @@ struct BuildOptions {
     // "Updates in place"): options as surfcast-build parses them, -o and the
     // inputs. Empty: the set keeps no record and cannot be updated.
     std::vector<std::string> commandLine;
+    // A preview of the build: its inputs sampled every `preview`-th point
+    // (InputOptions::stride), marked so in tileset.json; 0: a build.
+    uint32_t preview = 0;
     // Colours of textured meshes' surfels (Zwicker et al. 2001, §5), on every
     // level: the texture filtered with each surfel's own kernel (ewa,
     // view-independent EWA), or the least-squares coefficients of eq. 10-11

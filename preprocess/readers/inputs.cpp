@@ -367,16 +367,101 @@ private:
 
 }  // namespace
 
+// Every stride-th point of a reader, counted from its first (InputOptions::
+// stride). Its description declares no count: the inner reader checks its own.
+class StridedReader : public PointReader {
+public:
+    StridedReader(PointReader& inner, uint32_t stride) : inner_(inner), stride_(stride), description_(inner.description()) {
+        description_.declaredPoints = 0;
+    }
+    const InputDescription& description() const override { return description_; }
+    Result<size_t> read(InputPoint* out, size_t max) override {
+        if (buffer_.size() < max) buffer_.resize(max);
+        const size_t fields = description_.scalars.size();
+        while (true) {
+            auto n = inner_.read(buffer_.data(), max);
+            if (!n || *n == 0) return n;
+            const std::span<const double> values = inner_.scalarValues();
+            scalarValues_.clear();
+            size_t kept = 0;
+            for (size_t i = 0; i < *n; ++i, ++at_) {
+                if (at_ % stride_ != 0) continue;
+                out[kept++] = buffer_[i];
+                scalarValues_.insert(scalarValues_.end(), values.begin() + long(i * fields), values.begin() + long((i + 1) * fields));
+            }
+            if (kept > 0) return kept;
+        }
+    }
+
+private:
+    PointReader& inner_;
+    const uint32_t stride_;
+    InputDescription description_;
+    std::vector<InputPoint> buffer_;
+    uint64_t at_ = 0;  // the inner reader's points so far
+};
+
+// An input captured in memory, read again.
+class CapturedReader : public PointReader {
+public:
+    explicit CapturedReader(const CapturedInput& input) : input_(input) { skipped_ = input.skipped; }
+    const InputDescription& description() const override { return input_.description; }
+    Result<size_t> read(InputPoint* out, size_t max) override {
+        const size_t n = std::min(max, input_.points.size() - at_), fields = input_.description.scalars.size();
+        std::copy_n(input_.points.begin() + long(at_), n, out);
+        scalarValues_.assign(input_.scalars.begin() + long(at_ * fields), input_.scalars.begin() + long((at_ + n) * fields));
+        at_ += n;
+        return n;
+    }
+
+private:
+    const CapturedInput& input_;
+    size_t at_ = 0;
+};
+
+Result<std::shared_ptr<const std::vector<CapturedInput>>> captureInputs(const InputOptions& options) {
+    auto inputs = std::make_shared<std::vector<CapturedInput>>();
+    std::vector<InputPoint> batch(kBatchPoints);
+    SC_TRY(forEachInput(options, [&](size_t, PointReader& reader) -> Status {
+        CapturedInput c;
+        c.description = reader.description();
+        c.description.declaredPoints = 0;
+        while (true) {
+            auto n = reader.read(batch.data(), batch.size());
+            if (!n) return n.status();
+            if (*n == 0) break;
+            c.points.insert(c.points.end(), batch.begin(), batch.begin() + long(*n));
+            c.scalars.insert(c.scalars.end(), reader.scalarValues().begin(), reader.scalarValues().end());
+        }
+        c.skipped = reader.skipped();
+        inputs->push_back(std::move(c));
+        return {};
+    }));
+    return std::shared_ptr<const std::vector<CapturedInput>>(std::move(inputs));
+}
+
 Status forEachInput(const InputOptions& options, const std::function<Status(size_t index, PointReader& reader)>& visit) {
     size_t index = 0;
+    if (options.captured) {
+        for (const CapturedInput& input : *options.captured) {
+            CapturedReader reader(input);
+            SC_TRY(visit(index++, reader));
+        }
+        return {};
+    }
+    auto sampled = [&](PointReader& r) -> Status {
+        if (options.stride <= 1) return visit(index++, r);
+        StridedReader strided(r, options.stride);
+        return visit(index++, strided);
+    };
     if (options.defaultScene)
-        for (auto& r : openDefaultScene(options.scene)) SC_TRY(visit(index++, *r));
+        for (auto& r : openDefaultScene(options.scene)) SC_TRY(sampled(*r));
     if (!options.paths.empty()) {
         ReadAhead ahead(options);
         for (size_t i = 0; i < options.paths.size(); ++i) {
             auto r = ahead.next();
             if (!r) return r.status();
-            SC_TRY(visit(index++, **r));
+            SC_TRY(sampled(**r));
         }
     }
     if (index == 0) return Status::error("no inputs given");

@@ -21,6 +21,14 @@ namespace surfcast {
 // Points decoded ahead of the visitor, at most (part of kBaselineBytes).
 inline constexpr size_t kPrefetchBytes = 16u << 20;
 
+// One input's points held in memory (InputOptions::captured).
+struct CapturedInput {
+    InputDescription description;
+    std::vector<InputPoint> points;
+    std::vector<double> scalars;  // description.scalars.size() per point
+    uint64_t skipped = 0;
+};
+
 struct InputOptions {
     std::vector<std::string> paths;
     // Reads the first path from record `firstBegin` and the last one up to
@@ -37,7 +45,17 @@ struct InputOptions {
     ScalarSelection scalars;     // scalar fields readers decode (none by default)
     bool readAlpha = false;      // PCD: take rgba's alpha byte as opacity (often junk, so off)
     double opacity = 1;          // multiplies every point's opacity (--opacity), in [0, 1]
+    // Keep every stride-th point of each input, counted from its first (a
+    // preview's sample: surfcast-build --preview); 1: every point.
+    uint32_t stride = 1;
+    // Where set: the inputs' points as read once already (captureInputs),
+    // one per input in their order, visited from memory instead of the files
+    // (the scene and paths still say which inputs they are).
+    std::shared_ptr<const std::vector<CapturedInput>> captured;
 };
+
+// Reads every input once (with `options.stride`) into memory.
+Result<std::shared_ptr<const std::vector<CapturedInput>>> captureInputs(const InputOptions& options);
 
 // A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.
 inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return opacity == 1 ? alpha : uint8_t(std::lround(alpha * opacity)); }

@@ -47,6 +47,9 @@ export interface TilesetInfo {
     intensity?: { min: number; max: number; p2: number; p98: number };
     classCounts: Map<number, number>;
   };
+  // A preview (surfcast-build --preview): built from every previewStride-th
+  // input point while the set itself is built; 0: a set.
+  previewStride: number;
 }
 
 // The attributes whose place in a block the format fixes; every other listed
@@ -245,8 +248,10 @@ function readFields(j: Json): TilesetInfo {
     });
     if (sum !== blocksBytes) throw new FormatError(`blocks.parts: the files' bytes add up to ${sum}, not blocks.bytes ${blocksBytes}`);
   }
+  const previewStride = "preview" in j ? integer(object(j, "", "preview"), "preview", "stride", 1, 2 ** 32 - 1) : 0;
   return { version, rootMin, rootEdge, boundsMin, boundsMax, levels, grid, nodes, surfels, colorBits, attributes, weights,
-           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, blocksParts, statistics };
+           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, blocksParts, statistics,
+           previewStride };
 }
 
 // The file holding a node's block and the offset there (common/tileset_format.h's placeBlock).

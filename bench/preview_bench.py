@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Time to a first image: surfcast-build --preview with a following viewer,
+against the build without a preview and PotreeConverter 2, side by side.
+
+The input is build_bench.py's one big LAS: the lion tiled 6 x 5 (10.26 M
+points). In this one process, one after the other:
+
+  potree    PotreeConverter (--method poisson): its set exists when it ends;
+  build     surfcast-build -o OUT, no preview;
+  preview   surfcast-build --preview -o OUT2, and as soon as OUT2/tileset.json
+            appears, a headless viewer following it (surfcast-view --lod 1
+            --follow 1, the set framed at 640 x 360).
+
+For the preview run: when the preview appears, when the follower's first
+image (a frame with nodes drawn) arrives and how long lavapipe took to draw
+it, when the build ends, when the follower shows the built set (converged),
+and whether the built set is byte for byte the build's without a preview.
+
+Usage: bench/.venv/bin/python bench/preview_bench.py [--work DIR] [--threads N]
+Prints Markdown for bench/BENCHMARKS.md ("Previews").
+"""
+import argparse
+import filecmp
+import json
+import os
+import platform
+import queue
+import shutil
+import subprocess
+import sys
+import threading
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import build_bench  # noqa: E402  (the tiled LAS and PotreeConverter's build)
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.join(ROOT, "build", "bin")
+
+
+def same_folders(a, b):
+    names = sorted(os.listdir(a))
+    return names == sorted(os.listdir(b)) and all(filecmp.cmp(os.path.join(a, n), os.path.join(b, n), shallow=False) for n in names)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--work", default="/tmp/surfcast-preview-bench")
+    ap.add_argument("--threads", default=str(os.cpu_count()))
+    a = ap.parse_args()
+    os.makedirs(a.work, exist_ok=True)
+    las = os.path.join(a.work, "lion_tiled.las")
+    if not os.path.exists(las):
+        build_bench.tiled_las(os.path.join(build_bench.DATA, "lion_takanawa.copc.laz"), 6, 5, las)
+    build_bench.run_measured.log = os.path.join(a.work, "run.log")
+    plain, previewed, potree_out = (os.path.join(a.work, n) for n in ("plain", "previewed", "potree"))
+    for d in (plain, previewed, potree_out):
+        shutil.rmtree(d, ignore_errors=True)
+
+    potree = build_bench.potree(build_bench.potree_binary(), [las], potree_out)
+    # Built at the preview run's -o (the build record keeps it), then moved aside.
+    build = build_bench.surfcast([las], previewed, "2G", a.threads)
+    os.rename(previewed, plain)
+
+    start = time.monotonic()
+    builder = subprocess.Popen([os.path.join(BIN, "surfcast-build"), "-q", "--preview", las, "-o", previewed, "--memory", "2G",
+                                "--threads", a.threads], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    json_path = os.path.join(previewed, "tileset.json")
+    while not os.path.exists(json_path):
+        if builder.poll() is not None:
+            sys.exit("the build ended before a preview appeared:\n" + builder.stderr.read())
+        time.sleep(0.01)
+    t_preview = time.monotonic() - start
+    follower = subprocess.Popen([os.path.join(BIN, "surfcast-view"), "--headless", previewed, "--lod", "1", "--size", "640x360",
+                                 "--follow", "1", "--max-wait", "600", "--out", os.path.join(a.work, "follow.png")],
+                                stdout=subprocess.PIPE, text=True)
+    lines = queue.Queue()
+    threading.Thread(target=lambda: [lines.put((time.monotonic() - start, json.loads(l))) for l in follower.stdout],
+                     daemon=True).start()
+    first = None
+    while first is None:
+        t, line = lines.get(timeout=600)
+        if line["nodes"] > 0:
+            first = (t, line)
+    builder.wait()
+    t_built = time.monotonic() - start
+    if builder.returncode != 0:
+        sys.exit("the build with --preview failed:\n" + builder.stderr.read())
+    while True:
+        t, line = lines.get(timeout=600)
+        if line["version"] >= 1 and line["converged"]:
+            shown = (t, line)
+            break
+    follower.terminate()
+    follower.wait()
+
+    print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
+    print(f"Input: one LAS of {os.path.getsize(las):,} bytes, 10.26 M points (the lion tiled 6 x 5)\n")
+    print("| | seconds from the build's start |\n|---|---|")
+    print(f"| PotreeConverter's set (`--method poisson`) | {potree['wall']:.2f} |")
+    print(f"| surfcast-build's set, without a preview | {build['wall']:.2f} |")
+    print(f"| with `--preview`: the preview published | {t_preview:.2f} |")
+    print(f"| its follower's first image (lavapipe drew it in {first[1]['gpu_ms'] / 1e3:.2f} s) | {first[0]:.2f} |")
+    print(f"| the set built | {t_built:.2f} ({t_built / build['wall']:.3f}x the build without a preview) |")
+    print(f"| the follower showing the set, converged | {shown[0]:.2f} |")
+    print(f"\nThe set built with `--preview` is the build's without, byte for byte: "
+          f"{'yes' if same_folders(plain, previewed) else 'NO'}; the preview was every "
+          f"{first[1].get('preview', 1)}th point.")
+
+
+if __name__ == "__main__":
+    main()
