@@ -104,8 +104,8 @@ def main():
     print(f"| the set built | {t_built:.2f} ({t_built / build['wall']:.3f}x the build without a preview) |")
     print(f"| the follower showing the set, converged | {shown[0]:.2f} |")
     print(f"\nThe set built with `--preview` is the build's without, byte for byte: "
-          f"{'yes' if same_folders(plain, previewed) else 'NO'}; the preview was every "
-          f"{first[1].get('preview', 1)}th point.")
+          f"{'yes' if same_folders(plain, previewed) else 'NO'}; the preview was 1 in "
+          f"{first[1].get('preview', 1)} points.")
 
 
 if __name__ == "__main__":

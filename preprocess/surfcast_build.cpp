@@ -876,6 +876,8 @@ int main(int argc, char** argv) {
     if (int status = parseArgs(args, "", &a); status >= 0) return status;
     if (a.merge && (!a.update.empty() || !a.to.empty() || !a.compact.empty()))
         return usageError("--merge writes a new set (-o OUT); it takes no --add, --remove, --replace, --to or --compact");
+    if (a.preview && (!a.compact.empty() || !a.info.empty()))
+        return usageError("--preview is for builds (inputs and -o OUT)");
     if (!a.compact.empty()) {
         if (!a.update.empty() || !a.to.empty() || !a.opt.output.empty() || !a.opt.inputs.paths.empty() || a.opt.inputs.defaultScene)
             return usageError("--compact SET takes no inputs, no -o and no update");
@@ -987,8 +989,13 @@ int main(int argc, char** argv) {
         a.opt.commandLine = storedCommandLine(recorded);
     }
 
-    if (a.preview)
-        if (auto st = surfcast::publishPreview(a.opt, a.previewPoints); !st.ok()) return fail(st);
+    surfcast::SetLock previewLock;  // the preview is a set: other writers wait for the build
+    if (a.preview) {
+        if (auto st = surfcast::publishPreview(a.opt, a.previewPoints); !st.ok())
+            std::fprintf(stderr, "surfcast-build: no preview: %s\n", st.message().c_str());
+        else if (auto locked = surfcast::lockOutput(opt.output, &previewLock); !locked.ok())
+            return fail(locked);
+    }
     auto summary = surfcast::buildTileset(a.opt);
     if (!summary) return fail(summary.status());
     if (int status = finishBuild(a, *summary, !publishTo.empty()); status != 0 || publishTo.empty()) return status;

@@ -16,6 +16,7 @@
 #include <set>
 #include <thread>
 #include <tuple>
+#include <utility>
 
 #include "context.h"
 #include "http_tile_source.h"
@@ -345,14 +346,27 @@ TEST_F(FollowTest, ANewVersionThatFailsIsOpenedAgainOnceItReads) {
     EXPECT_TRUE(same(image(*client), freshImage(set(), camera)));
 }
 
-// surfcast-build --preview of every cell into `out`, started: its process,
-// stopped (SIGSTOP) as soon as the preview is there; -1 (and a failure) if
-// no preview appeared, or the build had already replaced it.
-int startPreviewedBuild(const std::vector<std::string>& cells, const std::string& out, int* previewStride) {
+// A build process that is killed (and waited for) when the guard goes,
+// unless release()d: a case that fails midway leaves no stopped child.
+struct BuildGuard {
+    int pid = -1;
+    ~BuildGuard() {
+        if (pid <= 0) return;
+        ::kill(pid, SIGKILL);
+        test::exitCode(pid);
+    }
+    int release() { return std::exchange(pid, -1); }
+};
+
+// surfcast-build --preview of `cells` into `out`, started and stopped
+// (SIGSTOP) as soon as the preview is there; `previewStride`: the stride of
+// the set found there then (0, and a failure, where the build had replaced
+// its preview already or none appeared).
+BuildGuard startPreviewedBuild(const std::vector<std::string>& cells, const std::string& out, int* previewStride) {
     std::vector<std::string> args = {test::binary("surfcast-build"), "-q", "--threads", "1", "--memory", "64M", "--capacity", "1000",
                                      "--preview-points", "5000", "-o", out};
     args.insert(args.end(), cells.begin(), cells.end());
-    test::Child build = test::spawn(args);
+    BuildGuard build{test::spawn(args).pid};
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
     while (!fs::exists(out + "/tileset.json") && std::chrono::steady_clock::now() < deadline)
         std::this_thread::sleep_for(std::chrono::milliseconds(2));
@@ -360,7 +374,7 @@ int startPreviewedBuild(const std::vector<std::string>& cells, const std::string
     auto reader = TilesetReader::open(out);
     *previewStride = reader ? int(reader->info().previewStride) : 0;
     EXPECT_GT(*previewStride, 1) << "no preview seen before the build ended: " << (reader ? "" : reader.status().message());
-    return build.pid;
+    return build;
 }
 
 TEST_F(FollowTest, APreviewComesFirstAndTheBuildReplacesItWithItsOwnBytes) {
@@ -380,8 +394,8 @@ TEST_F(FollowTest, APreviewComesFirstAndTheBuildReplacesItWithItsOwnBytes) {
     fs::rename(out, dir.file("plain"));
 
     int stride = 0;
-    const int pid = startPreviewedBuild(cells, out, &stride);
-    ASSERT_GT(pid, 0);
+    BuildGuard build = startPreviewedBuild(cells, out, &stride);
+    ASSERT_GT(stride, 1);
     auto client = this->open(out, 0.1);
     ASSERT_TRUE(client);
     EXPECT_EQ(client->info().previewStride, uint32_t(stride));
@@ -390,8 +404,8 @@ TEST_F(FollowTest, APreviewComesFirstAndTheBuildReplacesItWithItsOwnBytes) {
     ASSERT_FALSE(frames.empty());
     EXPECT_GT(frames.back().nodes, 0u) << "the preview draws";
     EXPECT_EQ(frames.back().version, 0u);
-    ::kill(pid, SIGCONT);
-    EXPECT_EQ(test::exitCode(pid), 0);
+    ::kill(build.pid, SIGCONT);
+    EXPECT_EQ(test::exitCode(build.release()), 0);
     frames = follow(*client, camera, [](const ClientFrame& f) { return f.version >= 1 && f.converged; });
     ASSERT_FALSE(frames.empty());
     EXPECT_EQ(client->info().previewStride, 0u);
@@ -407,10 +421,10 @@ TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
     std::vector<std::string> cells = base;
     const std::string out = dir.file("sets/killed");
     int stride = 0;
-    const int pid = startPreviewedBuild(cells, out, &stride);
-    ASSERT_GT(pid, 0);
-    ::kill(pid, SIGKILL);
-    test::exitCode(pid);
+    {
+        BuildGuard build = startPreviewedBuild(cells, out, &stride);  // killed here
+    }
+    ASSERT_GT(stride, 1);
     auto reader = TilesetReader::open(out);
     ASSERT_TRUE(reader) << reader.status().message();
     EXPECT_GT(reader->info().previewStride, 1u);
@@ -420,11 +434,28 @@ TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
     const std::map<std::string, std::string> before = update_test::folderFiles(set());
     std::vector<std::string> args = {test::binary("surfcast-build"), "--preview", "--threads", "1", "-o", set()};
     args.insert(args.end(), cells.begin(), cells.end());
-    test::Child build = test::spawn(args);
-    EXPECT_TRUE(build.waitFor("none written")) << build.log;
-    ::kill(build.pid, SIGKILL);
-    test::exitCode(build.pid);
+    test::Child child = test::spawn(args);
+    BuildGuard build{child.pid};
+    EXPECT_TRUE(child.waitFor("none written")) << child.log;
+    ::kill(build.pid, SIGSTOP);  // the build has begun (the preview step is behind it)
     EXPECT_EQ(update_test::folderFiles(set()), before) << "the set there should stay as it was";
+    EXPECT_EQ(child.log.find("preview: " + set() + ","), std::string::npos) << child.log;
+}
+
+TEST_F(FollowTest, APreviewReadsWhatTheBuildReads) {
+    // --attributes gps_time: the preview's sample decodes the scalar field
+    // the build stores, as the build's own reading does.
+    const std::string out = dir.file("sets/timed");
+    std::vector<std::string> args = {test::binary("surfcast-build"), "--preview-points", "5000", "--attributes", "gps_time",
+                                     "--threads", "1", "-o", out};
+    args.insert(args.end(), base.begin(), base.end());
+    auto r = test::run(args);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("preview: " + out + ", 1 in"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("no preview"), std::string::npos) << r.output;
+    auto reader = TilesetReader::open(out);
+    ASSERT_TRUE(reader) << reader.status().message();
+    EXPECT_TRUE(reader->info().attribute("gps_time")) << "the set stores gps_time";
 }
 
 TEST_F(FollowTest, PreviewsAreForBuildsIntoFolders) {

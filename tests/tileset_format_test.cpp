@@ -405,6 +405,7 @@ TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
     info.constants = {{"point_source_id", 7326}, {"classification", 2}};
     info.leftOut = {"gps_time", "nir"};
     info.duplicatesKept = true;
+    info.previewStride = 65;
     info.las.present = true;
     info.las.pointFormat = 8;
     info.las.gpsTimeType = 1;
@@ -437,6 +438,8 @@ TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
     rejected("/constants/0/value", "seven", "constants[0].value");
     rejected("/left_out/1", 3, "left_out[1]");
     rejected("/duplicates", "some", "duplicates");
+    rejected("/preview/stride", 0, "preview.stride");
+    rejected("/preview", 65, "preview");
     rejected("/las/point_format", 11, "las.point_format");
     rejected("/las/gps_time_type", 2, "las.gps_time_type");
     rejected("/las/color_multiplier", 255, "las.color_multiplier");

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "build_context.h"
 #include "inputs.h"
 
 namespace surfcast {
@@ -17,29 +18,31 @@ Status publishPreview(const BuildOptions& options, uint64_t points) {
                          out.c_str());
         return {};
     }
+    // The stride guessed from the files' sizes (bytes per point by format);
+    // captureInputs doubles it where the guess holds too many points.
     double estimate = options.inputs.defaultScene ? double(options.inputs.scene.targetPoints) : 0;
     for (const std::string& path : options.inputs.paths) {
         std::error_code ec;
         const double bytes = double(std::filesystem::file_size(path, ec));
-        if (ec) continue;  // a URL or an object: the build reads and checks it
+        if (ec) continue;  // a URL or an object: captureInputs bounds what it holds
         const std::string ext = lowerExtension(path);
         estimate += bytes / (ext == ".laz" ? 8 : ext == ".las" ? 28 : 24);
     }
-    BuildOptions p = options;
+    points = std::max<uint64_t>(1, points);
+    BuildOptions p = normalizeOptions(options);  // the attributes and threads the build's own reading uses
     p.commandLine.clear();
-    p.preview = uint32_t(std::clamp(estimate / double(std::max<uint64_t>(1, points)), 1.0, 1e9));
     p.progress = false;
     const auto start = std::chrono::steady_clock::now();
-    InputOptions sampling = p.inputs;
-    sampling.stride = p.preview;
-    auto captured = captureInputs(sampling);
+    auto captured = captureInputs(p.inputs, uint32_t(std::clamp(estimate / double(points), 1.0, 1e9)), 2 * points);
     if (!captured) return captured.status();
-    p.inputs.captured = std::move(*captured);
+    p.inputs.captured = std::move(captured->inputs);
+    p.preview = captured->stride;
     auto summary = buildTileset(p);
     if (!summary) return summary.status();
     if (options.progress)
-        std::fprintf(stderr, "preview: %s, every %u%s point of each input, in %.2f s\n", out.c_str(), p.preview,
-                     p.preview == 1 ? "" : "th", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        std::fprintf(stderr, "preview: %s, 1 in %u points of each input (%llu), in %.2f s\n", out.c_str(), p.preview,
+                     (unsigned long long)summary->inputPoints,
+                     std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     return {};
 }
 

@@ -12,10 +12,11 @@ namespace surfcast {
 
 // Unless options.output holds a set already (whose viewers keep it until the
 // build replaces it), builds there a set of every Nth point of each input,
-// about `points` in all, marked as a preview and keeping no build record (it
-// is replaced, never updated). N comes from the inputs' sizes (bytes per
-// point guessed by format), so no pass over the points comes first; the
-// sample is read once and built from memory. Says what it did on stderr
+// marked as a preview and keeping no build record (it is replaced, never
+// updated). N is guessed from the inputs' sizes (bytes per point by format),
+// so no pass over the points comes first, and doubled while the sample would
+// exceed 2 x `points`. The sample is read once and built from memory
+// (textured meshes' textures are read again). Says what it did on stderr
 // unless options.progress is off.
 Status publishPreview(const BuildOptions& options, uint64_t points);
 

@@ -367,40 +367,6 @@ private:
 
 }  // namespace
 
-// Every stride-th point of a reader, counted from its first (InputOptions::
-// stride). Its description declares no count: the inner reader checks its own.
-class StridedReader : public PointReader {
-public:
-    StridedReader(PointReader& inner, uint32_t stride) : inner_(inner), stride_(stride), description_(inner.description()) {
-        description_.declaredPoints = 0;
-    }
-    const InputDescription& description() const override { return description_; }
-    Result<size_t> read(InputPoint* out, size_t max) override {
-        if (buffer_.size() < max) buffer_.resize(max);
-        const size_t fields = description_.scalars.size();
-        while (true) {
-            auto n = inner_.read(buffer_.data(), max);
-            if (!n || *n == 0) return n;
-            const std::span<const double> values = inner_.scalarValues();
-            scalarValues_.clear();
-            size_t kept = 0;
-            for (size_t i = 0; i < *n; ++i, ++at_) {
-                if (at_ % stride_ != 0) continue;
-                out[kept++] = buffer_[i];
-                scalarValues_.insert(scalarValues_.end(), values.begin() + long(i * fields), values.begin() + long((i + 1) * fields));
-            }
-            if (kept > 0) return kept;
-        }
-    }
-
-private:
-    PointReader& inner_;
-    const uint32_t stride_;
-    InputDescription description_;
-    std::vector<InputPoint> buffer_;
-    uint64_t at_ = 0;  // the inner reader's points so far
-};
-
 // An input captured in memory, read again.
 class CapturedReader : public PointReader {
 public:
@@ -419,25 +385,58 @@ private:
     size_t at_ = 0;
 };
 
-Result<std::shared_ptr<const std::vector<CapturedInput>>> captureInputs(const InputOptions& options) {
+Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t stride, uint64_t most) {
+    CapturedInputs out;
+    out.stride = std::max<uint32_t>(1, stride);
     auto inputs = std::make_shared<std::vector<CapturedInput>>();
+    std::vector<std::vector<uint64_t>> indices;  // per input: each held point's index in it
+    uint64_t held = 0;
+    // Every held point whose index is not a multiple of the doubled stride goes.
+    auto thin = [&] {
+        out.stride *= 2;
+        held = 0;
+        for (size_t k = 0; k < inputs->size(); ++k) {
+            CapturedInput& c = (*inputs)[k];
+            const size_t fields = c.description.scalars.size();
+            size_t kept = 0;
+            for (size_t i = 0; i < c.points.size(); ++i) {
+                if (indices[k][i] % out.stride != 0) continue;
+                c.points[kept] = c.points[i];
+                indices[k][kept] = indices[k][i];
+                std::copy_n(c.scalars.begin() + long(i * fields), fields, c.scalars.begin() + long(kept * fields));
+                ++kept;
+            }
+            c.points.resize(kept);
+            indices[k].resize(kept);
+            c.scalars.resize(kept * fields);
+            held += kept;
+        }
+    };
     std::vector<InputPoint> batch(kBatchPoints);
     SC_TRY(forEachInput(options, [&](size_t, PointReader& reader) -> Status {
-        CapturedInput c;
+        CapturedInput& c = inputs->emplace_back();
+        indices.emplace_back();
         c.description = reader.description();
-        c.description.declaredPoints = 0;
-        while (true) {
+        c.description.declaredPoints = 0;  // a sample: the build's own read checks the header's count
+        const size_t fields = c.description.scalars.size();
+        for (uint64_t at = 0;;) {
             auto n = reader.read(batch.data(), batch.size());
             if (!n) return n.status();
             if (*n == 0) break;
-            c.points.insert(c.points.end(), batch.begin(), batch.begin() + long(*n));
-            c.scalars.insert(c.scalars.end(), reader.scalarValues().begin(), reader.scalarValues().end());
+            const std::span<const double> values = reader.scalarValues();
+            for (size_t i = 0; i < *n; ++i, ++at) {
+                if (at % out.stride != 0) continue;
+                c.points.push_back(batch[i]);
+                indices.back().push_back(at);
+                c.scalars.insert(c.scalars.end(), values.begin() + long(i * fields), values.begin() + long((i + 1) * fields));
+                if (++held > most) thin();
+            }
         }
         c.skipped = reader.skipped();
-        inputs->push_back(std::move(c));
         return {};
     }));
-    return std::shared_ptr<const std::vector<CapturedInput>>(std::move(inputs));
+    out.inputs = std::move(inputs);
+    return out;
 }
 
 Status forEachInput(const InputOptions& options, const std::function<Status(size_t index, PointReader& reader)>& visit) {
@@ -449,19 +448,14 @@ Status forEachInput(const InputOptions& options, const std::function<Status(size
         }
         return {};
     }
-    auto sampled = [&](PointReader& r) -> Status {
-        if (options.stride <= 1) return visit(index++, r);
-        StridedReader strided(r, options.stride);
-        return visit(index++, strided);
-    };
     if (options.defaultScene)
-        for (auto& r : openDefaultScene(options.scene)) SC_TRY(sampled(*r));
+        for (auto& r : openDefaultScene(options.scene)) SC_TRY(visit(index++, *r));
     if (!options.paths.empty()) {
         ReadAhead ahead(options);
         for (size_t i = 0; i < options.paths.size(); ++i) {
             auto r = ahead.next();
             if (!r) return r.status();
-            SC_TRY(sampled(**r));
+            SC_TRY(visit(index++, **r));
         }
     }
     if (index == 0) return Status::error("no inputs given");

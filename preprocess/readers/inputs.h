@@ -45,17 +45,23 @@ struct InputOptions {
     ScalarSelection scalars;     // scalar fields readers decode (none by default)
     bool readAlpha = false;      // PCD: take rgba's alpha byte as opacity (often junk, so off)
     double opacity = 1;          // multiplies every point's opacity (--opacity), in [0, 1]
-    // Keep every stride-th point of each input, counted from its first (a
-    // preview's sample: surfcast-build --preview); 1: every point.
-    uint32_t stride = 1;
     // Where set: the inputs' points as read once already (captureInputs),
     // one per input in their order, visited from memory instead of the files
     // (the scene and paths still say which inputs they are).
     std::shared_ptr<const std::vector<CapturedInput>> captured;
 };
 
-// Reads every input once (with `options.stride`) into memory.
-Result<std::shared_ptr<const std::vector<CapturedInput>>> captureInputs(const InputOptions& options);
+// A sample of the inputs in memory (a preview's: surfcast-build --preview):
+// every stride-th point of each input, counted from its first.
+struct CapturedInputs {
+    std::shared_ptr<const std::vector<CapturedInput>> inputs;
+    uint32_t stride = 1;
+};
+// Reads every input once, keeping every stride-th point of each; where more
+// than `most` points would be held, the stride doubles (and what is held
+// thins to it) as often as needed, so the sample stays within `most`
+// whatever the stride guessed.
+Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t stride, uint64_t most);
 
 // A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.
 inline uint8_t pointAlpha(uint8_t alpha, double opacity) { return opacity == 1 ? alpha : uint8_t(std::lround(alpha * opacity)); }
