@@ -284,8 +284,9 @@ TEST_F(FollowTest, TornAndVanishedVersionsAreRetriedNeverShown) {
     vanished.replace(named, 15, "\"hierarchy-0badf00d.bin\"");
     const std::pair<std::string, std::string> cases[] = {{json.substr(0, json.size() / 2), "tileset.json"},
                                                          {vanished, "hierarchy-0badf00d.bin"}};
-    for (const auto& [bad, named] : cases) {
-        replace(bad);
+    for (const auto& c : cases) {
+        const std::string& named = c.second;
+        replace(c.first);
         frames = follow(*client, camera, [&](const ClientFrame& f) { return f.followError.find(named) != std::string::npos; });
         ASSERT_FALSE(frames.empty());
         for (const ClientFrame& f : frames) {
