@@ -597,18 +597,7 @@ int runUpdate(const Args& a) {
 // surfcast-build --compact SET: the set written anew without the blocks its
 // updates replaced, its nodes' bytes (and so their ETags) as they were.
 int runCompact(const std::string& set) {
-    surfcast::Result<surfcast::CompactReport> report = surfcast::Status::error("");
-    std::unique_ptr<surfcast::PublishStaging> staging;
-    if (surfcast::isS3Url(set)) {
-        auto created = surfcast::PublishStaging::create();
-        if (!created) return fail(created.status());
-        staging = std::move(*created);
-        report = surfcast::compactStored(set, staging->dir());
-    } else {
-        surfcast::SetLock lock;
-        if (auto st = surfcast::lockSet(set, &lock); !st.ok()) return fail(st);
-        report = surfcast::compactFolder(set);
-    }
+    auto report = surfcast::compactSet(set);
     if (!report) return fail(report.status());
     if (report->already) {
         std::printf("%s is compact already: its one block file holds every node's bytes and no others\n", set.c_str());
@@ -616,7 +605,7 @@ int runCompact(const std::string& set) {
     }
     std::printf("compacted %s: blocks %llu bytes, was %llu in its block files\n", set.c_str(), (unsigned long long)report->blocksBytes,
                 (unsigned long long)report->before);
-    if (staging)
+    if (surfcast::isS3Url(set))
         std::printf("(%llu requests; %llu objects no kept version names deleted)\n", (unsigned long long)report->requests,
                     (unsigned long long)report->removed);
     return 0;

@@ -34,6 +34,20 @@ using update_test::UpdateTest;
 
 constexpr int kWidth = 200, kHeight = 150;
 
+// A file replaced as writers replace it: whole, by rename.
+void replaceFile(const std::string& path, const std::string& bytes) {
+    test::writeFile(path + ".next", bytes);
+    fs::rename(path + ".next", path);
+}
+
+// Every frame drew the base version's nodes (`nodes`), none of a later one.
+void expectOnlyTheBase(const std::vector<ClientFrame>& frames, uint32_t nodes) {
+    for (const ClientFrame& f : frames) {
+        EXPECT_EQ(f.version, 0u);
+        EXPECT_EQ(f.nodesCrc, nodes);
+    }
+}
+
 // Pixel for pixel, and not both empty (a failed render).
 bool same(const Image& a, const Image& b) {
     return !a.rgba.empty() && a.width == b.width && a.height == b.height && a.rgba == b.rgba;
@@ -94,6 +108,24 @@ protected:
         auto rendered = client.renderImage(client.defaultSettings());
         EXPECT_TRUE(rendered) << rendered.status().message();
         return rendered ? *rendered : Image{};
+    }
+
+    // A follower of the set polling every 0.1 s, converged on it: its camera
+    // (the set framed) and the nodes it draws; a null client on failure.
+    struct Follower {
+        std::unique_ptr<SurfcastClient> client;
+        Camera camera;
+        uint32_t nodes = 0;
+    };
+    Follower convergedFollower() {
+        Follower f{this->open(set(), 0.1), {}, 0};
+        if (!f.client) return f;
+        f.camera = frameBox(f.client->info().bounds, double(kWidth) / kHeight);
+        auto frames = follow(*f.client, f.camera, [](const ClientFrame& frame) { return frame.converged; });
+        EXPECT_FALSE(frames.empty());
+        if (frames.empty()) f.client.reset();
+        else f.nodes = frames.back().nodesCrc;
+        return f;
     }
 
     // The image a fresh client converges to on `location`.
@@ -266,18 +298,15 @@ TEST_F(FollowTest, TornAndVanishedVersionsAreRetriedNeverShown) {
     // hierarchy file that is not there: the follower reports each
     // (followError), keeps drawing the version it has, and takes the next
     // good version when it comes.
-    auto client = this->open(set(), 0.1);
-    ASSERT_TRUE(client);
-    const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
-    auto frames = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
-    ASSERT_FALSE(frames.empty());
-    const uint32_t baseNodes = frames.back().nodesCrc;
+    Follower follower = convergedFollower();
+    ASSERT_TRUE(follower.client);
+    SurfcastClient* client = follower.client.get();
+    const Camera camera = follower.camera;
+    const uint32_t baseNodes = follower.nodes;
     const Image base = image(*client);
     const std::string json = test::readFile(set() + "/tileset.json");
-    auto replace = [&](const std::string& bytes) {  // as writers do: whole, by rename
-        test::writeFile(set() + "/tileset.json.next", bytes);
-        fs::rename(set() + "/tileset.json.next", set() + "/tileset.json");
-    };
+    auto replace = [&](const std::string& bytes) { replaceFile(set() + "/tileset.json", bytes); };
+    std::vector<ClientFrame> frames;
     const size_t named = json.find("\"hierarchy.bin\"");
     ASSERT_NE(named, std::string::npos);
     std::string vanished = json;
@@ -289,10 +318,7 @@ TEST_F(FollowTest, TornAndVanishedVersionsAreRetriedNeverShown) {
         replace(c.first);
         frames = follow(*client, camera, [&](const ClientFrame& f) { return f.followError.find(named) != std::string::npos; });
         ASSERT_FALSE(frames.empty());
-        for (const ClientFrame& f : frames) {
-            EXPECT_EQ(f.version, 0u);
-            EXPECT_EQ(f.nodesCrc, baseNodes);
-        }
+        expectOnlyTheBase(frames, baseNodes);
         EXPECT_FALSE(frames.back().followError.empty());
     }
     EXPECT_TRUE(same(image(*client), base));
@@ -310,12 +336,11 @@ TEST_F(FollowTest, ANewVersionThatFailsIsOpenedAgainOnceItReads) {
     // the version loading gives up (its blocks fail their CRCs) and is
     // dropped, the version drawn stays; once the file reads again, the next
     // poll opens that version anew, although its tileset.json never changed.
-    auto client = this->open(set(), 0.1);
-    ASSERT_TRUE(client);
-    const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
-    auto frames = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
-    ASSERT_FALSE(frames.empty());
-    const uint32_t baseNodes = frames.back().nodesCrc;
+    Follower follower = convergedFollower();
+    ASSERT_TRUE(follower.client);
+    SurfcastClient* client = follower.client.get();
+    const Camera camera = follower.camera;
+    const uint32_t baseNodes = follower.nodes;
     std::set<std::string> before;
     for (const auto& e : fs::directory_iterator(set())) before.insert(e.path().filename().string());
     auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", set()});
@@ -328,19 +353,12 @@ TEST_F(FollowTest, ANewVersionThatFailsIsOpenedAgainOnceItReads) {
     const std::string good = test::readFile(blocks);
     std::string bad = good;
     for (char& c : bad) c = char(~c);
-    auto replace = [&](const std::string& bytes) {
-        test::writeFile(blocks + ".next", bytes);
-        fs::rename(blocks + ".next", blocks);
-    };
-    replace(bad);
-    frames = follow(*client, camera, [](const ClientFrame& f) { return !f.followError.empty() && !f.loadingVersion; });
+    replaceFile(blocks, bad);
+    auto frames = follow(*client, camera, [](const ClientFrame& f) { return !f.followError.empty() && !f.loadingVersion; });
     ASSERT_FALSE(frames.empty());
-    for (const ClientFrame& f : frames) {
-        EXPECT_EQ(f.version, 0u);
-        EXPECT_EQ(f.nodesCrc, baseNodes);
-    }
+    expectOnlyTheBase(frames, baseNodes);
     EXPECT_NE(frames.back().followError.find("CRC"), std::string::npos) << frames.back().followError;
-    replace(good);
+    replaceFile(blocks, good);
     frames = follow(*client, camera, [](const ClientFrame& f) { return f.version == 1 && f.converged; });
     ASSERT_FALSE(frames.empty());
     EXPECT_EQ(frames.back().version, 1u);

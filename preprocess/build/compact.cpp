@@ -8,6 +8,7 @@
 #include "crc32.h"
 #include "folder_publish.h"
 #include "http_tile_source.h"
+#include "set_lock.h"
 #include "object_store.h"
 #include "set_publisher.h"
 #include "tileset_reader.h"
@@ -135,6 +136,17 @@ Result<CompactReport> compactStored(const std::string& url, const std::string& s
     report.removed = published->removed;
     report.requests = (*store)->counts().requests - requestsBefore;
     return report;
+}
+
+Result<CompactReport> compactSet(const std::string& set) {
+    if (isS3Url(set)) {
+        auto staging = PublishStaging::create();
+        if (!staging) return staging.status();
+        return compactStored(set, (*staging)->dir());
+    }
+    SetLock lock;
+    SC_TRY(lockSet(set, &lock));
+    return compactFolder(set);
 }
 
 }  // namespace surfcast

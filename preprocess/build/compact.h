@@ -29,4 +29,9 @@ Result<CompactReport> compactFolder(const std::string& dir);
 // readers that opened it.
 Result<CompactReport> compactStored(const std::string& url, const std::string& staging);
 
+// surfcast-build --compact SET: a folder's set under its lock
+// (compactFolder), or an s3:// set through a staging folder of its own
+// (compactStored).
+Result<CompactReport> compactSet(const std::string& set);
+
 }  // namespace surfcast
