@@ -35,10 +35,14 @@ Result<std::optional<std::vector<uint8_t>>> TileSource::changedFile(const std::s
                                                                     std::string* tag) {
     auto bytes = file(name, maxBytes);
     if (!bytes) return bytes.status();
-    const std::string crc = "crc-" + std::to_string(crc32(bytes->data(), bytes->size()));
-    if (crc == *tag) return std::optional<std::vector<uint8_t>>();
+    return ifOtherBytes(std::move(*bytes), tag);
+}
+
+std::optional<std::vector<uint8_t>> TileSource::ifOtherBytes(std::vector<uint8_t> bytes, std::string* tag) {
+    const std::string crc = "crc-" + std::to_string(crc32(bytes.data(), bytes.size()));
+    if (crc == *tag) return std::nullopt;
     *tag = crc;
-    return std::optional(std::move(*bytes));
+    return bytes;
 }
 
 namespace {

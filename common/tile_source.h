@@ -36,6 +36,9 @@ public:
     // file(), it leaves what the source pinned at its tileset.json read
     // (batches' version) as it was: a follower polls with it.
     virtual Result<std::optional<std::vector<uint8_t>>> changedFile(const std::string& name, uint64_t maxBytes, std::string* tag);
+    // changedFile's comparison by content: `bytes` unless they are what
+    // `tag` names (nullopt then), `tag` naming them from now on.
+    static std::optional<std::vector<uint8_t>> ifOtherBytes(std::vector<uint8_t> bytes, std::string* tag);
     // A file's size in bytes (an input read by ranges: preprocess/readers/input_file.h).
     virtual Result<uint64_t> size(const std::string& name) = 0;
     // Several nodes' blobs, in order: POST {set}/batch requests of up to N

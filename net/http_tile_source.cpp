@@ -20,7 +20,6 @@
 #include <unordered_map>
 #include <utility>
 
-#include "crc32.h"
 #include "object_store.h"
 #include "sigpipe.h"
 #include "tileset_format.h"
@@ -123,13 +122,8 @@ public:
         if (!r) return r.status();
         if (r->status == 304 && !q.ifNoneMatch.empty()) return std::optional<std::vector<uint8_t>>();
         if (r->status != 200) return httpError(shown_ + "/" + name, r->status);
-        if (r->etag.empty()) {
-            const std::string crc = "crc-" + std::to_string(crc32(r->body.data(), r->body.size()));
-            if (crc == *tag) return std::optional<std::vector<uint8_t>>();
-            *tag = crc;
-        } else {
-            *tag = "etag:" + r->etag;
-        }
+        if (r->etag.empty()) return ifOtherBytes(std::move(r->body), tag);
+        *tag = "etag:" + r->etag;
         return std::optional(std::move(r->body));
     }
     std::string describe() const override { return shown_; }

@@ -17,7 +17,6 @@ size_t defaultGpuBudget(gpu::Context& ctx) {
         if (memory.memoryHeaps[i].flags & VK_MEMORY_HEAP_DEVICE_LOCAL_BIT) heap = std::max(heap, memory.memoryHeaps[i].size);
     return std::min<size_t>(size_t(1) << 30, heap ? heap / 4 : size_t(1) << 30);
 }
-double steadySeconds() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 uint32_t poolId(int slot, uint32_t index) { return index * 2 + uint32_t(slot); }
 }  // namespace
 
@@ -118,7 +117,7 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
         if (next_) {
             next_->setColoring(options_.coloring);  // as changed since the watcher opened it
             next_->adopt(stream_.get());
-            nextSince_ = steadySeconds();
+            nextSince_ = std::chrono::steady_clock::now();
         }
     }
     StreamUpdate u = stream_->update(camera, width, height, options_.lod);
@@ -133,7 +132,7 @@ Result<ClientFrame> SurfcastClient::update(const Camera& camera, int width, int 
         if (!applied.ok() || loading.gaveUp || loading.setChanged) {
             // Drawn as before; the watcher opens the newest version again.
             dropNext(applied.ok() ? loading.lastError : applied.message());
-        } else if (n.converged || (!u.converged && steadySeconds() - nextSince_ > kMaxSwitchSeconds)) {
+        } else if (n.converged || (!u.converged && std::chrono::steady_clock::now() - nextSince_ > std::chrono::duration<double>(kMaxSwitchSeconds))) {
             // (A drawn version that stopped, a rebuild found after a fault,
             // keeps its resident nodes until then.)
             switchVersion();

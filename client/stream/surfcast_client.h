@@ -12,6 +12,7 @@
 // versions.
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <string>
 #include <unordered_set>
@@ -122,7 +123,7 @@ private:
     // Following: the newer version loading, its pool slot is 1 - slot_; when
     // it started loading (steady seconds).
     std::unique_ptr<StreamingSet> next_;
-    double nextSince_ = 0;
+    std::chrono::steady_clock::time_point nextSince_;
     std::string nextError_;  // why the last version loading was dropped; "" since a switch
     int slot_ = 0;  // pool ids: a node's index times two, plus its version's slot
     std::unordered_set<uint32_t> inPool_[2];  // pool ids of each slot
