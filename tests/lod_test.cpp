@@ -286,9 +286,8 @@ TEST_F(Lod, ConesCullNothingWhereNormalsAreNotOriented) {
     // the centre (estimated-outward), the ground's down and the wall's to
     // either side, while their splats are drawn two-sided. A cone that faces
     // away from the eye says nothing about what the eye sees there, so
-    // culling by cones would take visible ground and wall away (it did: 330
-    // of 7,691 covered pixels were left from above); frustum culling alone
-    // leaves the image as it is.
+    // culling by cones would take visible ground and wall away (docs/
+    // RENDERER.md); frustum culling alone leaves the image as it is.
     TempDir out;
     std::string xyz;
     char line[64];
