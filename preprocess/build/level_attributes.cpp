@@ -23,6 +23,12 @@ constexpr double kWeightCellPercentile = 0.9;
 // An unoriented (zero) normal faces every side.
 bool sameSide(const Vec3f& a, const Vec3f& b) { return a == Vec3f{} || b == Vec3f{} || dot(a, b) >= 0; }
 
+// Neighbours the first d_k query fetches besides the query: with only k (8),
+// a third of a real scan's queries find one facing away and are asked again
+// for fetchK; 12 asks fewer again, for less in all (bench/BENCHMARKS.md, "What
+// isolation costs on a real scan").
+constexpr int kFirstFetch = 12;
+
 float percentile(std::vector<float>& v, double p) {
     size_t i = std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5));
     std::nth_element(v.begin(), v.begin() + long(i), v.end());
@@ -72,8 +78,9 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
     }
 
     // d_k of the surfels `queries` (indices into points): one FLANN query for
-    // the k nearest each, and a second, for fetchK, only where some of those
-    // face away. The result is the same as fetching fetchK at once, faster.
+    // the kFirstFetch nearest each, and a second, for fetchK, only where fewer
+    // than k of those face its side. The result is the same as fetching fetchK
+    // at once, faster.
     NeighbourIndex index(points, params.threads);
     std::vector<Vec3f> queryPoints;
     std::vector<int> nbr;
@@ -85,7 +92,8 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         spread->assign(queries.size(), 0.f);
         std::vector<uint32_t> pending(queries.size());
         for (size_t q = 0; q < queries.size(); ++q) pending[q] = uint32_t(q);
-        for (int k : {params.spacingK + 1, std::max(params.spacingK, params.fetchK) + 1}) {  // +1: the query itself
+        const int first = std::max(params.spacingK, std::min(params.fetchK, kFirstFetch));
+        for (int k : {first + 1, std::max(params.spacingK, params.fetchK) + 1}) {  // +1: the query itself
             queryPoints.resize(pending.size());
             for (size_t q = 0; q < pending.size(); ++q) queryPoints[q] = points[queries[pending[q]]];
             index.knn(queryPoints.data(), pending.size(), k, &nbr, &d2);
