@@ -54,6 +54,58 @@ TEST(Normals, AgreeWithMeshNormals) {
     EXPECT_GE(agreement("igea.ply"), 0.95);
 }
 
+// Each estimated point records its own sampling for the isolation of input
+// points (Surfel::scanDk): on a lattice of step a, the 8th nearest other point
+// lies at a·√2 (4 at a, then 4 at a·√2) and none off the plane. A point that
+// came with its normal is not measured.
+TEST(Normals, EachEstimatedPointRecordsItsDkAndSpread) {
+    constexpr double a = 0.1;
+    std::vector<Surfel> pts;
+    for (int i = 0; i < 30; ++i)
+        for (int j = 0; j < 30; ++j) {
+            Surfel s;
+            s.position = {i * a, j * a, 5.0};
+            pts.push_back(s);
+        }
+    pts[0].normal = {0, 0, 1};  // given: not estimated, not measured
+    NormalContext ctx;
+    ctx.rules = {OrientationRule{std::nullopt, true}};
+    ctx.threads = 2;
+    estimateNormals(pts, {}, ctx);
+    EXPECT_EQ(pts[0].scanDk, -1.f);
+    size_t interior = 0;
+    for (size_t p = 0; p < pts.size(); ++p) {
+        const int i = int(p / 30), j = int(p % 30);
+        if (i < 2 || j < 2 || i > 27 || j > 27) continue;
+        ++interior;
+        EXPECT_NEAR(pts[p].scanDk, a * std::sqrt(2.0), 1e-5) << "point " << p;
+        EXPECT_EQ(pts[p].scanSpread, 0) << "point " << p;
+    }
+    EXPECT_EQ(interior, 26u * 26u);
+
+    // Heights alternating by h (a checkerboard): the 4 nearest, beside, lie h
+    // above or below, the next 4, diagonal at a·√2, at the same height. Fitted
+    // to 13 points (the point and the rings at a, a·√2 and 2a: symmetric, so
+    // the plane is level), the offsets from the point along the normal are h
+    // for 4 of the 8 nearest and 0 for the others: spread = √(4h²/8) / (a·√2)
+    // = h / 2a.
+    constexpr double h = 0.02;
+    for (size_t p = 0; p < pts.size(); ++p) {
+        const int i = int(p / 30), j = int(p % 30);
+        pts[p].position.z = 5.0 + ((i + j) % 2 ? h : 0);
+        pts[p].normal = {};
+    }
+    ctx.k = 13;
+    estimateNormals(pts, {}, ctx);
+    for (size_t p = 0; p < pts.size(); ++p) {
+        const int i = int(p / 30), j = int(p % 30);
+        if (i < 2 || j < 2 || i > 27 || j > 27) continue;
+        const double d8 = a * std::sqrt(2.0);
+        EXPECT_NEAR(pts[p].scanDk, d8, 1e-5) << "point " << p;
+        EXPECT_NEAR(pts[p].scanSpread * kScanSpreadUnit, h / (2 * a), 2e-4) << "point " << p;
+    }
+}
+
 TEST(Normals, PlaneFacesTheScanOrigin) {
     std::vector<Surfel> pts;
     for (int i = 0; i < 30; ++i)
@@ -105,6 +157,14 @@ TEST(Normals, ADensePatchBesideFarScansTakesTheKdTree) {
     estimateNormals(pts, {}, ctx);
     const Vec3f plane = cast<float>(normalizeOrZero(Vec3d{-1, 0, 2}));
     for (size_t i = 0; i < 40000; ++i) ASSERT_GT(dot(pts[i].normal, plane), 0.999f) << "point " << i;
+    // The kd-tree's answers give the points their d_8 too: 2 neighbours at
+    // 5 mm (along y), 2 at 5.59 mm (along the slope), 4 diagonal at 7.5 mm.
+    for (size_t i = 2; i < 198; ++i)
+        for (size_t j = 2; j < 198; ++j) {
+            const Surfel& s = pts[i * 200 + j];
+            ASSERT_NEAR(s.scanDk, 0.0075f, 1e-6f) << "point " << i * 200 + j;
+            ASSERT_LE(s.scanSpread, 1) << "point " << i * 200 + j;
+        }
 }
 
 // The kd-tree's path (GridKnn::tooCoarse) keeps the grid's rule for stacks

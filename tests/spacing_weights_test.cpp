@@ -140,6 +140,33 @@ TEST(Isolation, StraysInANodeOfTheirOwnAreDrawnAtTheLevelSpacing) {
     for (size_t i = 0; i < far.size(); ++i) EXPECT_GT(stray.radii.empty() ? stray.h : stray.radii[i], 20 * kA);
 }
 
+TEST(Isolation, InputPointsAreIsolatedByTheirScansOwnSampling) {
+    // The ten strays of the test above as input points (cell 0) whose
+    // normals were estimated, so each carries its scan's d_8 and spread
+    // (Surfel::scanDk). Measured isolated (d_8 = 20a, beyond 6 rho): drawn at
+    // rho, as when the level's neighbours decide. Measured inside a surface
+    // (d_8 = a, no spread: the rest of their scan went to other levels), they
+    // are not isolated, but the level's 8th neighbours, 20a to 160a away, still
+    // cap them at isolation * rho = 12a, under their h (> 20a): a node without
+    // radii would draw them at h.
+    std::vector<Surfel> own = lattice(-14, 14, true, 4), halo = lattice(-14, 14, false, 4);
+    std::vector<Surfel> far = strays(10, 20 * kA, 20 * kA);
+    for (Surfel& s : far) s.scanDk = float(20 * kA), s.scanSpread = 0;
+    LevelNode plane, stray;
+    plane.surfels = own;
+    stray.surfels = far;
+    LevelNode* nodes[] = {&plane, &stray};
+    computeLevelAttributes(nodes, halo, isolatingOn());
+    ASSERT_EQ(stray.radii.size(), far.size());
+    for (float r : stray.radii) EXPECT_NEAR(r, kRho, 1e-6);
+
+    for (Surfel& s : far) s.scanDk = float(kA);
+    computeLevelAttributes(nodes, halo, isolatingOn());
+    EXPECT_GT(stray.h, 20 * kA);
+    ASSERT_EQ(stray.radii.size(), far.size());
+    for (float r : stray.radii) EXPECT_NEAR(r, kDefaultIsolation * kRho, 1e-6);
+}
+
 TEST(Isolation, HOfANodeTooLargeToQueryWholeStaysItsSamplesH) {
     // 4,000 strays scattered through a box 400a wide: more than kSpacingSamples,
     // so h comes from a strided sample. Isolating them queries the node whole

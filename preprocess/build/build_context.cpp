@@ -507,6 +507,7 @@ Status BuildContext::chooseOrientationRules() {
     const Box3d& b = stats_.bounds;
     normals_.centre = (b.min + b.max) * 0.5 - rootMin_;
     normals_.k = opt_.normalK;
+    normals_.spacingK = opt_.spacingK;
     normals_.rules.clear();
     sourceIds_.clear();
     std::map<std::tuple<bool, double, double, double, bool, long>, uint16_t> ruleIds;

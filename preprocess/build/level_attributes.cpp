@@ -125,12 +125,14 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
 
     // h per node from an evenly strided subsample of its surfels (see the
     // header); nodes the sample finds irregular are queried whole, for their
-    // per-surfel radii and an exact h. Nodes the sample finds isolated
-    // surfels in are queried whole for their radii too, keeping h.
+    // per-surfel radii and an exact h. Nodes with isolated surfels keep h and
+    // need each surfel's isolation: input points measured it when their normals
+    // were estimated (Surfel::scanDk); other nodes are queried whole for it.
     assert((params.isolation == 0 || params.isolation >= 1) && "isolation is off or at least rho");
     auto isolated = [&](float dk, float spread, float rho) {
         return std::isinf(spread) || dk > params.isolation * rho || (dk > rho && spread > kScatteredSpread);
     };
+    const bool isolating = params.radii && params.isolation > 0 && params.levelCell > 0;
     std::vector<uint32_t> queries;
     std::vector<float> spread;
     for (size_t i = 0; i < nodes.size(); ++i) {
@@ -140,10 +142,17 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         queries.clear();
         for (size_t s = 0; s < n; s += stride) queries.push_back(uint32_t(firstOf[i] + s));
         std::vector<float> dk = kthDistances(queries, &spread);
-        const bool isolating = params.radii && params.isolation > 0 && params.levelCell > 0;
         const float rho = float(kIsolationSpacing * (node.cell > 0 ? std::max(params.levelCell, node.cell) : std::max(params.levelCell, params.leafCell)));
-        bool sparse = false;
+        const bool measured = isolating && node.cell == 0 &&
+                              std::all_of(node.surfels.begin(), node.surfels.end(), [](const Surfel& s) { return s.scanDk >= 0; });
+        // Surfel s of the node isolated: by its measurement, or by its d_k and spread here.
+        auto alone = [&](size_t s, float d, float sp) {
+            const Surfel& p = node.surfels[s];
+            return measured ? isolated(p.scanDk, float(p.scanSpread) * kScanSpreadUnit, rho) : isolated(d, sp, rho);
+        };
+        bool sparse = false;  // the sample's d_k as well, so that h <= isolation * rho where no radius is kept
         for (size_t s = 0; s < dk.size() && isolating; ++s) sparse = sparse || isolated(dk[s], spread[s], rho);
+        for (size_t s = 0; s < n && measured && !sparse; ++s) sparse = alone(s, 0, 0);
         SpacingResult spacing = spacingRule(dk, params.fallbackSpacing);
         const bool exact = spacing.irregular && (params.radii || stride > 1);
         node.radii.clear();
@@ -151,9 +160,12 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
             node.h = spacing.h;  // isolating, h <= the largest sampled d_k <= isolation * rho (see the header)
             continue;
         }
-        queries.clear();
-        for (size_t s = 0; s < n; ++s) queries.push_back(uint32_t(firstOf[i] + s));
-        std::vector<float> all = kthDistances(queries, &spread);
+        std::vector<float> all;
+        if (exact || !measured) {
+            queries.clear();
+            for (size_t s = 0; s < n; ++s) queries.push_back(uint32_t(firstOf[i] + s));
+            all = kthDistances(queries, &spread);
+        }
         if (exact) {
             std::vector<float> sorted = all;
             spacing = spacingRule(sorted, params.fallbackSpacing);
@@ -163,8 +175,9 @@ void computeLevelAttributes(std::span<LevelNode* const> nodes, std::span<const S
         std::vector<float> radii(n);
         bool narrower = false;
         for (size_t s = 0; s < n; ++s) {
-            float r = own ? std::clamp(all[s], spacing.minRadius, spacing.h) : spacing.h;
-            if (isolating) r = std::min(r, float(isolated(all[s], spread[s], rho) ? rho : params.isolation * rho));
+            const float d = all.empty() ? 0.f : all[s], sp = all.empty() ? 0.f : spread[s];
+            float r = own ? std::clamp(d, spacing.minRadius, spacing.h) : spacing.h;
+            if (isolating) r = std::min(r, float(alone(s, d, sp) ? rho : params.isolation * rho));
             narrower = narrower || r < spacing.h;
             radii[s] = r;
         }

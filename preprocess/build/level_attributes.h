@@ -32,11 +32,15 @@
 // its neighbours spread off its tangent plane (kScatteredSpread): a stray
 // return, a leaf hit by a few points, but also a crease of a sparse surface.
 // It is drawn at rho (at h where that is smaller); every other surfel of its
-// node at most at isolation * rho. A regular node whose sample finds no
-// isolated surfel draws every surfel at its h, which is at most the largest sampled
-// d_k <= isolation * rho (or the fallback, where no sample has a neighbour
-// at a distance). h itself is what the spacing rule gives with or without
-// isolation. --no-radius (radii = false) turns isolation off with the radii.
+// node at most at isolation * rho. Input points whose normals were estimated
+// (a node of them all with Surfel::scanDk) are judged by d_k and spread among
+// their scan's points, as the estimate measured them (neighbours of either
+// side), not at the level: their node needs no query for it. A regular node
+// whose sample (and measurements) find no isolated surfel draws every surfel
+// at its h, which is at most the largest sampled d_k <= isolation * rho (or
+// the fallback, where no sample has a neighbour at a distance). h itself is
+// what the spacing rule gives with or without isolation. --no-radius
+// (radii = false) turns isolation off with the radii.
 //
 // Weights (Ren et al. 2002, §7.1, analytic form): s_k = 1 / Σ_j g_j(u_j - u_k),
 // summed over surfel k and its neighbours j, with u_j - u_k projected into the

@@ -2,12 +2,17 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <cmath>
 #include <tuple>
 
 #include "grid_knn.h"
 #include "neighbours.h"
 
 namespace surfcast {
+
+namespace {
+double sqr(double x) { return x * x; }
+}  // namespace
 
 std::string orientationName(const OrientationRule& rule) {
     return rule.scanOrigin ? "estimated-scan-origin" : rule.up ? "estimated-up" : "estimated-outward";
@@ -26,8 +31,11 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     for (const Surfel& s : points) all.push_back(cast<float>(s.position - frame));
     for (const Surfel& s : halo) all.push_back(cast<float>(s.position - frame));
 
-    // The normal of the plane fitted to a point's neighbours, oriented by its source's rule.
-    auto fit = [&](uint32_t query, std::span<const Vec3f> positions) {
+    // The normal of the plane fitted to a point's neighbours (the point itself
+    // among them, at distance² 0), oriented by its source's rule; and the
+    // point's d_k and spread off that plane (Surfel::scanDk), where k
+    // neighbours besides it were found.
+    auto fit = [&](uint32_t query, std::span<const Vec3f> positions, std::span<const float> dist2) {
         Surfel& s = points[query];
         Vec3d normal{0, 0, 1};
         const size_t n = positions.size();
@@ -60,6 +68,17 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
                                        : s.position - ctx.centre;
         if (dot(normal, toward) < 0) normal = normal * -1.0;
         s.normal = cast<float>(normal);
+        const size_t k = size_t(ctx.spacingK);
+        if (positions.size() <= k) return;
+        // The k nearest besides the point: positions 1..k, nearest first
+        // (position 0 is the point itself or a copy of it).
+        const float dk = std::sqrt(dist2[k]);
+        const Vec3f self = cast<float>(s.position - frame), facing = s.normal;
+        double off2 = 0;
+        for (size_t j = 1; j <= k; ++j) off2 += sqr(dot(positions[j] - self, facing));
+        const double spread = dk > 0 ? std::sqrt(off2 / double(k)) / dk : 0;
+        s.scanDk = dk;
+        s.scanSpread = uint16_t(std::min(65535.0, std::round(spread / kScanSpreadUnit)));
     };
 
     const size_t own = points.size();
@@ -67,7 +86,7 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     if (!grid.tooCoarse()) {
         std::vector<Vec3f>().swap(all);
         grid.forEach(ctx.k, ctx.threads, [&](uint32_t i) { return i < own && todo[i]; },
-                     [&](uint32_t query, const GridKnn::Neighbours& nbr) { fit(query, nbr.positions); }, GridKnn::Order::any);
+                     [&](uint32_t query, const GridKnn::Neighbours& nbr) { fit(query, nbr.positions, nbr.dist2); });
         return;
     }
     // A dense scan the grid cannot resolve (GridKnn::tooCoarse): FLANN's
@@ -103,7 +122,8 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
             if (!todo[i]) continue;
             if (stacked[i]) {
                 const std::vector<Vec3f> copies(size_t(ctx.k), all[i]);
-                fit(uint32_t(i), copies);
+                const std::vector<float> zero(size_t(ctx.k), 0.f);
+                fit(uint32_t(i), copies, zero);
             } else {
                 queries.push_back(uint32_t(i)), at.push_back(all[i]);
             }
@@ -114,7 +134,7 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
         for (size_t q = 0; q < queries.size(); ++q) {
             std::vector<Vec3f> near(k);
             for (size_t j = 0; j < k; ++j) near[j] = all[size_t(indices[q * k + j])];
-            fit(queries[q], near);
+            fit(queries[q], near, std::span<const float>(dist2.data() + q * k, k));
         }
     }
 }

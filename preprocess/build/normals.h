@@ -25,13 +25,15 @@ struct NormalContext {
     std::vector<OrientationRule> rules;  // indexed by Surfel::source
     Vec3d centre;                        // data set centre, surfel frame
     int k = 16;
+    int spacingK = 8;  // the d_k each estimated point records (Surfel::scanDk), when k > spacingK
     int threads = 1;
 };
 
 // Name of the rule an input's normals follow, for tileset.json and the summary.
 std::string orientationName(const OrientationRule& rule);
 
-// Fills the zero normals of `points`; neighbours come from points and halo.
+// Fills the zero normals of `points`, and their scanDk and scanSpread;
+// neighbours come from points and halo.
 void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, const NormalContext& context);
 
 }  // namespace surfcast

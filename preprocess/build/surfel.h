@@ -26,8 +26,16 @@ struct Surfel {
     // are distinct points (the build merged the exact duplicates), even where
     // quantization gave two of them one position, so two such are never merged.
     bool fromSet = false;
+    // An input point's own sampling, measured where its normal is estimated
+    // (normals.h): the distance to its spacingK-th nearest input point (-1:
+    // not measured) and the RMS distance of those neighbours from its fitted
+    // plane over it, in units of kScanSpreadUnit, for the isolation of input
+    // points (level_attributes.h, "Isolated surfels").
+    uint16_t scanSpread = 0;
+    float scanDk = -1;
 };
-// 58 bytes of fields padded to the 8-byte alignment of the position.
+inline constexpr float kScanSpreadUnit = 1e-4f;
+// 64 bytes of fields: chunk files store Surfel records as they are.
 static_assert(sizeof(Surfel) == 64, "chunk files store Surfel records raw; keep them compact");
 
 }  // namespace surfcast

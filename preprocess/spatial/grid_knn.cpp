@@ -226,7 +226,7 @@ void GridKnn::gather(int level, const uint32_t cell[3], size_t hint, Block* bloc
     block->runs.resize(out);
 }
 
-void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& wanted, const Visit& visit, Order order) const {
+void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& wanted, const Visit& visit) const {
     assert(k > 0);
     if (codes_.empty()) return;
     const double scale = double(1u << kBits) / edge_;
@@ -333,7 +333,7 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                         // The k-th lands at k - 1 either way: exact() and the next
                         // query's ball read it there.
                         std::nth_element(kp, kp + (k - 1), kp + m);
-                        if (order == Order::nearestFirst) std::sort(kp, kp + (k - 1));
+                        std::sort(kp, kp + (k - 1));
                         for (int i = 0; i < k; ++i) {
                             const uint64_t key = kp[i];
                             best[size_t(i)] = std::bit_cast<float>(uint32_t(key >> 32));

@@ -50,7 +50,7 @@ public:
 
     // Neighbours of one query: indices into the indexed points, their squared
     // distances and positions (as indexed), at most k (fewer only when fewer
-    // points exist), nearest first unless asked otherwise. A query finds
+    // points exist), nearest first. A query finds
     // itself at distance 0, or, in a stack of more than k coincident points,
     // k of the stack.
     struct Neighbours {
@@ -60,14 +60,10 @@ public:
     };
     using Visit = std::function<void(uint32_t query, const Neighbours&)>;
 
-    enum class Order { nearestFirst, any };
-
     // The k nearest neighbours of every indexed point i with wanted(i) (all
     // when wanted is empty), on `threads` OpenMP threads. visit runs
-    // concurrently for different queries; each query is visited once. The
-    // same k are found in either order; Order::any skips ranking them.
-    void forEach(int k, int threads, const std::function<bool(uint32_t)>& wanted, const Visit& visit,
-                 Order order = Order::nearestFirst) const;
+    // concurrently for different queries; each query is visited once.
+    void forEach(int k, int threads, const std::function<bool(uint32_t)>& wanted, const Visit& visit) const;
 
 private:
     static constexpr int kBits = 21;  // Morton bits per axis
