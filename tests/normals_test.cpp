@@ -68,20 +68,29 @@ TEST(Normals, EachEstimatedPointRecordsItsDkAndSpread) {
             pts.push_back(s);
         }
     pts[0].normal = {0, 0, 1};  // given: not estimated, not measured
+    // An update's decoded point whose normal the build estimated: measured
+    // again against its kept normal, tilted here so that the offsets of its
+    // 8 nearest are 0.6·Δy: √(0.36 · 6a² / 8) / (a·√2) = 0.3674.
+    const size_t kept = 5 * 30 + 5;
+    pts[kept].normal = {0, 0.6f, 0.8f};
+    pts[kept].scanDk = kScanDkToMeasure;
     NormalContext ctx;
     ctx.rules = {OrientationRule{std::nullopt, true}};
     ctx.threads = 2;
     estimateNormals(pts, {}, ctx);
     EXPECT_EQ(pts[0].scanDk, -1.f);
+    EXPECT_EQ(pts[kept].normal, (Vec3f{0, 0.6f, 0.8f}));
+    EXPECT_NEAR(pts[kept].scanDk, a * std::sqrt(2.0), 1e-5);
+    EXPECT_NEAR(pts[kept].scanSpread * kScanSpreadUnit, std::sqrt(0.36 * 6 / 8) / std::sqrt(2.0), 2e-4);
     size_t interior = 0;
     for (size_t p = 0; p < pts.size(); ++p) {
         const int i = int(p / 30), j = int(p % 30);
-        if (i < 2 || j < 2 || i > 27 || j > 27) continue;
+        if (i < 2 || j < 2 || i > 27 || j > 27 || p == kept) continue;
         ++interior;
         EXPECT_NEAR(pts[p].scanDk, a * std::sqrt(2.0), 1e-5) << "point " << p;
         EXPECT_EQ(pts[p].scanSpread, 0) << "point " << p;
     }
-    EXPECT_EQ(interior, 26u * 26u);
+    EXPECT_EQ(interior, 26u * 26u - 1);
 
     // Heights alternating by h (a checkerboard): the 4 nearest, beside, lie h
     // above or below, the next 4, diagonal at a·√2, at the same height. Fitted

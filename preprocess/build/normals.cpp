@@ -19,9 +19,13 @@ std::string orientationName(const OrientationRule& rule) {
 }
 
 void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, const NormalContext& ctx) {
+    // 1: to estimate and measure; 2: to measure only (kScanDkToMeasure).
     std::vector<uint8_t> todo(points.size());
     bool any = false;
-    for (size_t i = 0; i < points.size(); ++i) any |= (todo[i] = points[i].normal == Vec3f{});
+    for (size_t i = 0; i < points.size(); ++i) {
+        todo[i] = points[i].normal == Vec3f{} ? 1 : points[i].scanDk == kScanDkToMeasure ? 2 : 0;
+        any |= todo[i] != 0;
+    }
     if (!any) return;
 
     // Float coordinates relative to the first point keep precision local.
@@ -31,12 +35,8 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     for (const Surfel& s : points) all.push_back(cast<float>(s.position - frame));
     for (const Surfel& s : halo) all.push_back(cast<float>(s.position - frame));
 
-    // The normal of the plane fitted to a point's neighbours (the point itself
-    // among them, at distance² 0), oriented by its source's rule; and the
-    // point's d_k and spread off that plane (Surfel::scanDk), where k
-    // neighbours besides it were found.
-    auto fit = [&](uint32_t query, std::span<const Vec3f> positions, std::span<const float> dist2) {
-        Surfel& s = points[query];
+    // The normal of the plane fitted to a point's neighbours, oriented by its source's rule.
+    auto estimate = [&](Surfel& s, std::span<const Vec3f> positions) {
         Vec3d normal{0, 0, 1};
         const size_t n = positions.size();
         if (n >= 3) {
@@ -68,10 +68,13 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
                                        : s.position - ctx.centre;
         if (dot(normal, toward) < 0) normal = normal * -1.0;
         s.normal = cast<float>(normal);
+    };
+    // The point's d_k and its k neighbours' spread off its tangent plane
+    // (Surfel::scanDk), where k neighbours besides it were found; positions
+    // nearest first, the point itself or a copy of it first.
+    auto measure = [&](Surfel& s, std::span<const Vec3f> positions, std::span<const float> dist2) {
         const size_t k = size_t(ctx.spacingK);
         if (positions.size() <= k) return;
-        // The k nearest besides the point: positions 1..k, nearest first
-        // (position 0 is the point itself or a copy of it).
         const float dk = std::sqrt(dist2[k]);
         const Vec3f self = cast<float>(s.position - frame), facing = s.normal;
         double off2 = 0;
@@ -79,6 +82,10 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
         const double spread = dk > 0 ? std::sqrt(off2 / double(k)) / dk : 0;
         s.scanDk = dk;
         s.scanSpread = uint16_t(std::min(65535.0, std::round(spread / kScanSpreadUnit)));
+    };
+    auto fit = [&](uint32_t query, std::span<const Vec3f> positions, std::span<const float> dist2) {
+        if (todo[query] == 1) estimate(points[query], positions);
+        measure(points[query], positions, dist2);
     };
 
     const size_t own = points.size();

@@ -35,6 +35,9 @@ struct Surfel {
     float scanDk = -1;
 };
 inline constexpr float kScanSpreadUnit = 1e-4f;
+// scanDk of a set's input point that an update decoded, whose normal the
+// build estimated: measured again (its normal kept), as a build would have.
+inline constexpr float kScanDkToMeasure = -2.f;
 // 64 bytes of fields: chunk files store Surfel records as they are.
 static_assert(sizeof(Surfel) == 64, "chunk files store Surfel records raw; keep them compact");
 

@@ -268,7 +268,15 @@ private:
         std::vector<const Lattice*> lattices;
         if (n.flags & kFlagInputPoints)
             for (uint32_t input : inputsOf(block)) lattices.push_back(latticeOf(n, input));
+        const size_t first = out->size();
         appendSurfels(c, *reader_, n, block, rulesOf(block), lattices, out, table);
+        // Input points whose normals the build estimated: judged by their scan
+        // again where a chunk is rebuilt (kScanDkToMeasure), as a build judges them.
+        if (n.flags & kFlagInputPoints) {
+            const std::vector<uint32_t> inputs = inputsOf(block);
+            for (size_t i = first; i < out->size(); ++i)
+                if (inputs[i - first] < estimated_.size() && estimated_[inputs[i - first]]) (*out)[i].scanDk = kScanDkToMeasure;
+        }
     }
     // The added points, each batch snapped onto the set's leaves (SetLeaves):
     // every pass over them sees them where the chunks receive them.
@@ -301,6 +309,7 @@ private:
     std::shared_ptr<const BuildContext> context_;  // what the updated set holds, in the set's layout
     std::vector<uint16_t> oldRules_;
     std::vector<uint32_t> oldInputs_;
+    std::vector<bool> estimated_;  // per old input: its normals were estimated (none came with it)
     Growth grow_;
     bool addsProvenance_ = false;
     InputPart addedPart_;
@@ -389,8 +398,10 @@ Status Update::open(const BuildOptions& options, size_t added, const std::string
     const size_t inputs = oldInputs_.empty() ? 0 : *std::max_element(oldInputs_.begin(), oldInputs_.end()) + 1;
     std::vector<int> sources(inputs, 0);
     lattices_.assign(inputs, Lattice{});
+    estimated_.assign(inputs, true);
     for (size_t i = 0; i < oldInputs_.size(); ++i) {
         const InputDescription& d = record.stats.sources[i].description;
+        if (d.hasNormals) estimated_[oldInputs_[i]] = false;
         if (sources[oldInputs_[i]]++ == 0) lattices_[oldInputs_[i]] = {d.latticeScale, d.latticeOffset};
         else lattices_[oldInputs_[i]] = Lattice{};  // (several sources: the default scene)
     }
