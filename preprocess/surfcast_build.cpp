@@ -407,30 +407,20 @@ uint64_t meshCapacity(const surfcast::BuildContext& c) {
 surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart>>> reducedScans(const surfcast::WorkFolder& work,
                                                                                                 const surfcast::InputOptions& inputs,
                                                                                                 size_t parts, uint32_t job) {
-    std::vector<surfcast::InputStats> stats;
-    std::vector<surfcast::InputPart> ranges;
-    std::vector<bool> continues;
-    size_t sources = 0;
+    std::vector<surfcast::InputStats> stats(parts);
+    std::vector<surfcast::InputPart> ranges(parts);
     for (size_t p = 0; p < parts; ++p) {
-        surfcast::InputPart part;
-        auto scanned = surfcast::readScan(work.scan(p), &part, job);
+        auto scanned = surfcast::readScan(work.scan(p), &ranges[p], job);
         if (!scanned) return scanned.status();
-        const bool follows = p == 0 ? part.first == 0 && part.begin == 0 : part.first == ranges.back().last && part.begin == ranges.back().end;
-        if (!follows || part.sources != scanned->sources.size() || (part.continuesSource() && sources == 0))
-            return surfcast::Status::error(work.scan(p) + ": its inputs do not follow on from the previous part's" +
-                                           " (scanned with another number of parts?)");
-        // A part that starts within a file shares its source with the part before.
-        part.firstSource = part.continuesSource() ? sources - 1 : sources;
-        sources = part.firstSource + part.sources;
-        continues.push_back(part.continuesSource());
-        ranges.push_back(part);
-        stats.push_back(std::move(*scanned));
+        stats[p] = std::move(*scanned);
     }
     const size_t inputCount = inputs.paths.size() + (inputs.defaultScene ? 1 : 0);
+    auto reduced = surfcast::reduceScans(std::move(stats), ranges, [&](size_t p) { return work.scan(p); });
+    if (!reduced) return reduced.status();
     if (ranges.empty() || ranges.back().last != inputCount || ranges.back().end != 0)
         return surfcast::Status::error(work.dir + "/scan: the parts cover " + std::to_string(ranges.empty() ? 0 : ranges.back().last) +
                                        " of the " + std::to_string(inputCount) + " inputs");
-    return std::make_pair(surfcast::mergeInputStats(std::move(stats), continues), std::move(ranges));
+    return std::make_pair(std::move(*reduced), std::move(ranges));
 }
 
 // One stage of a staged build (stages.h): scan, count and plan take the inputs

@@ -11,6 +11,7 @@
 #include "inputs.h"
 #include "neighbours.h"
 #include "octree_builder.h"
+#include "stages.h"
 #include "test_support.h"
 #include "tileset_reader.h"
 
@@ -267,6 +268,40 @@ TEST(Octree, SameBytesWhateverTheThreads) {
     size_t entries = 0;
     for (auto& e : std::filesystem::directory_iterator(dir.file(""))) entries += e.path().filename().string()[0] == '.';
     EXPECT_EQ(entries, 0u);
+}
+
+TEST(Octree, SameBytesWhateverTheThreadsReadingOneFileInParts) {
+    // One LAS and one LAZ file, read by two threads in two parts cut within
+    // the file (readParts: record ranges, LAZ chunks) and by one thread whole:
+    // the same set, its build record included (built to the same path).
+    REQUIRE_DATA();
+    for (const std::string scan : {"autzen_trim.las", "lone-star.laz"}) {
+        SCOPED_TRACE(scan);
+        test::TempDir dir;
+        std::map<std::string, std::string> one;
+        for (int threads : {1, 2}) {
+            BuildOptions o = quietOptions(dir.file("set"));
+            o.inputs.paths = {test::dataFile(scan)};
+            o.capacity = 5000;
+            o.memoryBytes = kBaselineBytes + 2 * kBytesPerChunkPoint * 40000;
+            o.threads = threads;
+            o.commandLine = {"-o", dir.file("set"), test::dataFile(scan)};
+            if (threads == 2) {
+                ASSERT_EQ(readParts(o), 2u);
+                const InputPart first = inputPart(o.inputs, 0, 2);
+                EXPECT_TRUE(first.last == 0 && first.end > 0) << "the first part ends within the file";
+            }
+            auto summary = buildTileset(o);
+            ASSERT_TRUE(summary.ok()) << summary.status().message();
+            EXPECT_GT(summary->chunks, 2u);
+            for (const char* f : {"tileset.json", "hierarchy.bin", "blocks.bin", "build.bin"}) {
+                const std::string bytes = test::readFile(dir.file(std::string("set/") + f));
+                EXPECT_FALSE(bytes.empty()) << f;
+                if (threads == 1) one[f] = bytes;
+                else EXPECT_TRUE(one[f] == bytes) << f << " differs between 1 and 2 threads";
+            }
+        }
+    }
 }
 
 TEST(Octree, EachNodeHoldsAtMostAQuarterOfTheSurfelsBelowIt) {

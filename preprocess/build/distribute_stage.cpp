@@ -17,9 +17,11 @@ namespace {
 constexpr char kDistributionMagic[9] = "SCDIST02";
 }  // namespace
 
-Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& planned, size_t part,
-                       const WorkFolder& work, Progress& progress, BuildSummary* summary) {
-    const BuildOptions& opt = context.options();
+namespace {
+
+// Part `part`'s points to its chunk files, in a folder of its own.
+Status distributePart(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& planned, size_t part,
+                      const WorkFolder& work, Progress& progress) {
     const InputPart& inputs = plan.parts.at(part);
     // Written into a folder of this process's own and renamed into place
     // whole: a task run twice at once, or killed, never mixes its files with
@@ -38,8 +40,6 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
     } guard{folder};
     ChunkLayout layout = planned;
     const uint64_t expected = inputs.points;
-    MeshStore& meshes = *opt.inputs.meshes;
-    progress.begin("distribute", expected);
     ChunkWriter chunkWriter(layout, folder, context.scalars().size());
     uint64_t seen = 0;
     SC_TRY(forEachPartBatch(context, inputs, context.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
@@ -48,9 +48,6 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
         return chunkWriter.add(batch, scalars);
     }));
     SC_TRY(chunkWriter.finish());
-    meshes.setCapacity(0);  // the fields keep the textures; nothing reads the meshes again
-    summary->meshReads = meshes.reads();  // the store's, since the scan: the build's in one process
-    summary->phaseSeconds.push_back({"distribute", progress.end()});
     if (seen != expected)
         return Status::error("the inputs changed while being read: " + std::to_string(expected) + " points, then " + std::to_string(seen));
     SC_TRY(writeDistribution(folder + "/distribution.bin", plan, layout));
@@ -63,6 +60,34 @@ Status distributeStage(const BuildContext& context, const BuildPlan& plan, const
         ::renameat2(AT_FDCWD, folder.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) != 0)
         return Status::error(target + ": cannot move the part's chunk files into place (" + std::strerror(errno) + ")");
     return {};
+}
+
+// The parts `which` at once, a thread each, as one phase.
+Status distributeEach(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const std::vector<size_t>& which,
+                      const WorkFolder& work, Progress& progress, BuildSummary* summary) {
+    uint64_t points = 0;
+    for (size_t part : which) points += plan.parts.at(part).points;
+    progress.begin("distribute", points);
+    SC_TRY(forEachPartInParallel(which.size(), [&](size_t i) { return distributePart(context, plan, layout, which[i], work, progress); }));
+    MeshStore& meshes = *context.options().inputs.meshes;
+    meshes.setCapacity(0);  // the fields keep the textures; nothing reads the meshes again
+    summary->meshReads = meshes.reads();  // the store's, since the scan: the build's in one process
+    summary->phaseSeconds.push_back({"distribute", progress.end()});
+    return {};
+}
+
+}  // namespace
+
+Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t part,
+                       const WorkFolder& work, Progress& progress, BuildSummary* summary) {
+    return distributeEach(context, plan, layout, {part}, work, progress, summary);
+}
+
+Status distributeParts(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                       Progress& progress, BuildSummary* summary) {
+    std::vector<size_t> all(plan.parts.size());
+    for (size_t p = 0; p < all.size(); ++p) all[p] = p;
+    return distributeEach(context, plan, layout, all, work, progress, summary);
 }
 
 Status writeDistribution(const std::string& path, const BuildPlan& plan, const ChunkLayout& layout) {

@@ -77,7 +77,7 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     } workGuard{work.dir};
 
     ChunkLayout layout = plan->layout(c);
-    SC_TRY(distributeStage(c, *plan, layout, 0, work, progress, &summary));
+    SC_TRY(distributeParts(c, *plan, layout, work, progress, &summary));
     SC_TRY(readDistribution(work, *plan, layout));
     summary.chunks = layout.chunks().size();
     progress.begin("build", c.stats().points);
@@ -85,7 +85,15 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     for (size_t i = 0; i < all.size(); ++i) all[i] = i;
     SC_TRY(buildChunks(c, *plan, layout, std::move(all), work, progress));
     summary.phaseSeconds.push_back({"build", progress.end()});
-    if (!options.commandLine.empty()) SC_TRY(keepBuildRecord(**writer, work.dir, *plan, options.commandLine));
+    if (!options.commandLine.empty()) {
+        // The record names the inputs as one part, whatever parts they were
+        // read in: the same record, and so the same set, whatever the threads.
+        BuildPlan record = *plan;
+        record.parts = {inputPart(c.options().inputs, 0, 1)};
+        record.parts[0].sources = c.stats().sources.size();
+        record.parts[0].points = c.stats().points;
+        SC_TRY(keepBuildRecord(**writer, work.dir, std::move(record), options.commandLine));
+    }
     SC_TRY(mergeStage(c, *plan, layout, work, **writer, progress, &summary));
 
     summary.inputPoints = c.stats().points;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <map>
+#include <thread>
 #include <tuple>
 
 #include "crc32.h"
@@ -427,12 +428,61 @@ std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vect
     return out;
 }
 
+Result<InputStats> reduceScans(std::vector<InputStats> scans, std::vector<InputPart>& parts,
+                               const std::function<std::string(size_t)>& name) {
+    std::vector<bool> continues;
+    size_t sources = 0;
+    for (size_t p = 0; p < parts.size(); ++p) {
+        InputPart& part = parts[p];
+        const bool follows = p == 0 ? part.first == 0 && part.begin == 0 : part.first == parts[p - 1].last && part.begin == parts[p - 1].end;
+        if (!follows || part.sources != scans[p].sources.size() || (part.continuesSource() && sources == 0))
+            return Status::error(name(p) + ": its inputs do not follow on from the previous part's (scanned with another number of parts?)");
+        // A part that starts within a file shares its source with the part before.
+        part.firstSource = part.continuesSource() ? sources - 1 : sources;
+        sources = part.firstSource + part.sources;
+        continues.push_back(part.continuesSource());
+    }
+    return mergeInputStats(std::move(scans), continues);
+}
+
+Status forEachPartInParallel(size_t n, const std::function<Status(size_t)>& f) {
+    if (n == 1) return f(0);
+    std::vector<Status> results(n);
+    std::vector<std::thread> threads;
+    for (size_t p = 0; p < n; ++p) threads.emplace_back([&, p] { results[p] = f(p); });
+    for (std::thread& t : threads) t.join();
+    for (const Status& st : results) SC_TRY(st);
+    return {};
+}
+
+size_t readParts(const BuildOptions& options) {
+    const InputOptions& in = options.inputs;
+    if (options.threads <= 1 || in.defaultScene || in.paths.empty()) return 1;
+    for (const std::string& path : in.paths) {
+        std::string ext = std::filesystem::path(path).extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return char(std::tolower(ch)); });
+        if (isRemoteInput(path) || isSetInput(path) || (ext != ".las" && ext != ".laz")) return 1;
+    }
+    return size_t(options.threads);
+}
+
 Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
                             BuildSummary* summary) {
     const BuildOptions opt = normalizeOptions(options);
-    const InputPart all = inputPart(opt.inputs, 0, 1);
+    BuildPlan plan;
+    plan.parts.resize(readParts(opt));
+    for (size_t p = 0; p < plan.parts.size(); ++p) plan.parts[p] = inputPart(opt.inputs, p, plan.parts.size());
+    std::vector<InputStats> scans(plan.parts.size());
     progress.begin("scan", 0);
-    auto stats = scanStage(opt, all, progress);
+    SC_TRY(forEachPartInParallel(plan.parts.size(), [&](size_t p) {
+        auto scanned = scanStage(opt, plan.parts[p], progress);
+        if (!scanned) return scanned.status();
+        plan.parts[p].sources = scanned->sources.size();
+        plan.parts[p].points = scanned->points;
+        scans[p] = std::move(*scanned);
+        return Status{};
+    }));
+    auto stats = reduceScans(std::move(scans), plan.parts, [](size_t p) { return "scan part " + std::to_string(p); });
     if (!stats) return stats.status();
     summary->phaseSeconds.push_back({"scan", progress.end()});
     auto derived = BuildContext::derive(opt, std::move(*stats));
@@ -440,11 +490,7 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
     const BuildContext& c = **derived;
     *context = *derived;
 
-    BuildPlan plan;
     plan.stats = c.stats();
-    plan.parts = {all};
-    plan.parts[0].sources = c.stats().sources.size();
-    plan.parts[0].points = c.stats().points;
     auto most = chunkPoints(c);
     if (!most) return most.status();
     MeshStore& meshes = *opt.inputs.meshes;
@@ -452,10 +498,15 @@ Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std
     plan.maxChunkPoints = *most;
     if (plan.maxChunkPoints > 0) {
         progress.begin("count", c.stats().points);
-        auto counts = countStage(c, plan.parts[0], progress);
-        if (!counts) return counts.status();
+        std::vector<std::vector<std::pair<uint32_t, uint32_t>>> counts(plan.parts.size());
+        SC_TRY(forEachPartInParallel(plan.parts.size(), [&](size_t p) {
+            auto counted = countStage(c, plan.parts[p], progress);
+            if (!counted) return counted.status();
+            counts[p] = std::move(*counted);
+            return Status{};
+        }));
         summary->phaseSeconds.push_back({"count", progress.end()});
-        plan.counts = std::move(*counts);
+        plan.counts = addCounts(counts);
     }
     return plan;
 }

@@ -120,8 +120,18 @@ Result<std::vector<std::pair<uint32_t, uint32_t>>> readCount(const std::string& 
 // Sums sparse counts (each sorted by cell) into one, sorted by cell.
 std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vector<std::pair<uint32_t, uint32_t>>>& parts);
 
-// Plan in one process: scan and count every input as one part. `context`
-// receives the decisions derived from the scan; `summary` the phases' times.
+// The statistics of parts scanned apart (scanStage of each, in order, each
+// part's `sources` set to its scan's), reduced to those of one scan of every
+// input: each part's firstSource is set. A part whose inputs do not follow on
+// from the part before fails, named by name(p).
+Result<InputStats> reduceScans(std::vector<InputStats> scans, std::vector<InputPart>& parts,
+                               const std::function<std::string(size_t)>& name);
+// Runs f(0) .. f(n - 1), each on a thread of its own; the first failure.
+Status forEachPartInParallel(size_t n, const std::function<Status(size_t)>& f);
+
+// Plan in one process: scan and count the inputs, in parallel parts where
+// readParts gives several. `context` receives the decisions derived from the
+// scan; `summary` the phases' times.
 Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
                             BuildSummary* summary);
 // plan.bin: the plan and `args`, the command line that made it (the staged
@@ -137,10 +147,18 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
 // `commandLine`, written as dir/build.record.
 Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan plan, std::span<const std::string> commandLine);
 
+// The parts a build in one process reads its inputs in, in parallel: one per
+// thread where every input is a local LAS or LAZ file, which parts cut by
+// record ranges; one otherwise (bench/BENCHMARKS.md, "Reading one file in
+// parallel").
+size_t readParts(const BuildOptions& options);
 // Distribute: writes part `part`'s points to its chunk files and
 // distribution.bin (each chunk's point and halo counts from this part).
 Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t part,
                        const WorkFolder& work, Progress& progress, BuildSummary* summary);
+// Distribute every part of `plan` at once, a thread each (forEachPartInParallel).
+Status distributeParts(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                       Progress& progress, BuildSummary* summary);
 // distribution.bin at `path`: each chunk's point and halo counts as
 // `layout`'s chunks were written, for `plan`.
 Status writeDistribution(const std::string& path, const BuildPlan& plan, const ChunkLayout& layout);

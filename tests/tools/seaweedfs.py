@@ -10,6 +10,7 @@ anything. tests/store_support.h is the C++ tests' twin.
 """
 import json
 import os
+import socket
 import subprocess
 import time
 
@@ -29,6 +30,11 @@ class SeaweedFs:
             json.dump({"identities": [{"name": "writer", "credentials": [{"accessKey": KEY, "secretKey": SECRET}],
                                        "actions": ["Admin", "Read", "Write", "List", "Tagging"]}]}, f)
         os.makedirs(os.path.join(work, "data"), exist_ok=True)
+        # A store left running on the port (a test killed before it stopped
+        # its own) would answer in place of this one, with its old objects.
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                raise RuntimeError(f"port {port} is taken (a SeaweedFS left running?): stop what holds it first")
         # Every port fixed away from the defaults, which other programs take.
         ports = {"-s3.port": port, "-s3.port.iceberg": port + 48, "-master.port": port + 1000, "-volume.port": port + 47,
                  "-filer.port": port + 55, "-admin.port": port + 13, "-webdav.port": port - 33, "-debug.port": port + 27,
