@@ -670,7 +670,7 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
         }
         surfcast::BuildPlan plan;
         if (stage == "plan" && a.parts == 0) {
-            auto planned = surfcast::planStage(opt, progress, &context, &summary);
+            auto planned = surfcast::planStage(opt, 1, progress, &context, &summary);  // one part: the same plan whatever --threads
             if (!planned) return fail(planned.status());
             plan = std::move(*planned);
         } else {

@@ -305,6 +305,26 @@ class DaskBuild(unittest.TestCase):
         self.assertEqual(read(os.path.join(out, "blocks.bin")), old)
 
 
+class WorkFileMagics(unittest.TestCase):
+    def test_the_driver_reads_the_magics_the_builder_writes(self):
+        # The driver tells finished work from the files' magics (its resume);
+        # one it spells otherwise never matches, and that stage is always run again.
+        sources = ""
+        for name in ("plan_stage.cpp", "distribute_stage.cpp", "work_files.cpp", "update.cpp"):
+            with open(os.path.join(REPO, "preprocess", "build", name)) as f:
+                sources += f.read()
+        builder = dict(re.findall(r'constexpr char k(\w+)Magic\[9\] = "(\w{8})"', sources))
+        driver = {}
+        with open(DRIVER) as f:
+            for names, values in re.findall(r"^((?:\w+_MAGIC, )*\w+_MAGIC) = ((?:b\"\w{8}\", )*b\"\w{8}\")$", f.read(), re.M):
+                driver.update(zip(names.split(", "), re.findall(r'b"(\w{8})"', values)))
+        expected = {"SCAN_MAGIC": "Scan", "COUNT_MAGIC": "Count", "PLAN_MAGIC": "Plan", "DISTRIBUTION_MAGIC": "Distribution",
+                    "NODES_MAGIC": "Chunk", "UPDATE_MAGIC": "Update"}
+        self.assertEqual(set(driver), set(expected))
+        for name, cpp in expected.items():
+            self.assertEqual(driver[name], builder[cpp], name)
+
+
 class ShareNothing(unittest.TestCase):
     """Workers that share nothing but an S3 store (SeaweedFS, tests/tools/seaweedfs.py):
     each starts in an empty folder of its own, and every input, work file and

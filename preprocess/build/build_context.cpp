@@ -114,6 +114,7 @@ Result<std::shared_ptr<const BuildContext>> BuildContext::derive(const BuildOpti
             c->attributeNames_.push_back(provenance->name);
         }
     }
+    c->normals_.mergesCopies = !c->duplicatesKept_;  // (decided by the attributes, the set's where it keeps its layout)
     return std::shared_ptr<const BuildContext>(std::move(c));
 }
 
@@ -138,6 +139,7 @@ std::shared_ptr<const BuildContext> BuildContext::withLayoutOf(const BuildContex
         r->intensityStep_ = std::max(1, int(std::lround(a->scale)));
     }
     r->duplicatesKept_ = set.duplicatesKept;
+    r->normals_.mergesCopies = !r->duplicatesKept_;
     r->constants_ = set.constants;
     r->leftOut_ = set.leftOut;
     r->storeOpacity_ = set.attribute(kOpacityAttribute) != nullptr;
@@ -508,6 +510,7 @@ Status BuildContext::chooseOrientationRules() {
     normals_.centre = (b.min + b.max) * 0.5 - rootMin_;
     normals_.k = opt_.normalK;
     normals_.spacingK = opt_.spacingK;
+    normals_.measure = opt_.radii && opt_.isolation > 0;
     normals_.rules.clear();
     sourceIds_.clear();
     std::map<std::tuple<bool, double, double, double, bool, long>, uint16_t> ruleIds;

@@ -14,10 +14,7 @@
 namespace surfcast {
 
 namespace {
-constexpr char kDistributionMagic[9] = "SCDIST02";
-}  // namespace
-
-namespace {
+constexpr char kDistributionMagic[9] = "SCDIST03";  // 03: Surfel::scanDk in the chunk files' records
 
 // Part `part`'s points to its chunk files, in a folder of its own.
 Status distributePart(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& planned, size_t part,

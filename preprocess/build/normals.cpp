@@ -23,7 +23,7 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     std::vector<uint8_t> todo(points.size());
     bool any = false;
     for (size_t i = 0; i < points.size(); ++i) {
-        todo[i] = points[i].normal == Vec3f{} ? 1 : points[i].scanDk == kScanDkToMeasure ? 2 : 0;
+        todo[i] = points[i].normal == Vec3f{} ? 1 : points[i].scanDk == kScanDkToMeasure && ctx.measure ? 2 : 0;
         any |= todo[i] != 0;
     }
     if (!any) return;
@@ -71,21 +71,31 @@ void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, con
     };
     // The point's d_k and its k neighbours' spread off its tangent plane
     // (Surfel::scanDk), where k neighbours besides it were found; positions
-    // nearest first, the point itself or a copy of it first.
+    // nearest first, the point itself or a copy of it first. Where the build
+    // merges copies, they are one point at its level: not its neighbours.
     auto measure = [&](Surfel& s, std::span<const Vec3f> positions, std::span<const float> dist2) {
         const size_t k = size_t(ctx.spacingK);
-        if (positions.size() <= k) return;
-        const float dk = std::sqrt(dist2[k]);
         const Vec3f self = cast<float>(s.position - frame), facing = s.normal;
         double off2 = 0;
-        for (size_t j = 1; j <= k; ++j) off2 += sqr(dot(positions[j] - self, facing));
+        float dk = 0;
+        size_t seen = 0;
+        for (size_t j = 1; j < positions.size() && seen < k; ++j) {
+            if (ctx.mergesCopies && dist2[j] == 0) continue;
+            off2 += sqr(dot(positions[j] - self, facing));
+            dk = std::sqrt(dist2[j]);
+            ++seen;
+        }
+        if (seen < k) {  // too few found: its level judges it
+            s.scanDk = -1;
+            return;
+        }
         const double spread = dk > 0 ? std::sqrt(off2 / double(k)) / dk : 0;
         s.scanDk = dk;
         s.scanSpread = uint16_t(std::min(65535.0, std::round(spread / kScanSpreadUnit)));
     };
     auto fit = [&](uint32_t query, std::span<const Vec3f> positions, std::span<const float> dist2) {
         if (todo[query] == 1) estimate(points[query], positions);
-        measure(points[query], positions, dist2);
+        if (ctx.measure) measure(points[query], positions, dist2);
     };
 
     const size_t own = points.size();

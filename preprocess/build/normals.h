@@ -26,6 +26,8 @@ struct NormalContext {
     Vec3d centre;                        // data set centre, surfel frame
     int k = 16;
     int spacingK = 8;  // the d_k each estimated point records (Surfel::scanDk), when k > spacingK
+    bool measure = true;  // record scanDk and scanSpread (the isolation of input points needs them)
+    bool mergesCopies = false;  // the build merges exact duplicates: copies of a point do not count as its neighbours
     int threads = 1;
 };
 

@@ -56,7 +56,7 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     Progress progress(options.progress);
     BuildSummary summary;
     std::shared_ptr<const BuildContext> context;
-    auto plan = planStage(options, progress, &context, &summary);
+    auto plan = planStage(options, readParts(normalizeOptions(options)), progress, &context, &summary);
     if (!plan) return plan.status();
     const BuildContext& c = *context;
     c.describe(&summary);
@@ -89,9 +89,7 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
         // The record names the inputs as one part, whatever parts they were
         // read in: the same record, and so the same set, whatever the threads.
         BuildPlan record = *plan;
-        record.parts = {inputPart(c.options().inputs, 0, 1)};
-        record.parts[0].sources = c.stats().sources.size();
-        record.parts[0].points = c.stats().points;
+        record.parts = {wholeInputs(c.options().inputs, c.stats())};
         SC_TRY(keepBuildRecord(**writer, work.dir, std::move(record), options.commandLine));
     }
     SC_TRY(mergeStage(c, *plan, layout, work, **writer, progress, &summary));

@@ -1,6 +1,7 @@
 // The plan's stages (stages.h): the scan and the count, by parts of the
 // inputs, the memory budget's chunk size, and plan.bin.
 #include <algorithm>
+#include <cassert>
 #include <filesystem>
 #include <map>
 #include <thread>
@@ -430,6 +431,7 @@ std::vector<std::pair<uint32_t, uint32_t>> addCounts(const std::vector<std::vect
 
 Result<InputStats> reduceScans(std::vector<InputStats> scans, std::vector<InputPart>& parts,
                                const std::function<std::string(size_t)>& name) {
+    assert(scans.size() == parts.size());
     std::vector<bool> continues;
     size_t sources = 0;
     for (size_t p = 0; p < parts.size(); ++p) {
@@ -457,20 +459,25 @@ Status forEachPartInParallel(size_t n, const std::function<Status(size_t)>& f) {
 
 size_t readParts(const BuildOptions& options) {
     const InputOptions& in = options.inputs;
-    if (options.threads <= 1 || in.defaultScene || in.paths.empty()) return 1;
-    for (const std::string& path : in.paths) {
-        std::string ext = std::filesystem::path(path).extension().string();
-        std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return char(std::tolower(ch)); });
-        if (isRemoteInput(path) || isSetInput(path) || (ext != ".las" && ext != ".laz")) return 1;
-    }
-    return size_t(options.threads);
+    if (options.threads <= 1 || in.defaultScene || in.paths.size() != 1) return 1;
+    const std::string& path = in.paths[0];
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return char(std::tolower(ch)); });
+    return isRemoteInput(path) || isSetInput(path) || ext != ".las" ? 1 : size_t(options.threads);
 }
 
-Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
+InputPart wholeInputs(const InputOptions& inputs, const InputStats& stats) {
+    InputPart all = inputPart(inputs, 0, 1);
+    all.sources = stats.sources.size();
+    all.points = stats.points;
+    return all;
+}
+
+Result<BuildPlan> planStage(const BuildOptions& options, size_t parts, Progress& progress, std::shared_ptr<const BuildContext>* context,
                             BuildSummary* summary) {
     const BuildOptions opt = normalizeOptions(options);
     BuildPlan plan;
-    plan.parts.resize(readParts(opt));
+    plan.parts.resize(std::max<size_t>(parts, 1));
     for (size_t p = 0; p < plan.parts.size(); ++p) plan.parts[p] = inputPart(opt.inputs, p, plan.parts.size());
     std::vector<InputStats> scans(plan.parts.size());
     progress.begin("scan", 0);

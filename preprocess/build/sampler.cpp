@@ -100,6 +100,7 @@ std::vector<Surfel> resample(std::span<const Surfel> points, const SampleGrid& g
         Surfel& s = out[c];
         s = points[nearest];
         s.normal = normalizeOrZero(normal);
+        s.scanDk = -1, s.scanSpread = 0;  // an input point's own sampling, not the cell's
         s.count = float(weight);
         if (withAttributes && cell.end - cell.begin > 1) {
             s.classification = uint8_t(majority(points, order, cell, tally, [](const Surfel& p) { return p.classification; }));

@@ -15,8 +15,8 @@
 // the scan, count and distribute passes run in parallel over inputs, and over
 // one big LAS or LAZ file; a chunk reads the parts' files in part order, which
 // is input and record order. buildTileset
-// (octree_builder.h) runs the same stages in one process with one part, so a
-// build staged across processes writes the same bytes whatever its parts. The
+// (octree_builder.h) runs the same stages in one process, in the parts of
+// readParts on threads, so a build writes the same bytes whatever its parts. The
 // work folder's files are internal: each names its format and version (a new
 // layout takes a new magic), the job or plan that made it, and a stage checks
 // what it reads (sizes, counts, a CRC over each file, the job or plan) and
@@ -129,11 +129,13 @@ Result<InputStats> reduceScans(std::vector<InputStats> scans, std::vector<InputP
 // Runs f(0) .. f(n - 1), each on a thread of its own; the first failure.
 Status forEachPartInParallel(size_t n, const std::function<Status(size_t)>& f);
 
-// Plan in one process: scan and count the inputs, in parallel parts where
-// readParts gives several. `context` receives the decisions derived from the
-// scan; `summary` the phases' times.
-Result<BuildPlan> planStage(const BuildOptions& options, Progress& progress, std::shared_ptr<const BuildContext>* context,
+// Plan in one process: scan and count the inputs in `parts` parts (inputPart),
+// each on a thread of its own. `context` receives the decisions derived from
+// the scan; `summary` the phases' times.
+Result<BuildPlan> planStage(const BuildOptions& options, size_t parts, Progress& progress, std::shared_ptr<const BuildContext>* context,
                             BuildSummary* summary);
+// Every input as one part, of the sources and points of `stats`.
+InputPart wholeInputs(const InputOptions& inputs, const InputStats& stats);
 // plan.bin: the plan and `args`, the command line that made it (the staged
 // CLI's later stages read their options from it). Sets plan.id.
 Status writePlan(const std::string& path, BuildPlan& plan, std::span<const std::string> args);
@@ -148,9 +150,9 @@ Result<BuildPlan> readPlan(const std::string& path, std::vector<std::string>* ar
 Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan plan, std::span<const std::string> commandLine);
 
 // The parts a build in one process reads its inputs in, in parallel: one per
-// thread where every input is a local LAS or LAZ file, which parts cut by
-// record ranges; one otherwise (bench/BENCHMARKS.md, "Reading one file in
-// parallel").
+// thread where the input is one local LAS file, which parts cut by record
+// ranges; one otherwise (a LAZ file's decoder decodes its chunks on every
+// thread already: bench/BENCHMARKS.md, "Reading one file in parallel").
 size_t readParts(const BuildOptions& options);
 // Distribute: writes part `part`'s points to its chunk files and
 // distribution.bin (each chunk's point and halo counts from this part).

@@ -28,7 +28,7 @@ struct Surfel {
     bool fromSet = false;
     // An input point's own sampling, measured where its normal is estimated
     // (normals.h): the distance to its spacingK-th nearest input point (-1:
-    // not measured) and the RMS distance of those neighbours from its fitted
+    // not measured; kScanDkToMeasure: to measure) and the RMS distance of those neighbours from its fitted
     // plane over it, in units of kScanSpreadUnit, for the isolation of input
     // points (level_attributes.h, "Isolated surfels").
     uint16_t scanSpread = 0;

@@ -268,15 +268,7 @@ private:
         std::vector<const Lattice*> lattices;
         if (n.flags & kFlagInputPoints)
             for (uint32_t input : inputsOf(block)) lattices.push_back(latticeOf(n, input));
-        const size_t first = out->size();
         appendSurfels(c, *reader_, n, block, rulesOf(block), lattices, out, table);
-        // Input points whose normals the build estimated: judged by their scan
-        // again where a chunk is rebuilt (kScanDkToMeasure), as a build judges them.
-        if (n.flags & kFlagInputPoints) {
-            const std::vector<uint32_t> inputs = inputsOf(block);
-            for (size_t i = first; i < out->size(); ++i)
-                if (inputs[i - first] < estimated_.size() && estimated_[inputs[i - first]]) (*out)[i].scanDk = kScanDkToMeasure;
-        }
     }
     // The added points, each batch snapped onto the set's leaves (SetLeaves):
     // every pass over them sees them where the chunks receive them.
@@ -309,7 +301,7 @@ private:
     std::shared_ptr<const BuildContext> context_;  // what the updated set holds, in the set's layout
     std::vector<uint16_t> oldRules_;
     std::vector<uint32_t> oldInputs_;
-    std::vector<bool> estimated_;  // per old input: its normals were estimated (none came with it)
+    std::vector<bool> estimated_;  // per old input: its normals were estimated (a source of it came without)
     Growth grow_;
     bool addsProvenance_ = false;
     InputPart addedPart_;
@@ -398,10 +390,10 @@ Status Update::open(const BuildOptions& options, size_t added, const std::string
     const size_t inputs = oldInputs_.empty() ? 0 : *std::max_element(oldInputs_.begin(), oldInputs_.end()) + 1;
     std::vector<int> sources(inputs, 0);
     lattices_.assign(inputs, Lattice{});
-    estimated_.assign(inputs, true);
+    estimated_.assign(inputs, false);
     for (size_t i = 0; i < oldInputs_.size(); ++i) {
         const InputDescription& d = record.stats.sources[i].description;
-        if (d.hasNormals) estimated_[oldInputs_[i]] = false;
+        if (!d.hasNormals) estimated_[oldInputs_[i]] = true;
         if (sources[oldInputs_[i]]++ == 0) lattices_[oldInputs_[i]] = {d.latticeScale, d.latticeOffset};
         else lattices_[oldInputs_[i]] = Lattice{};  // (several sources: the default scene)
     }
@@ -548,10 +540,7 @@ Status Update::plan(const BuildOptions& options, const UpdateRequest& request, c
                         request.removed);
 
     // The plan of all the inputs: one part, the counts changed by the points.
-    InputPart all;
-    all.last = (opt.inputs.defaultScene ? 1 : 0) + opt.inputs.paths.size();
-    all.sources = c.stats().sources.size();
-    all.points = c.stats().points;
+    const InputPart all = wholeInputs(opt.inputs, c.stats());
     plan_.stats = c.stats();
     plan_.parts = {all};
     auto most = chunkPoints(c);
@@ -681,12 +670,6 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
                     if (changedCells.count(cellKey({cell[0] + dx, cell[1] + dy, cell[2] + dz}))) return true;
         return false;
     };
-    std::vector<bool> estimated;  // per input: its normals were estimated
-    for (size_t i = 0; i < oldInputs_.size(); ++i) {
-        if (estimated.size() <= oldInputs_[i]) estimated.resize(oldInputs_[i] + 1, false);
-        if (!record_.stats.sources[i].description.hasNormals) estimated[oldInputs_[i]] = true;
-    }
-
     std::error_code ec;
     fs::create_directories(work.chunks(0), ec);
     if (ec) return Status::error(work.chunks(0) + ": cannot create (" + ec.message() + ")");
@@ -701,9 +684,14 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         ScalarTable table = c.emptyTable();
         decode(c, n, block, &points, &table);
         const std::vector<uint32_t> of = inputsOf(block);
-        for (size_t i = 0; i < points.size(); ++i)
-            if (of[i] < estimated.size() && estimated[of[i]] && (addsProvenance_ || nearChange(points[i].position)))
+        const bool isolating = c.normals().measure;
+        for (size_t i = 0; i < points.size(); ++i) {
+            if (of[i] >= estimated_.size() || !estimated_[of[i]]) continue;
+            if (addsProvenance_ || nearChange(points[i].position))
                 points[i].normal = Vec3f{};  // (every chunk built again: every normal, as a fresh build estimates them)
+            else if (isolating)
+                points[i].scanDk = kScanDkToMeasure;  // its normal kept, its isolation judged by its scan as a build's
+        }
         if (!removed.empty()) {
             size_t kept = 0;
             const size_t fields = table.fields();

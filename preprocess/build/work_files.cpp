@@ -58,7 +58,7 @@ Result<std::vector<uint8_t>> readWorkFile(const std::string& path, const char (&
 namespace surfcast {
 
 namespace {
-constexpr char kChunkMagic[9] = "SCNODES2";
+constexpr char kChunkMagic[9] = "SCNODES3";  // 3: Surfel::scanDk in the root's records
 }
 
 Status writeChunkOutput(const std::string& path, const ChunkOutput& out) {

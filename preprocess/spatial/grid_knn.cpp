@@ -330,8 +330,8 @@ void GridKnn::forEach(int k, int threads, const std::function<bool(uint32_t)>& w
                         }
                     }
                     if (m >= size_t(k)) {
-                        // The k-th lands at k - 1 either way: exact() and the next
-                        // query's ball read it there.
+                        // The k-th lands at k - 1: exact() and the next query's
+                        // ball read it there.
                         std::nth_element(kp, kp + (k - 1), kp + m);
                         std::sort(kp, kp + (k - 1));
                         for (int i = 0; i < k; ++i) {
