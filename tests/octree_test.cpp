@@ -11,6 +11,7 @@
 #include "inputs.h"
 #include "neighbours.h"
 #include "octree_builder.h"
+#include "preview.h"
 #include "stages.h"
 #include "test_support.h"
 #include "tileset_reader.h"
@@ -301,6 +302,20 @@ TEST(Octree, SameBytesWhateverTheThreadsReadingOneFileInParts) {
                 else EXPECT_TRUE(one[f] == bytes) << f << " differs between 1 and 2 threads";
             }
         }
+    }
+    // A preview of the LAS on two threads holds its sample once: every
+    // previewStride-th of the file's 110,000 points.
+    {
+        test::TempDir dir;
+        BuildOptions o = quietOptions(dir.file("preview"));
+        o.inputs.paths = {test::dataFile("autzen_trim.las")};
+        o.threads = 2;
+        ASSERT_TRUE(publishPreview(o, 5000).ok());
+        auto set = TilesetReader::open(dir.file("preview"));
+        ASSERT_TRUE(set.ok()) << set.status().message();
+        const uint64_t stride = set->info().previewStride, held = set->info().inputPoints;
+        ASSERT_GT(stride, 1u);
+        EXPECT_NEAR(double(held), 110000.0 / double(stride), 1.0) << "stride " << stride;
     }
     // Read as one part: a LAZ file (its decoder takes the threads), several files.
     BuildOptions o = quietOptions("unused");

@@ -34,9 +34,9 @@ struct NormalContext {
 // Name of the rule an input's normals follow, for tileset.json and the summary.
 std::string orientationName(const OrientationRule& rule);
 
-// Fills the zero normals of `points`, and measures their scanDk and
-// scanSpread, and those of points marked kScanDkToMeasure (normals kept);
-// neighbours come from points and halo.
+// Fills the zero normals of `points`; where context.measure, also measures
+// their scanDk and scanSpread and those of points marked kScanDkToMeasure
+// (normals kept). Neighbours come from points and halo.
 void estimateNormals(std::span<Surfel> points, std::span<const Surfel> halo, const NormalContext& context);
 
 }  // namespace surfcast

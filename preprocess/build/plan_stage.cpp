@@ -459,7 +459,8 @@ Status forEachPartInParallel(size_t n, const std::function<Status(size_t)>& f) {
 
 size_t readParts(const BuildOptions& options) {
     const InputOptions& in = options.inputs;
-    if (options.threads <= 1 || in.defaultScene || in.paths.size() != 1) return 1;
+    // (A preview's captured sample is read whole, whatever the part.)
+    if (options.threads <= 1 || in.defaultScene || in.captured || in.paths.size() != 1) return 1;
     const std::string& path = in.paths[0];
     std::string ext = std::filesystem::path(path).extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return char(std::tolower(ch)); });

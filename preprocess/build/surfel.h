@@ -27,7 +27,7 @@ struct Surfel {
     // quantization gave two of them one position, so two such are never merged.
     bool fromSet = false;
     // An input point's own sampling, measured where its normal is estimated
-    // (normals.h): the distance to its spacingK-th nearest input point (-1:
+    // and isolation is on (normals.h): the distance to its spacingK-th nearest input point (-1:
     // not measured; kScanDkToMeasure: to measure) and the RMS distance of those neighbours from its fitted
     // plane over it, in units of kScanSpreadUnit, for the isolation of input
     // points (level_attributes.h, "Isolated surfels").
