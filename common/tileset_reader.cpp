@@ -1,6 +1,8 @@
 #include "tileset_reader.h"
 
 #include <algorithm>
+#include <atomic>
+#include <thread>
 
 #include <cmath>
 #include <filesystem>
@@ -92,7 +94,16 @@ Result<BlockData> TilesetReader::readBlock(const NodeRecord& node, bool scalars)
 
 Status TilesetReader::forEachBlock(const std::vector<NodeRecord>& nodes, bool scalars,
                                    const std::function<Status(const NodeRecord&, BlockData&)>& visit) const {
+    return forEachBlockInOrder(
+        nodes, scalars, 1, [&](size_t, const NodeRecord& n, BlockData& block) { return visit(n, block); },
+        [](size_t) { return Status{}; });
+}
+
+Status TilesetReader::forEachBlockInOrder(const std::vector<NodeRecord>& nodes, bool scalars, int threads,
+                                          const std::function<Status(size_t, const NodeRecord&, BlockData&)>& prepare,
+                                          const std::function<Status(size_t)>& consume) const {
     constexpr uint64_t kBatchBytes = 64ull << 20;
+    constexpr size_t kPerThread = 4;  // blocks a thread prepares before the group is consumed
     for (size_t first = 0; first < nodes.size();) {
         size_t end = first;
         for (uint64_t bytes = 0; end < nodes.size() && (end == first || bytes + nodes[end].blockSize <= kBatchBytes); ++end)
@@ -100,11 +111,26 @@ Status TilesetReader::forEachBlock(const std::vector<NodeRecord>& nodes, bool sc
         const std::vector<NodeRecord> batch(nodes.begin() + long(first), nodes.begin() + long(end));
         auto blobs = readBlocksBytes(batch);
         if (!blobs) return blobs.status();
-        for (size_t i = 0; i < batch.size(); ++i) {
-            auto block = decoded(batch[i], (*blobs)[i], scalars);
-            if (!block) return block.status();
-            std::vector<uint8_t>().swap((*blobs)[i]);
-            SC_TRY(visit(batch[i], *block));
+        const size_t group = kPerThread * size_t(std::max(threads, 1));
+        for (size_t g = 0; g < batch.size(); g += group) {
+            const size_t n = std::min(group, batch.size() - g);
+            std::vector<Status> results(n);
+            std::atomic<size_t> next{0};
+            auto work = [&] {
+                for (size_t i; (i = next++) < n;) {
+                    auto block = decoded(batch[g + i], (*blobs)[g + i], scalars);
+                    std::vector<uint8_t>().swap((*blobs)[g + i]);
+                    results[i] = block ? prepare(first + g + i, batch[g + i], *block) : block.status();
+                }
+            };
+            std::vector<std::thread> helpers;
+            for (int t = 1; t < threads && size_t(t) < n; ++t) helpers.emplace_back(work);
+            work();
+            for (std::thread& t : helpers) t.join();
+            for (size_t i = 0; i < n; ++i) {
+                SC_TRY(results[i]);
+                SC_TRY(consume(first + g + i));
+            }
         }
         first = end;
     }

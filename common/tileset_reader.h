@@ -38,6 +38,13 @@ public:
     // Stops at the first error, the visitor's own included.
     Status forEachBlock(const std::vector<NodeRecord>& nodes, bool scalars,
                         const std::function<Status(const NodeRecord&, BlockData&)>& visit) const;
+    // As forEachBlock, on `threads` threads: a batch's blocks are decoded and
+    // given to `prepare` (with their index in `nodes`) a few per thread at a
+    // time, all at once, and then to `consume` one after the other in their
+    // order. Stops at the first error, the earliest block's of a group.
+    Status forEachBlockInOrder(const std::vector<NodeRecord>& nodes, bool scalars, int threads,
+                               const std::function<Status(size_t, const NodeRecord&, BlockData&)>& prepare,
+                               const std::function<Status(size_t)>& consume) const;
     // World-space position of quantized surfel i of a decoded block.
     Vec3d position(const NodeRecord& node, const BlockData& block, size_t i) const;
 

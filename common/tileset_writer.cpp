@@ -92,14 +92,22 @@ Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
     return {};
 }
 
+Status TilesetWriter::keepCurrentNodes(const std::vector<NodeKey>& keys) {
+    std::vector<NodeRecord> records;
+    for (const NodeKey& key : keys) {
+        auto it = currentNodes_.find(key);
+        if (it == currentNodes_.end()) return Status::error("node " + key.name() + ": kept, but the set has no node of its key");
+        records.push_back(it->second);
+    }
+    return addKeptNodes(records);
+}
+
 Result<std::unique_ptr<TilesetWriter>> TilesetWriter::update(const std::string& set, const TilesetInfo& current,
-                                                            const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs,
-                                                            KeepCurrent keep) {
+                                                            const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs) {
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
     w->set_ = set;
     w->current_ = current;
     w->currentBlobs_ = std::move(currentBlobs);
-    w->keepCurrent_ = std::move(keep);
     for (const NodeRecord& r : currentNodes) w->currentNodes_[r.key] = r;
     // A hidden folder inside the set for the new blobs and the build's work
     // (readers and surfcast-serve never open it); a killed update's is
@@ -248,14 +256,7 @@ Status TilesetWriter::finishUpdate(TilesetInfo& info) {
         ~Closer() { ::close(fd); }
     } closer{out};
     std::map<NodeKey, size_t> index;
-    for (size_t i = 0; i < records_.size(); ++i) {
-        index[records_[i].key] = i;
-        auto it = currentNodes_.find(records_[i].key);
-        if (sources_[i] != kKept && keepCurrent_ && it != currentNodes_.end() && keepCurrent_(records_[i], it->second)) {
-            records_[i] = it->second;
-            sources_[i] = kKept;
-        }
-    }
+    for (size_t i = 0; i < records_.size(); ++i) index[records_[i].key] = i;
     std::map<uint32_t, int> open;
     struct CloseAll {
         std::map<uint32_t, int>& fds;

@@ -46,14 +46,9 @@ public:
     // from the folder, or from the store a folder of the set's metadata
     // mirrors) keeps that node's place too; where they cannot be read,
     // finish() fails.
-    // A blob built again that `keep` says holds what the current node of its
-    // key holds (the update knows nothing reached it) keeps that node, record
-    // and place, whatever its bytes.
     using CurrentBlobs = std::function<Result<std::vector<std::vector<uint8_t>>>(const std::vector<NodeRecord>&)>;
-    using KeepCurrent = std::function<bool(const NodeRecord& built, const NodeRecord& current)>;
     static Result<std::unique_ptr<TilesetWriter>> update(const std::string& set, const TilesetInfo& current,
-                                                         const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs,
-                                                         KeepCurrent keep = {});
+                                                         const std::vector<NodeRecord>& currentNodes, CurrentBlobs currentBlobs);
 
     // Thread-safe: appends a node's blob to a temporary file and keeps the
     // record with its size and CRC.
@@ -66,6 +61,10 @@ public:
     // An update's nodes whose blobs stay where they are in the set's blocks.bin
     // (records as the current hierarchy holds them).
     Status addKeptNodes(const std::vector<NodeRecord>& records);
+    // An update's nodes built again that hold what the current nodes of their
+    // keys hold (the update knows nothing reached them): those nodes stay,
+    // record and place.
+    Status keepCurrentNodes(const std::vector<NodeKey>& keys);
     // The build record (a plan.bin, stages.h) the set keeps for updates:
     // the file at `path` is moved in as buildRecordFile(the hierarchy's name).
     void setBuildRecord(const std::string& path) { record_ = path; }
@@ -97,7 +96,6 @@ private:
     TilesetInfo current_;      // an update's tileset.json before it
     std::map<NodeKey, NodeRecord> currentNodes_;  // and its nodes
     CurrentBlobs currentBlobs_;                   // which reads their blobs
-    KeepCurrent keepCurrent_;                     // which of them stay whatever their bytes
     std::string record_;       // the build record to publish, if any
     std::mutex mutex_;
 };

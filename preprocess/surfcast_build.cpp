@@ -756,7 +756,8 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
         return 0;
     }
     std::vector<size_t> updateChunks;  // an update's chunks to build
-    auto derived = update ? surfcast::updateContext(planned.opt, *plan, work, &updateChunks)
+    surfcast::KeepNode keep;           // and the nodes it keeps
+    auto derived = update ? surfcast::updateContext(planned.opt, *plan, work, &updateChunks, &keep)
                           : surfcast::BuildContext::derive(planned.opt, plan->stats, false);
     if (!derived) return fail(derived.status());
     const surfcast::BuildContext& c = **derived;
@@ -786,7 +787,7 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
         for (size_t i : a.chunks) points += layout.chunks()[i].points;
         progress.begin("build", points);
         for (size_t i : a.chunks) {
-            if (auto st = surfcast::chunkStage(c, *plan, layout, i, work, c.threads(), false); !st.ok()) return fail(st);
+            if (auto st = surfcast::chunkStage(c, *plan, layout, i, work, c.threads(), false, keep); !st.ok()) return fail(st);
             progress.advance(layout.chunks()[i].points);
         }
         progress.end();

@@ -90,6 +90,14 @@ FitReport filterLevelTextures(const BuildContext& context, std::span<BuiltNode* 
     return fits;
 }
 
+NodeRecord keptRecord(const BuiltNode& node) {
+    NodeRecord r;
+    r.key = node.key;
+    r.childMask = node.childMask;
+    r.surfelCount = uint32_t(node.surfels.size());
+    return r;
+}
+
 Result<EncodedNode> encodeNode(const BuildContext& context, const BuiltNode& node, const ScalarTable& scalars, StepTimes& steps) {
     assert((node.inputPoints || node.cell > 0) && "a resampled node knows its grid's cell");
     const BuildOptions& opt = context.options();

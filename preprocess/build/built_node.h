@@ -32,6 +32,10 @@ double largestCell(const BuildContext& context, int level, std::span<BuiltNode* 
 FitReport filterLevelTextures(const BuildContext& context, std::span<BuiltNode* const> nodes, std::span<const Surfel> halo,
                               int threads, StepTimes& steps);
 
+// The record of a node an update keeps (KeepNode): its key, children and
+// surfel count, and no block.
+NodeRecord keptRecord(const BuiltNode& node);
+
 // The node's hierarchy record (its block's offset, size and CRC left for the
 // writer) and Draco block.
 struct EncodedNode {

@@ -210,7 +210,7 @@ private:
 }  // namespace
 
 Status chunkStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t index, const WorkFolder& work,
-                  int threads, bool removeInputs) {
+                  int threads, bool removeInputs, const KeepNode& keep) {
     const Chunk& chunk = layout.chunks().at(index);
     StepTimes steps = {};
     FitReport fits;
@@ -279,9 +279,13 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
             fits.add(filterLevelTextures(context, built, haloLevel, threads, steps));
         }
         for (auto& n : nodes) {
-            auto encoded = encodeNode(context, *n, scalars, steps);
-            if (!encoded) return encoded.status();
-            SC_TRY(blocks.add(std::move(*encoded), &records));
+            if (const NodeRecord built = keptRecord(*n); keep && keep(built)) {
+                records.push_back(built);
+            } else {
+                auto encoded = encodeNode(context, *n, scalars, steps);
+                if (!encoded) return encoded.status();
+                SC_TRY(blocks.add(std::move(*encoded), &records));
+            }
             if (n.get() == root && !(chunk.key == NodeKey{})) retained = std::move(n);
         }
     }

@@ -10,7 +10,8 @@
 namespace surfcast {
 
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                  TilesetWriter& writer, Progress& progress, BuildSummary* summary, std::map<size_t, ChunkOutput>* kept) {
+                  TilesetWriter& writer, Progress& progress, BuildSummary* summary, std::map<size_t, ChunkOutput>* kept,
+                  const KeepNode& keep) {
     StepTimes steps = {};
     auto count = [&](const NodeRecord& r) {
         const size_t level = r.key.level;
@@ -42,7 +43,19 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
             if (!inside || !seen.insert(r.key).second)
                 return Status::error(work.nodes(i) + ": node " + r.key.name() + " is not chunk " + std::to_string(i) + "'s, or repeats");
         }
-        SC_TRY(isKept ? writer.addKeptNodes(out->records) : writer.addPlacedNodes(work.blocks(i), out->blocksBytes, out->records));
+        if (isKept) {
+            SC_TRY(writer.addKeptNodes(out->records));
+        } else {
+            // Nodes the rule kept (no block) take the set's.
+            std::vector<NodeRecord> placed;
+            std::vector<NodeKey> same;
+            for (const NodeRecord& r : out->records)
+                if (r.blockSize > 0) placed.push_back(r);
+                else if (keep) same.push_back(r.key);
+                else return Status::error(work.nodes(i) + ": node " + r.key.name() + " has no block");
+            SC_TRY(writer.addPlacedNodes(work.blocks(i), out->blocksBytes, placed));
+            SC_TRY(writer.keepCurrentNodes(same));
+        }
         for (const NodeRecord& r : out->records) count(r);
         for (int s = 0; s < kStepCount; ++s) steps[s] += out->stepNs[s];
         summary->textureFit.add(out->fits);
@@ -102,6 +115,11 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
             computeLevelAttributes(members, neighbours, context.levelParams(level, largestCell(context, level, built), context.threads()));
             summary->textureFit.add(filterLevelTextures(context, built, neighbours, context.threads(), steps));
             for (auto& [key, node] : current) {
+                if (const NodeRecord built = keptRecord(*node); keep && keep(built)) {
+                    count(built);
+                    SC_TRY(writer.keepCurrentNodes({key}));
+                    continue;
+                }
                 auto encoded = encodeNode(context, *node, upperScalars, steps);
                 if (!encoded) return encoded.status();
                 count(encoded->record);

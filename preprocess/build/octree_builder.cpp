@@ -18,7 +18,7 @@ namespace surfcast {
 // Largest first (the long poles start early), at most kChunksAtOnce at a time
 // (the budget is split that many ways); more threads work inside each chunk.
 Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, std::vector<size_t> order,
-                   const WorkFolder& work, Progress& progress) {
+                   const WorkFolder& work, Progress& progress, const KeepNode& keep) {
     if (order.empty()) return {};
     const std::vector<Chunk>& chunks = layout.chunks();
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return chunks[a].points > chunks[b].points; });
@@ -36,7 +36,7 @@ Status buildChunks(const BuildContext& context, const BuildPlan& plan, const Chu
                 std::lock_guard lock(errorMutex);
                 if (!firstError.ok()) return;
             }
-            Status st = chunkStage(context, plan, layout, order[i], work, inner, true);
+            Status st = chunkStage(context, plan, layout, order[i], work, inner, true, keep);
             progress.advance(chunks[order[i]].points);
             if (!st.ok()) {
                 std::lock_guard lock(errorMutex);

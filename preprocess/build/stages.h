@@ -167,6 +167,13 @@ Status writeDistribution(const std::string& path, const BuildPlan& plan, const C
 // Each chunk's files of every part, with their counts, from distribution.bin.
 Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout);
 
+// An update's rule for the nodes it builds again: true where the set's node
+// of the built node's key stays, record and block, since nothing the update
+// changed reaches it (Update's rule). Given the built node's key, children and
+// surfel count, before it is encoded: a kept node is never encoded, and its
+// record in a chunk's output carries no block (blockSize 0).
+using KeepNode = std::function<bool(const NodeRecord& built)>;
+
 // Chunk: builds chunk `index` of `layout` (its pieces from readDistribution)
 // on `threads` threads and writes its nodes' blocks and records, and its root
 // (the merge's input), to work.blocks(index) and work.nodes(index); each is
@@ -174,8 +181,9 @@ Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayo
 // marks the chunk done. `removeInputs`: delete the chunk's files once read (a
 // build in one process; a staged build keeps them, so that a chunk task can
 // run again).
+// `keep`: an update's rule (KeepNode).
 Status chunkStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t index, const WorkFolder& work,
-                  int threads, bool removeInputs);
+                  int threads, bool removeInputs, const KeepNode& keep = {});
 
 // Merge: reads every chunk's output (checking each block's CRC as it copies
 // it), builds the levels above the chunks and finishes `writer`. Fills the
@@ -183,13 +191,15 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
 // `kept`: an update's chunks taken as the set holds them (ChunkOutput's
 // records, placed in the set's block files, and its root decoded), by chunk
 // index; the writer keeps their blocks in place (TilesetWriter::update).
+// `keep`: an update's rule (KeepNode), for the levels above the chunks too;
+// the chunks' nodes it kept take the set's nodes of their keys.
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
                   TilesetWriter& writer, Progress& progress, BuildSummary* summary,
-                  std::map<size_t, ChunkOutput>* kept = nullptr);
+                  std::map<size_t, ChunkOutput>* kept = nullptr, const KeepNode& keep = {});
 
 // Builds the chunks `which` of `layout` (chunkStage, removing their inputs),
 // largest first, kChunksAtOnce at a time; `progress` advances by their points.
 Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, std::vector<size_t> which,
-                   const WorkFolder& work, Progress& progress);
+                   const WorkFolder& work, Progress& progress, const KeepNode& keep = {});
 
 }  // namespace surfcast

@@ -242,6 +242,9 @@ public:
     // The levels above the chunks (the rebuilt ones read from `work`, the kept
     // ones as the set holds them), and the switch.
     Status merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const;
+    // The nodes built again that keep the set's (KeepNode); none where every
+    // node may have changed.
+    KeepNode keepRule() const;
 
     const BuildContext& context() const { return *context_; }
     const std::shared_ptr<const BuildContext>& sharedContext() const { return context_; }
@@ -316,13 +319,12 @@ private:
     BuildPlan plan_;
     ChunkLayout layout_;
     std::vector<bool> touched_;  // per chunk: built again
-    // What no change reaches (keepsCurrent): the box of the added and removed
+    // What no change reaches (keepRule): the box of the added and removed
     // points, and how far a node's values look (the widest halo margin of the
     // rebuilt chunks); none where every node may have changed.
     bool keepsFar_ = false;
     Box3d changed_;
     double reach_ = 0;
-    bool keepsCurrent(const NodeRecord& built, const NodeRecord& current) const;
 };
 
 // A node built again keeps the set's node of its key where its box, widened
@@ -336,17 +338,23 @@ private:
 // changes which sparse neighbours past a surfel's own reach count, and the
 // rule keeps the node anyway.) Built again it would differ by being computed
 // from decoded points (bench/BENCHMARKS.md, "Nodes the change cannot reach
-// keep their blocks").
-bool Update::keepsCurrent(const NodeRecord& built, const NodeRecord& current) const {
-    if (!keepsFar_ || built.childMask != current.childMask || built.surfelCount != current.surfelCount) return false;
-    if (changed_.empty()) return true;
-    const BuildContext& c = *context_;
-    const double reach = std::max(reach_, 2 * c.edge(built.key.level));
-    const Vec3d lo = c.nodeMinRel(built.key) - Vec3d{reach, reach, reach};
-    const double e = c.edge(built.key.level) + 2 * reach;
-    for (int a = 0; a < 3; ++a)
-        if (lo[a] > changed_.max[a] || lo[a] + e < changed_.min[a]) return true;
-    return false;
+// keep their blocks"). The rule holds what it needs (a stage's Update goes
+// before its chunks are built).
+KeepNode Update::keepRule() const {
+    if (!keepsFar_) return {};
+    auto current = std::make_shared<std::map<NodeKey, std::pair<uint8_t, uint32_t>>>();
+    for (const NodeRecord& n : reader_->nodes()) (*current)[n.key] = {n.childMask, n.surfelCount};
+    return [c = context_, changed = changed_, reach0 = reach_, current](const NodeRecord& built) {
+        auto it = current->find(built.key);
+        if (it == current->end() || it->second != std::pair{built.childMask, built.surfelCount}) return false;
+        if (changed.empty()) return true;
+        const double reach = std::max(reach0, 2 * c->edge(built.key.level));
+        const Vec3d lo = c->nodeMinRel(built.key) - Vec3d{reach, reach, reach};
+        const double e = c->edge(built.key.level) + 2 * reach;
+        for (int a = 0; a < 3; ++a)
+            if (lo[a] > changed.max[a] || lo[a] + e < changed.min[a]) return true;
+        return false;
+    };
 }
 
 Status Update::open(const BuildOptions& options, size_t added, const std::string& set, const BuildPlan& record, const std::string& store) {
@@ -655,10 +663,17 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         for (int a = 0; a < 3; ++a) cellsMin[a] = std::min(cellsMin[a], cell[a]), cellsMax[a] = std::max(cellsMax[a], cell[a]);
     };
     for (const Surfel& s : gone_) changed(s.position);
+    std::error_code ec;
+    fs::create_directories(work.chunks(0), ec);
+    if (ec) return Status::error(work.chunks(0) + ": cannot create (" + ec.message() + ")");
+    progress.begin("distribute", 0);
+    ChunkWriter chunkWriter(layout_, work.chunks(0), c.scalars().size());
+    // The added points first: one pass both finds their cells and writes them.
     if (added > 0)
-        SC_TRY(forEachAdded({}, [&](std::span<Surfel> batch, std::span<const uint32_t>) {
+        SC_TRY(forEachAdded(c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
             for (const Surfel& s : batch) changed(s.position);
-            return Status{};
+            progress.advance(batch.size());
+            return chunkWriter.add(batch, scalars);
         }));
     auto nearChange = [&](const Vec3d& p) {
         const Cell cell = cellOf(p);
@@ -670,18 +685,20 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
                     if (changedCells.count(cellKey({cell[0] + dx, cell[1] + dy, cell[2] + dz}))) return true;
         return false;
     };
-    std::error_code ec;
-    fs::create_directories(work.chunks(0), ec);
-    if (ec) return Status::error(work.chunks(0) + ": cannot create (" + ec.message() + ")");
-    progress.begin("distribute", 0);
-    ChunkWriter chunkWriter(layout_, work.chunks(0), c.scalars().size());
     std::vector<NodeRecord> leaves;
     for (const NodeRecord& n : reader_->nodes())
         // (Every chunk built again where the set gains provenance: every leaf.)
         if ((n.flags & kFlagInputPoints) && (addsProvenance_ || reaches(info, n, boxes, c.rootMin()))) leaves.push_back(n);
-    SC_TRY(reader_->forEachBlock(leaves, true, [&](const NodeRecord& n, BlockData& block) {
+    // Decoded on the threads, written in the leaves' order.
+    struct Decoded {
         std::vector<Surfel> points;
-        ScalarTable table = c.emptyTable();
+        ScalarTable table;
+    };
+    std::vector<Decoded> decoded(leaves.size());
+    auto prepare = [&](size_t leaf, const NodeRecord& n, BlockData& block) {
+        std::vector<Surfel>& points = decoded[leaf].points;
+        ScalarTable& table = decoded[leaf].table;
+        table = c.emptyTable();
         decode(c, n, block, &points, &table);
         const std::vector<uint32_t> of = inputsOf(block);
         const bool isolating = c.normals().measure;
@@ -703,15 +720,13 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
             points.resize(kept);
             table.values.resize(kept * fields);
         }
-        SC_TRY(chunkWriter.add(points, table.values));
-        progress.advance(points.size());
         return Status{};
+    };
+    SC_TRY(reader_->forEachBlockInOrder(leaves, true, c.threads(), prepare, [&](size_t leaf) {
+        const Decoded d = std::move(decoded[leaf]);
+        progress.advance(d.points.size());
+        return chunkWriter.add(d.points, d.table.values);
     }));
-    if (added > 0)
-        SC_TRY(forEachAdded(c.scalars(), [&](std::span<Surfel> batch, std::span<const uint32_t> scalars) {
-            progress.advance(batch.size());
-            return chunkWriter.add(batch, scalars);
-        }));
     SC_TRY(chunkWriter.finish());
     summary->phaseSeconds.push_back({"distribute", progress.end()});
     for (Chunk& ch : layout_.chunks()) {
@@ -799,9 +814,8 @@ Status Update::resume(const BuildOptions& options, BuildPlan plan, const WorkFol
 Result<std::unique_ptr<TilesetWriter>> Update::writer() const {
     std::vector<NodeRecord> nodes = reader_->nodes();
     for (NodeRecord& n : nodes) n.key = grow_.key(n.key);
-    return TilesetWriter::update(
-        set_, reader_->info(), nodes, [this](const std::vector<NodeRecord>& n) { return reader_->readBlocksBytes(n); },
-        [this](const NodeRecord& built, const NodeRecord& current) { return keepsCurrent(built, current); });
+    return TilesetWriter::update(set_, reader_->info(), nodes,
+                                 [this](const std::vector<NodeRecord>& n) { return reader_->readBlocksBytes(n); });
 }
 
 Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& progress, BuildSummary* summary) const {
@@ -829,16 +843,16 @@ Status Update::merge(TilesetWriter& writer, const WorkFolder& work, Progress& pr
             break;
         }
     }
-    size_t next = 0;
-    SC_TRY(reader_->forEachBlock(roots, true, [&](const NodeRecord& n, BlockData& block) {
-        ChunkOutput& out = *rootOf[next++];
+    auto decodeRoot = [&](size_t i, const NodeRecord& n, BlockData& block) {
+        ChunkOutput& out = *rootOf[i];
         out.root = std::make_unique<BuiltNode>();
         out.root->key = grow_.key(n.key);
         out.rootScalars = c.emptyTable();
         decode(c, n, block, &out.root->surfels, &out.rootScalars);
         return Status{};
-    }));
-    return mergeStage(c, plan_, layout_, work, writer, progress, summary, &kept);
+    };
+    SC_TRY(reader_->forEachBlockInOrder(roots, true, c.threads(), decodeRoot, [](size_t) { return Status{}; }));
+    return mergeStage(c, plan_, layout_, work, writer, progress, summary, &kept, keepRule());
 }
 
 }  // namespace
@@ -858,7 +872,7 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
     uint64_t buildPoints = 0;
     for (size_t i : update.rebuilt()) buildPoints += update.layout().chunks()[i].points;
     progress.begin("build", buildPoints);
-    SC_TRY(buildChunks(c, update.buildPlan(), update.layout(), update.rebuilt(), work, progress));
+    SC_TRY(buildChunks(c, update.buildPlan(), update.layout(), update.rebuilt(), work, progress, update.keepRule()));
     summary.phaseSeconds.push_back({"build", progress.end()});
     SC_TRY(keepBuildRecord(**writer, (*writer)->partialDir(), update.buildPlan(), commandLine));
     SC_TRY(update.merge(**writer, work, progress, &summary));
@@ -899,10 +913,11 @@ Result<bool> updateApplied(const BuildOptions& options, const WorkFolder& work) 
 }
 
 Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work,
-                                                          std::vector<size_t>* build) {
+                                                          std::vector<size_t>* build, KeepNode* keep) {
     Update update;
     SC_TRY(update.resume(options, plan, work));
     *build = update.rebuilt();
+    *keep = update.keepRule();
     return update.sharedContext();
 }
 

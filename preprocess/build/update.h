@@ -47,8 +47,8 @@ Result<BuildSummary> updateTileset(const BuildOptions& options, const UpdateRequ
 // bytes as updateTileset:
 //   update-plan   updatePlanStage: all that precedes the chunks' builds, into
 //                 `work` (update.bin, plan.bin, the chunk files)
-//   chunk I       chunkStage, with updateContext's context, for the chunks
-//                 `build` names
+//   chunk I       chunkStage, with updateContext's context and rule, for the
+//                 chunks `build` names
 //   update-merge  updateMergeStage: the levels above the chunks, and the switch
 // The later stages take `options` from plan.bin's command line (-o names the
 // set) and fail, naming the set and the work folder, where the set changed
@@ -65,7 +65,7 @@ Result<StagedUpdate> updatePlanStage(const BuildOptions& options, const UpdateRe
                                      const BuildPlan& record, const std::vector<std::string>& commandLine, const WorkFolder& work);
 Result<bool> updateApplied(const BuildOptions& options, const WorkFolder& work);
 Result<std::shared_ptr<const BuildContext>> updateContext(const BuildOptions& options, const BuildPlan& plan, const WorkFolder& work,
-                                                          std::vector<size_t>* build);
+                                                          std::vector<size_t>* build, KeepNode* keep);
 // `commandLine`: plan.bin's, which the set's build record keeps.
 Result<BuildSummary> updateMergeStage(const BuildOptions& options, const BuildPlan& plan, const std::vector<std::string>& commandLine,
                                       const WorkFolder& work);
