@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <set>
 #include <unistd.h>
 
 #include "built_node.h"
@@ -260,6 +261,12 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
             std::vector<Surfel>().swap(points);
         }
 
+        // Nodes an update keeps (KeepNode) get no values and no block: at
+        // their level they are neighbours of the others as the halo is.
+        std::set<const BuiltNode*> kept;
+        if (keep)
+            for (auto& n : nodes)
+                if (keep(keptRecord(*n))) kept.insert(n.get());
         // Per level: h, radii and weights, with the halo resampled on the level's grid.
         std::map<int, std::vector<BuiltNode*>> levels;
         for (auto& n : nodes) {
@@ -268,19 +275,24 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
             levels[n->key.level].push_back(n.get());
         }
         for (auto& [level, built] : levels) {
+            std::vector<BuiltNode*> valued;
             std::vector<LevelNode*> members;
-            for (BuiltNode* n : built) members.push_back(&n->level);
+            for (BuiltNode* n : built)
+                if (!kept.count(n)) valued.push_back(n), members.push_back(&n->level);
+            if (valued.empty()) continue;
             std::vector<Surfel> haloLevel;
             {
                 ScopedTimer t(steps[kStepAttributes]);
                 haloLevel = resampleHalo(context, halo, chunk, margin, level, built);
+                for (BuiltNode* n : built)
+                    if (kept.count(n)) haloLevel.insert(haloLevel.end(), n->surfels.begin(), n->surfels.end());
                 computeLevelAttributes(members, haloLevel, context.levelParams(level, largestCell(context, level, built), threads));
             }
-            fits.add(filterLevelTextures(context, built, haloLevel, threads, steps));
+            fits.add(filterLevelTextures(context, valued, haloLevel, threads, steps));
         }
         for (auto& n : nodes) {
-            if (const NodeRecord built = keptRecord(*n); keep && keep(built)) {
-                records.push_back(built);
+            if (kept.count(n.get())) {
+                records.push_back(keptRecord(*n));
             } else {
                 auto encoded = encodeNode(context, *n, scalars, steps);
                 if (!encoded) return encoded.status();

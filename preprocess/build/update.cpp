@@ -327,6 +327,18 @@ private:
     double reach_ = 0;
 };
 
+// Whether the box of the node of `key`, widened by the larger of `reach` and
+// two node edges of its level, misses `changed` (keepRule).
+bool unreached(const BuildContext& c, const Box3d& changed, double reach, const NodeKey& key) {
+    if (changed.empty()) return true;
+    const double r = std::max(reach, 2 * c.edge(key.level));
+    const Vec3d lo = c.nodeMinRel(key) - Vec3d{r, r, r};
+    const double e = c.edge(key.level) + 2 * r;
+    for (int a = 0; a < 3; ++a)
+        if (lo[a] > changed.max[a] || lo[a] + e < changed.min[a]) return true;
+    return false;
+}
+
 // A node built again keeps the set's node of its key where its box, widened
 // by the larger of reach_ and two node edges of its level, misses every
 // added and removed point, and its children and surfel count agree: its
@@ -338,22 +350,19 @@ private:
 // changes which sparse neighbours past a surfel's own reach count, and the
 // rule keeps the node anyway.) Built again it would differ by being computed
 // from decoded points (bench/BENCHMARKS.md, "Nodes the change cannot reach
-// keep their blocks"). The rule holds what it needs (a stage's Update goes
-// before its chunks are built).
+// keep their blocks"). So a kept node is neither given values nor encoded
+// (KeepNode), and the points of a set's leaf the rule would keep are not
+// measured (a leaf whose decoded points merge otherwise, and so is built
+// again, judges them at its level). The rule holds what it needs (a stage's
+// Update goes before its chunks are built).
 KeepNode Update::keepRule() const {
     if (!keepsFar_) return {};
     auto current = std::make_shared<std::map<NodeKey, std::pair<uint8_t, uint32_t>>>();
     for (const NodeRecord& n : reader_->nodes()) (*current)[n.key] = {n.childMask, n.surfelCount};
-    return [c = context_, changed = changed_, reach0 = reach_, current](const NodeRecord& built) {
+    return [c = context_, changed = changed_, reach = reach_, current](const NodeRecord& built) {
         auto it = current->find(built.key);
-        if (it == current->end() || it->second != std::pair{built.childMask, built.surfelCount}) return false;
-        if (changed.empty()) return true;
-        const double reach = std::max(reach0, 2 * c->edge(built.key.level));
-        const Vec3d lo = c->nodeMinRel(built.key) - Vec3d{reach, reach, reach};
-        const double e = c->edge(built.key.level) + 2 * reach;
-        for (int a = 0; a < 3; ++a)
-            if (lo[a] > changed.max[a] || lo[a] + e < changed.min[a]) return true;
-        return false;
+        return it != current->end() && it->second == std::pair{built.childMask, built.surfelCount} &&
+               unreached(*c, changed, reach, built.key);
     };
 }
 
@@ -701,7 +710,9 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         table = c.emptyTable();
         decode(c, n, block, &points, &table);
         const std::vector<uint32_t> of = inputsOf(block);
-        const bool isolating = c.normals().measure;
+        // (Points of a leaf the change cannot reach stay in it, which the
+        // update keeps: their isolation judges nothing; keepRule.)
+        const bool isolating = c.normals().measure && !(keepsFar_ && unreached(c, changed_, reach_, n.key));
         for (size_t i = 0; i < points.size(); ++i) {
             if (of[i] >= estimated_.size() || !estimated_[of[i]]) continue;
             if (addsProvenance_ || nearChange(points[i].position))
