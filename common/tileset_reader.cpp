@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <future>
 #include <thread>
 
 #include <cmath>
@@ -102,15 +103,31 @@ Status TilesetReader::forEachBlock(const std::vector<NodeRecord>& nodes, bool sc
 Status TilesetReader::forEachBlockInOrder(const std::vector<NodeRecord>& nodes, bool scalars, int threads,
                                           const std::function<Status(size_t, const NodeRecord&, BlockData&)>& prepare,
                                           const std::function<Status(size_t)>& consume) const {
-    constexpr uint64_t kBatchBytes = 64ull << 20;
+    constexpr uint64_t kBatchBytes = 16ull << 20;
     constexpr size_t kPerThread = 4;  // blocks a thread prepares before the group is consumed
+    std::vector<size_t> starts;
     for (size_t first = 0; first < nodes.size();) {
-        size_t end = first;
-        for (uint64_t bytes = 0; end < nodes.size() && (end == first || bytes + nodes[end].blockSize <= kBatchBytes); ++end)
-            bytes += nodes[end].blockSize;
-        const std::vector<NodeRecord> batch(nodes.begin() + long(first), nodes.begin() + long(end));
-        auto blobs = readBlocksBytes(batch);
+        starts.push_back(first);
+        uint64_t bytes = 0;
+        do bytes += nodes[first++].blockSize;
+        while (first < nodes.size() && bytes + nodes[first].blockSize <= kBatchBytes);
+    }
+    starts.push_back(nodes.size());
+    // The next batch's blobs are read while one is decoded.
+    auto fetch = [&](size_t b) {
+        return std::async(std::launch::async, [this, batch = std::vector<NodeRecord>(nodes.begin() + long(starts[b]),
+                                                                                  nodes.begin() + long(starts[b + 1]))] {
+            return readBlocksBytes(batch);
+        });
+    };
+    std::future<Result<std::vector<std::vector<uint8_t>>>> ahead;
+    if (!nodes.empty()) ahead = fetch(0);
+    for (size_t b = 0; b + 1 < starts.size(); ++b) {
+        const size_t first = starts[b];
+        const std::vector<NodeRecord> batch(nodes.begin() + long(first), nodes.begin() + long(starts[b + 1]));
+        auto blobs = ahead.get();
         if (!blobs) return blobs.status();
+        if (b + 2 < starts.size()) ahead = fetch(b + 1);
         const size_t group = kPerThread * size_t(std::max(threads, 1));
         for (size_t g = 0; g < batch.size(); g += group) {
             const size_t n = std::min(group, batch.size() - g);
@@ -132,7 +149,6 @@ Status TilesetReader::forEachBlockInOrder(const std::vector<NodeRecord>& nodes, 
                 SC_TRY(consume(first + g + i));
             }
         }
-        first = end;
     }
     return {};
 }

@@ -34,7 +34,8 @@ public:
     Result<BlockData> readBlock(const NodeRecord& node, bool scalars = false) const;
     // Each of `nodes` decoded as readBlock decodes it, in their order, to
     // `visit`; their blobs are asked for in batches of about 64 MiB at once
-    // (from a store, one batch's ranges together rather than one at a time).
+    // (from a store, one batch's ranges together rather than one at a time),
+    // the next batch while one is decoded.
     // Stops at the first error, the visitor's own included.
     Status forEachBlock(const std::vector<NodeRecord>& nodes, bool scalars,
                         const std::function<Status(const NodeRecord&, BlockData&)>& visit) const;
