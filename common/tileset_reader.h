@@ -33,7 +33,7 @@ public:
     // checked against the hierarchy's surfel count; errors name the node.
     Result<BlockData> readBlock(const NodeRecord& node, bool scalars = false) const;
     // Each of `nodes` decoded as readBlock decodes it, in their order, to
-    // `visit`; their blobs are asked for in batches of about 64 MiB at once
+    // `visit`; their blobs are asked for in batches of about 16 MiB at once
     // (from a store, one batch's ranges together rather than one at a time),
     // the next batch while one is decoded.
     // Stops at the first error, the visitor's own included.

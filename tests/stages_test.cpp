@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "test_support.h"
+#include "work_files.h"
 
 using namespace surfcast;
 namespace fs = std::filesystem;
@@ -200,6 +201,21 @@ TEST(Stages, MissingOrCorruptWorkFilesFailWithTheirNames) {
     EXPECT_EQ(truncated.exitCode, 1);
     EXPECT_NE(truncated.output.find(nodes + ": checksum mismatch"), std::string::npos) << truncated.output;
     EXPECT_TRUE(test::readFile(out + "/blocks.bin") == oldBlocks) << "a failed merge changed the old set";
+
+    // A node's record without a block (as a node an update keeps has) in a
+    // build's chunk: the merge names the file and the node.
+    ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", "0", "1"}));
+    {
+        auto output = readChunkOutput(nodes, ScalarTable{});
+        ASSERT_TRUE(output) << output.status().message();
+        ASSERT_FALSE(output->records.empty());
+        const std::string key = output->records.back().key.name();
+        output->records.back().blockSize = 0;
+        ASSERT_TRUE(writeChunkOutput(nodes, *output).ok());
+        auto blockless = test::run({build, "merge", "--work", work, "-q"});
+        EXPECT_EQ(blockless.exitCode, 1);
+        EXPECT_NE(blockless.output.find(nodes + ": node " + key + " has no block"), std::string::npos) << blockless.output;
+    }
 
     // A chunk built for an earlier plan (its files copied back after a new
     // plan of the same layout): the merge refuses it.
