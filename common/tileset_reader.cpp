@@ -133,11 +133,13 @@ Status TilesetReader::forEachBlockInOrder(const std::vector<NodeRecord>& nodes, 
             const size_t n = std::min(group, batch.size() - g);
             std::vector<Status> results(n);
             std::atomic<size_t> next{0};
+            std::atomic<bool> failed{false};
             auto work = [&] {
-                for (size_t i; (i = next++) < n;) {
+                for (size_t i; !failed && (i = next++) < n;) {
                     auto block = decoded(batch[g + i], (*blobs)[g + i], scalars);
                     std::vector<uint8_t>().swap((*blobs)[g + i]);
                     results[i] = block ? prepare(first + g + i, batch[g + i], *block) : block.status();
+                    if (!results[i].ok()) failed = true;
                 }
             };
             std::vector<std::thread> helpers;

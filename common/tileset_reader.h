@@ -41,8 +41,11 @@ public:
                         const std::function<Status(const NodeRecord&, BlockData&)>& visit) const;
     // As forEachBlock, on `threads` threads: a batch's blocks are decoded and
     // given to `prepare` (with their index in `nodes`) a few per thread at a
-    // time, all at once, and then to `consume` one after the other in their
-    // order. Stops at the first error, the earliest block's of a group.
+    // time, concurrently, and then `consume` runs for each index, in order,
+    // on the caller's thread. `prepare` must not throw, may touch only what
+    // its index owns, and the block lives only through the call. Stops at the
+    // first error (the earliest block's of a group; blocks a thread already
+    // took are prepared).
     Status forEachBlockInOrder(const std::vector<NodeRecord>& nodes, bool scalars, int threads,
                                const std::function<Status(size_t, const NodeRecord&, BlockData&)>& prepare,
                                const std::function<Status(size_t)>& consume) const;

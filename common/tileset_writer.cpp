@@ -92,11 +92,12 @@ Status TilesetWriter::addKeptNodes(const std::vector<NodeRecord>& records) {
     return {};
 }
 
-Status TilesetWriter::keepCurrentNodes(const std::vector<NodeKey>& keys) {
+Status TilesetWriter::keepCurrentNodes(const std::vector<NodeRecord>& built) {
     std::vector<NodeRecord> records;
-    for (const NodeKey& key : keys) {
-        auto it = currentNodes_.find(key);
-        if (it == currentNodes_.end()) return Status::error("node " + key.name() + ": kept, but the set has no node of its key");
+    for (const NodeRecord& b : built) {
+        auto it = currentNodes_.find(b.key);
+        if (it == currentNodes_.end() || it->second.childMask != b.childMask || it->second.surfelCount != b.surfelCount)
+            return Status::error("node " + b.key.name() + ": kept, but the set has no node of its key, children and surfel count");
         records.push_back(it->second);
     }
     return addKeptNodes(records);

@@ -62,9 +62,10 @@ public:
     // (records as the current hierarchy holds them).
     Status addKeptNodes(const std::vector<NodeRecord>& records);
     // An update's nodes built again that hold what the current nodes of their
-    // keys hold (the update knows nothing reached them): those nodes stay,
-    // record and place.
-    Status keepCurrentNodes(const std::vector<NodeKey>& keys);
+    // keys hold (the update knows nothing reached them; `built` gives their
+    // keys, children and surfel counts, which must be the current nodes'):
+    // those nodes stay, record and place.
+    Status keepCurrentNodes(const std::vector<NodeRecord>& built);
     // The build record (a plan.bin, stages.h) the set keeps for updates:
     // the file at `path` is moved in as buildRecordFile(the hierarchy's name).
     void setBuildRecord(const std::string& path) { record_ = path; }

@@ -215,8 +215,9 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
     const Chunk& chunk = layout.chunks().at(index);
     StepTimes steps = {};
     FitReport fits;
-    // Every part's points in part order: the inputs' order. (Each file's
-    // size is checked against its count before anything is allocated.)
+    // Every part's points in part order: a build's in the inputs' order, an
+    // update's added points before the set's. (Each file's size is checked
+    // against its count before anything is allocated.)
     std::vector<Surfel> points, halo;
     ScalarTable scalars = context.emptyTable();
     for (const ChunkPiece& piece : chunk.pieces) {

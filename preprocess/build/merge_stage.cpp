@@ -47,11 +47,10 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
             SC_TRY(writer.addKeptNodes(out->records));
         } else {
             // Nodes the rule kept (no block) take the set's.
-            std::vector<NodeRecord> placed;
-            std::vector<NodeKey> same;
+            std::vector<NodeRecord> placed, same;
             for (const NodeRecord& r : out->records)
                 if (r.blockSize > 0) placed.push_back(r);
-                else if (keep) same.push_back(r.key);
+                else if (keep && keep(r)) same.push_back(r);
                 else return Status::error(work.nodes(i) + ": node " + r.key.name() + " has no block");
             SC_TRY(writer.addPlacedNodes(work.blocks(i), out->blocksBytes, placed));
             SC_TRY(writer.keepCurrentNodes(same));
@@ -97,29 +96,36 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
                 g.insert(g.end(), child->surfels.begin(), child->surfels.end());
             }
             below.clear();
+            // As in a chunk, nodes the rule keeps get no values and no block:
+            // they are neighbours of the others, with the chunk roots.
             std::vector<LevelNode*> members;
+            std::vector<BuiltNode*> built, valued;
+            std::vector<Surfel> neighbours;  // chunk roots on this level, and the kept nodes
+            std::vector<NodeRecord> same;
             for (auto& [key, node] : current) {
                 const SampleGrid grid = context.nodeGrid(key, gathered[key]);
                 node->cell = grid.cellSize;
                 node->surfels = resample(gathered[key], grid, true, &upperScalars);
                 node->level.surfels = node->surfels;
                 node->level.cell = node->cell;
-                members.push_back(&node->level);
+                built.push_back(node.get());
+                if (const NodeRecord r = keptRecord(*node); keep && keep(r)) {
+                    same.push_back(r);
+                    neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
+                } else {
+                    valued.push_back(node.get());
+                    members.push_back(&node->level);
+                }
             }
             gathered.clear();
-            std::vector<Surfel> neighbours;  // chunk roots on this level
             for (auto& [key, node] : retained)
                 if (key.level == level) neighbours.insert(neighbours.end(), node->surfels.begin(), node->surfels.end());
-            std::vector<BuiltNode*> built;
-            for (auto& [key, node] : current) built.push_back(node.get());
-            computeLevelAttributes(members, neighbours, context.levelParams(level, largestCell(context, level, built), context.threads()));
-            summary->textureFit.add(filterLevelTextures(context, built, neighbours, context.threads(), steps));
-            for (auto& [key, node] : current) {
-                if (const NodeRecord built = keptRecord(*node); keep && keep(built)) {
-                    count(built);
-                    SC_TRY(writer.keepCurrentNodes({key}));
-                    continue;
-                }
+            if (!members.empty())
+                computeLevelAttributes(members, neighbours, context.levelParams(level, largestCell(context, level, built), context.threads()));
+            summary->textureFit.add(filterLevelTextures(context, valued, neighbours, context.threads(), steps));
+            SC_TRY(writer.keepCurrentNodes(same));
+            for (const NodeRecord& r : same) count(r);
+            for (BuiltNode* node : valued) {
                 auto encoded = encodeNode(context, *node, upperScalars, steps);
                 if (!encoded) return encoded.status();
                 count(encoded->record);

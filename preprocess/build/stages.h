@@ -171,7 +171,8 @@ Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayo
 // of the built node's key stays, record and block, since nothing the update
 // changed reaches it (Update's rule). Given the built node's key, children and
 // surfel count, before it is encoded: a kept node is never encoded, and its
-// record in a chunk's output carries no block (blockSize 0).
+// record in a chunk's output carries no block (blockSize 0). Called from
+// several chunks' threads at once.
 using KeepNode = std::function<bool(const NodeRecord& built)>;
 
 // Chunk: builds chunk `index` of `layout` (its pieces from readDistribution)

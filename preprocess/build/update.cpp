@@ -351,10 +351,9 @@ bool unreached(const BuildContext& c, const Box3d& changed, double reach, const 
 // rule keeps the node anyway.) Built again it would differ by being computed
 // from decoded points (bench/BENCHMARKS.md, "Nodes the change cannot reach
 // keep their blocks"). So a kept node is neither given values nor encoded
-// (KeepNode), and the points of a set's leaf the rule would keep are not
-// measured (a leaf whose decoded points merge otherwise, and so is built
-// again, judges them at its level). The rule holds what it needs (a stage's
-// Update goes before its chunks are built).
+// (KeepNode). The rule holds what it needs (a stage's Update goes before its
+// chunks are built); it is off where the root grows, so the set's keys are
+// the updated set's.
 KeepNode Update::keepRule() const {
     if (!keepsFar_) return {};
     auto current = std::make_shared<std::map<NodeKey, std::pair<uint8_t, uint32_t>>>();
@@ -710,8 +709,11 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         table = c.emptyTable();
         decode(c, n, block, &points, &table);
         const std::vector<uint32_t> of = inputsOf(block);
-        // (Points of a leaf the change cannot reach stay in it, which the
-        // update keeps: their isolation judges nothing; keepRule.)
+        // Points of a leaf the change cannot reach (keepRule's box) are not
+        // measured: they stay in it, which the update keeps, and their
+        // isolation judges nothing. (A leaf that is built again all the same,
+        // its decoded points merging otherwise or its chunk's nodes changed
+        // above it, judges them at its level.)
         const bool isolating = c.normals().measure && !(keepsFar_ && unreached(c, changed_, reach_, n.key));
         for (size_t i = 0; i < points.size(); ++i) {
             if (of[i] >= estimated_.size() || !estimated_[of[i]]) continue;
@@ -734,7 +736,7 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
         return Status{};
     };
     SC_TRY(reader_->forEachBlockInOrder(leaves, true, c.threads(), prepare, [&](size_t leaf) {
-        const Decoded d = std::move(decoded[leaf]);
+        Decoded d = std::move(decoded[leaf]);
         progress.advance(d.points.size());
         return chunkWriter.add(d.points, d.table.values);
     }));
@@ -751,7 +753,7 @@ Status Update::distribute(const WorkFolder& work, Progress& progress, BuildSumma
 
 // update.bin: the plan's id, the set's version, the added inputs' count, the
 // growth of the root (levels and the old root's offset: the new root follows
-// from the set), the chunks built again, and what keepsCurrent needs (whether
+// from the set), the chunks built again, and what keepRule needs (whether
 // it applies, the changed points' box, the reach); the rest a stage derives
 // again from the plan and the set.
 Status Update::write(const std::string& path) const {
