@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <future>
+#include <span>
 #include <thread>
 
 #include <cmath>
@@ -124,7 +125,7 @@ Status TilesetReader::forEachBlockInOrder(const std::vector<NodeRecord>& nodes, 
     if (!nodes.empty()) ahead = fetch(0);
     for (size_t b = 0; b + 1 < starts.size(); ++b) {
         const size_t first = starts[b];
-        const std::vector<NodeRecord> batch(nodes.begin() + long(first), nodes.begin() + long(starts[b + 1]));
+        const std::span<const NodeRecord> batch(nodes.data() + first, starts[b + 1] - first);
         auto blobs = ahead.get();
         if (!blobs) return blobs.status();
         if (b + 2 < starts.size()) ahead = fetch(b + 1);
