@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""LAZ decode benchmark (issue: LAZ/COPC and PCD inputs).
+"""LAZ decode benchmark: surfcast's reader against laspy + lazrs.
 
 Decodes the same LAZ files with surfcast's reader (the laz crate through
 laz_ffi) and with laspy + lazrs, single- and multi-threaded, in the same run.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Renderer throughput benchmark (issue: object-space EWA on Vulkan).
+"""Renderer throughput benchmark: object-space EWA on Vulkan.
 
 Builds the built-in scanned scene at two sizes (its leaves are the input
 points, so --scene-points sets the splat count), then renders every leaf with

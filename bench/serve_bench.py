@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Server throughput benchmark (issue: streaming server).
+"""Server throughput benchmark: surfcast-serve against nginx.
 
 wrk on loopback, 64 concurrent keep-alive connections fetching random node
 blocks of a real tile set, against nginx (Debian) serving the same blocks.bin

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Streaming and level of detail, measured with the real programs.
 
-Streaming (issue 6): the built-in scene at --points (default 12 M, the largest
+Streaming: the built-in scene at --points (default 12 M, the largest
 set built here in a few minutes) served by surfcast-serve on loopback, and
 streamed by surfcast-view --headless URL --lod 1 along a camera path, each
 view until converged, every redraw saved (--save-redraws). Per view: time to
@@ -12,7 +12,7 @@ function of the bytes downloaded so far (stream_psnr_bytes.png). Frames per
 second at 1280x720 with the default target (1 px): the converged frames'
 update (level choice, uploads) plus GPU milliseconds, from the local folder.
 
-Level of detail (issue 8): a dolly of --frames views towards the set's centre,
+Level of detail: a dolly of --frames views towards the set's centre,
 rendered converged at the LOD targets 0.5, 1, 2 and 4 px and at full
 resolution (every leaf, no LOD). Per target: GPU ms and splats per frame,
 PSNR and FLIP against the full-resolution frame, the mean FLIP between

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "camera.h"
+#include "command_line.h"
 #include "http_tile_source.h"
 #include "laz_export.h"
 #include "object_store.h"
@@ -22,85 +23,35 @@
 
 namespace {
 
-const char* kUsage = R"(usage: surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
+constexpr const char* kUsage = R"(surfcast-export SET --format laz|copc [--bbox X0,Y0,Z0,X1,Y1,Z1] [--classes LIST] -o FILE
        surfcast-export SET --format 3dtiles [--as splats|points] [--compression meshopt|none]
                        [--tiling auto|explicit|implicit] -o FOLDER
        surfcast-export SET --format ply|spz [--level N|leaves | --splat-budget N | --camera C [--size WxH] [--lod PX]
-                       [--splat-budget N]] -o FILE
+                       [--splat-budget N]] -o FILE)";
 
-Writes a tile set's points as another format. SET is a set's folder or its
-http(s) URL.
+constexpr const char* kDescription = R"(Writes a tile set's points as another format. SET is a set's folder or its
+http(s) URL.)";
 
-  --format laz          LAS 1.4 compressed with LASzip (the laz crate): the input
-                        points the set's leaves hold (exact duplicates merged at
-                        build), point format 6, or 7 with colour; intensity,
-                        classification, returns, and GPS time, scan angle, user
-                        data and point source id where the set stores them
-  --format copc         the same points as a COPC 1.0 file (cloud-optimized point
-                        cloud: LAZ chunks in an octree on the set's root cube, each
-                        node above the leaves an even sample of what lies under
-                        it, the hierarchy in an EVLR), which COPC readers query
-                        by box and level
-  --format 3dtiles      a 3D Tiles 1.1 tileset for CesiumJS and other 3D Tiles
-                        engines: tileset.json and one glb per node (REPLACE
-                        refinement, the node's spacing as its geometric error);
-                        the whole set, into a folder (docs/EXPORT.md)
-  --as splats|points    3dtiles: each surfel a flat Gaussian (default;
-                        KHR_gaussian_splatting in SPZ, as CesiumJS reads
-                        splats in 3D Tiles), or a glTF point with its LiDAR
-                        attributes, which every 3D Tiles engine draws
-  --compression meshopt|none
-                        3dtiles --as points: the vertex data compressed by
-                        meshoptimizer (default; EXT_meshopt_compression, which
-                        CesiumJS, three.js and Babylon.js read) or stored as it
-                        is, for glTF readers without the extension
-  --tiling auto|explicit|implicit
-                        3dtiles: every tile in tileset.json (explicit), or the
-                        tree in subtree files an engine reads as it descends
-                        (3D Tiles 1.1 implicit tiling, each tile's own box and
-                        error as tile metadata: engines draw sooner); auto
-                        (default): implicit above 10,000 nodes
-  --format ply          the 3D Gaussian splatting PLY that splat viewers read:
-                        one cut through the tree, each surfel a flat Gaussian,
-                        about the centre of the set's bounds (a comment keeps
-                        it), in the PLY's y-down axes
-  --format spz          the same Gaussians as SPZ 2 (Niantic's compressed
-                        splats, y up; at most 10 million)
-  --level N|leaves      ply, spz: the nodes of level N and the leaves above it,
-                        as surfcast-view --level draws (default: the leaves)
-  --splat-budget N      ply, spz: the deepest level whose cut holds at most N
-                        surfels (the leaves where they fit); with --camera, at
-                        most N surfels of that view, as surfcast-view's budget
-  --camera EX,EY,EZ,TX,TY,TZ,UX,UY,UZ,FOV
-                        ply, spz: the nodes surfcast-view --lod draws for this
-                        camera (as surfcast-view takes it): what it sees, finer
-                        where it is nearer
-  --size WxH            with --camera: the view's pixels (default 1280x720)
-  --lod PX              with --camera: refine while a node's samples lie more
-                        than PX pixels apart on screen (default 1)
-  --splat-scale S       splats: standard deviation S times the set's kernel
-                        scale times the surfel's radius (default 0.75, closest
-                        to surfcast-view in CesiumJS and Spark; 1 is Surfcast's
-                        own reconstruction kernel)
-  --splat-opacity A     splats: opacity A times the surfel's own (default 1)
-  --bbox X0,Y0,Z0,X1,Y1,Z1
-                        only the points inside this box (world coordinates,
-                        bounds included)
-  --classes LIST        only these ASPRS classes, e.g. 2,6 (the set must store
-                        classification)
-  -o, --output FILE     the file (or 3dtiles' folder) to write, replaced atomically;
-                        or s3://BUCKET/KEY (a 3dtiles prefix must hold no objects yet)
-  --header 'NAME: VALUE', --token-file F, --ca-file F, --insecure,
-  --redirect-credentials
-                        how to reach a set at a URL, as in surfcast-view
-  -q, --quiet           no progress output
-  -h, --help            this text
-)";
+constexpr const char* kFormats = R"(Formats (--format):
+  laz      LAS 1.4 compressed with LASzip (the laz crate): the input points the
+           set's leaves hold (exact duplicates merged at build), point format 6,
+           or 7 with colour; intensity, classification, returns, and GPS time,
+           scan angle, user data and point source id where the set stores them
+  copc     the same points as a COPC 1.0 file (cloud-optimized point cloud: LAZ
+           chunks in an octree on the set's root cube, each node above the
+           leaves an even sample of what lies under it, the hierarchy in an
+           EVLR), which COPC readers query by box and level
+  3dtiles  a 3D Tiles 1.1 tileset for CesiumJS and other 3D Tiles engines:
+           tileset.json and one glb per node (REPLACE refinement, the node's
+           spacing as its geometric error); the whole set, into a folder
+           (docs/EXPORT.md)
+  ply      the 3D Gaussian splatting PLY that splat viewers read: one cut
+           through the tree, each surfel a flat Gaussian, about the centre of
+           the set's bounds (a comment keeps it), in the PLY's y-down axes
+  spz      the same Gaussians as SPZ 2 (Niantic's compressed splats, y up; at
+           most 10 million))";
 
-int usageError(const std::string& message) {
-    std::fprintf(stderr, "surfcast-export: %s\n(surfcast-export --help for usage)\n", message.c_str());
-    return 2;
-}
+int usageError(const std::string& message) { return surfcast::cli::usageError("surfcast-export", message); }
 
 // The summary's lines on what a LAS export carries and what it leaves out.
 std::string dimensionSummary(const std::vector<std::string>& carried, const std::vector<std::string>& leftOut) {
@@ -135,94 +86,121 @@ int main(int argc, char** argv) {
     bool asGiven = false, compressionGiven = false, tilingGiven = false, shapeGiven = false, cutGiven = false, viewGiven = false,
          levelGiven = false;  // options only some formats take
     SplatCut cut;
-    for (int i = 1; i < argc; ++i) {
-        const std::string a = argv[i];
-        auto value = [&](std::string* out) {
-            if (i + 1 >= argc) return false;
-            *out = argv[++i];
-            return true;
-        };
-        std::string v;
-        if (a == "-h" || a == "--help") {
-            std::fputs(kUsage, stdout);
-            return 0;
-        } else if (a == "--format") {
-            if (!value(&format)) return usageError("--format wants laz, copc, 3dtiles, ply or spz");
-        } else if (a == "--as") {
-            if (!value(&v) || (v != "points" && v != "splats")) return usageError("--as wants points or splats");
-            tiles.as = v == "splats" ? Tiles3dOptions::As::Splats : Tiles3dOptions::As::Points;
-            asGiven = true;
-        } else if (a == "--compression") {
-            if (!value(&v) || (v != "meshopt" && v != "none")) return usageError("--compression wants meshopt or none");
-            tiles.compression = v == "meshopt" ? Tiles3dOptions::Compression::Meshopt : Tiles3dOptions::Compression::None;
-            compressionGiven = true;
-        } else if (a == "--tiling") {
-            if (!value(&v) || (v != "auto" && v != "explicit" && v != "implicit")) return usageError("--tiling wants auto, explicit or implicit");
-            tiles.tiling = v == "auto"       ? Tiles3dOptions::Tiling::Auto
-                           : v == "explicit" ? Tiles3dOptions::Tiling::Explicit
-                                             : Tiles3dOptions::Tiling::Implicit;
-            tilingGiven = true;
-        } else if (a == "--splat-scale" || a == "--splat-opacity") {
-            char* end = nullptr;
-            const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
-            const bool scale = a == "--splat-scale";
-            if (!(end && *end == '\0' && d > 0 && d <= (scale ? 100.0 : 1.0)))
-                return usageError(a + (scale ? " wants a number in (0, 100]" : " wants a number in (0, 1]"));
-            (scale ? tiles.gaussians.sigmaScale : tiles.gaussians.opacity) = d;
-            shapeGiven = true;
-        } else if (a == "--level") {
-            char* end = nullptr;
-            const long l = value(&v) && v != "leaves" ? std::strtol(v.c_str(), &end, 10) : -1;
-            if (v != "leaves" && !(end && *end == '\0' && !v.empty() && l >= 0 && l <= 64)) return usageError("--level wants a level (0, 1, ...) or leaves");
-            cut.level = int(l);
-            cutGiven = levelGiven = true;
-        } else if (a == "--splat-budget") {
-            char* end = nullptr;
-            const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
-            if (!(end && *end == '\0' && d >= 1 && d <= 1e12)) return usageError("--splat-budget wants a count of surfels (1 or more)");
-            cut.budget = uint64_t(d);
-            cutGiven = true;
-        } else if (a == "--camera") {
-            if (!value(&v)) return usageError("--camera wants EX,EY,EZ,TX,TY,TZ,UX,UY,UZ,FOV");
-            auto camera = parseCamera(v);
-            if (!camera) return usageError("--camera: " + camera.status().message());
-            cut.camera = *camera;
-            cutGiven = true;
-        } else if (a == "--size") {
-            auto size = value(&v) ? parseImageSize(v) : Result<std::pair<int, int>>(Status::error("--size wants WxH"));
-            if (!size) return usageError("--size wants WxH, 1 to 16384 pixels each");
-            cut.width = size->first, cut.height = size->second;
-            viewGiven = true;
-        } else if (a == "--lod") {
-            char* end = nullptr;
-            const double d = value(&v) ? std::strtod(v.c_str(), &end) : NAN;
-            if (!(end && *end == '\0' && d > 0 && d <= 1000)) return usageError("--lod wants pixels in (0, 1000]");
-            cut.lodPixels = d;
-            viewGiven = true;
-        } else if (a == "-o" || a == "--output") {
-            if (!value(&output)) return usageError("-o wants a file");
-        } else if (a == "--bbox") {
-            if (!value(&v)) return usageError("--bbox wants X0,Y0,Z0,X1,Y1,Z1");
-            auto box = parseBox(v);
-            if (!box) return usageError("--bbox: " + box.status().message());
-            filter.box = *box;
-        } else if (a == "--classes") {
-            if (!value(&v)) return usageError("--classes wants a list such as 2,6");
-            auto classes = parseClasses(v);
-            if (!classes) return usageError("--classes: " + classes.status().message());
-            filter.classes = *classes;
-        } else if (std::string error; parseHttpOption(a, value, http, &error)) {
-            if (!error.empty()) return usageError(error);
-        } else if (a == "-q" || a == "--quiet") {
-            quiet = true;
-        } else if (!a.empty() && a[0] == '-') {
-            return usageError("unknown option " + a);
-        } else if (set.empty()) {
-            set = a;
-        } else {
-            return usageError("one set at a time ('" + set + "' and '" + a + "' given)");
-        }
-    }
+    using cli::UsageError;
+    CLI::App app{kDescription, "surfcast-export"};
+    cli::configure(app)->usage(&app, kUsage);
+    app.footer(kFormats);
+    app.add_option("SET", set, "the set's folder, or its http(s) or s3:// URL");
+    auto option = [&](const std::string& spec, const std::string& type, const std::string& help, std::function<void(const std::string&)> f) {
+        cli::option(app, spec, type, help, std::move(f));
+    };
+    // A number in (0, most], whole text, else `message`.
+    auto positive = [](const std::string& v, double most, const std::string& message) {
+        char* end = nullptr;
+        const double d = std::strtod(v.c_str(), &end);
+        if (!(*end == '\0' && !v.empty() && d > 0 && d <= most)) throw UsageError(message);
+        return d;
+    };
+    option("--format", "FORMAT", "laz, copc, 3dtiles, ply or spz (below)", [&](const std::string& v) { format = v; });
+    option("-o,--output", "FILE", "the file (or 3dtiles' folder) to write, replaced atomically; or s3://BUCKET/KEY (a 3dtiles prefix must hold no objects yet)",
+           [&](const std::string& v) { output = v; });
+    option("--bbox", "X0,Y0,Z0,X1,Y1,Z1", "laz, copc: only the points inside this box (world coordinates, bounds included)",
+           [&](const std::string& v) {
+               auto box = parseBox(v);
+               if (!box) throw UsageError("--bbox: " + box.status().message());
+               filter.box = *box;
+           });
+    option("--classes", "LIST", "laz, copc: only these ASPRS classes, e.g. 2,6 (the set must store classification)", [&](const std::string& v) {
+        auto classes = parseClasses(v);
+        if (!classes) throw UsageError("--classes: " + classes.status().message());
+        filter.classes = *classes;
+    });
+    option("--as", "splats|points",
+           "3dtiles: each surfel a flat Gaussian (default; KHR_gaussian_splatting in SPZ, as CesiumJS reads splats in 3D Tiles), or a "
+           "glTF point with its LiDAR attributes, which every 3D Tiles engine draws",
+           [&](const std::string& v) {
+               if (v != "points" && v != "splats") throw UsageError("--as wants points or splats");
+               tiles.as = v == "splats" ? Tiles3dOptions::As::Splats : Tiles3dOptions::As::Points;
+               asGiven = true;
+           });
+    option("--compression", "meshopt|none",
+           "3dtiles --as points: the vertex data compressed by meshoptimizer (default; EXT_meshopt_compression, which CesiumJS, "
+           "three.js and Babylon.js read) or stored as it is, for glTF readers without the extension",
+           [&](const std::string& v) {
+               if (v != "meshopt" && v != "none") throw UsageError("--compression wants meshopt or none");
+               tiles.compression = v == "meshopt" ? Tiles3dOptions::Compression::Meshopt : Tiles3dOptions::Compression::None;
+               compressionGiven = true;
+           });
+    option("--tiling", "auto|explicit|implicit",
+           "3dtiles: every tile in tileset.json (explicit), or the tree in subtree files an engine reads as it descends (3D Tiles 1.1 "
+           "implicit tiling, each tile's own box and error as tile metadata: engines draw sooner); auto (default): implicit above "
+           "10,000 nodes",
+           [&](const std::string& v) {
+               if (v != "auto" && v != "explicit" && v != "implicit") throw UsageError("--tiling wants auto, explicit or implicit");
+               tiles.tiling = v == "auto" ? Tiles3dOptions::Tiling::Auto
+                              : v == "explicit" ? Tiles3dOptions::Tiling::Explicit
+                                                : Tiles3dOptions::Tiling::Implicit;
+               tilingGiven = true;
+           });
+    option("--level", "N|leaves", "ply, spz: the nodes of level N and the leaves above it, as surfcast-view --level draws (default: the leaves)",
+           [&](const std::string& v) {
+               char* end = nullptr;
+               const long l = v != "leaves" ? std::strtol(v.c_str(), &end, 10) : -1;
+               if (v != "leaves" && !(*end == '\0' && !v.empty() && l >= 0 && l <= 64))
+                   throw UsageError("--level wants a level (0, 1, ...) or leaves");
+               cut.level = int(l);
+               cutGiven = levelGiven = true;
+           });
+    option("--splat-budget", "N",
+           "ply, spz: the deepest level whose cut holds at most N surfels (the leaves where they fit); with --camera, at most N "
+           "surfels of that view, as surfcast-view's budget",
+           [&](const std::string& v) {
+               char* end = nullptr;
+               const double d = std::strtod(v.c_str(), &end);
+               if (!(*end == '\0' && d >= 1 && d <= 1e12)) throw UsageError("--splat-budget wants a count of surfels (1 or more)");
+               cut.budget = uint64_t(d);
+               cutGiven = true;
+           });
+    option("--camera", "EX,EY,EZ,TX,TY,TZ,UX,UY,UZ,FOV",
+           "ply, spz: the nodes surfcast-view --lod draws for this camera (as surfcast-view takes it): what it sees, finer where it "
+           "is nearer",
+           [&](const std::string& v) {
+               auto camera = parseCamera(v);
+               if (!camera) throw UsageError("--camera: " + camera.status().message());
+               cut.camera = *camera;
+               cutGiven = true;
+           });
+    option("--size", "WxH", "with --camera: the view's pixels (default 1280x720)", [&](const std::string& v) {
+        auto size = parseImageSize(v);
+        if (!size) throw UsageError("--size wants WxH, 1 to 16384 pixels each");
+        cut.width = size->first, cut.height = size->second;
+        viewGiven = true;
+    });
+    option("--lod", "PX", "with --camera: refine while a node's samples lie more than PX pixels apart on screen (default 1)",
+           [&](const std::string& v) {
+               cut.lodPixels = positive(v, 1000, "--lod wants pixels in (0, 1000]");
+               viewGiven = true;
+           });
+    option("--splat-scale", "S",
+           "splats: standard deviation S times the set's kernel scale times the surfel's radius (default 0.75, closest to "
+           "surfcast-view in CesiumJS and Spark; 1 is Surfcast's own reconstruction kernel)",
+           [&](const std::string& v) {
+               tiles.gaussians.sigmaScale = positive(v, 100, "--splat-scale wants a number in (0, 100]");
+               shapeGiven = true;
+           });
+    option("--splat-opacity", "A", "splats: opacity A times the surfel's own (default 1)", [&](const std::string& v) {
+        tiles.gaussians.opacity = positive(v, 1, "--splat-opacity wants a number in (0, 1]");
+        shapeGiven = true;
+    });
+    cli::addHttpOptions(app, http, "Reaching a set at a URL (as surfcast-view does)");
+    cli::flag(app, "-q,--quiet", "no progress output", [&] { quiet = true; });
+    if (int status = cli::parse(app, std::vector<std::string>(argv + 1, argv + argc), nullptr,
+                                [&set](const CLI::App&, const std::string& arg) {
+                                    return !arg.empty() && arg[0] == '-' ? "unknown option " + arg
+                                                                         : "one set at a time ('" + set + "' and '" + arg + "' given)";
+                                });
+        status >= 0)
+        return status;
     if (set.empty()) return usageError("no set given");
     if (format.empty()) return usageError("--format is required (laz, copc, 3dtiles, ply or spz)");
     const bool splatFile = format == "ply" || format == "spz";

@@ -671,7 +671,7 @@ CURLM* newMulti() {
     if (!multi) return nullptr;
     curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(kMaxHostConnections));
     // Keep that many alive between requests (libcurl's default cache holds
-    // 4 per easy handle in the multi at the time, and closed the rest).
+    // 4 per easy handle in the multi at the time, and closes the rest).
     curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, long(kMaxHostConnections));
     return multi;
 }
@@ -758,26 +758,6 @@ Result<TilesetReader> openTileset(const std::string& location, const HttpOptions
     auto source = openTileSource(location, options);
     if (!source) return source.status();
     return TilesetReader::open(std::move(*source));
-}
-
-bool parseHttpOption(const std::string& arg, const std::function<bool(std::string*)>& value, HttpOptions& http, std::string* error) {
-    error->clear();
-    std::string v;
-    if (arg == "--header") {
-        if (!value(&v) || v.find(':') == std::string::npos || v.find(':') == 0) *error = "--header wants 'Name: value'";
-        else http.headers.push_back(v);
-    } else if (arg == "--token-file") {
-        if (!value(&http.tokenFile)) *error = "--token-file wants a file";
-    } else if (arg == "--ca-file") {
-        if (!value(&http.caFile)) *error = "--ca-file wants a PEM file";
-    } else if (arg == "--insecure") {
-        http.insecure = true;
-    } else if (arg == "--redirect-credentials") {
-        http.redirectCredentials = true;
-    } else {
-        return false;
-    }
-    return true;
 }
 
 }  // namespace surfcast

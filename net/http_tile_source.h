@@ -31,11 +31,4 @@ Result<std::unique_ptr<TileSource>> openTileSource(const std::string& location, 
 // transient fault of a request is asked again (HttpOptions::retries, at least 3).
 Result<TilesetReader> openTileset(const std::string& location, const HttpOptions& http = {});
 
-// The command-line options that say how to reach a URL (--header 'N: V',
-// --token-file F, --ca-file F, --insecure, --redirect-credentials), for every
-// program that takes them. Returns false where `arg` is none of them; else
-// true, with `error` set where its value is missing or malformed. `value`
-// takes the option's value from the command line (false: none left).
-bool parseHttpOption(const std::string& arg, const std::function<bool(std::string*)>& value, HttpOptions& http, std::string* error);
-
 }  // namespace surfcast

@@ -32,34 +32,14 @@
 #include "input_file.h"
 #include "object_store.h"
 #include "set_publisher.h"
-#include "surfcast_build_usage.h"
+#include "build_cli.h"
+#include "command_line.h"
 #include "set_reader.h"
 #include "tileset_reader.h"
 
 extern char** environ;
 
 namespace {
-
-bool parseSize(const std::string& s, uint64_t* out) {
-    char* end = nullptr;
-    double v = std::strtod(s.c_str(), &end);
-    if (end == s.c_str() || !(v > 0)) return false;
-    std::string unit(end);
-    double mult = unit.empty() || unit == "B" ? 1
-                  : unit == "K" || unit == "KiB" ? 1024.0
-                  : unit == "M" || unit == "MiB" ? 1024.0 * 1024
-                  : unit == "G" || unit == "GiB" ? 1024.0 * 1024 * 1024
-                                                 : 0;
-    if (mult == 0) return false;
-    *out = uint64_t(v * mult);
-    return true;
-}
-
-bool parseNumber(const std::string& s, double* out) {
-    char* end = nullptr;
-    *out = std::strtod(s.c_str(), &end);
-    return end != s.c_str() && *end == '\0';
-}
 
 // Runs surfcast-weights from this program's folder on `set`; its exit status,
 // or -1 when it cannot be started.
@@ -83,233 +63,11 @@ int runWeightCapture(const std::string& set, bool quiet) {
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-int usageError(const std::string& message) {
-    std::fprintf(stderr, "surfcast-build: %s\n(see surfcast-build --help)\n", message.c_str());
-    return 2;
-}
+int usageError(const std::string& message) { return surfcast::cli::usageError("surfcast-build", message); }
 
-// The command line, parsed. A stage of a staged build reads the plan's
-// command line (plan.bin) and then its own.
-struct Args {
-    surfcast::BuildOptions opt;
-    bool captureWeights = false;
-    std::string info;
-    surfcast::HttpOptions http;  // how --info's set and inputs at URLs are reached
-    std::string work;            // --work: a staged build's work folder
-    std::vector<size_t> chunks;  // the chunk stage's chunks
-    size_t part = 0, parts = 0;  // --part P/N (scan, count; P alone for distribute) and --parts N (plan)
-    bool partGiven = false;
-    std::vector<std::string> kept;  // the arguments but inputs and -o, which the plan stores as given
-    // An update in place of the set --to names: --add INPUT..., --remove
-    // NAME..., --replace OLD NEW (the positional arguments).
-    std::string update;
-    std::string to;
-    std::string compact;  // --compact SET
-    bool merge = false;   // --merge SET...: the positional arguments are tile sets
-    bool preview = false;  // --preview: a preview of the build published to -o first
-    uint64_t previewPoints = 200'000;  // --preview-points: about this many points make it
-};
+using Args = surfcast::BuildArgs;
 
-// Parses `args` into `out`; returns -1, or the exit status (after --help, or a
-// usage error). `stage`: the subcommand ("" for a whole build): a later stage
-// takes only --threads, -q, --work and chunk indices.
-int parseArgs(const std::vector<std::string>& args, const std::string& stage, Args* out) {
-    surfcast::BuildOptions& opt = out->opt;
-    surfcast::HttpOptions& http = out->http;
-    std::string& info = out->info;
-    bool& captureWeights = out->captureWeights;
-    const bool later = stage == "distribute" || stage == "chunk" || stage == "merge" || stage == "update-merge";
-    const size_t argc = args.size();
-    bool httpGiven = false;
-    for (size_t i = 0; i < argc; ++i) {
-        const size_t first = i;
-        std::string a = args[i];
-        auto value = [&](std::string* o) {
-            if (i + 1 >= argc) return false;
-            *o = args[++i];
-            return true;
-        };
-        // How to reach URL inputs is never in the plan: the stages that read
-        // inputs take it on their own command line.
-        const bool reach = a == "--header" || a == "--token-file" || a == "--ca-file" || a == "--insecure" || a == "--redirect-credentials";
-        if (later && a != "--threads" && a != "-q" && a != "--quiet" && a != "--work" && a != "-h" && a != "--help" &&
-            !(stage == "distribute" && (a == "--part" || reach)) &&
-            !(stage == "chunk" && !a.empty() && a[0] != '-'))
-            return usageError(stage + " takes --work DIR, --threads N and -q" +
-                              (stage == "chunk" ? std::string(" and chunk numbers") : stage == "distribute" ? std::string(", --part P and how to reach URL inputs (--header, ...)") : "") +
-                              "; the other options come from the plan (not " + a + ")");
-        auto number = [&](double* out, double lo, double hi) {
-            std::string v;
-            return value(&v) && parseNumber(v, out) && *out >= lo && *out <= hi;
-        };
-        std::string v;
-        double d = 0;
-        if (a == "-h" || a == "--help") {
-            std::fputs(kBuildUsage, stdout);
-            return 0;
-        } else if (a == "-o" || a == "--output") {
-            if (!value(&opt.output)) return usageError(a + " needs a folder");
-            continue;
-        } else if ((a == "--add" || a == "--remove" || a == "--replace") && (stage.empty() || stage == "update-plan")) {
-            if (!out->update.empty() && out->update != a) return usageError(out->update + " and " + a + " are separate updates");
-            out->update = a;
-            continue;
-        } else if (a == "--merge" && stage.empty()) {
-            out->merge = true;
-            continue;
-        } else if (a == "--preview" && stage.empty()) {
-            out->preview = true;
-            continue;
-        } else if (a == "--preview-points" && stage.empty()) {
-            if (!number(&d, 1000, 1e9)) return usageError("--preview-points needs a count in [1000, 10^9]");
-            out->preview = true;
-            out->previewPoints = uint64_t(d);
-            continue;
-        } else if (a == "--compact" && stage.empty()) {
-            if (!value(&out->compact)) return usageError("--compact needs a tile set folder");
-            continue;
-        } else if (a == "--to" && (stage.empty() || stage == "update-plan")) {
-            if (!value(&out->to)) return usageError("--to needs a tile set folder");
-            continue;
-        } else if (a == "--work" && !stage.empty()) {
-            if (!value(&out->work)) return usageError("--work needs a folder");
-            continue;
-        } else if (a == "--part" && (stage == "scan" || stage == "count" || stage == "distribute")) {
-            // P/N for scan and count; P, of the plan's parts, for distribute.
-            const bool fraction = stage != "distribute";
-            if (!value(&v)) return usageError("--part needs " + std::string(fraction ? "P/N" : "a part number"));
-            const size_t slash = v.find('/');
-            double p = -1, n = 1e6;
-            bool ok = fraction ? slash != std::string::npos && parseNumber(v.substr(0, slash), &p) && parseNumber(v.substr(slash + 1), &n)
-                               : slash == std::string::npos && parseNumber(v, &p);
-            ok = ok && p >= 0 && p == std::floor(p) && n >= 1 && n <= 1e6 && n == std::floor(n) && p < n;
-            if (!ok) return usageError(fraction ? "--part needs P/N, part P of N parts (0 <= P < N)" : "--part needs a part number (0, 1, ...)");
-            out->part = size_t(p);
-            out->parts = fraction ? size_t(n) : 0;
-            out->partGiven = true;
-            continue;
-        } else if (a == "--parts" && stage == "plan") {
-            if (!number(&d, 1, 1e6) || d != std::floor(d)) return usageError("--parts needs the count of scan and count parts");
-            out->parts = size_t(d);
-            continue;
-        } else if (a == "--info") {
-            if (!value(&info)) return usageError("--info needs a tile set folder or URL");
-        } else if (std::string error; surfcast::parseHttpOption(a, value, http, &error)) {
-            if (!error.empty()) return usageError(error);
-            // How to reach URLs changes no byte of a set, and may hold a
-            // token: never in a plan or a build record. A stage's process
-            // takes them on its own command line.
-            httpGiven = true;
-            continue;
-        } else if (a == "--default-scene") {
-            opt.inputs.defaultScene = true;
-        } else if (a == "--scene-points") {
-            if (!number(&d, 1, 1e10)) return usageError("--scene-points needs a positive count");
-            opt.inputs.scene.targetPoints = uint64_t(d);
-        } else if (a == "--seed") {
-            if (!number(&d, 0, 1e18)) return usageError("--seed needs a non-negative integer");
-            opt.inputs.scene.seed = opt.inputs.mesh.seed = uint64_t(d);
-        } else if (a == "--grid") {
-            if (!number(&d, 4, 1024)) return usageError("--grid needs a value in [4, 1024]");
-            opt.grid = int(d);
-        } else if (a == "--page-depth") {
-            if (!number(&d, 2, surfcast::kMaxLevel + 1)) return usageError("--page-depth needs a value in [2, 21]");
-            opt.pageDepth = uint32_t(d);
-        } else if (a == "--capacity") {
-            if (!number(&d, 16, surfcast::kMaxBlockPoints))
-                return usageError("--capacity needs a value in [16, " + std::to_string(surfcast::kMaxBlockPoints) + "]");
-            opt.capacity = uint32_t(d);
-        } else if (a == "--memory") {
-            if (!value(&v) || !parseSize(v, &opt.memoryBytes)) return usageError("--memory needs a size such as 512M or 2G");
-        } else if (a == "--threads") {
-            if (!number(&d, 1, 1024)) return usageError("--threads needs a value in [1, 1024]");
-            opt.threads = int(d);
-        } else if (a == "--normal-k") {
-            if (!number(&d, 3, 256)) return usageError("--normal-k needs a value in [3, 256]");
-            opt.normalK = int(d);
-        } else if (a == "--kernel-scale") {
-            if (!number(&d, 0.05, 10)) return usageError("--kernel-scale needs a value in [0.05, 10]");
-            opt.kernelScale = d;
-        } else if (a == "--normal-bits") {
-            if (!number(&d, 4, 16)) return usageError("--normal-bits needs a value in [4, 16]");
-            opt.normalBits = int(d);
-        } else if (a == "--no-radius") {
-            opt.radii = false;
-        } else if (a == "--isolation") {
-            if (!number(&d, 0, 1000) || (d > 0 && d < 1)) return usageError("--isolation needs 0 or a value in [1, 1000]");
-            opt.isolation = d;
-        } else if (a == "--spacing-k") {
-            if (!number(&d, 1, 64)) return usageError("--spacing-k needs a value in [1, 64]");
-            opt.spacingK = int(d);
-        } else if (a == "--position-fraction") {
-            if (!number(&d, 1, 1 << 16)) return usageError("--position-fraction needs a value in [1, 65536]");
-            opt.positionFraction = d;
-        } else if (a == "--weights") {
-            if (!value(&v) || (v != "analytic" && v != "none" && v != "capture"))
-                return usageError("--weights is capture, analytic or none");
-            // Capture starts from analytic weights: they stay for surfels no view sees.
-            opt.weights = v != "none";
-            captureWeights = v == "capture";
-        } else if (a == "--attributes") {
-            if (!value(&v)) return usageError("--attributes needs a list, all or none");
-            std::vector<std::string> names;
-            if (v == "all") {
-                names.assign(std::begin(surfcast::kLidarAttributes), std::end(surfcast::kLidarAttributes));
-                opt.inputs.scalars.all = true;
-            } else if (v != "none") {
-                std::stringstream list(v);
-                for (std::string name; std::getline(list, name, ',');) {
-                    if (name.empty()) return usageError("--attributes: an empty name in '" + v + "'");
-                    names.push_back(name);
-                }
-            }
-            opt.attributes = names;
-        } else if (a == "--opacity") {
-            if (!number(&d, 0, 1)) return usageError("--opacity needs a value in [0, 1]");
-            opt.inputs.opacity = d;
-        } else if (a == "--read-alpha") {
-            opt.inputs.readAlpha = true;
-        } else if (a == "--columns") {
-            if (!value(&opt.inputs.columns)) return usageError("--columns needs a layout");
-        } else if (a == "--mesh-spacing") {
-            if (!number(&d, 1e-12, 1e12)) return usageError("--mesh-spacing needs a positive length");
-            opt.inputs.mesh.spacing = d;
-        } else if (a == "--mesh-max-surfels") {
-            if (!number(&d, 1, 1e12) || d != std::floor(d)) return usageError("--mesh-max-surfels needs a whole number >= 1");
-            opt.inputs.mesh.maxSurfels = uint64_t(d);
-        } else if (a == "--texture-filter") {
-            std::string f;
-            if (!value(&f) || (f != "ewa" && f != "nearest" && f != "optimal"))
-                return usageError("--texture-filter needs ewa, optimal or nearest");
-            using Filter = surfcast::BuildOptions::TextureFilter;
-            opt.textureFilter = f == "ewa" ? Filter::Ewa : f == "optimal" ? Filter::Optimal : Filter::Nearest;
-        } else if (a == "--allow-missing-textures") {
-            opt.inputs.mesh.allowMissingTextures = true;
-        } else if (a == "--allow-outside-paths") {
-            opt.inputs.mesh.allowOutsidePaths = true;
-        } else if (a == "--vertices-only") {
-            opt.inputs.verticesOnly = true;
-        } else if (a == "-q" || a == "--quiet") {
-            opt.progress = false;
-        } else if (!a.empty() && a[0] == '-') {
-            return usageError("unknown option " + a);
-        } else if (stage == "chunk") {
-            if (!parseNumber(a, &d) || d < 0 || d > 1e9 || d != std::floor(d))
-                return usageError("chunk wants chunk numbers (0, 1, ...), not " + a);
-            out->chunks.push_back(size_t(d));
-            continue;
-        } else {
-            opt.inputs.paths.push_back(a);
-            continue;
-        }
-        for (size_t k = first; k <= i; ++k) out->kept.push_back(args[k]);
-    }
-    // Inputs at URLs are reached as --info's set is. A plan's or record's
-    // stored command line, parsed after the process's own, holds none.
-    if (httpGiven) surfcast::setInputHttpOptions(http);
-    return -1;
-}
-
+using surfcast::parseBuildCommandLine;
 
 int fail(const surfcast::Status& status) {
     std::fprintf(stderr, "surfcast-build: %s\n", status.message().c_str());
@@ -423,21 +181,7 @@ surfcast::Result<std::pair<surfcast::InputStats, std::vector<surfcast::InputPart
     return std::make_pair(std::move(*reduced), std::move(ranges));
 }
 
-// One stage of a staged build (stages.h): scan, count and plan take the inputs
-// and options of a whole build, and plan stores them; the later stages read
-// them from the plan.
-// The command line a plan and a set's build record keep: the options but -q
-// and --threads N, which change no byte, then -o and the inputs.
-std::vector<std::string> storedCommandLine(const Args& a) {
-    std::vector<std::string> stored;
-    for (size_t i = 0; i < a.kept.size(); ++i) {
-        if (a.kept[i] == "--threads") ++i;
-        else if (a.kept[i] != "-q" && a.kept[i] != "--quiet") stored.push_back(a.kept[i]);
-    }
-    stored.insert(stored.end(), {"-o", a.opt.output});
-    stored.insert(stored.end(), a.opt.inputs.paths.begin(), a.opt.inputs.paths.end());
-    return stored;
-}
+using surfcast::storedCommandLine;
 
 // The input of a set's build record that NAME names: its path as given
 // (made absolute), or its file name where only one input has it; -1 with
@@ -485,7 +229,7 @@ surfcast::Status readRecord(const std::string& set, surfcast::BuildPlan* record,
     auto read = surfcast::readPlan(recordPath, &stored, true);
     if (!read) return read.status();
     *record = std::move(*read);
-    if (parseArgs(stored, "plan", planned) >= 0) return surfcast::Status::error(recordPath + ": its command line does not parse");
+    if (surfcast::parseStoredCommandLine(stored, planned) >= 0) return surfcast::Status::error(recordPath + ": its command line does not parse");
     return {};
 }
 
@@ -535,6 +279,7 @@ int runUpdate(const Args& a) {
     if (auto st = readRecord(set, &record, &planned, "update it", nullptr, shown); !st.ok()) return fail(st);
     planned.opt.threads = a.opt.threads;
     planned.opt.progress = a.opt.progress;
+    planned.opt.inputs.http = a.opt.inputs.http;  // how to reach the added inputs: never in a record
     if (!stored) planned.opt.output = set;  // (a set in a store keeps the URL it was built to)
 
     surfcast::UpdateRequest request;
@@ -606,9 +351,8 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
 // A stage: on the work folder --work names, or on a local copy of the files
 // it reads from a work prefix in a store, whose outputs it then uploads
 // (store_work.h).
-int runStage(const std::string& stage, const std::vector<std::string>& own) {
-    Args a;
-    if (int status = parseArgs(own, stage, &a); status >= 0) return status;
+int runStage(Args& a) {
+    const std::string& stage = a.stage;
     if (a.work.empty()) return usageError(stage + " needs --work DIR, a folder every stage's process sees (or s3://BUCKET/PREFIX)");
     if (!surfcast::isS3Url(a.work)) return runStageOn(stage, a, surfcast::WorkFolder{a.work});
     if (stage == "update-merge") return usageError("an update in stages works in a folder; --work s3://... is for builds");
@@ -629,6 +373,9 @@ int runStage(const std::string& stage, const std::vector<std::string>& own) {
     return 0;
 }
 
+// One stage of a staged build (stages.h): scan, count and plan take the inputs
+// and options of a whole build, and plan stores them; the later stages read
+// them from the plan.
 int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& work) {
     surfcast::BuildSummary summary;
     std::shared_ptr<const surfcast::BuildContext> context;
@@ -722,9 +469,10 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
     auto plan = surfcast::readPlan(work.plan(), &stored);
     if (!plan) return fail(plan.status());
     Args planned;
-    if (parseArgs(stored, "plan", &planned) >= 0) return fail(surfcast::Status::error(work.plan() + ": its command line does not parse"));
+    if (surfcast::parseStoredCommandLine(stored, &planned) >= 0) return fail(surfcast::Status::error(work.plan() + ": its command line does not parse"));
     planned.opt.threads = a.opt.threads;
     planned.opt.progress = a.opt.progress;
+    planned.opt.inputs.http = a.opt.inputs.http;  // how to reach URL inputs: never in a plan
     const size_t inputCount = planned.opt.inputs.paths.size() + (planned.opt.inputs.defaultScene ? 1 : 0);
     if (plan->parts.back().last != inputCount)
         return fail(surfcast::Status::error(work.plan() + ": its parts do not cover its " + std::to_string(inputCount) + " inputs"));
@@ -841,21 +589,18 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
 }  // namespace
 
 int main(int argc, char** argv) {
-    std::vector<std::string> args(argv + 1, argv + argc);
-    if (!args.empty() && (args[0] == "scan" || args[0] == "count" || args[0] == "plan" || args[0] == "distribute" || args[0] == "chunk" ||
-                          args[0] == "merge" || args[0] == "update-merge"))
-        return runStage(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
-    if (!args.empty() && args[0] == "update-plan") {
-        Args a;
-        if (int status = parseArgs(std::vector<std::string>(args.begin() + 1, args.end()), "update-plan", &a); status >= 0) return status;
+    Args a;
+    if (int status = parseBuildCommandLine(std::vector<std::string>(argv + 1, argv + argc), &a); status >= 0) return status;
+    if (a.stage == "update-plan") {
         if (a.work.empty()) return usageError("update-plan needs --work DIR, a folder every stage's process sees");
         if (a.update.empty()) return usageError("update-plan needs --add, --remove or --replace, and --to SET");
         return runUpdate(a);
     }
-    Args a;
-    if (int status = parseArgs(args, "", &a); status >= 0) return status;
+    if (!a.stage.empty()) return runStage(a);
     if (a.merge && (!a.update.empty() || !a.to.empty() || !a.compact.empty()))
         return usageError("--merge writes a new set (-o OUT); it takes no --add, --remove, --replace, --to or --compact");
+    if (!a.info.empty() && (!a.update.empty() || !a.to.empty() || a.merge || !a.compact.empty()))
+        return usageError("--info SET prints a set's summary: it takes no update, --merge or --compact");
     if (a.preview && (!a.compact.empty() || !a.info.empty()))
         return usageError("--preview is for builds (inputs and -o OUT)");
     if (!a.compact.empty()) {
@@ -917,13 +662,14 @@ int main(int argc, char** argv) {
         args.insert(args.end(), {"-o", a.opt.output});
         args.insert(args.end(), sets.begin(), sets.end());
         Args merged;
-        if (int status = parseArgs(args, "", &merged); status >= 0) return status;
+        if (int status = parseBuildCommandLine(args, &merged); status >= 0) return status;
+        merged.opt.inputs.http = a.opt.inputs.http;
         merged.preview = a.preview;
         merged.previewPoints = a.previewPoints;
         a = std::move(merged);
     }
     const surfcast::BuildOptions& opt = a.opt;
-    const surfcast::HttpOptions& http = a.http;
+    const surfcast::HttpOptions& http = a.opt.inputs.http;
     const std::string& info = a.info;
     if (!info.empty()) {
         auto reader = surfcast::openTileset(info, http);

@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 
 packages=(
   build-essential cmake ninja-build pkg-config git zlib1g-dev
-  libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev libmeshoptimizer-dev
+  libcli11-dev libdraco-dev libopenmesh-dev libflann-dev liblz4-dev libeigen3-dev libmeshoptimizer-dev
   libglfw3-dev libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
   libmicrohttpd-dev libcurl4-openssl-dev nlohmann-json3-dev libstb-dev curl python3
 )

@@ -10,6 +10,6 @@ scripts/test-venv.sh
 # Two tests share the two cores: an OpenMP thread with nothing to do sleeps
 # rather than spinning on the other test's core (LLVM's runtime, the sanitizer
 # builds', spins 200 ms by default, GCC's a shorter while:
-# bench/RELIABILITY.md, "CI stages", stop 58).
+# bench/RELIABILITY.md, "CI stages").
 export OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-passive}"
 ctest --test-dir build --output-on-failure --timeout 1200 -j "${CTEST_PARALLEL_LEVEL:-2}" "$@"

@@ -151,9 +151,9 @@ TEST(BadInput, DegenerateGeometriesBuild) {
 }
 
 // A million copies of one point (a scanner left standing, a duplicated
-// tile): the neighbour search once ranked every copy against every other
-// (10^12 distances, hours) and the build never finished; ctest's timeout
-// is what fails here if that comes back.
+// tile) build: a neighbour search that ranked every copy against every
+// other (10^12 distances, hours) would never finish, and ctest's timeout is
+// what fails here then.
 TEST(BadInput, AMillionCoincidentPointsBuild) {
     TempDir dir;
     test::writeFile(dir.file("in.ply"), asciiPly(std::vector<std::string>(1000000, "1.5 -2 3")));

@@ -22,7 +22,7 @@ spec.loader.exec_module(case_coverage)
 class ProductItems(unittest.TestCase):
     def test_counts_run_lines_and_taken_branch_directions_of_product_sources_only(self):
         lcov = "\n".join([
-            f"SF:{REPO}/preprocess/build/a.cpp",
+            f"SF:{REPO}/preprocess/octree/a.cpp",
             "DA:10,0",          # not run
             "DA:11,3",
             "BRDA:11,0,0,2",    # taken twice
@@ -40,7 +40,7 @@ class ProductItems(unittest.TestCase):
             "end_of_record",
         ])
         self.assertEqual(case_coverage.product_items(lcov),
-                         {"preprocess/build/a.cpp:11", "preprocess/build/a.cpp:11:0:0", "client/render/b.cpp:3"})
+                         {"preprocess/octree/a.cpp:11", "preprocess/octree/a.cpp:11:0:0", "client/render/b.cpp:3"})
 
 
 def write_cases(folder, cases):

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <regex>
 
 #include <nlohmann/json.hpp>
 
@@ -25,6 +26,63 @@ std::map<std::string, std::string> setFiles(const std::string& dir) {
 }
 
 }  // namespace
+
+// The four programs share one command line library: --version names the
+// project's version (CMakeLists.txt's project()) and the format versions,
+// --help starts with the usage, a usage error exits 2 pointing at --help.
+TEST(Cli, EveryProgramAnswersVersionHelpAndUsageErrorsAlike) {
+    const std::string cmake = test::readFile(std::string(SURFCAST_TEST_TOOLS) + "/../../CMakeLists.txt");
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(cmake, m, std::regex(R"(project\(Surfcast VERSION ([0-9.]+))")));
+    const std::string version = m[1];
+    for (const std::string program : {"surfcast-build", "surfcast-serve", "surfcast-view", "surfcast-export"}) {
+        auto v = test::run({test::binary(program), "--version"});
+        EXPECT_EQ(v.exitCode, 0) << program;
+        EXPECT_EQ(v.output.rfind(program + " " + version + "\n", 0), 0u) << v.output;
+        EXPECT_NE(v.output.find("tile sets: reads format versions 1 to 3, writes 2"), std::string::npos) << v.output;
+        auto h = test::run({test::binary(program), "--help"});
+        EXPECT_EQ(h.exitCode, 0) << program;
+        EXPECT_EQ(h.output.rfind("usage: " + program, 0), 0u) << h.output;
+        EXPECT_NE(h.output.find("--version"), std::string::npos) << h.output;
+        auto bad = test::run({test::binary(program), "/tmp", "--no-such-option"});
+        EXPECT_EQ(bad.exitCode, 2) << program;
+        EXPECT_NE(bad.output.find(program + ": unknown option --no-such-option\n(see " + program + " --help)"), std::string::npos)
+            << bad.output;
+    }
+}
+
+// Arguments reach the build as given, whatever the parser allows: an
+// option's "--name=value" form is stored as "--name value" (so the parts of
+// a staged build agree on what they build), a stage is named first or not at
+// all, a positional is never split as a list, --help wins over a bad value,
+// and "--" is no option.
+TEST(Cli, ArgumentsReachTheBuildAsGiven) {
+    const std::string build = test::binary("surfcast-build");
+    test::TempDir dir;
+    const std::string work = dir.file("work"), out = dir.file("set");
+    auto scan = test::run({build, "scan", "--work", work, "--part", "0/1", "-q", "--grid=64", "--default-scene", "--scene-points", "3000",
+                           "-o", out});
+    ASSERT_EQ(scan.exitCode, 0) << scan.output;
+    auto plan = test::run({build, "plan", "--work", work, "--parts", "1", "-q", "--grid", "64", "--default-scene", "--scene-points",
+                           "3000", "-o", out});
+    // (3,000 points make one chunk: no count.) Another job's scan would be refused.
+    EXPECT_EQ(plan.exitCode, 0) << plan.output;
+
+    auto stageLater = test::run({build, "--default-scene", "plan", "-o", out});
+    EXPECT_EQ(stageLater.exitCode, 1) << stageLater.output;
+    EXPECT_NE(stageLater.output.find("plan: no such file"), std::string::npos) << stageLater.output;
+    auto bracketed = test::run({build, "[a,b]", "-o", out});
+    EXPECT_EQ(bracketed.exitCode, 1) << bracketed.output;
+    EXPECT_NE(bracketed.output.find("[a,b]: no such file"), std::string::npos) << bracketed.output;
+    auto help = test::run({build, "--grid", "1", "--help"});
+    EXPECT_EQ(help.exitCode, 0) << help.output;
+    EXPECT_EQ(help.output.rfind("usage: surfcast-build", 0), 0u) << help.output;
+    auto dashes = test::run({build, "--default-scene", "-o", out, "--", "--grid", "8"});
+    EXPECT_EQ(dashes.exitCode, 2) << dashes.output;
+    EXPECT_NE(dashes.output.find("unknown option --"), std::string::npos) << dashes.output;
+    auto flagValue = test::run({build, "--default-scene", "-o", out, "--quiet=false"});
+    EXPECT_EQ(flagValue.exitCode, 2) << flagValue.output;
+}
 
 TEST(Cli, HelpAndUsageErrors) {
     auto help = test::run({test::binary("surfcast-build"), "--help"});

@@ -311,7 +311,7 @@ class WorkFileMagics(unittest.TestCase):
         # one it spells otherwise never matches, and that stage is always run again.
         sources = ""
         for name in ("plan_stage.cpp", "distribute_stage.cpp", "work_files.cpp", "update.cpp"):
-            with open(os.path.join(REPO, "preprocess", "build", name)) as f:
+            with open(os.path.join(REPO, "preprocess", "octree", name)) as f:
                 sources += f.read()
         builder = dict(re.findall(r'constexpr char k(\w+)Magic\[9\] = "(\w{8})"', sources))
         driver = {}

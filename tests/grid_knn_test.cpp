@@ -120,8 +120,8 @@ TEST(GridKnn, OutliersFarClustersAndDuplicates) {
 // Stacks of coincident points whose copies alternate in the input with those
 // of a second stack a hair away (in the same finest cell): of k - 1, k and
 // k + 1 copies against FLANN; then two stacks of 200,000, every third point
-// queried, each at distance 0 from all its k nearest. Those once cost n²
-// distances (hours); ctest's timeout is what fails if that comes back.
+// queried, each at distance 0 from all its k nearest. Those must not cost n²
+// distances (hours); ctest's timeout is what fails if they do.
 TEST(GridKnn, InterleavedStacksOfCoincidentPoints) {
     const int k = 16;
     const Vec3f hair{1e-7f, 0, 0};

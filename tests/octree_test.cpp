@@ -172,8 +172,8 @@ TEST(Octree, IgeaScanRoundTrip) {
     for (int l = 0; l + 1 < levels; ++l) {
         double cell = nodeEdge(set->info(), l + 1) / set->info().grid;
         // Levels where leaves (the scan's own points) are more than a fifth are
-        // not a resampling. (A tenth before nodes kept at most a quarter of
-        // the surfels below them; leaves are a larger share of each level now.)
+        // not a resampling (nodes keep at most a quarter of the surfels below
+        // them, so leaves are a large share of each level).
         if (cell < 2 * inputSpacing || fromLeaves[l + 1] * 5 > complete[l + 1]) break;
         double ratio = double(complete[l + 1]) / double(complete[l]);
         EXPECT_GT(ratio, 3.0) << "level " << l;

@@ -39,10 +39,10 @@ TEST(OutOfCore, PeakRssStaysWithinBudget) {
     EXPECT_EQ(v.exitCode, 0) << v.output;
 }
 
-// Thousands of small LAZ files, as Potree 1.x and Entwine leave a scan: a build
-// once held every file's reader, decode pool and buffer open at once (5.8 GiB
-// for 4,234 files under a 2 GiB budget). Readers now open one at a time and
-// share one decode pool, so the budget holds.
+// Thousands of small LAZ files, as Potree 1.x and Entwine leave a scan:
+// readers open one at a time and share one decode pool, so the budget holds
+// (every file's reader, decode pool and buffer open at once would take
+// 5.8 GiB for 4,234 files under a 2 GiB budget).
 TEST(OutOfCore, ThousandsOfLazFilesStayWithinBudget) {
     REQUIRE_DATA();
     REQUIRE_TEST_PYTHON();

@@ -331,8 +331,8 @@ TEST(Stream, RedirectsKeepCredentialsAtHomeAndNeverDowngrade) {
         return run(args);
     };
     ASSERT_EQ(view(a + "/sets/scene", {}).exitCode, 0) << "the credentials open A's own set";
-    // So they do in the window without --lod, which once opened the set a
-    // second time without them (and so failed after loading it), once.
+    // So they do in the window without --lod, which opens the set once, with
+    // them (a second open without them would fail after loading it).
     const size_t before = test::readFile(dir.file("a.log")).size();
     auto window = run({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 640x480x24", binary("surfcast-view"), a + "/sets/scene",
                        "--size", "64x48", "--frames", "2", "--ca-file", dir.file("ca.pem"), "--token-file", dir.file("token"),

@@ -135,7 +135,7 @@ TEST(ServeCli, ServesLogsAndStopsGracefully) {
         EXPECT_TRUE(c.waitFor("GET /sets/s/tileset.json 200 ")) << c.log;
         // A request in flight when the signal comes (its head not yet ended)
         // is answered; `client`'s idle keep-alive connection does not hold
-        // the stop up: it once waited out the 5 s drain for every connection.
+        // the stop up (the 5 s drain waits for requests, not idle connections).
         int inFlight = connectFrom("127.0.0.1", port);
         ASSERT_GE(inFlight, 0);
         const std::string head = "GET /sets/s/tileset.json HTTP/1.1\r\nHost: x\r\n";

@@ -390,8 +390,8 @@ TEST_F(ServerTest, ConcurrentClientsAndMetrics) {
     EXPECT_EQ(good, 640);
     EXPECT_EQ(bad, 0);
     // A request is counted when libmicrohttpd reports it completed, which
-    // may come just after its client has the whole response (a run under
-    // ASan once read 639): wait for the count, up to 5 s.
+    // may come just after its client has the whole response (under ASan a
+    // read can see 639): wait for the count, up to 5 s.
     const std::string counted = "surfcast_requests_total{route=\"nodes\",status=\"200\"} 640\n";
     std::string body;
     for (auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);;) {

@@ -1,4 +1,4 @@
-// The stability suite (speed-against-accuracy issue): small scenes where
+// The stability suite: small scenes where
 // splatting methods fail, each with a threshold, on the GPU renderer with the
 // validation layer on (zero errors is a condition of every test). Grazing
 // angles, the near plane, the camera inside a cloud, NaN input, empty sets and

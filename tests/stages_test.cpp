@@ -1,4 +1,4 @@
-// The staged build (preprocess/build/stages.h): surfcast-build plan,
+// The staged build (preprocess/octree/stages.h): surfcast-build plan,
 // distribute, chunk and merge, each its own process, write the same bytes as
 // one surfcast-build, and refuse work files that are missing or corrupt.
 #include <gtest/gtest.h>

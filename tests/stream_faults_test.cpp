@@ -207,9 +207,9 @@ TEST(Stream, SurvivesTheServerRestartingAndFlakyResponses) {
 
 TEST(Stream, ABlockPastTheEndOfBlocksBinIsRejectedAtOpen) {
     // A hierarchy record whose block reaches past blocks.bin, with every CRC
-    // valid: the client once asked for the range and retried forever. It is
-    // now rejected when the set opens, with the node named, the same check
-    // the local reader and the server make.
+    // valid, is rejected when the set opens, with the node named (the same
+    // check the local reader and the server make), rather than asked for and
+    // retried forever.
     TempDir dir;
     auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
@@ -251,7 +251,7 @@ TEST(Stream, ACorruptBlockStopsTheStreamAtOnce) {
     // One block fails its CRC (a damaged copy: the set's bytes are fixed, so
     // reading it again gives the same bytes). The stream stops fetching at
     // the first failure and says which node, and surfcast-view exits
-    // non-zero at once; it used to retry 8 times over about 11 s.
+    // non-zero at once, not after 8 retries over about 11 s.
     TempDir dir;
     auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
     ASSERT_EQ(b.exitCode, 0) << b.output;
@@ -328,10 +328,10 @@ TEST(Stream, RefusalsFailAtOnceAndServerFaultsAreRetried) {
 
 // Blocks fetched again to recolour (their kept copies gone: a block cache
 // of one byte) fail like any fetch: a block that fails its CRC stops the
-// stream naming the node (it was once dropped quietly, leaving the old
-// colours and a converged view). A recolouring after the stream stopped
-// re-decodes what is kept and converges (it once queued fetches that the
-// stopped stream never made: the fetch threads spun and no update converged).
+// stream naming the node (dropped quietly, it would leave the old colours
+// and a converged view). A recolouring after the stream stopped re-decodes
+// what is kept and converges (fetches queued for the stopped stream would
+// never be made: the fetch threads would spin and no update converge).
 TEST(Stream, BlocksFetchedAgainToRecolourFailLikeAnyFetch) {
     TempDir dir;
     auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "2000"});
@@ -403,9 +403,9 @@ TEST(Stream, APersistentlyCorruptHierarchyPageGivesUpNamingIt) {
 
 // A node larger than the memory budget could never be resident. One in
 // page 0 fails open(); one in a later page stops the stream when that page
-// arrives, naming the node, before the page joins the tree (the client's
-// check came after the stream had handed over and evicted, and every later
-// update failed on it: issue 31, finding 7). The stream keeps what it has.
+// arrives, naming the node, before the page joins the tree (checked after
+// the hand-over and evictions, every later update would fail on it). The
+// stream keeps what it has.
 TEST(Stream, ANodeLargerThanTheBudgetStopsTheStreamNamingIt) {
     TempDir dir;
     auto b = test::buildScene(dir.file("scene"), 20000, {"--capacity", "500", "--page-depth", "2"});

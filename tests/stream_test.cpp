@@ -320,7 +320,7 @@ TEST(Stream, ColoringChangesWithoutFetchingAgain) {
     EXPECT_TRUE(back.rgba == inColour.rgba) << "switching back did not give the first image";
     EXPECT_FALSE(recoloured.rgba == inColour.rgba);
 
-    // Issue 31, finding 9: the kept blocks counted against no budget. With a
+    // The kept blocks count against the block cache's budget. With a
     // block cache of a third of what the view's blocks take, the cache stays
     // within it, and the recolour fetches the blocks that went (at most the
     // resident nodes', no more bytes than the view fetched) and converges to the same image.

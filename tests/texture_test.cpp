@@ -79,8 +79,8 @@ TEST(Texture, BilinearReconstructionAndRepeatMatchHandDerivedValues) {
 }
 
 // A mesh without textures asked for its textures (surfcast-mesh-reference
-// --colors on any mesh): none, and its triangles with their colours. The
-// textures' list once started one past the end of an empty one.
+// --colors on any mesh): none (an empty list, not one indexed past its end),
+// and its triangles with their colours.
 TEST(TexturedMesh, AMeshWithoutTexturesHasNone) {
     test::TempDir dir;
     test::writeFile(dir.file("t.off"), "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n");
@@ -222,9 +222,9 @@ TEST(TexturedMesh, BadTexturesAreClearErrors) {
 
 // PLY textures in MeshLab's conventions: "comment TextureFile", per-corner
 // "texcoord" lists beside the vertex indices, per-vertex s/t, and polygons.
-// The reader once read a face's lists as one: corners.ply's texture
-// coordinates became vertex indices of extra triangles (1.5 times the quad's
-// area sampled), which the surfel count below catches. Each carries the ramp quad of
+// A face's lists are read apart: read as one, corners.ply's texture
+// coordinates would become vertex indices of extra triangles (1.5 times the
+// quad's area sampled), which the surfel count below catches. Each carries the ramp quad of
 // LeafColoursAreTheTextureAtEachSampledPoint, so the same colours follow.
 TEST(TexturedMesh, PlyTextureCoordinatesPerCornerOrPerVertex) {
     test::TempDir dir;
@@ -409,7 +409,7 @@ TEST(TexturedMesh, GltfScenesCarryTransformsTexturesAndBaseColours) {
 // Nodes shared by many parents are instanced each time: 1 x 1,000 x 68 paths
 // to a mesh of 1,000 unindexed vertices in a file of a few kilobytes expand
 // to 68,000 x 1,000 = 68 M vertices (2.2 GB here, about 10 in OpenMesh; a
-// megabyte of such nodes once asked for 70 GB). Counted from the accessors
+// megabyte of such nodes can ask for 70 GB). Counted from the accessors
 // before anything is decoded, and refused once past 2^26 = 67,108,864.
 TEST(TexturedMesh, GltfInstancesAreCountedBeforeTheyExpand) {
     test::TempDir dir;
@@ -452,9 +452,9 @@ TEST(TexturedMesh, GltfInstancesAreCountedBeforeTheyExpand) {
     EXPECT_NE(l.status().message().find("lying.gltf: " + refused), std::string::npos) << l.status().message();
 }
 
-// A model's external files resolve inside its folder: a model from elsewhere
-// once made the build read any file the user could ("../" or an absolute
-// path in a glTF uri, an OBJ mtllib or map_Kd, a PLY TextureFile). Each is an
+// A model's external files resolve inside its folder, so that a model from
+// elsewhere cannot make the build read any file the user can ("../" or an
+// absolute path in a glTF uri, an OBJ mtllib or map_Kd, a PLY TextureFile). Each is an
 // error naming it; --allow-outside-paths reads them. A library in a subfolder
 // may still name a map beside the model.
 TEST(TexturedMesh, ExternalFilesStayInsideTheModelsFolder) {
@@ -539,19 +539,19 @@ Rgb readPng(const std::string& path) {
 }
 }  // namespace
 
-// Issue 31, finding 9: the texture fields (decoded texels, mip levels,
-// triangles) were outside --memory, and each pass read the mesh again. An
-// 8192 x 8192 texture is 192 MiB of texels and 64 MiB of mip levels above
-// them (each a quarter of the one below: 192 x (1/4 + 1/16 + ...) = 64), so
-// the field holds 256 MiB whatever the chunks: under --memory 256M the build
-// stops with an error that names them. Under 768M it fits (the minimum is the
-// 48 MiB baseline, the field's 256 MiB and the mesh while it is read, its
-// 192 MiB texture twice while decoding, and the JPEG file: about 700 MiB):
-// peak RSS within the budget (+10 %, as out_of_core_test) and the mesh read
-// once. Before the fix the first build succeeded with a peak RSS of 885 MiB
-// (measured on an 8192² PPM of the same size). Under the sanitizers, where
-// RSS is not checked, a 4096² texture: 64 MiB held, so 64M is too small, and
-// 256M enough (the minimum: 48 + 64 + 2 x 48 MiB and the file, about 210).
+// The texture fields (decoded texels, mip levels, triangles) count against
+// --memory, and the mesh is read once, not once a pass. An 8192 x 8192
+// texture is 192 MiB of texels and 64 MiB of mip levels above them (each a
+// quarter of the one below: 192 x (1/4 + 1/16 + ...) = 64), so the field
+// holds 256 MiB whatever the chunks: under --memory 256M the build stops with
+// an error that names them. Under 768M it fits (the minimum is the 48 MiB
+// baseline, the field's 256 MiB and the mesh while it is read, its 192 MiB
+// texture twice while decoding, and the JPEG file: about 700 MiB): peak RSS
+// within the budget (+10 %, as out_of_core_test) and the mesh read once
+// (uncounted fields would let the build pass at about 885 MiB, measured on an
+// 8192² PPM of the same size). Under the sanitizers, where RSS is not
+// checked, a 4096² texture: 64 MiB held, so 64M is too small, and 256M enough
+// (the minimum: 48 + 64 + 2 x 48 MiB and the file, about 210).
 TEST(TexturedMesh, LargeTexturesCountAgainstTheMemoryBudget) {
     test::TempDir dir;
     const size_t side = test::kSanitized ? 4096 : 8192;
@@ -608,7 +608,7 @@ TEST(TexturedMesh, LargeTexturesCountAgainstTheMemoryBudget) {
 // differences 0.4-0.6/255. A grey dragon (the texture ignored) is 90/255 off.
 // The dragon is built at 1 M input points (--mesh-max-surfels), not one per
 // texel: still about 40 surfels per covered pixel, and a quarter of the build
-// (bench/RELIABILITY.md, "CI stages", stop 54).
+// (bench/RELIABILITY.md, "CI stages").
 //
 // Histogram of luminance in 16 bins of 16 levels: a per-pixel difference of
 // RMS 5.4 levels can carry the pixels within 5.4 levels of a bin edge, about

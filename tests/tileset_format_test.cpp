@@ -455,8 +455,8 @@ TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
 }
 
 // The hierarchy against tileset.json: size and CRC as declared, and every
-// block inside blocks.bin's declared size (the streaming client once asked for
-// a block 4 GB past the end and retried forever).
+// block inside blocks.bin's declared size (else a streaming client could ask
+// for a block 4 GB past the end and retry forever).
 TEST(TilesetFormat, HierarchyOfASetChecksSizesAndBlockRanges) {
     NodeRecord root = valid();
     root.childMask = 1;

@@ -1,7 +1,7 @@
 // update_support.h's leaf decoding and point matching, compiled once at the
 // libraries' optimization: they loop over every leaf point of a set (over
 // std::map in the matching), which the test files' -O0 under a sanitizer made
-// the program's slowest part (bench/RELIABILITY.md, "CI stages", stop 54).
+// the program's slowest part (bench/RELIABILITY.md, "CI stages").
 #include "update_support.h"
 
 #include <algorithm>

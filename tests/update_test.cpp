@@ -1,4 +1,4 @@
-// Updates in place (preprocess/build/update.h): `surfcast-build --add INPUT...
+// Updates in place (preprocess/octree/update.h): `surfcast-build --add INPUT...
 // --to SET` against a fresh build of all the inputs, the kept nodes' bytes,
 // byte ranges and ETags (surfcast-serve before and after), the version before
 // it for clients that opened it, and bad input that must leave the set as it
@@ -191,9 +191,9 @@ TEST_F(UpdateTest, NodesTheChangeCannotReachKeepTheirBlocks) {
 // A scan whose points repeat the set's exactly (one file added twice,
 // overlapping flight lines with the same returns): a fresh build merges each
 // pair, keeping the lower input's, and so must the update, whose set points
-// are decoded from their leaves while the added ones are read raw (stop 56
-// kept both: 114,212 leaf points where the fresh build has 110,000). Beside
-// it, the same scan moved by 0.4 of its coordinates' step: on another
+// are decoded from their leaves while the added ones are read raw (keeping
+// both would give 114,212 leaf points where the fresh build has 110,000).
+// Beside it, the same scan moved by 0.4 of its coordinates' step: on another
 // lattice, so no point repeats one of the set's, though most quantize to a
 // position of one (which the update must not take for a repeat).
 TEST_F(UpdateTest, AnAddedCopyOfTheSetsScanMergesAsInAFreshBuild) {
@@ -287,8 +287,8 @@ TEST_F(UpdateTest, AnAddedCopyOfAFloatScanMergesAsInAFreshBuild) {
 
 // Added points that repeat none of the set's keep their positions: two of
 // them closer than the leaf's step, 3.3 steps from a point of the set, stay
-// two, as in a fresh build (snapping every added point onto the leaf's grid,
-// as this stop's first fix did, made the two one).
+// two, as in a fresh build (snapping every added point onto the leaf's grid
+// would make the two one).
 TEST_F(UpdateTest, AddedPointsOnNoneOfTheSetsPositionsKeepTheirOwn) {
     const std::string scan = test::dataFile("fragment.pcd"), pairs = dir.file("pairs.xyz");
     auto built = test::run(build({scan, "-o", dir.file("scan")}));
@@ -360,7 +360,7 @@ TEST_F(UpdateTest, ReplacedFloatScanLeavesNoPointOnTheRemovedOnes) {
 }
 
 // Images at --lod 1 from four views around the set, 640 x 360, within mean
-// FLIP 0.01 of the fresh build's (the bound the living-sets issue sets; the
+// FLIP 0.01 of the fresh build's (the bound for updates in place; the
 // benchmark's 104 M-point update measured 0.0019-0.0024: bench/BENCHMARKS.md,
 // "Updates in place").
 TEST_F(UpdateTest, ImagesAtLod1MatchAFreshBuild) {

@@ -1,4 +1,4 @@
-// Updates in stages (preprocess/build/update.h: update-plan, chunk,
+// Updates in stages (preprocess/octree/update.h: update-plan, chunk,
 // update-merge) and --merge, against fresh builds: compiled into update_test
 // with update_test.cpp, whose fixture (update_support.h) they share.
 #include <set>

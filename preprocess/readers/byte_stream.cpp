@@ -33,10 +33,10 @@ constexpr uint64_t kRemoteBufferSize = 4 << 20;  // a URL's: one request a buffe
 constexpr size_t kFirstRead = 64 << 10;
 }
 
-Result<ByteStream> ByteStream::open(const std::string& path) {
+Result<ByteStream> ByteStream::open(const std::string& path, const HttpOptions& http) {
     ByteStream s;
     s.path_ = path;
-    auto file = InputFile::open(path);
+    auto file = InputFile::open(path, http);
     if (!file) return file.status();
     s.file_ = std::move(*file);
     s.fileSize_ = s.file_->size();

@@ -16,7 +16,7 @@ namespace surfcast {
 
 class ByteStream {
 public:
-    static Result<ByteStream> open(const std::string& path);
+    static Result<ByteStream> open(const std::string& path, const HttpOptions& http = {});  // a URL reached as `http` says
     ByteStream(ByteStream&&) noexcept;
     ByteStream& operator=(ByteStream&&) noexcept;
     ~ByteStream();

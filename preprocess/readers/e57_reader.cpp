@@ -110,8 +110,8 @@ private:
 
 }  // namespace
 
-Result<std::unique_ptr<PointReader>> openE57Reader(const std::string& path, const ScalarSelection& scalars) {
-    auto file = InputFile::open(path);
+Result<std::unique_ptr<PointReader>> openE57Reader(const std::string& path, const ScalarSelection& scalars, const HttpOptions& http) {
+    auto file = InputFile::open(path, http);
     if (!file) return file.status();
     auto input = std::make_unique<FfiInput>();
     input->file = std::move(*file);

@@ -15,9 +15,11 @@
 #include <string>
 
 #include "input_point.h"
+#include "tile_source.h"
 
 namespace surfcast {
 
-Result<std::unique_ptr<PointReader>> openE57Reader(const std::string& path, const ScalarSelection& scalars = {});
+Result<std::unique_ptr<PointReader>> openE57Reader(const std::string& path, const ScalarSelection& scalars = {},
+                                                   const HttpOptions& http = {});
 
 }  // namespace surfcast

@@ -459,7 +459,7 @@ Result<GltfScene> readGltf(const std::string& path, bool allowMissingTextures, b
         }
     };
     // What the instances expand to, from the accessors' declared counts,
-    // before anything is decoded: about 1 MB of shared nodes once asked for
+    // before anything is decoded: about 1 MB of shared nodes can ask for
     // 70 GB. Each vertex takes 32 bytes here and about 150 in OpenMesh's mesh.
     // Checked as it adds up (under the bound, one more count cannot wrap).
     uint64_t vertices = 0, triangles = 0;

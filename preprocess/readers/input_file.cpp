@@ -50,9 +50,9 @@ private:
 };
 
 std::mutex gHttpMutex;
-HttpOptions gHttp;
-// One HTTP source per origin, shared by every file there: its connections
-// (and its one I/O thread) serve every input from that host.
+// One HTTP source per origin and way of reaching it (HttpOptions), shared by
+// every file there: its connections (and its one I/O thread) serve every
+// input from that host. A cache of connections: each caller says how to reach the file.
 std::map<std::string, std::shared_ptr<TileSource>> gSources;
 std::map<std::string, uint64_t> gSizes;  // by URL: a file is asked its size once
 // Presigned URLs by the redacted form every other part of the build sees.
@@ -75,20 +75,23 @@ auto withRetries(F request) {
 // One source per origin (an http(s) host, a bucket), or per folder and
 // query where a URL's query string signs its requests (a presigned URL):
 // `location` as openTileSource takes it.
-Result<std::shared_ptr<TileSource>> source(const std::string& location) {
+Result<std::shared_ptr<TileSource>> source(const std::string& location, const HttpOptions& http) {
+    std::string key = location + '\n' + http.tokenFile + '\n' + http.caFile + '\n' + char('0' + http.insecure) +
+                      char('0' + http.redirectCredentials) + std::to_string(http.timeoutSeconds) + ',' + std::to_string(http.retries);
+    for (const std::string& h : http.headers) key += '\n' + h;
     std::lock_guard lock(gHttpMutex);
-    auto it = gSources.find(location);
+    auto it = gSources.find(key);
     if (it == gSources.end()) {
-        auto source = openTileSource(location, gHttp);
+        auto source = openTileSource(location, http);
         if (!source) return source.status();
-        it = gSources.emplace(location, std::shared_ptr<TileSource>(std::move(*source))).first;
+        it = gSources.emplace(key, std::shared_ptr<TileSource>(std::move(*source))).first;
     }
     return it->second;
 }
 
 // The source of `url`'s origin (an s3:// URL's bucket) and the file's path
 // (key) there.
-Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url) {
+Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::string& url, const HttpOptions& http) {
     std::string location, name;
     if (isS3Url(url)) {
         auto object = parseS3Url(url);
@@ -112,7 +115,7 @@ Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::st
         location = (query.empty() ? url.substr(0, slash) : path.substr(0, last)) + query;
         name = query.empty() ? path.substr(slash + 1) : path.substr(last + 1);
     }
-    auto opened = source(location);
+    auto opened = source(location, http);
     if (!opened) return opened.status();
     return std::make_pair(*opened, name);
 }
@@ -185,13 +188,6 @@ std::string redactUrl(const std::string& url) {
 
 bool isRemoteInput(const std::string& path) { return isUrl(path) || isS3Url(path); }
 
-void setInputHttpOptions(const HttpOptions& options) {
-    std::lock_guard lock(gHttpMutex);
-    gHttp = options;
-    gSources.clear();
-    gSizes.clear();
-}
-
 namespace {
 
 // A presigned URL as redactUrl shows it (expanding inputs twice keeps it).
@@ -223,11 +219,11 @@ Result<std::string> realUrl(const std::string& path) {
 
 }  // namespace
 
-Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path) {
+Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path, const HttpOptions& http) {
     if (isRemoteInput(path)) {
         auto url = realUrl(path);
         if (!url) return url.status();
-        auto r = remote(*url);
+        auto r = remote(*url, http);
         if (!r) return r.status();
         auto size = remoteSize(path, *r->first, r->second);
         if (!size) return size.status();
@@ -243,7 +239,7 @@ Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path) {
     return std::unique_ptr<InputFile>(new LocalFile(path, fd, uint64_t(st.st_size)));
 }
 
-Result<uint64_t> inputFileSize(const std::string& path) {
+Result<uint64_t> inputFileSize(const std::string& path, const HttpOptions& http) {
     if (!isRemoteInput(path)) {
         struct stat st{};
         if (::stat(path.c_str(), &st) != 0) return Status::error(path + ": " + std::strerror(errno));
@@ -251,7 +247,7 @@ Result<uint64_t> inputFileSize(const std::string& path) {
     }
     auto url = realUrl(path);
     if (!url) return url.status();
-    auto r = remote(*url);
+    auto r = remote(*url, http);
     if (!r) return r.status();
     return remoteSize(path, *r->first, r->second);
 }

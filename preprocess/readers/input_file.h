@@ -16,10 +16,10 @@ namespace surfcast {
 
 class InputFile {
 public:
-    // A path, an http(s) URL (credentials in headers: setInputHttpOptions,
-    // or a presigned URL's query string: signedInput), or an s3:// object
-    // (net/object_store.h). Fails naming the file.
-    static Result<std::unique_ptr<InputFile>> open(const std::string& path);
+    // A path, an http(s) URL (reached as `http` says: credentials in
+    // headers, or a presigned URL's query string: signedInput), or an s3://
+    // object (net/object_store.h). Fails naming the file.
+    static Result<std::unique_ptr<InputFile>> open(const std::string& path, const HttpOptions& http = {});
     virtual ~InputFile() = default;
 
     const std::string& path() const { return path_; }
@@ -57,11 +57,8 @@ std::string redactUrl(const std::string& url);
 // records, messages and InputFile::open take. Other paths come back as they are.
 std::string signedInput(const std::string& url);
 
-// How http(s) inputs are reached (--header, --token-file, --ca-file, ...):
-// set by the command line before any input is opened.
-void setInputHttpOptions(const HttpOptions& options);
-
-// The byte size of the file at `path` (a URL asks its host), or an error.
-Result<uint64_t> inputFileSize(const std::string& path);
+// The byte size of the file at `path` (a URL asks its host, reached as
+// `http` says), or an error.
+Result<uint64_t> inputFileSize(const std::string& path, const HttpOptions& http = {});
 
 }  // namespace surfcast

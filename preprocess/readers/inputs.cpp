@@ -43,14 +43,14 @@ Result<InputKind> inputKind(const std::string& path, const InputOptions& options
     if (!isRemoteInput(path) && !std::filesystem::is_regular_file(path, ec)) return Status::error(path + ": no such file");
     char magic[4] = {};
     {
-        auto in = ByteStream::open(path);
+        auto in = ByteStream::open(path, options.http);
         if (!in) return in.status();
         if (in->fileSize() == 0) return Status::error(path + ": empty file");
         in->readBytes(magic, std::min<uint64_t>(4, in->fileSize()));
     }
     if (lowerExtension(path) == ".ply" || std::string(magic, 3) == "ply") {
         if (options.verticesOnly) return InputKind::Points;
-        auto in = ByteStream::open(path);
+        auto in = ByteStream::open(path, options.http);
         if (!in) return in.status();
         auto header = parsePlyHeader(*in);
         if (!header) return header.status();
@@ -71,7 +71,7 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
     std::string ext = lowerExtension(path);
     char magic[4] = {};
     {
-        auto in = ByteStream::open(path);
+        auto in = ByteStream::open(path, options.http);
         if (!in) return in.status();
         in->readBytes(magic, std::min<uint64_t>(4, in->fileSize()));
     }
@@ -83,12 +83,12 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
         return Status::error(path + ": meshes are read from local files only (point files may be URLs)");
     if (*kind == InputKind::Mesh) return openMeshReader(path, options.mesh, options.meshes.get());
     if (isSetInput(path)) return openSetReader(path, options.scalars);
-    if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars);
+    if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars, options.http);
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
-        return openPcdReader(path, options.scalars, options.readAlpha);
-    if (las) return openLasReader(path, options.threads, options.scalars, range);
-    if (ext == ".e57" || std::string(magic, 4) == "ASTM") return openE57Reader(path, options.scalars);
-    if (isTextExtension(ext)) return openTextReader(path, options.columns);
+        return openPcdReader(path, options.scalars, options.readAlpha, options.http);
+    if (las) return openLasReader(path, options.threads, options.scalars, range, options.http);
+    if (ext == ".e57" || std::string(magic, 4) == "ASTM") return openE57Reader(path, options.scalars, options.http);
+    if (isTextExtension(ext)) return openTextReader(path, options.columns, options.http);
     return Status::error(path + ": unknown input format '" + ext + "' (PLY, LAS, LAZ, E57, PCD, XYZ/TXT/PTS/CSV, OBJ, OFF, STL, a tile set's tileset.json)");
 }
 

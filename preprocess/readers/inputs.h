@@ -13,6 +13,7 @@
 #include "block_codec.h"
 #include "default_scene.h"
 #include "input_point.h"
+#include "tile_source.h"
 #include "mesh_reader.h"
 #include "surfel.h"
 
@@ -41,6 +42,9 @@ struct InputOptions {
     MeshSampling mesh;
     std::shared_ptr<MeshStore> meshes;  // where every pass finds the meshes (null: each reads them anew)
     bool verticesOnly = false;   // treat a mesh file as its vertices
+    // How inputs at http(s) URLs are reached (--header, --token-file, ...):
+    // never stored in a plan or a record, as it may hold a token.
+    HttpOptions http;
     int threads = 1;             // decoder threads (LAZ chunks)
     ScalarSelection scalars;     // scalar fields readers decode (none by default)
     bool readAlpha = false;      // PCD: take rgba's alpha byte as opacity (often junk, so off)

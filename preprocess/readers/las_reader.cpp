@@ -459,10 +459,10 @@ Result<LasHeader> readLasHeader(ByteStream& in) {
 }
 
 // The LAZ decompressor of `l`'s records [begin, end) (`tableOnly`: of none; its chunk table).
-Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHeader& l, uint64_t begin, uint64_t end, int threads,
-                                            bool tableOnly = false) {
+Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const HttpOptions& http, const LasHeader& l, uint64_t begin,
+                                            uint64_t end, int threads, bool tableOnly = false) {
     auto input = std::make_unique<FfiInput>();
-    auto file = InputFile::open(path);
+    auto file = InputFile::open(path, http);
     if (!file) return file.status();
     input->file = std::move(*file);
     const std::vector<uint8_t>& vlr = *l.vlrs.laszip;
@@ -480,8 +480,8 @@ Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const LasHe
 }  // namespace
 
 Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads, const ScalarSelection& scalars,
-                                                   RecordRange range) {
-    auto in = ByteStream::open(path);
+                                                   RecordRange range, const HttpOptions& http) {
+    auto in = ByteStream::open(path, http);
     if (!in) return in.status();
     auto header = readLasHeader(*in);
     if (!header) return header.status();
@@ -525,7 +525,7 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
 
     std::unique_ptr<RecordSource> source;
     if (l.compressed) {
-        auto laz = openLaz(path, l, range.begin, end, threads);
+        auto laz = openLaz(path, http, l, range.begin, end, threads);
         if (!laz) return laz.status();
         source = std::move(*laz);
     } else {
@@ -536,8 +536,8 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
                                                       l.offset, std::move(layouts)));
 }
 
-Result<std::vector<RecordCut>> lasCuts(const std::string& path) {
-    auto in = ByteStream::open(path);
+Result<std::vector<RecordCut>> lasCuts(const std::string& path, const HttpOptions& http) {
+    auto in = ByteStream::open(path, http);
     if (!in) return in.status();
     auto l = readLasHeader(*in);
     if (!l) return l.status();
@@ -548,7 +548,7 @@ Result<std::vector<RecordCut>> lasCuts(const std::string& path) {
         for (uint64_t r = 0; r < l->count; r += stride) cuts.push_back({r, l->dataOffset + r * l->recordLength});
         return cuts;
     }
-    auto laz = openLaz(path, *l, 0, l->count, 1, true);
+    auto laz = openLaz(path, http, *l, 0, l->count, 1, true);
     if (!laz) return laz.status();
     // Chunks of no points start where the next does: one cut each place.
     for (uint64_t k = 0, n = (*laz)->chunkCount(); k < n; ++k) {

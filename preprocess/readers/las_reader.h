@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "input_point.h"
+#include "tile_source.h"
 
 namespace surfcast {
 
@@ -23,7 +24,8 @@ struct RecordRange {
     uint64_t begin = 0, end = 0;
 };
 Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads = 1,
-                                                   const ScalarSelection& scalars = {}, RecordRange range = {});
+                                                   const ScalarSelection& scalars = {}, RecordRange range = {},
+                                                   const HttpOptions& http = {});
 
 // Where a LAS or LAZ file may be cut into runs of records that are read on
 // their own (a part of a build staged across processes, stages.h): the first
@@ -34,6 +36,6 @@ struct RecordCut {
     uint64_t record = 0, byte = 0;
 };
 inline constexpr uint64_t kLasCutRecords = 1 << 16;
-Result<std::vector<RecordCut>> lasCuts(const std::string& path);
+Result<std::vector<RecordCut>> lasCuts(const std::string& path, const HttpOptions& http = {});
 
 }  // namespace surfcast

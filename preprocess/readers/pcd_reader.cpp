@@ -144,8 +144,8 @@ Result<PcdHeader> parseHeader(ByteStream& in) {
 
 class PcdReader final : public PointReader {
 public:
-    PcdReader(std::string path, PcdHeader h, const ScalarSelection& scalars, bool readAlpha)
-        : path_(std::move(path)), h_(std::move(h)), readAlpha_(readAlpha) {
+    PcdReader(std::string path, PcdHeader h, const ScalarSelection& scalars, bool readAlpha, const HttpOptions& http)
+        : path_(std::move(path)), http_(http), h_(std::move(h)), readAlpha_(readAlpha) {
         // Single-element fields no fixed attribute takes are scalar fields
         // ("_" marks padding in PCL's files).
         for (Field& f : h_.fields)
@@ -175,7 +175,7 @@ public:
     }
 
     Status start() {
-        auto in = ByteStream::open(path_);
+        auto in = ByteStream::open(path_, http_);
         if (!in) return in.status();
         uint64_t dataBytes = in->fileSize() - std::min(in->fileSize(), h_.dataOffset);
         if (h_.data == DataKind::Binary) {
@@ -205,7 +205,7 @@ public:
         for (const Field& f : h_.fields) {
             uint64_t columnBytes = f.size * f.count * h_.points;
             if (f.role != Role::Ignore) {
-                auto s = ByteStream::open(path_);
+                auto s = ByteStream::open(path_, http_);
                 if (!s) return s.status();
                 s->seek(h_.dataOffset + 8);
                 auto lzf = std::make_unique<LzfStream>(std::move(*s), compressed, uncompressed);
@@ -341,6 +341,7 @@ private:
     }
 
     std::string path_;
+    HttpOptions http_;
     PcdHeader h_;
     bool readAlpha_ = false;
     InputDescription desc_;
@@ -354,12 +355,13 @@ private:
 
 }  // namespace
 
-Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars, bool readAlpha) {
-    auto in = ByteStream::open(path);
+Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars, bool readAlpha,
+                                                   const HttpOptions& http) {
+    auto in = ByteStream::open(path, http);
     if (!in) return in.status();
     auto h = parseHeader(*in);
     if (!h) return h.status();
-    auto reader = std::make_unique<PcdReader>(path, std::move(*h), scalars, readAlpha);
+    auto reader = std::make_unique<PcdReader>(path, std::move(*h), scalars, readAlpha, http);
     SC_TRY(reader->start());
     return std::unique_ptr<PointReader>(std::move(reader));
 }

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "input_point.h"
+#include "tile_source.h"
 
 namespace surfcast {
 
@@ -18,6 +19,6 @@ namespace surfcast {
 // byte (rgba's alpha, rgb's padding) is opacity only with `readAlpha`: PCL
 // writes 0 or junk there in many files.
 Result<std::unique_ptr<PointReader>> openPcdReader(const std::string& path, const ScalarSelection& scalars = {},
-                                                   bool readAlpha = false);
+                                                   bool readAlpha = false, const HttpOptions& http = {});
 
 }  // namespace surfcast

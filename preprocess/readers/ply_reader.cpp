@@ -339,8 +339,8 @@ bool plyHasFaces(const PlyHeader& header) {
     return false;
 }
 
-Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars) {
-    auto in = ByteStream::open(path);
+Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars, const HttpOptions& http) {
+    auto in = ByteStream::open(path, http);
     if (!in) return in.status();
     auto header = parsePlyHeader(*in);
     if (!header) return header.status();

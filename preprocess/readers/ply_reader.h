@@ -12,6 +12,7 @@
 
 #include "byte_stream.h"
 #include "input_point.h"
+#include "tile_source.h"
 
 namespace surfcast {
 
@@ -42,7 +43,8 @@ bool plyHasFaces(const PlyHeader& header);
 
 // Vertex properties that no fixed attribute takes are scalar fields under
 // their own names (integer types at resolution 1); `scalars` selects those decoded.
-Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars = {});
+Result<std::unique_ptr<PointReader>> openPlyReader(const std::string& path, const ScalarSelection& scalars = {},
+                                                   const HttpOptions& http = {});
 
 // Whole-file read of a PLY mesh: vertex positions and colours (16-bit scale,
 // empty when absent), texture coordinates and texture names, and triangles

@@ -122,11 +122,11 @@ std::string detectTextLayout(const std::vector<double>& row) {
     }
 }
 
-Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, const std::string& layoutArg) {
+Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, const std::string& layoutArg, const HttpOptions& http) {
     std::string layout = layoutArg;
     if (layout.empty()) {
         // Detect from the first data row, then reopen to stream from the start.
-        auto probe = ByteStream::open(path);
+        auto probe = ByteStream::open(path, http);
         if (!probe) return probe.status();
         std::string line;
         std::vector<double> row;
@@ -146,7 +146,7 @@ Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, con
     std::vector<XyzColumn> fields;
     if (!parseLayout(layout, &fields))
         return Status::error("column layout '" + layout + "' is not a comma-separated list of x,y,z,r,g,b,nx,ny,nz,i,_ with x, y and z");
-    auto in = ByteStream::open(path);
+    auto in = ByteStream::open(path, http);
     if (!in) return in.status();
     InputDescription desc;
     desc.path = path;

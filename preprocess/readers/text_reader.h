@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "input_point.h"
+#include "tile_source.h"
 
 namespace surfcast {
 
@@ -18,6 +19,6 @@ namespace surfcast {
 std::string detectTextLayout(const std::vector<double>& firstRow);
 
 // `layout` empty: detect. A PTS file's leading point-count line is skipped.
-Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, const std::string& layout);
+Result<std::unique_ptr<PointReader>> openTextReader(const std::string& path, const std::string& layout, const HttpOptions& http = {});
 
 }  // namespace surfcast

@@ -8,6 +8,13 @@
 import { crc32 } from "./crc32.js";
 import { classColor, type ColorBy, intensityColor, returnColor, type RGB, viridis } from "./coloring.js";
 
+// Where the decode worker loads draco3d's decoder from (the script and its
+// WASM; absolute URLs): its first message, where the streamer says.
+export interface DecoderUrls {
+  draco: string;
+  wasm: string;
+}
+
 export interface DecodeJob {
   id: number;
   key: string;

@@ -16,6 +16,7 @@
 
 import defaults from "../../common/render_defaults.json";
 import { type Box, kGranuleSurfels } from "./lod_selection.js";
+import { programs as shaderSources } from "surfcast:shaders";
 import * as S from "./shaders.js";
 
 export type RenderMode = "points" | "circles" | "ewa-noprefilter" | "ewa-surfel" | "ewa-pixel";
@@ -166,7 +167,7 @@ export class SplatRenderer {
     this.shared = !!options.shared;
     if (clip && !this.shared) clip.clipControlEXT(clip.LOWER_LEFT_EXT, clip.ZERO_TO_ONE_EXT);
     const unsigned8 = !this.floatBlend;  // RGBA8 accumulation targets (ensureTargets)
-    const program = (name: S.ProgramName) => new Program(gl, ...S.programs[name]);
+    const program = (name: keyof typeof shaderSources) => new Program(gl, ...shaderSources[name]);
     this.programs = {
       visibility: program("visibility"),
       accumulate: program(unsigned8 ? "accumulate8" : "accumulate"),

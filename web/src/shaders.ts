@@ -1,12 +1,10 @@
-// The shaders, generated at build time from the Vulkan client's own GLSL
-// (client/shaders) by web/glsl_es.mjs, which build.mjs bundles as the module
-// "surfcast:shaders"; and the constants client/shaders/shared_types.h
-// defines for both languages.
+// The constants client/shaders/shared_types.h defines for both languages, from
+// the module "surfcast:shaders" that build.mjs bundles (the shaders, generated
+// from client/shaders by web/glsl_es.mjs, renderer.ts imports itself). No
+// exported type names that build-time module: the npm package's declarations
+// must type-check without it.
 
-import { constants, programs } from "surfcast:shaders";
-
-export { programs };
-export type ProgramName = keyof typeof programs;
+import { constants } from "surfcast:shaders";
 
 function constant(name: string): number {
   const v = constants[name];

@@ -20,7 +20,7 @@
 // and decodingKey), their GPU copy is shared (Uploader.retain), not decoded.
 
 import type { Camera } from "./camera.js";
-import type { ColoringSpec, DecodeJob, DecodeResult, PickedSurfel } from "./block_decode.js";
+import type { ColoringSpec, DecodeJob, DecodeResult, DecoderUrls, PickedSurfel } from "./block_decode.js";
 import { attribute, FormatError, indexBytes, kFixedAttributes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
          type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, placeBlock, readHierarchyIndex, readHierarchyPage,
          type TilesetInfo, type Vec3 } from "./format.js";
@@ -77,14 +77,22 @@ async function withRetries<R>(tries: number, attempt: () => Promise<R>, stopped:
   }
 }
 
+// The decode worker's script, and draco3d's decoder (the worker's own
+// default without: draco_decoder.js and .wasm beside the worker).
+export interface DecoderFiles {
+  worker: URL;
+  decoder?: DecoderUrls;
+}
+
 class DecoderPool {
   private workers: Worker[] = [];
   private pending = new Map<number, (r: DecodeResult) => void>();
   private next = 0;
   private id = 0;
-  constructor(url: URL, count: number, onError: (message: string) => void) {
+  constructor(files: DecoderFiles, count: number, onError: (message: string) => void) {
     for (let i = 0; i < count; ++i) {
-      const w = new Worker(url);
+      const w = new Worker(files.worker);
+      if (files.decoder) w.postMessage({ decoder: files.decoder });
       w.onmessage = (e: MessageEvent<DecodeResult>) => {
         const done = this.pending.get(e.data.id);
         this.pending.delete(e.data.id);
@@ -160,7 +168,7 @@ export class Streamer<T> {
 
   // `json`: tileset.json as opened (the version this stream shows).
   private constructor(readonly source: TileSource, readonly json: string, info: TilesetInfo, origin: Vec3, index: HierarchyIndex,
-                      page0: NodeRecord[], private uploader: Uploader<T>, workerUrl: URL, coloring: ColoringSpec,
+                      page0: NodeRecord[], private uploader: Uploader<T>, decoderFiles: DecoderFiles, coloring: ColoringSpec,
                       readonly options: StreamOptions) {
     this.info = info;
     this.index = index;
@@ -168,11 +176,11 @@ export class Streamer<T> {
     this.selector = new LodSelector(info, page0);
     this.extra = info.attributes.map((a) => a.name).filter((n) => !kFixedAttributes.includes(n));
     this.coloring = coloring;
-    this.decoders = new DecoderPool(workerUrl, options.decoders, (m) => this.fail(m));
+    this.decoders = new DecoderPool(decoderFiles, options.decoders, (m) => this.fail(m));
   }
 
   // Opens the set at `source`, or throws an Error saying why it cannot be shown.
-  static async open<T>(source: TileSource, uploader: Uploader<T>, workerUrl: URL,
+  static async open<T>(source: TileSource, uploader: Uploader<T>, decoderFiles: DecoderFiles,
                        coloring: (info: TilesetInfo, origin: Vec3) => ColoringSpec,
                        options: StreamOptions = kDefaultStreamOptions): Promise<Streamer<T>> {
     const stop = () => false;
@@ -189,7 +197,7 @@ export class Streamer<T> {
     const bytes = await withRetries(options.maxTries, () => source.range(info.hierarchyFile, p0.offset, p0.records * 64), stop);
     const page0 = readHierarchyPage(index, 0, bytes, "0-0-0-0", info.blocksBytes, what);
     const origin = [0, 1, 2].map((a) => 0.5 * (info.boundsMin[a] + info.boundsMax[a])) as Vec3;
-    return new Streamer(source, json, info, origin, index, page0, uploader, workerUrl, coloring(info, origin), options);
+    return new Streamer(source, json, info, origin, index, page0, uploader, decoderFiles, coloring(info, origin), options);
   }
 
   isResident = (i: number) => this.resident.has(i);

@@ -27,7 +27,7 @@ import { type Box, emptyStats } from "./lod_selection.js";
 import { type DrawnNode, type FrameView, kDefaultEdgeTau, type SceneComposite, kDefaultLayers, kDefaultLowpassVariance, kDefaultZt, kMaxLayers, kNearFraction,
          type RenderMode, type RenderSettings, SplatRenderer } from "./renderer.js";
 import { TileSource } from "./source.js";
-import { coloringFor, kDefaultStreamOptions, Streamer } from "./streamer.js";
+import { coloringFor, type DecoderFiles, kDefaultStreamOptions, Streamer } from "./streamer.js";
 
 // The name suffix of a wide scalar field's low part (docs/FORMAT.md, "Scalar attributes").
 export const kLowPartSuffix = ":low";
@@ -57,7 +57,9 @@ export interface ViewerOptions {
   // host's own (three_layer.ts).
   loop?: boolean;
   forbidFloatBlend?: boolean; // behave as a browser without float blending (tests)
-  workerUrl?: URL; // the decode worker (default: decode_worker.js beside this module)
+  // The decode worker, with draco_decoder.js and .wasm beside it (default:
+  // the three beside this module).
+  workerUrl?: URL;
   // Follow the set as it changes: poll its tileset.json every this many
   // seconds and switch to each new version (0 or absent: never). The GPU
   // budget is then split in half: the version drawn, the one loading.
@@ -183,7 +185,7 @@ export class SurfcastViewer extends EventTarget {
     let colorBy = options.colorBy ?? "auto";
     const hidden = [...(options.hiddenClasses ?? [])];
     if (!((options.follow ?? 0) >= 0)) throw new Error("follow is a number of seconds, at least 0");
-    const streamer = await Streamer.open(source, uploads, options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
+    const streamer = await Streamer.open(source, uploads, decoderFiles(options),
       (info, origin) => {
         const by = resolveColorBy(colorBy, info);
         if (!kColorByOrder.includes(by as ColorBy)) throw new Error(by);
@@ -249,7 +251,7 @@ export class SurfcastViewer extends EventTarget {
       if (this.latest !== this.streamer.json && !this.next && !this.opening && !this.disposed) {
         this.opening = true;
         const next = await Streamer.open(new TileSource(this.setUrl, { token: this.options.token }), this.uploads,
-          this.options.workerUrl ?? new URL("decode_worker.js", import.meta.url),
+          decoderFiles(this.options),
           (info, origin) => coloringFor(info, origin, this.colorMode, this.hidden), streamOptions(this.options));
         if (this.disposed) next.close();
         else if (next.json !== this.streamer.json) {
@@ -635,6 +637,18 @@ function checkBox(box: Box, what: string) {
   for (let a = 0; a < 3; ++a)
     if (!Number.isFinite(box.min[a]) || !Number.isFinite(box.max[a]) || box.min[a] > box.max[a])
       throw new Error(`${what}: axis ${"xyz"[a]} from ${box.min[a]} to ${box.max[a]}`);
+}
+
+// The decode worker and draco3d's decoder, beside this module unless the
+// options name a worker. Each URL is the literal `new URL("./x", import.meta.url)`:
+// a static host resolves it beside the module, and bundlers that know the
+// pattern emit the file with the bundle (docs/WEB.md, "The npm package").
+function decoderFiles(options: ViewerOptions): DecoderFiles {
+  if (options.workerUrl) return { worker: options.workerUrl };
+  return {
+    worker: new URL("./decode_worker.js", import.meta.url),
+    decoder: { draco: new URL("./draco_decoder.js", import.meta.url).href, wasm: new URL("./draco_decoder.wasm", import.meta.url).href },
+  };
 }
 
 // "X0,Y0,Z0,X1,Y1,Z1", as surfcast-view's --clip and the export route's bbox

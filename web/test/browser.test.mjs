@@ -15,6 +15,7 @@ import { join } from "node:path";
 import { PNG } from "pngjs";
 import puppeteer from "puppeteer-core";
 import { loadModule } from "./load_module.mjs";
+import { compare, kFarLimit, kMeanLimit, viewReference, waitFor } from "./view_reference.mjs";
 
 const build = process.env.SURFCAST_BUILD ?? join(import.meta.dirname ?? ".", "..", "..", "build");
 const bin = (name) => join(build, "bin", name);
@@ -38,16 +39,6 @@ function start(command, args) {
   child.stderr.on("data", (d) => (child.log += d));
   children.push(child);
   return child;
-}
-
-async function waitFor(predicate, what, ms = 10000) {
-  const end = Date.now() + ms;
-  while (Date.now() < end) {
-    const v = predicate();
-    if (v) return v;
-    await new Promise((r) => setTimeout(r, 50));
-  }
-  throw new Error(`timed out waiting for ${what}`);
 }
 
 async function startServe(dir, extra = []) {
@@ -129,44 +120,13 @@ function reference(url, extra = [], view = camera) {
   const key = JSON.stringify([url, extra, view]);
   if (!references.has(key)) {
     const out = join(work, `ref-${Math.random().toString(36).slice(2)}.png`);
-    const lines = execFileSync(bin("surfcast-view"), ["--headless", url, "--lod", "1", "--camera", view, "--size",
-      `${size.width}x${size.height}`, "--out", out, ...extra], { encoding: "utf8" }).trim().split("\n");
-    references.set(key, { json: JSON.parse(lines[lines.length - 1]), png: PNG.sync.read(readFileSync(out)) });
+    references.set(key, viewReference(bin("surfcast-view"), url, { camera: view, size, out, extra }));
   }
   return references.get(key);
 }
 
-// Mean absolute difference over RGB (0-255), and the share of pixels that
-// differ by more than 16 in some channel.
-function compare(a, b) {
-  assert.equal(a.width, b.width);
-  assert.equal(a.height, b.height);
-  let sum = 0, far = 0;
-  for (let i = 0; i < a.data.length; i += 4) {
-    let most = 0;
-    for (let c = 0; c < 3; ++c) {
-      const d = Math.abs(a.data[i + c] - b.data[i + c]);
-      sum += d;
-      most = Math.max(most, d);
-    }
-    if (most > 16) ++far;
-  }
-  const pixels = a.width * a.height;
-  return { mean: sum / (3 * pixels), far: far / pixels };
-}
-
-// Both clients draw the same nodes (the same LOD rules at the same camera)
-// with the same EWA math in float32. What may differ: the rasterizers'
-// rules for pixels whose centre lies on a splat quad's edge (lavapipe
-// against SwiftShader), the order of the float additions (the Vulkan
-// client Morton-orders each node's surfels, the browser keeps Draco's
-// order), and the final rounding to 8 bits. Rounding and order move a pixel
-// by about one level, so a mean under 1 of 255 leaves no room for a
-// systematic error (a missing normalization, a wrong axis or offset moves
-// most covered pixels by tens of levels); a quad edge moves a single pixel
-// by up to the checkerboard's full contrast, and such pixels stay under
-// 1 % of the image.
-const kMeanLimit = 1.0, kFarLimit = 0.01;
+// compare() and the limits kMeanLimit and kFarLimit, with their derivation:
+// view_reference.mjs.
 
 // The converged view against surfcast-view's at `refUrl`: the same splats
 // and an image within the limits derived above.
@@ -386,9 +346,9 @@ describe("browser viewer", { skip }, () => {
   test("colour by elevation, chosen in the page, as surfcast-view draws it", async () => {
     // Chosen in the panel after the rgb view converged: the resident nodes
     // are decoded again from their kept blocks with the palette, nothing is
-    // fetched again, the old surfels stay drawn meanwhile (the viewer once
-    // dropped every node: a blank view, and the whole set downloaded again),
-    // and the view converges again.
+    // fetched again, the old surfels stay drawn meanwhile (dropping every
+    // node would blank the view and download the whole set again), and the
+    // view converges again.
     const { before, after, png } = await recolourToElevation("");
     assert.ok(before.keptBytes > 0);
     assert.equal(after.requests, before.requests, "nothing fetched again");
@@ -398,7 +358,7 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("a block cache smaller than the view's blocks: within it, and a recolouring fetches what went", async () => {
-    // Issue 31, finding 9: the kept blocks counted against no budget. With
+    // The kept blocks count against the block cache's budget. With
     // 64 KiB of cache (the view's blocks take several hundred), the cache
     // stays within it and the recolouring fetches the other blocks again:
     // at most every resident node's, and no more bytes than the view took.
@@ -412,8 +372,8 @@ describe("browser viewer", { skip }, () => {
   });
 
   test("colour by elevation without statistics: the bounds' z range, as surfcast-view draws it", async () => {
-    // The browser once took the bounds' minimum for both ends of the range,
-    // and coloured every surfel alike.
+    // Both ends of the range come from the bounds (the minimum for both
+    // would colour every surfel alike).
     const { state, png, problems } = await view(`${serveUrl}/?set=/sets/nostats&camera=${camera}&color=elevation`);
     assert.deepEqual(problems, []);
     assert.equal(state.converged, true);
@@ -898,8 +858,8 @@ describe("browser viewer", { skip }, () => {
 
   test("without float blending, lit: per-surfel weights in 8-bit targets shade as surfcast-view does", async (t) => {
     // Lambert shading (the default for elevation) reads the accumulated
-    // normal, whose negative components 8-bit targets once clamped to 0:
-    // mean abs 19.7, 61 % of pixels far off. 8-bit targets also round every
+    // normal, whose negative components 8-bit targets would clamp to 0 if
+    // stored as they are (mean abs 19.7, 61 % of pixels far off). 8-bit targets also round every
     // blend to 1/255, and 4-10 splats overlap a pixel here, so up to a few
     // levels per channel are expected where float targets stay within 1
     // (kMeanLimit): this case allows a mean of 4 levels and 8 % far, above

@@ -47,7 +47,7 @@ const kSplatScale = 0.75;
 const camera = "636300,848500,900,636590,849216,430,0,0,1,45";
 // Spark draws the files of this level's cut, a quarter of the leaves'
 // splats, against surfcast-view --level: SwiftShader's frames cost per splat
-// (bench/RELIABILITY.md, "CI stages", stop 58). The leaves' files are checked
+// (bench/RELIABILITY.md, "CI stages"). The leaves' files are checked
 // against the set below, and Spark loads them too.
 const sparkLevel = 1;
 const children = [];
@@ -648,7 +648,7 @@ describe("exports, as their consumers read them", { skip }, () => {
 
   // A consumer's settled view against surfcast-view's of the same cut (the
   // leaves, or a level with `surfels` of them): no errors, the pixels covered
-  // (0.8: the issue's bar) and the colours (expectSameColours).
+  // (IoU at least 0.8) and the colours (expectSameColours).
   function expectLikeSurfcastView(t, what, { state, png, problems }, spz, level = "leaves", surfels = 0) {
     assert.deepEqual(state.errors, []);
     assert.deepEqual(problems, []);

@@ -165,7 +165,7 @@ impl ChunkRange {
 }
 
 // One decode pool for every reader: a build that reads thousands of files, or
-// opens several at once, keeps one set of threads (a pool per reader once made
+// opens several at once, keeps one set of threads (a pool per reader would make
 // 8,469 threads for 4,234 files). Replaced when a caller asks for another size;
 // readers keep the pool they were given.
 static POOL: Mutex<Option<Arc<rayon::ThreadPool>>> = Mutex::new(None);

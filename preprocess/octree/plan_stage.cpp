@@ -298,7 +298,7 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
     for (const std::string& path : inputs.paths) {
         // A URL's asks its host; a tile set weighs as its blocks.bin (set_reader.h;
         // an updated set's other block files left out: the weight only balances parts).
-        auto bytes = inputFileSize(isSetInput(path) ? (std::filesystem::path(path).parent_path() / "blocks.bin").string() : path);
+        auto bytes = inputFileSize(isSetInput(path) ? (std::filesystem::path(path).parent_path() / "blocks.bin").string() : path, inputs.http);
         weight.push_back(bytes ? double(*bytes) + 1 : 1.0);  // unreadable: its reader names the error
     }
     double total = 0;
@@ -317,7 +317,7 @@ InputPart inputPart(const InputOptions& inputs, size_t part, size_t parts) {
         std::vector<RecordCut> cuts;
         // Only a file that a part boundary falls within is opened for its cuts.
         if (i >= scene && owner(before) != owner(before + weight[i]))
-            if (auto found = lasCuts(inputs.paths[i - scene])) cuts = std::move(*found);
+            if (auto found = lasCuts(inputs.paths[i - scene], inputs.http)) cuts = std::move(*found);
         if (cuts.empty()) visit(i, 0, owner(before + weight[i] / 2));
         for (const RecordCut& c : cuts) visit(i, c.record, owner(before + double(c.byte)));
     }

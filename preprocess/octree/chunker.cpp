@@ -85,7 +85,7 @@ ChunkLayout ChunkLayout::fromCounts(const std::vector<uint32_t>& counts, uint64_
     // chunk is a cube of cells, so a cell off its cube's faces is interior
     // without a look; only the faces' cells read their neighbours (the 27
     // reads of every cell were a hot spot of CI's many small builds:
-    // bench/RELIABILITY.md, "CI stages", stop 58).
+    // bench/RELIABILITY.md, "CI stages").
     l.interior_.assign(counts.size(), 0);
     const int64_t n = kCountCells;
     auto anotherBeside = [&](int64_t x, int64_t y, int64_t z, int32_t own) {
