@@ -71,17 +71,6 @@ CLI::App* subcommand(CLI::App& app, const std::string& name) {
     return nullptr;
 }
 
-namespace {
-
-// The (sub)command `args` name: a subcommand given first, else the app.
-const CLI::App& named(CLI::App& app, const std::vector<std::string>& args) {
-    if (!args.empty())
-        if (const CLI::App* sub = subcommand(app, args[0]); sub && !sub->get_disabled()) return *sub;
-    return app;
-}
-
-}  // namespace
-
 int parse(CLI::App& app, std::vector<std::string> args, std::vector<std::string>* positionals, const ExtraArgument& extra) {
     const std::string program = app.get_name();
     auto asked = [&](std::initializer_list<const char*> names) {
@@ -90,14 +79,15 @@ int parse(CLI::App& app, std::vector<std::string> args, std::vector<std::string>
                 if (a == n) return true;
         return false;
     };
-    // "--" (the rest as positionals) is no option of these programs.
-    if (asked({"--"})) return usageError(program, "unknown option --");
-    const std::vector<std::string> given = args;
+    // CLI11's "--" (the rest as positionals) and "++" (the end of a
+    // subcommand) are no options of these programs.
+    for (const char* mark : {"--", "++"})
+        if (asked({mark})) return usageError(program, std::string("unknown option ") + mark);
     try {
         std::reverse(args.begin(), args.end());  // CLI11 takes the arguments last first
         app.parse(args);
     } catch (const CLI::CallForHelp&) {
-        std::fputs(named(app, given).help().c_str(), stdout);
+        std::fputs(app.help().c_str(), stdout);  // the help of the subcommand given, where one was
         return 0;
     } catch (const CLI::CallForVersion& e) {
         std::printf("%s\n", e.what());
@@ -106,10 +96,10 @@ int parse(CLI::App& app, std::vector<std::string> args, std::vector<std::string>
         // A value checked as it was read failed before the parser reached
         // --help or --version: they still come first.
         if (asked({"-h", "--help"})) {
-            std::fputs(named(app, given).help().c_str(), stdout);
+            std::fputs(app.help().c_str(), stdout);
             return 0;
         }
-        if (asked({"--version"}) && &named(app, given) == &app) {
+        if (asked({"--version"})) {
             std::printf("%s\n", versionText(program).c_str());
             return 0;
         }

@@ -57,7 +57,7 @@ using ExtraArgument = std::function<std::string(const CLI::App& where, const std
 // stdout; they win over a bad value given with them), 2 after a usage error
 // (on stderr). The arguments no option took that do not start with '-' go
 // to `positionals` in order (null: each is an error, as every unknown
-// option is); "--" is an unknown option.
+// option is); CLI11's "--" and "++" are unknown options.
 int parse(CLI::App& app, std::vector<std::string> args, std::vector<std::string>* positionals = nullptr,
           const ExtraArgument& extra = {});
 

@@ -287,6 +287,7 @@ void addUpdate(Declare& d, BuildArgs& a) {
 CLI::App* stage(CLI::App& app, const char* name, const char* help) {
     CLI::App* sub = app.add_subcommand(name, help);
     sub->group("Stages of a build in stages (see below)");
+    sub->set_version_flag("--version", cli::versionText(kProgram), "the program's version and the tile-set formats it reads and writes");
     return sub;
 }
 
@@ -321,6 +322,7 @@ struct BuildApp {
     explicit BuildApp(BuildArgs& a) {
         cli::configure(app)->usage(&app, kUsage);
         app.footer(kFooter);
+        app.require_subcommand(0, 1);  // one stage at most: a second stage's name is an argument of the first
         Declare d(app, names);
         addOutput(d, a);
         addBuildOptions(d, a);

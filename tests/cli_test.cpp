@@ -82,6 +82,20 @@ TEST(Cli, ArgumentsReachTheBuildAsGiven) {
     EXPECT_NE(dashes.output.find("unknown option --"), std::string::npos) << dashes.output;
     auto flagValue = test::run({build, "--default-scene", "-o", out, "--quiet=false"});
     EXPECT_EQ(flagValue.exitCode, 2) << flagValue.output;
+    auto pluses = test::run({build, "chunk", "--work", work, "3", "++", "--grid", "8"});
+    EXPECT_EQ(pluses.exitCode, 2) << pluses.output;
+    EXPECT_NE(pluses.output.find("unknown option ++"), std::string::npos) << pluses.output;
+    // A stage's own name later on is an input of that stage, not the stage again.
+    auto twice = test::run({build, "plan", "--work", dir.file("w2"), "-q", "-o", out, "plan"});
+    EXPECT_EQ(twice.exitCode, 1) << twice.output;
+    EXPECT_NE(twice.output.find("plan: no such file"), std::string::npos) << twice.output;
+    // A stage answers --help with its own usage, and --version as the program does.
+    auto stageHelp = test::run({build, "chunk", "--help"});
+    EXPECT_EQ(stageHelp.exitCode, 0) << stageHelp.output;
+    EXPECT_EQ(stageHelp.output.rfind("usage: surfcast-build chunk", 0), 0u) << stageHelp.output;
+    auto stageVersion = test::run({build, "plan", "--version"});
+    EXPECT_EQ(stageVersion.exitCode, 0) << stageVersion.output;
+    EXPECT_EQ(stageVersion.output.rfind("surfcast-build ", 0), 0u) << stageVersion.output;
 }
 
 TEST(Cli, HelpAndUsageErrors) {

@@ -54,6 +54,54 @@ def one_process(options, out):
     assert r.returncode == 0, r.stderr
 
 
+class TokenHost:
+    """A real HTTP server on loopback serving `root`'s files by Range, to
+    requests that carry "Authorization: Bearer TOKEN" only (401 otherwise)."""
+
+    def __init__(self, root, token):
+        import http.server
+        import threading
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+            def answer(self, body):
+                path = os.path.join(root, os.path.basename(self.path.split("?")[0]))
+                if self.headers.get("Authorization") != f"Bearer {token}" or not os.path.isfile(path):
+                    self.send_response(401 if os.path.isfile(path) else 404)
+                    self.send_header("Content-Length", "0")
+                    self.end_headers()
+                    return
+                size = os.path.getsize(path)
+                m = re.match(r"bytes=(\d+)-(\d*)$", self.headers.get("Range", ""))
+                start, end = (int(m[1]), min(int(m[2]) if m[2] else size - 1, size - 1)) if m else (0, size - 1)
+                self.send_response(206 if m else 200)
+                if m:
+                    self.send_header("Content-Range", f"bytes {start}-{end}/{size}")
+                self.send_header("Accept-Ranges", "bytes")
+                self.send_header("Content-Length", str(end - start + 1))
+                self.end_headers()
+                if body:
+                    with open(path, "rb") as f:
+                        f.seek(start)
+                        self.wfile.write(f.read(end - start + 1))
+
+            def do_GET(self):
+                self.answer(True)
+
+            def do_HEAD(self):
+                self.answer(False)
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
 def parent_of(pid):
     with open(f"/proc/{pid}/stat") as f:
         return int(f.read().rsplit(")", 1)[1].split()[1])
@@ -286,6 +334,26 @@ class DaskBuild(unittest.TestCase):
         self.assertEqual(r.returncode, 0, r.stderr)
         self.assertIn("holds this update already", r.stderr)
         self.assertEqual({f: read(os.path.join(out, f)) for f in os.listdir(out)}, files)
+
+    def test_inputs_at_urls_are_reached_by_every_stage_and_never_stored(self):
+        # A scan at a URL that wants a token: the stages that read it (scan,
+        # count, plan and distribute) all take --header, which neither the
+        # driver's record nor its report keeps.
+        require_data(self)
+        secret = "sEcReT-123"
+        host = TokenHost(DATA, secret)
+        try:
+            options = [f"{host.url}/autzen_trim.las", "--header", f"Authorization: Bearer {secret}", "--capacity", "4000"]
+            one_process(options, self.path("one"))
+            report = self.path("report.json")
+            r = subprocess.run(self.driver(options, self.path("dask"), "--parts", "2", "--keep-work", "--report", report),
+                               capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertTrue(same_set(self.path("one"), self.path("dask")))
+            for path in (report, os.path.join(self.dir, ".dask.dask-work", "driver.json")):
+                self.assertNotIn(secret, read(path).decode(), path)
+        finally:
+            host.close()
 
     def test_bad_file_among_many_names_it_and_keeps_the_old_set(self):
         require_data(self)

@@ -54,7 +54,7 @@ std::mutex gHttpMutex;
 // every file there: its connections (and its one I/O thread) serve every
 // input from that host. A cache of connections: each caller says how to reach the file.
 std::map<std::string, std::shared_ptr<TileSource>> gSources;
-std::map<std::string, uint64_t> gSizes;  // by URL: a file is asked its size once
+std::map<std::string, uint64_t> gSizes;  // by URL and way of reaching it: a file is asked its size once
 // Presigned URLs by the redacted form every other part of the build sees.
 std::map<std::string, std::string> gSigned;
 
@@ -75,10 +75,16 @@ auto withRetries(F request) {
 // One source per origin (an http(s) host, a bucket), or per folder and
 // query where a URL's query string signs its requests (a presigned URL):
 // `location` as openTileSource takes it.
-Result<std::shared_ptr<TileSource>> source(const std::string& location, const HttpOptions& http) {
+// `location` (a URL) with how it is reached, as the caches key them.
+std::string reachKey(const std::string& location, const HttpOptions& http) {
     std::string key = location + '\n' + http.tokenFile + '\n' + http.caFile + '\n' + char('0' + http.insecure) +
                       char('0' + http.redirectCredentials) + std::to_string(http.timeoutSeconds) + ',' + std::to_string(http.retries);
     for (const std::string& h : http.headers) key += '\n' + h;
+    return key;
+}
+
+Result<std::shared_ptr<TileSource>> source(const std::string& location, const HttpOptions& http) {
+    const std::string key = reachKey(location, http);
     std::lock_guard lock(gHttpMutex);
     auto it = gSources.find(key);
     if (it == gSources.end()) {
@@ -120,15 +126,16 @@ Result<std::pair<std::shared_ptr<TileSource>, std::string>> remote(const std::st
     return std::make_pair(*opened, name);
 }
 
-Result<uint64_t> remoteSize(const std::string& url, TileSource& source, const std::string& name) {
+Result<uint64_t> remoteSize(const std::string& url, const HttpOptions& http, TileSource& source, const std::string& name) {
+    const std::string key = reachKey(url, http);
     {
         std::lock_guard lock(gHttpMutex);
-        if (auto it = gSizes.find(url); it != gSizes.end()) return it->second;
+        if (auto it = gSizes.find(key); it != gSizes.end()) return it->second;
     }
     auto size = withRetries([&] { return source.size(name); });
     if (!size) return size.status();
     std::lock_guard lock(gHttpMutex);
-    gSizes[url] = *size;
+    gSizes[key] = *size;
     return *size;
 }
 
@@ -225,7 +232,7 @@ Result<std::unique_ptr<InputFile>> InputFile::open(const std::string& path, cons
         if (!url) return url.status();
         auto r = remote(*url, http);
         if (!r) return r.status();
-        auto size = remoteSize(path, *r->first, r->second);
+        auto size = remoteSize(path, http, *r->first, r->second);
         if (!size) return size.status();
         return std::unique_ptr<InputFile>(new RemoteFile(redactUrl(path), std::move(r->first), std::move(r->second), *size));
     }
@@ -249,7 +256,7 @@ Result<uint64_t> inputFileSize(const std::string& path, const HttpOptions& http)
     if (!url) return url.status();
     auto r = remote(*url, http);
     if (!r) return r.status();
-    return remoteSize(path, *r->first, r->second);
+    return remoteSize(path, http, *r->first, r->second);
 }
 
 int64_t FfiInput::readAt(void* ctx, uint64_t offset, uint8_t* out, uint64_t len) noexcept {
