@@ -15,7 +15,7 @@ import { join } from "node:path";
 import { PNG } from "pngjs";
 import puppeteer from "puppeteer-core";
 import { loadModule } from "./load_module.mjs";
-import { compare, kFarLimit, kMeanLimit, viewReference, waitFor } from "./view_reference.mjs";
+import { compare, kFarLimit, kMeanLimit, viewReference, waitFor, watchProblems } from "./view_reference.mjs";
 
 const build = process.env.SURFCAST_BUILD ?? join(import.meta.dirname ?? ".", "..", "..", "build");
 const bin = (name) => join(build, "bin", name);
@@ -85,11 +85,7 @@ http { access_log off; types { text/html html; text/javascript js; text/css css;
 async function view(url, { timeout = 60000 } = {}) {
   const page = await browser.newPage();
   await page.setViewport(size);
-  const problems = [];
-  page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
-  page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
-  page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
-  page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+  const problems = watchProblems(page);
   await page.goto(url);
   await page.waitForFunction("window.surfcast && (window.surfcast.converged || window.surfcast.errors.length > 0)", { timeout });
   const state = await page.evaluate(() => window.surfcast);

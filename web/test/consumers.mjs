@@ -9,6 +9,7 @@ import { join } from "node:path";
 import { PNG } from "pngjs";
 import puppeteer from "puppeteer-core";
 import { web } from "./load_module.mjs";
+import { watchProblems } from "./view_reference.mjs";
 
 export const width = 640, height = 480;
 export const chromiumArgs = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", `--window-size=${width},${height}`];
@@ -139,11 +140,7 @@ export async function loadedView(browser, url, counter) {
 async function openPage(browser) {
   const page = await browser.newPage();
   await page.setViewport({ width, height });
-  const problems = [];
-  page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
-  page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
-  page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
-  page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+  const problems = watchProblems(page);
   return { page, problems };
 }
 

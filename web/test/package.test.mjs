@@ -17,7 +17,7 @@ import { build as esbuild } from "esbuild";
 import { PNG } from "pngjs";
 import puppeteer from "puppeteer-core";
 import { web } from "./load_module.mjs";
-import { compare, kFarLimit, kMeanLimit, viewReference, waitFor } from "./view_reference.mjs";
+import { compare, kFarLimit, kMeanLimit, viewReference, waitFor, watchProblems } from "./view_reference.mjs";
 
 const buildDir = process.env.SURFCAST_BUILD ?? join(web, "..", "build");
 const bin = (name) => join(buildDir, "bin", name);
@@ -207,11 +207,7 @@ describe("the npm package", () => {
       args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", `--window-size=${size.width},${size.height}`] });
     const page = await browser.newPage();
     await page.setViewport(size);
-    const problems = [];
-    page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
-    page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
-    page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
-    page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+    const problems = watchProblems(page);
     await page.goto(`${url}/?set=/sets/scene&camera=${camera}`);
     await page.waitForFunction("window.app && (window.app.viewer.state.converged || window.app.viewer.state.errors.length > 0)",
                                { timeout: 60000 });

@@ -1,6 +1,6 @@
 // The browser viewer's converged images against the Vulkan client's
 // (surfcast-view --headless) at the same camera and size: the reference, the
-// comparison and its limits. Shared by browser.test.mjs and package.test.mjs.
+// comparison and its limits, and a page's problems. Shared by the web tests.
 
 import assert from "node:assert/strict";
 import { execFileSync } from "node:child_process";
@@ -56,4 +56,15 @@ export async function waitFor(predicate, what, ms = 10000) {
     await new Promise((r) => setTimeout(r, 50));
   }
   throw new Error(`timed out waiting for ${what}`);
+}
+
+// The page's problems from now on, as they happen: console errors, page
+// errors, failed requests and HTTP error responses.
+export function watchProblems(page) {
+  const problems = [];
+  page.on("console", (m) => m.type() === "error" && problems.push(`console: ${m.text()}`));
+  page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
+  page.on("requestfailed", (r) => problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`));
+  page.on("response", (r) => r.status() >= 400 && problems.push(`HTTP ${r.status()}: ${r.url()}`));
+  return problems;
 }
