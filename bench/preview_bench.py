@@ -7,14 +7,20 @@ points). In this one process, one after the other:
 
   potree    PotreeConverter (--method poisson): its set exists when it ends;
   build     surfcast-build -o OUT, no preview;
+  alone     surfcast-build --preview -o OUT3, with nothing following it: the
+            cost of the preview and its refinements (versions as chunks are
+            built) to the build;
   preview   surfcast-build --preview -o OUT2, and as soon as OUT2/tileset.json
             appears, a headless viewer following it (surfcast-view --lod 1
-            --follow 1, the set framed at 640 x 360).
+            --follow 1 --save-redraws, the set framed at 640 x 360).
 
 For the preview run: when the preview appears, when the follower's first
 image (a frame with nodes drawn) arrives and how long lavapipe took to draw
-it, when the build ends, when the follower shows the built set (converged),
-and whether the built set is byte for byte the build's without a preview.
+it, the versions it showed, when the build ends, when the follower shows the
+built set (converged), and whether the built set is byte for byte the build's
+without a preview. Every image the follower drew is compared (FLIP) with its
+last, the finished set's: the quality-over-time chart,
+bench/report/preview_quality.png.
 
 Usage: bench/.venv/bin/python bench/preview_bench.py [--work DIR] [--threads N]
 Prints Markdown for bench/BENCHMARKS.md ("Previews").
@@ -47,24 +53,35 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--work", default="/tmp/surfcast-preview-bench")
     ap.add_argument("--threads", default=str(os.cpu_count()))
+    ap.add_argument("--interval", default="2", help="--preview-interval (default 2)")
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
     las = os.path.join(a.work, "lion_tiled.las")
     if not os.path.exists(las):
         build_bench.tiled_las(os.path.join(build_bench.DATA, "lion_takanawa.copc.laz"), 6, 5, las)
     build_bench.run_measured.log = os.path.join(a.work, "run.log")
-    plain, previewed, potree_out = (os.path.join(a.work, n) for n in ("plain", "previewed", "potree"))
-    for d in (plain, previewed, potree_out):
+    plain, previewed, alone, potree_out = (os.path.join(a.work, n) for n in ("plain", "previewed", "alone", "potree"))
+    for d in (plain, previewed, alone, potree_out):
         shutil.rmtree(d, ignore_errors=True)
 
     potree = build_bench.potree(build_bench.potree_binary(), [las], potree_out)
     # Built at the preview run's -o (the build record keeps it), then moved aside.
     build = build_bench.surfcast([las], previewed, "2G", a.threads)
     os.rename(previewed, plain)
+    common = ["--memory", "2G", "--threads", a.threads, "--preview-interval", a.interval]
+    started = time.monotonic()
+    quiet = subprocess.run([os.path.join(BIN, "surfcast-build"), "--preview", las, "-o", alone, *common], stdout=subprocess.DEVNULL,
+                           stderr=subprocess.PIPE, text=True, check=True)
+    t_alone = time.monotonic() - started
+    versions_alone = quiet.stderr.count("at full detail")
+    shutil.rmtree(alone)
+    frames_dir = os.path.join(a.work, "frames")
+    shutil.rmtree(frames_dir, ignore_errors=True)
+    os.makedirs(frames_dir)
 
     start = time.monotonic()
-    builder = subprocess.Popen([os.path.join(BIN, "surfcast-build"), "-q", "--preview", las, "-o", previewed, "--memory", "2G",
-                                "--threads", a.threads], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    builder = subprocess.Popen([os.path.join(BIN, "surfcast-build"), "-q", "--preview", las, "-o", previewed, *common],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     json_path = os.path.join(previewed, "tileset.json")
     while not os.path.exists(json_path):
         if builder.poll() is not None:
@@ -72,14 +89,17 @@ def main():
         time.sleep(0.01)
     t_preview = time.monotonic() - start
     follower = subprocess.Popen([os.path.join(BIN, "surfcast-view"), "--headless", previewed, "--lod", "1", "--size", "640x360",
-                                 "--follow", "1", "--max-wait", "600", "--out", os.path.join(a.work, "follow.png")],
+                                 "--follow", "1", "--max-wait", "600", "--save-redraws", "--out",
+                                 os.path.join(frames_dir, "follow.png")],
                                 stdout=subprocess.PIPE, text=True)
+    seen = []  # (seconds since the start, line) of every frame the follower printed
     lines = queue.Queue()
     threading.Thread(target=lambda: [lines.put((time.monotonic() - start, json.loads(l))) for l in follower.stdout],
                      daemon=True).start()
     first = None
     while first is None:
         t, line = lines.get(timeout=600)
+        seen.append((t, line))
         if line["nodes"] > 0:
             first = (t, line)
     builder.wait()
@@ -88,7 +108,8 @@ def main():
         sys.exit("the build with --preview failed:\n" + builder.stderr.read())
     while True:
         t, line = lines.get(timeout=600)
-        if line["version"] >= 1 and line["converged"]:
+        seen.append((t, line))
+        if line["version"] >= 1 and line["converged"] and "preview" not in line:
             shown = (t, line)
             break
     follower.terminate()
@@ -103,9 +124,46 @@ def main():
     print(f"| its follower's first image (lavapipe drew it in {first[1]['gpu_ms'] / 1e3:.2f} s) | {first[0]:.2f} |")
     print(f"| the set built | {t_built:.2f} ({t_built / build['wall']:.3f}x the build without a preview) |")
     print(f"| the follower showing the set, converged | {shown[0]:.2f} |")
+    print(f"| with `--preview`, nothing following: the set built | {t_alone:.2f} ({t_alone / build['wall']:.3f}x; "
+          f"{versions_alone} versions while building) |")
+    quality(seen, os.path.join(ROOT, "bench", "report", "preview_quality.png"), t_preview, t_built, potree["wall"])
     print(f"\nThe set built with `--preview` is the build's without, byte for byte: "
           f"{'yes' if same_folders(plain, previewed) else 'NO'}; the preview was 1 in "
           f"{first[1].get('preview', 1)} points.")
+
+
+def quality(seen, chart, t_preview, t_built, t_potree):
+    """FLIP of each image the follower drew against its last (the finished
+    set's), over time; a table and the chart."""
+    import flip_evaluator as flip
+    import matplotlib
+    import numpy as np
+    from PIL import Image
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    drawn = [(t, l) for t, l in seen if "redraw" in l]
+    load = lambda path: np.asarray(Image.open(path).convert("RGB")).astype(np.float32) / 255
+    final = load(drawn[-1][1]["redraw"])
+    points = [(t, float(flip.evaluate(final, load(l["redraw"]), "LDR")[1]), l) for t, l in drawn]
+    print("\n| seconds | version | at full detail | FLIP against the finished set |\n|---:|---:|---:|---:|")
+    last = None
+    for t, f, l in points:
+        state = (l["version"], l.get("preview_done"))
+        if state != last and l["converged"]:
+            done = "preview" if l.get("preview_done") == 0 else "set" if "preview" not in l else f"{100 * l['preview_done']:.0f} %"
+            print(f"| {t:.2f} | {l['version']} | {done} | {f:.4f} |")
+            last = state
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.step([t for t, _, _ in points], [f for _, f, _ in points], where="post", label="surfcast-view --follow")
+    ax.axvline(t_preview, color="grey", linestyle=":", label="preview published")
+    ax.axvline(t_built, color="black", linestyle="--", label="surfcast-build done")
+    ax.axvline(t_potree, color="tab:red", linestyle="--", label="PotreeConverter done")
+    ax.set_xlabel("seconds since the build started")
+    ax.set_ylabel("FLIP against the finished set")
+    ax.set_title("10.26 M-point LAS: the image while the build runs")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(chart, dpi=100)
 
 
 if __name__ == "__main__":

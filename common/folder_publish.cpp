@@ -70,7 +70,7 @@ Status writeFileSynced(const std::string& path, const void* data, size_t size) {
 
 Result<std::unique_ptr<PublishedFolder>> PublishedFolder::create(const std::string& output, const std::string& marker,
                                                                  const std::function<bool(const std::string&)>& replaceable,
-                                                                 const std::string& what) {
+                                                                 const std::string& what, const std::string& tag) {
     fs::path out = fs::absolute(output).lexically_normal();
     if (out.filename().empty()) out = out.parent_path();
     std::error_code ec;
@@ -81,7 +81,9 @@ Result<std::unique_ptr<PublishedFolder>> PublishedFolder::create(const std::stri
     std::unique_ptr<PublishedFolder> f(new PublishedFolder);
     f->output_ = out.string();
     f->marker_ = marker;
-    f->partial_ = (out.parent_path() / ("." + out.filename().string() + ".partial-" + std::to_string(::getpid()))).string();
+    f->partial_ = (out.parent_path() / ("." + out.filename().string() + ".partial-" + std::to_string(::getpid()) +
+                                        (tag.empty() ? "" : "-" + tag)))
+                      .string();
     fs::remove_all(f->partial_, ec);
     if (!fs::create_directory(f->partial_, ec)) return Status::error(f->partial_ + ": cannot create (" + ec.message() + ")");
     return f;

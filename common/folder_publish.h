@@ -27,9 +27,12 @@ public:
     // writer may replace (else: an error, never clobbering other data);
     // `what` names that kind of folder in the error. `marker` is the file
     // whose presence makes a folder whole: the old folder loses it first.
+    // `tag`: where one process writes the output twice at once (a build and
+    // its refinements: refine.h), each writer's own, named in the partial
+    // folder (".NAME.partial-PID-TAG").
     static Result<std::unique_ptr<PublishedFolder>> create(const std::string& output, const std::string& marker,
                                                            const std::function<bool(const std::string&)>& replaceable,
-                                                           const std::string& what);
+                                                           const std::string& what, const std::string& tag = "");
     ~PublishedFolder();  // removes the partial folder unless publish() succeeded
 
     const std::string& path() const { return partial_; }  // where to write

@@ -317,7 +317,10 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     if (!info.leftOut.empty()) j["left_out"] = info.leftOut;
     if (info.las.present) j["las"] = lasJson(info.las);
     if (info.duplicatesKept) j["duplicates"] = "kept";
-    if (info.previewStride) j["preview"] = {{"stride", info.previewStride}};
+    if (info.previewStride) {
+        j["preview"] = {{"stride", info.previewStride}};
+        if (info.previewDone > 0) j["preview"]["done"] = info.previewDone;
+    }
     const TilesetStatistics& st = info.statistics;
     ordered_json stats = {{"elevation", {{"min", st.elevationMin}, {"max", st.elevationMax}}}};
     if (st.intensity)
@@ -554,8 +557,13 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         if (j.contains("left_out")) info.leftOut = strings(j, "", "left_out");
         if (j.contains("las")) info.las = readLas(object(j, "", "las"));
         if (j.contains("preview")) {
-            info.previewStride = integer<uint32_t>(object(j, "", "preview"), "preview", "stride");
+            const nlohmann::json& preview = object(j, "", "preview");
+            info.previewStride = integer<uint32_t>(preview, "preview", "stride");
             if (info.previewStride == 0) fieldError("preview.stride", "0 is not a stride");
+            if (preview.contains("done")) {
+                info.previewDone = number(preview, "preview", "done");
+                if (!(info.previewDone >= 0 && info.previewDone < 1)) fieldError("preview.done", "not in [0, 1)");
+            }
         }
         if (j.contains("duplicates")) {
             const std::string d = text(j, "", "duplicates");

@@ -208,8 +208,11 @@ struct TilesetInfo {
     // archive of its inputs), not one of each exact duplicate position.
     bool duplicatesKept = false;
     // A preview (surfcast-build --preview): built from every previewStride-th
-    // input point while the set itself is built; 0: a set.
+    // input point while the set itself is built; 0: a set. A refinement of
+    // it (refine.h) holds a share previewDone of the input points at full
+    // detail, in [0, 1); 0 in the first preview.
     uint32_t previewStride = 0;
+    double previewDone = 0;
     TilesetStatistics statistics;
     std::string normalSource;  // input | estimated-scan-origin | estimated-up | estimated-outward
     std::string weights;       // analytic | captured | none

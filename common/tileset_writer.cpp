@@ -25,7 +25,7 @@ constexpr char kUnorderedBlocks[] = "blocks.unordered";
 
 }  // namespace
 
-Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& output) {
+Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& output, const std::string& tag) {
     // A Surfcast set has a hierarchy.bin beside its tileset.json; a 3D Tiles
     // export (surfcast-export) has a tileset.json alone, and is not replaced.
     auto folder = PublishedFolder::create(output, "tileset.json", [](const std::string& out) {
@@ -34,7 +34,7 @@ Result<std::unique_ptr<TilesetWriter>> TilesetWriter::create(const std::string& 
         for (const auto& e : fs::directory_iterator(out, ec))  // hierarchy.bin, or an updated set's hierarchy-XXXXXXXX.bin
             if (validHierarchyFile(e.path().filename().string())) return true;
         return false;
-    }, "a tile set");
+    }, "a tile set", tag);
     if (!folder) return folder.status();
     std::unique_ptr<TilesetWriter> w(new TilesetWriter);
     w->folder_ = std::move(*folder);

@@ -27,7 +27,8 @@ class TilesetWriter {
 public:
     // Fails if `output` exists and is neither empty nor a tile set (its
     // tileset.json and hierarchy.bin): it never clobbers other data.
-    static Result<std::unique_ptr<TilesetWriter>> create(const std::string& output);
+    // `tag`: PublishedFolder::create's, for a second writer of `output` in one process.
+    static Result<std::unique_ptr<TilesetWriter>> create(const std::string& output, const std::string& tag = "");
     ~TilesetWriter();  // removes the partial folder unless finish() succeeded
 
     // An update in place of the set in folder `set`, whose tileset.json says

@@ -342,13 +342,21 @@ struct BuildApp {
         d.group("Previews");
         d.flag("--preview", "first publish a preview to OUT, unless OUT holds a set (whose viewers keep it until the build replaces "
                             "it): a set of every Nth point of each input, about 200,000 points, marked \"preview\" in its tileset.json, "
-                            "for viewers to open and follow (surfcast-view --follow, ?follow=) while the build goes on; the build then "
-                            "replaces it. The build's own bytes are those it writes without --preview",
+                            "for viewers to open and follow (surfcast-view --follow, ?follow=) while the build goes on; then, as "
+                            "chunks are built, versions with those chunks at full detail and the rest from the preview's points; "
+                            "the build then replaces them. The build's own bytes are those it writes without --preview",
                [&a] { a.preview = true; }, false);
         d.number("--preview-points", "N", "--preview of about N points (default 200000)", 1000, 1e9, false,
                  "--preview-points needs a count in [1000, 10^9]", [&a](double v) {
                      a.preview = true;
                      a.previewPoints = uint64_t(v);
+                 }, false);
+        d.number("--preview-interval", "S",
+                 "--preview with versions at least S seconds apart, and further apart where publishing one takes over a 20th of "
+                 "that (default 2; 0: after every chunk)",
+                 0, 3600, false, "--preview-interval needs seconds in [0, 3600]", [&a](double v) {
+                     a.preview = true;
+                     a.previewInterval = v;
                  }, false);
         addReach(app, names, a);
 

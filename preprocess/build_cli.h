@@ -34,6 +34,7 @@ struct BuildArgs {
     bool merge = false;                // --merge SET...: the positional arguments are tile sets
     bool preview = false;              // --preview: a preview of the build published to -o first
     uint64_t previewPoints = 200'000;  // --preview-points: about this many points make it
+    double previewInterval = 2;        // --preview-interval: the least seconds between versions while building
 };
 
 // Parses surfcast-build's arguments (without the program's name) into

@@ -666,6 +666,7 @@ int main(int argc, char** argv) {
         merged.opt.inputs.http = a.opt.inputs.http;
         merged.preview = a.preview;
         merged.previewPoints = a.previewPoints;
+        merged.previewInterval = a.previewInterval;
         a = std::move(merged);
     }
     const surfcast::BuildOptions& opt = a.opt;
@@ -717,10 +718,12 @@ int main(int argc, char** argv) {
 
     surfcast::SetLock previewLock;  // the preview is a set: other writers wait for the build
     if (a.preview) {
-        if (auto st = surfcast::publishPreview(a.opt, a.previewPoints); !st.ok())
-            std::fprintf(stderr, "surfcast-build: no preview: %s\n", st.message().c_str());
-        else if (auto locked = surfcast::lockOutput(opt.output, &previewLock); !locked.ok())
-            return fail(locked);
+        if (auto sample = surfcast::publishPreview(a.opt, a.previewPoints); !sample) {
+            std::fprintf(stderr, "surfcast-build: no preview: %s\n", sample.status().message().c_str());
+        } else if (sample->inputs) {
+            if (auto locked = surfcast::lockOutput(opt.output, &previewLock); !locked.ok()) return fail(locked);
+            a.opt.refine = surfcast::BuildOptions::Refine{std::move(*sample), a.previewInterval};
+        }
     }
     auto summary = surfcast::buildTileset(a.opt);
     if (!summary) return fail(summary.status());

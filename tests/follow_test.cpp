@@ -377,29 +377,50 @@ struct BuildGuard {
     int release() { return std::exchange(pid, -1); }
 };
 
+// Holds the build `pid` still (SIGSTOP) once the set at `out` says
+// `wanted`; false where the build ended first (60 s at most).
+bool stopWhen(int pid, const std::string& out, const std::function<bool(const TilesetInfo&)>& wanted) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    auto says = [&] {
+        auto info = readTilesetJson(test::readFile(out + "/tileset.json"), "tileset.json");
+        return info && wanted(*info);
+    };
+    while (std::chrono::steady_clock::now() < deadline && ::kill(pid, 0) == 0) {
+        if (fs::exists(out + "/tileset.json") && says()) {
+            ::kill(pid, SIGSTOP);
+            if (says()) return true;  // and not replaced meanwhile
+            ::kill(pid, SIGCONT);
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return false;
+}
+
 // surfcast-build --preview of `cells` into `out`, started and stopped
 // (SIGSTOP) as soon as the preview is there; `previewStride`: the stride of
 // the set found there then (0, and a failure, where the build had replaced
-// its preview already or none appeared).
-BuildGuard startPreviewedBuild(const std::vector<std::string>& cells, const std::string& out, int* previewStride) {
+// its preview already or none appeared). `interval`: --preview-interval.
+BuildGuard startPreviewedBuild(const std::vector<std::string>& cells, const std::string& out, int* previewStride,
+                               const std::string& interval = "2") {
     std::vector<std::string> args = {test::binary("surfcast-build"), "-q", "--threads", "1", "--memory", "64M", "--capacity", "1000",
-                                     "--preview-points", "5000", "-o", out};
+                                     "--preview-points", "5000", "--preview-interval", interval, "-o", out};
     args.insert(args.end(), cells.begin(), cells.end());
     BuildGuard build{test::spawn(args).pid};
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (!fs::exists(out + "/tileset.json") && std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    ::kill(build.pid, SIGSTOP);
+    EXPECT_TRUE(stopWhen(build.pid, out, [](const TilesetInfo&) { return true; })) << "no set appeared";
     auto reader = TilesetReader::open(out);
     *previewStride = reader ? int(reader->info().previewStride) : 0;
     EXPECT_GT(*previewStride, 1) << "no preview seen before the build ended: " << (reader ? "" : reader.status().message());
     return build;
 }
 
-TEST_F(FollowTest, APreviewComesFirstAndTheBuildReplacesItWithItsOwnBytes) {
-    // The build with --preview, held still once its preview is published: a
-    // follower shows the preview; let go, the build replaces it with the set
-    // a build without --preview writes, byte for byte (the same -o: the build
+TEST_F(FollowTest, APreviewComesFirstRefinesAsChunksAreBuiltAndEndsInTheBuildsOwnBytes) {
+    // The build with --preview (a version after every chunk: its 14 chunks
+    // are built one at a time), held still once its preview is published: a
+    // follower shows the preview. Held again at a version with some chunks
+    // built: that version is a whole set, its built chunks' nodes are the
+    // finished set's (key, CRC and size), the others stand-ins, and the
+    // follower switches to it. Let go, the build replaces it with the set a
+    // build without --preview writes, byte for byte (the same -o: the build
     // record keeps it), and the follower switches to that set as a fresh open
     // of it draws it.
     std::vector<std::string> cells = base;
@@ -413,30 +434,56 @@ TEST_F(FollowTest, APreviewComesFirstAndTheBuildReplacesItWithItsOwnBytes) {
     fs::rename(out, dir.file("plain"));
 
     int stride = 0;
-    BuildGuard build = startPreviewedBuild(cells, out, &stride);
+    BuildGuard build = startPreviewedBuild(cells, out, &stride, "0");
     ASSERT_GT(stride, 1);
     auto client = this->open(out, 0.1);
     ASSERT_TRUE(client);
     EXPECT_EQ(client->info().previewStride, uint32_t(stride));
+    EXPECT_EQ(client->info().previewDone, 0.0);
     const Camera camera = frameBox(client->info().bounds, double(kWidth) / kHeight);
     auto frames = follow(*client, camera, [](const ClientFrame& f) { return f.converged; });
     ASSERT_FALSE(frames.empty());
     EXPECT_GT(frames.back().nodes, 0u) << "the preview draws";
     EXPECT_EQ(frames.back().version, 0u);
+
     ::kill(build.pid, SIGCONT);
-    EXPECT_EQ(test::exitCode(build.release()), 0);
+    ASSERT_TRUE(stopWhen(build.pid, out, [](const TilesetInfo& info) { return info.previewDone > 0; }))
+        << "no version with chunks built appeared";
+    auto refined = TilesetReader::open(out);
+    ASSERT_TRUE(refined) << refined.status().message();
+    auto verified = verifyTileset(*refined);
+    EXPECT_TRUE(verified) << verified.status().message();
+    EXPECT_EQ(refined->info().previewStride, uint32_t(stride));
+    EXPECT_LT(refined->info().previewDone, 1.0);
     frames = follow(*client, camera, [](const ClientFrame& f) { return f.version >= 1 && f.converged; });
     ASSERT_FALSE(frames.empty());
-    EXPECT_EQ(client->info().previewStride, 0u);
+    EXPECT_GT(client->info().previewDone, 0.0) << "the follower shows the version with chunks built";
+
+    ::kill(build.pid, SIGCONT);
+    EXPECT_EQ(test::exitCode(build.release()), 0);
+    frames = follow(*client, camera, [&](const ClientFrame& f) { return f.converged && client->info().previewStride == 0; });
+    ASSERT_FALSE(frames.empty());
     EXPECT_TRUE(same(image(*client), freshImage(out, camera)));
     EXPECT_EQ(update_test::folderFiles(out), update_test::folderFiles(dir.file("plain")))
         << "the build with --preview wrote other bytes than without";
+
+    // The refined version: the built chunks' nodes are the set's; the rest
+    // stand in with fewer surfels (the preview's points).
+    auto finished = TilesetReader::open(out);
+    ASSERT_TRUE(finished) << finished.status().message();
+    std::set<std::tuple<NodeKey, uint32_t, uint32_t>> final;
+    for (const NodeRecord& n : finished->nodes()) final.insert({n.key, n.blockCrc, n.blockSize});
+    size_t shared = 0;
+    for (const NodeRecord& n : refined->nodes()) shared += final.count({n.key, n.blockCrc, n.blockSize});
+    EXPECT_GT(shared, 0u) << "no node of a built chunk in the version";
+    EXPECT_LT(shared, refined->nodes().size());
+    EXPECT_LT(refined->info().surfels, finished->info().surfels);
 }
 
 TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
     // Killed after its preview, a build leaves the preview, whole and
-    // readable. Over a set that is there already no preview is written, and a
-    // killed build leaves that set.
+    // readable; killed later, the last version it published. Over a set that
+    // is there already no preview is written, and a killed build leaves that set.
     std::vector<std::string> cells = base;
     const std::string out = dir.file("sets/killed");
     int stride = 0;
@@ -448,6 +495,19 @@ TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
     ASSERT_TRUE(reader) << reader.status().message();
     EXPECT_GT(reader->info().previewStride, 1u);
     auto verified = verifyTileset(*reader);
+    EXPECT_TRUE(verified) << verified.status().message();
+
+    // Killed at a version with chunks built, it leaves that version.
+    const std::string refined = dir.file("sets/killed-refining");
+    {
+        BuildGuard build = startPreviewedBuild(cells, refined, &stride, "0");
+        ::kill(build.pid, SIGCONT);
+        ASSERT_TRUE(stopWhen(build.pid, refined, [](const TilesetInfo& info) { return info.previewDone > 0; }));
+    }
+    reader = TilesetReader::open(refined);
+    ASSERT_TRUE(reader) << reader.status().message();
+    EXPECT_GT(reader->info().previewDone, 0.0);
+    verified = verifyTileset(*reader);
     EXPECT_TRUE(verified) << verified.status().message();
 
     const std::map<std::string, std::string> before = update_test::folderFiles(set());

@@ -406,6 +406,7 @@ TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
     info.leftOut = {"gps_time", "nir"};
     info.duplicatesKept = true;
     info.previewStride = 65;
+    info.previewDone = 0.375;
     info.las.present = true;
     info.las.pointFormat = 8;
     info.las.gpsTimeType = 1;
@@ -439,6 +440,8 @@ TEST(TilesetFormat, TilesetJsonKeepsWhatTheInputsSaid) {
     rejected("/left_out/1", 3, "left_out[1]");
     rejected("/duplicates", "some", "duplicates");
     rejected("/preview/stride", 0, "preview.stride");
+    rejected("/preview/done", 1, "preview.done");
+    rejected("/preview/done", -0.5, "preview.done");
     rejected("/preview", 65, "preview");
     rejected("/las/point_format", 11, "las.point_format");
     rejected("/las/gps_time_type", 2, "las.gps_time_type");

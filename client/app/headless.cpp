@@ -206,7 +206,10 @@ int runHeadlessLod(const ViewOptions& o) {
                 line["update_ms"] = updateMs;
                 line["gpu_ms"] = gpuStats.totalMs;
                 line["converged"] = cf.converged;
-                if (const uint32_t stride = client.value()->info().previewStride) line["preview"] = stride;
+                if (const uint32_t stride = client.value()->info().previewStride) {
+                    line["preview"] = stride;
+                    line["preview_done"] = client.value()->info().previewDone;
+                }
                 if (o.client.followSeconds > 0) {
                     line["version"] = cf.version;
                     line["loading_version"] = cf.loadingVersion;

@@ -11,7 +11,7 @@ namespace surfcast {
 
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
                   TilesetWriter& writer, Progress& progress, BuildSummary* summary, std::map<size_t, ChunkOutput>* kept,
-                  const KeepNode& keep) {
+                  const KeepNode& keep, const Refinement* refinement) {
     StepTimes steps = {};
     auto count = [&](const NodeRecord& r) {
         const size_t level = r.key.level;
@@ -30,10 +30,11 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
     std::set<NodeKey> seen;
     for (size_t i = 0; i < layout.chunks().size(); ++i) {
         const bool isKept = kept && kept->count(i);
-        auto out = isKept ? Result<ChunkOutput>(std::move(kept->at(i))) : readChunkOutput(work.nodes(i), context.emptyTable());
+        const WorkFolder& from = refinement && !refinement->built.at(i) ? *refinement->standIns : work;
+        auto out = isKept ? Result<ChunkOutput>(std::move(kept->at(i))) : readChunkOutput(from.nodes(i), context.emptyTable());
         if (!out) return out.status();
         if (!isKept && out->plan != plan.id)
-            return Status::error(work.nodes(i) + ": built for another plan (build chunk " + std::to_string(i) + " again)");
+            return Status::error(from.nodes(i) + ": built for another plan (build chunk " + std::to_string(i) + " again)");
         // Every node lies in its chunk, once.
         const NodeKey& chunkKey = layout.chunks()[i].key;
         for (const NodeRecord& r : out->records) {
@@ -41,7 +42,7 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
             const bool inside = below >= 0 && below <= kMaxLevel && (r.key.x >> below) == chunkKey.x &&
                                 (r.key.y >> below) == chunkKey.y && (r.key.z >> below) == chunkKey.z;
             if (!inside || !seen.insert(r.key).second)
-                return Status::error(work.nodes(i) + ": node " + r.key.name() + " is not chunk " + std::to_string(i) + "'s, or repeats");
+                return Status::error(from.nodes(i) + ": node " + r.key.name() + " is not chunk " + std::to_string(i) + "'s, or repeats");
         }
         if (isKept) {
             SC_TRY(writer.addKeptNodes(out->records));
@@ -51,8 +52,8 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
             for (const NodeRecord& r : out->records)
                 if (r.blockSize > 0) placed.push_back(r);
                 else if (keep && keep(r)) same.push_back(r);
-                else return Status::error(work.nodes(i) + ": node " + r.key.name() + " has no block");
-            SC_TRY(writer.addPlacedNodes(work.blocks(i), out->blocksBytes, placed));
+                else return Status::error(from.nodes(i) + ": node " + r.key.name() + " has no block");
+            SC_TRY(writer.addPlacedNodes(from.blocks(i), out->blocksBytes, placed));
             SC_TRY(writer.keepCurrentNodes(same));
         }
         for (const NodeRecord& r : out->records) count(r);
@@ -60,7 +61,7 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
         summary->textureFit.add(out->fits);
         if (out->root) {
             if (!(out->root->key == layout.chunks()[i].key))
-                return Status::error(work.nodes(i) + ": its root is not chunk " + std::to_string(i) + "'s node");
+                return Status::error(from.nodes(i) + ": its root is not chunk " + std::to_string(i) + "'s node");
             for (Surfel& s : out->root->surfels) s.row = upperScalars.append(out->rootScalars.row(s.row));
             retained[out->root->key] = std::move(out->root);
         }
@@ -139,6 +140,10 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
 
     progress.begin("write", 0);
     TilesetInfo info = context.tilesetInfo();
+    if (refinement) {
+        info.previewStride = refinement->stride;
+        info.previewDone = refinement->done;
+    }
     info.surfels = summary->surfels;
     info.levels = int(summary->nodesPerLevel.size());
     SC_TRY(writer.finish(info));

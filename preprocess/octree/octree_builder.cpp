@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <mutex>
 #include <thread>
 
+#include "refine.h"
 #include "stages.h"
 
 namespace fs = std::filesystem;
@@ -18,7 +20,7 @@ namespace surfcast {
 // Largest first (the long poles start early), at most kChunksAtOnce at a time
 // (the budget is split that many ways); more threads work inside each chunk.
 Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, std::vector<size_t> order,
-                   const WorkFolder& work, Progress& progress, const KeepNode& keep) {
+                   const WorkFolder& work, Progress& progress, const KeepNode& keep, const std::function<void(size_t)>& built) {
     if (order.empty()) return {};
     const std::vector<Chunk>& chunks = layout.chunks();
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return chunks[a].points > chunks[b].points; });
@@ -38,6 +40,7 @@ Status buildChunks(const BuildContext& context, const BuildPlan& plan, const Chu
             }
             Status st = chunkStage(context, plan, layout, order[i], work, inner, true, keep);
             progress.advance(chunks[order[i]].points);
+            if (st.ok() && built) built(order[i]);
             if (!st.ok()) {
                 std::lock_guard lock(errorMutex);
                 if (firstError.ok()) firstError = st;
@@ -80,10 +83,21 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     SC_TRY(distributeParts(c, *plan, layout, work, progress, &summary));
     SC_TRY(readDistribution(work, *plan, layout));
     summary.chunks = layout.chunks().size();
+    // Versions of the build in progress (refine.h), where there is more than
+    // one chunk to refine: a failure to start them is a warning.
+    std::unique_ptr<Refiner> refiner;
+    if (options.refine && layout.chunks().size() > 1) {
+        const auto begun = std::chrono::steady_clock::now();
+        auto created = Refiner::create(c, *plan, layout, work, *options.refine);
+        summary.phaseSeconds.push_back({"stand-ins", std::chrono::duration<double>(std::chrono::steady_clock::now() - begun).count()});
+        if (created) refiner = std::move(*created);
+        else std::fprintf(stderr, "surfcast-build: no versions while building: %s\n", created.status().message().c_str());
+    }
     progress.begin("build", c.stats().points);
     std::vector<size_t> all(layout.chunks().size());
     for (size_t i = 0; i < all.size(); ++i) all[i] = i;
-    SC_TRY(buildChunks(c, *plan, layout, std::move(all), work, progress));
+    SC_TRY(buildChunks(c, *plan, layout, std::move(all), work, progress, {},
+                       refiner ? std::function<void(size_t)>([&](size_t i) { refiner->chunkBuilt(i); }) : nullptr));
     summary.phaseSeconds.push_back({"build", progress.end()});
     if (!options.commandLine.empty()) {
         // The record names the inputs as one part, whatever parts they were

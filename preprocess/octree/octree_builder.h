@@ -52,6 +52,15 @@ struct BuildOptions {
     // A preview of the build: its inputs sampled every `preview`-th point
     // (InputOptions::stride), marked so in tileset.json; 0: a build.
     uint32_t preview = 0;
+    // Refinement while building (refine.h): where set, versions published to
+    // `output` as the chunks are built, the chunks not built yet made from
+    // the preview's `sample`, at least `interval` seconds apart (0: after
+    // every chunk) and rarer where publishing is slow (kRefineCostFactor).
+    struct Refine {
+        CapturedInputs sample;
+        double interval = 2;
+    };
+    std::optional<Refine> refine;
     // Colours of textured meshes' surfels (Zwicker et al. 2001, §5), on every
     // level: the texture filtered with each surfel's own kernel (ewa,
     // view-independent EWA), or the least-squares coefficients of eq. 10-11

@@ -194,13 +194,28 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
 // index; the writer keeps their blocks in place (TilesetWriter::update).
 // `keep`: an update's rule (KeepNode), for the levels above the chunks too;
 // the chunks' nodes it kept take the set's nodes of their keys.
+// `refinement`: a version of a build in progress (refine.h).
+struct Refinement;
 Status mergeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
                   TilesetWriter& writer, Progress& progress, BuildSummary* summary,
-                  std::map<size_t, ChunkOutput>* kept = nullptr, const KeepNode& keep = {});
+                  std::map<size_t, ChunkOutput>* kept = nullptr, const KeepNode& keep = {}, const Refinement* refinement = nullptr);
+
+// A merge of a build in progress (refine.h): the chunks not `built` yet are
+// taken from their stand-ins in `standIns` (built to the same plan), and the
+// set is marked a preview of `stride` with `done` of its points at full detail.
+struct Refinement {
+    const WorkFolder* standIns = nullptr;
+    std::vector<bool> built;  // by chunk index
+    uint32_t stride = 1;
+    double done = 0;
+};
 
 // Builds the chunks `which` of `layout` (chunkStage, removing their inputs),
 // largest first, kChunksAtOnce at a time; `progress` advances by their points.
+// `built`, where given, is called with each chunk's index once it is built,
+// on the thread that built it.
 Status buildChunks(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, std::vector<size_t> which,
-                   const WorkFolder& work, Progress& progress, const KeepNode& keep = {});
+                   const WorkFolder& work, Progress& progress, const KeepNode& keep = {},
+                   const std::function<void(size_t)>& built = {});
 
 }  // namespace surfcast

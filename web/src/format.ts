@@ -50,6 +50,9 @@ export interface TilesetInfo {
   // A preview (surfcast-build --preview): built from every previewStride-th
   // input point while the set itself is built; 0: a set.
   previewStride: number;
+  // A refinement of the preview (a build in progress): the share of the
+  // input points at full detail, in [0, 1); 0 in the first preview.
+  previewDone: number;
 }
 
 // The attributes whose place in a block the format fixes; every other listed
@@ -248,10 +251,18 @@ function readFields(j: Json): TilesetInfo {
     });
     if (sum !== blocksBytes) throw new FormatError(`blocks.parts: the files' bytes add up to ${sum}, not blocks.bytes ${blocksBytes}`);
   }
-  const previewStride = "preview" in j ? integer(object(j, "", "preview"), "preview", "stride", 1, 2 ** 32 - 1) : 0;
+  let previewStride = 0, previewDone = 0;
+  if ("preview" in j) {
+    const preview = object(j, "", "preview");
+    previewStride = integer(preview, "preview", "stride", 1, 2 ** 32 - 1);
+    if ("done" in preview) {
+      previewDone = number(preview, "preview", "done");
+      if (!(previewDone >= 0 && previewDone < 1)) throw new FormatError(`preview.done: ${previewDone} is not in [0, 1)`);
+    }
+  }
   return { version, rootMin, rootEdge, boundsMin, boundsMax, levels, grid, nodes, surfels, colorBits, attributes, weights,
            kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, blocksParts, statistics,
-           previewStride };
+           previewStride, previewDone };
 }
 
 // The file holding a node's block and the offset there (common/tileset_format.h's placeBlock).

@@ -319,7 +319,8 @@ async function main() {
     $("progress").textContent = `${s.nodes} nodes, ${s.splats.toLocaleString()} splats, ` +
       `${(s.bytes / 1e6).toFixed(1)} MB in ${s.requests} requests` + (s.converged ? ", converged" : `, ${s.inFlight} in flight`) +
       (opts.follow ? `; version ${s.version}${s.loadingVersion ? ", loading the next" : ""}` : "") +
-      (s.preview ? `; a preview of a build in progress (1 in ${s.preview} points)` : "");
+      (s.preview ? `; a preview of a build in progress (1 in ${s.preview} points` +
+                   (s.previewDone > 0 ? `, ${Math.floor(100 * s.previewDone)} % at full detail)` : ")") : "");
   };
   for (const type of ["change", "converged", "version"]) v.addEventListener(type, progress);
   wirePanel(v, setUrl);

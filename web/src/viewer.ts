@@ -103,8 +103,10 @@ export interface ViewerState {
   loadingVersion: boolean;
   followError: string;
   // The version drawn is a preview of a build in progress (every Nth input
-  // point: surfcast-build --preview); 0: a set.
+  // point: surfcast-build --preview); 0: a set. previewDone: the share of
+  // its input points at full detail (the chunks built so far), in [0, 1).
   preview: number;
+  previewDone: number;
 }
 
 // A surfel under the cursor (SurfcastViewer.pick).
@@ -516,7 +518,8 @@ export class SurfcastViewer extends EventTarget {
     if (st.gaveUp && !this.next) this.error(st.lastError);
     Object.assign(this.state, { bytes: st.bytes, requests: st.requests, resident: st.resident, residentBytes: st.residentBytes, keptBytes: st.keptBytes,
                                 refetched: st.refetched, adopted: st.adopted, shared: st.shared, evictions: st.evictions, inFlight: st.inFlight,
-                                loadingVersion: this.next !== null, preview: this.info.previewStride });
+                                loadingVersion: this.next !== null, preview: this.info.previewStride,
+                                previewDone: this.info.previewDone });
     return { gpu, indices, splats, converged: done, nodesCrc: crc32(new TextEncoder().encode(keys.join(","))) };
   }
 
@@ -671,7 +674,7 @@ export function emptyViewerState(): ViewerState {
   return { converged: false, nodes: 0, nodesCrc: 0, splats: 0, bytes: 0, requests: 0, errors: [], notices: [], mode: "",
            firstImageMs: null, convergedMs: null, resident: 0, residentBytes: 0, keptBytes: 0, refetched: 0, adopted: 0, shared: 0, evictions: 0,
            inFlight: 0, frames: 0, frameMs: 0, camera: "", version: 0, loadingVersion: false, followError: "",
-           preview: 0 };
+           preview: 0, previewDone: 0 };
 }
 
 function normalsOriented(source: string): boolean {
