@@ -298,6 +298,11 @@ void addWork(Declare& d, BuildArgs& a) {
 }
 
 // --part P/N (scan, count) or P (distribute).
+void addStandIns(Declare& d, BuildArgs& a, const std::string& help) {
+    d.number("--stand-ins", "N", help, 1, 4294967295.0, true, "--stand-ins needs a stride in [1, 2^32)",
+             [&a](double v) { a.standIns = uint32_t(v); }, false);
+}
+
 void addPart(Declare& d, BuildArgs& a, bool fraction) {
     d.value("--part", fraction ? "P/N" : "P", fraction ? "part P of N parts (0 <= P < N)" : "part P of the plan's parts alone",
             [&a, fraction](const std::string& v) {
@@ -360,20 +365,25 @@ struct BuildApp {
                  }, false);
         addReach(app, names, a);
 
-        // The stages that take the inputs and the options: scan, count and plan.
-        for (const char* name : {"scan", "count", "plan"}) {
+        // The stages that take the inputs and the options: preview, scan, count and plan.
+        for (const char* name : {"preview", "scan", "count", "plan"}) {
+            const std::string n = name;
             CLI::App* sub = stage(app, name,
-                                  std::string(name) == "plan" ? "plan the build: the chunk layout, W/plan.bin and W/plan.json"
-                                                              : std::string(name) == "scan" ? "scan part P of the inputs"
-                                                                                            : "count part P's points on the counting grid");
+                                  n == "plan"      ? "plan the build: the chunk layout, W/plan.bin and W/plan.json"
+                                  : n == "scan"    ? "scan part P of the inputs"
+                                  : n == "preview" ? "publish --preview's set at -o (a folder), unless it holds a set"
+                                                   : "count part P's points on the counting grid");
             Declare s(*sub, names);
             addOutput(s, a);
             addBuildOptions(s, a);
             addReach(*sub, names, a);
             addWork(s, a);
-            if (std::string(name) == "plan")
+            if (n == "plan")
                 s.number("--parts", "N", "reduce what scan and count wrote for parts 0/N to N-1/N", 1, 1e6, true,
                          "--parts needs the count of scan and count parts", [&a](double v) { a.parts = size_t(v); }, false);
+            else if (n == "preview")
+                s.number("--preview-points", "N", "about N points (default 200000)", 1000, 1e9, false,
+                         "--preview-points needs a count in [1000, 10^9]", [&a](double v) { a.previewPoints = uint64_t(v); }, false);
             else
                 addPart(s, a, true);
         }
@@ -391,7 +401,15 @@ struct BuildApp {
         addWork(ds, a);
         addThreadsAndQuiet(ds, a);
         addPart(ds, a, false);
+        addStandIns(ds, a, "also every Nth point of the part to the stand-ins' files, for refine");
         addReach(*distribute, names, a);
+        CLI::App* refine = stage(app, "refine",
+                                 "publish a version of the build in progress at the plan's -o (a folder): the chunks built so far, "
+                                 "the others' stand-ins (distribute --stand-ins N)");
+        Declare r(*refine, names);
+        addWork(r, a);
+        addThreadsAndQuiet(r, a);
+        addStandIns(r, a, "the stand-ins' stride, as distribute was given it (required)");
         CLI::App* chunk = stage(app, "chunk", "build the chunks I... (0 to the plan's count less one)");
         Declare c(*chunk, names);
         addWork(c, a);
@@ -430,13 +448,16 @@ struct BuildApp {
 };
 
 bool laterStage(const std::string& stage) {
-    return stage == "distribute" || stage == "chunk" || stage == "merge" || stage == "update-merge";
+    return stage == "distribute" || stage == "chunk" || stage == "refine" || stage == "merge" || stage == "update-merge";
 }
 
 // What a later stage says of an argument it does not take.
 std::string notFromThePlan(const std::string& stage, const std::string& arg) {
     return stage + " takes --work DIR, --threads N and -q" +
-           (stage == "chunk" ? " and chunk numbers" : stage == "distribute" ? ", --part P and how to reach URL inputs (--header, ...)" : "") +
+           (stage == "chunk"        ? " and chunk numbers"
+            : stage == "distribute" ? ", --part P, --stand-ins N and how to reach URL inputs (--header, ...)"
+            : stage == "refine"     ? " and --stand-ins N"
+                                    : "") +
            "; the other options come from the plan (not " + arg + ")";
 }
 

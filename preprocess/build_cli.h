@@ -22,6 +22,7 @@ struct BuildArgs {
     std::vector<size_t> chunks;  // the chunk stage's chunks
     size_t part = 0, parts = 0;  // --part P/N (scan, count; P alone for distribute) and --parts N (plan)
     bool partGiven = false;
+    uint32_t standIns = 0;  // --stand-ins N (distribute, refine): every Nth point stands in for a chunk not built yet
     // The build options as given, in order (every option but the inputs, -o,
     // the modes, the stages' own and how to reach URLs): what a plan and a
     // build record store, and what an update refuses but --threads and -q.

@@ -23,6 +23,7 @@
 #include "crc32.h"
 #include "octree_builder.h"
 #include "preview.h"
+#include "refine.h"
 #include "set_lock.h"
 #include "stages.h"
 #include "store_work.h"
@@ -356,6 +357,8 @@ int runStage(Args& a) {
     if (a.work.empty()) return usageError(stage + " needs --work DIR, a folder every stage's process sees (or s3://BUCKET/PREFIX)");
     if (!surfcast::isS3Url(a.work)) return runStageOn(stage, a, surfcast::WorkFolder{a.work});
     if (stage == "update-merge") return usageError("an update in stages works in a folder; --work s3://... is for builds");
+    if (stage == "preview" || stage == "refine" || a.standIns > 0)
+        return usageError("previews and versions while building publish to a folder; --work s3://... builds a set in a store whole");
     auto staging = surfcast::PublishStaging::create();
     if (!staging) return fail(staging.status());
     auto storeWork = surfcast::StoreWork::open(a.work, stage, a.chunks, (*staging)->dir() + "/work");
@@ -379,6 +382,18 @@ int runStage(Args& a) {
 int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& work) {
     surfcast::BuildSummary summary;
     std::shared_ptr<const surfcast::BuildContext> context;
+    if (stage == "preview") {
+        if (a.opt.output.empty()) return usageError("no output folder (-o OUT)");
+        if (surfcast::isS3Url(a.opt.output)) return usageError("--preview publishes to a folder (-o DIR); a set in a store is published whole");
+        if (a.opt.inputs.paths.empty() && !a.opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
+        auto paths = absoluteInputs(a.opt.inputs.paths);
+        if (!paths) return fail(paths.status());
+        a.opt.inputs.paths = *paths;
+        auto written = surfcast::publishPreview(a.opt, a.previewPoints);
+        if (!written) return fail(written.status());
+        std::printf("%s %s\n", *written ? "published a preview at" : "no preview: a set is at", a.opt.output.c_str());
+        return 0;
+    }
     if (stage == "scan" || stage == "count" || stage == "plan") {
         if (a.opt.output.empty()) return usageError("no output folder (-o OUT)");
         if (a.opt.inputs.paths.empty() && !a.opt.inputs.defaultScene) return usageError("no inputs (give files or --default-scene)");
@@ -456,7 +471,7 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
         }
         // A new plan: what earlier plans distributed and built goes (their
         // files name their plan, and the later stages would refuse them).
-        for (const char* folder : {"chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
+        for (const char* folder : {"chunks", "nodes", "stand-ins"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
         std::filesystem::remove(work.update(), ec);
         if (auto st = surfcast::writePlan(work.plan(), plan, stored); !st.ok()) return fail(st);
         if (auto st = writePlanJson(work, plan, plan.layout(*context), plannedChunkPoints(plan, *context)); !st.ok()) return fail(st);
@@ -479,7 +494,7 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
     // A staged update's plan (update.bin beside plan.bin) is distributed by
     // update-plan, and merged into its set by update-merge.
     const bool update = std::filesystem::exists(work.update());
-    if (update && (stage == "distribute" || stage == "merge"))
+    if (update && (stage == "distribute" || stage == "merge" || stage == "refine"))
         return usageError(work.dir + " holds an update's plan, which update-plan distributed; run chunk, then update-merge");
     if (!update && stage == "update-merge") return usageError(work.dir + " holds no update's plan (update.bin): run update-plan first");
     if (update && (stage == "chunk" || stage == "update-merge")) {
@@ -518,7 +533,7 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
         if (a.partGiven && a.part >= plan->parts.size())
             return usageError("--part " + std::to_string(a.part) + ": the plan has parts 0 to " + std::to_string(plan->parts.size() - 1));
         for (size_t p = a.partGiven ? a.part : 0; p < (a.partGiven ? a.part + 1 : plan->parts.size()); ++p)
-            if (auto st = surfcast::distributeStage(c, *plan, layout, p, work, progress, &summary); !st.ok()) return fail(st);
+            if (auto st = surfcast::distributeStage(c, *plan, layout, p, work, progress, &summary, a.standIns); !st.ok()) return fail(st);
         std::printf("distributed %s into %zu chunks\n", a.partGiven ? ("part " + std::to_string(a.part)).c_str() : "every part",
                     layout.chunks().size());
         return 0;
@@ -539,6 +554,23 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
             progress.advance(layout.chunks()[i].points);
         }
         progress.end();
+        return 0;
+    }
+    if (stage == "refine") {
+        // A version of the build in progress (refine.h): the chunks whose
+        // output is in place (the .nodes file comes last), the others' stand-ins.
+        if (a.standIns == 0) return usageError("refine needs --stand-ins N, the stride distribute was given");
+        if (surfcast::isS3Url(planned.opt.output))
+            return usageError("versions while building publish to a folder; a set in a store is published whole");
+        if (auto st = surfcast::readDistribution(work, *plan, layout); !st.ok()) return fail(st);
+        if (auto st = surfcast::buildStandIns(c, *plan, layout, work, c.threads()); !st.ok()) return fail(st);
+        std::vector<bool> built(layout.chunks().size());
+        for (size_t i = 0; i < built.size(); ++i) built[i] = std::filesystem::exists(work.nodes(i));
+        const size_t done = size_t(std::count(built.begin(), built.end(), true));
+        surfcast::SetLock lock;
+        if (auto st = surfcast::lockOutput(planned.opt.output, &lock); !st.ok()) return fail(st);
+        if (auto st = surfcast::publishRefinement(c, *plan, layout, work, std::move(built), a.standIns); !st.ok()) return fail(st);
+        std::printf("published a version at %s: %zu of %zu chunks built\n", planned.opt.output.c_str(), done, layout.chunks().size());
         return 0;
     }
     // merge: into the set's folder, or for a set in a store into a local
@@ -577,7 +609,7 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
     // The set is in place: the parts' and chunks' files go (plan.bin and
     // plan.json stay, a record of the build).
     std::error_code ec;
-    for (const char* folder : {"scan", "count", "chunks", "nodes"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
+    for (const char* folder : {"scan", "count", "chunks", "nodes", "stand-ins"}) std::filesystem::remove_all(work.dir + "/" + folder, ec);
     if (int status = finishBuild(planned, summary, !publishTo.empty()); status != 0 || publishTo.empty()) return status;
     auto published = surfcast::publishFolder(planned.opt.output, publishTo);
     if (!published) return fail(published.status());
@@ -718,11 +750,11 @@ int main(int argc, char** argv) {
 
     surfcast::SetLock previewLock;  // the preview is a set: other writers wait for the build
     if (a.preview) {
-        if (auto sample = surfcast::publishPreview(a.opt, a.previewPoints); !sample) {
-            std::fprintf(stderr, "surfcast-build: no preview: %s\n", sample.status().message().c_str());
-        } else if (sample->inputs) {
+        if (auto written = surfcast::publishPreview(a.opt, a.previewPoints); !written) {
+            std::fprintf(stderr, "surfcast-build: no preview: %s\n", written.status().message().c_str());
+        } else if (*written) {
             if (auto locked = surfcast::lockOutput(opt.output, &previewLock); !locked.ok()) return fail(locked);
-            a.opt.refine = surfcast::BuildOptions::Refine{std::move(*sample), a.previewInterval};
+            a.opt.refine = surfcast::BuildOptions::Refine{a.previewPoints, a.previewInterval};
         }
     }
     auto summary = surfcast::buildTileset(a.opt);

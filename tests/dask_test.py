@@ -234,6 +234,49 @@ class DaskBuild(unittest.TestCase):
                 self.assertLessEqual(t["rss"], budget * 1.1, f"{name}: {t}")
             self.assertFalse(os.path.exists(os.path.join(self.dir, "." + name + "-dask.dask-work")), "work folder left")
 
+    def test_a_preview_and_versions_while_the_chunks_are_built(self):
+        # --preview: the preview task beside the scan, a refine task once a
+        # chunk is built (--preview-interval 0), and the set the one-process
+        # bytes. A poll of -o sees the preview and a version with chunks
+        # built, each a whole set.
+        import threading
+
+        out, report = self.path("set"), self.path("report.json")
+        one_process(SCENE, self.path("one"))
+        seen, broken, stop = [], [], threading.Event()
+
+        def poll():
+            while not stop.is_set():
+                try:
+                    text = read(os.path.join(out, "tileset.json"))
+                    info = json.loads(text)
+                    if info.get("preview") and info["preview"] not in seen:
+                        seen.append(info["preview"])
+                        verified = subprocess.run([SURFCAST_BUILD, "--info", out], capture_output=True, text=True)
+                        if verified.returncode != 0 and read(os.path.join(out, "tileset.json")) == text:
+                            broken.append(verified.stderr)  # (not a version replaced while verified)
+                except (OSError, ValueError):
+                    pass  # none yet, or replaced while read
+                time.sleep(0.005)
+
+        poller = threading.Thread(target=poll)
+        poller.start()
+        try:
+            r = subprocess.run(self.driver(SCENE, out, "--preview", "--preview-points", "5000", "--preview-interval", "0",
+                                           "--report", report), capture_output=True, text=True)
+        finally:
+            stop.set()
+            poller.join()
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertTrue(same_set(self.path("one"), out))
+        self.assertEqual(broken, [])
+        with open(report) as f:
+            stages = json.load(f)["stages"]
+        self.assertEqual(stages["preview"]["tasks"], 1)
+        self.assertGreaterEqual(stages["refine"]["tasks"], 1)
+        self.assertTrue(any(p.get("done", 0) == 0 for p in seen), f"no preview seen: {seen}")
+        self.assertTrue(any(0 < p.get("done", 0) < 1 for p in seen), f"no version with chunks built seen: {seen}")
+
     def test_worker_killed_mid_chunk(self):
         out, work = self.path("set"), self.path("work")
         one_process(LONGER, self.path("one"))

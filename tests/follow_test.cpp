@@ -453,7 +453,7 @@ TEST_F(FollowTest, APreviewComesFirstRefinesAsChunksAreBuiltAndEndsInTheBuildsOw
     ASSERT_TRUE(refined) << refined.status().message();
     auto verified = verifyTileset(*refined);
     EXPECT_TRUE(verified) << verified.status().message();
-    EXPECT_EQ(refined->info().previewStride, uint32_t(stride));
+    EXPECT_GT(refined->info().previewStride, 1u);  // about 5,000 of the 110,000 points, from the plan's count
     EXPECT_LT(refined->info().previewDone, 1.0);
     frames = follow(*client, camera, [](const ClientFrame& f) { return f.version >= 1 && f.converged; });
     ASSERT_FALSE(frames.empty());

@@ -80,15 +80,17 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     } workGuard{work.dir};
 
     ChunkLayout layout = plan->layout(c);
-    SC_TRY(distributeParts(c, *plan, layout, work, progress, &summary));
-    SC_TRY(readDistribution(work, *plan, layout));
-    summary.chunks = layout.chunks().size();
     // Versions of the build in progress (refine.h), where there is more than
     // one chunk to refine: a failure to start them is a warning.
+    const bool refining = options.refine && layout.chunks().size() > 1;
+    const uint32_t stride = refining ? standInStride(c.stats().points, options.refine->points) : 0;
+    SC_TRY(distributeParts(c, *plan, layout, work, progress, &summary, stride));
+    SC_TRY(readDistribution(work, *plan, layout));
+    summary.chunks = layout.chunks().size();
     std::unique_ptr<Refiner> refiner;
-    if (options.refine && layout.chunks().size() > 1) {
+    if (refining) {
         const auto begun = std::chrono::steady_clock::now();
-        auto created = Refiner::create(c, *plan, layout, work, *options.refine);
+        auto created = Refiner::create(c, *plan, layout, work, stride, options.refine->interval);
         summary.phaseSeconds.push_back({"stand-ins", std::chrono::duration<double>(std::chrono::steady_clock::now() - begun).count()});
         if (created) refiner = std::move(*created);
         else std::fprintf(stderr, "surfcast-build: no versions while building: %s\n", created.status().message().c_str());

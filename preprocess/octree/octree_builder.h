@@ -54,10 +54,11 @@ struct BuildOptions {
     uint32_t preview = 0;
     // Refinement while building (refine.h): where set, versions published to
     // `output` as the chunks are built, the chunks not built yet made from
-    // the preview's `sample`, at least `interval` seconds apart (0: after
-    // every chunk) and rarer where publishing is slow (kRefineCostFactor).
+    // about `points` of the input points (standInStride), at least `interval`
+    // seconds apart (0: after every chunk) and rarer where publishing is slow
+    // (kRefineCostFactor).
     struct Refine {
-        CapturedInputs sample;
+        uint64_t points = 200'000;
         double interval = 2;
     };
     std::optional<Refine> refine;

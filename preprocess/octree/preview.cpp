@@ -10,13 +10,13 @@
 
 namespace surfcast {
 
-Result<CapturedInputs> publishPreview(const BuildOptions& options, uint64_t points) {
+Result<bool> publishPreview(const BuildOptions& options, uint64_t points) {
     const std::string& out = options.output;
     if (std::filesystem::exists(std::filesystem::path(out) / "tileset.json")) {
         if (options.progress)
             std::fprintf(stderr, "preview: %s holds a set, which its viewers keep until the build replaces it: none written\n",
                          out.c_str());
-        return CapturedInputs{};
+        return false;
     }
     // The stride guessed from the files' sizes (bytes per point by format);
     // captureInputs doubles it where the guess holds too many points.
@@ -35,7 +35,7 @@ Result<CapturedInputs> publishPreview(const BuildOptions& options, uint64_t poin
     const auto start = std::chrono::steady_clock::now();
     auto captured = captureInputs(p.inputs, uint32_t(std::clamp(estimate / double(points), 1.0, 1e9)), 2 * points);
     if (!captured) return captured.status();
-    p.inputs.captured = captured->inputs;
+    p.inputs.captured = std::move(captured->inputs);
     p.preview = captured->stride;
     auto summary = buildTileset(p);
     if (!summary) return summary.status();
@@ -43,7 +43,7 @@ Result<CapturedInputs> publishPreview(const BuildOptions& options, uint64_t poin
         std::fprintf(stderr, "preview: %s, 1 in %u points of each input (%llu), in %.2f s\n", out.c_str(), p.preview,
                      (unsigned long long)summary->inputPoints,
                      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-    return *captured;
+    return true;
 }
 
 }  // namespace surfcast

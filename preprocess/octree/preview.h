@@ -17,9 +17,7 @@ namespace surfcast {
 // so no pass over the points comes first, and doubled while the sample would
 // exceed 2 x `points`. The sample is read once and built from memory
 // (textured meshes' textures are read again). Says what it did on stderr
-// unless options.progress is off. Returns the sample (for the build's
-// refinements: BuildOptions::refine), none (null inputs) where no preview
-// was written.
-Result<CapturedInputs> publishPreview(const BuildOptions& options, uint64_t points);
+// unless options.progress is off. Returns whether it wrote one.
+Result<bool> publishPreview(const BuildOptions& options, uint64_t points);
 
 }  // namespace surfcast

@@ -1,15 +1,18 @@
 // Refinement while building (surfcast-build --preview): as a build's chunks
 // are built, versions of the set are published to its output, each holding
 // the chunks built so far at full detail and the others as stand-ins: the same
-// chunks built from the preview's sample (every stride-th point). Each version
+// chunks built from every Nth input point, which the distribute pass writes
+// beside the chunks' own files (distributeStage's standInStride). Each version
 // is an ordinary set in the build's own layout, marked a preview with the
 // share of its points at full detail (docs/FORMAT.md, "preview"), so a
 // follower keeps a built chunk's nodes from one version to the next. The
-// build's own merge then replaces the last version; nothing here touches the
-// build's files, so its bytes are those of a build without previews.
+// build's own merge then replaces the last version; nothing here changes the
+// build's own files, so its bytes are those of a build without previews.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -23,12 +26,27 @@ namespace surfcast {
 // 1 / kRefineCostFactor of the build (bench/BENCHMARKS.md, "Previews").
 inline constexpr double kRefineCostFactor = 20;
 
+// The stand-ins' stride: every Nth of `points` input points, about `wanted` in all.
+inline uint32_t standInStride(uint64_t points, uint64_t wanted) {
+    return uint32_t(std::clamp<uint64_t>(points / std::max<uint64_t>(1, wanted), 1, UINT32_MAX));
+}
+
+// Builds the stand-ins of `layout`'s chunks (from the parts' stand-in files)
+// into work.standIns(), but those built there already.
+Status buildStandIns(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                     int threads);
+
+// Publishes a version to the plan's output: the chunks `built` from the work
+// folder, the others' stand-ins (buildStandIns), marked a preview of `stride`.
+Status publishRefinement(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
+                         std::vector<bool> built, uint32_t stride);
+
+// A build in one process: publishes versions as its chunks are built.
 class Refiner {
 public:
-    // Distributes the sample to `layout`'s chunks and builds each chunk's
-    // stand-in, in a folder inside the work folder. `layout`: readDistribution's.
+    // Builds the stand-ins. `layout`: readDistribution's; `stride`: distributeStage's.
     static Result<std::unique_ptr<Refiner>> create(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout,
-                                                   const WorkFolder& work, const BuildOptions::Refine& options);
+                                                   const WorkFolder& work, uint32_t stride, double interval);
 
     // Chunk `index` is built (its files are in the work folder): publishes a
     // version where one is due. Called from the chunks' threads; publishes one
@@ -36,24 +54,19 @@ public:
     // merge comes next). A version that fails is a warning: the build goes on.
     void chunkBuilt(size_t index);
 
-    size_t versions() const { return versions_; }  // published so far
-
 private:
-    Refiner(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-            const BuildOptions::Refine& options);
-    Status buildStandIns();
-    Status publish(Refinement refinement);
+    Refiner(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work, uint32_t stride,
+            double interval);
 
     const BuildContext& context_;
     const BuildPlan& plan_;
     const ChunkLayout& layout_;
     const WorkFolder& work_;
-    WorkFolder standIns_;
-    BuildOptions::Refine options_;
+    const uint32_t stride_;
+    const double interval_;
     std::mutex mutex_;  // guards what follows
     std::vector<bool> built_;
-    uint64_t builtPoints_ = 0;
-    size_t builtChunks_ = 0, versions_ = 0;
+    size_t builtChunks_ = 0;
     bool publishing_ = false;
     std::chrono::steady_clock::time_point lastEnd_;
     double lastSeconds_ = 0;

@@ -51,6 +51,11 @@ struct WorkFolder {
     std::string nodes(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".nodes"; }
     std::string blocks(size_t chunk) const { return dir + "/nodes/" + std::to_string(chunk) + ".blocks"; }
     std::string update() const { return dir + "/update.bin"; }  // a staged update's own record (update.h)
+    // Refinement while building (refine.h): a part's stand-ins' chunk files
+    // beside its own (in `partFolder`, chunks(part)), and the stand-ins'
+    // chunks' outputs under the work folder.
+    static std::string standIns(const std::string& partFolder) { return partFolder + "/stand-ins"; }
+    WorkFolder standIns() const { return {dir + "/stand-ins"}; }
 };
 
 // A run of consecutive inputs' records, from record `begin` of input `first`
@@ -156,16 +161,21 @@ Status keepBuildRecord(TilesetWriter& writer, const std::string& dir, BuildPlan 
 size_t readParts(const BuildOptions& options);
 // Distribute: writes part `part`'s points to its chunk files and
 // distribution.bin (each chunk's point and halo counts from this part).
+// `standInStride` > 0: also every standInStride-th point of the part, counted
+// from its first, to the same files and a distribution.bin of their own in
+// WorkFolder::standIns(work.chunks(part)) (refine.h); the part's own files
+// are the same bytes either way.
 Status distributeStage(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, size_t part,
-                       const WorkFolder& work, Progress& progress, BuildSummary* summary);
+                       const WorkFolder& work, Progress& progress, BuildSummary* summary, uint32_t standInStride = 0);
 // Distribute every part of `plan` at once, a thread each (forEachPartInParallel).
 Status distributeParts(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                       Progress& progress, BuildSummary* summary);
+                       Progress& progress, BuildSummary* summary, uint32_t standInStride = 0);
 // distribution.bin at `path`: each chunk's point and halo counts as
 // `layout`'s chunks were written, for `plan`.
 Status writeDistribution(const std::string& path, const BuildPlan& plan, const ChunkLayout& layout);
-// Each chunk's files of every part, with their counts, from distribution.bin.
-Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout);
+// Each chunk's files of every part, with their counts, from distribution.bin
+// (`standIns`: the stand-ins', distributeStage's standInStride).
+Status readDistribution(const WorkFolder& work, const BuildPlan& plan, ChunkLayout& layout, bool standIns = false);
 
 // An update's rule for the nodes it builds again: true where the set's node
 // of the built node's key stays, record and block, since nothing the update
