@@ -3,13 +3,14 @@
 against the build without a preview and PotreeConverter 2, side by side.
 
 The input is build_bench.py's one big LAS: the lion tiled 6 x 5 (10.26 M
-points). In this one process, one after the other:
+points; --tiles 18x17 gives 104.6 M). In this one process, one after the other:
 
   potree    PotreeConverter (--method poisson): its set exists when it ends;
   build     surfcast-build -o OUT, no preview;
-  alone     surfcast-build --preview -o OUT3, with nothing following it: the
-            cost of the preview and its refinements (versions as chunks are
-            built) to the build;
+  pairs     --pairs times, one after the other: surfcast-build without a
+            preview, then --preview with nothing following it: the cost of
+            the preview and its refinements (versions as chunks are built) to
+            the build, as the median of the pairs' ratios;
   preview   surfcast-build --preview -o OUT2, and as soon as OUT2/tileset.json
             appears, a headless viewer following it (surfcast-view --lod 1
             --follow 1 --save-redraws, the set framed at 640 x 360).
@@ -20,7 +21,7 @@ it, the versions it showed, when the build ends, when the follower shows the
 built set (converged), and whether the built set is byte for byte the build's
 without a preview. Every image the follower drew is compared (FLIP) with its
 last, the finished set's: the quality-over-time chart,
-bench/report/preview_quality.png.
+bench/report/preview_quality_XxY.png.
 
 Usage: bench/.venv/bin/python bench/preview_bench.py [--work DIR] [--threads N]
 Prints Markdown for bench/BENCHMARKS.md ("Previews").
@@ -54,11 +55,15 @@ def main():
     ap.add_argument("--work", default="/tmp/surfcast-preview-bench")
     ap.add_argument("--threads", default=str(os.cpu_count()))
     ap.add_argument("--interval", default="2", help="--preview-interval (default 2)")
+    ap.add_argument("--tiles", default="6x5", help="copies of the lion, X x Y (default 6x5)")
+    ap.add_argument("--pairs", type=int, default=3, help="builds without and with --preview, one after the other (default 3)")
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
-    las = os.path.join(a.work, "lion_tiled.las")
+    tx, ty = (int(v) for v in a.tiles.split("x"))
+    las = os.path.join(a.work, f"lion_tiled_{tx}x{ty}.las")
     if not os.path.exists(las):
-        build_bench.tiled_las(os.path.join(build_bench.DATA, "lion_takanawa.copc.laz"), 6, 5, las)
+        build_bench.tiled_las(os.path.join(build_bench.DATA, "lion_takanawa.copc.laz"), tx, ty, las)
+    points = tx * ty * 341989
     build_bench.run_measured.log = os.path.join(a.work, "run.log")
     plain, previewed, alone, potree_out = (os.path.join(a.work, n) for n in ("plain", "previewed", "alone", "potree"))
     for d in (plain, previewed, alone, potree_out):
@@ -69,12 +74,19 @@ def main():
     build = build_bench.surfcast([las], previewed, "2G", a.threads)
     os.rename(previewed, plain)
     common = ["--memory", "2G", "--threads", a.threads, "--preview-interval", a.interval]
-    started = time.monotonic()
-    quiet = subprocess.run([os.path.join(BIN, "surfcast-build"), "--preview", las, "-o", alone, *common], stdout=subprocess.DEVNULL,
+
+    def timed(args):
+        started = time.monotonic()
+        r = subprocess.run([os.path.join(BIN, "surfcast-build"), *args, las, "-o", alone, *common], stdout=subprocess.DEVNULL,
                            stderr=subprocess.PIPE, text=True, check=True)
-    t_alone = time.monotonic() - started
-    versions_alone = quiet.stderr.count("at full detail")
-    shutil.rmtree(alone)
+        shutil.rmtree(alone)
+        return time.monotonic() - started, r.stderr.count("at full detail")
+
+    pairs = []  # (without, with --preview, versions)
+    for _ in range(a.pairs):
+        without, _ = timed(["-q"])
+        with_preview, versions = timed(["--preview"])
+        pairs.append((without, with_preview, versions))
     frames_dir = os.path.join(a.work, "frames")
     shutil.rmtree(frames_dir, ignore_errors=True)
     os.makedirs(frames_dir)
@@ -116,7 +128,7 @@ def main():
     follower.wait()
 
     print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; `{' '.join(sys.argv)}`\n")
-    print(f"Input: one LAS of {os.path.getsize(las):,} bytes, 10.26 M points (the lion tiled 6 x 5)\n")
+    print(f"Input: one LAS of {os.path.getsize(las):,} bytes, {points / 1e6:.2f} M points (the lion tiled {tx} x {ty})\n")
     print("| | seconds from the build's start |\n|---|---|")
     print(f"| PotreeConverter's set (`--method poisson`) | {potree['wall']:.2f} |")
     print(f"| surfcast-build's set, without a preview | {build['wall']:.2f} |")
@@ -124,15 +136,19 @@ def main():
     print(f"| its follower's first image (lavapipe drew it in {first[1]['gpu_ms'] / 1e3:.2f} s) | {first[0]:.2f} |")
     print(f"| the set built | {t_built:.2f} ({t_built / build['wall']:.3f}x the build without a preview) |")
     print(f"| the follower showing the set, converged | {shown[0]:.2f} |")
-    print(f"| with `--preview`, nothing following: the set built | {t_alone:.2f} ({t_alone / build['wall']:.3f}x; "
-          f"{versions_alone} versions while building) |")
-    quality(seen, os.path.join(ROOT, "bench", "report", "preview_quality.png"), t_preview, t_built, potree["wall"])
+    ratios = sorted(w / o for o, w, _ in pairs)
+    if pairs:
+        print(f"\nWithout and with `--preview`, nothing following, {len(pairs)} pairs one after the other: " +
+              "; ".join(f"{o:.2f} s and {w:.2f} s ({w / o:.3f}x, {v} versions)" for o, w, v in pairs) +
+              f"; median **{ratios[len(ratios) // 2]:.3f}x**.")
+    quality(seen, os.path.join(ROOT, "bench", "report", f"preview_quality_{tx}x{ty}.png"), t_preview, t_built, potree["wall"],
+            f"{points / 1e6:.2f} M-point LAS")
     print(f"\nThe set built with `--preview` is the build's without, byte for byte: "
           f"{'yes' if same_folders(plain, previewed) else 'NO'}; the preview was 1 in "
           f"{first[1].get('preview', 1)} points.")
 
 
-def quality(seen, chart, t_preview, t_built, t_potree):
+def quality(seen, chart, t_preview, t_built, t_potree, title):
     """FLIP of each image the follower drew against its last (the finished
     set's), over time; a table and the chart."""
     import flip_evaluator as flip
@@ -160,7 +176,7 @@ def quality(seen, chart, t_preview, t_built, t_potree):
     ax.axvline(t_potree, color="tab:red", linestyle="--", label="PotreeConverter done")
     ax.set_xlabel("seconds since the build started")
     ax.set_ylabel("FLIP against the finished set")
-    ax.set_title("10.26 M-point LAS: the image while the build runs")
+    ax.set_title(f"{title}: the image while the build runs")
     ax.legend()
     fig.tight_layout()
     fig.savefig(chart, dpi=100)

@@ -92,6 +92,47 @@ TEST(Stages, DefaultSceneAcrossChunksSameBytesAsOneProcess) {
     expectStagedSameAsOneProcess(dir, {"--default-scene", "--scene-points", "300000", "--memory", "160M", "--capacity", "4000"});
 }
 
+// Versions while building (refine.h) in stages: distribute writes the
+// stand-ins aside (--stand-ins N), refine publishes the chunks built so far
+// with the others' stand-ins, a whole set marked with the share done; the
+// set the merge then writes is the one-process build's, byte for byte, and
+// the work folder keeps no stand-in.
+TEST(Stages, VersionsWhileBuildingLeaveTheSameBytes) {
+    test::TempDir dir;
+    const std::vector<std::string> options = {"--default-scene", "--scene-points", "300000", "--memory", "160M", "--capacity", "4000"};
+    const std::string work = dir.file("work"), out = dir.file("staged");
+    auto whole = test::run(concat(concat({test::binary("surfcast-build"), "-q"}, options), {"-o", dir.file("whole")}));
+    ASSERT_EQ(whole.exitCode, 0) << whole.output;
+    ASSERT_NO_FATAL_FAILURE(stage(concat(concat({"plan", "--work", work, "-q"}, options), {"-o", out})));
+    const size_t chunks = plannedChunks(work);
+    ASSERT_GE(chunks, 4u);
+    ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q", "--stand-ins", "30"}));
+    for (size_t i = 0; i < chunks / 2; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    auto refined = test::run({test::binary("surfcast-build"), "refine", "--work", work, "-q", "--stand-ins", "30"});
+    ASSERT_EQ(refined.exitCode, 0) << refined.output;
+    EXPECT_NE(refined.output.find(std::to_string(chunks / 2) + " of " + std::to_string(chunks) + " chunks built"), std::string::npos)
+        << refined.output;
+    const std::string json = test::readFile(out + "/tileset.json");
+    EXPECT_NE(json.find("\"stride\": 30"), std::string::npos) << json;
+    const size_t done = json.find("\"done\": ");
+    ASSERT_NE(done, std::string::npos) << json;
+    const double share = std::stod(json.substr(done + 8));
+    EXPECT_GT(share, 0);
+    EXPECT_LT(share, 1);
+    auto info = test::run({test::binary("surfcast-build"), "--info", out});
+    EXPECT_EQ(info.exitCode, 0) << info.output;  // every block's CRC checks
+    for (size_t i = chunks / 2; i < chunks; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
+    expectSameSet(out, dir.file("whole"));
+    EXPECT_FALSE(fs::exists(work + "/stand-ins"));
+    EXPECT_EQ(test::readFile(out + "/tileset.json").find("preview"), std::string::npos);
+
+    // refine wants the stride distribute was given.
+    auto bare = test::run({test::binary("surfcast-build"), "refine", "--work", work});
+    EXPECT_EQ(bare.exitCode, 2) << bare.output;
+    EXPECT_NE(bare.output.find("--stand-ins"), std::string::npos) << bare.output;
+}
+
 // Inputs of three formats in three parts: the scene (several scanners, so a
 // part's sources are not its inputs), a LAZ scan and a PCD scan. They lie far
 // apart, each within one cell of the counting grid: a chunk each.

@@ -148,6 +148,27 @@ function flipByte(file, offset) {
   writeFileSync(file, b);
 }
 
+// Holds the process `child` still (SIGSTOP) once the set in `dir` says
+// `wanted` (its tileset.json parsed); false where it ended first (60 s at most).
+async function stopWhen(child, dir, wanted) {
+  const says = () => {
+    try {
+      return wanted(JSON.parse(readFileSync(join(dir, "tileset.json"), "utf8")));
+    } catch {
+      return false;  // none yet, or replaced while read
+    }
+  };
+  for (const deadline = Date.now() + 60000; Date.now() < deadline && child.exitCode === null;) {
+    if (says()) {
+      child.kill("SIGSTOP");
+      if (says()) return true;
+      child.kill("SIGCONT");
+    }
+    await new Promise((resolve) => setTimeout(resolve, 2));
+  }
+  return false;
+}
+
 // Page 0's byte offset in hierarchy.bin, and the root record's block (FORMAT.md).
 function rootLayout(dir) {
   const h = readFileSync(join(dir, "hierarchy.bin"));
@@ -827,6 +848,42 @@ describe("browser viewer", { skip }, () => {
     assert.equal(after.nodesCrc, ref.json.nodes_crc, "the nodes a fresh open draws");
     assert.deepEqual(problems, []);
     t.diagnostic(`followed: ${after.bytes} bytes for ${changed} bytes of changed nodes; mean abs ${d.mean.toFixed(3)}`);
+    await page.close();
+  });
+
+  test("following a build in progress: a version with chunks built, said so, then the set as a fresh open draws it", async () => {
+    // surfcast-build --preview of the scene in chunks, a version after every
+    // chunk, held still once a version with chunks built is there; the page
+    // follows the folder through surfcast-serve.
+    const set = join(work, "sets", "building");
+    const child = spawn(bin("surfcast-build"), ["-q", "--default-scene", "--scene-points", "250000", "--threads", "1", "--memory",
+                                                "64M", "--capacity", "1000", "--preview-points", "5000", "--preview-interval", "0",
+                                                "-o", set], { stdio: "ignore" });
+    children.push(child);
+    const ended = new Promise((resolve) => child.on("exit", resolve));
+    assert.ok(await stopWhen(child, set, (j) => (j.preview?.done ?? 0) > 0), "no version with chunks built appeared");
+    const { page, problems } = await openPage();
+    await page.goto(`${serveUrl}/?set=/sets/building&camera=${camera}&follow=0.3`);
+    await page.waitForFunction("window.surfcast.converged || window.surfcast.errors.length > 0", { timeout: 60000 });
+    const during = await page.evaluate(() => ({ ...window.surfcast, text: document.getElementById("progress").textContent }));
+    assert.deepEqual(during.errors, []);
+    assert.ok(during.preview > 1 && during.previewDone > 0 && during.previewDone < 1, JSON.stringify(during));
+    assert.match(during.text, /a preview of a build in progress \(1 in \d+ points, \d+ % at full detail\)/);
+    child.kill("SIGCONT");
+    assert.equal(await ended, 0);
+    await page.waitForFunction("(window.surfcast.preview === 0 && window.surfcast.converged) || window.surfcast.errors.length > 0",
+                               { timeout: 60000 });
+    const after = await page.evaluate(() => ({ ...window.surfcast, text: document.getElementById("progress").textContent }));
+    assert.deepEqual(after.errors, []);
+    assert.ok(after.version >= 1);
+    assert.doesNotMatch(after.text, /preview/);
+    await page.evaluate(() => document.body.classList.add("capture"));
+    const png = PNG.sync.read(await page.screenshot({ type: "png" }));
+    const { ref } = expectLikeReference(after, png, set);
+    assert.equal(after.nodesCrc, ref.json.nodes_crc, "the nodes a fresh open draws");
+    // A version replaced while its blocks were fetched: surfcast-serve says
+    // 409 (the set changed), which the viewer takes as a transient fault.
+    assert.deepEqual(problems.filter((p) => !/status of 409/.test(p)), []);
     await page.close();
   });
 
