@@ -73,7 +73,8 @@ def main():
     # Built at the preview run's -o (the build record keeps it), then moved aside.
     build = build_bench.surfcast([las], previewed, "2G", a.threads)
     os.rename(previewed, plain)
-    common = ["--memory", "2G", "--threads", a.threads, "--preview-interval", a.interval]
+    common = ["--memory", "2G", "--threads", a.threads]
+    previewing = ["--preview", "--preview-interval", a.interval]
 
     def timed(args):
         started = time.monotonic()
@@ -85,14 +86,14 @@ def main():
     pairs = []  # (without, with --preview, versions)
     for _ in range(a.pairs):
         without, _ = timed(["-q"])
-        with_preview, versions = timed(["--preview"])
+        with_preview, versions = timed(previewing)
         pairs.append((without, with_preview, versions))
     frames_dir = os.path.join(a.work, "frames")
     shutil.rmtree(frames_dir, ignore_errors=True)
     os.makedirs(frames_dir)
 
     start = time.monotonic()
-    builder = subprocess.Popen([os.path.join(BIN, "surfcast-build"), "-q", "--preview", las, "-o", previewed, *common],
+    builder = subprocess.Popen([os.path.join(BIN, "surfcast-build"), "-q", *previewing, las, "-o", previewed, *common],
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     json_path = os.path.join(previewed, "tileset.json")
     while not os.path.exists(json_path):

@@ -32,7 +32,7 @@ void removeLeftovers(const fs::path& out, const std::string& marker) {
             char* end = nullptr;
             const long pid = std::strtol(file.c_str() + prefix.size(), &end, 10);
             // ".NAME.partial-PID" and what a writer keeps beside it
-            // (".NAME.partial-PID-SUFFIX": the build's "-work").
+            // (".NAME.partial-PID-SUFFIX": the build's "-work", its versions' "-refine").
             if ((*end != '\0' && *end != '-') || pid <= 0 || pid == ::getpid()) continue;
             if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // still running (or not ours to judge)
             stale.push_back({entry.path(), kind[1] == 'o' && *end == '\0'});

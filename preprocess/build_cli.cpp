@@ -348,7 +348,7 @@ struct BuildApp {
         d.flag("--preview", "first publish a preview to OUT, unless OUT holds a set (whose viewers keep it until the build replaces "
                             "it): a set of every Nth point of each input, about 200,000 points, marked \"preview\" in its tileset.json, "
                             "for viewers to open and follow (surfcast-view --follow, ?follow=) while the build goes on; then, as "
-                            "chunks are built, versions with those chunks at full detail and the rest from the preview's points; "
+                            "chunks are built, versions with those chunks at full detail and the others from every Nth point; "
                             "the build then replaces them. The build's own bytes are those it writes without --preview",
                [&a] { a.preview = true; }, false);
         d.number("--preview-points", "N", "--preview of about N points (default 200000)", 1000, 1e9, false,

@@ -563,13 +563,15 @@ int runStageOn(const std::string& stage, Args& a, const surfcast::WorkFolder& wo
         if (surfcast::isS3Url(planned.opt.output))
             return usageError("versions while building publish to a folder; a set in a store is published whole");
         if (auto st = surfcast::readDistribution(work, *plan, layout); !st.ok()) return fail(st);
-        if (auto st = surfcast::buildStandIns(c, *plan, layout, work, c.threads()); !st.ok()) return fail(st);
+        if (auto st = surfcast::buildStandIns(c, *plan, layout, work); !st.ok()) return fail(st);
         std::vector<bool> built(layout.chunks().size());
-        for (size_t i = 0; i < built.size(); ++i) built[i] = std::filesystem::exists(work.nodes(i));
+        std::error_code ec;
+        for (size_t i = 0; i < built.size(); ++i) built[i] = std::filesystem::exists(work.nodes(i), ec);
         const size_t done = size_t(std::count(built.begin(), built.end(), true));
-        surfcast::SetLock lock;
+        surfcast::SetLock lock, version;
         if (auto st = surfcast::lockOutput(planned.opt.output, &lock); !st.ok()) return fail(st);
-        if (auto st = surfcast::publishRefinement(c, *plan, layout, work, std::move(built), a.standIns); !st.ok()) return fail(st);
+        if (auto st = surfcast::publishRefinement(c, *plan, layout, work, std::move(built), a.standIns, &version); !st.ok())
+            return fail(st);
         std::printf("published a version at %s: %zu of %zu chunks built\n", planned.opt.output.c_str(), done, layout.chunks().size());
         return 0;
     }

@@ -468,7 +468,7 @@ TEST_F(FollowTest, APreviewComesFirstRefinesAsChunksAreBuiltAndEndsInTheBuildsOw
         << "the build with --preview wrote other bytes than without";
 
     // The refined version: the built chunks' nodes are the set's; the rest
-    // stand in with fewer surfels (the preview's points).
+    // stand in with fewer surfels (every Nth point).
     auto finished = TilesetReader::open(out);
     ASSERT_TRUE(finished) << finished.status().message();
     std::set<std::tuple<NodeKey, uint32_t, uint32_t>> final;

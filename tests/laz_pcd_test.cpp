@@ -110,6 +110,36 @@ std::string lasWithColors(uint32_t count, uint16_t (*color)(uint32_t)) {
 
 }  // namespace
 
+// A LAZ file of point format 1 (pointwise coding), a COPC file of format 7
+// (layered, variable chunks) and Megaplot: each chunk's first record, read
+// as it lies in the file with nothing decoded, is the decoder's point at
+// that chunk's first record (position, colour, intensity, class, returns).
+// A LAS file is read whole.
+TEST(LazPcd, ChunkStartsAreTheDecodedFirstPointsOfTheChunks) {
+    REQUIRE_DATA();
+    const ScalarSelection every{true, {}};
+    for (const char* f : {"lone-star.laz", "lion_takanawa.copc.laz", "Megaplot.laz"}) {
+        SCOPED_TRACE(f);
+        const std::string path = test::dataFile(f);
+        auto cuts = lasCuts(path);
+        ASSERT_TRUE(cuts.ok()) << cuts.status().message();
+        auto whole = openLasReader(path, 2, every);
+        ASSERT_TRUE(whole.ok());
+        const std::vector<InputPoint> all = readPoints(**whole);
+        auto starts = openLasChunkStarts(path, every);
+        ASSERT_TRUE(starts.ok()) << starts.status().message();
+        EXPECT_EQ((*starts)->description().format, "laz");
+        EXPECT_EQ((*starts)->description().declaredPoints, all.size());
+        EXPECT_EQ((*starts)->description().scalars.size(), (*whole)->description().scalars.size());
+        const std::vector<InputPoint> read = readPoints(**starts);
+        ASSERT_EQ(read.size(), cuts->size());
+        for (size_t k = 0; k < read.size(); ++k) ASSERT_TRUE(samePoint(read[k], all[(*cuts)[k].record])) << "chunk " << k;
+    }
+    auto las = openLasChunkStarts(test::dataFile("autzen_trim.las"));
+    ASSERT_TRUE(las.ok());
+    EXPECT_EQ(readPoints(**las).size(), 110000u);
+}
+
 // A LAS, a LAZ and a COPC file (variable chunks) read as runs between its
 // cuts, each run's reader opened on its own: in order, the same points as
 // one read of the whole file. Runs that a LAZ file cannot start or end at are

@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "test_support.h"
+#include "tileset_format.h"
 #include "work_files.h"
 
 using namespace surfcast;
@@ -96,7 +97,7 @@ TEST(Stages, DefaultSceneAcrossChunksSameBytesAsOneProcess) {
 // stand-ins aside (--stand-ins N), refine publishes the chunks built so far
 // with the others' stand-ins, a whole set marked with the share done; the
 // set the merge then writes is the one-process build's, byte for byte, and
-// the work folder keeps no stand-in.
+// the work folder keeps no stand-in. No version replaces a finished set.
 TEST(Stages, VersionsWhileBuildingLeaveTheSameBytes) {
     test::TempDir dir;
     const std::vector<std::string> options = {"--default-scene", "--scene-points", "300000", "--memory", "160M", "--capacity", "4000"};
@@ -108,24 +109,31 @@ TEST(Stages, VersionsWhileBuildingLeaveTheSameBytes) {
     ASSERT_GE(chunks, 4u);
     ASSERT_NO_FATAL_FAILURE(stage({"distribute", "--work", work, "-q", "--stand-ins", "30"}));
     for (size_t i = 0; i < chunks / 2; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
+    // Over a finished set no version is written.
+    fs::copy(dir.file("whole"), out, fs::copy_options::recursive);
+    auto refused = test::run({test::binary("surfcast-build"), "refine", "--work", work, "-q", "--stand-ins", "30"});
+    EXPECT_EQ(refused.exitCode, 1) << refused.output;
+    EXPECT_NE(refused.output.find("which no version of a build replaces"), std::string::npos) << refused.output;
+    expectSameSet(out, dir.file("whole"));
+    fs::remove_all(out);
     auto refined = test::run({test::binary("surfcast-build"), "refine", "--work", work, "-q", "--stand-ins", "30"});
     ASSERT_EQ(refined.exitCode, 0) << refined.output;
     EXPECT_NE(refined.output.find(std::to_string(chunks / 2) + " of " + std::to_string(chunks) + " chunks built"), std::string::npos)
         << refined.output;
-    const std::string json = test::readFile(out + "/tileset.json");
-    EXPECT_NE(json.find("\"stride\": 30"), std::string::npos) << json;
-    const size_t done = json.find("\"done\": ");
-    ASSERT_NE(done, std::string::npos) << json;
-    const double share = std::stod(json.substr(done + 8));
-    EXPECT_GT(share, 0);
-    EXPECT_LT(share, 1);
+    auto version = readTilesetJson(test::readFile(out + "/tileset.json"), "tileset.json");
+    ASSERT_TRUE(version) << version.status().message();
+    EXPECT_EQ(version->previewStride, 30u);
+    EXPECT_GT(version->previewDone, 0);
+    EXPECT_LT(version->previewDone, 1);
     auto info = test::run({test::binary("surfcast-build"), "--info", out});
     EXPECT_EQ(info.exitCode, 0) << info.output;  // every block's CRC checks
     for (size_t i = chunks / 2; i < chunks; ++i) ASSERT_NO_FATAL_FAILURE(stage({"chunk", "--work", work, "-q", std::to_string(i)}));
     ASSERT_NO_FATAL_FAILURE(stage({"merge", "--work", work, "-q"}));
     expectSameSet(out, dir.file("whole"));
     EXPECT_FALSE(fs::exists(work + "/stand-ins"));
-    EXPECT_EQ(test::readFile(out + "/tileset.json").find("preview"), std::string::npos);
+    auto finished = readTilesetJson(test::readFile(out + "/tileset.json"), "tileset.json");
+    ASSERT_TRUE(finished) << finished.status().message();
+    EXPECT_EQ(finished->previewStride, 0u);
 
     // refine wants the stride distribute was given.
     auto bare = test::run({test::binary("surfcast-build"), "refine", "--work", work});

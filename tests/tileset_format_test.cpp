@@ -665,6 +665,7 @@ TEST(FormatConformance, TilesetJsonCases) {
             else if (field == "weights") EXPECT_EQ(info->weights, want.get<std::string>());
             else if (field == "blocks_bytes") EXPECT_EQ(info->blocksBytes, want.get<uint64_t>());
             else if (field == "hierarchy_file") EXPECT_EQ(info->hierarchyFile, want.get<std::string>());
+            else if (field == "preview") EXPECT_EQ((std::vector<double>{double(info->previewStride), info->previewDone}), want.get<std::vector<double>>());
             else if (field == "blocks_parts") {
                 std::vector<std::string> parts;
                 for (const BlocksPart& part : blocksPartsOf(*info)) parts.push_back(part.file + ":" + std::to_string(part.bytes));

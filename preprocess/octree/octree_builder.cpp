@@ -82,8 +82,8 @@ Result<BuildSummary> buildTileset(const BuildOptions& options) {
     ChunkLayout layout = plan->layout(c);
     // Versions of the build in progress (refine.h), where there is more than
     // one chunk to refine: a failure to start them is a warning.
-    const bool refining = options.refine && layout.chunks().size() > 1;
-    const uint32_t stride = refining ? standInStride(c.stats().points, options.refine->points) : 0;
+    const uint32_t stride = options.refine && layout.chunks().size() > 1 ? standInStride(c.stats().points, options.refine->points) : 0;
+    const bool refining = stride > 0;
     SC_TRY(distributeParts(c, *plan, layout, work, progress, &summary, stride));
     SC_TRY(readDistribution(work, *plan, layout));
     summary.chunks = layout.chunks().size();

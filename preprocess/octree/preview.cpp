@@ -26,14 +26,16 @@ Result<bool> publishPreview(const BuildOptions& options, uint64_t points) {
         const double bytes = double(std::filesystem::file_size(path, ec));
         if (ec) continue;  // a URL or an object: captureInputs bounds what it holds
         const std::string ext = lowerExtension(path);
-        estimate += bytes / (ext == ".laz" ? 8 : ext == ".las" ? 28 : 24);
+        if (ext != ".laz") estimate += bytes / (ext == ".las" ? 28 : 24);  // LAZ: its chunk starts
     }
     points = std::max<uint64_t>(1, points);
     BuildOptions p = normalizeOptions(options);  // the attributes and threads the build's own reading uses
     p.commandLine.clear();
     p.progress = false;
     const auto start = std::chrono::steady_clock::now();
+    p.inputs.chunkStarts = true;
     auto captured = captureInputs(p.inputs, uint32_t(std::clamp(estimate / double(points), 1.0, 1e9)), 2 * points);
+    p.inputs.chunkStarts = false;
     if (!captured) return captured.status();
     p.inputs.captured = std::move(captured->inputs);
     p.preview = captured->stride;

@@ -17,6 +17,7 @@
 #include <mutex>
 #include <vector>
 
+#include "set_lock.h"
 #include "stages.h"
 
 namespace surfcast {
@@ -26,25 +27,33 @@ namespace surfcast {
 // 1 / kRefineCostFactor of the build (bench/BENCHMARKS.md, "Previews").
 inline constexpr double kRefineCostFactor = 20;
 
-// The stand-ins' stride: every Nth of `points` input points, about `wanted` in all.
+// The stand-ins' stride: every Nth of `points` input points, about `wanted`
+// in all; 0 (no versions) where N would be under kMinStandInStride: the
+// stand-ins would cost a good part of the build itself, which is small.
+inline constexpr uint64_t kMinStandInStride = 8;
 inline uint32_t standInStride(uint64_t points, uint64_t wanted) {
-    return uint32_t(std::clamp<uint64_t>(points / std::max<uint64_t>(1, wanted), 1, UINT32_MAX));
+    const uint64_t n = points / std::max<uint64_t>(1, wanted);
+    return n < kMinStandInStride ? 0 : uint32_t(std::min<uint64_t>(n, UINT32_MAX));
 }
 
 // Builds the stand-ins of `layout`'s chunks (from the parts' stand-in files)
 // into work.standIns(), but those built there already.
-Status buildStandIns(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                     int threads);
+Status buildStandIns(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work);
 
 // Publishes a version to the plan's output: the chunks `built` from the work
 // folder, the others' stand-ins (buildStandIns), marked a preview of `stride`.
+// `lock` then holds the version's folder (taken before it is swapped in: the
+// output stays locked from one version to the next). Fails, writing nothing,
+// where the output holds a set that is not a preview: versions never replace
+// a finished set.
 Status publishRefinement(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout, const WorkFolder& work,
-                         std::vector<bool> built, uint32_t stride);
+                         std::vector<bool> built, uint32_t stride, SetLock* lock);
 
 // A build in one process: publishes versions as its chunks are built.
 class Refiner {
 public:
-    // Builds the stand-ins. `layout`: readDistribution's; `stride`: distributeStage's.
+    // Builds the stand-ins and publishes them as the first version.
+    // `layout`: readDistribution's; `stride`: distributeStage's.
     static Result<std::unique_ptr<Refiner>> create(const BuildContext& context, const BuildPlan& plan, const ChunkLayout& layout,
                                                    const WorkFolder& work, uint32_t stride, double interval);
 
@@ -65,6 +74,7 @@ private:
     const uint32_t stride_;
     const double interval_;
     std::mutex mutex_;  // guards what follows
+    SetLock lock_;      // the last version's folder
     std::vector<bool> built_;
     size_t builtChunks_ = 0;
     bool publishing_ = false;

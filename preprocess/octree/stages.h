@@ -11,6 +11,10 @@
 //               textures, Draco blocks                            → nodes/I.*
 //   merge       the levels above the chunks, then the tile set    → the output
 //
+// and, for viewers while it builds (refine.h): preview, a sample's set at the
+// output before the scan; distribute --stand-ins N, every Nth point aside;
+// refine, a version of the chunks built so far and the others' stand-ins.
+//
 // Parts are runs of the inputs' records of about equal bytes (inputPart), so
 // the scan, count and distribute passes run in parallel over inputs, and over
 // one big LAS or LAZ file; a chunk reads the parts' files in part order, which

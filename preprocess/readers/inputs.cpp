@@ -86,6 +86,7 @@ Result<std::unique_ptr<PointReader>> openOne(size_t index, const InputOptions& o
     if (ext == ".ply" || std::string(magic, 3) == "ply") return openPlyReader(path, options.scalars, options.http);
     if (ext == ".pcd" || std::string(magic, 4) == "# .P" || std::string(magic, 4) == "VERS")
         return openPcdReader(path, options.scalars, options.readAlpha, options.http);
+    if (las && options.chunkStarts && whole) return openLasChunkStarts(path, options.scalars, options.http);
     if (las) return openLasReader(path, options.threads, options.scalars, range, options.http);
     if (ext == ".e57" || std::string(magic, 4) == "ASTM") return openE57Reader(path, options.scalars, options.http);
     if (isTextExtension(ext)) return openTextReader(path, options.columns, options.http);
@@ -392,15 +393,19 @@ Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t strid
     std::vector<std::vector<uint64_t>> indices;  // per input: each held point's index in it
     uint64_t held = 0;
     // Every held point whose index is not a multiple of the doubled stride goes.
+    std::vector<bool> starts;   // per input: read by its chunk starts, each kept (every startsStride-th once thinned)
+    uint32_t startsStride = 1;
+    uint64_t standFor = 0;      // the points of the inputs read by their chunk starts
     auto thin = [&] {
         out.stride *= 2;
+        startsStride *= 2;
         held = 0;
         for (size_t k = 0; k < inputs->size(); ++k) {
             CapturedInput& c = (*inputs)[k];
             const size_t fields = c.description.scalars.size();
             size_t kept = 0;
             for (size_t i = 0; i < c.points.size(); ++i) {
-                if (indices[k][i] % out.stride != 0) continue;
+                if (indices[k][i] % (starts[k] ? startsStride : out.stride) != 0) continue;
                 c.points[kept] = c.points[i];
                 indices[k][kept] = indices[k][i];
                 std::copy_n(c.scalars.begin() + long(i * fields), fields, c.scalars.begin() + long(kept * fields));
@@ -417,6 +422,8 @@ Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t strid
         CapturedInput& c = inputs->emplace_back();
         indices.emplace_back();
         c.description = reader.description();
+        starts.push_back(options.chunkStarts && c.description.format == "laz");
+        if (starts.back()) standFor += c.description.declaredPoints;
         c.description.declaredPoints = 0;  // a sample: the build's own read checks the header's count
         const size_t fields = c.description.scalars.size();
         for (uint64_t at = 0;;) {
@@ -425,7 +432,7 @@ Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t strid
             if (*n == 0) break;
             const std::span<const double> values = reader.scalarValues();
             for (size_t i = 0; i < *n; ++i, ++at) {
-                if (at % out.stride != 0) continue;
+                if (at % (starts.back() ? startsStride : out.stride) != 0) continue;
                 c.points.push_back(batch[i]);
                 indices.back().push_back(at);
                 c.scalars.insert(c.scalars.end(), values.begin() + long(i * fields), values.begin() + long((i + 1) * fields));
@@ -435,6 +442,9 @@ Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t strid
         c.skipped = reader.skipped();
         return {};
     }));
+    uint64_t startsHeld = 0;
+    for (size_t k = 0; k < inputs->size(); ++k) startsHeld += starts[k] ? (*inputs)[k].points.size() : 0;
+    if (startsHeld > 0) out.stride = uint32_t(std::clamp<uint64_t>(standFor / startsHeld, out.stride, UINT32_MAX));
     out.inputs = std::move(inputs);
     return out;
 }

@@ -53,6 +53,8 @@ struct InputOptions {
     // one per input in their order, visited from memory instead of the files
     // (the scene and paths still say which inputs they are).
     std::shared_ptr<const std::vector<CapturedInput>> captured;
+    // LAZ files read as their chunk starts (openLasChunkStarts): a preview's sample.
+    bool chunkStarts = false;
 };
 
 // A sample of the inputs in memory (a preview's: surfcast-build --preview):
@@ -64,7 +66,9 @@ struct CapturedInputs {
 // Reads every input once, keeping every stride-th point of each; where more
 // than `most` points would be held, the stride doubles (and what is held
 // thins to it) as often as needed, so the sample stays within `most`
-// whatever the stride guessed.
+// whatever the stride guessed. With options.chunkStarts a LAZ file's chunk
+// starts are each kept (but for that thinning), and the stride is at least
+// what they stand for: the file's points over those held.
 Result<CapturedInputs> captureInputs(const InputOptions& options, uint32_t stride, uint64_t most);
 
 // A point's stored opacity: its own alpha times `opacity`, rounded to 8 bits.

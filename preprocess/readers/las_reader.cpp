@@ -125,6 +125,29 @@ private:
     size_t recordLength_;
 };
 
+// The first record of each of a LAZ file's chunks, as it lies in the file
+// (LASzip writes a chunk's first point raw, then codes the rest).
+class ChunkStarts final : public RecordSource {
+public:
+    ChunkStarts(ByteStream in, size_t recordLength, std::vector<RecordCut> starts)
+        : in_(std::move(in)), length_(recordLength), starts_(std::move(starts)) {}
+    Status read(uint8_t* out, size_t records, uint64_t firstIndex) override {
+        for (size_t i = 0; i < records; ++i) {
+            const RecordCut& c = starts_.at(firstIndex + i);
+            if (!in_.seek(c.byte) || !in_.readBytes(out + i * length_, length_))
+                return Status::error(in_.at() + ": cannot read the first point of chunk " + std::to_string(firstIndex + i) + " (record " +
+                                     std::to_string(c.record) + ")");
+        }
+        return {};
+    }
+    size_t preferredBatch() const override { return kBatchRecords; }
+
+private:
+    ByteStream in_;
+    size_t length_;
+    std::vector<RecordCut> starts_;
+};
+
 class LasReader final : public PointReader {
 public:
     // Reads records [begin, end) of `source`, which starts at `begin`.
@@ -477,10 +500,22 @@ Result<std::unique_ptr<LazRecords>> openLaz(const std::string& path, const HttpO
     return records;
 }
 
-}  // namespace
+// The first record after each of a LAZ file's chunk boundaries (chunks of no
+// points start where the next does: one place each).
+Result<std::vector<RecordCut>> chunkStarts(const std::string& path, const HttpOptions& http, const LasHeader& l) {
+    auto laz = openLaz(path, http, l, 0, l.count, 1, true);
+    if (!laz) return laz.status();
+    std::vector<RecordCut> cuts;
+    for (uint64_t k = 0, n = (*laz)->chunkCount(); k < n; ++k) {
+        const RecordCut c = (*laz)->chunkStart(k);
+        if (c.record < l.count && (cuts.empty() || c.record > cuts.back().record)) cuts.push_back(c);
+    }
+    return cuts;
+}
 
-Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads, const ScalarSelection& scalars,
-                                                   RecordRange range, const HttpOptions& http) {
+// openLasReader, or with `starts` a LAZ file's chunk starts (openLasChunkStarts).
+Result<std::unique_ptr<PointReader>> openLas(const std::string& path, int threads, const ScalarSelection& scalars, RecordRange range,
+                                             const HttpOptions& http, bool starts) {
     auto in = ByteStream::open(path, http);
     if (!in) return in.status();
     auto header = readLasHeader(*in);
@@ -524,6 +559,14 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
         }
 
     std::unique_ptr<RecordSource> source;
+    if (starts && l.compressed) {
+        auto cuts = chunkStarts(path, http, l);
+        if (!cuts) return cuts.status();
+        const uint64_t n = cuts->size();
+        source = std::make_unique<ChunkStarts>(std::move(*in), l.recordLength, std::move(*cuts));
+        return std::unique_ptr<PointReader>(new LasReader(std::move(source), desc, 0, n, l.recordLength, l.format, l.scale, l.offset,
+                                                          std::move(layouts)));
+    }
     if (l.compressed) {
         auto laz = openLaz(path, http, l, range.begin, end, threads);
         if (!laz) return laz.status();
@@ -534,6 +577,17 @@ Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int 
     }
     return std::unique_ptr<PointReader>(new LasReader(std::move(source), desc, range.begin, end, l.recordLength, l.format, l.scale,
                                                       l.offset, std::move(layouts)));
+}
+
+}  // namespace
+
+Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads, const ScalarSelection& scalars,
+                                                   RecordRange range, const HttpOptions& http) {
+    return openLas(path, threads, scalars, range, http, false);
+}
+
+Result<std::unique_ptr<PointReader>> openLasChunkStarts(const std::string& path, const ScalarSelection& scalars, const HttpOptions& http) {
+    return openLas(path, 1, scalars, {}, http, true);
 }
 
 Result<std::vector<RecordCut>> lasCuts(const std::string& path, const HttpOptions& http) {
@@ -548,14 +602,7 @@ Result<std::vector<RecordCut>> lasCuts(const std::string& path, const HttpOption
         for (uint64_t r = 0; r < l->count; r += stride) cuts.push_back({r, l->dataOffset + r * l->recordLength});
         return cuts;
     }
-    auto laz = openLaz(path, http, *l, 0, l->count, 1, true);
-    if (!laz) return laz.status();
-    // Chunks of no points start where the next does: one cut each place.
-    for (uint64_t k = 0, n = (*laz)->chunkCount(); k < n; ++k) {
-        const RecordCut c = (*laz)->chunkStart(k);
-        if (c.record < l->count && (cuts.empty() || c.record > cuts.back().record)) cuts.push_back(c);
-    }
-    return cuts;
+    return chunkStarts(path, http, *l);
 }
 
 }  // namespace surfcast

@@ -26,6 +26,13 @@ struct RecordRange {
 Result<std::unique_ptr<PointReader>> openLasReader(const std::string& path, int threads = 1,
                                                    const ScalarSelection& scalars = {}, RecordRange range = {},
                                                    const HttpOptions& http = {});
+// A LAZ file's chunk starts: the first record of each chunk, which LASzip
+// stores uncompressed, read with nothing decoded (as LidarScout, Erler et al.
+// 2025, samples a scan): one point of each chunk's (50,000 by default). The
+// description says "laz" and declares the file's points, of which it reads
+// one per chunk. A LAS file is read whole, as openLasReader reads it.
+Result<std::unique_ptr<PointReader>> openLasChunkStarts(const std::string& path, const ScalarSelection& scalars = {},
+                                                        const HttpOptions& http = {});
 
 // Where a LAS or LAZ file may be cut into runs of records that are read on
 // their own (a part of a build staged across processes, stages.h): the first

@@ -46,6 +46,7 @@ const readers = {
   weights: (i) => i.weights,
   blocks_bytes: (i) => i.blocksBytes,
   hierarchy_file: (i) => i.hierarchyFile,
+  preview: (i) => [i.previewStride, i.previewDone],
   blocks_parts: (i) => i.blocksParts.map((p) => `${p.file}:${p.bytes}`),
   hierarchy_bytes: (i) => i.hierarchyBytes,
   hierarchy_pages: (i) => i.hierarchyPages,
