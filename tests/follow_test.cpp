@@ -482,8 +482,9 @@ TEST_F(FollowTest, APreviewComesFirstRefinesAsChunksAreBuiltAndEndsInTheBuildsOw
 
 TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
     // Killed after its preview, a build leaves the preview, whole and
-    // readable; killed later, the last version it published. Over a set that
-    // is there already no preview is written, and a killed build leaves that set.
+    // readable; killed later, the last version it published, which a build
+    // run again replaces with its own preview. Over a set that is there
+    // already no preview is written, and a killed build leaves that set.
     std::vector<std::string> cells = base;
     const std::string out = dir.file("sets/killed");
     int stride = 0;
@@ -509,6 +510,12 @@ TEST_F(FollowTest, AKilledBuildLeavesItsPreviewOrTheSetThatWasThere) {
     EXPECT_GT(reader->info().previewDone, 0.0);
     verified = verifyTileset(*reader);
     EXPECT_TRUE(verified) << verified.status().message();
+    // Built again, over what the killed build left: a new preview first (that is no finished set).
+    std::vector<std::string> again = {test::binary("surfcast-build"), "--preview", "--threads", "1", "--preview-points", "5000", "-o", refined};
+    again.insert(again.end(), cells.begin(), cells.end());
+    auto rebuilt = test::run(again);
+    EXPECT_EQ(rebuilt.exitCode, 0) << rebuilt.output;
+    EXPECT_NE(rebuilt.output.find("preview: " + refined + ", 1 in"), std::string::npos) << rebuilt.output;
 
     const std::map<std::string, std::string> before = update_test::folderFiles(set());
     std::vector<std::string> args = {test::binary("surfcast-build"), "--preview", "--threads", "1", "-o", set()};

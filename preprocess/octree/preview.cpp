@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
 #include "build_context.h"
 #include "inputs.h"
@@ -12,11 +14,18 @@ namespace surfcast {
 
 Result<bool> publishPreview(const BuildOptions& options, uint64_t points) {
     const std::string& out = options.output;
-    if (std::filesystem::exists(std::filesystem::path(out) / "tileset.json")) {
-        if (options.progress)
-            std::fprintf(stderr, "preview: %s holds a set, which its viewers keep until the build replaces it: none written\n",
-                         out.c_str());
-        return false;
+    const std::string json = out + "/tileset.json";
+    std::error_code ec;
+    if (std::filesystem::exists(json, ec)) {
+        // A finished set stays; a preview or version a killed build left is replaced.
+        std::ifstream in(json, std::ios::binary);
+        auto there = readTilesetJson(std::string{std::istreambuf_iterator<char>(in), {}}, json);
+        if (!there || there->previewStride == 0) {
+            if (options.progress)
+                std::fprintf(stderr, "preview: %s holds a set, which its viewers keep until the build replaces it: none written\n",
+                             out.c_str());
+            return false;
+        }
     }
     // The stride guessed from the files' sizes (bytes per point by format);
     // captureInputs doubles it where the guess holds too many points.

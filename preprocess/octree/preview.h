@@ -11,7 +11,8 @@
 namespace surfcast {
 
 // Unless options.output holds a set already (whose viewers keep it until the
-// build replaces it), builds there a set of every Nth point of each input,
+// build replaces it; a preview or version that a killed build left is no such
+// set), builds there a set of every Nth point of each input,
 // marked as a preview and keeping no build record (it is replaced, never
 // updated); of a LAZ file, the first point of each chunk, read with nothing
 // decoded (openLasChunkStarts). N is guessed from the inputs' sizes (bytes per point by format),
