@@ -1,15 +1,30 @@
-// Node blocks: one Draco point cloud per node (kd-tree encoding). The only file
-// that includes Draco. The kd-tree encoder reorders points, so every per-surfel
-// value travels as a Draco attribute, never as a side array.
+// Node blocks (docs/FORMAT.md, "blocks.bin"). The only file that includes
+// Draco. Draco's kd-tree encoder reorders points, so every per-surfel value
+// travels in the kd-tree's decoded order, never as a side array of the input's.
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "status.h"
 
 namespace surfcast {
+
+// How a set's blocks are coded (tileset.json `blocks.codec`).
+enum class BlockCodec {
+    // "draco": one kd-tree point cloud holding every attribute.
+    Draco,
+    // "draco-columns": the positions alone in a kd-tree point cloud, then the
+    // other attributes, column by column in the first's decoded order, in a
+    // sequentially coded one (delta and entropy coding per column): the
+    // kd-tree's cost grows with the dimensions it holds (bench/BENCHMARKS.md,
+    // "Block coding").
+    DracoColumns,
+};
+const char* blockCodecName(BlockCodec codec);
+std::optional<BlockCodec> parseBlockCodec(const std::string& name);
 
 // A scalar field's quantized values (FORMAT.md, "Scalar attributes"): 1 per surfel.
 struct ScalarAttribute {
@@ -45,9 +60,12 @@ struct BlockData {
 };
 
 struct BlockCodecOptions {
+    BlockCodec codec = BlockCodec::DracoColumns;
     int positionBits = 16;  // bits the positions occupy (for Draco's integer coder)
     int colorBits = 8;      // 8 or 16: stored as uint8 or uint16
-    int normalBits = 10;    // Draco quantization bits per normal component
+    // Draco's quantization of normals: bits per component (draco) or of each
+    // of the two octahedral coordinates (draco-columns).
+    int normalBits = 9;
     int weightBits = 12;    // per weight
     int radiusBits = 8;     // per radius
     int edgeWeightBits = 8; // per edge-weight ratio
@@ -74,19 +92,24 @@ inline int lidarIndex(const std::string& name) {
     return -1;
 }
 
-// Decodes untrusted bytes; checks the attribute set against what the tile set
+// Decodes untrusted bytes; checks the blobs' headers and attribute set against what the tile set
 // declares (expectColorBits 0 = no colour, expect* = attribute present).
 // `extra` names the attributes after the fixed ones, in block order: those of
 // kLidarAttributes and the opacity are decoded; any other is a scalar attribute, decoded into
 // BlockData::scalars when `scalars` is set (widened to 32 bits) and skipped
 // otherwise, as are a newer writer's attributes.
 struct BlockExpectation {
+    BlockCodec codec = BlockCodec::DracoColumns;
     int colorBits = 0;
     bool normals = true;
     bool weights = true;
     bool radii = false;
     bool edgeWeights = false;
     std::vector<std::string> extra;
+    // The width of each of `extra` (8, 16 or 32 bits: tileset.json's type);
+    // draco-columns stores a 32-bit one as two 16-bit columns, top first.
+    // Empty: none wider than 16 bits.
+    std::vector<int> extraBits;
     bool scalars = false;
     // Surfels the node's record declares: the block must hold exactly these.
     // Draco sizes its buffers by the count in the block's header before it
@@ -94,6 +117,10 @@ struct BlockExpectation {
     // most kMaxBlockPoints.
     uint32_t points = 0;
 };
+// The most attributes one Draco point cloud of a block may declare: every
+// dimension of LAS point format 10, each 32-bit one as two columns, with room
+// for Extra Bytes.
+inline constexpr uint32_t kMaxBlockAttributes = 128;
 // The largest node surfcast-build writes (--capacity's upper bound, 2^22).
 inline constexpr uint32_t kMaxBlockPoints = 4'194'304;
 // What decoding one block may allocate, and so the largest block a writer

@@ -339,7 +339,7 @@ std::string writeTilesetJson(const TilesetInfo& info) {
     j["hierarchy"] = {{"file", info.hierarchyFile}, {"bytes", info.hierarchyBytes}, {"pages", info.hierarchyPages},
                       {"page_depth", info.pageDepth}, {"crc32", info.hierarchyCrc}};
     j["blocks"] = {{"file", info.blocksParts.empty() ? std::string("blocks.bin") : info.blocksParts[0].file}, {"bytes", info.blocksBytes},
-                   {"codec", "draco"}};
+                   {"codec", blockCodecName(info.blockCodec)}};
     if (!info.blocksParts.empty()) {
         ordered_json parts = ordered_json::array();
         for (const BlocksPart& p : info.blocksParts) parts.push_back({{"file", p.file}, {"bytes", p.bytes}});
@@ -619,7 +619,9 @@ Result<TilesetInfo> readTilesetJson(const std::string& json, const std::string& 
         info.hierarchyCrc = integer<uint32_t>(h, "hierarchy", "crc32");
         const nlohmann::json& blocks = object(j, "", "blocks");
         info.blocksBytes = integer<uint64_t>(blocks, "blocks", "bytes");
-        if (text(blocks, "blocks", "codec") != "draco") fieldError("blocks.codec", "not \"draco\"");
+        const std::string codec = text(blocks, "blocks", "codec");
+        if (auto known = parseBlockCodec(codec)) info.blockCodec = *known;
+        else fieldError("blocks.codec", "'" + codec + "' is not \"draco\" or \"draco-columns\"");
         if (blocks.contains("parts") != (info.version >= kPartsFormatVersion))
             fieldError("blocks.parts", info.version >= kPartsFormatVersion ? "missing (version 3 lists the blocks' files)"
                                                                            : "only in version 3");

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "block_codec.h"
 #include "octree_key.h"
 #include "render_defaults.h"  // generated from render_defaults.json
 #include "status.h"
@@ -229,6 +230,7 @@ struct TilesetInfo {
     uint32_t hierarchyPages = 0;
     uint32_t hierarchyCrc = 0;  // CRC-32 of the whole hierarchy.bin
     uint64_t blocksBytes = 0;
+    BlockCodec blockCodec = BlockCodec::DracoColumns;  // how every block is coded (blocks.codec)
     // The files the blocks lie in, where more than blocks.bin (an update in
     // place adds one a version); empty: blocks.bin alone, of blocksBytes.
     std::vector<BlocksPart> blocksParts;

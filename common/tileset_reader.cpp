@@ -53,6 +53,7 @@ Result<TilesetReader> TilesetReader::open(const std::string& folder) {
 
 BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& node) {
     BlockExpectation e;
+    e.codec = info.blockCodec;
     e.colorBits = info.colorBits;
     e.normals = true;
     e.weights = info.weights != "none";
@@ -62,8 +63,10 @@ BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& nod
     // Every attribute past the fixed ones sits in every block, in the order
     // tileset.json lists them.
     for (const AttributeInfo& a : info.attributes)
-        if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) == std::end(kFixedAttributes))
+        if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) == std::end(kFixedAttributes)) {
             e.extra.push_back(a.name);
+            e.extraBits.push_back(a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32);
+        }
     return e;
 }
 

@@ -1,8 +1,8 @@
 // libFuzzer target: one node's Draco block, decoded as a client decodes what a
 // server sends. The first byte picks what the tile set declares (colour bits,
 // which optional attributes, LiDAR attributes and scalars), the next two the
-// node record's surfel count (readers always pass the record's count), the
-// rest is the block.
+// node record's surfel count (readers always pass the record's count; 15
+// bits) and the codec (the top bit: draco-columns), the rest is the block.
 #include <cstdint>
 
 #include "block_codec.h"
@@ -18,9 +18,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     expect.weights = flags & 8;
     expect.radii = flags & 16;
     expect.edgeWeights = flags & 32;
-    if (flags & 64) expect.extra = {"intensity", "classification", "return_number", "gps_time"};
+    if (flags & 64) {
+        expect.extra = {"intensity", "classification", "return_number", "gps_time"};
+        expect.extraBits = {16, 8, 8, 32};
+    }
     expect.scalars = flags & 128;
-    expect.points = uint32_t(data[1] | data[2] << 8);
+    expect.points = uint32_t(data[1] | (data[2] & 0x7f) << 8);
+    expect.codec = data[2] & 0x80 ? BlockCodec::DracoColumns : BlockCodec::Draco;
     (void)decodeBlock(data + 3, size - 3, expect);
     return 0;
 }

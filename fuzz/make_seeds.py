@@ -257,8 +257,10 @@ def set_seeds(sets, tileset_dst, block_dst):
             f = color | 4 | 8 | (16 if flags & 2 else 0) | (32 if flags & 16 else 0)
             f |= 64 if "classification" in meta else 0
             count = struct.unpack_from("<I", hier, rec + 32)[0]
-            if count < 65536:  # the target takes the record's count as two bytes
-                out(os.path.join(block_dst, "%s-%d" % (name, i)), bytes([f]) + struct.pack("<H", count) + blocks[off:off + size])
+            columns = 0x8000 if '"draco-columns"' in meta else 0
+            if count < 32768:  # the target takes the record's count as 15 bits, the codec as the 16th
+                out(os.path.join(block_dst, "%s-%d" % (name, i)), bytes([f]) + struct.pack("<H", count | columns) +
+                    blocks[off:off + size])
         del pages
 
 
@@ -291,8 +293,9 @@ def conformance_seeds(tileset_dst, block_dst):
         e = dict(blocks["expect"], **case.get("expect", {}))
         f = (1 if e["color_bits"] == 8 else 2 if e["color_bits"] == 16 else 0) | (4 if e["normals"] else 0) | \
             (8 if e["weights"] else 0) | (16 if e["radii"] else 0) | (32 if e["edge_weights"] else 0)
-        if e["points"] < 65536:  # the target takes the record's count as two bytes
-            out(os.path.join(block_dst, "conformance-%02d" % i), bytes([f]) + struct.pack("<H", e["points"]) +
+        if e["points"] < 32768:  # the target takes the record's count as 15 bits, the codec as the 16th
+            columns = 0x8000 if e["codec"] == "draco-columns" else 0
+            out(os.path.join(block_dst, "conformance-%02d" % i), bytes([f]) + struct.pack("<H", e["points"] | columns) +
                 bytes.fromhex(case["block"]))
 
 

@@ -180,8 +180,18 @@ void addBuildOptions(Declare& d, BuildArgs& a) {
              [&o](double v) { o.normalK = int(v); });
     d.number("--spacing-k", "K", "k of the k-th-neighbour spacing h (default 8)", 1, 64, false, "--spacing-k needs a value in [1, 64]",
              [&o](double v) { o.spacingK = int(v); });
-    d.number("--normal-bits", "N", "Draco quantization bits per normal component (default 8)", 4, 16, false,
+    d.number("--normal-bits", "N",
+             "Draco's quantization of normals: bits of each of their two octahedral coordinates (default 9; with --codec "
+             "draco, of each of their three components)", 4, 16, false,
              "--normal-bits needs a value in [4, 16]", [&o](double v) { o.normalBits = int(v); });
+    d.value("--codec", "C",
+            "how blocks are coded: draco-columns (default: the positions in a kd-tree, the other attributes column by column) "
+            "or draco (one kd-tree of every attribute, as sets were coded before draco-columns; larger, and read by older viewers)",
+            [&o](const std::string& c) {
+                auto codec = parseBlockCodec(c);
+                if (!codec) throw UsageError("--codec needs draco-columns or draco");
+                o.blockCodec = *codec;
+            });
     d.flag("--no-radius", "no per-surfel radius, even where a node's sampling is irregular", [&o] { o.radii = false; });
     d.value("--isolation", "T",
             "isolated surfels (a stray return, a leaf hit by a few points) are drawn at their level's spacing rho (2 sampling "

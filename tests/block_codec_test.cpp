@@ -4,6 +4,7 @@
 #include <string>
 #include <vector>
 #include <map>
+#include <set>
 #include <tuple>
 
 #include "block_codec.h"
@@ -72,10 +73,14 @@ TEST(BlockCodec, RejectsTruncatedAndMismatchedBlocks) {
 // decoding anything: a block claiming 2^31 - 1 points made it allocate
 // gigabytes (fuzz_block). The count is checked against the node's record
 // (or, unknown, against the largest node a set may hold) first.
+// Byte offsets below are those of the one blob of a "draco" block (a
+// "draco-columns" block's blobs start with the same header; the corpus at
+// the end covers them).
 TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
-    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{});
+    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{.codec = BlockCodec::Draco});
     ASSERT_TRUE(bytes.ok());
     BlockExpectation e;
+    e.codec = BlockCodec::Draco;
     e.colorBits = 8;
     e.points = 300;
     ASSERT_TRUE(decodeBlock(bytes->data(), bytes->size(), e).ok());
@@ -108,7 +113,7 @@ TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
         other[5] = major;
         auto version = decodeBlock(other.data(), other.size(), e);
         ASSERT_FALSE(version.ok()) << int(major);
-        EXPECT_NE(version.status().message().find("the Draco block is bitstream version " + std::to_string(major) + "." +
+        EXPECT_NE(version.status().message().find("the block is bitstream version " + std::to_string(major) + "." +
                                                   std::to_string((*bytes)[6]) + "; readers take 2.x"),
                   std::string::npos)
             << version.status().message();
@@ -140,9 +145,10 @@ TEST(BlockCodec, APointCountTheRecordDoesNotDeclareIsRejectedBeforeDraco) {
 // 768 MiB, over the 512 MiB bound.
 TEST(BlockCodec, ABlockThatWouldTakeOverHalfAGigabyteToDecodeIsRejectedBeforeDraco) {
     EXPECT_EQ(blockDecodeBytes(1000, 10, 31), 71'000u);
-    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{});
+    auto bytes = encodeBlock(sampleBlock(300), BlockCodecOptions{.codec = BlockCodec::Draco});
     ASSERT_TRUE(bytes.ok());
     BlockExpectation e;
+    e.codec = BlockCodec::Draco;
     e.colorBits = 8;
     // Descriptors from byte 17, five bytes each: type, data type, components,
     // normalized, a one-byte id.
@@ -158,6 +164,71 @@ TEST(BlockCodec, ABlockThatWouldTakeOverHalfAGigabyteToDecodeIsRejectedBeforeDra
     EXPECT_NE(claimed.status().message().find("4194304 points of 16 components would take 768 MiB to decode"),
               std::string::npos)
         << claimed.status().message();
+}
+
+// draco-columns: the other attributes follow the positions' decoded order
+// in their own blob. Points at one position with different values (a set
+// with --attributes all keeps them) keep their values together, a 32-bit
+// scalar over its whole range (two 16-bit columns; Draco's sequential coder
+// takes values below 2^31 only) comes back exact, and the footprint bound
+// counts both blobs.
+TEST(BlockCodec, ColumnsFollowThePositionsDecodedOrder) {
+    BlockData in = sampleBlock(600);
+    ScalarAttribute wide{"gps_time", 32, {}}, narrow{"user_data", 8, {}};
+    for (size_t i = 0; i < in.size(); ++i) {
+        if (i % 4 == 1) std::copy_n(in.positions.begin() + 3 * (i - 1), 3, in.positions.begin() + 3 * i);  // a copy's position
+        in.intensity.push_back(uint16_t(i * 101 % 65536));
+        wide.values.push_back(uint32_t(i * 2654435761u));  // spans [0, 2^32)
+        narrow.values.push_back(uint8_t(i * 7));
+    }
+    in.scalars = {wide, narrow};
+    auto bytes = encodeBlock(in, BlockCodecOptions{.positionBits = 10});
+    ASSERT_TRUE(bytes.ok()) << bytes.status().message();
+    BlockExpectation e;
+    e.colorBits = 8;
+    e.extra = {"intensity", "gps_time", "user_data"};
+    e.extraBits = {16, 32, 8};
+    e.scalars = true;
+    e.points = uint32_t(in.size());
+    auto out = decodeBlock(bytes->data(), bytes->size(), e);
+    ASSERT_TRUE(out.ok()) << out.status().message();
+    ASSERT_EQ(out->size(), in.size());
+    ASSERT_EQ(out->scalars.size(), 2u);
+    using Point = std::tuple<PositionKey, uint16_t, uint16_t, uint32_t, uint32_t>;
+    auto points = [](const BlockData& b) {
+        std::multiset<Point> all;
+        for (size_t i = 0; i < b.size(); ++i)
+            all.insert({positionOf(b, i), b.colors[3 * i], b.intensity[i], b.scalars[0].values[i], b.scalars[1].values[i]});
+        return all;
+    };
+    EXPECT_EQ(points(*out), points(in));
+    // Without the widths the columns do not add up to the attributes listed.
+    e.extraBits = {};
+    EXPECT_FALSE(decodeBlock(bytes->data(), bytes->size(), e).ok());
+    e.extraBits = {16, 32, 8};
+    // u32 length, the positions blob, then the columns blob. Its descriptors
+    // widened (six attributes: normal, colour, weight, intensity, two
+    // gps_time halves, user data: seven) and both blobs claiming 2^22 points.
+    std::vector<uint8_t> claimed = *bytes;
+    uint32_t kdBytes;
+    std::memcpy(&kdBytes, claimed.data(), 4);
+    uint8_t* columns = claimed.data() + 4 + kdBytes;
+    ASSERT_EQ(columns[16], 7) << "normal, colour, weight, intensity, gps_time top and low, user data";
+    for (size_t at = 17; at < 17 + 7 * 5; at += 5) {
+        columns[at + 1] = 10;  // DT_FLOAT64
+        columns[at + 2] = 4;
+    }
+    const int32_t count = int32_t(kMaxBlockPoints);
+    std::memcpy(claimed.data() + 4 + 11, &count, 4);
+    std::memcpy(columns + 11, &count, 4);
+    e.points = 0;
+    auto huge = decodeBlock(claimed.data(), claimed.size(), e);
+    ASSERT_FALSE(huge.ok());
+    // Positions: 3 components, 12 value bytes; the columns: 28 and 224. So 4
+    // bytes for each of 31 components and 236 bytes of values: 360 bytes a
+    // point, and 2^22 points take 1440 MiB.
+    EXPECT_NE(huge.status().message().find("4194304 points of 31 components would take 1440 MiB to decode"), std::string::npos)
+        << huge.status().message();
 }
 
 // Edge weights (4 ratios per surfel, 8-bit) travel with their point.
@@ -232,6 +303,7 @@ TEST(FormatConformance, BlockCases) {
         nlohmann::json e = corpus["expect"];
         if (c.contains("expect")) e.update(c["expect"]);
         BlockExpectation expect;
+        expect.codec = *parseBlockCodec(e["codec"].get<std::string>());
         expect.points = e["points"].get<uint32_t>();
         expect.colorBits = e["color_bits"].get<int>();
         expect.normals = e["normals"].get<bool>();

@@ -24,6 +24,7 @@
 #include "block_codec.h"
 #include "crc32.h"
 #include "test_support.h"
+#include "stages.h"
 #include "tileset_reader.h"
 #include "update_support.h"
 
@@ -134,6 +135,42 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
 // node's level (the neighbouring nodes whose h its weights take); a node
 // whose box widened by the larger misses the added scan's bounds (its LAS
 // header's) is one the change cannot reach.
+// A set coded as before draco-columns ("draco", normals at 8 bits per
+// component: the defaults then) keeps its coding through an update, though
+// its build record names neither and today's defaults differ.
+TEST_F(UpdateTest, ASetCodedAsBeforeKeepsItsCoding) {
+    const std::string old = dir.file("sets/old");
+    auto args = base;
+    args.insert(args.end(), {"--codec", "draco", "--normal-bits", "8", "-o", old});
+    auto built = test::run(build(args));
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    // The record as such a build wrote it: without the two options.
+    const std::string record = old + "/" + buildRecordFile("hierarchy.bin");
+    std::vector<std::string> stored, before;
+    auto plan = readPlan(record, &stored, true);
+    ASSERT_TRUE(plan) << plan.status().message();
+    for (size_t i = 0; i < stored.size(); ++i) {
+        if (stored[i] == "--codec" || stored[i] == "--normal-bits") ++i;
+        else before.push_back(stored[i]);
+    }
+    ASSERT_EQ(before.size() + 4, stored.size());
+    ASSERT_TRUE(writePlan(record, *plan, before).ok());
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", old});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto reader = TilesetReader::open(old);
+    ASSERT_TRUE(reader) << reader.status().message();
+    EXPECT_EQ(reader->info().blockCodec, BlockCodec::Draco);
+    ASSERT_NE(reader->info().attribute("normal"), nullptr);
+    EXPECT_EQ(reader->info().attribute("normal")->quantizationBits, 8);
+    uint64_t surfels = 0;
+    Status decoded = reader->forEachBlock(reader->nodes(), true, [&](const NodeRecord&, BlockData& b) {
+        surfels += b.size();
+        return Status{};
+    });
+    ASSERT_TRUE(decoded.ok()) << decoded.message();
+    EXPECT_EQ(surfels, reader->info().surfels);
+}
+
 TEST_F(UpdateTest, NodesTheChangeCannotReachKeepTheirBlocks) {
     auto before = TilesetReader::open(set());
     ASSERT_TRUE(before) << before.status().message();

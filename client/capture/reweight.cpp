@@ -65,6 +65,7 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
         NodeRecord record = nodes[n];
         record.flags = uint16_t((record.flags & ~kFlagEdgeWeights) | (b.edgeWeights.empty() ? 0 : kFlagEdgeWeights));
         BlockCodecOptions codec;
+        codec.codec = info.blockCodec;
         codec.positionBits = nodes[n].positionBits;
         codec.colorBits = info.colorBits ? info.colorBits : 8;
         codec.normalBits = normalBits;

@@ -226,6 +226,7 @@ TilesetInfo BuildContext::tilesetInfo() const {
     TilesetInfo info;
     info.generator = "surfcast-build 0.1.0";
     info.previewStride = opt_.preview;
+    info.blockCodec = opt_.blockCodec;
     info.inputPoints = stats_.points;
     info.grid = opt_.grid;
     info.pageDepth = opt_.pageDepth;

@@ -139,6 +139,7 @@ Result<EncodedNode> encodeNode(const BuildContext& context, const BuiltNode& nod
     block.weights = node.level.weights;
     block.radii = node.level.radii;
     BlockCodecOptions codec;
+    codec.codec = opt.blockCodec;
     codec.positionBits = bits;
     codec.normalBits = opt.normalBits;
     codec.colorBits = colorBits ? colorBits : 8;

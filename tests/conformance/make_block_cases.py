@@ -2,10 +2,11 @@
 """Writes blocks.json: Draco blocks both readers must decode or reject alike
 (tests/block_codec_test.cpp, web/test/format.test.mjs).
 
-The good block is the one node of a 150-point default scene that
-surfcast-build writes (Draco's own encoder); each bad case changes one field
-of its header (docs/FORMAT.md, "blocks.bin": the offsets of Draco 1.5's
-bitstream 2.x), or cuts it short, so that it reaches the check it is about.
+The good blocks are the one node of a 150-point default scene that
+surfcast-build writes (Draco's own encoder) in each codec, `draco` and
+`draco-columns`; each bad case changes one field of a header (docs/FORMAT.md,
+"blocks.bin": the offsets of Draco 1.5's bitstream 2.x), or cuts a blob short,
+or puts one where another belongs, so that it reaches the check it is about.
 Header checks come before decoding, so a bad case keeps only the bytes its
 check reads. `error` is text both readers' messages contain.
 
@@ -21,24 +22,32 @@ import tempfile
 import zlib
 
 
-def main():
-    build = sys.argv[1] if len(sys.argv) > 1 else "build/bin/surfcast-build"
-    with tempfile.TemporaryDirectory() as tmp:
-        out = os.path.join(tmp, "set")
-        subprocess.run([build, "-q", "--default-scene", "--scene-points", "150", "-o", out], check=True,
-                       stdout=subprocess.DEVNULL)
-        info = json.load(open(os.path.join(out, "tileset.json")))
-        block = open(os.path.join(out, "blocks.bin"), "rb").read()
+def build(binary, tmp, codec):
+    """The one block of a 150-point default scene, and the set's tileset.json."""
+    out = os.path.join(tmp, codec)
+    subprocess.run([binary, "-q", "--default-scene", "--scene-points", "150", "--codec", codec, "-o", out], check=True,
+                   stdout=subprocess.DEVNULL)
+    info = json.load(open(os.path.join(out, "tileset.json")))
     assert info["nodes"] == 1, "one node: the whole blocks.bin is its block"
+    assert info["blocks"]["codec"] == codec
+    return open(os.path.join(out, "blocks.bin"), "rb").read(), info
+
+
+def main():
+    binary = sys.argv[1] if len(sys.argv) > 1 else "build/bin/surfcast-build"
+    with tempfile.TemporaryDirectory() as tmp:
+        block, info = build(binary, tmp, "draco")
+        split, split_info = build(binary, tmp, "draco-columns")
     points = struct.unpack_from("<i", block, 11)[0]
     names = [a["name"] for a in info["attributes"]]
     # What the node's record and tileset.json tell a reader to expect.
-    expect = {"points": points, "color_bits": info["color_bits"], "normals": "normal" in names,
+    expect = {"codec": "draco-columns", "points": points, "color_bits": info["color_bits"], "normals": "normal" in names,
               "weights": "weight" in names, "radii": "radius" in names, "edge_weights": "edge_weight" in names}
+    draco = {"codec": "draco"}
     attributes = block[16]  # a varint below 128: one byte
 
-    def patched(at, fmt, value, keep=64):
-        b = bytearray(block[:keep])
+    def patched(at, fmt, value, keep=64, source=None):
+        b = bytearray((block if source is None else source)[:keep])
         struct.pack_into(fmt, b, at, value)
         return bytes(b)
 
@@ -47,23 +56,54 @@ def main():
     struct.pack_into("<i", huge, 11, 4_194_304)
     for i in range(attributes):
         huge += bytes([0, 8, 4, 0, i])  # attribute type, data type uint64, 4 components, normalized, unique id
+    # draco-columns: u32 the positions blob's bytes, the positions blob, the columns blob.
+    kd = struct.unpack_from("<I", split, 0)[0]
+    positions, columns = split[4:4 + kd], split[4 + kd:]
+    assert positions[:5] == b"DRACO" and positions[8] == 1 and columns[:5] == b"DRACO" and columns[8] == 0
+    assert struct.unpack_from("<i", positions, 11)[0] == points == struct.unpack_from("<i", columns, 11)[0]
+
+    def columns_case(positions_blob, columns_blob):
+        return struct.pack("<I", len(positions_blob)) + positions_blob + columns_blob
+
+    def patched_columns(at, fmt, value):
+        b = bytearray(columns)
+        struct.pack_into(fmt, b, at, value)
+        return columns_case(positions, bytes(b))
+
     cases = [
-        ("good: the node's block", block, {}, {"count": points}),
-        ("a block that is not Draco", b"PLY" + block[3:64], {}, "not a Draco block"),
-        ("shorter than a Draco header", block[:16], {}, "not a Draco block"),
-        ("bitstream version 3", patched(5, "<B", 3), {}, "bitstream version 3"),
-        ("a mesh, not a point cloud", patched(7, "<B", 1), {}, "not a point cloud"),
-        ("sequential coding, not kd-tree", patched(8, "<B", 0), {}, "not kd-tree coded"),
-        ("metadata", patched(9, "<H", 0x8000), {}, "carries metadata"),
-        ("a negative point count", patched(11, "<i", -1), {}, "negative point count"),
-        ("more points than the record", patched(11, "<i", points + 1), {}, f"declares {points + 1} points"),
-        ("two attribute decoders", patched(15, "<B", 2), {}, "2 attribute decoders"),
-        ("another attribute count than tileset.json's", block, {"radii": not expect["radii"]}, "attributes; the tile set declares"),
-        ("cut in its attribute descriptors", block[:19], {}, "ends in its attribute descriptors"),
-        ("an attribute of 5 components", patched(19, "<B", 5), {}, "has 5 components"),
-        ("an attribute of data type 12", patched(18, "<B", 12), {}, "of type 12"),
-        ("4,194,304 points of 48 bytes each to decode", bytes(huge), {"points": 4_194_304}, "MiB to decode"),
-        ("the body cut short", block[:len(block) // 2], {}, "Draco decoding failed"),
+        ("draco: good: the node's block", block, draco, {"count": points}),
+        ("draco: a block that is not Draco", b"PLY" + block[3:64], draco, "the block is not Draco"),
+        ("draco: shorter than a Draco header", block[:16], draco, "the block is not Draco"),
+        ("draco: bitstream version 3", patched(5, "<B", 3), draco, "bitstream version 3"),
+        ("draco: a mesh, not a point cloud", patched(7, "<B", 1), draco, "not a point cloud"),
+        ("draco: sequential coding, not kd-tree", patched(8, "<B", 0), draco, "not kd-tree coded"),
+        ("draco: metadata", patched(9, "<H", 0x8000), draco, "carries metadata"),
+        ("draco: a negative point count", patched(11, "<i", -1), draco, "negative point count"),
+        ("draco: more points than the record", patched(11, "<i", points + 1), draco, f"declares {points + 1} points"),
+        ("draco: two attribute decoders", patched(15, "<B", 2), draco, "2 attribute decoders"),
+        ("draco: another attribute count than tileset.json's", block, {**draco, "radii": not expect["radii"]},
+         "attributes; the tile set declares"),
+        ("draco: cut in its attribute descriptors", block[:19], draco, "ends in its attribute descriptors"),
+        ("draco: an attribute of 5 components", patched(19, "<B", 5), draco, "has 5 components"),
+        ("draco: an attribute of data type 12", patched(18, "<B", 12), draco, "of type 12"),
+        ("draco: 4,194,304 points of 48 bytes each to decode", bytes(huge), {**draco, "points": 4_194_304}, "MiB to decode"),
+        ("draco: the body cut short", block[:len(block) // 2], draco, "Draco decoding failed"),
+        ("good: the node's block", split, {}, {"count": points}),
+        ("shorter than the positions blob's length", split[:3], {}, "ends before its positions blob's length"),
+        ("a positions blob past the block's end", struct.pack("<I", len(split)) + split[4:], {}, "runs past its end"),
+        ("positions not Draco", columns_case(b"PLY" + positions[3:], columns), {}, "the positions blob is not Draco"),
+        ("positions sequentially coded", columns_case(patched(8, "<B", 0, len(positions), positions), columns), {},
+         "the positions blob is not kd-tree coded"),
+        ("positions of more points than the record", columns_case(patched(11, "<i", points + 1, len(positions), positions), columns),
+         {}, f"the positions blob declares {points + 1} points"),
+        ("the whole block's attributes in the positions blob", columns_case(block, b""), {}, "the positions blob has"),
+        ("no columns blob", columns_case(positions, b""), {}, "the columns blob is not Draco"),
+        ("columns kd-tree coded", patched_columns(8, "<B", 1), {}, "the columns blob is not sequentially coded"),
+        ("columns of more points than the record", patched_columns(11, "<i", points + 1), {},
+         f"the columns blob declares {points + 1} points"),
+        ("another column count than tileset.json's", split, {"radii": not expect["radii"]},
+         "the columns blob has"),
+        ("columns cut short", columns_case(positions, columns[:len(columns) // 2]), {}, "Draco decoding failed"),
     ]
     result = {
         "about": [

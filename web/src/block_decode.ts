@@ -29,7 +29,13 @@ export interface DecodeJob {
   hasEdgeWeights: boolean;
   colorBits: number;
   weights: boolean;
+  // blocks.codec "draco-columns": the positions in a kd-tree blob, the other
+  // attributes in a sequential one; else "draco", one kd-tree blob of all.
+  columns: boolean;
   extra: string[]; // the listed attributes after the fixed ones, in block order
+  // Their widths (8, 16 or 32: tileset.json's types); draco-columns stores a
+  // 32-bit one as two 16-bit columns, top first.
+  extraBits: number[];
   coloring: ColoringSpec;
   // Picking: the attributes of the surfel at this index of the packed
   // surfels (the pick-th of those the class filter keeps), not the surfels.
@@ -68,18 +74,28 @@ export interface DecodeResult {
 
 // What decoding may allocate (common/block_codec.h kMaxBlockDecodeBytes).
 const kMaxDecodeBytes = 512 * 2 ** 20;
+// The most attributes one of a block's point clouds may declare (kMaxBlockAttributes).
+const kMaxAttributes = 128;
 const kTypeBytes = [0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8, 1];
 
-export function checkDracoHeader(b: Uint8Array, points: number, attributes: number): string | null {
-  if (b.length < 17 || String.fromCharCode(...b.subarray(0, 5)) !== "DRACO") return "not a Draco block";
-  if (b[5] !== 2) return `the Draco block is bitstream version ${b[5]}.${b[6]}; readers take 2.x`;
-  if (b[7] !== 0) return "the Draco block is not a point cloud";
-  if (b[8] !== 1) return "the Draco block is not kd-tree coded";
-  if ((b[9] | (b[10] << 8)) & 0x8000) return "the Draco block carries metadata";
-  const count = new DataView(b.buffer, b.byteOffset + 11, 4).getInt32(0, true);
-  if (count < 0) return "the Draco block declares a negative point count";
-  if (count !== points) return `the Draco block declares ${count} points; the tile set declares ${points}`;
-  if (b[15] !== 1) return `the Draco block has ${b[15]} attribute decoders, not 1`;
+interface DracoHeader {
+  points: number;
+  attributes: number;
+  components: number;
+  valueBytes: number;
+}
+
+// common/block_codec.cpp's readDracoHeader: `kdTree`, the blob must be
+// kd-tree coded, else sequentially; `what` names it in errors.
+function readDracoHeader(b: Uint8Array, kdTree: boolean, what: string): DracoHeader | string {
+  if (b.length < 17 || String.fromCharCode(...b.subarray(0, 5)) !== "DRACO") return `${what} is not Draco`;
+  if (b[5] !== 2) return `${what} is bitstream version ${b[5]}.${b[6]}; readers take 2.x`;
+  if (b[7] !== 0) return `${what} is not a point cloud`;
+  if (b[8] !== (kdTree ? 1 : 0)) return kdTree ? `${what} is not kd-tree coded` : `${what} is not sequentially coded`;
+  if ((b[9] | (b[10] << 8)) & 0x8000) return `${what} carries metadata`;
+  const points = new DataView(b.buffer, b.byteOffset + 11, 4).getInt32(0, true);
+  if (points < 0) return `${what} declares a negative point count`;
+  if (b[15] !== 1) return `${what} has ${b[15]} attribute decoders, not 1`;
   let at = 16;
   const varint = (): number | null => {
     let v = 0;
@@ -90,22 +106,50 @@ export function checkDracoHeader(b: Uint8Array, points: number, attributes: numb
     }
     return null;
   };
-  const n = varint();
-  if (n === null || n > 64) return "the Draco block's attribute count is unreadable";
-  if (n !== attributes) return `block has ${n} attributes; the tile set declares ${attributes}`;
+  const attributes = varint();
+  if (attributes === null || attributes > kMaxAttributes) return `${what}'s attribute count is unreadable`;
   let components = 0, valueBytes = 0;
-  for (let i = 0; i < n; ++i) {
-    if (b.length - at < 4) return "the Draco block ends in its attribute descriptors";
+  for (let i = 0; i < attributes; ++i) {
+    if (b.length - at < 4) return `${what} ends in its attribute descriptors`;
     const type = b[at + 1], comps = b[at + 2];
     at += 4;
     if (type < 1 || type > 11 || comps < 1 || comps > 4 || varint() === null)
-      return `the Draco block's attribute ${i} has ${comps} components of type ${type}`;
+      return `${what}'s attribute ${i} has ${comps} components of type ${type}`;
     components += comps;
     valueBytes += comps * kTypeBytes[type];
   }
+  return { points, attributes, components, valueBytes };
+}
+
+// The block's blobs, their headers checked against the job before Draco
+// allocates anything (common/block_codec.cpp's checkBlock), or the error.
+export function checkBlock(b: Uint8Array, job: Pick<DecodeJob, "points" | "colorBits" | "weights" | "hasRadius" |
+                           "hasEdgeWeights" | "columns" | "extra" | "extraBits">): { first: Uint8Array; columns: Uint8Array | null } | string {
+  let others = 1 + (job.colorBits ? 1 : 0) + (job.weights ? 1 : 0) + (job.hasRadius ? 1 : 0) + (job.hasEdgeWeights ? 1 : 0);
+  job.extra.forEach((_, i) => { others += job.columns && job.extraBits[i] > 16 ? 2 : 1; });
+  let first = b, columns: Uint8Array | null = null;
+  if (job.columns) {
+    if (b.length < 4) return "the block ends before its positions blob's length";
+    const kdBytes = new DataView(b.buffer, b.byteOffset, 4).getUint32(0, true);
+    if (kdBytes > b.length - 4) return `the block's positions blob of ${kdBytes} bytes runs past its end (${b.length} bytes)`;
+    first = b.subarray(4, 4 + kdBytes);
+    columns = b.subarray(4 + kdBytes);
+  }
+  const blobs: [Uint8Array, boolean, string, number][] = [[first, true, job.columns ? "the positions blob" : "the block", job.columns ? 1 : 1 + others]];
+  if (columns) blobs.push([columns, false, "the columns blob", others]);
+  let points = -1, components = 0, valueBytes = 0;
+  for (const [blob, kdTree, what, attributes] of blobs) {
+    const h = readDracoHeader(blob, kdTree, what);
+    if (typeof h === "string") return h;
+    if (h.points !== job.points) return `${what} declares ${h.points} points; the tile set declares ${job.points}`;
+    if (h.attributes !== attributes) return `${what} has ${h.attributes} attributes; the tile set declares ${attributes}`;
+    points = h.points;
+    components += h.components;
+    valueBytes += h.valueBytes;
+  }
   if (points * (4 * components + valueBytes) > kMaxDecodeBytes)
-    return `the Draco block's ${points} points would take over ${kMaxDecodeBytes >> 20} MiB to decode`;
-  return null;
+    return `the block's ${points} points would take over ${kMaxDecodeBytes >> 20} MiB to decode`;
+  return { first, columns };
 }
 
 function snorm16(v: number): number {
@@ -149,23 +193,27 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
   const bytes = new Uint8Array(job.blob);
   const where = `node ${job.key}`;
   if (crc32(bytes) !== job.crc) return { id: job.id, error: `${where}: block CRC mismatch` };
-  const attributes = 2 + (job.colorBits ? 1 : 0) + (job.weights ? 1 : 0) + (job.hasRadius ? 1 : 0) +
-                     (job.hasEdgeWeights ? 1 : 0) + job.extra.length;
-  const problem = checkDracoHeader(bytes, job.points, attributes);
-  if (problem) return { id: job.id, error: `${where}: ${problem}` };
+  const blobs = checkBlock(bytes, job);
+  if (typeof blobs === "string") return { id: job.id, error: `${where}: ${blobs}` };
 
   const decoder = new draco.Decoder();
-  const buffer = new draco.DecoderBuffer();
-  const pc = new draco.PointCloud();
-  const cleanup: any[] = [pc, buffer, decoder];
-  try {
-    buffer.Init(new Int8Array(job.blob), bytes.length);
+  const cleanup: any[] = [decoder];
+  // One of the block's point clouds, or an error.
+  const decode = (blob: Uint8Array, what: string): any => {
+    const buffer = new draco.DecoderBuffer();
+    const pc = new draco.PointCloud();
+    cleanup.push(pc, buffer);
+    buffer.Init(new Int8Array(blob.buffer, blob.byteOffset, blob.length), blob.length);
     const status = decoder.DecodeBufferToPointCloud(buffer, pc);
-    if (!status.ok()) return { id: job.id, error: `${where}: Draco decoding failed: ${status.error_msg()}` };
-    const n = pc.num_points();
-    if (n !== job.points || pc.num_attributes() !== attributes)
-      return { id: job.id, error: `${where}: the decoded block does not match its record` };
-    const read = (index: number, type: "u8" | "u16" | "u32" | "f32", components: number): ArrayLike<number> => {
+    if (!status.ok()) throw new Error(`${where}: Draco decoding failed (${what}): ${status.error_msg()}`);
+    if (pc.num_points() !== job.points) throw new Error(`${where}: the decoded block does not match its record`);
+    return pc;
+  };
+  try {
+    const first = decode(blobs.first, job.columns ? "positions" : "block");
+    const rest = blobs.columns ? decode(blobs.columns, "columns") : first;
+    const n = job.points;
+    const read = (index: number, type: "u8" | "u16" | "u32" | "f32", components: number, pc: any = rest): ArrayLike<number> => {
       const a = decoder.GetAttribute(pc, index);
       if (a.num_components() !== components) throw new Error(`${where}: block attribute ${index} has ${a.num_components()} components, not ${components}`);
       const count = n * components;
@@ -192,21 +240,31 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
         draco._free(ptr);
       }
     };
-    let index = 0;
-    const positions = read(index++, "u32", 3);
+    const positions = read(0, "u32", 3, first);
+    let index = blobs.columns ? 0 : 1;
     const normals = read(index++, "f32", 3);
     const colors = job.colorBits ? read(index++, job.colorBits === 8 ? "u8" : "u16", 3) : null;
     const weights = job.weights ? read(index++, "f32", 1) : null;
     const radii = job.hasRadius ? read(index++, "f32", 1) : null;
     const edges = job.hasEdgeWeights ? read(index++, "f32", 4) : null;
     const lidar: Record<string, ArrayLike<number>> = {};
-    for (const name of job.extra) {
+    job.extra.forEach((name, e) => {
       // Picking reads every attribute (unsigned, 8 to 32 bits: Draco widens them).
       const type = job.pick !== undefined ? "u32" : name === "intensity" ? "u16"
         : ["classification", "return_number", "number_of_returns", "opacity"].includes(name) ? "u8" : null;
-      if (type) lidar[name] = read(index, type, 1);
-      ++index;
-    }
+      if (job.columns && job.extraBits[e] > 16) {
+        // Two 16-bit columns, the top and the low bits.
+        if (type) {
+          const top = read(index, "u32", 1), low = read(index + 1, "u32", 1), v = new Float64Array(n);
+          for (let i = 0; i < n; ++i) v[i] = top[i] * 65536 + low[i];
+          lidar[name] = v;
+        }
+        index += 2;
+      } else {
+        if (type) lidar[name] = read(index, type, 1);
+        ++index;
+      }
+    });
     if (job.pick !== undefined) return { id: job.id, picked: picked(job, n, positions, normals, colors, weights, radii, lidar) };
     return pack(job, n, positions, normals, colors, weights, radii, edges, lidar);
   } catch (e) {

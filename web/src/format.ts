@@ -38,6 +38,8 @@ export interface TilesetInfo {
   hierarchyPages: number;
   hierarchyCrc: number;
   blocksBytes: number;
+  // How the blocks are coded (FORMAT.md, "blocks.bin").
+  blockCodec: "draco" | "draco-columns";
   // The files the blocks lie in, in order: a node's block offset is into
   // their concatenation (FORMAT.md, "blocks.bin"); blocks.bin alone before version 3.
   blocksParts: { file: string; bytes: number }[];
@@ -58,6 +60,15 @@ export interface TilesetInfo {
 // The attributes whose place in a block the format fixes; every other listed
 // attribute follows them in every block (FORMAT.md, "blocks.bin").
 export const kFixedAttributes = ["position", "normal", "color", "weight", "radius", "edge_weight"];
+
+// How a block of the set is laid out past its fixed attributes (the fields
+// of block_decode.ts's DecodeJob): the codec, and the listed attributes after
+// the fixed ones, in block order, with their widths in bits.
+export function blockLayout(info: TilesetInfo): { columns: boolean; extra: string[]; extraBits: number[] } {
+  const extra = info.attributes.filter((a) => !kFixedAttributes.includes(a.name));
+  return { columns: info.blockCodec === "draco-columns", extra: extra.map((a) => a.name),
+           extraBits: extra.map((a) => (a.type === "uint32" ? 32 : a.type === "uint16" ? 16 : 8)) };
+}
 
 // Largest tileset.json a reader accepts (common/tile_source.h's
 // kMaxTilesetJsonBytes): the format's is a few kilobytes.
@@ -224,7 +235,9 @@ function readFields(j: Json): TilesetInfo {
   const hierarchyCrc = integer(hierarchy, "hierarchy", "crc32", 0, kU32);
   const blocks = object(j, "", "blocks");
   const blocksBytes = integer(blocks, "blocks", "bytes", 0, kU64);
-  if (text(blocks, "blocks", "codec") !== "draco") throw new FormatError(`blocks.codec: not "draco"`);
+  const blockCodec = text(blocks, "blocks", "codec");
+  if (blockCodec !== "draco" && blockCodec !== "draco-columns")
+    throw new FormatError(`blocks.codec: '${blockCodec}' is not "draco" or "draco-columns"`);
   if (Object.hasOwn(blocks, "parts") !== (version >= 3))
     throw new FormatError(version >= 3 ? "blocks.parts: missing (version 3 lists the blocks' files)" : "blocks.parts: only in version 3");
   let blocksParts = [{ file: "blocks.bin", bytes: blocksBytes }];
@@ -261,7 +274,7 @@ function readFields(j: Json): TilesetInfo {
     }
   }
   return { version, rootMin, rootEdge, boundsMin, boundsMax, levels, grid, nodes, surfels, colorBits, attributes, weights,
-           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, blocksParts, statistics,
+           kernelScale, normalSource, hierarchyFile, hierarchyBytes, hierarchyPages, hierarchyCrc, blocksBytes, blockCodec, blocksParts, statistics,
            previewStride, previewDone };
 }
 

@@ -21,7 +21,7 @@
 
 import type { Camera } from "./camera.js";
 import type { ColoringSpec, DecodeJob, DecodeResult, DecoderUrls, PickedSurfel } from "./block_decode.js";
-import { attribute, FormatError, indexBytes, kFixedAttributes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
+import { attribute, blockLayout, FormatError, indexBytes, kFlagEdgeWeights, kFlagHasRadius, kMaxTilesetJsonBytes,
          type HierarchyIndex, type NodeRecord, nodeEdge, nodeMin, parseTileset, placeBlock, readHierarchyIndex, readHierarchyPage,
          type TilesetInfo, type Vec3 } from "./format.js";
 import { emptyStats, type LodParams, LodSelector, type LodStats, residentBytes, type SelectedNode } from "./lod_selection.js";
@@ -158,7 +158,7 @@ export class Streamer<T> {
   private generation = 0; // of the colouring: what was decoded with an older one is decoded again
   private recoloring = new Set<number>(); // resident nodes being decoded again with a new colouring
   private refetchQueue: number[] = []; // of those, the ones whose blocks are to be fetched again
-  private extra: string[];
+  private layout: { columns: boolean; extra: string[]; extraBits: number[] };
   private donor: Streamer<T> | null = null;
   coloring: ColoringSpec;
   readonly stats: StreamStats = { requests: 0, bytes: 0, pages: 1, nodesFetched: 0, inFlight: 0, resident: 0,
@@ -174,7 +174,7 @@ export class Streamer<T> {
     this.index = index;
     this.origin = origin;
     this.selector = new LodSelector(info, page0);
-    this.extra = info.attributes.map((a) => a.name).filter((n) => !kFixedAttributes.includes(n));
+    this.layout = blockLayout(info);
     this.coloring = coloring;
     this.decoders = new DecoderPool(decoderFiles, options.decoders, (m) => this.fail(m));
   }
@@ -214,7 +214,7 @@ export class Streamer<T> {
     const i = this.info, c = this.coloring;
     const reads = c.by === "intensity" ? [c.intensityScale, c.intensityOffset, c.intensityP2, c.intensityP98]
       : c.by === "elevation" ? [c.originZ, c.elevationMin, c.elevationMax] : [];
-    return JSON.stringify([this.origin, i.rootMin, i.rootEdge, i.colorBits, i.weights, this.extra, c.by, c.hiddenClasses, reads]);
+    return JSON.stringify([this.origin, i.rootMin, i.rootEdge, i.colorBits, i.weights, this.layout.extra, c.by, c.hiddenClasses, reads]);
   }
   // This set's resident node with the record's key, if its block has the
   // record's CRC and size and is kept: the block, and the GPU copy where it
@@ -389,7 +389,7 @@ export class Streamer<T> {
       key: n.key, blob: block.slice().buffer, crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits,
       min: [min[0] - this.origin[0], min[1] - this.origin[1], min[2] - this.origin[2]], edge: nodeEdge(this.info, n.level),
       spacing: n.spacing, hasRadius: !!(n.flags & kFlagHasRadius), hasEdgeWeights: !!(n.flags & kFlagEdgeWeights),
-      colorBits: this.info.colorBits, weights: this.info.weights !== "none", extra: this.extra, coloring: this.coloring,
+      colorBits: this.info.colorBits, weights: this.info.weights !== "none", ...this.layout, coloring: this.coloring,
     };
   }
 

@@ -413,14 +413,13 @@ describe("exports, as their consumers read them", { skip }, () => {
   async function decoderFor(info) {
     const draco = await createRequire(import.meta.url)("draco3d").createDecoderModule({});
     const blob = readFileSync(join(set, "blocks.bin"));
-    const extra = info.attributes.map((a) => a.name).filter((n) => !format.kFixedAttributes.includes(n));
     const coloring = { by: "rgb", originZ: 0, elevationMin: 0, elevationMax: 1, intensityScale: 1, intensityOffset: 0,
                        intensityP2: 0, intensityP98: 1, hiddenClasses: [] };
     return (n, i) => blocks.decodeBlock(draco, {
       id: 1, key: n.key, blob: blob.buffer.slice(blob.byteOffset + n.blockOffset, blob.byteOffset + n.blockOffset + n.blockSize),
       crc: n.blockCrc, points: n.surfelCount, positionBits: n.positionBits, min: format.nodeMin(info, n), edge: format.nodeEdge(info, n.level),
       spacing: n.spacing, hasRadius: !!(n.flags & format.kFlagHasRadius), hasEdgeWeights: !!(n.flags & format.kFlagEdgeWeights),
-      colorBits: info.colorBits, weights: info.weights !== "none", extra, coloring, pick: i }).picked;
+      colorBits: info.colorBits, weights: info.weights !== "none", ...format.blockLayout(info), coloring, pick: i }).picked;
   }
 
   // One Gaussian read back against surfel s: where it is (set coordinates,
