@@ -376,8 +376,9 @@ def mesh_view(mesh, size, tmp, shading="lambert"):
 
 # The model sweep on the scanned meshes: irregular vertex sampling (where a
 # per-surfel radius can matter) and shaded normals (where normal bits show).
-MESH_MODEL = [("defaults", []), ("no-radius", ["--no-radius"]), ("normal-bits 6", ["--normal-bits", "6"]),
-              ("normal-bits 8", ["--normal-bits", "8"]), ("normal-bits 12", ["--normal-bits", "12"])]
+# Normal bits: of each octahedral coordinate (the default 8).
+MESH_MODEL = [("defaults", []), ("no-radius", ["--no-radius"])] + \
+             [(f"normal-bits {n}", ["--normal-bits", str(n)]) for n in (6, 7, 9, 10, 12)]
 
 
 def mesh_model_sweep(mesh, size, tmp):

@@ -66,6 +66,17 @@ std::optional<BlockCodec> parseBlockCodec(const std::string& name) {
 
 namespace {
 
+// A Draco point cloud of at least one point; `what` names it in errors.
+Result<std::unique_ptr<draco::PointCloud>> decodeCloud(const uint8_t* data, size_t size, const char* what) {
+    draco::DecoderBuffer buffer;
+    buffer.Init(reinterpret_cast<const char*>(data), size);
+    draco::Decoder decoder;
+    auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
+    if (!decoded.ok()) return Status::error(std::string("Draco decoding failed (") + what + "): " + decoded.status().error_msg());
+    if (decoded.value()->num_points() == 0) return Status::error("block has no points");
+    return std::move(decoded).value();
+}
+
 // `values` (`components` per point) in `order` (empty: as they are).
 template <typename T>
 const T* permuted(const std::vector<T>& values, int components, const std::vector<uint32_t>& order, std::vector<T>* scratch) {
@@ -178,9 +189,11 @@ Result<std::vector<uint32_t>> decodedOrder(const std::vector<uint32_t>& position
     std::vector<uint32_t> sorted(n);
     std::iota(sorted.begin(), sorted.end(), 0u);
     std::sort(sorted.begin(), sorted.end(), [&](uint32_t a, uint32_t b) { return std::pair{at(a), a} < std::pair{at(b), b}; });
+    if (size_t(decoded.num_points()) != n || decoded.num_attributes() != 1 || decoded.attribute(0)->num_components() != 3 ||
+        decoded.attribute(0)->data_type() != draco::DT_UINT32)
+        return Status::error("Draco decoded other positions than it encoded");
     std::vector<uint32_t> taken(n, 0), order(n);
     const draco::PointAttribute* a = decoded.attribute(0);
-    if (size_t(decoded.num_points()) != n || a->num_components() != 3) return Status::error("Draco decoded other positions than it encoded");
     for (draco::PointIndex i(0); i < decoded.num_points(); ++i) {
         std::array<uint32_t, 3> p;
         a->GetMappedValue(i, p.data());
@@ -218,12 +231,9 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
     auto kdBuffer = encode(*positions, draco::POINT_CLOUD_KD_TREE_ENCODING, {});
     if (!kdBuffer) return kdBuffer.status();
     // The order the kd-tree's decoder gives the points in, which the columns follow.
-    draco::DecoderBuffer in;
-    in.Init(kdBuffer->data(), kdBuffer->size());
-    draco::Decoder decoder;
-    auto decoded = decoder.DecodePointCloudFromBuffer(&in);
-    if (!decoded.ok()) return Status::error(std::string("Draco decoding failed: ") + decoded.status().error_msg());
-    auto order = decodedOrder(block.positions, *decoded.value());
+    auto decoded = decodeCloud(reinterpret_cast<const uint8_t*>(kdBuffer->data()), kdBuffer->size(), "positions");
+    if (!decoded) return decoded.status();
+    auto order = decodedOrder(block.positions, **decoded);
     if (!order) return order.status();
     draco::PointCloudBuilder seq;
     seq.Start(uint32_t(n));
@@ -232,7 +242,7 @@ Result<std::vector<uint8_t>> encodeBlock(const BlockData& block, const BlockCode
     if (!others) return Status::error("Draco rejected the block's attributes");
     SC_TRY(checkReadable(n, {positions.get(), others.get()}));
     std::vector<uint8_t> out(4);
-    const uint32_t kdBytes = uint32_t(kdBuffer->size());
+    const uint32_t kdBytes = uint32_t(kdBuffer->size());  // a block is at most kMaxBlockDecodeBytes
     le::put(out.data(), kdBytes);
     out.insert(out.end(), kdBuffer->data(), kdBuffer->data() + kdBuffer->size());
     if (others->num_attributes() > 0) {
@@ -250,7 +260,7 @@ namespace {
 // count, 3.3 GB from the sequential decoder, 2 GB from attribute
 // descriptors, 3 GB from a count within the record bound times many wide
 // attributes). Header: "DRACO", major, minor, encoder type (0: point
-// cloud), method (1: kd-tree, what surfcast-build writes), u16 flags (no
+// cloud), method (1: kd-tree, 0: sequential), u16 flags (no
 // metadata: surfcast-build writes none), the point count as int32; then one
 // attribute decoder, its attribute count (varint), and per attribute its
 // type, data type, component count and normalized flag (a byte each) and a
@@ -321,7 +331,7 @@ struct Blobs {
 Result<Blobs> checkBlock(const uint8_t* data, size_t size, const BlockExpectation& expect) {
     const bool split = expect.codec == BlockCodec::DracoColumns;
     int others = expect.normals + (expect.colorBits != 0) + expect.weights + expect.radii + expect.edgeWeights;
-    for (size_t i = 0; i < expect.extra.size(); ++i) others += split && i < expect.extraBits.size() && expect.extraBits[i] > 16 ? 2 : 1;
+    for (size_t e = 0; e < expect.extra.size(); ++e) others += expect.splitsColumn(e) ? 2 : 1;
     Blobs b;
     if (!split) {
         b = {data, size, nullptr, 0};
@@ -366,16 +376,6 @@ Result<Blobs> checkBlock(const uint8_t* data, size_t size, const BlockExpectatio
     return b;
 }
 
-Result<std::unique_ptr<draco::PointCloud>> decodeCloud(const uint8_t* data, size_t size, const char* what) {
-    draco::DecoderBuffer buffer;
-    buffer.Init(reinterpret_cast<const char*>(data), size);
-    draco::Decoder decoder;
-    auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
-    if (!decoded.ok()) return Status::error(std::string("Draco decoding failed (") + what + "): " + decoded.status().error_msg());
-    if (decoded.value()->num_points() == 0) return Status::error("block has no points");
-    return std::move(decoded).value();
-}
-
 }  // namespace
 
 Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpectation& expect) {
@@ -412,8 +412,10 @@ Result<BlockData> decodeBlock(const uint8_t* data, size_t size, const BlockExpec
     if (ok && expect.edgeWeights) ok = readAttribute(pc, index++, draco::DT_FLOAT32, 4, &block.edgeWeights);
     for (size_t e = 0; e < expect.extra.size() && ok; ++e) {
         const std::string& name = expect.extra[e];
-        const bool halves = split && e < expect.extraBits.size() && expect.extraBits[e] > 16;
-        if (name == "intensity") ok = readAttribute(pc, index, draco::DT_UINT16, 1, &block.intensity);
+        const bool halves = expect.splitsColumn(e);
+        // The LiDAR attributes and the opacity have their own types, never two columns.
+        if (halves && (lidarIndex(name) >= 0 || name == kOpacityAttribute)) ok = false;
+        else if (name == "intensity") ok = readAttribute(pc, index, draco::DT_UINT16, 1, &block.intensity);
         else if (name == "classification") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.classification);
         else if (name == "return_number") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.returnNumber);
         else if (name == "number_of_returns") ok = readAttribute(pc, index, draco::DT_UINT8, 1, &block.numberOfReturns);

@@ -35,6 +35,9 @@ struct ScalarAttribute {
 
 // The tileset.json type of a scalar attribute of `bits` bits.
 inline const char* scalarType(int bits) { return bits <= 8 ? "uint8" : bits <= 16 ? "uint16" : "uint32"; }
+// The width BlockExpectation::extraBits takes for an attribute of tileset.json
+// type `type`: 32 for uint32 (two columns in draco-columns), 16, else 8.
+inline int scalarBits(const std::string& type) { return type == "uint32" ? 32 : type == "uint16" ? 16 : 8; }
 
 // What a block carries. Attributes with empty vectors are absent.
 struct BlockData {
@@ -65,7 +68,7 @@ struct BlockCodecOptions {
     int colorBits = 8;      // 8 or 16: stored as uint8 or uint16
     // Draco's quantization of normals: bits per component (draco) or of each
     // of the two octahedral coordinates (draco-columns).
-    int normalBits = 9;
+    int normalBits = 8;
     int weightBits = 12;    // per weight
     int radiusBits = 8;     // per radius
     int edgeWeightBits = 8; // per edge-weight ratio
@@ -106,10 +109,12 @@ struct BlockExpectation {
     bool radii = false;
     bool edgeWeights = false;
     std::vector<std::string> extra;
-    // The width of each of `extra` (8, 16 or 32 bits: tileset.json's type);
+    // The width of each of `extra` (scalarBits of tileset.json's type);
     // draco-columns stores a 32-bit one as two 16-bit columns, top first.
     // Empty: none wider than 16 bits.
     std::vector<int> extraBits;
+    // Whether extra[e] is two columns.
+    bool splitsColumn(size_t e) const { return codec == BlockCodec::DracoColumns && e < extraBits.size() && extraBits[e] == 32; }
     bool scalars = false;
     // Surfels the node's record declares: the block must hold exactly these.
     // Draco sizes its buffers by the count in the block's header before it

@@ -243,6 +243,11 @@ struct TilesetInfo {
             if (a.name == name) return &a;
         return nullptr;
     }
+    // Draco's quantization bits of the normals (the `normal` attribute's), or `fallback` where none are given.
+    int normalBits(int fallback) const {
+        const AttributeInfo* normal = attribute("normal");
+        return normal && normal->quantizationBits > 0 ? normal->quantizationBits : fallback;
+    }
     const ConstantAttribute* constant(const std::string& name) const {
         for (const ConstantAttribute& c : constants)
             if (c.name == name) return &c;

@@ -65,7 +65,7 @@ BlockExpectation blockExpectation(const TilesetInfo& info, const NodeRecord& nod
     for (const AttributeInfo& a : info.attributes)
         if (std::find(std::begin(kFixedAttributes), std::end(kFixedAttributes), a.name) == std::end(kFixedAttributes)) {
             e.extra.push_back(a.name);
-            e.extraBits.push_back(a.type == "uint8" ? 8 : a.type == "uint16" ? 16 : 32);
+            e.extraBits.push_back(scalarBits(a.type));
         }
     return e;
 }

@@ -181,8 +181,8 @@ void addBuildOptions(Declare& d, BuildArgs& a) {
     d.number("--spacing-k", "K", "k of the k-th-neighbour spacing h (default 8)", 1, 64, false, "--spacing-k needs a value in [1, 64]",
              [&o](double v) { o.spacingK = int(v); });
     d.number("--normal-bits", "N",
-             "Draco's quantization of normals: bits of each of their two octahedral coordinates (default 9; with --codec "
-             "draco, of each of their three components)", 4, 16, false,
+             "Draco's quantization of normals: bits of each of their two octahedral coordinates (default 8, chosen by "
+             "measurement: bench/BENCHMARKS.md; with --codec draco, of each of their three components)", 4, 16, false,
              "--normal-bits needs a value in [4, 16]", [&o](double v) { o.normalBits = int(v); });
     d.value("--codec", "C",
             "how blocks are coded: draco-columns (default: the positions in a kd-tree, the other attributes column by column) "

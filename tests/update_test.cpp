@@ -126,22 +126,13 @@ TEST_F(UpdateTest, AddedScanEqualsAFreshBuildAndKeepsTheOtherNodes) {
     ASSERT_NO_FATAL_FAILURE(expectNothingLeftBehind(set()));
 }
 
-// Every node the change cannot reach keeps its block where and what it was,
-// though the chunk that holds it is built again from decoded points (whose
-// values, computed again, differ in rounding: isolated surfels' radii
-// flipped in about 1 % of surfels, rewriting far nodes). Reach, from what a
-// build looks at (docs/ARCHITECTURE.md, "Updates in place"): a chunk's halo,
-// at most one counting cell (root edge / 128), and two node edges of the
-// node's level (the neighbouring nodes whose h its weights take); a node
-// whose box widened by the larger misses the added scan's bounds (its LAS
-// header's) is one the change cannot reach.
-// A set coded as before draco-columns ("draco", normals at 8 bits per
-// component: the defaults then) keeps its coding through an update, though
-// its build record names neither and today's defaults differ.
+// A set coded as before draco-columns ("draco") with other normal bits than
+// today's default keeps its coding through an update, though its build
+// record names neither (as the records of builds before draco-columns).
 TEST_F(UpdateTest, ASetCodedAsBeforeKeepsItsCoding) {
     const std::string old = dir.file("sets/old");
     auto args = base;
-    args.insert(args.end(), {"--codec", "draco", "--normal-bits", "8", "-o", old});
+    args.insert(args.end(), {"--codec", "draco", "--normal-bits", "10", "-o", old});
     auto built = test::run(build(args));
     ASSERT_EQ(built.exitCode, 0) << built.output;
     // The record as such a build wrote it: without the two options.
@@ -155,13 +146,17 @@ TEST_F(UpdateTest, ASetCodedAsBeforeKeepsItsCoding) {
     }
     ASSERT_EQ(before.size() + 4, stored.size());
     ASSERT_TRUE(writePlan(record, *plan, before).ok());
+    std::set<uint32_t> crcsBefore;
+    auto previous = TilesetReader::open(old);
+    ASSERT_TRUE(previous) << previous.status().message();
+    for (const NodeRecord& n : previous->nodes()) crcsBefore.insert(n.blockCrc);
     auto update = test::run({test::binary("surfcast-build"), "-q", "--add", added[0], "--to", old});
     ASSERT_EQ(update.exitCode, 0) << update.output;
     auto reader = TilesetReader::open(old);
     ASSERT_TRUE(reader) << reader.status().message();
     EXPECT_EQ(reader->info().blockCodec, BlockCodec::Draco);
     ASSERT_NE(reader->info().attribute("normal"), nullptr);
-    EXPECT_EQ(reader->info().attribute("normal")->quantizationBits, 8);
+    EXPECT_EQ(reader->info().attribute("normal")->quantizationBits, 10);
     uint64_t surfels = 0;
     Status decoded = reader->forEachBlock(reader->nodes(), true, [&](const NodeRecord&, BlockData& b) {
         surfels += b.size();
@@ -169,8 +164,21 @@ TEST_F(UpdateTest, ASetCodedAsBeforeKeepsItsCoding) {
     });
     ASSERT_TRUE(decoded.ok()) << decoded.message();
     EXPECT_EQ(surfels, reader->info().surfels);
+    // Some blocks were written anew (the added scan's), in the set's coding.
+    size_t rewritten = 0;
+    for (const NodeRecord& n : reader->nodes()) rewritten += !crcsBefore.count(n.blockCrc);
+    EXPECT_GT(rewritten, 0u);
 }
 
+// Every node the change cannot reach keeps its block where and what it was,
+// though the chunk that holds it is built again from decoded points (whose
+// values, computed again, differ in rounding: isolated surfels' radii
+// flipped in about 1 % of surfels, rewriting far nodes). Reach, from what a
+// build looks at (docs/ARCHITECTURE.md, "Updates in place"): a chunk's halo,
+// at most one counting cell (root edge / 128), and two node edges of the
+// node's level (the neighbouring nodes whose h its weights take); a node
+// whose box widened by the larger misses the added scan's bounds (its LAS
+// header's) is one the change cannot reach.
 TEST_F(UpdateTest, NodesTheChangeCannotReachKeepTheirBlocks) {
     auto before = TilesetReader::open(set());
     ASSERT_TRUE(before) << before.status().message();

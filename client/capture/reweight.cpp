@@ -55,9 +55,7 @@ Result<ReweightSummary> reweightTileset(const std::string& dir, const ReweightOp
     TilesetInfo info = reader->info();
     // Blocks are re-encoded with the set's own quantization, which tileset.json
     // keeps declaring: only the weights change.
-    int normalBits = BlockCodecOptions{}.normalBits;
-    for (const auto& a : info.attributes)
-        if (a.name == "normal" && a.quantizationBits > 0) normalBits = a.quantizationBits;
+    const int normalBits = info.normalBits(BlockCodecOptions{}.normalBits);
     for (size_t n = 0; n < nodes.size(); ++n) {
         BlockData& b = blocks[n];
         b.weights = std::move(weights[n]);

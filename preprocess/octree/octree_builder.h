@@ -38,7 +38,7 @@ struct BuildOptions {
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
     double isolation = kDefaultIsolation;  // isolated surfels drawn at their level's spacing (level_attributes.h); 0: off
     BlockCodec blockCodec = BlockCodec::DracoColumns;  // how blocks are coded (bench/BENCHMARKS.md, "Block coding")
-    int normalBits = 9;                 // BlockCodecOptions::normalBits (bench/BENCHMARKS.md, "Block coding")
+    int normalBits = 8;                 // BlockCodecOptions::normalBits (bench/BENCHMARKS.md, "Block coding")
     // Attributes to store, each where some input carries it: names from
     // kLidarAttributes, and scalar fields (input_point.h) by name, which
     // inputs.scalars must select too. Unset: all of kLidarAttributes, each only

@@ -391,7 +391,7 @@ Status Update::open(const BuildOptions& options, size_t added, const std::string
         return Status::error(name_ + ": its weights were captured by rendering; an update cannot keep them; build it anew");
     // The set's blocks keep their coding, whatever the defaults are now.
     opt_.blockCodec = info.blockCodec;
-    if (const AttributeInfo* normal = info.attribute("normal")) opt_.normalBits = normal->quantizationBits;
+    opt_.normalBits = info.normalBits(opt_.normalBits);
     BuildOptions setOptions = opt_;
     setOptions.inputs.paths.resize(opt_.inputs.paths.size() - added);
     auto derivedOld = BuildContext::derive(setOptions, record.stats, false);

@@ -4,11 +4,11 @@
 
 The good blocks are the one node of a 150-point default scene that
 surfcast-build writes (Draco's own encoder) in each codec, `draco` and
-`draco-columns`; each bad case changes one field of a header (docs/FORMAT.md,
+`draco-columns`, and of 100 points with a 32-bit scalar (two columns); each bad case changes one field of a header (docs/FORMAT.md,
 "blocks.bin": the offsets of Draco 1.5's bitstream 2.x), or cuts a blob short,
 or puts one where another belongs, so that it reaches the check it is about.
-Header checks come before decoding, so a bad case keeps only the bytes its
-check reads. `error` is text both readers' messages contain.
+Header checks come before decoding, so a bad case of the one-blob codec keeps
+only the bytes its check reads. `error` is text both readers' messages contain.
 
 Run it again after changing a case:
     python3 tests/conformance/make_block_cases.py build/bin/surfcast-build
@@ -22,11 +22,9 @@ import tempfile
 import zlib
 
 
-def build(binary, tmp, codec):
-    """The one block of a 150-point default scene, and the set's tileset.json."""
-    out = os.path.join(tmp, codec)
-    subprocess.run([binary, "-q", "--default-scene", "--scene-points", "150", "--codec", codec, "-o", out], check=True,
-                   stdout=subprocess.DEVNULL)
+def build(binary, out, codec, inputs=("--default-scene", "--scene-points", "150")):
+    """The one block of a set (by default of a 150-point default scene), and its tileset.json."""
+    subprocess.run([binary, "-q", *inputs, "--codec", codec, "-o", out], check=True, stdout=subprocess.DEVNULL)
     info = json.load(open(os.path.join(out, "tileset.json")))
     assert info["nodes"] == 1, "one node: the whole blocks.bin is its block"
     assert info["blocks"]["codec"] == codec
@@ -36,8 +34,23 @@ def build(binary, tmp, codec):
 def main():
     binary = sys.argv[1] if len(sys.argv) > 1 else "build/bin/surfcast-build"
     with tempfile.TemporaryDirectory() as tmp:
-        block, info = build(binary, tmp, "draco")
-        split, split_info = build(binary, tmp, "draco-columns")
+        block, info = build(binary, os.path.join(tmp, "draco"), "draco")
+        split, split_info = build(binary, os.path.join(tmp, "columns"), "draco-columns")
+        # 100 points on a plane with a 32-bit scalar "stamp" over [0, 2^32).
+        ply = os.path.join(tmp, "stamped.ply")
+        with open(ply, "w") as f:
+            f.write("ply\nformat ascii 1.0\nelement vertex 100\nproperty float x\nproperty float y\nproperty float z\n"
+                    "property uint stamp\nend_header\n")
+            for i in range(100):
+                f.write(f"{i % 10} {i // 10} 0 {(i * 2654435761) % 2**32 if i else 2**32 - 1}\n")
+        wide, wide_info = build(binary, os.path.join(tmp, "wide"), "draco-columns", [ply, "--attributes", "stamp"])
+    assert split_info["attributes"] == info["attributes"], "the two codecs' sets list the same attributes"
+    stamp = [a for a in wide_info["attributes"] if a["name"] == "stamp"]
+    assert stamp and stamp[0]["type"] == "uint32", "stamp is a 32-bit scalar"
+    wide_names = [a["name"] for a in wide_info["attributes"]]
+    wide_points = struct.unpack_from("<i", wide, 4 + 11)[0]
+    wide_expect = {"points": wide_points, "color_bits": wide_info["color_bits"], "radii": "radius" in wide_names,
+                   "edge_weights": False, "weights": False, "extra": ["stamp"], "extra_bits": [32]}
     points = struct.unpack_from("<i", block, 11)[0]
     names = [a["name"] for a in info["attributes"]]
     # What the node's record and tileset.json tell a reader to expect.
@@ -104,6 +117,8 @@ def main():
         ("another column count than tileset.json's", split, {"radii": not expect["radii"]},
          "the columns blob has"),
         ("columns cut short", columns_case(positions, columns[:len(columns) // 2]), {}, "Draco decoding failed"),
+        ("good: a 32-bit scalar in two columns", wide, wide_expect, {"count": wide_points}),
+        ("a 32-bit scalar taken for one column", wide, {**wide_expect, "extra_bits": [16]}, "the columns blob has"),
     ]
     result = {
         "about": [

@@ -121,12 +121,20 @@ function readDracoHeader(b: Uint8Array, kdTree: boolean, what: string): DracoHea
   return { points, attributes, components, valueBytes };
 }
 
+// The LiDAR attributes and the opacity: their types are the format's own.
+const kFixedTypeAttributes = ["intensity", "classification", "return_number", "number_of_returns", "opacity"];
+
+// Whether extra[e] is two columns (common/block_codec.h's splitsColumn).
+function splitsColumn(job: Pick<DecodeJob, "columns" | "extraBits">, e: number): boolean {
+  return job.columns && job.extraBits[e] === 32;
+}
+
 // The block's blobs, their headers checked against the job before Draco
 // allocates anything (common/block_codec.cpp's checkBlock), or the error.
 export function checkBlock(b: Uint8Array, job: Pick<DecodeJob, "points" | "colorBits" | "weights" | "hasRadius" |
                            "hasEdgeWeights" | "columns" | "extra" | "extraBits">): { first: Uint8Array; columns: Uint8Array | null } | string {
   let others = 1 + (job.colorBits ? 1 : 0) + (job.weights ? 1 : 0) + (job.hasRadius ? 1 : 0) + (job.hasEdgeWeights ? 1 : 0);
-  job.extra.forEach((_, i) => { others += job.columns && job.extraBits[i] > 16 ? 2 : 1; });
+  job.extra.forEach((_, e) => { others += splitsColumn(job, e) ? 2 : 1; });
   let first = b, columns: Uint8Array | null = null;
   if (job.columns) {
     if (b.length < 4) return "the block ends before its positions blob's length";
@@ -251,9 +259,10 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
     job.extra.forEach((name, e) => {
       // Picking reads every attribute (unsigned, 8 to 32 bits: Draco widens them).
       const type = job.pick !== undefined ? "u32" : name === "intensity" ? "u16"
-        : ["classification", "return_number", "number_of_returns", "opacity"].includes(name) ? "u8" : null;
-      if (job.columns && job.extraBits[e] > 16) {
-        // Two 16-bit columns, the top and the low bits.
+        : kFixedTypeAttributes.includes(name) ? "u8" : null;
+      if (splitsColumn(job, e)) {
+        // Two 16-bit columns, the top and the low bits; never the LiDAR attributes' or the opacity's.
+        if (kFixedTypeAttributes.includes(name)) throw new Error(`${where}: block attribute ${index} has an unexpected type`);
         if (type) {
           const top = read(index, "u32", 1), low = read(index + 1, "u32", 1), v = new Float64Array(n);
           for (let i = 0; i < n; ++i) v[i] = top[i] * 65536 + low[i];

@@ -67,7 +67,7 @@ export const kFixedAttributes = ["position", "normal", "color", "weight", "radiu
 export function blockLayout(info: TilesetInfo): { columns: boolean; extra: string[]; extraBits: number[] } {
   const extra = info.attributes.filter((a) => !kFixedAttributes.includes(a.name));
   return { columns: info.blockCodec === "draco-columns", extra: extra.map((a) => a.name),
-           extraBits: extra.map((a) => (a.type === "uint32" ? 32 : a.type === "uint16" ? 16 : 8)) };
+           extraBits: extra.map((a) => (a.type === "uint32" ? 32 : a.type === "uint16" ? 16 : 8)) }; // common/block_codec.h scalarBits
 }
 
 // Largest tileset.json a reader accepts (common/tile_source.h's

@@ -123,7 +123,7 @@ test("blocks: the conformance cases (conformance/blocks.json)", async (t) => {
         id: 1, key: "0-0-0-0", blob: bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.length), crc: c.crc,
         points: e.points, positionBits: 16, min: [0, 0, 0], edge: 1, spacing: 0.1, hasRadius: e.radii,
         hasEdgeWeights: e.edge_weights, colorBits: e.color_bits, weights: e.weights, columns: e.codec === "draco-columns",
-        extra: [], extraBits: [], coloring });
+        extra: e.extra ?? [], extraBits: e.extra_bits ?? [], coloring });
       if (c.error === undefined) {
         assert.equal(result.error, undefined);
         assert.equal(result.count, c.count);
