@@ -13,8 +13,9 @@
 namespace surfcast {
 
 namespace {
-// Draco speed 0..10: 5 is its default balance; the kd-tree coder's ratio barely
-// changes below it while encoding gets markedly slower.
+// Draco speed 0..10, both coders: 5 is its default balance; the kd-tree
+// coder's ratio barely changes below it while encoding gets markedly slower
+// (bench/BENCHMARKS.md, "Bytes").
 constexpr int kDracoSpeed = 4;
 
 template <typename T>

@@ -29,7 +29,7 @@ std::optional<BlockCodec> parseBlockCodec(const std::string& name);
 // A scalar field's quantized values (FORMAT.md, "Scalar attributes"): 1 per surfel.
 struct ScalarAttribute {
     std::string name;  // as tileset.json lists it (decoding fills it)
-    int bits = 32;     // the values' width: stored as uint8, uint16 or uint32 (scalarType)
+    int bits = 32;     // the values' width: stored as uint8, uint16 or uint32 (scalarType; draco-columns: uint32 as two uint16)
     std::vector<uint32_t> values;
 };
 

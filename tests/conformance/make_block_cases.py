@@ -119,6 +119,9 @@ def main():
         ("columns cut short", columns_case(positions, columns[:len(columns) // 2]), {}, "Draco decoding failed"),
         ("good: a 32-bit scalar in two columns", wide, wide_expect, {"count": wide_points}),
         ("a 32-bit scalar taken for one column", wide, {**wide_expect, "extra_bits": [16]}, "the columns blob has"),
+        ("a LiDAR attribute declared 32-bit", wide, {**wide_expect, "extra": ["intensity"]}, "has an unexpected type"),
+        ("a 16-bit column where a class belongs", wide,
+         {**wide_expect, "extra": ["classification", "user_data"], "extra_bits": [8, 8]}, "has an unexpected type"),
     ]
     result = {
         "about": [

@@ -221,9 +221,15 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
     const first = decode(blobs.first, job.columns ? "positions" : "block");
     const rest = blobs.columns ? decode(blobs.columns, "columns") : first;
     const n = job.points;
-    const read = (index: number, type: "u8" | "u16" | "u32" | "f32", components: number, pc: any = rest): ArrayLike<number> => {
+    // Attribute `index` of `pc` as `type`; it must be stored as one of `stored`
+    // (by default `type` itself), as common/block_codec.cpp's readAttribute
+    // and readScalar demand.
+    const dtOf = { u8: draco.DT_UINT8, u16: draco.DT_UINT16, u32: draco.DT_UINT32, f32: draco.DT_FLOAT32 };
+    const read = (index: number, type: "u8" | "u16" | "u32" | "f32", components: number, pc: any = rest,
+                  stored: number[] = [dtOf[type]]): ArrayLike<number> => {
       const a = decoder.GetAttribute(pc, index);
       if (a.num_components() !== components) throw new Error(`${where}: block attribute ${index} has ${a.num_components()} components, not ${components}`);
+      if (!stored.includes(a.data_type())) throw new Error(`${where}: block attribute ${index} has an unexpected type`);
       const count = n * components;
       if (type === "f32") {
         const arr = new draco.DracoFloat32Array();
@@ -258,19 +264,22 @@ export function decodeBlock(draco: DracoModule, job: DecodeJob): DecodeResult {
     const lidar: Record<string, ArrayLike<number>> = {};
     job.extra.forEach((name, e) => {
       // Picking reads every attribute (unsigned, 8 to 32 bits: Draco widens them).
-      const type = job.pick !== undefined ? "u32" : name === "intensity" ? "u16"
-        : kFixedTypeAttributes.includes(name) ? "u8" : null;
+      const own = name === "intensity" ? "u16" : kFixedTypeAttributes.includes(name) ? "u8" : null;
+      const type = job.pick !== undefined ? "u32" : own;
+      // Stored as the format's own type, or a scalar as any unsigned integer of one component.
+      const stored = own ? [dtOf[own]] : [draco.DT_UINT8, draco.DT_UINT16, draco.DT_UINT32];
       if (splitsColumn(job, e)) {
         // Two 16-bit columns, the top and the low bits; never the LiDAR attributes' or the opacity's.
         if (kFixedTypeAttributes.includes(name)) throw new Error(`${where}: block attribute ${index} has an unexpected type`);
         if (type) {
-          const top = read(index, "u32", 1), low = read(index + 1, "u32", 1), v = new Float64Array(n);
+          const top = read(index, "u32", 1, rest, [draco.DT_UINT16]), low = read(index + 1, "u32", 1, rest, [draco.DT_UINT16]);
+          const v = new Float64Array(n);
           for (let i = 0; i < n; ++i) v[i] = top[i] * 65536 + low[i];
           lidar[name] = v;
         }
         index += 2;
       } else {
-        if (type) lidar[name] = read(index, type, 1);
+        if (type) lidar[name] = read(index, type, 1, rest, stored);
         ++index;
       }
     });
