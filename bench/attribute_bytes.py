@@ -12,46 +12,31 @@ without. Prints markdown tables for bench/BENCHMARKS.md ("Attribute bytes").
 Usage: bench/attribute_bytes.py [--build build] [--data ../shared/data] [SCAN ...]
 Needs the test venv (laspy): build/test-venv/bin/python bench/attribute_bytes.py
 """
-import argparse
-import json
 import os
-import subprocess
 import tempfile
 
 import laspy
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+import set_bytes
+
 SCANS = ["Megaplot.laz", "lone-star.laz", "lion_takanawa.copc.laz", "autzen_trim.las"]
 LIDAR = ["intensity", "classification", "return_number", "number_of_returns"]
 
 
-def set_bytes(folder):
-    info = json.load(open(os.path.join(folder, "tileset.json")))
-    return info["hierarchy"]["bytes"] + info["blocks"]["bytes"], info
-
-
 def build(binary, scan, args, out):
-    subprocess.run([binary, "-q", scan, *args, "-o", out], check=True, capture_output=True)
-    return set_bytes(out)
+    size, info, _ = set_bytes.build(binary, scan, ["-q", *args], out)
+    return size, info
 
 
 def main():
-    p = argparse.ArgumentParser()
-    p.add_argument("--build", default=os.path.join(ROOT, "build"))
-    p.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
-    p.add_argument("scans", nargs="*", default=SCANS)
-    a = p.parse_args()
-    binary = os.path.join(a.build, "bin", "surfcast-build")
+    a = set_bytes.arguments(__doc__, SCANS)
+    binary = a.binary
     totals, costs = [], {}
     with tempfile.TemporaryDirectory() as work:
         for name in a.scans:
             scan = os.path.join(a.data, name)
-            laz = scan
-            if not name.endswith(".laz"):
-                laz = os.path.join(work, name + ".laz")
-                laspy.read(scan).write(laz)
-            laz_bytes = os.path.getsize(laz)
-            points = laspy.open(laz).header.point_count
+            laz_bytes = set_bytes.laz_bytes(scan, work)
+            points = laspy.open(scan).header.point_count
             default, _ = build(binary, scan, [], os.path.join(work, "default"))
             everything, info = build(binary, scan, ["--attributes", "all"], os.path.join(work, "all"))
             totals.append((name, points, laz_bytes, default, everything))

@@ -15,16 +15,14 @@ tables for bench/BENCHMARKS.md ("Block coding").
 Usage: bench/block_coding.py [--build build] [--data ../shared/data] [SCAN ...]
 Needs the test venv (laspy): build/test-venv/bin/python bench/block_coding.py
 """
-import argparse
 import json
 import os
 import re
 import subprocess
 import tempfile
 
-import laspy
+import set_bytes
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCANS = ["Megaplot.laz", "lone-star.laz", "lion_takanawa.copc.laz", "autzen_trim.las", "CSite1_red1-utm.pcd", "bunny.ply"]
 # Each codec with normals at the same angular error (RMS 0.18°): 8 bits per
 # component in one kd-tree (the default before draco-columns), 9 per
@@ -33,10 +31,8 @@ CODECS = {"draco": ["--codec", "draco", "--normal-bits", "8"], "draco-columns": 
 
 
 def build(binary, scan, args, out):
-    run = subprocess.run([binary, scan, "--threads", "1", *args, "-o", out], check=True, capture_output=True, text=True)
-    info = json.load(open(os.path.join(out, "tileset.json")))
-    encode = float(re.search(r"encode ([0-9.]+)", run.stdout).group(1))
-    return info["hierarchy"]["bytes"] + info["blocks"]["bytes"], encode, info
+    size, info, stdout = set_bytes.build(binary, scan, ["--threads", "1", *args], out)
+    return size, float(re.search(r"encode ([0-9.]+)", stdout).group(1)), info
 
 
 def decode_ns(tool, folder):
@@ -45,24 +41,14 @@ def decode_ns(tool, folder):
 
 
 def main():
-    p = argparse.ArgumentParser()
-    p.add_argument("--build", default=os.path.join(ROOT, "build"))
-    p.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
-    p.add_argument("scans", nargs="*", default=SCANS)
-    a = p.parse_args()
-    binary = os.path.join(a.build, "bin", "surfcast-build")
+    a = set_bytes.arguments(__doc__, SCANS)
+    binary = a.binary
     tool = os.path.join(a.build, "bin", "surfcast-decode-bench")
     rows = []
     with tempfile.TemporaryDirectory() as work:
         for name in a.scans:
             scan = os.path.join(a.data, name)
-            laz_bytes = None
-            if name.endswith((".las", ".laz")):
-                laz = scan
-                if name.endswith(".las"):
-                    laz = os.path.join(work, name + ".laz")
-                    laspy.read(scan).write(laz)
-                laz_bytes = os.path.getsize(laz)
+            laz_bytes = set_bytes.laz_bytes(scan, work) if name.endswith((".las", ".laz")) else None
             for label, args in [("default", []), ("--attributes all", ["--attributes", "all"])]:
                 if label != "default" and laz_bytes is None:
                     continue

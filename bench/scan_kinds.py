@@ -13,31 +13,19 @@ Prints a markdown table for bench/BENCHMARKS.md ("Block coding").
 
 Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/scan_kinds.py [--build build] [--data ../shared/data]
 """
-import argparse
-import json
 import os
-import subprocess
 import tempfile
 
 import laspy
 import numpy as np
 from scipy.spatial import cKDTree
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def set_bytes(binary, las, out):
-    subprocess.run([binary, "-q", las, "-o", out, "--threads", "2"], check=True, capture_output=True)
-    info = json.load(open(os.path.join(out, "tileset.json")))
-    return info["hierarchy"]["bytes"] + info["blocks"]["bytes"], info["color_bits"]
+import set_bytes
 
 
 def main():
-    p = argparse.ArgumentParser()
-    p.add_argument("--build", default=os.path.join(ROOT, "build"))
-    p.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
-    a = p.parse_args()
-    binary = os.path.join(a.build, "bin", "surfcast-build")
+    a = set_bytes.arguments(__doc__)
+    binary = a.binary
     with tempfile.TemporaryDirectory() as work:
         copc = laspy.read(os.path.join(a.data, "lion_takanawa.copc.laz"))
         # Its points as a plain LAS 1.4 (laspy writes no COPC), and again with 16-bit colour.
@@ -63,7 +51,8 @@ def main():
             data.write(las)
             data.write(laz)
             n = len(data.points)
-            size, bits = set_bytes(binary, las, os.path.join(work, f"set{i}"))
+            size, info, _ = set_bytes.build(binary, las, ["-q", "--threads", "2"], os.path.join(work, f"set{i}"))
+            bits = info["color_bits"]
             laz_bpp = os.path.getsize(laz) / n
             print(f"| {name} | {n:,} | {bits} | {laz_bpp:.2f} | {size / n:.2f} | {size / os.path.getsize(laz):.2f} |", flush=True)
 
