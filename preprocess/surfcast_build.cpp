@@ -681,12 +681,13 @@ int main(int argc, char** argv) {
         if (auto st = readRecord(firstSet, &record, &first, "merge it", &found, a.opt.inputs.paths[0]); !st.ok()) return fail(st);
         // Options of how the first set read its inputs act on the sets'
         // points no more: they hold the result (--opacity would scale their
-        // alpha twice, --default-scene add the scene again).
+        // alpha twice, --default-scene add the scene again, --remove-outliers
+        // judge the points it kept again).
         std::vector<std::string> args;
         for (size_t i = 0; i < first.kept.size(); ++i) {
             const std::string& o = first.kept[i];
             if (o == "--scene-points" || o == "--seed" || o == "--opacity" || o == "--columns" || o == "--mesh-spacing" ||
-                o == "--mesh-max-surfels" || o == "--texture-filter")
+                o == "--mesh-max-surfels" || o == "--texture-filter" || o == "--remove-outliers")
                 ++i;
             else if (o != "--default-scene" && o != "--read-alpha" && o != "--vertices-only" && o != "--allow-missing-textures" &&
                      o != "--allow-outside-paths")

@@ -132,6 +132,44 @@ TEST_F(ScanDefects, StraysInASlabAreDrawnAtTheSurfacesSpacing) {
     EXPECT_GT(double(changedPixels(clean, before)) / (kW * kH), 0.3);
 }
 
+TEST_F(ScanDefects, OutlierRemovalKeepsEveryPointOfTheSurface) {
+    // 2 % strays (800) through the slab 0.1-2 m above the 20 m plane. A
+    // plane point's d_8 is s·√2 = 0.14 m inside, 2 s on an edge, 2√2 s = 0.28 m
+    // at a corner; a stray's about (8 / (4/3 π n))^(1/3) = 1.2 m at the strays'
+    // density n = 800 / 760 m³. Over the chunk (one: 40,800 points) the mean is
+    // then about 0.16 m and the standard deviation 0.14 · 1.06 = 0.15 m, so
+    // --remove-outliers 2 cuts at about 0.46 m: above every plane point's
+    // d_8, and below a stray's where it lies over 1 m up (the plane 1 m away,
+    // and 8 other strays within 0.46 m expected with probability under 1e-7).
+    std::vector<Point> points = lattice(kS, -1e9, 1e9);
+    const size_t surface = points.size();
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> across(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
+    const size_t strays = surface / 50;
+    size_t high = 0;
+    for (size_t i = 0; i < strays; ++i) {
+        points.push_back({across(rng), across(rng), up(rng), kStray});
+        high += points.back().z > 1.0;
+    }
+    writePly(dir_.file("strays.ply"), points);
+    auto r = test::run({test::binary("surfcast-build"), dir_.file("strays.ply"), "-o", dir_.file("set"), "--remove-outliers", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto set = loadSurfelSet(dir_.file("set"), LevelChoice{});
+    ASSERT_TRUE(set) << set.status().message();
+    size_t onPlane = 0, keptHigh = 0, kept = 0;
+    for (const auto& s : set->surfels) {
+        const double z = set->origin.z + s.pz;
+        onPlane += std::fabs(z) < 1e-3;
+        kept += z > 0.05;
+        keptHigh += z > 1.0;
+    }
+    EXPECT_EQ(onPlane, surface);
+    EXPECT_EQ(keptHigh, 0u) << "of " << high << " strays over 1 m";
+    EXPECT_LT(kept, strays);
+    // The summary counts what left.
+    EXPECT_NE(r.output.find(std::to_string(strays - kept) + " removed as outliers"), std::string::npos) << r.output;
+}
+
 TEST_F(ScanDefects, ADensityJumpStaysClosed) {
     // x < 1 m at s, beyond at 3s (a ninth of the density): its d_8 is 3·s·√2,
     // 0.42 m, within 6 rho of its level (rho = 2 cells, 0.16 m at level 1 of

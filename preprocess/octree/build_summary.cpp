@@ -18,7 +18,8 @@ std::string BuildSummary::text() const {
     std::ostringstream out;
     out.setf(std::ios::fixed);
     out.precision(2);
-    out << "points in: " << inputPoints << " (" << skippedPoints << " skipped: NaN/Inf or no return)\n";
+    out << "points in: " << inputPoints << " (" << skippedPoints << " skipped: NaN/Inf or no return"
+        << (removedOutliers ? "; " + std::to_string(removedOutliers) + " removed as outliers" : "") << ")\n";
     out << "surfels: " << surfels << " in " << nodes << " nodes, " << levels << " levels, " << chunks << " chunks\n";
     for (size_t l = 0; l < surfelsPerLevel.size(); ++l)
         out << "  level " << l << ": " << nodesPerLevel[l] << " nodes, " << surfelsPerLevel[l] << " surfels\n";

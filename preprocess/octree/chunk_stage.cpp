@@ -40,6 +40,29 @@ void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
     points.swap(sorted);
 }
 
+// Statistical outlier removal (BuildOptions::removeOutliers): removes the
+// read points whose d_k (Surfel::scanDk) exceeds the mean over the chunk's
+// measured read points by `sigmas` standard deviations, with their entries of
+// `flags`. A set's points an update decoded (Surfel::fromSet) are not judged
+// again. Returns how many it removed.
+uint64_t removeOutliers(std::vector<Surfel>& points, std::vector<uint8_t>& flags, double sigmas) {
+    double sum = 0, sum2 = 0;
+    size_t n = 0;
+    for (const Surfel& s : points)
+        if (!s.fromSet && s.scanDk >= 0) sum += s.scanDk, sum2 += double(s.scanDk) * s.scanDk, ++n;
+    if (n < 2) return 0;
+    const double mean = sum / double(n), sd = std::sqrt(std::max(0.0, sum2 / double(n) - mean * mean));
+    const double limit = mean + sigmas * sd;
+    size_t kept = 0;
+    for (size_t i = 0; i < points.size(); ++i) {
+        if (!points[i].fromSet && points[i].scanDk > limit) continue;
+        points[kept] = points[i], flags[kept] = flags[i], ++kept;
+    }
+    const uint64_t removed = points.size() - kept;
+    points.resize(kept), flags.resize(kept);
+    return removed;
+}
+
 BuiltNode* buildSubtree(const BuildContext& ctx, std::vector<Surfel>& pts, size_t b, size_t e, const NodeKey& key,
                         std::vector<std::unique_ptr<BuiltNode>>& nodes, ScalarTable& scalars) {
     auto node = std::make_unique<BuiltNode>();
@@ -243,6 +266,7 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
     std::vector<NodeRecord> records;
     std::unique_ptr<BuiltNode> retained;  // the chunk root, for the levels above (none for the root chunk)
 
+    uint64_t removedOutliers = 0;
     if (!points.empty()) {
         const double margin = layout.margin(int(index));
         NormalContext normals = context.normals();
@@ -252,7 +276,25 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
             const Vec3d lo = context.nodeMinRel(chunk.key) - Vec3d{margin, margin, margin};
             sortMorton(points, lo, context.edge(chunk.key.level) + 2 * margin);
             sortMorton(halo, lo, context.edge(chunk.key.level) + 2 * margin);
+            // Outlier removal judges every read point by its d_k: those whose
+            // normals came with them (flagged) are measured for it alone, and
+            // forget it after, as isolation judges them at their level.
+            const double sigmas = context.options().removeOutliers;
+            std::vector<uint8_t> judgedOnly;
+            if (sigmas > 0) {
+                normals.measure = true;
+                judgedOnly.resize(points.size());
+                for (size_t i = 0; i < points.size(); ++i)
+                    if (!points[i].fromSet && points[i].normal != Vec3f{} && points[i].scanDk == -1)
+                        points[i].scanDk = kScanDkToMeasure, judgedOnly[i] = 1;
+            }
             estimateNormals(points, halo, normals);
+            if (sigmas > 0) {
+                removedOutliers = removeOutliers(points, judgedOnly, sigmas);
+                const bool keepsMeasure = context.normals().measure;
+                for (size_t i = 0; i < points.size(); ++i)
+                    if (judgedOnly[i] || (!keepsMeasure && !points[i].fromSet)) points[i].scanDk = -1;
+            }
         }
         std::vector<std::unique_ptr<BuiltNode>> nodes;
         BuiltNode* root = nullptr;
@@ -310,6 +352,7 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
     out.blocksBytes = blocks.bytes();
     for (int i = 0; i < kStepCount; ++i) out.stepNs[i] = steps[i];
     out.fits = fits;
+    out.removedOutliers = removedOutliers;
     if (retained) {
         // Rows renumbered in surfel order, each with its scalar values.
         out.root = std::move(retained);

@@ -59,6 +59,7 @@ Status mergeStage(const BuildContext& context, const BuildPlan& plan, const Chun
         for (const NodeRecord& r : out->records) count(r);
         for (int s = 0; s < kStepCount; ++s) steps[s] += out->stepNs[s];
         summary->textureFit.add(out->fits);
+        summary->removedOutliers += out->removedOutliers;
         if (out->root) {
             if (!(out->root->key == layout.chunks()[i].key))
                 return Status::error(from.nodes(i) + ": its root is not chunk " + std::to_string(i) + "'s node");

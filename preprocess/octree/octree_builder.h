@@ -37,6 +37,10 @@ struct BuildOptions {
     bool weights = false;               // store analytic per-surfel normalization weights (ewa-surfel reads them)
     bool radii = true;                  // store a per-surfel radius in irregularly sampled nodes
     double isolation = kDefaultIsolation;  // isolated surfels drawn at their level's spacing (level_attributes.h); 0: off
+    // > 0: statistical outlier removal. An input point leaves the set where
+    // its d_k (--spacing-k) exceeds the mean over its chunk's points by this
+    // many standard deviations (chunk_stage.cpp, removeOutliers). 0: off, every point kept.
+    double removeOutliers = 0;
     BlockCodec blockCodec = BlockCodec::DracoColumns;  // how blocks are coded (bench/BENCHMARKS.md, "Block coding")
     int normalBits = 8;                 // BlockCodecOptions::normalBits (bench/BENCHMARKS.md, "Block coding")
     // Attributes to store, each where some input carries it: names from
@@ -74,6 +78,7 @@ struct BuildOptions {
 
 struct BuildSummary {
     uint64_t inputPoints = 0, skippedPoints = 0, surfels = 0, nodes = 0;
+    uint64_t removedOutliers = 0;  // input points --remove-outliers took out
     int levels = 0;
     size_t chunks = 0;
     std::vector<uint64_t> nodesPerLevel, surfelsPerLevel;

@@ -58,7 +58,7 @@ Result<std::vector<uint8_t>> readWorkFile(const std::string& path, const char (&
 namespace surfcast {
 
 namespace {
-constexpr char kChunkMagic[9] = "SCNODES3";  // 3: Surfel::scanDk in the root's records
+constexpr char kChunkMagic[9] = "SCNODES4";  // 4: the outliers removed
 }
 
 Status writeChunkOutput(const std::string& path, const ChunkOutput& out) {
@@ -78,6 +78,7 @@ Status writeChunkOutput(const std::string& path, const ChunkOutput& out) {
     w.put(out.fits.iterations);
     w.put(int32_t(out.fits.maxIterations));
     w.put(out.fits.maxResidual);
+    w.put(out.removedOutliers);
     w.put(uint8_t(out.root != nullptr));
     if (out.root) {
         const BuiltNode& root = *out.root;
@@ -114,6 +115,7 @@ Result<ChunkOutput> readChunkOutput(const std::string& path, const ScalarTable& 
     out.fits.iterations = r.get<uint64_t>();
     out.fits.maxIterations = r.get<int32_t>();
     out.fits.maxResidual = r.get<double>();
+    out.removedOutliers = r.get<uint64_t>();
     if (r.get<uint8_t>()) {
         out.root = std::make_unique<BuiltNode>();
         BuiltNode& root = *out.root;

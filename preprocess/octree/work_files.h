@@ -97,6 +97,7 @@ struct ChunkOutput {
     uint64_t blocksBytes = 0;
     uint64_t stepNs[kStepCount] = {};
     FitReport fits;
+    uint64_t removedOutliers = 0;  // read points BuildOptions::removeOutliers took out
     std::unique_ptr<BuiltNode> root;
     ScalarTable rootScalars;  // row i: root->surfels[i]'s (Surfel::row == i)
 };
