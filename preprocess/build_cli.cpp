@@ -206,8 +206,9 @@ void addBuildOptions(Declare& d, BuildArgs& a) {
             });
     d.number("--remove-outliers", "M",
              "removes stray input points: those whose k-th neighbour (--spacing-k) lies farther than the mean over their "
-             "chunk's points by M standard deviations (statistical outlier removal, as PCL's and PDAL's; 2 is usual). Off by "
-             "default: a set keeps every point it reads",
+             "chunk's points by M standard deviations, and than twice the mean (statistical outlier removal, as PCL's and "
+             "PDAL's; 2 is usual; a surface sampled far more sparsely than the chunk's average goes too). Off by default: a "
+             "set keeps every point it reads",
              0.1, 100, false, "--remove-outliers needs a value in [0.1, 100]", [&o](double v) { o.removeOutliers = v; });
     d.number("--kernel-scale", "K", "reconstruction kernel V^r = (K h)^2 I the weights assume (default 0.5, measured: see bench/BENCHMARKS.md)",
              0.05, 10, false, "--kernel-scale needs a value in [0.05, 10]", [&o](double v) { o.kernelScale = v; });

@@ -141,8 +141,26 @@ TEST_F(ScanDefects, OutlierRemovalKeepsEveryPointOfTheSurface) {
     // --remove-outliers 2 cuts at about 0.46 m: above every plane point's
     // d_8, and below a stray's where it lies over 1 m up (the plane 1 m away,
     // and 8 other strays within 0.46 m expected with probability under 1e-7).
+    // The clean plane alone keeps every point too: its mean d_8 is 0.14 m and
+    // its deviation under 0.01 m, so its edges and corners, 1.4 and 2 times
+    // the inner d_8, lie beyond the mean by many deviations but not beyond
+    // twice the mean.
     std::vector<Point> points = lattice(kS, -1e9, 1e9);
     const size_t surface = points.size();
+    auto leafPoints = [&](const std::string& name) {
+        auto set = loadSurfelSet(dir_.file(name), LevelChoice{});
+        EXPECT_TRUE(set) << set.status().message();
+        std::vector<double> z;
+        if (set)
+            for (const auto& s : set->surfels) z.push_back(set->origin.z + s.pz);
+        return z;
+    };
+    writePly(dir_.file("clean.ply"), points);
+    auto clean = test::run({test::binary("surfcast-build"), dir_.file("clean.ply"), "-o", dir_.file("clean"), "--remove-outliers", "2"});
+    ASSERT_EQ(clean.exitCode, 0) << clean.output;
+    EXPECT_EQ(leafPoints("clean").size(), surface);
+    EXPECT_EQ(clean.output.find("removed as outliers"), std::string::npos) << clean.output;
+
     std::mt19937 rng(5);
     std::uniform_real_distribution<double> across(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
     const size_t strays = surface / 50;
@@ -154,11 +172,8 @@ TEST_F(ScanDefects, OutlierRemovalKeepsEveryPointOfTheSurface) {
     writePly(dir_.file("strays.ply"), points);
     auto r = test::run({test::binary("surfcast-build"), dir_.file("strays.ply"), "-o", dir_.file("set"), "--remove-outliers", "2"});
     ASSERT_EQ(r.exitCode, 0) << r.output;
-    auto set = loadSurfelSet(dir_.file("set"), LevelChoice{});
-    ASSERT_TRUE(set) << set.status().message();
     size_t onPlane = 0, keptHigh = 0, kept = 0;
-    for (const auto& s : set->surfels) {
-        const double z = set->origin.z + s.pz;
+    for (const double z : leafPoints("set")) {
         onPlane += std::fabs(z) < 1e-3;
         kept += z > 0.05;
         keptHigh += z > 1.0;

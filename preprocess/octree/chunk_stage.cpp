@@ -42,9 +42,12 @@ void sortMorton(std::vector<Surfel>& points, const Vec3d& lo, double edge) {
 
 // Statistical outlier removal (BuildOptions::removeOutliers): removes the
 // read points whose d_k (Surfel::scanDk) exceeds the mean over the chunk's
-// measured read points by `sigmas` standard deviations, with their entries of
-// `flags`. A set's points an update decoded (Surfel::fromSet) are not judged
-// again. Returns how many it removed.
+// measured read points by `sigmas` standard deviations, and twice the mean,
+// with their entries of `flags`. (On a surface sampled evenly, a border
+// point's k neighbours fill a half disc, a corner's a quarter: its d_k is √2
+// and 2 times an inner point's. On a clean one the deviation is near 0, and
+// without the second bound its borders would go.) A set's points an update
+// decoded (Surfel::fromSet) are not judged again. Returns how many it removed.
 uint64_t removeOutliers(std::vector<Surfel>& points, std::vector<uint8_t>& flags, double sigmas) {
     double sum = 0, sum2 = 0;
     size_t n = 0;
@@ -52,7 +55,7 @@ uint64_t removeOutliers(std::vector<Surfel>& points, std::vector<uint8_t>& flags
         if (!s.fromSet && s.scanDk >= 0) sum += s.scanDk, sum2 += double(s.scanDk) * s.scanDk, ++n;
     if (n < 2) return 0;
     const double mean = sum / double(n), sd = std::sqrt(std::max(0.0, sum2 / double(n) - mean * mean));
-    const double limit = mean + sigmas * sd;
+    const double limit = std::max(mean + sigmas * sd, 2 * mean);
     size_t kept = 0;
     for (size_t i = 0; i < points.size(); ++i) {
         if (!points[i].fromSet && points[i].scanDk > limit) continue;

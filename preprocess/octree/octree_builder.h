@@ -39,7 +39,8 @@ struct BuildOptions {
     double isolation = kDefaultIsolation;  // isolated surfels drawn at their level's spacing (level_attributes.h); 0: off
     // > 0: statistical outlier removal. An input point leaves the set where
     // its d_k (--spacing-k) exceeds the mean over its chunk's points by this
-    // many standard deviations (chunk_stage.cpp, removeOutliers). 0: off, every point kept.
+    // many standard deviations, and twice the mean (chunk_stage.cpp,
+    // removeOutliers). 0: off, every point kept.
     double removeOutliers = 0;
     BlockCodec blockCodec = BlockCodec::DracoColumns;  // how blocks are coded (bench/BENCHMARKS.md, "Block coding")
     int normalBits = 8;                 // BlockCodecOptions::normalBits (bench/BENCHMARKS.md, "Block coding")
