@@ -69,10 +69,11 @@ IMAGES = os.path.join(ab.ROOT, "docs", "images")
 # Build options compared: the isolation factor T of surfcast-build (a surfel
 # whose 8th neighbour lies beyond T times its level's spacing rho, or beyond
 # rho among scattered neighbours, is drawn at rho; 0 is the node's spacing
-# rule alone: docs/ARCHITECTURE.md, "Isolated surfels").
+# rule alone: docs/ARCHITECTURE.md, "Isolated surfels"), and statistical
+# outlier removal on top of the default (--remove-outliers, off by default).
 METHODS = [("isolation off", ["--isolation", "0"]), ("isolation 2", ["--isolation", "2"]),
            ("isolation 4", ["--isolation", "4"]), ("isolation 6 (default)", []),
-           ("isolation 8", ["--isolation", "8"])]
+           ("isolation 8", ["--isolation", "8"]), ("remove outliers 2", ["--remove-outliers", "2"])]
 DEFAULT = "isolation 6 (default)"
 MODES = ["points", "circles", "ewa-noprefilter", "ewa-surfel", "ewa-pixel"]
 WIDTH, STEP = 50.0, 0.1

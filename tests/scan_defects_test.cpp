@@ -185,6 +185,38 @@ TEST_F(ScanDefects, OutlierRemovalKeepsEveryPointOfTheSurface) {
     EXPECT_NE(r.output.find(std::to_string(strays - kept) + " removed as outliers"), std::string::npos) << r.output;
 }
 
+TEST_F(ScanDefects, AnUpdateRemovesOutliersOnlyAmongTheAddedPoints) {
+    // A set of the plane's x < 0 half at 3s (d_8 = 3·s·√2 = 0.42 m), built
+    // with --remove-outliers 2: a clean surface, all kept. Then added: the
+    // x > 0 half at s (d_8 0.14 m) with 1 % strays over it. Judged with the
+    // added points, twice the chunk's mean d_8 (under 0.4 m) would take every
+    // point of the set; the update judges the added points only, and keeps
+    // the set's points as the set kept them, while the strays over 1 m go
+    // (see the test above).
+    const std::vector<Point> sparse = lattice(3 * kS, -1e9, 0);
+    std::vector<Point> added = lattice(kS, 0, 1e9);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> x(0, 0.5 * kN * kS), y(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
+    for (size_t i = 0, n = added.size() / 100; i < n; ++i) added.push_back({x(rng), y(rng), up(rng), kStray});
+    writePly(dir_.file("sparse.ply"), sparse);
+    writePly(dir_.file("added.ply"), added);
+    auto built = test::run({test::binary("surfcast-build"), "-q", dir_.file("sparse.ply"), "-o", dir_.file("set"), "--remove-outliers", "2"});
+    ASSERT_EQ(built.exitCode, 0) << built.output;
+    auto update = test::run({test::binary("surfcast-build"), "-q", "--add", dir_.file("added.ply"), "--to", dir_.file("set")});
+    ASSERT_EQ(update.exitCode, 0) << update.output;
+    auto set = loadSurfelSet(dir_.file("set"), LevelChoice{});
+    ASSERT_TRUE(set) << set.status().message();
+    size_t setPoints = 0, addedPoints = 0, high = 0;
+    for (const auto& s : set->surfels) {
+        const Vec3d p = set->origin + Vec3d{s.px, s.py, s.pz};
+        if (std::fabs(p.z) < 1e-3) (p.x < 0 ? setPoints : addedPoints) += 1;
+        high += p.z > 1.0;
+    }
+    EXPECT_EQ(setPoints, sparse.size());
+    EXPECT_EQ(addedPoints, lattice(kS, 0, 1e9).size());
+    EXPECT_EQ(high, 0u);
+}
+
 TEST_F(ScanDefects, ADensityJumpStaysClosed) {
     // x < 1 m at s, beyond at 3s (a ninth of the density): its d_8 is 3·s·√2,
     // 0.42 m, within 6 rho of its level (rho = 2 cells, 0.16 m at level 1 of

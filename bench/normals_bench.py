@@ -1,0 +1,189 @@
+#!/usr/bin/env python3
+"""Normal estimation on a chart: each estimator's angular error against true
+normals, against the thread-seconds of the build's normals step on
+build_bench's 10 M-point LAS.
+
+Estimators: PCA of the k nearest input points (`--normal-k K`, exact grid
+search; docs/ARCHITECTURE.md, "Normals") for K in 6, 8, 10, 12, 16 (16, the
+default, is the reference the tests hold the others to).
+
+Surfaces with true normals, built from positions alone (normals estimated as
+for a scan):
+- analytic, sampled with jitter at spacing s: a plane, the plane with noise
+  of s/4 along its normal, a sphere of radius 20 s and a cylinder of radius
+  3 s (the small radius a few neighbours already curve around);
+- the scanned meshes (bunny, horse, igea, the dragon), sampled by
+  surfcast-build (each surfel carries its face's normal, the truth), their
+  positions written again without normals.
+
+Each set's leaves are exported (surfcast-export --format ply --level leaves)
+and matched to the truth by position; the error is the unsigned angle (an
+orientation flip is the orientation rule's, not the estimator's). Time: the
+normals step of `surfcast-build --threads 2 --normal-k K` on the LAS, in
+thread-seconds from the build's summary. Prints markdown tables for
+bench/BENCHMARKS.md ("Normals on a chart") and writes
+bench/report/normals_chart.png.
+
+Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/normals_bench.py [--ks 6,8,10,12,16] [--no-las]
+"""
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import build_bench  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.join(ROOT, "build", "bin")
+DATA = os.path.join(ROOT, "..", "shared", "data")
+REPORT = os.path.join(ROOT, "bench", "report")
+MESHES = ["bunny.ply", "horse.ply", "igea.ply", "fg_spkMgDragon/fg_spkMgDragon.obj"]
+S = 0.01  # analytic sampling step, metres
+
+
+def run(cmd):
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stdout}{r.stderr}")
+    return r.stdout
+
+
+def write_ply(path, points, normals=None):
+    cols = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + ([("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")] if normals is not None else [])
+    rec = np.zeros(len(points), dtype=cols)
+    rec["x"], rec["y"], rec["z"] = points.T
+    if normals is not None:
+        rec["nx"], rec["ny"], rec["nz"] = normals.T
+    head = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
+    head += "".join(f"property {'double' if t == '<f8' else 'float'} {n}\n" for n, t in cols) + "end_header\n"
+    with open(path, "wb") as f:
+        f.write(head.encode())
+        f.write(rec.tobytes())
+
+
+def leaves(tileset, work):
+    """The set's leaf surfels as world positions and normals (the export's y-up frame undone)."""
+    ply = os.path.join(work, "leaves.ply")
+    run([os.path.join(BIN, "surfcast-export"), tileset, "--format", "ply", "--level", "leaves", "-o", ply])
+    with open(ply, "rb") as f:
+        data = f.read()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    head = data[:end].decode()
+    names = re.findall(r"property float (\w+)", head)
+    n = int(re.search(r"element vertex (\d+)", head).group(1))
+    rec = np.frombuffer(data, dtype=[(k, "<f4") for k in names], count=n, offset=end)
+    # "set x, y, z = A + x, B + z, C - y": world x = A + x, y = B + z, z = C - y.
+    a, b, c = (float(v) for v in re.search(r"= (\S+) \+ x, (\S+) \+ z, (\S+) - y", head).groups())
+    pos = np.column_stack([a + rec["x"].astype(np.float64), b + rec["z"], c - rec["y"].astype(np.float64)])
+    nrm = np.column_stack([rec["nx"], rec["nz"], -rec["ny"]]).astype(np.float64)
+    return pos, nrm
+
+
+def analytic(rng):
+    """name -> (points, true normals)."""
+    out = {}
+    g = np.arange(0, 2.0, S)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    jitter = lambda n: rng.uniform(-0.25 * S, 0.25 * S, n)  # noqa: E731
+    p = np.column_stack([x + jitter(x.size), y + jitter(x.size), np.zeros(x.size)])
+    n = np.tile([0.0, 0.0, 1.0], (x.size, 1))
+    out["plane"] = (p, n)
+    q = p.copy()
+    q[:, 2] = rng.normal(0, 0.25 * S, x.size)
+    out["plane, noise s/4"] = (q, n)
+    r = 20 * S  # the sphere: Fibonacci lattice at spacing about s
+    m = int(4 * np.pi * r * r / (S * S))
+    i = np.arange(m) + 0.5
+    phi, theta = np.arccos(1 - 2 * i / m), np.pi * (1 + 5**0.5) * i
+    d = np.column_stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)])
+    out["sphere r = 20 s"] = (r * d, d)
+    r = 3 * S  # the cylinder: rings s apart, about s between points along each
+    k = int(round(2 * np.pi * r / S))
+    a, h = np.meshgrid(np.arange(k) * 2 * np.pi / k, np.arange(0, 1.0, S))
+    a = a.ravel() + rng.uniform(0, 2 * np.pi / k, a.size) * 0.25
+    d = np.column_stack([np.cos(a), np.sin(a), np.zeros(a.size)])
+    out["cylinder r = 3 s"] = (np.column_stack([r * d[:, 0], r * d[:, 1], h.ravel()]), d)
+    return out
+
+
+def errors(truth_p, truth_n, est_p, est_n):
+    """Unsigned angles (degrees) at the estimated points, against the nearest true point's normal."""
+    dist, idx = cKDTree(truth_p).query(est_p)
+    cos = np.abs(np.sum(truth_n[idx] * est_n, axis=1)) / (np.linalg.norm(truth_n[idx], axis=1) * np.linalg.norm(est_n, axis=1))
+    return np.degrees(np.arccos(np.clip(cos, 0, 1))), dist.max()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--ks", default="6,8,10,12,16")
+    ap.add_argument("--no-las", action="store_true", help="leave out the timing on the 10 M-point LAS")
+    args = ap.parse_args()
+    ks = [int(k) for k in args.ks.split(",")]
+    build = os.path.join(BIN, "surfcast-build")
+    rows = {}  # (scene, k) -> (median, p95, rms)
+    with tempfile.TemporaryDirectory() as work:
+        scenes = analytic(np.random.default_rng(1))
+        for mesh in MESHES:
+            # The mesh sampled by the build: its surfels carry the faces' normals.
+            run([build, "-q", os.path.join(DATA, mesh), "-o", os.path.join(work, "mesh")])
+            scenes[os.path.basename(mesh).split(".")[0]] = leaves(os.path.join(work, "mesh"), work)
+        for name, (p, n) in scenes.items():
+            ply = os.path.join(work, "points.ply")
+            write_ply(ply, p)
+            for k in ks:
+                out = os.path.join(work, "set")
+                run([build, "-q", ply, "--normal-k", str(k), "-o", out])
+                ep, en = leaves(out, work)
+                angle, far = errors(p, n, ep, en)
+                rows[name, k] = (np.median(angle), np.percentile(angle, 95), np.sqrt(np.mean(angle**2)), len(ep))
+                print(f"{name} k={k}: median {rows[name, k][0]:.2f}°, p95 {rows[name, k][1]:.2f}°, "
+                      f"{len(ep)} points (farthest match {far:.2g})", file=sys.stderr, flush=True)
+        seconds = {}
+        if not args.no_las:
+            las = os.path.join(work, "lion_tiled.las")
+            total = build_bench.tiled_las(os.path.join(DATA, "lion_takanawa.copc.laz"), 6, 5, las)
+            for k in ks:  # alternating rounds, the fastest of two
+                for _ in range(2):
+                    stdout = run([build, las, "--threads", "2", "--normal-k", str(k), "-o", os.path.join(work, "las")])
+                    t = float(re.search(r"normals ([0-9.]+)", stdout).group(1))
+                    seconds[k] = min(seconds.get(k, t), t)
+                    print(f"LAS k={k}: normals {t:.2f} thread-s", file=sys.stderr, flush=True)
+    names = list(scenes)
+    print("| k | " + " | ".join(names) + " | normals thread-s, 10 M-point LAS |")
+    print("|---:|" + "---:|" * (len(names) + 1))
+    for k in ks:
+        cells = [f"{rows[s, k][0]:.2f} / {rows[s, k][1]:.2f}" for s in names]
+        print(f"| {k} | " + " | ".join(cells) + (f" | {seconds[k]:.2f} |" if seconds else " | |"))
+    chart(names, ks, rows, seconds)
+
+
+def chart(names, ks, rows, seconds):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    x = [seconds[k] for k in ks] if seconds else ks
+    for i, name in enumerate(names):
+        for ax, col in zip(axes, (0, 1)):
+            ax.plot(x, [rows[name, k][col] for k in ks], marker="o", color=f"C{i}", label=name)
+    for ax, what in zip(axes, ("median", "95th percentile")):
+        for k, xv in zip(ks, x):
+            ax.annotate(f"k={k}", (xv, ax.get_ylim()[1]), fontsize=7, ha="center", va="top")
+        ax.set_xlabel("normals step, thread-seconds on the 10 M-point LAS" if seconds else "k")
+        ax.set_ylabel(f"{what} angle to the true normal (degrees)")
+        ax.set_yscale("log")
+        ax.set_title(f"PCA of k neighbours: {what} error against time")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    os.makedirs(REPORT, exist_ok=True)
+    fig.savefig(os.path.join(REPORT, "normals_chart.png"), dpi=110)
+
+
+if __name__ == "__main__":
+    main()
