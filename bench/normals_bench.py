@@ -18,7 +18,11 @@ for a scan):
 
 Each set's leaves are exported (surfcast-export --format ply --level leaves)
 and matched to the truth by position; the error is the unsigned angle (an
-orientation flip is the orientation rule's, not the estimator's). Time: the
+orientation flip is the orientation rule's, not the estimator's). Rendered:
+the meshes' vertices built as surfels (--vertices-only, normals estimated),
+drawn grey with Lambert shading (ewa-pixel) against the mesh rasterized with
+the same light (accuracy_bench's "Model sweep on the scanned meshes"), FLIP
+per k. Time: the
 normals step of `surfcast-build --threads 2 --normal-k K` on the LAS, in
 thread-seconds from the build's summary. Prints markdown tables for
 bench/BENCHMARKS.md ("Normals on a chart") and writes
@@ -37,6 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import accuracy_bench as ab  # noqa: E402
 import build_bench  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -68,7 +73,8 @@ def write_ply(path, points, normals=None):
 
 
 def leaves(tileset, work):
-    """The set's leaf surfels as world positions and normals (the export's y-up frame undone)."""
+    """The set's leaf surfels as world positions and normals (the export's y-up frame undone;
+    surfcast-export writes each surfel as a flat Gaussian, its normal in its rotation)."""
     ply = os.path.join(work, "leaves.ply")
     run([os.path.join(BIN, "surfcast-export"), tileset, "--format", "ply", "--level", "leaves", "-o", ply])
     with open(ply, "rb") as f:
@@ -81,8 +87,12 @@ def leaves(tileset, work):
     # "set x, y, z = A + x, B + z, C - y": world x = A + x, y = B + z, z = C - y.
     a, b, c = (float(v) for v in re.search(r"= (\S+) \+ x, (\S+) \+ z, (\S+) - y", head).groups())
     pos = np.column_stack([a + rec["x"].astype(np.float64), b + rec["z"], c - rec["y"].astype(np.float64)])
-    nrm = np.column_stack([rec["nx"], rec["nz"], -rec["ny"]]).astype(np.float64)
-    return pos, nrm
+    # A flat Gaussian's normal: its rotation (w, x, y, z) applied to its thinnest axis, z (scale_2).
+    w, qx, qy, qz = (rec[f"rot_{i}"].astype(np.float64) for i in range(4))
+    norm = np.sqrt(w * w + qx * qx + qy * qy + qz * qz)
+    w, qx, qy, qz = w / norm, qx / norm, qy / norm, qz / norm
+    n = np.column_stack([2 * (qx * qz + w * qy), 2 * (qy * qz - w * qx), 1 - 2 * (qx * qx + qy * qy)])
+    return pos, np.column_stack([n[:, 0], n[:, 2], -n[:, 1]])
 
 
 def analytic(rng):
@@ -144,6 +154,16 @@ def main():
                 rows[name, k] = (np.median(angle), np.percentile(angle, 95), np.sqrt(np.mean(angle**2)), len(ep))
                 print(f"{name} k={k}: median {rows[name, k][0]:.2f}°, p95 {rows[name, k][1]:.2f}°, "
                       f"{len(ep)} points (farthest match {far:.2g})", file=sys.stderr, flush=True)
+        flips = {}  # (mesh, k) -> FLIP, lit
+        for mesh in ("bunny", "horse", "igea"):
+            src, _, camera, ref = ab.mesh_view(mesh, "480x360", work, "lambert")
+            for k in ks:
+                out = os.path.join(work, "lit")
+                run([build, "-q", "--vertices-only", src, "--normal-k", str(k), "-o", out])
+                img, _, _ = ab.render(out, "ewa-pixel", camera, "480x360", 1, os.path.join(work, "lit.png"),
+                                      shading="lambert", colour="0.8,0.8,0.8")
+                flips[mesh, k] = ab.metrics(ref, img)[2]
+                print(f"{mesh} lit k={k}: FLIP {flips[mesh, k]:.4f}", file=sys.stderr, flush=True)
         seconds = {}
         if not args.no_las:
             las = os.path.join(work, "lion_tiled.las")
@@ -155,11 +175,18 @@ def main():
                     seconds[k] = min(seconds.get(k, t), t)
                     print(f"LAS k={k}: normals {t:.2f} thread-s", file=sys.stderr, flush=True)
     names = list(scenes)
+    print("Median / 95th-percentile angle to the true normal, degrees:\n")
     print("| k | " + " | ".join(names) + " | normals thread-s, 10 M-point LAS |")
     print("|---:|" + "---:|" * (len(names) + 1))
     for k in ks:
         cells = [f"{rows[s, k][0]:.2f} / {rows[s, k][1]:.2f}" for s in names]
         print(f"| {k} | " + " | ".join(cells) + (f" | {seconds[k]:.2f} |" if seconds else " | |"))
+    meshes = sorted({m for m, _ in flips})
+    print("\nFLIP, Lambert-shaded, against the mesh:\n")
+    print("| k | " + " | ".join(meshes) + " |")
+    print("|---:|" + "---:|" * len(meshes))
+    for k in ks:
+        print(f"| {k} | " + " | ".join(f"{flips[m, k]:.4f}" for m in meshes) + " |")
     chart(names, ks, rows, seconds)
 
 

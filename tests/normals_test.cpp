@@ -2,8 +2,10 @@
 // shared meshes; the fractions are recorded in docs/ARCHITECTURE.md.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <random>
 
 #include "mesh_reader.h"
 #include "grid_knn.h"
@@ -195,4 +197,105 @@ TEST(Normals, CoincidentStacksOnTheKdTreePathAreAnsweredAtOnce) {
     ctx.threads = 2;
     estimateNormals(pts, {}, ctx);
     for (size_t i = 0; i < pts.size(); i += 997) EXPECT_NEAR(length(pts[i].normal), 1.0f, 1e-5f) << "point " << i;
+}
+
+// PCA of k neighbours (the point among them) on analytic surfaces, for the k
+// the normals chart sweeps (bench/BENCHMARKS.md, "Normals on a chart"),
+// against bounds derived from k and the noise. Angles unsigned: orientation
+// is the rule's, not the fit's.
+namespace {
+double angleDeg(const Vec3f& a, const Vec3d& b) {
+    return std::acos(std::min(1.0, std::fabs(dot(cast<double>(a), b)) / (length(cast<double>(a)) * length(b)))) * 180 / M_PI;
+}
+// The k nearest of each point among `p` (itself first), by brute force: an
+// independent search, not the estimator's grid.
+std::vector<std::vector<size_t>> nearest(const std::vector<Vec3d>& p, int k) {
+    std::vector<std::vector<size_t>> out(p.size());
+    std::vector<std::pair<double, size_t>> d(p.size());
+    for (size_t i = 0; i < p.size(); ++i) {
+        for (size_t j = 0; j < p.size(); ++j) d[j] = {dot(p[j] - p[i], p[j] - p[i]), j};
+        std::partial_sort(d.begin(), d.begin() + k, d.end());
+        for (int j = 0; j < k; ++j) out[i].push_back(d[size_t(j)].second);
+    }
+    return out;
+}
+std::vector<Surfel> estimated(const std::vector<Vec3d>& p, int k) {
+    std::vector<Surfel> pts(p.size());
+    for (size_t i = 0; i < p.size(); ++i) pts[i].position = p[i];
+    NormalContext ctx;
+    ctx.rules = {OrientationRule{std::nullopt, true}};
+    ctx.k = k;
+    ctx.threads = 2;
+    estimateNormals(pts, {}, ctx);
+    return pts;
+}
+}  // namespace
+
+TEST(Normals, PcaOnAPlaneASphereAndAThinCylinderKeepsToItsBounds) {
+    constexpr double s = 0.01;  // sampling step
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> jitter(-0.25 * s, 0.25 * s);
+    std::normal_distribution<double> noise(0, 0.25 * s);
+    std::vector<Vec3d> plane, noisy;
+    for (int i = 0; i < 60; ++i)
+        for (int j = 0; j < 60; ++j) {
+            plane.push_back({i * s + jitter(rng), j * s + jitter(rng), 0});
+            noisy.push_back({plane.back().x, plane.back().y, noise(rng)});
+        }
+    // The sphere (radius 20 s, a Fibonacci lattice about s apart) and the
+    // cylinder (radius 3 s, rings s apart).
+    constexpr double R = 20 * s, r = 3 * s;
+    std::vector<Vec3d> sphere, cylinder;
+    const int m = int(4 * M_PI * R * R / (s * s));
+    for (int i = 0; i < m; ++i) {
+        const double z = 1 - 2 * (i + 0.5) / m, t = M_PI * (1 + std::sqrt(5.0)) * (i + 0.5);
+        sphere.push_back(Vec3d{std::cos(t) * std::sqrt(1 - z * z), std::sin(t) * std::sqrt(1 - z * z), z} * R);
+    }
+    const int around = int(std::lround(2 * M_PI * r / s));
+    for (int h = 0; h < 60; ++h)
+        for (int a = 0; a < around; ++a) {
+            const double t = 2 * M_PI * (a + 0.5 * (h % 2)) / around;
+            cylinder.push_back({r * std::cos(t), r * std::sin(t), h * s});
+        }
+    for (int k : {6, 8, 10, 12, 16}) {
+        SCOPED_TRACE("k = " + std::to_string(k));
+        // A plane without noise: exact but for float rounding.
+        for (const Surfel& e : estimated(plane, k)) ASSERT_LT(angleDeg(e.normal, {0, 0, 1}), 0.01);
+        // Curved, without noise: the neighbours of a point lie within d_k of
+        // it, so their normals within asin(d_k / radius) of its own, and the
+        // plane fitted to points of a convex patch tilts no further than the
+        // normals they span.
+        auto curved = [&](const std::vector<Vec3d>& p, double radius, auto trueNormal) {
+            const auto near = nearest(p, k);
+            const auto e = estimated(p, k);
+            for (size_t i = 0; i < p.size(); ++i) {
+                const double dk = length(p[near[i].back()] - p[i]);
+                ASSERT_LE(angleDeg(e[i].normal, trueNormal(p[i])), std::asin(std::min(1.0, dk / radius)) * 180 / M_PI) << "point " << i;
+            }
+        };
+        curved(sphere, R, [](const Vec3d& q) { return normalizeOrZero(q); });
+        curved(cylinder, r, [](const Vec3d& q) { return normalizeOrZero(Vec3d{q.x, q.y, 0}); });
+        // Noise of sd σ along the normal: a plane fitted by least squares to
+        // points with in-plane second moments Sxx, Syy about their centroid
+        // tilts with variance σ²/Sxx and σ²/Syy along the two axes (the
+        // slopes' standard errors), so its RMS tilt over the points is
+        // sqrt(mean(σ²(1/Sxx + 1/Syy))). Within 1.2 times that: PCA fits
+        // across the noise too (total least squares, not ordinary), and its
+        // neighbours are the noisy points' (within 5 % of it at every k here).
+        const auto near = nearest(noisy, k);
+        const auto e = estimated(noisy, k);
+        double expected = 0, got = 0;
+        size_t n = 0;
+        for (size_t i = 0; i < noisy.size(); ++i) {
+            double mx = 0, my = 0;
+            for (size_t j : near[i]) mx += noisy[j].x / k, my += noisy[j].y / k;
+            double sxx = 0, syy = 0;
+            for (size_t j : near[i]) sxx += (noisy[j].x - mx) * (noisy[j].x - mx), syy += (noisy[j].y - my) * (noisy[j].y - my);
+            const double sigma = 0.25 * s, tilt = angleDeg(e[i].normal, {0, 0, 1}) * M_PI / 180;
+            expected += sigma * sigma * (1 / sxx + 1 / syy), got += tilt * tilt, ++n;
+        }
+        EXPECT_LE(std::sqrt(got / n), 1.2 * std::sqrt(expected / n));
+        std::printf("k = %d: noisy plane RMS tilt %.2f°, least squares predicts %.2f°\n", k, std::sqrt(got / n) * 180 / M_PI,
+                    std::sqrt(expected / n) * 180 / M_PI);
+    }
 }
