@@ -4,8 +4,8 @@ normals, against the thread-seconds of the build's normals step on
 build_bench's 10 M-point LAS.
 
 Estimators: PCA of the k nearest input points (`--normal-k K`, exact grid
-search; docs/ARCHITECTURE.md, "Normals") for K in 6, 8, 10, 12, 16 (16, the
-default, is the reference the tests hold the others to).
+search; docs/ARCHITECTURE.md, "Normals") for K in 6, 8, 10, 12, 16 (16: the
+default).
 
 Surfaces with true normals, built from positions alone (normals estimated as
 for a scan):
@@ -73,7 +73,7 @@ def write_ply(path, points, normals=None):
 
 
 def leaves(tileset, work):
-    """The set's leaf surfels as world positions and normals (the export's y-up frame undone;
+    """The set's leaf surfels as world positions and normals (the export's frame undone;
     surfcast-export writes each surfel as a flat Gaussian, its normal in its rotation)."""
     ply = os.path.join(work, "leaves.ply")
     run([os.path.join(BIN, "surfcast-export"), tileset, "--format", "ply", "--level", "leaves", "-o", ply])
@@ -184,7 +184,7 @@ def main():
         if not args.no_las:
             las = os.path.join(work, "lion_tiled.las")
             total = build_bench.tiled_las(os.path.join(DATA, "lion_takanawa.copc.laz"), 6, 5, las)
-            for k in ks:  # alternating rounds, the fastest of two
+            for k in ks:  # twice each, the faster kept
                 for _ in range(2):
                     stdout = run([build, las, "--threads", "2", "--normal-k", str(k), "-o", os.path.join(work, "las")])
                     t = float(re.search(r"normals ([0-9.]+)", stdout).group(1))

@@ -33,31 +33,30 @@ def filled(scan, point_format):
     header = laspy.LasHeader(point_format=point_format, version="1.4")
     header.scales, header.offsets = scan.header.scales, scan.header.offsets
     out = laspy.LasData(header)
-    rec = np.zeros(len(scan.points), dtype=out.points.array.dtype)
-    names = set(rec.dtype.names)
+    out.points = laspy.ScaleAwarePointRecord.zeros(len(scan.points), header=header)
+    # By dimension name, packed bit fields (returns, flags, classification) included.
+    names = set(header.point_format.dimension_names)
     for name in scan.point_format.dimension_names:
-        if name in names:
-            rec[name] = np.asarray(scan[name])
-    # LAS 1.4 formats keep these bits apart from the classification.
-    for flag in ("synthetic", "key_point", "withheld"):
-        if flag in names:
-            rec[flag] = np.asarray(scan[flag])
+        if name in names and name not in ("X", "Y", "Z"):
+            out[name] = np.asarray(scan[name])
+    out.X, out.Y, out.Z = scan.X, scan.Y, scan.Z
     angle = np.asarray(scan.scan_angle_rank).astype(np.float64)
     if "scan_angle" in names:
-        rec["scan_angle"] = np.round(angle / 0.006).astype(np.int16)
+        out.scan_angle = np.round(angle / 0.006).astype(np.int16)
     if "nir" in names:
-        rec["nir"] = np.asarray(scan.red)
+        out.nir = np.asarray(scan.red)
     if "wavepacket_index" in names:
-        rec["wavepacket_index"] = 1
-        rec["wavepacket_size"] = 256
+        out.wavepacket_index = np.ones(len(angle), dtype=np.uint8)
+        out.wavepacket_size = np.full(len(angle), 256, dtype=np.uint32)
         order = np.argsort(np.asarray(scan.gps_time), kind="stable")
         offset = np.empty(len(order), dtype=np.uint64)
         offset[order] = 256 * np.arange(len(order), dtype=np.uint64)
-        rec["wavepacket_offset"] = offset
-        rec["return_point_wave_location"] = 1000.0 * np.asarray(scan.return_number)
+        out.wavepacket_offset = offset
+        out.return_point_wave_location = (1000.0 * np.asarray(scan.return_number)).astype(np.float32)
         theta = np.radians(angle)
-        rec["x_t"], rec["y_t"], rec["z_t"] = np.sin(theta) * 1e-4, 0.0, -np.cos(theta) * 1e-4
-    out.points = laspy.ScaleAwarePointRecord(rec, header.point_format, header.scales, header.offsets)
+        out.x_t = (np.sin(theta) * 1e-4).astype(np.float32)
+        out.y_t = np.zeros(len(angle), dtype=np.float32)
+        out.z_t = (-np.cos(theta) * 1e-4).astype(np.float32)
     return out
 
 

@@ -206,10 +206,10 @@ void addBuildOptions(Declare& d, BuildArgs& a) {
             });
     d.number("--remove-outliers", "M",
              "removes stray input points: those whose k-th neighbour (--spacing-k) lies farther than the mean over their "
-             "chunk's points by M standard deviations, and than twice the mean (statistical outlier removal, as PCL's and "
-             "PDAL's; 2 is usual; a surface sampled far more sparsely than the chunk's average goes too). Off by default: a "
-             "set keeps every point it reads",
-             0.1, 100, false, "--remove-outliers needs a value in [0.1, 100]", [&o](double v) { o.removeOutliers = v; });
+             "chunk's points by M standard deviations, and than twice the mean (statistical outlier removal, like PCL's and "
+             "PDAL's filters, which take the mean distance to the k nearest; 2 is usual; a surface sampled far more sparsely "
+             "than the chunk's average goes too). 0 (the default): off, a set keeps every point it reads",
+             0, 100, false, "--remove-outliers needs a value in [0, 100]", [&o](double v) { o.removeOutliers = v; });
     d.number("--kernel-scale", "K", "reconstruction kernel V^r = (K h)^2 I the weights assume (default 0.5, measured: see bench/BENCHMARKS.md)",
              0.05, 10, false, "--kernel-scale needs a value in [0.05, 10]", [&o](double v) { o.kernelScale = v; });
     d.value("--weights", "MODE",
@@ -505,6 +505,11 @@ int parseAs(const std::vector<std::string>& args, BuildArgs* out) {
     } else {
         a.opt.inputs.paths.insert(a.opt.inputs.paths.end(), positionals.begin(), positionals.end());
     }
+    // Outlier removal judges a point by its --spacing-k-th neighbour among
+    // the --normal-k its normal's search finds, itself among them.
+    if (a.opt.removeOutliers > 0 && a.opt.normalK <= a.opt.spacingK)
+        return cli::usageError(kProgram, "--remove-outliers needs --normal-k above --spacing-k (" + std::to_string(a.opt.normalK) +
+                                             " is not above " + std::to_string(a.opt.spacingK) + ")");
     a.kept = build.kept(args);
     return -1;
 }

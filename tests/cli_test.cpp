@@ -113,6 +113,12 @@ TEST(Cli, HelpAndUsageErrors) {
     auto badIsolation = test::run({test::binary("surfcast-build"), "--default-scene", "-o", "/tmp/x", "--isolation", "0.5"});
     EXPECT_EQ(badIsolation.exitCode, 2);
     EXPECT_NE(badIsolation.output.find("--isolation needs 0 or a value in [1, 1000]"), std::string::npos) << badIsolation.output;
+    // Outlier removal reads each point's 8th neighbour among the normals' k: with 8 or fewer it would judge nothing.
+    auto blind = test::run({test::binary("surfcast-build"), "--default-scene", "-o", "/tmp/x", "--remove-outliers", "2", "--normal-k", "8"});
+    EXPECT_EQ(blind.exitCode, 2);
+    EXPECT_NE(blind.output.find("--remove-outliers needs --normal-k above --spacing-k (8 is not above 8)"), std::string::npos) << blind.output;
+    auto negative = test::run({test::binary("surfcast-build"), "--default-scene", "-o", "/tmp/x", "--remove-outliers", "-1"});
+    EXPECT_EQ(negative.exitCode, 2);
 }
 
 TEST(Cli, InfoVerifiesChecksums) {

@@ -207,8 +207,9 @@ namespace {
 double angleDeg(const Vec3f& a, const Vec3d& b) {
     return std::acos(std::min(1.0, std::fabs(dot(cast<double>(a), b)) / (length(cast<double>(a)) * length(b)))) * 180 / M_PI;
 }
-// The k nearest of each point among `p` (itself first), by brute force: an
-// independent search, not the estimator's grid.
+// The k nearest of each point among `p` (itself first, then by distance), by
+// brute force: an independent search, not the estimator's grid. A smaller
+// k's are the first of them.
 std::vector<std::vector<size_t>> nearest(const std::vector<Vec3d>& p, int k) {
     std::vector<std::vector<size_t>> out(p.size());
     std::vector<std::pair<double, size_t>> d(p.size());
@@ -257,6 +258,7 @@ TEST(Normals, PcaOnAPlaneASphereAndAThinCylinderKeepsToItsBounds) {
             const double t = 2 * M_PI * (a + 0.5 * (h % 2)) / around;
             cylinder.push_back({r * std::cos(t), r * std::sin(t), h * s});
         }
+    const auto sphereNear = nearest(sphere, 16), cylinderNear = nearest(cylinder, 16), noisyNear = nearest(noisy, 16);
     for (int k : {6, 8, 10, 12, 16}) {
         SCOPED_TRACE("k = " + std::to_string(k));
         // A plane without noise: exact but for float rounding.
@@ -265,16 +267,15 @@ TEST(Normals, PcaOnAPlaneASphereAndAThinCylinderKeepsToItsBounds) {
         // it, so their normals within asin(d_k / radius) of its own, and the
         // plane fitted to points of a convex patch tilts no further than the
         // normals they span.
-        auto curved = [&](const std::vector<Vec3d>& p, double radius, auto trueNormal) {
-            const auto near = nearest(p, k);
+        auto curved = [&](const std::vector<Vec3d>& p, const std::vector<std::vector<size_t>>& near, double radius, auto trueNormal) {
             const auto e = estimated(p, k);
             for (size_t i = 0; i < p.size(); ++i) {
-                const double dk = length(p[near[i].back()] - p[i]);
+                const double dk = length(p[near[i][size_t(k - 1)]] - p[i]);
                 ASSERT_LE(angleDeg(e[i].normal, trueNormal(p[i])), std::asin(std::min(1.0, dk / radius)) * 180 / M_PI) << "point " << i;
             }
         };
-        curved(sphere, R, [](const Vec3d& q) { return normalizeOrZero(q); });
-        curved(cylinder, r, [](const Vec3d& q) { return normalizeOrZero(Vec3d{q.x, q.y, 0}); });
+        curved(sphere, sphereNear, R, [](const Vec3d& q) { return normalizeOrZero(q); });
+        curved(cylinder, cylinderNear, r, [](const Vec3d& q) { return normalizeOrZero(Vec3d{q.x, q.y, 0}); });
         // Noise of sd σ along the normal: a plane fitted by least squares to
         // points with in-plane second moments Sxx, Syy about their centroid
         // tilts with variance σ²/Sxx and σ²/Syy along the two axes (the
@@ -282,15 +283,15 @@ TEST(Normals, PcaOnAPlaneASphereAndAThinCylinderKeepsToItsBounds) {
         // sqrt(mean(σ²(1/Sxx + 1/Syy))). Within 1.2 times that: PCA fits
         // across the noise too (total least squares, not ordinary), and its
         // neighbours are the noisy points' (within 5 % of it at every k here).
-        const auto near = nearest(noisy, k);
         const auto e = estimated(noisy, k);
         double expected = 0, got = 0;
         size_t n = 0;
         for (size_t i = 0; i < noisy.size(); ++i) {
+            const std::vector<size_t> near(noisyNear[i].begin(), noisyNear[i].begin() + k);
             double mx = 0, my = 0;
-            for (size_t j : near[i]) mx += noisy[j].x / k, my += noisy[j].y / k;
+            for (size_t j : near) mx += noisy[j].x / k, my += noisy[j].y / k;
             double sxx = 0, syy = 0;
-            for (size_t j : near[i]) sxx += (noisy[j].x - mx) * (noisy[j].x - mx), syy += (noisy[j].y - my) * (noisy[j].y - my);
+            for (size_t j : near) sxx += (noisy[j].x - mx) * (noisy[j].x - mx), syy += (noisy[j].y - my) * (noisy[j].y - my);
             const double sigma = 0.25 * s, tilt = angleDeg(e[i].normal, {0, 0, 1}) * M_PI / 180;
             expected += sigma * sigma * (1 / sxx + 1 / syy), got += tilt * tilt, ++n;
         }

@@ -186,13 +186,14 @@ TEST_F(ScanDefects, OutlierRemovalKeepsEveryPointOfTheSurface) {
 }
 
 TEST_F(ScanDefects, AnUpdateRemovesOutliersOnlyAmongTheAddedPoints) {
-    // A set of the plane's x < 0 half at 3s (d_8 = 3·s·√2 = 0.42 m), built
-    // with --remove-outliers 2: a clean surface, all kept. Then added: the
-    // x > 0 half at s (d_8 0.14 m) with 1 % strays over it. Judged with the
-    // added points, twice the chunk's mean d_8 (under 0.4 m) would take every
-    // point of the set; the update judges the added points only, and keeps
-    // the set's points as the set kept them, while the strays over 1 m go
-    // (see the test above).
+    // A set of the plane's x < 0 half at 3s (d_8 = 3·s·√2 = 0.42 m inside,
+    // 0.6 m on its edges), built with --remove-outliers 2: a clean surface,
+    // all kept. Then added: the x > 0 half at s (d_8 0.14 m) with 1 % strays
+    // over it. Judged among the added points, the set's points would meet a
+    // mean d_8 near 0.2 m and a cut near 0.43 m: its outer edges would go.
+    // The update judges the added points only, and keeps the set's points
+    // as the set kept them, while the strays over 1 m go (see the test
+    // above).
     const std::vector<Point> sparse = lattice(3 * kS, -1e9, 0);
     std::vector<Point> added = lattice(kS, 0, 1e9);
     std::mt19937 rng(7);

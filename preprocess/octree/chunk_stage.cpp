@@ -281,7 +281,8 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
             sortMorton(halo, lo, context.edge(chunk.key.level) + 2 * margin);
             // Outlier removal judges every read point by its d_k: those whose
             // normals came with them (flagged) are measured for it alone, and
-            // forget it after, as isolation judges them at their level.
+            // forget it after, as isolation judges them at their level; where
+            // isolation is off, every point forgets it.
             const double sigmas = context.options().removeOutliers;
             std::vector<uint8_t> judgedOnly;
             if (sigmas > 0) {
@@ -296,7 +297,7 @@ Status chunkStage(const BuildContext& context, const BuildPlan& plan, const Chun
                 removedOutliers = removeOutliers(points, judgedOnly, sigmas);
                 const bool keepsMeasure = context.normals().measure;
                 for (size_t i = 0; i < points.size(); ++i)
-                    if (judgedOnly[i] || (!keepsMeasure && !points[i].fromSet)) points[i].scanDk = -1;
+                    if (judgedOnly[i] || !keepsMeasure) points[i].scanDk = -1, points[i].scanSpread = 0;
             }
         }
         std::vector<std::unique_ptr<BuiltNode>> nodes;
