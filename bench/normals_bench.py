@@ -1,7 +1,6 @@
 #!/usr/bin/env python3
 """Normal estimation on a chart: each estimator's angular error against true
-normals, against the thread-seconds of the build's normals step on
-build_bench's 10 M-point LAS.
+normals and its lit FLIP, against the build of build_bench's 10 M-point LAS.
 
 Estimators: PCA of the k nearest input points (`--normal-k K`, exact grid
 search; docs/ARCHITECTURE.md, "Normals") for K in 6, 8, 10, 12, 16 (16: the
@@ -13,20 +12,22 @@ for a scan):
   of s/4 along its normal, a sphere of radius 20 s and a cylinder of radius
   3 s (the small radius a few neighbours already curve around);
 - the scanned meshes (bunny, horse, igea, the dragon), sampled by
-  surfcast-build (each surfel carries its face's normal, the truth), their
-  positions written again without normals.
+  surfcast-build (each surfel carries the mesh's own normal, the truth: the
+  face's, or the dragon's OBJ vertex normals interpolated), their positions
+  written again without normals.
 
 Each set's leaves are exported (surfcast-export --format ply --level leaves)
 and matched to the truth by position; the error is the unsigned angle (an
-orientation flip is the orientation rule's, not the estimator's). Rendered:
-the meshes' vertices built as surfels (--vertices-only, normals estimated),
-drawn grey with Lambert shading (ewa-pixel) against the mesh rasterized with
-the same light (accuracy_bench's "Model sweep on the scanned meshes"), FLIP
-per k. Time: the
-normals step of `surfcast-build --threads 2 --normal-k K` on the LAS, in
-thread-seconds from the build's summary. Prints markdown tables for
+orientation flip is the orientation rule's, not the estimator's). Rendered,
+Lambert-shaded, grey, ewa-pixel: the noisy plane and the sphere against the
+same points drawn with their true normals (the normals' error alone), and
+the meshes' vertices (--vertices-only) against the mesh rasterized with the
+same light (accuracy_bench's "Model sweep on the scanned meshes"); FLIP per
+k. Time: `surfcast-build --threads 2 --normal-k K` on the LAS, twice each:
+the normals step and the level's queries (neighbours + h + weights) in
+thread-seconds, and the build's seconds. Prints markdown tables for
 bench/BENCHMARKS.md ("Normals on a chart") and writes
-bench/report/normals_chart.png.
+bench/report/normals_chart.png (accuracy against the build's seconds).
 
 Usage: bench/setup_venv.sh && bench/.venv/bin/python bench/normals_bench.py [--ks 6,8,10,12,16] [--no-las]
 """
