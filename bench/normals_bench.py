@@ -61,16 +61,8 @@ def run(cmd):
 
 
 def write_ply(path, points, normals=None):
-    cols = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + ([("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")] if normals is not None else [])
-    rec = np.zeros(len(points), dtype=cols)
-    rec["x"], rec["y"], rec["z"] = points.T
-    if normals is not None:
-        rec["nx"], rec["ny"], rec["nz"] = normals.T
-    head = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
-    head += "".join(f"property {'double' if t == '<f8' else 'float'} {n}\n" for n, t in cols) + "end_header\n"
-    with open(path, "wb") as f:
-        f.write(head.encode())
-        f.write(rec.tobytes())
+    """Positions, grey, and `normals` (None: zero, which the build estimates)."""
+    ab.write_ply(path, points, np.zeros_like(points) if normals is None else normals, np.full_like(points, 0.8))
 
 
 def leaves(tileset, work):

@@ -38,8 +38,10 @@ curl -fsS -o "$out/sets.json" "$url/sets"
 echo "GET /sets: $(grep -c '"name"' "$out/sets.json") tile set(s)"
 curl -fsS -o "$out/tileset.json" "$url/sets/scene/tileset.json"
 echo "fetched tileset.json: $(wc -c < "$out/tileset.json") bytes"
-curl -fsS -o "$out/root.drc" "$url/sets/scene/nodes/0-0-0-0"
-echo "fetched the root block (node 0-0-0-0): $(wc -c < "$out/root.drc") bytes, starts with $(head -c 5 "$out/root.drc")"
+curl -fsS -o "$out/root.block" "$url/sets/scene/nodes/0-0-0-0"
+# A draco-columns block (docs/FORMAT.md, "blocks.bin"): a u32 length, then the positions' Draco cloud.
+echo "fetched the root block (node 0-0-0-0): $(wc -c < "$out/root.block") bytes, its positions a Draco cloud of" \
+     "$(od -An -tu4 -N4 "$out/root.block" | tr -d ' ') bytes starting $(tail -c +5 "$out/root.block" | head -c 5)"
 echo
 echo "== streaming it from the server (level of detail 1 px) to $out/streamed.png"
 build/bin/surfcast-view --headless "$url/sets/scene" --lod 1 --out "$out/streamed.png" > "$out/streamed.jsonl"

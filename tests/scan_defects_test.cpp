@@ -62,16 +62,44 @@ void writePly(const std::string& path, const std::vector<Point>& points) {
     test::writeFile(path, bytes);
 }
 
+// `n` strays spread uniformly through the slab 0.1-2 m above the plane
+// (a tenth of its width thick), x0 <= x < x1.
+std::vector<Point> slabStrays(size_t n, uint32_t seed, double x0, double x1) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> x(x0, x1), y(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
+    std::vector<Point> out;
+    for (size_t i = 0; i < n; ++i) {
+        const double px = x(rng), py = y(rng);
+        out.push_back({px, py, up(rng), kStray});
+    }
+    return out;
+}
+
 class ScanDefects : public test::GpuTest {
 protected:
-    // Builds `points` with `options` and draws every leaf from above.
-    Image draw(const std::vector<Point>& points, const std::vector<std::string>& options = {}) {
-        const std::string name = "set" + std::to_string(builds_++);
+    // Builds `points` into the set `name` with `options`; the build's output.
+    std::string build(const std::string& name, const std::vector<Point>& points, const std::vector<std::string>& options = {}) {
         writePly(dir_.file(name + ".ply"), points);
-        std::vector<std::string> args = {test::binary("surfcast-build"), dir_.file(name + ".ply"), "-o", dir_.file(name), "-q"};
+        std::vector<std::string> args = {test::binary("surfcast-build"), dir_.file(name + ".ply"), "-o", dir_.file(name)};
         args.insert(args.end(), options.begin(), options.end());
         auto r = test::run(args);
         EXPECT_EQ(r.exitCode, 0) << r.output;
+        return r.output;
+    }
+    // The world positions of every leaf surfel of the set `name`.
+    std::vector<Vec3d> leafPositions(const std::string& name) {
+        auto set = loadSurfelSet(dir_.file(name), LevelChoice{});
+        EXPECT_TRUE(set) << set.status().message();
+        std::vector<Vec3d> out;
+        if (set)
+            for (const auto& s : set->surfels) out.push_back(set->origin + Vec3d{s.px, s.py, s.pz});
+        return out;
+    }
+    // Builds `points` with `options` and draws every leaf from above.
+    Image draw(const std::vector<Point>& points, std::vector<std::string> options = {}) {
+        const std::string name = "set" + std::to_string(builds_++);
+        options.push_back("-q");
+        build(name, points, options);
         TilesetInfo info;
         auto set = loadSurfelSet(dir_.file(name), LevelChoice{}, {}, {}, 0, &info);
         EXPECT_TRUE(set) << set.status().message();
@@ -110,10 +138,9 @@ size_t changedPixels(const Image& a, const Image& b) {
 TEST_F(ScanDefects, StraysInASlabAreDrawnAtTheSurfacesSpacing) {
     // 0.5 % strays spread through a slab a tenth of the plane's width thick.
     std::vector<Point> plane = lattice(kS, -1e9, 1e9), dirty = plane;
-    std::mt19937 rng(5);
-    std::uniform_real_distribution<double> across(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
     const size_t strays = plane.size() / 200;
-    for (size_t i = 0; i < strays; ++i) dirty.push_back({across(rng), across(rng), up(rng), kStray});
+    const std::vector<Point> slab = slabStrays(strays, 5, -0.5 * kN * kS, 0.5 * kN * kS);
+    dirty.insert(dirty.end(), slab.begin(), slab.end());
     const Image clean = draw(plane), withStrays = draw(dirty), before = draw(dirty, {"--isolation", "0"});
     ASSERT_FALSE(clean.rgba.empty());
     ASSERT_FALSE(withStrays.rgba.empty());
@@ -147,42 +174,28 @@ TEST_F(ScanDefects, OutlierRemovalKeepsEveryPointOfTheSurface) {
     // twice the mean.
     std::vector<Point> points = lattice(kS, -1e9, 1e9);
     const size_t surface = points.size();
-    auto leafPoints = [&](const std::string& name) {
-        auto set = loadSurfelSet(dir_.file(name), LevelChoice{});
-        EXPECT_TRUE(set) << set.status().message();
-        std::vector<double> z;
-        if (set)
-            for (const auto& s : set->surfels) z.push_back(set->origin.z + s.pz);
-        return z;
-    };
-    writePly(dir_.file("clean.ply"), points);
-    auto clean = test::run({test::binary("surfcast-build"), dir_.file("clean.ply"), "-o", dir_.file("clean"), "--remove-outliers", "2"});
-    ASSERT_EQ(clean.exitCode, 0) << clean.output;
-    EXPECT_EQ(leafPoints("clean").size(), surface);
-    EXPECT_EQ(clean.output.find("removed as outliers"), std::string::npos) << clean.output;
+    const std::string clean = build("clean", points, {"--remove-outliers", "2"});
+    EXPECT_EQ(leafPositions("clean").size(), surface);
+    EXPECT_EQ(clean.find("removed as outliers"), std::string::npos) << clean;
 
-    std::mt19937 rng(5);
-    std::uniform_real_distribution<double> across(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
     const size_t strays = surface / 50;
     size_t high = 0;
-    for (size_t i = 0; i < strays; ++i) {
-        points.push_back({across(rng), across(rng), up(rng), kStray});
-        high += points.back().z > 1.0;
+    for (const Point& p : slabStrays(strays, 5, -0.5 * kN * kS, 0.5 * kN * kS)) {
+        points.push_back(p);
+        high += p.z > 1.0;
     }
-    writePly(dir_.file("strays.ply"), points);
-    auto r = test::run({test::binary("surfcast-build"), dir_.file("strays.ply"), "-o", dir_.file("set"), "--remove-outliers", "2"});
-    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::string output = build("set", points, {"--remove-outliers", "2"});
     size_t onPlane = 0, keptHigh = 0, kept = 0;
-    for (const double z : leafPoints("set")) {
-        onPlane += std::fabs(z) < 1e-3;
-        kept += z > 0.05;
-        keptHigh += z > 1.0;
+    for (const Vec3d& p : leafPositions("set")) {
+        onPlane += std::fabs(p.z) < 1e-3;
+        kept += p.z > 0.05;
+        keptHigh += p.z > 1.0;
     }
     EXPECT_EQ(onPlane, surface);
     EXPECT_EQ(keptHigh, 0u) << "of " << high << " strays over 1 m";
     EXPECT_LT(kept, strays);
     // The summary counts what left.
-    EXPECT_NE(r.output.find(std::to_string(strays - kept) + " removed as outliers"), std::string::npos) << r.output;
+    EXPECT_NE(output.find(std::to_string(strays - kept) + " removed as outliers"), std::string::npos) << output;
 }
 
 TEST_F(ScanDefects, AnUpdateRemovesOutliersOnlyAmongTheAddedPoints) {
@@ -196,20 +209,14 @@ TEST_F(ScanDefects, AnUpdateRemovesOutliersOnlyAmongTheAddedPoints) {
     // above).
     const std::vector<Point> sparse = lattice(3 * kS, -1e9, 0);
     std::vector<Point> added = lattice(kS, 0, 1e9);
-    std::mt19937 rng(7);
-    std::uniform_real_distribution<double> x(0, 0.5 * kN * kS), y(-0.5 * kN * kS, 0.5 * kN * kS), up(0.1, 0.1 * kN * kS);
-    for (size_t i = 0, n = added.size() / 100; i < n; ++i) added.push_back({x(rng), y(rng), up(rng), kStray});
-    writePly(dir_.file("sparse.ply"), sparse);
+    const std::vector<Point> strays = slabStrays(added.size() / 100, 7, 0, 0.5 * kN * kS);
+    added.insert(added.end(), strays.begin(), strays.end());
+    build("set", sparse, {"-q", "--remove-outliers", "2"});
     writePly(dir_.file("added.ply"), added);
-    auto built = test::run({test::binary("surfcast-build"), "-q", dir_.file("sparse.ply"), "-o", dir_.file("set"), "--remove-outliers", "2"});
-    ASSERT_EQ(built.exitCode, 0) << built.output;
     auto update = test::run({test::binary("surfcast-build"), "-q", "--add", dir_.file("added.ply"), "--to", dir_.file("set")});
     ASSERT_EQ(update.exitCode, 0) << update.output;
-    auto set = loadSurfelSet(dir_.file("set"), LevelChoice{});
-    ASSERT_TRUE(set) << set.status().message();
     size_t setPoints = 0, addedPoints = 0, high = 0;
-    for (const auto& s : set->surfels) {
-        const Vec3d p = set->origin + Vec3d{s.px, s.py, s.pz};
+    for (const Vec3d& p : leafPositions("set")) {
         if (std::fabs(p.z) < 1e-3) (p.x < 0 ? setPoints : addedPoints) += 1;
         high += p.z > 1.0;
     }
